@@ -1,0 +1,47 @@
+"""Skid-steering models behind one interface.
+
+``solve(vehicle, terrain, speed, turn_radius, model='fess', **options) -> SteadyState``
+
+Each model module exposes ``solve(vehicle, terrain, speed, turn_radius, **options)`` taking
+broadcastable arrays of forward speed V [m/s] and signed turning radius R [m] (inf = straight) and
+returning :class:`~skidsteer_power.models.base.SteadyState`. Modules are imported lazily so a model
+that needs heavy set-up costs nothing until it is used.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from skidsteer_power.errors import InputError
+from skidsteer_power.models.base import SteadyState
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+MODELS: dict[str, str] = {
+    'steeds': 'skidsteer_power.models.steeds',  # chapter 3.2, closed form
+    'icr': 'skidsteer_power.models.icr',  # chapter 3.4
+    'wong': 'skidsteer_power.models.wong',  # chapter 3.3 (tracks) and chapter 4 (wheels)
+    'fast': 'skidsteer_power.models.fast',  # chapter 5
+    'fess': 'skidsteer_power.models.fess',  # chapter 6
+}
+
+__all__ = ['MODELS', 'SteadyState', 'solve']
+
+
+def solve(
+    vehicle: Any,
+    terrain: Any,
+    speed: npt.ArrayLike,
+    turn_radius: npt.ArrayLike,
+    model: str = 'fess',
+    **options: Any,
+) -> SteadyState:
+    """Solve the steady state of ``vehicle`` on ``terrain`` with the named ``model``."""
+    try:
+        module_name = MODELS[model]
+    except KeyError:
+        raise InputError(f'unknown model {model!r}; choose one of {", ".join(MODELS)}') from None
+    module = importlib.import_module(module_name)
+    return module.solve(vehicle, terrain, speed, turn_radius, **options)
