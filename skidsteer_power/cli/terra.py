@@ -1,0 +1,145 @@
+"""Commands ``track``, ``wheel`` and ``terrains``: chapter 2 single track / single wheel and presets.
+
+skidsteer-power track  --terrain T --load N --width M --length M [--slip S] --json
+    -> sinkage_m, compaction_resistance_N, drawbar_pull_N (at --slip), tractive_effort_N, slip
+skidsteer-power wheel  --terrain T --load N --width M --radius M --slip S [--speed V] --json
+    -> sinkage_m, drawbar_pull_N, torque_Nm, entry_angle_rad, exit_angle_rad, max_stress_angle_rad,
+       slip; with --speed also wheel_speed_rad_s and shaft_power_W
+skidsteer-power terrains [--json]
+    -> every preset with its values in SI units, the units and the table it came from
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, finite_float, nonnegative_float, positive_float
+from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.terrain import PRESET_SOURCES, PRESETS, load_terrain
+from skidsteer_power.terramechanics.track import single_track
+from skidsteer_power.terramechanics.wheel import wheel_at_slip
+
+UNITS = {
+    'n': '-',
+    'kc': 'N/m^(n+1)',
+    'kphi': 'N/m^(n+2)',
+    'c': 'Pa',
+    'phi': 'rad',
+    'K': 'm',
+    'shear_type': '',
+    'Kr': '-',
+    'Kw': 'm',
+    'a0': '-',
+    'a1': '-',
+    'b0': '-',
+    'b1': '-',
+}
+
+
+def slip_float(text: str) -> float:
+    """argparse type: a slip ratio in [-1, 1] (eq. 2.13)."""
+    value = finite_float(text)
+    if not -1.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f'slip must lie in [-1, 1]: {text!r}')
+    return value
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--terrain', required=True, help='preset name or YAML terrain file')
+    parser.add_argument('--load', required=True, type=nonnegative_float, help='normal load W [N]')
+    parser.add_argument('--width', required=True, type=positive_float, help='contact width b [m]')
+    add_json_flag(parser)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    track = subparsers.add_parser('track', help='single track on deformable terrain (eqs. 2.6-2.18)')
+    _common(track)
+    track.add_argument('--length', required=True, type=positive_float, help='contact length l [m]')
+    track.add_argument('--slip', type=slip_float, default=0.0, help='slip ratio s in [-1, 1] (default 0)')
+    track.set_defaults(func=run_track)
+
+    wheel = subparsers.add_parser(
+        'wheel',
+        help='single rigid wheel, Wong-Reece (eqs. 2.19-2.34)',
+        description='Sinkage from the vertical balance at the given slip, then drawbar pull F_x (eq. 2.27) '
+        'and torque_Nm, the axle torque that drives the wheel (= -M_y of eq. 2.34; > 0 when driving).',
+    )
+    _common(wheel)
+    wheel.add_argument('--radius', required=True, type=positive_float, help='wheel radius r [m]')
+    wheel.add_argument('--slip', required=True, type=slip_float, help='slip ratio s in [-1, 1]')
+    wheel.add_argument('--speed', type=finite_float, help='forward speed V [m/s] (adds wheel speed, power)')
+    wheel.set_defaults(func=run_wheel)
+
+    terrains = subparsers.add_parser('terrains', help='list terrain presets with values and units')
+    add_json_flag(terrains)
+    terrains.set_defaults(func=run_terrains)
+
+
+def run_track(args: argparse.Namespace) -> int:
+    terrain = load_terrain(args.terrain)
+    state = single_track(terrain, args.load, args.width, args.length, args.slip)
+    emit(
+        {
+            'terrain': terrain.name,
+            'slip': args.slip,
+            'sinkage_m': float(state.sinkage_m),
+            'compaction_resistance_N': float(state.compaction_resistance_N),
+            'tractive_effort_N': float(state.tractive_effort_N),
+            'drawbar_pull_N': float(state.drawbar_pull_N),
+        },
+        args.json,
+    )
+    return 0
+
+
+def run_wheel(args: argparse.Namespace) -> int:
+    terrain = load_terrain(args.terrain)
+    state = wheel_at_slip(terrain, args.load, args.slip, args.radius, args.width)
+    payload: dict[str, Any] = {
+        'terrain': terrain.name,
+        'slip': args.slip,
+        'sinkage_m': float(state.sinkage_m),
+        'drawbar_pull_N': float(state.drawbar_pull_N),
+        'torque_Nm': float(state.drive_torque_Nm),
+        'entry_angle_rad': float(state.theta_f),
+        'exit_angle_rad': float(state.theta_r),
+        'max_stress_angle_rad': float(state.theta_m),
+    }
+    if args.speed is not None:
+        omega = wheel_speed(args.speed, args.slip, args.radius)
+        payload['wheel_speed_rad_s'] = omega
+        payload['shaft_power_W'] = float(state.drive_torque_Nm) * omega
+    emit(payload, args.json)
+    return 0
+
+
+def wheel_speed(speed: float, slip: float, radius: float) -> float:
+    """Wheel angular speed w [rad/s] from forward speed V [m/s] and slip s (eq. 2.13 inverted)."""
+    if slip == 1.0:
+        raise InputError('at slip 1 the wheel speed is not set by --speed (the vehicle stands still)')
+    if slip >= 0:
+        return speed / (radius * (1.0 - slip))
+    return speed * (1.0 + slip) / radius
+
+
+def run_terrains(args: argparse.Namespace) -> int:
+    payload = {}
+    for name, terrain in PRESETS.items():
+        values = {k: v for k, v in dataclasses.asdict(terrain).items() if k != 'name' and v is not None}
+        values['phi_deg'] = terrain.phi_deg
+        payload[name] = {'values': values, 'source': PRESET_SOURCES[name]}
+    if args.json:
+        emit({'presets': payload, 'units': {**UNITS, 'phi_deg': 'deg'}}, True)
+        return 0
+    for name, entry in payload.items():
+        print(f'{name}  ({entry["source"]})')
+        for key, value in entry['values'].items():
+            unit = 'deg' if key == 'phi_deg' else UNITS[key]
+            print(
+                f'    {key:<10} {value:<14.6g} {unit}'
+                if not isinstance(value, str)
+                else f'    {key:<10} {value}'
+            )
+    return 0
