@@ -1,0 +1,56 @@
+"""Skid-steer kinematics between a body twist and per-side motor speeds (no ROS).
+
+REP 103: x forward, z up, positive yaw rate turns left. With an effective tread B_eff [m] (the
+geometric tread widened by track/wheel slip in a skid-steered turn), the side speeds are
+
+    v_left = v - omega B_eff / 2,   v_right = v + omega B_eff / 2          [m/s]
+
+and a side's motor speed is v_side / r * G [rad/s] for drive radius r [m] and reduction G [-].
+"""
+
+from __future__ import annotations
+
+import math
+
+RPM = 2.0 * math.pi / 60.0
+"""One revolution per minute in rad/s."""
+
+
+def side_speeds(linear_m_s: float, yaw_rate_rad_s: float, tread_m: float) -> tuple[float, float]:
+    """(left, right) track/wheel ground speeds [m/s] for a body twist (v [m/s], yaw rate [rad/s])."""
+    half = 0.5 * yaw_rate_rad_s * tread_m
+    return linear_m_s - half, linear_m_s + half
+
+
+def twist_to_motor_rpm(
+    linear_m_s: float,
+    yaw_rate_rad_s: float,
+    *,
+    tread_m: float,
+    drive_radius_m: float,
+    gear_ratio: float,
+    max_rpm: float,
+) -> tuple[float, float]:
+    """(left, right) motor speed set points [rpm], forward positive, for a body twist.
+
+    If either side would exceed ``max_rpm`` [rpm], both are scaled by the same factor so the
+    commanded path curvature is kept.
+    """
+    left, right = side_speeds(linear_m_s, yaw_rate_rad_s, tread_m)
+    scale = gear_ratio / drive_radius_m / RPM
+    rpm_left, rpm_right = left * scale, right * scale
+    peak = max(abs(rpm_left), abs(rpm_right))
+    if peak > max_rpm:
+        rpm_left, rpm_right = rpm_left * max_rpm / peak, rpm_right * max_rpm / peak
+    return rpm_left, rpm_right
+
+
+def unwrap_counter(previous: int, current: int, expected_delta: float, modulus: int = 1 << 16) -> int:
+    """Counts moved between two readings of a wrapping counter [counts].
+
+    Of all deltas congruent to ``current - previous`` modulo ``modulus``, the one nearest
+    ``expected_delta`` (speed x time since the last reading) is taken, so a fast motor that wraps
+    the 16-bit counter between polls is still tracked.
+    """
+    base = (current - previous) % modulus
+    return base + modulus * round((expected_delta - base) / modulus)

@@ -1,0 +1,771 @@
+"""A virtual DES 70/10 amplifier with an EC-45 motor, on a pseudo-terminal pair.
+
+The simulator holds the master side of an :func:`os.openpty` pair and speaks the DES protocol in a
+thread; the host opens the slave side (through a stable symlink, like a udev
+``/dev/serial/by-id`` link) with :func:`serial.serial_for_url`, the robot's own code path.
+
+Motor model (SI units inside, per side):
+
+    J dw/dt = Kt i - T_load(w, t)                                   (Newton, motor shaft)
+    i = clamp(PI(w_set - w), peak current, (+-0.9 V_supply - w/Kn) / R)   (speed mode)
+
+with the EC-45 constants of Appendix B (:data:`~skidsteer_power.powertrain.motor.EC45`), the rotor
+inertia plus the robot's inertia reflected through the 12:1 reduction, and a pluggable load torque:
+a number [N m at the motor shaft] or a callable ``load(omega_rad_s, t_s) -> N m`` (positive load
+opposes positive rotation), e.g. a terramechanics axle torque divided by the gear ratio. The default
+is a small viscous + Coulomb load. The current loop is taken as ideal (electrical time constant
+L/R = 0.95 ms, below the 0.5 ms integration step's resolution of interest).
+
+Fault injection: :meth:`SimulatedDes.inject` (drop, delay, corrupt CRC, answer 'F', go silent),
+:meth:`SimulatedDes.raise_error` (error bits), :meth:`SimulatedDes.close_port` and
+:meth:`SimulatedDes.reopen_port` (the port disappears and comes back at the same path).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import enum
+import math
+import os
+import select
+import shutil
+import tempfile
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from skidsteer_power.des.errors import DesCrcError, DesFrameError
+from skidsteer_power.des.protocol import (
+    ACK_FAIL,
+    ACK_OK,
+    BAUD_CODES,
+    REPLY_OPCODE,
+    DesConfig,
+    DesErrorFlags,
+    Frame,
+    FrameDecoder,
+    FrameStart,
+    OpCode,
+    Param,
+    ParamFormat,
+    Status,
+    SystemConfig,
+    encode_body,
+    join_lword,
+    split_lword,
+    to_int16,
+    to_word,
+)
+from skidsteer_power.powertrain.motor import DES_70_10, EC45, GEAR_RATIO, MotorConstants
+
+RPM = 2.0 * math.pi / 60.0
+"""One rpm in rad/s."""
+
+LoadTorque = float | Callable[[float, float], float]
+"""Load torque at the motor shaft [N m]: a constant or ``f(omega_rad_s, t_s)``."""
+
+SIM_VERSION = (0x2010, 0x6510, 0x0001, 0x0001)
+"""ReadVersion words the simulator answers (its own, not a real firmware's)."""
+
+ROBOT_MASS_KG = 30.0
+"""Test robot operating mass, ch. 7.1.1 ("around 30 kg") [kg]."""
+DRIVE_RADIUS_M = 0.1
+"""Sprocket / wheel radius, ASSUMED as in config/vehicles/test_robot_track.yaml [m]."""
+REFLECTED_INERTIA_KG_M2 = (ROBOT_MASS_KG / 2.0) * DRIVE_RADIUS_M**2 / GEAR_RATIO**2
+"""Half the robot's mass at the drive radius, seen at one motor through 12:1: m r^2 / (2 G^2) [kg m^2]."""
+
+
+@dataclass(frozen=True)
+class ViscousCoulombLoad:
+    """Default load torque [N m] = b w + c tanh(w / w_eps) (cf. eq. 7.1's b w + c).
+
+    Defaults: Coulomb part c = Kt I0 = 0.114 N m/A x 0.193 A = 0.022 N m (Appendix B lines 3 and 12,
+    the no-load friction of the motor); a small viscous part b = 1e-5 N m s/rad (assumed); tanh
+    smoothing over w_eps = 1 rad/s keeps the explicit integration stable through zero speed.
+    """
+
+    viscous_Nm_s: float = 1e-5
+    coulomb_Nm: float = EC45.torque_constant_Nm_A * EC45.no_load_current_A
+    smoothing_rad_s: float = 1.0
+
+    def __call__(self, omega_rad_s: float, t_s: float) -> float:
+        return self.viscous_Nm_s * omega_rad_s + self.coulomb_Nm * math.tanh(
+            omega_rad_s / self.smoothing_rad_s
+        )
+
+
+@dataclass(frozen=True)
+class AxleLoad:
+    """Load torque at the motor shaft [N m] from an axle (sprocket/wheel) torque, e.g. a
+    terramechanics steady state (``PowerMap.query(...).torque_left_Nm``) for an operating point.
+
+    ``axle_torque_Nm`` [N m] is a number or ``f(axle_omega_rad_s, t_s)``; it resists rotation in
+    either direction (its magnitude is used, with the sign of the speed, smoothed over
+    ``smoothing_rad_s`` at the motor). The motor sees it divided by ``gear_ratio`` [-] and by the
+    transmission ``efficiency`` [-], plus the motor's own ``friction`` (default
+    :class:`ViscousCoulombLoad`).
+    """
+
+    axle_torque_Nm: float | Callable[[float, float], float]
+    gear_ratio: float = GEAR_RATIO
+    efficiency: float = 1.0
+    friction: Callable[[float, float], float] | None = None
+    smoothing_rad_s: float = 1.0
+
+    def __call__(self, omega_rad_s: float, t_s: float) -> float:
+        axle = self.axle_torque_Nm
+        axle_omega = omega_rad_s / self.gear_ratio
+        torque = abs(float(axle(axle_omega, t_s) if callable(axle) else axle))
+        friction = (self.friction or ViscousCoulombLoad())(omega_rad_s, t_s)
+        direction = math.tanh(omega_rad_s / self.smoothing_rad_s)
+        return friction + direction * torque / (self.gear_ratio * self.efficiency)
+
+
+class MotorModel:
+    """EC-45 driven by a DES in speed or current mode; state in SI units.
+
+    Parameters
+    ----------
+    motor : motor constants (default EC-45, Appendix B)
+    load_inertia_kg_m2 : inertia reflected to the motor shaft besides the rotor [kg m^2]
+    supply_voltage_V : amplifier supply [V] (default 44.4 V: two 6-cell LiPo packs in series at
+        3.7 V/cell, ASSUMED; ch. 7.1.2 names the packs, not their wiring)
+    load_torque : see :data:`LoadTorque`
+    bandwidth_rad_s : speed-loop bandwidth of the PI controller [rad/s] (assumed; the real gains,
+        parameters 5 and 6, are in units the sources do not give)
+    mean_time_constant_s : low-pass behind the 'mean' speed and current readings [s] (assumed)
+    """
+
+    STEP_S = 0.0005
+
+    def __init__(
+        self,
+        motor: MotorConstants = EC45,
+        load_inertia_kg_m2: float = REFLECTED_INERTIA_KG_M2,
+        supply_voltage_V: float = 44.4,
+        load_torque: LoadTorque | None = None,
+        bandwidth_rad_s: float = 60.0,
+        mean_time_constant_s: float = 0.01,
+    ) -> None:
+        self.motor = motor
+        self.inertia_kg_m2 = motor.rotor_inertia_kg_m2 + load_inertia_kg_m2
+        self.supply_voltage_V = supply_voltage_V
+        self.load_torque: LoadTorque = ViscousCoulombLoad() if load_torque is None else load_torque
+        self.kp_A_s = bandwidth_rad_s * self.inertia_kg_m2 / motor.torque_constant_Nm_A
+        self.ki_A = self.kp_A_s * bandwidth_rad_s / 4.0
+        self.mean_time_constant_s = mean_time_constant_s
+        self.omega_rad_s = 0.0
+        self.theta_rad = 0.0
+        self.current_A = 0.0
+        self.mean_omega_rad_s = 0.0
+        self.mean_current_A = 0.0
+        self.ramped_setpoint_rad_s = 0.0
+        self.current_limited = False
+        self._integral_A = 0.0
+
+    def load_at(self, omega_rad_s: float, t_s: float) -> float:
+        """Load torque at the motor shaft [N m]."""
+        load = self.load_torque
+        return float(load(omega_rad_s, t_s)) if callable(load) else float(load)
+
+    def step(
+        self,
+        dt_s: float,
+        t_s: float,
+        *,
+        powered: bool,
+        current_mode: bool,
+        speed_setpoint_rad_s: float,
+        current_setpoint_A: float,
+        peak_current_A: float,
+        acceleration_rad_s2: float,
+    ) -> None:
+        """Advance the state by ``dt_s`` [s] (explicit Euler)."""
+        motor = self.motor
+        max_step = acceleration_rad_s2 * dt_s
+        self.ramped_setpoint_rad_s += max(
+            -max_step, min(max_step, speed_setpoint_rad_s - self.ramped_setpoint_rad_s)
+        )
+        if not powered:
+            wanted, self._integral_A = 0.0, 0.0
+            self.ramped_setpoint_rad_s = self.omega_rad_s
+        elif current_mode:
+            wanted = current_setpoint_A
+        else:
+            error = self.ramped_setpoint_rad_s - self.omega_rad_s
+            self._integral_A = max(
+                -peak_current_A, min(peak_current_A, self._integral_A + self.ki_A * error * dt_s)
+            )
+            wanted = self.kp_A_s * error + self._integral_A
+        v_max = DES_70_10.max_output_voltage_fraction * self.supply_voltage_V
+        emf = self.omega_rad_s / motor.speed_constant_rad_s_V
+        upper = min(peak_current_A, (v_max - emf) / motor.terminal_resistance_ohm)
+        lower = max(-peak_current_A, (-v_max - emf) / motor.terminal_resistance_ohm)
+        current = min(upper, max(lower, wanted)) if powered else 0.0
+        self.current_limited = powered and current != wanted
+        self.current_A = current
+        torque = motor.torque_constant_Nm_A * current - self.load_at(self.omega_rad_s, t_s)
+        if not powered and abs(self.omega_rad_s) < 0.5 and abs(torque) < self.load_at(1.0, t_s):
+            torque, self.omega_rad_s = 0.0, 0.0  # Coulomb friction holds a coasting motor at rest
+        self.omega_rad_s += torque / self.inertia_kg_m2 * dt_s
+        self.theta_rad += self.omega_rad_s * dt_s
+        alpha = dt_s / (self.mean_time_constant_s + dt_s)
+        self.mean_omega_rad_s += alpha * (self.omega_rad_s - self.mean_omega_rad_s)
+        self.mean_current_A += alpha * (current - self.mean_current_A)
+
+
+class Fault(enum.Enum):
+    """Counted link faults (see :meth:`SimulatedDes.inject`)."""
+
+    DROP = 'drop'  # ignore a command's op code entirely (the host times out)
+    DELAY = 'delay'  # answer each byte of a command ``delay_s`` late
+    CORRUPT_CRC = 'corrupt_crc'  # send a reply with a wrong CRC (a repeat after 'F' is good)
+    NAK = 'nak'  # answer 'F' to the op code
+    SILENT = 'silent'  # answer nothing at all
+
+
+def default_parameters(baudrate: int, motor: MotorConstants = EC45) -> dict[int, int]:
+    """RAM parameters of a freshly configured amplifier for the test robot."""
+    return {
+        Param.BAUD_RATE: BAUD_CODES[baudrate],
+        Param.SYSTEM_CONFIG: int(
+            SystemConfig.ENABLE_BY_SOFTWARE
+            | SystemConfig.MODE_FROM_BITS
+            | SystemConfig.MAX_SPEED_FROM_SOFTWARE
+        ),
+        Param.CURRENT_P: 500,
+        Param.CURRENT_I: 200,
+        Param.SPEED_P: 1000,
+        Param.SPEED_I: 100,
+        Param.PEAK_CURRENT_MA: int(DES_70_10.continuous_current_A * 1000),
+        Param.MAX_CONTINUOUS_CURRENT_MA: int(motor.nominal_current_A * 1000),
+        Param.MAX_SPEED_RPM: round(motor.max_speed_rad_s / RPM),
+        Param.ACCELERATION_RPM_PER_MS: 10,
+        Param.ENCODER_RESOLUTION: motor.encoder_counts_per_turn,
+        Param.POLE_PAIRS: motor.pole_pairs,
+        Param.ERROR_PROCEDURE: 1,
+        Param.MAX_SPEED_CURRENT_MODE_RPM: round(motor.max_speed_rad_s / RPM),
+    }
+
+
+class _Refuse(Exception):
+    """The simulator answers 'F' to the frame."""
+
+
+@dataclass
+class _Exchange:
+    """Where the DES side of the protocol stands."""
+
+    state: str = 'idle'  # idle | await_start_ack | await_final_ack
+    reply: tuple[int, ...] = ()
+    last_byte_at: float = 0.0
+
+
+@dataclass
+class CommandRecord:
+    """One command the simulator executed."""
+
+    time_s: float
+    opcode: OpCode
+    words: tuple[int, ...]
+
+
+@dataclass
+class _Faults:
+    counts: dict[Fault, int] = field(default_factory=dict)
+    delay_s: float = 0.0
+
+    def take(self, fault: Fault) -> bool:
+        left = self.counts.get(fault, 0)
+        if left == 0:
+            return False
+        if left > 0:
+            self.counts[fault] = left - 1
+        return True
+
+
+class SimulatedDes:
+    """One virtual DES 70/10 on a pty. Use as a context manager or call :meth:`start` / :meth:`stop`.
+
+    Parameters
+    ----------
+    baudrate : the link speed it emulates [bit/s]; with ``emulate_baud`` every byte costs its
+        byte time (10 bits, 8N1) on the line, so link throughput is realistic on a pty
+    config : protocol options (UNCONFIRMED items); the simulator answers in the same convention
+    model : motor model (default EC-45 with the test robot's reflected inertia)
+    link_path : stable path of the port (a symlink to the pty); default in a fresh temp directory
+    """
+
+    INTER_BYTE_TIMEOUT_S = 0.1
+
+    def __init__(
+        self,
+        baudrate: int = 38400,
+        *,
+        config: DesConfig | None = None,
+        model: MotorModel | None = None,
+        link_path: str | None = None,
+        emulate_baud: bool = True,
+        name: str = 'des',
+    ) -> None:
+        self.config = config or DesConfig(baudrate=baudrate)
+        self.baudrate = baudrate
+        self.model = model or MotorModel()
+        self.name = name
+        self.emulate_baud = emulate_baud
+        self._byte_time_s = 10.0 / baudrate
+        self._tmpdir = None if link_path else tempfile.mkdtemp(prefix='des-sim-')
+        self.port = link_path or os.path.join(self._tmpdir or '', name)
+        self.device = ''
+        self.commands: collections.deque[CommandRecord] = collections.deque(maxlen=20000)
+        self._lock = threading.RLock()
+        self._faults = _Faults()
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self._decoder = FrameDecoder(frozenset(int(op) for op in OpCode))
+        self._exchange = _Exchange()
+        self._wire_free_at = 0.0
+        self._t0 = time.monotonic()
+        self._last_step = self._t0
+        self._reset_state()
+
+    # -- lifecycle ------------------------------------------------------------------------------
+
+    def start(self) -> SimulatedDes:
+        """Open the pty, publish its symlink at :attr:`port` and start answering."""
+        self._open_pty()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f'sim-{self.name}', daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread, close the pty and remove the symlink (and its temp directory)."""
+        if self._wake_w < 0:
+            return  # already stopped
+        self._stop.set()
+        os.write(self._wake_w, b'x')
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close_pty()
+        for fd in (self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._wake_r = self._wake_w = -1
+        if self._tmpdir:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+
+    def __enter__(self) -> SimulatedDes:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def close_port(self) -> None:
+        """Make the port disappear, as an unplugged USB adapter does (the host's reads fail)."""
+        with self._lock:
+            self._close_pty()
+
+    def reopen_port(self) -> None:
+        """Bring the port back at the same :attr:`port` path (a new pty behind the symlink)."""
+        with self._lock:
+            if self._master is None:
+                self._open_pty()
+        os.write(self._wake_w, b'x')
+
+    @property
+    def port_open(self) -> bool:
+        return self._master is not None
+
+    # -- fault injection and state access -------------------------------------------------------
+
+    def inject(self, fault: Fault, count: int = 1, *, delay_s: float = 0.2) -> None:
+        """Apply ``fault`` to the next ``count`` commands (``-1``: until :meth:`clear_faults`).
+
+        For :attr:`Fault.DELAY`, ``delay_s`` [s] is added before each answer byte.
+        """
+        with self._lock:
+            self._faults.counts[fault] = count
+            if fault is Fault.DELAY:
+                self._faults.delay_s = delay_s
+
+    def clear_faults(self) -> None:
+        """Stop every injected link fault."""
+        with self._lock:
+            self._faults = _Faults()
+
+    def raise_error(self, errors: DesErrorFlags) -> None:
+        """Set amplifier error bits (bit 15 'any error' is added); the power stage switches off."""
+        with self._lock:
+            self.errors |= DesErrorFlags(errors) | DesErrorFlags.ANY
+
+    def send_raw(self, data: bytes) -> None:
+        """Put ``data`` on the line unasked (line noise, a stale answer)."""
+        with self._lock:
+            self._send(data)
+
+    def set_load(self, load_torque: LoadTorque) -> None:
+        """Replace the load torque at the motor shaft [N m or f(omega_rad_s, t_s)]."""
+        with self._lock:
+            self.model.load_torque = load_torque
+
+    def commands_of(self, opcode: OpCode) -> list[CommandRecord]:
+        """Executed commands with this op code, oldest first."""
+        with self._lock:
+            return [c for c in self.commands if c.opcode == opcode]
+
+    @property
+    def speed_rpm(self) -> float:
+        """Instantaneous motor speed [rpm] (for tests)."""
+        with self._lock:
+            self._advance()
+            return self.model.omega_rad_s / RPM
+
+    @property
+    def powered(self) -> bool:
+        """True when the power stage drives the motor (enabled, no error)."""
+        return self.enabled and not self.errors
+
+    # -- amplifier state ------------------------------------------------------------------------
+
+    def _reset_state(self) -> None:
+        self.eeprom = default_parameters(self.baudrate, self.model.motor)
+        self.params = dict(self.eeprom)
+        self.errors = DesErrorFlags(0)
+        self.enabled = False
+        self.current_mode = False
+        self.stopped = False
+        self.speed_setpoint_rpm = 0
+        self.current_setpoint_ma = 0
+
+    def status_word(self) -> Status:
+        status = Status.HALL_FOUND | Status.ROTOR_POSITION_FOUND | Status.CURRENT_OFFSETS_DETECTED
+        if abs(self.model.theta_rad) >= 2.0 * math.pi:
+            status |= Status.INDEX_FOUND
+        if self.errors:
+            status |= Status.ERROR
+        if self.enabled:
+            status |= Status.ENABLED
+        if self.powered:
+            status |= Status.POWER_STAGE_HIGH
+        if self.stopped:
+            status |= Status.BRAKING
+        if self.model.current_limited:
+            status |= Status.CURRENT_LIMITED_CONTINUOUS
+        if abs(self.model.current_A) * 1000 > self.params[Param.MAX_CONTINUOUS_CURRENT_MA]:
+            status |= Status.HIGH_CURRENT_REGION
+        return status
+
+    def _advance(self) -> None:
+        """Integrate the motor model up to now."""
+        now = time.monotonic()
+        model, params = self.model, self.params
+        setpoint_rpm = 0 if self.stopped else self.speed_setpoint_rpm
+        while now - self._last_step >= model.STEP_S:
+            self._last_step += model.STEP_S
+            model.step(
+                model.STEP_S,
+                self._last_step - self._t0,
+                powered=self.powered,
+                current_mode=self.current_mode,
+                speed_setpoint_rad_s=setpoint_rpm * RPM,
+                current_setpoint_A=self.current_setpoint_ma / 1000.0,
+                peak_current_A=params[Param.PEAK_CURRENT_MA] / 1000.0,
+                acceleration_rad_s2=params[Param.ACCELERATION_RPM_PER_MS] * 1000.0 * RPM,
+            )
+        if abs(model.omega_rad_s) > 1.25 * params[Param.MAX_SPEED_RPM] * RPM:
+            self.errors |= DesErrorFlags.OVER_SPEED | DesErrorFlags.ANY
+
+    def _status_variable(self, number: int, lword: bool) -> int:
+        sv, model = self.config.status_variables, self.model
+        counts_per_rad = (
+            self.params[Param.ENCODER_RESOLUTION] * self.config.quadrature_counts_per_count / (2.0 * math.pi)
+        )
+        values = {
+            sv.system_status: int(self.status_word()),
+            sv.mean_current_d: 0,
+            sv.mean_current_q: round(model.mean_current_A * 1000),
+            sv.current_setpoint: self.current_setpoint_ma,
+            sv.rotor_position: round(model.theta_rad * counts_per_rad)
+            % self.params[Param.ENCODER_RESOLUTION],
+            sv.speed_setpoint: 0 if self.stopped else self.speed_setpoint_rpm,
+            sv.mean_speed: round(model.mean_omega_rad_s / RPM),
+            sv.absolute_position: round(model.theta_rad * counts_per_rad),
+            sv.error: int(self.errors),
+            sv.instantaneous_current_q: round(model.current_A * 1000),
+            sv.instantaneous_speed: round(model.omega_rad_s / RPM),
+            sv.encoder_counter: round(model.theta_rad * counts_per_rad) & 0xFFFF,
+            sv.counter_at_index: 0,
+            sv.hall_pattern: 1 + int(model.theta_rad * self.params[Param.POLE_PAIRS] * 3 / math.pi) % 6,
+        }
+        if number not in values:
+            raise _Refuse
+        value = values[number]
+        if lword:
+            return value & 0xFFFF_FFFF
+        return value & 0xFFFF if -0x8000 <= value <= 0xFFFF else (0x7FFF if value > 0 else 0x8000)
+
+    # -- command execution ----------------------------------------------------------------------
+
+    def _execute(self, opcode: int, words: tuple[int, ...]) -> tuple[int, ...]:
+        """Run one command; return the reply words (empty: no reply). ``_Refuse`` -> 'F'."""
+        op = OpCode(opcode)
+        self._advance()
+        self.commands.append(CommandRecord(time.monotonic(), op, words))
+        handler = getattr(self, f'_op_{op.name.lower()}')
+        return handler(words)
+
+    def _op_read_sys_status(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        return (int(self.status_word()),)
+
+    def _op_read_error(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        return (int(self.errors),)
+
+    def _op_clear_error(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        self.errors = DesErrorFlags(0)
+        return ()
+
+    def _op_reset(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        self._reset_state()
+        return ()
+
+    def _op_enable(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        if not self.params[Param.SYSTEM_CONFIG] & SystemConfig.ENABLE_BY_SOFTWARE:
+            raise _Refuse
+        self.enabled = bool(words[0])
+        return ()
+
+    def _op_read_temp_param(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        if len(words) != 2 or words[1] not in (ParamFormat.WORD, ParamFormat.LWORD):
+            raise _Refuse
+        number, lword = words[0], words[1] == ParamFormat.LWORD
+        if number >= 128:
+            value = self._status_variable(number, lword)
+        elif number in self.params:
+            value = self.params[number]
+        else:
+            raise _Refuse
+        return split_lword(value, self.config) if lword else (to_word(value),)
+
+    def _op_set_temp_param(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        if len(words) < 3 or words[0] not in self.params:
+            raise _Refuse
+        lword = words[1] == ParamFormat.LWORD
+        if len(words) != (4 if lword else 3):
+            raise _Refuse
+        value = join_lword((words[2], words[3]), self.config) if lword else words[2]
+        if words[0] == Param.BAUD_RATE and value not in BAUD_CODES.values():
+            self.errors |= DesErrorFlags.PARAMETER_RANGE | DesErrorFlags.ANY
+            return ()
+        self.params[words[0]] = value
+        return ()
+
+    def _op_reset_temp_param(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        self.params = dict(self.eeprom)
+        return ()
+
+    def _op_save_temp_param(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        self.eeprom = dict(self.params)
+        return ()
+
+    def _op_read_version(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        return SIM_VERSION
+
+    def _op_set_velocity(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        limit = self.params[Param.MAX_SPEED_RPM]
+        self.speed_setpoint_rpm = max(-limit, min(limit, to_int16(words[0])))
+        self.current_mode = False
+        return ()
+
+    def _op_set_current(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        limit = self.params[Param.PEAK_CURRENT_MA]
+        self.current_setpoint_ma = max(-limit, min(limit, to_int16(words[0])))
+        self.current_mode = True
+        return ()
+
+    def _op_stop_motion(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        self.stopped = not self.stopped
+        return ()
+
+    def _op_read_velocity_is_must(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        model = self.model
+        omega = model.omega_rad_s if words[0] else model.mean_omega_rad_s
+        setpoint = 0 if self.stopped else self.speed_setpoint_rpm
+        return (to_word(round(omega / RPM)), to_word(setpoint))
+
+    def _op_read_current_is_must(self, words: tuple[int, ...]) -> tuple[int, ...]:
+        model = self.model
+        current = model.current_A if words[0] else model.mean_current_A
+        pair = [to_word(round(current * 1000)), to_word(self.current_setpoint_ma)]
+        if self.config.current_is_must_actual_index == 1:
+            pair.reverse()
+        return tuple(pair)
+
+    # -- the pty and the protocol state machine -------------------------------------------------
+
+    def _open_pty(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line editing before the host configures the port
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.device = os.ttyname(slave)
+        tmp = f'{self.port}.tmp'
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        os.symlink(self.device, tmp)
+        os.replace(tmp, self.port)
+        self._decoder.reset()
+        self._exchange = _Exchange()
+
+    def _close_pty(self) -> None:
+        master, slave = self._master, self._slave
+        self._master = self._slave = None
+        for fd in (master, slave):
+            if fd is not None:
+                os.close(fd)
+        if os.path.lexists(self.port):
+            os.unlink(self.port)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            master = self._master
+            fds = [self._wake_r] if master is None else [master, self._wake_r]
+            try:
+                ready, _, _ = select.select(fds, [], [], 0.005)
+            except (OSError, ValueError):
+                continue  # the port was closed under select
+            if self._wake_r in ready:
+                os.read(self._wake_r, 64)
+            with self._lock:
+                self._advance()
+                if master is not None and master in ready and master == self._master:
+                    self._receive(master)
+                self._expire_exchange()
+
+    def _receive(self, master: int) -> None:
+        try:
+            data = os.read(master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return  # EIO: no host has the slave open at the moment
+        now = time.monotonic()
+        self._wire_free_at = max(self._wire_free_at, now) + len(data) * self._byte_time_s
+        self._exchange.last_byte_at = now
+        for byte in data:
+            self._on_byte(byte)
+
+    def _on_byte(self, byte: int) -> None:
+        ex = self._exchange
+        if self._faults.counts.get(Fault.SILENT, 0):
+            self._decoder.reset()
+            return
+        if ex.state == 'await_start_ack':
+            ex.state = 'await_final_ack' if byte == ACK_OK else 'idle'
+            if byte == ACK_OK:
+                self._send_reply_body(ex.reply)
+            return
+        if ex.state == 'await_final_ack':
+            if byte == ACK_FAIL and self.config.des_repeats_reply_after_nak:
+                self._send(bytes((REPLY_OPCODE,)))
+                ex.state = 'await_start_ack'
+            else:
+                ex.state = 'idle'
+            return
+        self._decoder.feed(bytes((byte,)))
+        try:
+            event = self._decoder.next_event()
+        except (DesCrcError, DesFrameError):
+            self._send(bytes((ACK_FAIL,)))
+            return
+        if isinstance(event, FrameStart):
+            self._on_opcode()
+        elif isinstance(event, Frame):
+            self._on_frame(event)
+
+    def _on_opcode(self) -> None:
+        faults = self._faults
+        if faults.take(Fault.DROP):
+            self._decoder.reset()
+            return
+        if faults.take(Fault.NAK):
+            self._decoder.reset()
+            self._send(bytes((ACK_FAIL,)))
+            return
+        if faults.take(Fault.DELAY):
+            self._sleep(faults.delay_s)
+        self._send(bytes((ACK_OK,)))
+
+    def _on_frame(self, frame: Frame) -> None:
+        try:
+            reply = self._execute(frame.opcode, frame.words)
+        except _Refuse:
+            self._send(bytes((ACK_FAIL,)))
+            return
+        self._send(bytes((ACK_OK,)))
+        if reply:
+            self._exchange.reply = reply
+            self._exchange.state = 'await_start_ack'
+            self._send(bytes((REPLY_OPCODE,)))
+
+    def _send_reply_body(self, reply: tuple[int, ...]) -> None:
+        body = encode_body(REPLY_OPCODE, reply)
+        if self._faults.take(Fault.CORRUPT_CRC):
+            body = body[:-2] + bytes((body[-2] ^ 0xFF, body[-1]))
+        self._send(body)
+
+    def _expire_exchange(self) -> None:
+        ex = self._exchange
+        busy = ex.state != 'idle' or self._decoder.in_frame
+        if busy and time.monotonic() - ex.last_byte_at > self.INTER_BYTE_TIMEOUT_S:
+            self._decoder.reset()
+            ex.state = 'idle'
+
+    def _send(self, data: bytes) -> None:
+        if self.emulate_baud:
+            start = max(self._wire_free_at, time.monotonic())
+            self._wire_free_at = start + len(data) * self._byte_time_s
+            self._sleep_until(self._wire_free_at)
+        master = self._master
+        if master is None:
+            return
+        with contextlib.suppress(OSError):  # the host is gone; it will time out or reopen
+            os.write(master, data)
+
+    def _sleep(self, seconds: float) -> None:
+        self._sleep_until(time.monotonic() + seconds)
+
+    @staticmethod
+    def _sleep_until(deadline: float) -> None:
+        while (left := deadline - time.monotonic()) > 0:
+            time.sleep(left)
+
+
+class SimulatedPair:
+    """Two virtual amplifiers, ``left`` and ``right`` (one per side, as on the robot)."""
+
+    def __init__(self, baudrate: int = 38400, **kwargs: object) -> None:
+        self.left = SimulatedDes(baudrate, name='des_left', **kwargs)  # type: ignore[arg-type]
+        self.right = SimulatedDes(baudrate, name='des_right', **kwargs)  # type: ignore[arg-type]
+
+    def start(self) -> SimulatedPair:
+        self.left.start()
+        self.right.start()
+        return self
+
+    def stop(self) -> None:
+        self.left.stop()
+        self.right.stop()
+
+    def __enter__(self) -> SimulatedPair:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -1,0 +1,301 @@
+"""Serial transport of the DES 70/10 protocol: one :meth:`DesLink.transact` alone touches the port.
+
+The port is opened with :func:`serial.serial_for_url`, so a device path, a pty path or a pyserial
+URL (``loop://``, ``socket://``) all work. Every wait has a deadline from :func:`time.monotonic`;
+failed transactions are retried a bounded number of times, with the input flushed in between.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass, field
+
+import serial
+
+from skidsteer_power.des.errors import (
+    DesCrcError,
+    DesFrameError,
+    DesLinkError,
+    DesNak,
+    DesPortError,
+    DesTimeout,
+)
+from skidsteer_power.des.protocol import (
+    ACK_FAIL,
+    ACK_OK,
+    DUMMY,
+    DesConfig,
+    Frame,
+    FrameDecoder,
+    FrameStart,
+    body_length,
+    encode_body,
+)
+
+_OK = bytes((ACK_OK,))
+_FAIL = bytes((ACK_FAIL,))
+_READ_SLICE_S = 0.005
+"""pyserial read timeout [s]: the granularity with which a deadline is checked while waiting."""
+
+
+@dataclass(frozen=True)
+class LinkTiming:
+    """Deadlines and retries of one link.
+
+    Attributes
+    ----------
+    ack_timeout_s : wait for each 'O'/'F' from the DES [s] (existing drivers: about 50 ms)
+    reply_timeout_s : wait for the reply op code after the frame was acknowledged [s]
+    slack_s : allowance beyond the byte time for a body to arrive [s]
+    retries : extra attempts after a failed transaction (no answer, NAK, CRC, garbled) [-]
+    """
+
+    ack_timeout_s: float = 0.05
+    reply_timeout_s: float = 0.05
+    slack_s: float = 0.02
+    retries: int = 2
+
+    def __post_init__(self) -> None:
+        if min(self.ack_timeout_s, self.reply_timeout_s, self.slack_s) <= 0 or self.retries < 0:
+            raise ValueError(f'timeouts must be > 0 and retries >= 0: {self}')
+
+
+@dataclass
+class LinkStats:
+    """Counters of one link (for diagnostics and benchmarks)."""
+
+    transactions: int = 0
+    failures: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    naks: int = 0
+    crc_errors: int = 0
+    frame_errors: int = 0
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    flushed_bytes: int = 0
+    opens: int = 0
+    lost: int = 0
+    last_error: str = ''
+
+    def as_dict(self) -> dict[str, int | str]:
+        return dict(self.__dict__)
+
+
+_COUNTER = {DesTimeout: 'timeouts', DesNak: 'naks', DesCrcError: 'crc_errors', DesFrameError: 'frame_errors'}
+
+
+@dataclass
+class DesLink:
+    """One serial link to one DES amplifier.
+
+    ``port`` is a device path or pyserial URL. Call :meth:`open` (or use ``with``); a lost port
+    raises :class:`DesPortError` and closes the link, and :meth:`open` may be called again.
+    """
+
+    port: str
+    config: DesConfig = field(default_factory=DesConfig)
+    timing: LinkTiming = field(default_factory=LinkTiming)
+
+    def __post_init__(self) -> None:
+        self._serial: serial.SerialBase | None = None
+        self._lock = threading.Lock()
+        self.stats = LinkStats()
+        self._byte_time_s = 10.0 / self.config.baudrate  # 8N1: start + 8 data + stop bits
+
+    # -- port -----------------------------------------------------------------------------------
+
+    @property
+    def is_open(self) -> bool:
+        return self._serial is not None
+
+    @property
+    def byte_time_s(self) -> float:
+        """Time one byte occupies the line at the configured baud rate [s]."""
+        return self._byte_time_s
+
+    def open(self) -> DesLink:
+        """Open the port (8N1, no flow control); :class:`DesPortError` if that fails."""
+        with self._lock:
+            if self._serial is not None:
+                return self
+            try:
+                self._serial = serial.serial_for_url(
+                    self.port,
+                    baudrate=self.config.baudrate,
+                    bytesize=serial.EIGHTBITS,
+                    parity=serial.PARITY_NONE,
+                    stopbits=serial.STOPBITS_ONE,
+                    timeout=_READ_SLICE_S,
+                    write_timeout=1.0,
+                )
+            except (serial.SerialException, OSError, ValueError) as err:
+                raise DesPortError(f'cannot open DES port {self.port}: {err}') from err
+            self.stats.opens += 1
+        return self
+
+    def close(self) -> None:
+        """Close the port (idempotent)."""
+        with self._lock:
+            self._close_locked()
+
+    def _close_locked(self) -> None:
+        ser, self._serial = self._serial, None
+        if ser is not None:
+            with contextlib.suppress(serial.SerialException, OSError):
+                ser.close()
+
+    def __enter__(self) -> DesLink:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- transactions ---------------------------------------------------------------------------
+
+    def transact(self, opcode: int, words: tuple[int, ...] = DUMMY, reply_words: int = 0) -> tuple[int, ...]:
+        """Send one command and return the reply's words (``()`` when ``reply_words`` is 0).
+
+        ``words`` are 16-bit words (see :func:`~skidsteer_power.des.protocol.to_word`);
+        ``reply_words`` is the exact number of words the reply must hold. Raises a
+        :class:`DesLinkError` after ``timing.retries`` failed retries, or :class:`DesPortError` at
+        once when the port is lost (the link is then closed).
+        """
+        with self._lock:
+            if self._serial is None:
+                raise DesPortError(f'DES port {self.port} is not open')
+            self.stats.transactions += 1
+            last: DesLinkError | None = None
+            for attempt in range(self.timing.retries + 1):
+                if attempt:
+                    self.stats.retries += 1
+                try:
+                    return self._transact_once(opcode, words, reply_words)
+                except DesPortError as err:
+                    self.stats.lost += 1
+                    self.stats.failures += 1
+                    self.stats.last_error = str(err)
+                    self._close_locked()
+                    raise
+                except (DesTimeout, DesNak, DesCrcError, DesFrameError) as err:
+                    last = err
+                    if not isinstance(err, DesCrcError):  # counted where the reply was refused
+                        name = _COUNTER[type(err)]
+                        setattr(self.stats, name, getattr(self.stats, name) + 1)
+                    try:
+                        self._flush_input()
+                    except DesPortError:
+                        self.stats.lost += 1
+                        self._close_locked()
+                        raise
+            assert last is not None
+            self.stats.failures += 1
+            self.stats.last_error = str(last)
+            raise last
+
+    def _transact_once(self, opcode: int, words: tuple[int, ...], reply_words: int) -> tuple[int, ...]:
+        self._drop_stale_input()
+        body = encode_body(opcode, words)
+        self._write(bytes((opcode,)))
+        self._expect_ack(self.timing.ack_timeout_s, f'op code 0x{opcode:02X}')
+        self._write(body)
+        self._expect_ack(self.timing.ack_timeout_s + len(body) * self._byte_time_s, f'frame 0x{opcode:02X}')
+        if not reply_words:
+            return ()
+        return self._receive_reply(opcode, reply_words)
+
+    def _receive_reply(self, opcode: int, reply_words: int) -> tuple[int, ...]:
+        decoder = FrameDecoder()
+        deadline = time.monotonic() + self.timing.reply_timeout_s
+        refused: DesCrcError | None = None
+        while True:
+            try:
+                event = decoder.next_event()
+            except DesCrcError as err:
+                self._write(_FAIL)
+                self.stats.crc_errors += 1
+                if not self.config.des_repeats_reply_after_nak:
+                    raise
+                refused = err
+                deadline = time.monotonic() + self.timing.reply_timeout_s
+                continue
+            if isinstance(event, FrameStart):
+                self._write(_OK)
+                body_time = body_length(reply_words - 1) * self._byte_time_s
+                deadline = time.monotonic() + body_time + self.timing.slack_s + self.timing.ack_timeout_s
+            elif isinstance(event, Frame):
+                if len(event.words) != reply_words:
+                    self._write(_FAIL)
+                    raise DesFrameError(
+                        f'reply to op code 0x{opcode:02X} has {len(event.words)} words, '
+                        f'expected {reply_words}'
+                    )
+                self._write(_OK)
+                return event.words
+            else:
+                data = self._read(decoder.needed, deadline)
+                if not data:
+                    if refused is not None:
+                        raise refused
+                    state = 'reply body' if decoder.in_frame else 'reply'
+                    raise DesTimeout(f'no {state} to op code 0x{opcode:02X} from {self.port}')
+                decoder.feed(data)
+
+    # -- the only code that touches the port ----------------------------------------------------
+
+    def _expect_ack(self, timeout_s: float, what: str) -> None:
+        data = self._read(1, time.monotonic() + timeout_s)
+        if not data:
+            raise DesTimeout(f'no acknowledge of {what} from {self.port}')
+        if data == _FAIL:
+            raise DesNak(f'DES on {self.port} refused {what}')
+        if data != _OK:
+            raise DesFrameError(f'unexpected byte 0x{data[0]:02X} instead of an acknowledge of {what}')
+
+    def _read(self, size: int, deadline: float) -> bytes:
+        """Up to ``size`` bytes, returning as soon as any arrived; b'' at the deadline."""
+        ser = self._serial
+        assert ser is not None
+        try:
+            while True:
+                data = ser.read(size)
+                if data:
+                    self.stats.bytes_received += len(data)
+                    return data
+                if time.monotonic() >= deadline:
+                    return b''
+        except (serial.SerialException, OSError) as err:
+            raise DesPortError(f'DES port {self.port} lost: {err}') from err
+
+    def _write(self, data: bytes) -> None:
+        ser = self._serial
+        assert ser is not None
+        try:
+            ser.write(data)
+        except serial.SerialTimeoutException as err:
+            raise DesTimeout(f'write to {self.port} timed out') from err
+        except (serial.SerialException, OSError) as err:
+            raise DesPortError(f'DES port {self.port} lost: {err}') from err
+        self.stats.bytes_sent += len(data)
+
+    def _drop_stale_input(self) -> None:
+        ser = self._serial
+        assert ser is not None
+        try:
+            waiting = ser.in_waiting
+        except (serial.SerialException, OSError) as err:
+            raise DesPortError(f'DES port {self.port} lost: {err}') from err
+        if waiting:
+            self.stats.flushed_bytes += waiting
+            self._flush_input()
+
+    def _flush_input(self) -> None:
+        ser = self._serial
+        if ser is None:
+            return
+        try:
+            ser.reset_input_buffer()
+        except (serial.SerialException, OSError) as err:
+            raise DesPortError(f'DES port {self.port} lost: {err}') from err
