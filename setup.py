@@ -16,6 +16,8 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config/terrains', glob('config/terrains/*.yaml')),
         (f'share/{PACKAGE}/config/vehicles', glob('config/vehicles/*.yaml')),
+        (f'share/{PACKAGE}/config/powertrains', glob('config/powertrains/*.yaml')),
+        (f'share/{PACKAGE}/config/batteries', glob('config/batteries/*.yaml')),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
     ],

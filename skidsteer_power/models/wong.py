@@ -1,0 +1,24 @@
+"""Wong's skid-steering theory: tracks (chapter 3, ``wong_track``) or wheels (chapter 4, ``wong_wheel``).
+
+``solve`` dispatches on ``vehicle.running_gear``; options (``resolution``, ``tol``, ``max_iter``,
+``raise_on_failure``) pass through. See the two modules for the equations.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from numpy.typing import ArrayLike
+
+from skidsteer_power.models import wong_track, wong_wheel
+from skidsteer_power.models.base import SteadyState
+from skidsteer_power.terramechanics.terrain import Terrain
+from skidsteer_power.vehicle import Vehicle
+
+
+def solve(
+    vehicle: Vehicle, terrain: Terrain, speed: ArrayLike, turn_radius: ArrayLike, **options: Any
+) -> SteadyState:
+    """Steady state by Wong's theory for speed V [m/s] and signed turning radius R [m] (inf straight)."""
+    module = wong_track if vehicle.is_tracked else wong_wheel
+    return module.solve(vehicle, terrain, speed, turn_radius, **options)

@@ -1,0 +1,266 @@
+"""Vehicle descriptions: a frozen dataclass, a validating YAML loader and a stable fingerprint.
+
+A vehicle file in ``config/vehicles/`` holds the fields of :class:`Vehicle` as flat keys (SI units,
+names carry the unit)::
+
+    name: chapter3_track
+    source: Table 3.3 of the dissertation
+    running_gear: track          # 'track' | 'wheel'
+    mass_kg: 30.0
+    cg_height_m: 0.15
+    tread_m: 0.4
+    track_length_m: 0.7          # tracks only
+    track_width_m: 0.07
+    sprocket_radius_m: 0.1
+    n_wheels: 4                  # wheels only (4 or 6, total)
+    wheel_radius_m: 0.1
+    wheel_width_m: 0.074
+    wheelbase_m: 0.45            # front axle to rear axle
+    powertrain: {preset: test_robot}
+
+Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from skidsteer_power.errors import ConfigError
+
+GRAVITY_M_S2 = 9.81  # [m/s^2], the value used throughout the dissertation
+
+RUNNING_GEARS = ('track', 'wheel')
+WHEEL_COUNTS = (4, 6)
+TRACK_FIELDS = ('track_length_m', 'track_width_m', 'sprocket_radius_m')
+WHEEL_FIELDS = ('n_wheels', 'wheel_radius_m', 'wheel_width_m', 'wheelbase_m')
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A skid-steered vehicle (SI units). Validated on construction.
+
+    Attributes
+    ----------
+    name : identifier (file stem for shipped vehicles)
+    running_gear : 'track' or 'wheel'
+    mass_kg : total mass m [kg]
+    cg_height_m : height h of the centre of gravity [m] (load transfer, eq. 3.1)
+    tread_m : tread B, centre-to-centre distance of the two sides [m]
+    track_length_m : contact length l of each track [m] (tracks)
+    track_width_m : width b of each track [m] (tracks)
+    sprocket_radius_m : sprocket radius r [m] (tracks)
+    n_wheels : total number of wheels, 4 or 6 (wheels)
+    wheel_radius_m, wheel_width_m : wheel radius r and width b [m] (wheels)
+    wheelbase_m : front axle to rear axle wb [m] (wheels); a 6-wheel vehicle's middle axle is midway
+    powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
+    source : where the numbers come from; flags assumed values
+    """
+
+    name: str
+    running_gear: str
+    mass_kg: float
+    cg_height_m: float
+    tread_m: float
+    track_length_m: float | None = None
+    track_width_m: float | None = None
+    sprocket_radius_m: float | None = None
+    n_wheels: int | None = None
+    wheel_radius_m: float | None = None
+    wheel_width_m: float | None = None
+    wheelbase_m: float | None = None
+    powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    source: str = ''
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    @property
+    def weight_N(self) -> float:
+        """Weight W = m g [N]."""
+        return self.mass_kg * GRAVITY_M_S2
+
+    @property
+    def drive_radius_m(self) -> float:
+        """Sprocket radius (tracks) or wheel radius (wheels) r [m]."""
+        radius = self.sprocket_radius_m if self.is_tracked else self.wheel_radius_m
+        assert radius is not None  # guaranteed by validation
+        return radius
+
+    @property
+    def is_tracked(self) -> bool:
+        return self.running_gear == 'track'
+
+    @property
+    def contact_width_m(self) -> float:
+        """Track or wheel width b [m]."""
+        width = self.track_width_m if self.is_tracked else self.wheel_width_m
+        assert width is not None
+        return width
+
+    @property
+    def wheels_per_side(self) -> int:
+        """Wheels on each side (2 or 3); 0 for a tracked vehicle."""
+        return 0 if self.is_tracked else int(self.n_wheels or 0) // 2
+
+    def axle_positions_m(self) -> tuple[float, ...]:
+        """Longitudinal positions of the axles of one side, front first, from the centre [m]."""
+        if self.is_tracked:
+            return ()
+        half = 0.5 * float(self.wheelbase_m or 0.0)
+        return (half, -half) if self.wheels_per_side == 2 else (half, 0.0, -half)
+
+
+def _fail(vehicle_name: str, message: str) -> ConfigError:
+    return ConfigError(f'vehicle {vehicle_name!r}: {message}')
+
+
+def _check_positive(vehicle: Vehicle, name: str) -> None:
+    value = getattr(vehicle, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _fail(vehicle.name, f'{name} must be a number, not {value!r}')
+    if not math.isfinite(value) or value <= 0:
+        raise _fail(vehicle.name, f'{name} must be a finite number > 0, not {value!r}')
+
+
+def _validate(vehicle: Vehicle) -> None:
+    if not isinstance(vehicle.name, str) or not vehicle.name:
+        raise ConfigError(f'vehicle name must be a non-empty string, not {vehicle.name!r}')
+    if vehicle.running_gear not in RUNNING_GEARS:
+        raise _fail(
+            vehicle.name, f'running_gear must be one of {RUNNING_GEARS}, not {vehicle.running_gear!r}'
+        )
+    for name in ('mass_kg', 'cg_height_m', 'tread_m'):
+        _check_positive(vehicle, name)
+    own, other = (TRACK_FIELDS, WHEEL_FIELDS) if vehicle.is_tracked else (WHEEL_FIELDS, TRACK_FIELDS)
+    for name in own:
+        if getattr(vehicle, name) is None:
+            raise _fail(vehicle.name, f'{name} is required for running_gear {vehicle.running_gear!r}')
+    for name in other:
+        if getattr(vehicle, name) is not None:
+            raise _fail(vehicle.name, f'{name} does not apply to running_gear {vehicle.running_gear!r}')
+    for name in own:
+        if name == 'n_wheels':
+            if vehicle.n_wheels not in WHEEL_COUNTS or isinstance(vehicle.n_wheels, bool):
+                raise _fail(vehicle.name, f'n_wheels must be 4 or 6, not {vehicle.n_wheels!r}')
+        else:
+            _check_positive(vehicle, name)
+    if vehicle.tread_m <= vehicle.contact_width_m:
+        raise _fail(
+            vehicle.name,
+            f'tread_m ({vehicle.tread_m}) must exceed the track/wheel width ({vehicle.contact_width_m})',
+        )
+    if not vehicle.is_tracked:
+        spacing = float(vehicle.wheelbase_m) / (vehicle.wheels_per_side - 1)  # type: ignore[arg-type]
+        if spacing <= 2.0 * float(vehicle.wheel_radius_m):  # type: ignore[arg-type]
+            raise _fail(vehicle.name, f'wheelbase_m ({vehicle.wheelbase_m}) is too short: the wheels overlap')
+    if not isinstance(vehicle.powertrain, dict):
+        raise _fail(vehicle.name, f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
+    if not isinstance(vehicle.source, str):
+        raise _fail(vehicle.name, 'source must be a string')
+
+
+FIELD_NAMES = tuple(f.name for f in dataclasses.fields(Vehicle))
+
+
+def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
+    """Build a validated :class:`Vehicle` from a mapping (e.g. parsed YAML); ``origin`` names the source."""
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f'{origin}: a vehicle file must hold a mapping of fields, not {type(data).__name__}'
+        )
+    unknown = sorted(set(data) - set(FIELD_NAMES))
+    if unknown:
+        raise ConfigError(
+            f'{origin}: unknown field(s) {", ".join(map(str, unknown))}; known: {", ".join(FIELD_NAMES)}'
+        )
+    for required in ('name', 'running_gear', 'mass_kg', 'cg_height_m', 'tread_m'):
+        if required not in data:
+            raise ConfigError(f'{origin}: missing field {required!r}')
+    values = dict(data)
+    if values.get('powertrain') is None:
+        values['powertrain'] = {}
+    values['name'] = str(values['name'])
+    try:
+        return Vehicle(**values)
+    except ConfigError as err:
+        raise ConfigError(f'{origin}: {err}') from None
+
+
+def vehicle_dirs() -> list[Path]:
+    """Directories searched for vehicle names: the source tree, then the installed share folder."""
+    package_root = Path(__file__).resolve().parent.parent
+    return [
+        package_root / 'config' / 'vehicles',
+        Path(sys.prefix) / 'share' / 'skidsteer_power' / 'config' / 'vehicles',
+    ]
+
+
+def available_vehicles() -> list[str]:
+    """Names of the shipped vehicle files (without .yaml)."""
+    names: set[str] = set()
+    for folder in vehicle_dirs():
+        if folder.is_dir():
+            names.update(p.stem for p in folder.glob('*.yaml'))
+    return sorted(names)
+
+
+def _resolve(path_or_name: str | os.PathLike[str]) -> Path:
+    candidate = Path(path_or_name)
+    if candidate.is_file():
+        return candidate
+    text = str(path_or_name)
+    if os.sep not in text and '/' not in text:
+        stem = text[:-5] if text.endswith('.yaml') else text
+        for folder in vehicle_dirs():
+            found = folder / f'{stem}.yaml'
+            if found.is_file():
+                return found
+    known = ', '.join(available_vehicles()) or 'none found'
+    raise ConfigError(f'vehicle {text!r}: no such file or shipped vehicle (shipped: {known})')
+
+
+def load_vehicle(path_or_name: str | os.PathLike[str] | Vehicle) -> Vehicle:
+    """Load a vehicle from a YAML file path, or a name in ``config/vehicles/`` (without .yaml).
+
+    A :class:`Vehicle` passes through unchanged. Raises ConfigError for a missing, unreadable or
+    invalid file, naming the file and the field.
+    """
+    if isinstance(path_or_name, Vehicle):
+        return path_or_name
+    path = _resolve(path_or_name)
+    try:
+        text = path.read_text(encoding='utf-8')
+    except OSError as err:
+        raise ConfigError(f'{path}: cannot read vehicle file ({err.strerror or err})') from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{path}: not valid YAML ({str(err).splitlines()[0]})') from err
+    return vehicle_from_dict(data, origin=str(path))
+
+
+def vehicle_fingerprint(vehicle: Vehicle) -> str:
+    """Stable hex digest of the vehicle's physical parameters and powertrain (not name or source).
+
+    Two vehicles with the same fingerprint give the same model results, so maps can be cached by it.
+    """
+    payload = {
+        f.name: getattr(vehicle, f.name)
+        for f in dataclasses.fields(vehicle)
+        if f.name not in ('name', 'source')
+    }
+    for key, value in payload.items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            payload[key] = repr(float(value))  # 4 and 4.0 hash alike
+    text = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]
