@@ -1,0 +1,242 @@
+"""``mission``, ``sensitivity`` and ``design-study`` (chapter 8; DESIGN.md command-line contract).
+
+mission --json keys: energy_J, energy_internal_J, energy_terrain_J, power_straight_W, power_turning_W,
+max_sinkage_m, max_drawbar_pull_N (+ drawbar_pull_ratio, energy_battery_J, internal_fraction,
+battery_end_soc, battery_remaining_wh, legs, ...). design-study --json: best: {track, 4-wheel, 6-wheel}
+each with mass_kg, width_m, radius_m, length_or_wheelbase_m, tread_m (+ powers, mobility, merit),
+candidates: [...], criterion. sensitivity --json: results: {vehicle: {baseline, changes_percent}}.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float, positive_float
+from skidsteer_power.errors import InputError
+
+PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
+MODEL_CHOICES = ('fess', 'wong', 'steeds', 'icr', 'fast')
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    _register_mission(subparsers)
+    _register_sensitivity(subparsers)
+    _register_design(subparsers)
+
+
+def _register_mission(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'mission',
+        help='power and energy along a route (ch. 8.1, 8.2)',
+        description='Energy of a vehicle driving a route: built-in patrol (ch. 8.1), search-retrieve '
+        '(ch. 8.2, synthetic smooth path) or a CSV of segments (length_m or duration_s, speed_m_s, '
+        'turn_radius_m, payload_kg). Energy = terrain + internal (eqs. 7.1-7.4); battery energy adds '
+        'motor and amplifier losses.',
+    )
+    p.add_argument('--vehicle', required=True, help='vehicle YAML file or shipped name')
+    p.add_argument('--terrain', required=True, help='terrain preset or YAML file')
+    p.add_argument('--route', required=True, help='patrol | search-retrieve | FILE.csv')
+    p.add_argument(
+        '--speed',
+        type=positive_float,
+        help='forward speed [m/s] (default: 0.2 patrol, 0.5 search-retrieve; CSV rows)',
+    )
+    p.add_argument(
+        '--payload-kg',
+        type=nonnegative_float,
+        help='search-retrieve: payload brought back [kg] (default 10); other routes: carried throughout',
+    )
+    _add_source_args(p)
+    p.add_argument(
+        '--cache-dir', default=None, help='map cache folder (default $SKIDSTEER_POWER_CACHE or ~/.cache)'
+    )
+    p.add_argument(
+        '--no-cache', action='store_true', help='build maps in memory; do not read or write the cache'
+    )
+    p.add_argument('--plot', metavar='PNG', help='write power and energy along the route to this PNG')
+    add_json_flag(p)
+    p.set_defaults(func=run_mission_cmd)
+
+
+def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'sensitivity',
+        help='soil-parameter sensitivity of a mission (ch. 8.2)',
+        description='Change each soil parameter (n, kc, kphi, c, phi, K) by +-delta and all at once; '
+        'relative change of mission energy, max drawbar pull / weight and max sinkage per vehicle.',
+    )
+    p.add_argument(
+        '--vehicle', action='append', help='vehicle (repeatable; default: the three chapter 8 Packbots)'
+    )
+    p.add_argument(
+        '--terrain', default='sandy_soil', help='terrain preset or YAML (default sandy_soil, Table 8.2)'
+    )
+    p.add_argument('--route', default='search-retrieve', help='patrol | search-retrieve | FILE.csv')
+    p.add_argument('--speed', type=positive_float, help="forward speed [m/s] (default: the route's)")
+    p.add_argument('--delta', type=positive_float, default=0.01, help='relative change (default 0.01 = 1 %%)')
+    _add_source_args(p)
+    p.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
+    p.add_argument('--plot', metavar='PNG', help='write a bar chart of the changes to this PNG')
+    add_json_flag(p)
+    p.set_defaults(func=run_sensitivity_cmd)
+
+
+def _register_design(subparsers: argparse._SubParsersAction) -> None:
+    from skidsteer_power.missions.design import CRITERIA
+
+    p = subparsers.add_parser(
+        'design-study',
+        help='the 729-candidate design study of ch. 8.3 (Table 8.4)',
+        description='Straight at 0.2 m/s and R = 2 m at 0.2 m/s for every Table 8.4 candidate; best design '
+        'per configuration by --criterion (merit: max drawbar pull / weight per watt of mean power).',
+    )
+    p.add_argument(
+        '--terrain', default='sandy_soil', help='terrain preset or YAML (default sandy_soil, Table 8.2)'
+    )
+    p.add_argument('--model', default='fess', choices=MODEL_CHOICES)
+    p.add_argument('--criterion', default='merit', choices=CRITERIA)
+    p.add_argument('--workers', type=int, default=None, help='processes (default: 2 or the cores there are)')
+    p.add_argument('--plot', metavar='PNG', help='write the power vs mobility scatter to this PNG')
+    add_json_flag(p)
+    p.set_defaults(func=run_design_cmd)
+
+
+def _add_source_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--model', default='fess', choices=MODEL_CHOICES, help='skid-steer model (default fess)')
+    p.add_argument(
+        '--direct',
+        action='store_true',
+        help='solve the model at every route state instead of querying the FESS power map '
+        '(implied by a model other than fess; fails where the model cannot solve a tight turn)',
+    )
+
+
+def _source(args: argparse.Namespace) -> str:
+    return 'direct' if args.direct or args.model != 'fess' else 'map'
+
+
+def _load(vehicle: str, terrain: str) -> tuple[Any, Any]:
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    return load_vehicle(vehicle), load_terrain(terrain)
+
+
+def _route(spec: str, speed: float | None, payload: float | None) -> Any:
+    import dataclasses
+
+    from skidsteer_power.missions.routes import resolve_route, search_retrieve
+
+    if spec == 'search-retrieve':
+        kwargs: dict[str, float] = {}
+        if speed is not None:
+            kwargs['speed_m_s'] = speed
+        if payload is not None:
+            kwargs['payload_kg'] = payload
+        return search_retrieve(**kwargs)
+    route = resolve_route(spec, speed)
+    if payload:
+        segments = tuple(dataclasses.replace(s, payload_kg=s.payload_kg + payload) for s in route.segments)
+        route = dataclasses.replace(route, segments=segments)
+    return route
+
+
+def _workers(value: int | None) -> int | None:
+    if value is not None and value < 1:
+        raise InputError(f'--workers must be >= 1, not {value}')
+    return value
+
+
+def run_mission_cmd(args: argparse.Namespace) -> int:
+    from skidsteer_power.missions.energy import run_mission
+    from skidsteer_power.powertrain import Battery, Powertrain
+
+    vehicle, terrain = _load(args.vehicle, args.terrain)
+    route = _route(args.route, args.speed, args.payload_kg)
+    powertrain = Powertrain.for_vehicle(vehicle)
+    cache_dir = None if args.no_cache else (args.cache_dir or _default_cache())
+    result = run_mission(
+        vehicle,
+        terrain,
+        route,
+        source=_source(args),
+        model=args.model,
+        powertrain=powertrain,
+        cache_dir=cache_dir,
+    )
+    payload = result.summary()
+    battery = Battery.from_config(powertrain.battery)
+    for power, dt in zip(result.power_battery_W, result.duration_s, strict=True):
+        battery.step(float(power), float(dt))
+    payload['battery_end_soc'] = battery.soc
+    payload['battery_remaining_wh'] = battery.remaining_wh
+    if args.plot:
+        from skidsteer_power.missions.plots import plot_missions
+
+        plot_missions([result], Path(args.plot))
+        payload['plot'] = str(args.plot)
+    emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
+    return 0
+
+
+def _default_cache() -> Path:
+    from skidsteer_power.maps import default_cache_dir
+
+    return default_cache_dir()
+
+
+def run_sensitivity_cmd(args: argparse.Namespace) -> int:
+    from skidsteer_power.missions.sensitivity import sensitivity
+
+    names = args.vehicle or list(PACKBOTS)
+    loaded = [_load(name, args.terrain) for name in names]
+    vehicles, terrain = [v for v, _ in loaded], loaded[0][1]
+    route = _route(args.route, args.speed, None)
+    table = sensitivity(
+        vehicles, terrain, route, delta=args.delta, model=args.model, workers=_workers(args.workers)
+    )
+    if args.plot:
+        from skidsteer_power.missions.plots import plot_sensitivity
+
+        plot_sensitivity(table, Path(args.plot))
+        table['plot'] = str(args.plot)
+    if args.json:
+        emit(table, True)
+    else:
+        for name, res in table['results'].items():
+            print(f'{name}: baseline ' + ', '.join(f'{k} {v:.4g}' for k, v in res['baseline'].items()))
+            for case, changes in res['changes_percent'].items():
+                print(f'  {case:<7} ' + '  '.join(f'{k} {v:+.3f} %' for k, v in changes.items()))
+    return 0
+
+
+def run_design_cmd(args: argparse.Namespace) -> int:
+    from skidsteer_power.missions.design import design_study
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    terrain = load_terrain(args.terrain)
+    study = design_study(terrain, model=args.model, criterion=args.criterion, workers=_workers(args.workers))
+    if args.plot:
+        from skidsteer_power.missions.plots import plot_design_study
+
+        plot_design_study(study['candidates'], study['best'], Path(args.plot))
+        study['plot'] = str(args.plot)
+    if args.json:
+        emit(study, True)
+    else:
+        converged = f'{study["n_converged"]} of {study["n_candidates"]} candidates converged'
+        print(f'{converged}; criterion: {study["criterion_text"]}')
+        for config, best in study['best'].items():
+            print(f'best {config:<8} {_design_line(best)}')
+    return 0
+
+
+def _design_line(best: dict[str, Any]) -> str:
+    shape = (
+        f'm {best["mass_kg"]:g} kg, width {best["width_m"]:g} m, radius {best["radius_m"]:g} m, '
+        f'length/wheelbase {best["length_or_wheelbase_m"]:g} m, tread {best["tread_m"]:g} m'
+    )
+    power = f'P {best["power_straight_W"]:.3g} / {best["power_turning_W"]:.3g} W'
+    return f'{shape}: {power}, DP/W {best["drawbar_pull_ratio"]:.3g}'

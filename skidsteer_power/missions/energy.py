@@ -1,0 +1,307 @@
+"""Power and energy of a vehicle driving a route (ch. 8.1, 8.2).
+
+Every segment is a steady state (V, R, payload): the skid-steer model gives each side's axle torque
+and speed, the powertrain adds its internal resistance (eqs. 7.1-7.4) and turns it into motor,
+amplifier and battery power. The unique states of a route are solved in one batched model call per
+payload state (``source='direct'``), or read from the vehicle's FESS power map (``source='map'``,
+the default, see :mod:`skidsteer_power.maps`), so a route of hundreds of segments costs little.
+
+Energies (SI, J) follow the dissertation's split (Figures 8.5, 8.11):
+    terrain  = sum over sides of  T_axle w_axle  x time   (vehicle-terrain interaction)
+    internal = sum over sides of  T_int w_motor  x time   (eqs. 7.2-7.4, >= 0)
+    total    = terrain + internal                          (the "power consumption" of ch. 7-8)
+and, beyond the dissertation, the battery energy: the amplifiers' DC bus power (motor copper loss,
+amplifier efficiency, regeneration at an efficiency; see powertrain.motor) x time.
+Energies are exact sums of constant segment powers times durations, so they equal the time integral
+of the piecewise-constant power trace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.missions.mobility import max_drawbar_pull
+from skidsteer_power.missions.routes import Route
+from skidsteer_power.powertrain import Powertrain
+
+SIDES = ('left', 'right')
+
+
+@dataclass
+class MissionResult:
+    """Per-segment powers [W] and the mission's energies [J] and mobility.
+
+    Per-segment arrays (one entry per route segment): ``power_W`` (terrain + internal),
+    ``power_terrain_W``, ``power_internal_W``, ``power_battery_W`` (DC bus), ``sinkage_m``,
+    ``traction_margin``, ``power_left_W``, ``power_right_W`` (mechanical, per side), ``clamped`` (the
+    map query left the map or touched a non-converged cell).
+    """
+
+    route: Route
+    vehicle_name: str
+    terrain_name: str
+    model: str
+    power_W: np.ndarray
+    power_terrain_W: np.ndarray
+    power_internal_W: np.ndarray
+    power_battery_W: np.ndarray
+    power_left_W: np.ndarray
+    power_right_W: np.ndarray
+    sinkage_m: np.ndarray
+    traction_margin: np.ndarray
+    clamped: np.ndarray
+    drawbar_pull_by_payload: dict[float, float] = field(default_factory=dict)
+    weight_by_payload: dict[float, float] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> np.ndarray:
+        return self.route.arrays()['duration_s']
+
+    @property
+    def turning(self) -> np.ndarray:
+        return np.isfinite(self.route.arrays()['turn_radius_m'])
+
+    def _energy(self, power: np.ndarray, mask: np.ndarray | None = None) -> float:
+        dt = self.duration_s
+        return float(np.sum((power * dt)[mask] if mask is not None else power * dt))
+
+    @property
+    def energy_J(self) -> float:
+        return self._energy(self.power_W)
+
+    @property
+    def energy_terrain_J(self) -> float:
+        return self._energy(self.power_terrain_W)
+
+    @property
+    def energy_internal_J(self) -> float:
+        return self._energy(self.power_internal_W)
+
+    @property
+    def energy_battery_J(self) -> float:
+        return self._energy(self.power_battery_W)
+
+    def mean_power(self, turning: bool) -> float:
+        """Time-weighted mean total power [W] over the turning or the straight segments (nan if none)."""
+        mask = self.turning if turning else ~self.turning
+        time = float(np.sum(self.duration_s[mask]))
+        return self._energy(self.power_W, mask) / time if time > 0 else math.nan
+
+    @property
+    def max_drawbar_pull_N(self) -> float:
+        """The mobility-limiting (smallest) maximum drawbar pull over the route's payload states [N]."""
+        return min(self.drawbar_pull_by_payload.values())
+
+    @property
+    def drawbar_pull_ratio(self) -> float:
+        """Smallest maximum drawbar pull / weight over the payload states [-] (ch. 8.2's mobility index)."""
+        return min(dp / self.weight_by_payload[p] for p, dp in self.drawbar_pull_by_payload.items())
+
+    def legs(self) -> list[dict[str, float]]:
+        """Per payload state: energy, max sinkage, max drawbar pull and its ratio to the weight."""
+        payload = self.route.arrays()['payload_kg']
+        out = []
+        for p in sorted(self.drawbar_pull_by_payload):
+            mask = payload == p
+            out.append(
+                {
+                    'payload_kg': p,
+                    'distance_m': float(np.sum(self.route.arrays()['length_m'][mask])),
+                    'energy_J': self._energy(self.power_W, mask),
+                    'max_sinkage_m': float(np.max(self.sinkage_m[mask])),
+                    'max_drawbar_pull_N': self.drawbar_pull_by_payload[p],
+                    'drawbar_pull_ratio': self.drawbar_pull_by_payload[p] / self.weight_by_payload[p],
+                }
+            )
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The DESIGN.md ``mission --json`` keys, plus a few more (SI units)."""
+        return {
+            'energy_J': self.energy_J,
+            'energy_internal_J': self.energy_internal_J,
+            'energy_terrain_J': self.energy_terrain_J,
+            'power_straight_W': self.mean_power(turning=False),
+            'power_turning_W': self.mean_power(turning=True),
+            'max_sinkage_m': float(np.max(self.sinkage_m)),
+            'max_drawbar_pull_N': self.max_drawbar_pull_N,
+            'drawbar_pull_ratio': self.drawbar_pull_ratio,
+            'energy_battery_J': self.energy_battery_J,
+            'clamped_segments': int(np.sum(self.clamped)),
+            'internal_fraction': self.energy_internal_J / self.energy_J,
+            'distance_m': self.route.length_m,
+            'duration_s': self.route.duration_s,
+            'turning_distance_m': self.route.turning_length_m,
+            'route': self.route.name,
+            'synthetic_route': self.route.synthetic,
+            'vehicle': self.vehicle_name,
+            'terrain': self.terrain_name,
+            'model': self.model,
+            'legs': self.legs(),
+        }
+
+    def trace(self, samples_per_segment: int = 2) -> dict[str, np.ndarray]:
+        """Time, distance, power and cumulative energy along the route, for plots and checks.
+
+        Each segment contributes its start and end (and optional interior) points at its constant
+        power, so the trapezoidal integral of power over time reproduces the energy exactly.
+        """
+        dt = self.duration_s
+        ds = self.route.arrays()['length_m']
+        t0 = np.r_[0.0, np.cumsum(dt)[:-1]]
+        s0 = np.r_[0.0, np.cumsum(ds)[:-1]]
+        frac = np.linspace(0.0, 1.0, max(samples_per_segment, 2))
+        t = (t0[:, None] + dt[:, None] * frac).ravel()
+        s = (s0[:, None] + ds[:, None] * frac).ravel()
+        out = {'time_s': t, 'distance_m': s}
+        for name in ('power_W', 'power_terrain_W', 'power_internal_W', 'power_battery_W'):
+            p = np.repeat(getattr(self, name), frac.size)
+            out[name] = p
+            e_seg = getattr(self, name) * dt
+            e0 = np.r_[0.0, np.cumsum(e_seg)[:-1]]
+            out[name.replace('power', 'energy').replace('_W', '_J')] = (
+                e0[:, None] + e_seg[:, None] * frac
+            ).ravel()
+        return out
+
+
+def with_payload(vehicle: Any, payload_kg: float) -> Any:
+    """The vehicle carrying ``payload_kg`` [kg] more, at its CG (ch. 8.2: only the weight changes)."""
+    if payload_kg == 0:
+        return vehicle
+    return dataclasses.replace(vehicle, mass_kg=vehicle.mass_kg + payload_kg)
+
+
+SOURCES = ('map', 'direct')
+
+
+def run_mission(
+    vehicle: Any,
+    terrain: Any,
+    route: Route,
+    *,
+    source: str = 'map',
+    model: str = 'fess',
+    powertrain: Powertrain | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> MissionResult:
+    """Evaluate ``route`` for ``vehicle`` on ``terrain`` (see module doc).
+
+    ``source='map'`` (default) queries the FESS power map of the vehicle (one per payload state) from
+    :mod:`skidsteer_power.maps`: built in memory, or loaded from / saved to ``cache_dir``. The map
+    handles turns tighter than it can solve by its small-radius limit (see maps.power_map).
+    ``source='direct'`` solves ``model`` at the route's unique states in one batched call per
+    payload and raises ConvergenceError naming the first (V, R) it cannot solve.
+    """
+    if source not in SOURCES:
+        raise InputError(f'source must be one of {", ".join(SOURCES)}, not {source!r}')
+    if source == 'map' and model != 'fess':
+        raise InputError(f"power maps are built with FESS; use source='direct' for model {model!r}")
+    pt = powertrain or Powertrain.for_vehicle(vehicle)
+    a = route.arrays()
+    n = len(route.segments)
+    fields_ = {k: np.zeros(n) for k in ('P', 'Pt', 'Pi', 'Pb', 'Pl', 'Pr', 'z', 'tm')}
+    clamped = np.zeros(n, dtype=bool)
+    dp: dict[float, float] = {}
+    weight: dict[float, float] = {}
+    for payload in np.unique(a['payload_kg']):
+        in_group = a['payload_kg'] == payload
+        loaded = with_payload(vehicle, float(payload))
+        table = np.column_stack([a['speed_m_s'][in_group], a['turn_radius_m'][in_group]])
+        states, inverse = np.unique(table, axis=0, return_inverse=True)
+        if source == 'map':
+            axle = _map_states(loaded, terrain, states[:, 0], states[:, 1], cache_dir)
+        else:
+            axle = _axle_states(loaded, terrain, states[:, 0], states[:, 1], model)
+        side_points = {s: pt.motor_side(s, axle[f'torque_{s}'], axle[f'omega_{s}']) for s in SIDES}
+        rows = np.flatnonzero(in_group)
+        inv = inverse.ravel()
+        left, right = side_points['left'], side_points['right']
+        fields_['Pl'][rows] = left.mechanical_power_W[inv]
+        fields_['Pr'][rows] = right.mechanical_power_W[inv]
+        fields_['P'][rows] = (left.mechanical_power_W + right.mechanical_power_W)[inv]
+        fields_['Pt'][rows] = (left.terrain_power_W + right.terrain_power_W)[inv]
+        fields_['Pi'][rows] = (left.internal_power_W + right.internal_power_W)[inv]
+        fields_['Pb'][rows] = (left.electrical_power_W + right.electrical_power_W)[inv]
+        fields_['z'][rows] = axle['sinkage'][inv]
+        fields_['tm'][rows] = axle['traction_margin'][inv]
+        clamped[rows] = axle['clamped'][inv]
+        dp[float(payload)] = float(max_drawbar_pull([loaded], terrain)[0])
+        weight[float(payload)] = float(loaded.weight_N)
+    return MissionResult(
+        route=route,
+        vehicle_name=vehicle.name,
+        terrain_name=getattr(terrain, 'name', str(terrain)),
+        model=f'{model} ({source})',
+        power_W=fields_['P'],
+        power_terrain_W=fields_['Pt'],
+        power_internal_W=fields_['Pi'],
+        power_battery_W=fields_['Pb'],
+        power_left_W=fields_['Pl'],
+        power_right_W=fields_['Pr'],
+        sinkage_m=fields_['z'],
+        traction_margin=fields_['tm'],
+        clamped=clamped,
+        drawbar_pull_by_payload=dp,
+        weight_by_payload=weight,
+    )
+
+
+def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Yaw rate V / R [rad/s] (0 for R = inf)."""
+    straight = np.isinf(radius)
+    return np.where(straight, 0.0, speed / np.where(straight, 1.0, radius))
+
+
+def _map_states(
+    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
+) -> dict[str, np.ndarray]:
+    from skidsteer_power.maps import PowerMap, load_or_build
+
+    if cache_dir is None:
+        power_map = PowerMap.build(vehicle, terrain)
+    else:
+        power_map, _built = load_or_build(vehicle, terrain, cache_dir)
+    q = power_map.query(speed, _yaw_rate(speed, radius))
+    return {
+        'torque_left': np.asarray(q.torque_left_Nm, dtype=float),
+        'torque_right': np.asarray(q.torque_right_Nm, dtype=float),
+        'omega_left': np.asarray(q.omega_left_rad_s, dtype=float),
+        'omega_right': np.asarray(q.omega_right_rad_s, dtype=float),
+        'sinkage': np.asarray(q.sinkage_m, dtype=float),
+        'traction_margin': np.asarray(q.traction_margin, dtype=float),
+        'clamped': np.asarray(q.clamped, dtype=bool),
+    }
+
+
+def _axle_states(
+    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, model: str
+) -> dict[str, np.ndarray]:
+    """Per-side axle torque [N m] and speed [rad/s], sinkage [m] and traction margin at (V, R)."""
+    from skidsteer_power.models import solve
+
+    state = solve(vehicle, terrain, speed, radius, model=model, raise_on_failure=False)
+    converged = np.asarray(state.converged, dtype=bool)
+    if not np.all(converged):
+        k = int(np.flatnonzero(~converged)[0])
+        raise ConvergenceError(
+            f'{model} did not converge for {vehicle.name} ({vehicle.mass_kg:g} kg) at V = {speed[k]:g} m/s, '
+            f'R = {radius[k]:g} m ({int(np.sum(~converged))} of {converged.size} route states failed); '
+            'the map source handles tight turns'
+        )
+    return {
+        'torque_left': state.side('torque', 'left'),
+        'torque_right': state.side('torque', 'right'),
+        'omega_left': state.side('omega', 'left'),
+        'omega_right': state.side('omega', 'right'),
+        'sinkage': np.asarray(state.sinkage_m, dtype=float),
+        'traction_margin': np.asarray(state.traction_margin, dtype=float),
+        'clamped': np.zeros(speed.shape, dtype=bool),
+    }

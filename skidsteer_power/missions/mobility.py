@@ -1,0 +1,50 @@
+"""Mobility indices of ch. 8: maximum drawbar pull (and its ratio to the weight) in straight running.
+
+The dissertation's mobility indices (ch. 8.2, Figure 8.9; ch. 8.3's X axis) are the maximum drawbar
+pull over the vehicle weight, and the sinkage. The maximum drawbar pull is the largest net pull the
+running gear can develop on level ground over all slips, with the weight shared equally (CG at the
+centre, straight running):
+
+* tracks: two tracks of load W/2, F_d(s) = F_s(s) - R_c (eq. 2.18), maximized over s in [0, 1];
+* wheels: n rigid wheels of load W/n, F_d(s) = F_x(s) of the Wong-Reece wheel (eqs. 2.27-2.28),
+  maximized over s in [0, 0.99].
+
+Each is one vectorized array call over (candidate, slip).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from skidsteer_power.terramechanics.terrain import Terrain
+from skidsteer_power.terramechanics.track import drawbar_pull as track_drawbar_pull
+from skidsteer_power.terramechanics.wheel import wheel_at_slip
+
+TRACK_SLIPS = np.linspace(0.0, 1.0, 101)
+WHEEL_SLIPS = np.linspace(0.0, 0.99, 34)
+
+
+def max_drawbar_pull(vehicles: Sequence, terrain: Terrain) -> np.ndarray:
+    """Maximum straight-running drawbar pull [N] of each vehicle (see module doc), one array call
+    per running-gear type. ``vehicles`` are :class:`~skidsteer_power.vehicle.Vehicle` objects."""
+    out = np.empty(len(vehicles))
+    tracked = [k for k, v in enumerate(vehicles) if v.is_tracked]
+    wheeled = [k for k, v in enumerate(vehicles) if not v.is_tracked]
+    if tracked:
+        v = [vehicles[k] for k in tracked]
+        load = np.array([x.weight_N / 2.0 for x in v])[:, None]
+        width = np.array([x.track_width_m for x in v])[:, None]
+        length = np.array([x.track_length_m for x in v])[:, None]
+        dp = track_drawbar_pull(terrain, load, width, length, TRACK_SLIPS[None, :])
+        out[tracked] = 2.0 * dp.max(axis=1)
+    if wheeled:
+        v = [vehicles[k] for k in wheeled]
+        n = np.array([x.n_wheels for x in v], dtype=float)
+        load = (np.array([x.weight_N for x in v]) / n)[:, None]
+        radius = np.array([x.wheel_radius_m for x in v])[:, None]
+        width = np.array([x.wheel_width_m for x in v])[:, None]
+        state = wheel_at_slip(terrain, load, WHEEL_SLIPS[None, :], radius, width)
+        out[wheeled] = n * np.asarray(state.Fx_N).max(axis=1)
+    return out

@@ -1,0 +1,188 @@
+"""Maxon EC-45 motor (Appendix B), the 12:1 reduction and the DES 70/10 amplifier (Appendix A, ch. 7.1).
+
+Every constant is converted to SI at definition (rad/s, N m, A, V, ohm, H, kg m^2, kg) and keeps the
+datasheet value and unit beside it, so a reader can check the conversion.
+
+Amplifier model (4-quadrant, ch. 7.1.2: "4-Q ready ... can absorb power from the motor when the
+vehicle is performing regenerative braking"): the DC bus power is the motor terminal power divided by
+the amplifier efficiency when motoring, and the terminal power times the efficiency when the motor
+generates. Appendix A gives only the *maximum* efficiency (92 %); using it at every operating point is
+a stated simplification (it slightly flatters part-load operation). Regeneration can therefore only
+return part of the mechanical braking power: it never creates energy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skidsteer_power.errors import ConfigError
+
+RPM = 2.0 * math.pi / 60.0
+"""One revolution per minute in rad/s."""
+
+
+@dataclass(frozen=True)
+class MotorConstants:
+    """Datasheet constants of a DC / EC motor, SI units.
+
+    Attributes
+    ----------
+    name : motor designation
+    nominal_voltage_V : nominal supply voltage [V]
+    no_load_speed_rad_s : no-load speed at nominal voltage [rad/s]
+    no_load_current_A : no-load current at nominal voltage [A]
+    nominal_speed_rad_s : speed at nominal torque [rad/s]
+    nominal_torque_Nm : max. continuous torque [N m]
+    nominal_current_A : max. continuous current [A]
+    stall_torque_Nm : stall torque [N m]
+    starting_current_A : starting (stall) current [A]
+    max_efficiency : maximum efficiency [-]
+    terminal_resistance_ohm : terminal resistance phase to phase [ohm]
+    terminal_inductance_H : terminal inductance phase to phase [H]
+    torque_constant_Nm_A : torque constant Kt [N m / A]
+    speed_constant_rad_s_V : speed constant Kn [rad/s / V] (its inverse is the back-EMF constant)
+    speed_torque_gradient : speed / torque gradient [(rad/s) / (N m)]
+    mechanical_time_constant_s : mechanical time constant [s]
+    rotor_inertia_kg_m2 : rotor inertia [kg m^2]
+    max_speed_rad_s : max. permissible speed [rad/s]
+    pole_pairs : number of pole pairs [-]
+    encoder_counts_per_turn : encoder pulses per revolution [-] (ch. 7.1.2: 2048)
+    mass_kg : motor mass [kg]
+    """
+
+    name: str
+    nominal_voltage_V: float
+    no_load_speed_rad_s: float
+    no_load_current_A: float
+    nominal_speed_rad_s: float
+    nominal_torque_Nm: float
+    nominal_current_A: float
+    stall_torque_Nm: float
+    starting_current_A: float
+    max_efficiency: float
+    terminal_resistance_ohm: float
+    terminal_inductance_H: float
+    torque_constant_Nm_A: float
+    speed_constant_rad_s_V: float
+    speed_torque_gradient: float
+    mechanical_time_constant_s: float
+    rotor_inertia_kg_m2: float
+    max_speed_rad_s: float
+    pole_pairs: int
+    encoder_counts_per_turn: int
+    mass_kg: float
+
+    @property
+    def back_emf_constant_V_s(self) -> float:
+        """Back-EMF constant 1 / Kn [V s / rad] (equal to Kt within datasheet rounding)."""
+        return 1.0 / self.speed_constant_rad_s_V
+
+
+EC45 = MotorConstants(
+    name='maxon EC-4pole 45, 300 W, order no. 283150 (Appendix B)',
+    nominal_voltage_V=48.0,  # line 1: 48.0 V
+    no_load_speed_rad_s=4010 * RPM,  # line 2: 4010 rpm
+    no_load_current_A=0.193,  # line 3: 193 mA
+    nominal_speed_rad_s=3580 * RPM,  # line 4: 3580 rpm
+    nominal_torque_Nm=0.635,  # line 5: 635 mNm
+    nominal_current_A=5.61,  # line 6: 5.61 A
+    stall_torque_Nm=7.690,  # line 7: 7690 mNm
+    starting_current_A=67.6,  # line 8: 67.6 A
+    max_efficiency=0.90,  # line 9: 90 %
+    terminal_resistance_ohm=0.710,  # line 10: 0.710 ohm phase to phase
+    terminal_inductance_H=0.677e-3,  # line 11: 0.677 mH
+    torque_constant_Nm_A=0.114,  # line 12: 114 mNm / A
+    speed_constant_rad_s_V=84.0 * RPM,  # line 13: 84.0 rpm / V
+    speed_torque_gradient=0.524 * RPM / 1e-3,  # line 14: 0.524 rpm / mNm
+    mechanical_time_constant_s=2.02e-3,  # line 15: 2.02 ms
+    rotor_inertia_kg_m2=368e-7,  # line 16: 368 g cm^2
+    max_speed_rad_s=10000 * RPM,  # line 23: 10000 rpm
+    pole_pairs=2,  # line 29
+    encoder_counts_per_turn=2048,  # ch. 7.1.2 and encoder data
+    mass_kg=1.130,  # line 31: 1130 g
+)
+"""The test robot's drive motor, one per side (ch. 7.1.1, Appendix B)."""
+
+GEAR_RATIO = 12.0
+"""Motor-to-axle reduction of the test robot: 4.8:1 planetary x 2.5:1 roller chain (ch. 7.1.1) [-]."""
+
+
+@dataclass(frozen=True)
+class AmplifierConstants:
+    """Servo amplifier data, SI units.
+
+    Attributes
+    ----------
+    name : designation
+    min_supply_V, max_supply_V : operating supply voltage range V_CC [V]
+    max_output_voltage_fraction : max. output voltage / V_CC [-]
+    max_current_A : max. (peak) output current [A]
+    continuous_current_A : continuous output current [A]
+    efficiency : efficiency used for every operating point [-] (Appendix A: max. efficiency)
+    four_quadrant : True if it can absorb regenerated power
+    """
+
+    name: str
+    min_supply_V: float
+    max_supply_V: float
+    max_output_voltage_fraction: float
+    max_current_A: float
+    continuous_current_A: float
+    efficiency: float
+    four_quadrant: bool = True
+
+
+DES_70_10 = AmplifierConstants(
+    name='maxon DES 70/10 4-Q-EC servoamplifier, part no. 228597 (Appendix A)',
+    min_supply_V=24.0,  # operating voltage 24 - 70 VDC
+    max_supply_V=70.0,
+    max_output_voltage_fraction=0.9,  # max. output voltage 0.9 x V_CC
+    max_current_A=30.0,  # I_max 30 A
+    continuous_current_A=10.0,  # I_cont 10 A
+    efficiency=0.92,  # max. efficiency 92 %
+    four_quadrant=True,
+)
+"""The test robot's amplifier, one per motor (ch. 7.1.2, Appendix A)."""
+
+
+def motor_current(motor: MotorConstants, motor_torque_Nm: np.ndarray | float) -> np.ndarray:
+    """Motor current i = T / Kt [A] for the total electromagnetic torque T [N m] (eq. 7.1: Kt i)."""
+    return np.asarray(motor_torque_Nm, dtype=float) / motor.torque_constant_Nm_A
+
+
+def terminal_power(
+    motor: MotorConstants, motor_torque_Nm: np.ndarray | float, motor_omega_rad_s: np.ndarray | float
+) -> np.ndarray:
+    """Electrical power at the motor terminals [W]: T omega + R i^2 (negative = generating).
+
+    ``motor_torque_Nm`` is the electromagnetic torque Kt i [N m] (load plus internal resistance),
+    ``motor_omega_rad_s`` the shaft speed [rad/s]. R is the phase-to-phase terminal resistance, the
+    datasheet's convention (starting current 67.6 A = 48 V / 0.710 ohm).
+    """
+    torque = np.asarray(motor_torque_Nm, dtype=float)
+    omega = np.asarray(motor_omega_rad_s, dtype=float)
+    current = torque / motor.torque_constant_Nm_A
+    return torque * omega + motor.terminal_resistance_ohm * current**2
+
+
+def bus_power(
+    terminal_power_W: np.ndarray | float,
+    amplifier: AmplifierConstants = DES_70_10,
+    regen_efficiency: float | None = None,
+) -> np.ndarray:
+    """DC bus (battery-side) power of one amplifier [W], 4-quadrant.
+
+    Motoring (terminal power > 0): P_bus = P_term / eta. Generating (< 0): P_bus = P_term * eta_regen,
+    with eta_regen = ``regen_efficiency`` (default: the amplifier efficiency; 0 = no regeneration,
+    e.g. a 2-quadrant amplifier or a full battery). |P_bus| <= |P_term| when generating, so braking
+    never returns more than the motor gives back.
+    """
+    eta = amplifier.efficiency
+    eta_regen = (eta if amplifier.four_quadrant else 0.0) if regen_efficiency is None else regen_efficiency
+    if not (0.0 < eta <= 1.0) or not (0.0 <= eta_regen <= 1.0):
+        raise ConfigError(f'amplifier efficiencies must be in (0, 1]: {eta}, {eta_regen}')
+    p = np.asarray(terminal_power_W, dtype=float)
+    return np.where(p >= 0.0, p / eta, p * eta_regen)

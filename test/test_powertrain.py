@@ -1,0 +1,153 @@
+"""Powertrain: EC-45 constants (Appendix B), internal resistance (eqs. 7.1-7.4, Table 7.1), the
+4-quadrant motor/amplifier power and the least-squares fit of ch. 7.2."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.powertrain import EC45, GEAR_RATIO, Powertrain, fit_internal
+from skidsteer_power.powertrain.internal import components_from_stages
+from skidsteer_power.powertrain.motor import DES_70_10, bus_power, terminal_power
+
+
+def test_ec45_constants_in_si():
+    # Appendix B: Kt 114 mNm/A, R 0.710 ohm, speed constant 84.0 rpm/V, no-load current 193 mA.
+    assert EC45.torque_constant_Nm_A == pytest.approx(0.114)
+    assert EC45.terminal_resistance_ohm == pytest.approx(0.710)
+    assert EC45.speed_constant_rad_s_V == pytest.approx(84.0 * 2 * math.pi / 60)
+    assert EC45.no_load_current_A == pytest.approx(0.193)
+    # Consistency of the datasheet: back-EMF constant 1/Kn ~= Kt (SI motors: Ke = Kt), and the
+    # starting current is nominal voltage / terminal resistance (48 / 0.710 = 67.6 A, line 8).
+    assert EC45.back_emf_constant_V_s == pytest.approx(EC45.torque_constant_Nm_A, rel=0.01)
+    assert EC45.nominal_voltage_V / EC45.terminal_resistance_ohm == pytest.approx(
+        EC45.starting_current_A, rel=0.01
+    )
+    assert pytest.approx(4.8 * 2.5) == GEAR_RATIO  # ch. 7.1.1
+
+
+def test_table_7_1_read_as_currents_is_below_no_load_current():
+    """The Table 7.1 interpretation: the motor alone at the no-load speed draws less than 193 mA."""
+    pt = Powertrain.default_test_robot('wheel')
+    motor = pt.left.components['motor']
+    current = motor.torque(EC45.no_load_speed_rad_s) / EC45.torque_constant_Nm_A
+    # hand calculation: 0.0617 A + 0.0001 A s/rad * 419.9 rad/s = 0.1037 A
+    assert current == pytest.approx(0.0617 + 0.0001 * 4010 * 2 * math.pi / 60, rel=1e-9)
+    assert current < EC45.no_load_current_A
+
+
+def test_track_has_more_internal_resistance_than_wheels():
+    # ch. 7.2.3: "the track configuration has a much larger internal resistance ... than the wheel"
+    track = Powertrain.default_test_robot('track')
+    wheel = Powertrain.default_test_robot('wheel')
+    assert set(track.left.components) == {'motor', 'gear_train', 'roller_chain', 'track'}
+    assert 'track' not in wheel.left.components
+    omega_axle = 500 * 2 * math.pi / 60 / GEAR_RATIO  # Figure 7.14's 500 rpm motor speed
+    assert track.internal_torque('left', omega_axle) > 3 * wheel.internal_torque('left', omega_axle)
+    # Figure 7.14: the track dominates the internal power loss
+    parts = track.left.component_power(500 * 2 * math.pi / 60)
+    assert max(parts, key=lambda k: float(parts[k])) == 'track'
+
+
+def test_internal_torque_hand_calculation_and_sign():
+    pt = Powertrain.default_test_robot('track')
+    kt = 0.114
+    b = kt * (0.0001 + 0.00008 + 0.0001 + 0.00012)  # Table 7.1, left column 1 [A s/rad] -> N m s/rad
+    c = kt * (0.0617 + 0.0177 + 0.0448 + 0.6489)  # Table 7.1, left column 2 [A] -> N m
+    w = 2.0  # axle rad/s -> motor 24 rad/s
+    expected = 12 * (b * 24 + c)
+    assert pt.internal_torque('left', w) == pytest.approx(expected)
+    assert pt.internal_torque('left', -w) == pytest.approx(-expected)  # resists both directions
+    assert pt.internal_torque('left', 0.0) == 0.0
+    assert pt.internal_torque('right', w) != pytest.approx(expected)  # Motor 2 differs (Table 7.1)
+
+
+def test_motor_side_power_balance():
+    pt = Powertrain.default_test_robot('track')
+    torque = np.array([0.0, 2.0, 5.0])
+    omega = np.array([1.0, 2.0, 3.0])
+    mp = pt.motor_side('right', torque, omega)
+    np.testing.assert_allclose(mp.mechanical_power_W, mp.terrain_power_W + mp.internal_power_W, rtol=1e-12)
+    copper = EC45.terminal_resistance_ohm * mp.current_A**2
+    np.testing.assert_allclose(mp.terminal_power_W, mp.mechanical_power_W + copper, rtol=1e-12)
+    np.testing.assert_allclose(mp.electrical_power_W, mp.terminal_power_W / DES_70_10.efficiency)
+    np.testing.assert_allclose(mp.current_A * EC45.torque_constant_Nm_A, mp.motor_torque_Nm)
+    np.testing.assert_allclose(mp.motor_omega_rad_s, 12 * omega)
+
+
+def test_regeneration_never_creates_energy():
+    """4-quadrant operation: braking returns at most the braking power, less losses."""
+    pt = Powertrain.default_test_robot('wheel')
+    omega = np.linspace(0.5, 8.0, 40)
+    braking_torque = -np.linspace(0.5, 30.0, 40)
+    mp = pt.motor_side('left', braking_torque[:, None], omega[None, :])
+    braking_power = -(braking_torque[:, None] * omega[None, :])  # > 0, power the terrain pushes in
+    returned = -mp.electrical_power_W
+    assert np.all(returned < braking_power)
+    assert np.any(returned > 0)  # and it does regenerate somewhere
+    no_regen = Powertrain.from_config({'preset': 'test_robot', 'regen_efficiency': 0.0}, 'wheel')
+    assert np.all(no_regen.motor_side('left', braking_torque, omega).electrical_power_W >= 0)
+
+
+def test_bus_power_quadrants():
+    p = bus_power(np.array([100.0, -100.0]), DES_70_10)
+    np.testing.assert_allclose(p, [100 / 0.92, -92.0])
+    assert terminal_power(EC45, 0.114, 0.0) == pytest.approx(0.710)  # 1 A at stall: R i^2
+
+
+def test_axle_from_motor_inverts_motor_side():
+    pt = Powertrain.default_test_robot('track')
+    mp = pt.motor_side('left', 3.0, 1.5)
+    torque, omega = pt.axle_from_motor('left', mp.motor_torque_Nm, mp.motor_omega_rad_s)
+    assert torque == pytest.approx(3.0)
+    assert omega == pytest.approx(1.5)
+
+
+def test_fit_recovers_coefficients_from_noisy_no_load_runs():
+    rng = np.random.default_rng(7)
+    omega = np.r_[np.linspace(-400, -20, 30), np.linspace(20, 400, 30)]
+    b_true, c_true = 1.1e-5, 7.0e-3
+    torque = b_true * omega + c_true * np.sign(omega) + rng.normal(0, 2e-4, omega.size)
+    fit = fit_internal(np.r_[omega, 0.0], np.r_[torque, 0.0])
+    assert fit.n_samples == 60  # the omega = 0 sample is dropped
+    assert fit.viscous_Nm_s == pytest.approx(b_true, rel=0.05)
+    assert fit.coulomb_Nm == pytest.approx(c_true, rel=0.02)
+    assert fit.rms_residual_Nm == pytest.approx(2e-4, rel=0.3)
+
+
+def test_components_from_cumulative_stages():
+    omega = np.linspace(10, 300, 20)
+    stages = {}
+    cumulative_b, cumulative_c = 0.0, 0.0
+    for name, (b, c) in {'motor': (1e-5, 0.007), 'gear_train': (1e-5, 0.002), 'track': (2e-5, 0.07)}.items():
+        cumulative_b += b
+        cumulative_c += c
+        stages[name] = fit_internal(omega, cumulative_b * omega + cumulative_c)
+    parts = components_from_stages(stages)
+    assert parts['gear_train'].coulomb_Nm == pytest.approx(0.002, abs=1e-12)
+    assert parts['track'].viscous_Nm_s == pytest.approx(2e-5, abs=1e-15)
+
+
+def test_fit_rejects_degenerate_input():
+    with pytest.raises(InputError, match='two or more distinct speeds'):
+        fit_internal([100.0, 100.0], [0.01, 0.01])
+    with pytest.raises(InputError, match='NaN'):
+        fit_internal([1.0, np.nan], [0.01, 0.02])
+    with pytest.raises(InputError, match='differ'):
+        fit_internal([1.0, 2.0], [0.01])
+
+
+def test_bad_config_errors():
+    with pytest.raises(ConfigError, match='not found'):
+        Powertrain.from_config({'preset': 'no_such_robot'})
+    with pytest.raises(ConfigError, match='gear_ratio'):
+        Powertrain.from_config({'preset': 'test_robot', 'gear_ratio': -1})
+    with pytest.raises(ConfigError, match='running_gear'):
+        Powertrain.from_config({'preset': 'test_robot'}, running_gear='legs')
+    with pytest.raises(ConfigError, match='left and right'):
+        Powertrain.from_config({'preset': 'test_robot', 'internal_resistance': {'left': {}}})
+    with pytest.raises(InputError, match='side'):
+        Powertrain.default_test_robot().internal_torque('middle', 1.0)
