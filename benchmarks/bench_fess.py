@@ -1,0 +1,119 @@
+"""FESS benchmark (issue 5): 8 x 16 maps of tracks and wheels, one online track solve, and the ratio
+to this project's Wong models measured in the same run; plus the accuracy figures against them.
+
+Grid: 8 speeds 0.2 ... 1.5 m/s x 16 radii 1 ... 500 m (geometric), as in Figures 3.9 / 6.6-6.11.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from benchmarks.harness import Report, best_time
+from skidsteer_power.models import fess, wong_track, wong_wheel
+from skidsteer_power.terramechanics.terrain import PRESETS
+from skidsteer_power.vehicle import load_vehicle
+
+V = np.linspace(0.2, 1.5, 8)[:, None]
+R = np.geomspace(1.0, 500.0, 16)[None, :]
+SOILS = ('dry_sand', 'sandy_loam', 'clay')
+
+
+def _side_error(got, ref, mask=None) -> float:
+    """Largest |torque difference| over both sides / larger side torque of the reference."""
+    scale = np.maximum(np.abs(ref.torque_outer_Nm), np.abs(ref.torque_inner_Nm))
+    err = np.maximum(
+        np.abs(got.torque_outer_Nm - ref.torque_outer_Nm), np.abs(got.torque_inner_Nm - ref.torque_inner_Nm)
+    )
+    ok = got.converged & ref.converged if mask is None else mask & got.converged & ref.converged
+    return float(np.max(err[ok] / scale[ok])) if np.any(ok) else float('nan')
+
+
+def _tracks(report: Report) -> None:
+    track = load_vehicle('chapter3_track')
+    dry = PRESETS['dry_sand']
+    t_fess = best_time(lambda: fess.solve(track, dry, V, R), repeat=5)
+    t_wong = best_time(lambda: wong_track.solve(track, dry, V, R), repeat=3)
+    report.figure(
+        'track 8x16 map, FESS (dry sand)', t_fess * 1e3, 'ms', goal='< 50 ms (text: 3.1 s)', met=t_fess < 0.05
+    )
+    report.figure('track 8x16 map, Wong (this project, same run)', t_wong * 1e3, 'ms', note='text: 244.8 s')
+    report.ratio(
+        'track map speed-up FESS vs Wong', t_wong, t_fess, goal='>= 500x', met=t_wong / t_fess >= 500
+    )
+    for soil in SOILS:
+        got = fess.solve(track, PRESETS[soil], V, R)
+        ref = wong_track.solve(track, PRESETS[soil], V, R)
+        err = _side_error(got, ref)
+        report.figure(
+            f'track torque vs Wong, max over 8x16, {soil}', err * 100, '%', goal='< 3 %', met=err < 0.03
+        )
+    for n in (10, 20, 80):
+        t = best_time(lambda n=n: fess.solve(track, dry, V, R, n=n), repeat=3)
+        report.figure(f'track 8x16 map, n = {n} elements', t * 1e3, 'ms')
+    solver = fess.FessSolver(track, dry)
+    cold = best_time(lambda: solver.solve_point(0.5, 0.25), repeat=5, number=50)
+    x0 = solver.solve_point(0.5, 0.25).state
+    warm = best_time(lambda: solver.solve_point(0.52, 0.26, x0=x0), repeat=5, number=50)
+    batch1 = best_time(lambda: solver.solve_twist(0.5, 0.25), repeat=5, number=20)
+    report.figure(
+        'one online track solve, solve_point (cold start)', cold * 1e3, 'ms', goal='< 1 ms', met=cold < 1e-3
+    )
+    report.figure(
+        'one online track solve, solve_point (warm start)', warm * 1e3, 'ms', goal='< 1 ms', met=warm < 1e-3
+    )
+    report.figure('one track point through the batched solve_twist', batch1 * 1e3, 'ms')
+    wheel_solver = fess.FessSolver(load_vehicle('test_robot_6wheel'), dry)
+    wheel_solver.solve_point(0.5, 0.25)
+    t_w = best_time(lambda: wheel_solver.solve_point(0.5, 0.25), repeat=5, number=50)
+    report.figure('one online 6-wheel solve, solve_point', t_w * 1e3, 'ms')
+    api = best_time(lambda: fess.solve(track, dry, 0.5, 2.0), repeat=5, number=20)
+    report.figure('one track solve via models.solve (SteadyState)', api * 1e3, 'ms')
+
+
+def _wheels(report: Report) -> None:
+    wheeled = load_vehicle('chapter4_4wheel')
+    dry = PRESETS['dry_sand']
+    fess._free_wheel_table.cache_clear()
+    start = time.perf_counter()
+    fess.solve(wheeled, dry, V, R)
+    cold = time.perf_counter() - start
+    t_fess = best_time(lambda: fess.solve(wheeled, dry, V, R), repeat=3)
+    start = time.perf_counter()
+    wong_wheel.solve(wheeled, dry, V, R, raise_on_failure=False)
+    t_wong = time.perf_counter() - start
+    report.figure(
+        'wheel 8x16 map, FESS (dry sand, wheel table cached)',
+        t_fess * 1e3,
+        'ms',
+        goal='< 300 ms (text: 14.3 s)',
+        met=t_fess < 0.3,
+    )
+    report.figure('wheel 8x16 map, FESS incl. single-wheel table', cold * 1e3, 'ms')
+    report.figure('wheel 8x16 map, chapter 4 model (same run)', t_wong * 1e3, 'ms', note='text: 2777.2 s')
+    report.ratio('wheel map speed-up FESS vs chapter 4', t_wong, t_fess)
+    big = np.broadcast_to(R >= 2.0, (8, 16))
+    for soil in SOILS:
+        got = fess.solve(wheeled, PRESETS[soil], V, R)
+        ref = wong_wheel.solve(wheeled, PRESETS[soil], V, R, raise_on_failure=False)
+        e_big = _side_error(got, ref, big)
+        e_small = _side_error(got, ref, ~big)
+        both = int(np.sum(got.converged & ref.converged))
+        report.figure(
+            f'wheel torque vs ch. 4, R >= 2 m, {soil}', e_big * 100, '%', goal='< 10 %', met=e_big < 0.1
+        )
+        report.figure(
+            f'wheel torque vs ch. 4, R < 2 m, {soil}',
+            e_small * 100,
+            '%',
+            note=f'flat-contact assumption (section 6.4); {both}/128 points solved by both',
+        )
+    exact = fess.solve(wheeled, dry, np.linspace(0.2, 1.5, 8), 2.0)
+    ref = wong_wheel.solve(wheeled, dry, np.linspace(0.2, 1.5, 8), 2.0, raise_on_failure=False)
+    report.figure('wheel torque vs ch. 4 at exactly R = 2 m, dry sand', _side_error(exact, ref) * 100, '%')
+
+
+def run(report: Report) -> None:
+    _tracks(report)
+    _wheels(report)

@@ -1,0 +1,111 @@
+"""Look-up map benchmark (issue 5): build time, one query from Python (goal < 20 us), vectorized
+queries per second (goal >= 1e6), the hand-written bilinear kernel against scipy's
+RegularGridInterpolator on the same table, and the off-grid accuracy against direct FESS.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from benchmarks.harness import Report, best_time
+from skidsteer_power.maps import PowerMap
+from skidsteer_power.models import fess
+from skidsteer_power.terramechanics.terrain import PRESETS
+from skidsteer_power.vehicle import load_vehicle
+
+N_VECTOR = 1_000_000
+
+
+def _build(report: Report) -> PowerMap:
+    dry = PRESETS['dry_sand']
+    maps = {}
+    for name in ('chapter3_track', 'test_robot_track', 'chapter4_4wheel', 'test_robot_6wheel'):
+        vehicle = load_vehicle(name)
+        if not vehicle.is_tracked:
+            PowerMap.build(vehicle, dry, shape=(2, 3))  # single-wheel table (cached per process)
+        start = time.perf_counter()
+        maps[name] = PowerMap.build(vehicle, dry)
+        elapsed = time.perf_counter() - start
+        m = maps[name]
+        report.figure(
+            f'build 16x41 map, {name}, dry sand',
+            elapsed,
+            's',
+            note=f'{int(m.converged.sum())}/{m.converged.size} converged, {int(m.limited.sum())} limited',
+        )
+    return maps['chapter3_track']
+
+
+def _queries(report: Report, m: PowerMap) -> None:
+    rng = np.random.default_rng(0)
+    v = rng.uniform(-1.5, 1.5, N_VECTOR)
+    w = rng.uniform(-2.0, 2.0, N_VECTOR)
+    one = best_time(lambda: m.query(0.43, -0.71), repeat=7, number=2000)
+    report.figure(
+        'one query from Python (hand-written kernel)', one * 1e6, 'us', goal='< 20 us', met=one < 20e-6
+    )
+    vec = best_time(lambda: m.query(v, w), repeat=3)
+    report.figure('vectorized queries', N_VECTOR / vec, '1/s', goal='>= 1e6 /s', met=N_VECTOR / vec >= 1e6)
+    # kernels alone, same table, same grid coordinates: hand-written bilinear vs scipy
+    grid = m._grid
+    a = rng.uniform(0.0, float(m.radial[-1]), N_VECTOR)
+    u = rng.uniform(-1.0, 1.0, N_VECTOR)
+    rgi = RegularGridInterpolator((grid.axis0.values, grid.axis1.values), grid.values)
+    t_hand = best_time(lambda: grid(a, u), repeat=3)
+    t_rgi = best_time(lambda: rgi(np.column_stack([a, u])), repeat=3)
+    s_hand = best_time(lambda: grid.scalar(0.83, -0.31), repeat=7, number=2000)
+    s_rgi = best_time(lambda: rgi(np.array([[0.83, -0.31]])), repeat=7, number=200)
+    report.figure('kernel, 1e6 points: hand-written bilinear', t_hand * 1e3, 'ms')
+    report.figure('kernel, 1e6 points: scipy RegularGridInterpolator', t_rgi * 1e3, 'ms')
+    report.figure('kernel, one point: hand-written bilinear', s_hand * 1e6, 'us')
+    report.figure('kernel, one point: scipy RegularGridInterpolator', s_rgi * 1e6, 'us')
+    report.ratio('hand-written vs scipy, one point', s_rgi, s_hand)
+    report.ratio('hand-written vs scipy, 1e6 points', t_rgi, t_hand)
+    diff = np.max(np.abs(rgi(np.column_stack([a[:1000], u[:1000]])) - grid(a[:1000], u[:1000])[0]))
+    report.figure('max |difference| hand-written vs scipy (all fields)', diff, '')
+
+
+def _accuracy(report: Report, m: PowerMap) -> None:
+    vehicle, dry = load_vehicle('chapter3_track'), PRESETS['dry_sand']
+    rng = np.random.default_rng(1)
+    v, w = rng.uniform(0.0, 1.5, 3000), rng.uniform(-2.0, 2.0, 3000)
+    keep = np.abs(v) >= m.meta['min_radius_m'] * np.abs(w)
+    v, w = v[keep][:1000], w[keep][:1000]
+    q = m.query(v, w)
+    direct = fess.FessSolver(vehicle, dry).solve_twist(v, w)
+    power_err = np.abs(q.power_left_W + q.power_right_W - direct.power.sum(axis=1)) / np.abs(
+        direct.power
+    ).sum(axis=1)
+    report.figure(
+        'off-grid total power vs direct FESS, max (1000 pts)',
+        power_err.max() * 100,
+        '%',
+        goal='< 1 %',
+        met=power_err.max() < 0.01,
+    )
+    scale = np.abs(direct.torque).max(axis=1)
+    t_err = np.maximum(
+        np.abs(q.torque_left_Nm - direct.torque[:, 0]), np.abs(q.torque_right_Nm - direct.torque[:, 1])
+    )
+    rel = t_err / scale
+    k = int(rel.argmax())
+    report.figure(
+        'off-grid side torque vs direct FESS, max',
+        rel.max() * 100,
+        '%',
+        goal='< 1 %',
+        met=rel.max() < 0.01,
+        note=f'worst at V={v[k]:.3f} m/s, w={w[k]:.4f} rad/s; abs {t_err[k]:.3g} N m',
+    )
+    report.figure('off-grid side torque vs direct FESS, 95th percentile', np.percentile(rel, 95) * 100, '%')
+    turning = np.abs(v) < 20 * np.abs(w)  # |R| < 20 m
+    report.figure('off-grid side torque vs direct FESS, max for |R| < 20 m', rel[turning].max() * 100, '%')
+
+
+def run(report: Report) -> None:
+    m = _build(report)
+    _queries(report, m)
+    _accuracy(report, m)

@@ -1,0 +1,152 @@
+"""Command ``map build|show``: FESS look-up maps over (forward speed, yaw rate).
+
+skidsteer-power map build --vehicle V --terrain T [--out FILE | --cache-dir DIR] [--max-speed 1.5]
+                          [--max-yaw-rate 2] [--rings 16] [--angles 41] [--elements N]
+                          [--min-radius M] [--no-progress] [--json]
+    -> path, build_time_s, vehicle, terrain, model_version, converged_points, total_points, ...
+skidsteer-power map show (FILE | --vehicle V --terrain T [--cache-dir DIR])
+                         [--speed V --yaw-rate W] [--json]
+    -> the map's metadata and extent; with --speed/--yaw-rate the interpolated values there
+
+A file built for another vehicle, terrain or model version is refused (one error line, exit 2).
+The progress bar goes to stderr, so ``--json`` output on stdout stays clean.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
+from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.maps import PowerMap, cache_path
+from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.vehicle import load_vehicle
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
+    if value < 2:
+        raise argparse.ArgumentTypeError(f'need at least 2 grid points: {text!r}')
+    return value
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser('map', help='build or show FESS look-up maps over (speed, yaw rate)')
+    sub = parser.add_subparsers(dest='map_command', metavar='ACTION', parser_class=type(parser))
+    sub.required = True
+
+    build = sub.add_parser('build', help='solve a map with FESS and store it (.npz)')
+    build.add_argument('--vehicle', required=True, help='vehicle YAML file or a name in config/vehicles/')
+    build.add_argument('--terrain', required=True, help='terrain preset name or YAML file')
+    where = build.add_mutually_exclusive_group()
+    where.add_argument('--out', type=Path, help='output .npz file (default: the cache)')
+    where.add_argument(
+        '--cache-dir',
+        type=Path,
+        help='cache directory (default $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
+    )
+    build.add_argument('--max-speed', type=positive_float, default=1.5, help='largest forward speed [m/s]')
+    build.add_argument('--max-yaw-rate', type=positive_float, default=2.0, help='largest |yaw rate| [rad/s]')
+    build.add_argument(
+        '--rings', type=_count, default=16, help='grid rings of command magnitude (default 16)'
+    )
+    build.add_argument('--angles', type=_count, default=41, help='grid turn angles, -90..90 deg (default 41)')
+    build.add_argument('--elements', type=_count, help='FESS elements per contact (default 40)')
+    build.add_argument('--min-radius', type=positive_float, help='small-radius limit [m] (default 2 x tread)')
+    build.add_argument('--no-progress', action='store_true', help='no progress bar')
+    add_json_flag(build)
+    build.set_defaults(func=run_build)
+
+    show = sub.add_parser('show', help='describe a stored map, or query it at one command')
+    show.add_argument('file', nargs='?', type=Path, help='map .npz file (or give --vehicle and --terrain)')
+    show.add_argument('--vehicle', help='vehicle the map must be built for (file or name)')
+    show.add_argument('--terrain', help='terrain the map must be built for (preset or YAML)')
+    show.add_argument('--cache-dir', type=Path, help='cache directory to look in (with --vehicle/--terrain)')
+    show.add_argument('--speed', type=finite_float, help='query: forward speed V [m/s]')
+    show.add_argument('--yaw-rate', type=finite_float, help='query: yaw rate [rad/s] (+ = left)')
+    add_json_flag(show)
+    show.set_defaults(func=run_show)
+
+
+def _progress_bar(enabled: bool) -> Any:
+    """A rich progress bar on stderr (None when disabled or stderr is not a terminal)."""
+    if not enabled or not sys.stderr.isatty():
+        return None
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn('building map'),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn('rings'),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
+
+
+def run_build(args: argparse.Namespace) -> int:
+    vehicle = load_vehicle(args.vehicle)
+    terrain = load_terrain(args.terrain)
+    if args.angles < 3:
+        raise InputError('--angles must be at least 3')
+    target = args.out if args.out is not None else cache_path(vehicle, terrain, args.cache_dir)
+    options = {
+        'max_speed': args.max_speed,
+        'max_yaw_rate': args.max_yaw_rate,
+        'shape': (args.rings, args.angles),
+        'n': args.elements,
+        'min_radius': args.min_radius,
+    }
+    bar = _progress_bar(not args.no_progress)
+    start = time.perf_counter()
+    if bar is None:
+        power_map = PowerMap.build(vehicle, terrain, **options)
+    else:
+        with bar:
+            task = bar.add_task('build', total=args.rings)
+            power_map = PowerMap.build(
+                vehicle, terrain, **options, progress=lambda done, total: bar.update(task, completed=done)
+            )
+    elapsed = time.perf_counter() - start
+    try:
+        power_map.save(target)
+    except OSError as err:
+        raise ConfigError(f'cannot write map {target}: {err.strerror or err}') from err
+    emit({**power_map.summary(), 'build_time_s': elapsed}, args.json)
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+    terrain = load_terrain(args.terrain) if args.terrain else None
+    path = args.file
+    if path is None:
+        if vehicle is None or terrain is None:
+            raise InputError('give a map file, or --vehicle and --terrain to find the cached map')
+        path = cache_path(vehicle, terrain, args.cache_dir)
+        if not path.exists():
+            raise ConfigError(f'no cached map for {vehicle.name} on {terrain.name} (run: map build)')
+    power_map = PowerMap.load(path, vehicle, terrain)
+    if (args.speed is None) != (args.yaw_rate is None):
+        raise InputError('give both --speed and --yaw-rate to query the map')
+    payload = power_map.summary()
+    if args.speed is not None:
+        q = power_map.query(args.speed, args.yaw_rate)
+        payload = {
+            'speed_m_s': args.speed,
+            'yaw_rate_rad_s': args.yaw_rate,
+            **vars(q),
+            'total_power_W': q.total_power_W,
+            'map': str(path),
+        }
+    emit(payload, args.json)
+    return 0

@@ -1,0 +1,28 @@
+"""Look-up maps over (forward speed, signed yaw rate) built by FESS; .npz storage; interpolation.
+
+See :mod:`skidsteer_power.maps.power_map` for the grid, symmetry and small-radius conventions.
+"""
+
+from __future__ import annotations
+
+from skidsteer_power.errors import MapMismatchError
+from skidsteer_power.maps.power_map import (
+    FIELDS,
+    MapQuery,
+    PowerMap,
+    cache_path,
+    default_cache_dir,
+    load_or_build,
+    terrain_fingerprint,
+)
+
+__all__ = [
+    'FIELDS',
+    'MapMismatchError',
+    'MapQuery',
+    'PowerMap',
+    'cache_path',
+    'default_cache_dir',
+    'load_or_build',
+    'terrain_fingerprint',
+]

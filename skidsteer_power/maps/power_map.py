@@ -1,0 +1,545 @@
+"""Look-up maps of per-side torque, speed and power over (forward speed V, signed yaw rate w_z).
+
+Inputs are (V, w_z): the estimator gets exactly V and w_z from ``cmd_vel``. The grid, however, is
+polar in the (V, L w_z) plane: a "command magnitude" s = hypot(V, L w_z) [m/s] and a "turn angle"
+psi = atan2(L w_z, V) [rad], with the length L = max_speed / max_yaw_rate [m]. Why: torque and power
+depend mostly on the turning radius R = V / w_z = L cot(psi); on a rectangular (V, w_z) grid the
+torque rises so steeply with w_z near straight running at low V (R drops from infinity to a metre
+within one yaw-rate step) that bilinear interpolation was measured 36 % off at off-grid points
+(16 x 81 grid). On the (s, psi) grid of 16 x 41 (psi warped, see :func:`_angle_coordinate`) the
+total power is within 0.8 % of direct FESS and each side torque within 1.3 % of the larger one
+(1000 random commands, benchmarks/bench_maps.py). Straight running is
+psi = 0, spinning in place psi = +-pi/2 and rest s = 0: no division by zero anywhere (hypot,
+atan2). The grid covers V up to ``max_speed`` and |w_z| up to ``max_yaw_rate`` (the corner
+included: s_max = sqrt(2) max_speed); queries beyond s_max are clamped radially and flagged. At
+exactly V = w_z = 0 the query answers rest (all zeros); the s = 0 grid row holds the s -> 0 limit
+(the breakaway torques) for interpolation.
+
+Reverse driving (V < 0) is not stored: a vehicle with its CG midway along its contact backing
+at (-V, w_z) is the forward solution at (V, w_z) seen from a frame turned 180 degrees about the
+vertical, so left and right swap and every side's speed and torque change sign (power, sinkage and
+traction margin do not; s0 changes sign). :meth:`PowerMap.query` applies this itself.
+
+Tight turns and spinning in place: the FESS shear-displacement kinematics (eq. 6.6) stop giving a
+usable steady state once the turning radius approaches the tread (below about R = 0.5 m for the
+chapter 3 track on dry sand the solution jumps to a branch with the inner side reversed and almost no
+turning resistance; spinning in place has several roots). The map therefore solves every point with
+|R| = |V / w_z| below ``min_radius`` (default twice the tread) at R = min_radius and the *same yaw
+rate*, i.e. at V' = min_radius |w_z|, and keeps that point's shear state: its torques, each side's
+slip speed r omega - v_side, s0, sinkage and traction margin. Each side's omega then follows its own
+ground speed, omega = omega' + (v_side - v_side') / r. The text's argument for this limit: at small
+radii "the soil fails and the shear force on the contact surface is saturated" (section 3.4), so the
+turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``.
+A spin in place therefore gets both sides driven in opposite directions with the turning resistance
+of the tightest reliable turn at that yaw rate. It inherits that turn's asymmetry: the side that
+was outer keeps its driving slip speed and torque, the other its braking ones, so the two sides'
+speeds and torques are opposite but not equal in size (a limitation of the limit, not physics).
+At rest (V = w_z = 0) every torque is 0.
+
+Points that do not converge even after warm starts from converged neighbours keep
+``converged=False`` in the map, are filled with the nearest converged point's values and are
+reported (never silently dropped); a query touching such a cell is flagged ``clamped``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
+from skidsteer_power.maps.grid import Axis, BilinearGrid
+from skidsteer_power.vehicle import vehicle_fingerprint
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
+
+MAP_FORMAT = 1
+DEFAULT_MAX_SPEED = 1.5  # [m/s] the dissertation's largest simulated speed (section 3.5)
+DEFAULT_MAX_YAW_RATE = 2.0  # [rad/s]
+DEFAULT_SHAPE = (16, 41)  # rings (command magnitude) x turn angles
+CACHE_ENV = 'SKIDSTEER_POWER_CACHE'
+
+FIELDS = (
+    'torque_left_Nm',
+    'torque_right_Nm',
+    'omega_left_rad_s',
+    'omega_right_rad_s',
+    'power_left_W',
+    'power_right_W',
+    's0_m',
+    'sinkage_m',
+    'traction_margin',
+    'suspect',  # 1 where the cell holds a filled (non-converged) value; interpolates to > 0 near it
+)
+# quantities that change sign in reverse driving (after the left/right swap)
+_ODD_IN_REVERSE = ('torque_left_Nm', 'torque_right_Nm', 'omega_left_rad_s', 'omega_right_rad_s', 's0_m')
+
+_REST = {name: (1.0 if name == 'traction_margin' else 0.0) for name in FIELDS}  # V = w_z = 0
+
+ProgressCallback = Callable[[int, int], None]
+
+
+@dataclass
+class MapQuery:
+    """Interpolated map values at the queried points (arrays, or floats for a scalar query).
+
+    torque_*_Nm : axle / sprocket torque per side [N m]; omega_*_rad_s : axle speed [rad/s];
+    power_*_W : torque x omega [W]; s0_m : turning-centre offset [m]; sinkage_m [m];
+    traction_margin [-]; clamped : the point lay outside the grid (clamped to its edge) or next to
+    a cell the solver could not converge.
+    """
+
+    torque_left_Nm: Any
+    torque_right_Nm: Any
+    omega_left_rad_s: Any
+    omega_right_rad_s: Any
+    power_left_W: Any
+    power_right_W: Any
+    s0_m: Any
+    sinkage_m: Any
+    traction_margin: Any
+    clamped: Any
+
+    @property
+    def total_power_W(self) -> Any:
+        return self.power_left_W + self.power_right_W
+
+
+def terrain_fingerprint(terrain: Terrain) -> str:
+    """Stable hex digest of the terrain's physical parameters (not its name)."""
+    payload = {
+        k: (repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
+        for k, v in dataclasses.asdict(terrain).items()
+        if k != 'name'
+    }
+    text = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]
+
+
+def model_version(model: str) -> str:
+    """Version string of the model that builds maps; a stored map must match it."""
+    if model == 'fess':
+        from skidsteer_power.models.fess import MODEL_VERSION
+
+        return f'{MODEL_VERSION}/map{MAP_FORMAT}'
+    return f'{model}/map{MAP_FORMAT}'
+
+
+def default_cache_dir() -> Path:
+    """$SKIDSTEER_POWER_CACHE, else ~/.cache/skidsteer_power."""
+    env = os.environ.get(CACHE_ENV)
+    return Path(env).expanduser() if env else Path.home() / '.cache' / 'skidsteer_power'
+
+
+@dataclass
+class PowerMap:
+    """A look-up map for one vehicle on one terrain over the polar (s, psi) grid (module doc)."""
+
+    radial: np.ndarray  # (Ns,) command magnitude s = hypot(V, L w_z) [m/s], starts at 0
+    angles: np.ndarray  # (Npsi,) turn angle psi = atan2(L w_z, V) in [-pi/2, pi/2] [rad]
+    length_m: float  # L [m]
+    values: dict[str, np.ndarray]  # FIELDS -> (Ns, Npsi)
+    converged: np.ndarray  # (Ns, Npsi) bool
+    limited: np.ndarray  # (Ns, Npsi) bool: solved at the small-radius limit
+    meta: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    def __post_init__(self) -> None:
+        self._axis_s = Axis(self.radial, 'command magnitude')
+        self._axis_psi = Axis(_angle_coordinate(self.angles), 'turn angle')
+        stacked = np.stack([self.values[name] for name in FIELDS], axis=-1)
+        self._grid = BilinearGrid(self._axis_s, self._axis_psi, stacked)
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Forward speeds [m/s] of the straight-running grid line (all >= 0: reverse by symmetry)."""
+        return self.radial
+
+    @property
+    def yaw_rates(self) -> np.ndarray:
+        """Yaw rates [rad/s] of the spin-in-place grid lines, -max ... +max."""
+        return np.concatenate([-self.radial[::-1], self.radial[1:]]) / self.length_m
+
+    # ---------------------------------------------------------------- building
+    @classmethod
+    def build(
+        cls,
+        vehicle: Vehicle,
+        terrain: Terrain,
+        *,
+        max_speed: float = DEFAULT_MAX_SPEED,
+        max_yaw_rate: float = DEFAULT_MAX_YAW_RATE,
+        shape: tuple[int, int] | None = None,
+        model: str = 'fess',
+        progress: ProgressCallback | None = None,
+        n: int | None = None,
+        min_radius: float | None = None,
+        speeds: ArrayLike | None = None,
+        yaw_rates: ArrayLike | None = None,
+    ) -> PowerMap:
+        """Solve the map with FESS: one batched Newton solve per ring s = const from the physical
+        first guess (eq. 3.21), failed points re-solved warm-started from converged neighbours.
+        (Warm-starting whole rings from the previous ring was tried and dropped: near rest and in
+        tight turns the equilibrium has several roots, and a wrong one propagated outwards.)
+
+        max_speed [m/s] and max_yaw_rate [rad/s] set the covered box; shape = (rings, angles),
+        default :data:`DEFAULT_SHAPE`;
+        ``progress(done, total)`` is called after each ring; ``n`` FESS elements per contact;
+        ``min_radius`` [m] the small-radius limit (default 2 x tread). ``speeds`` [m/s] and
+        ``yaw_rates`` [rad/s] (the interface of docs/INTERFACES.md) are accepted for compatibility:
+        they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates| and shape = (their
+        lengths); the grid itself stays polar (module doc).
+        """
+        if speeds is not None:
+            max_speed = float(np.max(np.abs(_axis(speeds, 'speeds'))))
+        if yaw_rates is not None:
+            max_yaw_rate = float(np.max(np.abs(_axis(yaw_rates, 'yaw_rates'))))
+        if shape is None and speeds is not None and yaw_rates is not None:
+            shape = (len(np.ravel(speeds)), max(len(np.ravel(yaw_rates)), 3))
+        if model != 'fess':
+            raise InputError(f"maps are built with the FESS model only (model='fess'), not {model!r}")
+        from skidsteer_power.models import fess
+
+        for name, value in (('max_speed', max_speed), ('max_yaw_rate', max_yaw_rate)):
+            if not np.isfinite(value) or value <= 0:
+                raise InputError(f'{name} must be a finite number > 0, got {value!r}')
+        n_s, n_psi = (int(k) for k in (DEFAULT_SHAPE if shape is None else shape))
+        if n_s < 2 or n_psi < 3:
+            raise InputError(f'map shape must be at least (2, 3), got {shape!r}')
+        r_min = 2.0 * vehicle.tread_m if min_radius is None else float(min_radius)
+        if not np.isfinite(r_min) or r_min <= 0:
+            raise InputError(f'min_radius must be a finite number > 0 m, got {min_radius!r}')
+        length = max_speed / max_yaw_rate
+        radial = np.linspace(0.0, np.sqrt(2.0) * max_speed, n_s)
+        angles = _angle_from_coordinate(np.linspace(-1.0, 1.0, n_psi))
+        solver = fess.FessSolver(vehicle, terrain, fess.DEFAULT_ELEMENTS if n is None else n)
+        rows: list[dict[str, Any]] = []
+        for k, s in enumerate(radial):
+            ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
+            v = ring * np.cos(angles)
+            w = ring * np.sin(angles) / length
+            rows.append(_solve_row(solver, v, w, r_min, None))
+            if progress is not None:
+                progress(k + 1, n_s)
+        values, converged, limited = _assemble(rows)
+        meta = {
+            'vehicle': vehicle.name,
+            'vehicle_fingerprint': vehicle_fingerprint(vehicle),
+            'terrain': terrain.name,
+            'terrain_fingerprint': terrain_fingerprint(terrain),
+            'model': model,
+            'model_version': model_version(model),
+            'elements': solver.n,
+            'min_radius_m': r_min,
+            'max_speed_m_s': float(max_speed),
+            'max_yaw_rate_rad_s': float(max_yaw_rate),
+            'failed_points': int(np.sum(~converged)),
+        }
+        return cls(radial, angles, float(length), values, converged, limited, meta)
+
+    # ---------------------------------------------------------------- storage
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the map to ``path`` (.npz, with vehicle, terrain and model version inside)."""
+        target = Path(path)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {f'value_{k}': v for k, v in self.values.items()}
+        tmp = target.with_name(target.name + '.tmp.npz')
+        np.savez_compressed(
+            tmp,
+            radial=self.radial,
+            angles=self.angles,
+            length_m=np.array(self.length_m),
+            converged=self.converged,
+            limited=self.limited,
+            meta=np.array(json.dumps(self.meta)),
+            **arrays,
+        )
+        os.replace(tmp, target)  # atomic: a reader never sees half a map
+        self.path = target
+        return target
+
+    @classmethod
+    def load(
+        cls, path: str | os.PathLike[str], vehicle: Vehicle | None = None, terrain: Terrain | None = None
+    ) -> PowerMap:
+        """Read a map; MapMismatchError if it was built for another vehicle, terrain or model
+        version than those given (and the current FESS version); ConfigError if unreadable."""
+        source = Path(path)
+        try:
+            with np.load(source, allow_pickle=False) as data:
+                meta = json.loads(str(data['meta']))
+                values = {name: np.array(data[f'value_{name}']) for name in FIELDS}
+                arrays = {
+                    k: np.array(data[k]) for k in ('radial', 'angles', 'length_m', 'converged', 'limited')
+                }
+        except FileNotFoundError:
+            raise ConfigError(f'map file not found: {source}') from None
+        except (OSError, KeyError, ValueError, json.JSONDecodeError) as err:
+            raise ConfigError(f'{source}: not a skidsteer_power map ({err})') from err
+        _check_meta(source, meta, vehicle, terrain)
+        out = cls(
+            arrays['radial'],
+            arrays['angles'],
+            float(arrays['length_m']),
+            values,
+            arrays['converged'].astype(bool),
+            arrays['limited'].astype(bool),
+            meta,
+        )
+        out.path = source
+        return out
+
+    # ---------------------------------------------------------------- queries
+    def query(self, speed: ArrayLike, yaw_rate: ArrayLike) -> MapQuery:
+        """Interpolated values at (V [m/s], w_z [rad/s]); broadcast arrays or scalars.
+
+        V < 0 is answered by the 180-degree symmetry (module doc). Points outside the grid are
+        clamped to its edge and flagged ``clamped``.
+        """
+        if np.ndim(speed) == 0 and np.ndim(yaw_rate) == 0:
+            return self._query_scalar(float(speed), float(yaw_rate))
+        v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
+        shape = v.shape
+        v, w = v.ravel(), w.ravel()
+        reverse = v < 0
+        lw = self.length_m * w
+        out, clamped = self._grid(np.hypot(v, lw), _angle_coordinate(np.arctan2(lw, np.abs(v))))
+        bad = ~np.isfinite(v) | ~np.isfinite(w)
+        rest = (v == 0) & (w == 0)
+        columns = {name: out[:, k] for k, name in enumerate(FIELDS)}
+        if np.any(reverse):
+            columns = _reverse(columns, reverse)
+        suspect = columns.pop('suspect') > 0
+        fields = {
+            name: np.where(bad, np.nan, np.where(rest, _REST[name], col)).reshape(shape)
+            for name, col in columns.items()
+        }
+        return MapQuery(**fields, clamped=(clamped | suspect | bad).reshape(shape))
+
+    def _query_scalar(self, v: float, w: float) -> MapQuery:
+        if v != v or w != w or math.isinf(v) or math.isinf(w):  # never a silent number
+            return MapQuery(**dict.fromkeys(FIELDS[:-1], float('nan')), clamped=True)
+        lw = self.length_m * w
+        psi = math.atan2(lw, abs(v))
+        vals, clamped = self._grid.scalar(math.hypot(v, lw), _angle_coordinate_scalar(psi))
+        d = dict(zip(FIELDS, vals, strict=True))
+        if v == 0 and w == 0:
+            d = dict(_REST)
+        if v < 0:
+            d = {
+                'torque_left_Nm': -d['torque_right_Nm'],
+                'torque_right_Nm': -d['torque_left_Nm'],
+                'omega_left_rad_s': -d['omega_right_rad_s'],
+                'omega_right_rad_s': -d['omega_left_rad_s'],
+                'power_left_W': d['power_right_W'],
+                'power_right_W': d['power_left_W'],
+                's0_m': -d['s0_m'],
+                'sinkage_m': d['sinkage_m'],
+                'traction_margin': d['traction_margin'],
+                'suspect': d['suspect'],
+            }
+        suspect = d.pop('suspect') > 0
+        return MapQuery(**d, clamped=clamped or suspect)
+
+    # ---------------------------------------------------------------- description
+    def summary(self) -> dict[str, Any]:
+        """Metadata and grid extent, for ``map show``."""
+        return {
+            **self.meta,
+            'path': str(self.path) if self.path else None,
+            'grid': {
+                'rings': len(self.radial),
+                'angles': len(self.angles),
+                'length_m': self.length_m,
+                'max_command_m_s': float(self.radial[-1]),
+            },
+            'converged_points': int(np.sum(self.converged)),
+            'total_points': int(self.converged.size),
+            'limited_points': int(np.sum(self.limited)),
+            'max_power_W': float(np.max(self.values['power_left_W'] + self.values['power_right_W'])),
+            'min_traction_margin': float(np.min(self.values['traction_margin'])),
+        }
+
+
+_HALF_PI = 0.5 * math.pi
+
+
+ANGLE_WARP = 3.0  # c in psi = (pi/2) sinh(c u) / sinh(c)
+
+
+def _angle_coordinate(psi: np.ndarray) -> np.ndarray:
+    """Grid coordinate u in [-1, 1] of the turn angle psi [rad]: psi = (pi/2) sinh(c u) / sinh(c).
+
+    The grid is uniform in u: about 7x denser near straight running (where torque rises fastest
+    with psi, R going from infinity to a few metres) than towards spinning in place (flat in the
+    small-radius limit), and linear in psi near psi = 0, where the side torques are linear in the
+    curvature (a square-root warp was tried: it bent that linear part and was 38 % off there).
+    """
+    return np.arcsinh(np.asarray(psi) / _HALF_PI * math.sinh(ANGLE_WARP)) / ANGLE_WARP
+
+
+def _angle_coordinate_scalar(psi: float) -> float:
+    return math.asinh(psi / _HALF_PI * math.sinh(ANGLE_WARP)) / ANGLE_WARP
+
+
+def _angle_from_coordinate(u: np.ndarray) -> np.ndarray:
+    return _HALF_PI * np.sinh(ANGLE_WARP * np.asarray(u)) / math.sinh(ANGLE_WARP)
+
+
+def _axis(values: ArrayLike, name: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float).ravel()
+    if len(arr) < 2 or not np.all(np.isfinite(arr)) or not np.all(np.diff(arr) > 0):
+        raise InputError(f'{name} must hold at least 2 finite, strictly increasing values')
+    return arr
+
+
+def _reverse(columns: dict[str, np.ndarray], reverse: np.ndarray) -> dict[str, np.ndarray]:
+    """Turn forward-driving columns into reverse driving where ``reverse`` (180-degree symmetry)."""
+    out = dict(columns)
+    for a, b in (
+        ('torque_left_Nm', 'torque_right_Nm'),
+        ('omega_left_rad_s', 'omega_right_rad_s'),
+        ('power_left_W', 'power_right_W'),
+    ):
+        out[a] = np.where(reverse, columns[b], columns[a])
+        out[b] = np.where(reverse, columns[a], columns[b])
+    for name in _ODD_IN_REVERSE:
+        out[name] = np.where(reverse, -out[name], out[name])
+    return out
+
+
+def _check_meta(source: Path, meta: dict[str, Any], vehicle: Vehicle | None, terrain: Terrain | None) -> None:
+    current = model_version(str(meta.get('model', 'fess')))
+    if meta.get('model_version') != current:
+        raise MapMismatchError(
+            f'{source}: built by model version {meta.get("model_version")!r}, this package is {current!r}'
+        )
+    if vehicle is not None and meta.get('vehicle_fingerprint') != vehicle_fingerprint(vehicle):
+        raise MapMismatchError(
+            f'{source}: built for vehicle {meta.get("vehicle")!r} '
+            f'({meta.get("vehicle_fingerprint")}), not {vehicle.name!r} ({vehicle_fingerprint(vehicle)})'
+        )
+    if terrain is not None and meta.get('terrain_fingerprint') != terrain_fingerprint(terrain):
+        raise MapMismatchError(
+            f'{source}: built for terrain {meta.get("terrain")!r}, not {terrain.name!r} (parameters differ)'
+        )
+
+
+# -------------------------------------------------------------------- row solves
+
+
+def _solve_row(
+    solver: Any, v: np.ndarray, w: np.ndarray, r_min: float, prev: dict[str, Any] | None
+) -> dict[str, Any]:
+    """One ring of points (V, w_z): FESS at (V_eff, w_z), V_eff = max(V, r_min |w_z|) (the
+    small-radius limit), warm-started from the previous ring with each side's speed shifted by the
+    change of V_eff."""
+    veh = solver.vehicle
+    r = veh.drive_radius_m
+    v_eff = np.maximum(v, r_min * np.abs(w))
+    limited = v_eff > v
+    x0 = None
+    if prev is not None:
+        x0 = prev['state'].copy()
+        x0[:, 1:] += ((v_eff - prev['v_eff']) / r)[:, None]
+    sol = solver.solve_twist(v_eff, w, x0=x0)
+    half = 0.5 * veh.tread_m
+    ys = np.array([half, -half])
+    side_v = v[:, None] - w[:, None] * ys  # actual ground speed of each side [m/s]
+    side_v_eff = v_eff[:, None] - w[:, None] * ys
+    omega = sol.omega + (side_v - side_v_eff) / r  # keep each side's slip speed (module doc)
+    return {
+        'torque': sol.torque,
+        'omega': omega,
+        's0': sol.s0,
+        'sinkage': sol.sinkage,
+        'margin': sol.traction_margin,
+        'converged': sol.converged,
+        'limited': limited,
+        'state': np.where(sol.converged[:, None], sol.state, np.nan),
+        'v_eff': v_eff,
+    }
+
+
+def _assemble(rows: list[dict[str, Any]]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    torque = np.stack([r['torque'] for r in rows])  # (Nv, Nw, 2)
+    omega = np.stack([r['omega'] for r in rows])
+    converged = np.stack([r['converged'] for r in rows])
+    limited = np.stack([r['limited'] for r in rows])
+    values = {
+        'torque_left_Nm': torque[..., 0],
+        'torque_right_Nm': torque[..., 1],
+        'omega_left_rad_s': omega[..., 0],
+        'omega_right_rad_s': omega[..., 1],
+        'power_left_W': torque[..., 0] * omega[..., 0],
+        'power_right_W': torque[..., 1] * omega[..., 1],
+        's0_m': np.stack([r['s0'] for r in rows]),
+        'sinkage_m': np.stack([r['sinkage'] for r in rows]),
+        'traction_margin': np.stack([r['margin'] for r in rows]),
+        'suspect': (~converged).astype(float),
+    }
+    if np.any(~converged) and np.any(converged):
+        _fill_nearest(values, converged)
+    return values, converged, limited
+
+
+def _fill_nearest(values: dict[str, np.ndarray], converged: np.ndarray) -> None:
+    """Replace non-converged cells by their nearest converged cell (grid-index distance)."""
+    good = np.argwhere(converged)
+    for i, j in np.argwhere(~converged):
+        k = good[np.argmin(np.sum((good - (i, j)) ** 2, axis=1))]
+        for name, arr in values.items():
+            if name != 'suspect':
+                arr[i, j] = arr[k[0], k[1]]
+        # no steady state found (typically a side's thrust saturated): no traction margin left
+        values['traction_margin'][i, j] = min(values['traction_margin'][i, j], 0.0)
+
+
+# -------------------------------------------------------------------- cache
+
+
+def cache_path(
+    vehicle: Vehicle, terrain: Terrain, cache_dir: str | os.PathLike[str] | None = None, model: str = 'fess'
+) -> Path:
+    """Where :func:`load_or_build` keeps the map of this vehicle and terrain."""
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    version = model_version(model).replace('/', '-')
+    vehicle_part = f'{vehicle.name}-{vehicle_fingerprint(vehicle)}'
+    terrain_part = f'{terrain.name}-{terrain_fingerprint(terrain)}'
+    return folder / f'{vehicle_part}_{terrain_part}_{version}.npz'
+
+
+def load_or_build(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    cache_dir: str | os.PathLike[str] | None = None,
+    *,
+    progress: ProgressCallback | None = None,
+    rebuild: bool = False,
+) -> tuple[PowerMap, bool]:
+    """The cached default-grid map of ``vehicle`` on ``terrain``, building (and saving) it if it is
+    missing, unreadable or was built for another vehicle, terrain or model version.
+
+    Returns (map, built). cache_dir defaults to $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power.
+    """
+    path = cache_path(vehicle, terrain, cache_dir)
+    if path.exists() and not rebuild:
+        try:
+            return PowerMap.load(path, vehicle, terrain), False
+        except (MapMismatchError, ConfigError):
+            pass  # stale or damaged: rebuild below, never use it
+    built = PowerMap.build(vehicle, terrain, progress=progress)
+    built.save(path)
+    return built, True

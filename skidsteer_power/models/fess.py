@@ -1,0 +1,856 @@
+"""Finite Element Skid Steering (FESS) model, tracks and wheels (chapter 6, eqs. 6.1-6.12).
+
+Each side's contact is cut into ``n`` elements along its length (eq. 6.5); the shear displacement of
+each element is the distance between where it is now and the ground point it gripped when it entered
+the contact (eqs. 6.1-6.4, 6.6); the shear stress follows eq. 6.7 (any of soil types A, B, C via
+:func:`~skidsteer_power.terramechanics.soil.shear_fraction`); the forces and moments are trapezoidal
+sums over the elements; and the three unknowns (s0, omega_left, omega_right) solve the equilibrium of
+eq. 3.18 by Newton-Raphson. Wheels (section 6.3) use the same kernel on a flattened contact whose
+normal stress is the quadratic approximation of eqs. 6.8-6.10, placed along the vehicle by eq. 6.11.
+
+Kinematics in (V, yaw rate)
+---------------------------
+The model works in the vehicle frame (REP 103: x forward, y left) with the forward speed V [m/s]
+(the x velocity of the hull centreline) and the signed yaw rate w_z [rad/s] as inputs, never the
+turning radius R = V / w_z itself. Every place the text writes R multiplies a sine or 1 - cos of the
+yaw angle, R sin(w_z t) = V t sin(th)/th and R (1 - cos th) = V t (1 - cos th)/th, so straight running
+(w_z = 0) and spinning in place (V = 0) are ordinary points with no division by zero. The centrifugal
+force m V^2 / R of eq. 3.18 is m V w_z; the load transfer of eq. 6.12 is m V w_z h / B.
+
+Eq. 6.6 typo: the text writes the rotation angle of the k-th element as k phi L / (n omega r), with
+phi (the turning angle) where the *yaw rate* phi-dot is meant: by eqs. 6.3 and 6.5 the angle is
+phi-dot times the element's time in contact, k L / (n omega r). We use w_z * k L / (n |omega| r).
+
+An element of a side turning backwards (omega < 0, e.g. the inner side spinning in place) enters the
+contact at the rear; the kernel mirrors the contact for that side (the same eq. 6.6 with the entry
+point at the rear end). Reverse driving (V < 0) is the fore-aft mirror image of forward driving:
+solution(-V, w_z) = solution(V, -w_z) with omega, torque, thrust and s0 negated, power, sinkage and
+traction margin unchanged (exact for the CG at the geometric centre, the text's assumption).
+
+Compaction resistance acts against each side's motion over the ground, sign(V - w_z y_side); a side
+that does not move over the ground (w_z y_side = V) makes no rut.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.models.base import SteadyState
+from skidsteer_power.models.loads import OperatingPoints, side_loads
+from skidsteer_power.terramechanics.soil import shear_fraction
+from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
+from skidsteer_power.terramechanics.wheel import quadratic_stress_coefficients, solve_wheel, wheel_angles
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
+
+MODEL_VERSION = 'fess-1'
+DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
+FORCE_TOL_N = 1e-3  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
+MAX_ITERATIONS = 60
+MAX_HALVINGS = 12
+RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
+SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
+STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
+
+LEFT, RIGHT = 0, 1
+SIDE_Y_SIGN = np.array([1.0, -1.0])  # left side at y = +B/2, right side at y = -B/2
+
+
+# --------------------------------------------------------------------------------------------------
+# Contact description: element positions, stresses and integration weights
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Contact:
+    """Discretized contacts of both sides over a batch of P operating points.
+
+    Arrays broadcast to (P, 2 sides, G gears per side, N elements); forward position of an element
+    relative to its gear centre for forward rolling is ``fwd`` [m]; the entry point is ``entry`` [m];
+    ``xi`` = entry - fwd is the distance behind the entry [m] (eq. 6.1). Weights [m^2] are trapezoidal
+    area weights for the longitudinal force (``wx``, horizontal projection), the lateral force
+    (``wy``) and the drive torque about the axle (``wt``, rim area; multiplied by r).
+    """
+
+    centre: np.ndarray  # (1, 1, G, 1) gear centre x from the CG [m]
+    fwd: np.ndarray  # (P|1, 2|1, G, N)
+    entry: np.ndarray  # (P|1, 2|1, G, 1)
+    tau_max: np.ndarray  # (P, 2, G|1, N|1) shear strength c + sigma tan(phi) [Pa] (eq. 2.2)
+    wx: np.ndarray
+    wy: np.ndarray
+    wt: np.ndarray
+    resistance: np.ndarray  # (P, 2) compaction resistance magnitude of each side [N]
+    sinkage: np.ndarray  # (P, 2) sinkage of each side [m]
+    length_scale: float  # contact span used to scale s0 steps [m]
+
+    @property
+    def xi(self) -> np.ndarray:
+        return self.entry - self.fwd
+
+    def take(self, idx: np.ndarray) -> Contact:
+        """The contacts of the operating points ``idx`` only."""
+        out = dict(vars(self))
+        for name, value in vars(self).items():
+            if isinstance(value, np.ndarray) and name != 'centre' and value.shape[0] > 1:
+                out[name] = value[idx]
+        return Contact(**out)
+
+
+def _trapezoid_weights(n: int) -> np.ndarray:
+    """Trapezoid weights of n+1 equally spaced nodes on [0, 1] (sum 1)."""
+    w = np.full(n + 1, 1.0 / n)
+    w[[0, -1]] *= 0.5
+    return w
+
+
+def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
+    """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
+    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    s = np.linspace(0.0, 1.0, n + 1)
+    fwd = (0.5 * length - s * length)[None, None, None, :]  # element k at l/2 - k l / n (eq. 6.6)
+    area = width * length * _trapezoid_weights(n)[None, None, None, :]
+    pressure = np.maximum(loads, 0.0) / (width * length)
+    tau_max = (terrain.c + pressure * math.tan(terrain.phi))[:, :, None, None]  # eq. 2.2
+    safe = np.maximum(loads, 0.0)
+    return Contact(
+        centre=np.zeros((1, 1, 1, 1)),
+        fwd=fwd,
+        entry=np.full((1, 1, 1, 1), 0.5 * length),
+        tau_max=tau_max,
+        wx=area,
+        wy=area,
+        wt=area,
+        resistance=compaction_resistance(terrain, safe, width, length),  # eq. 2.10
+        sinkage=track_sinkage(terrain, safe, width, length),  # eq. 2.6
+        length_scale=length,
+    )
+
+
+@lru_cache(maxsize=32)
+def _free_wheel_table(
+    terrain: Terrain, radius: float, width: float, nominal_load: float
+) -> tuple[np.ndarray, ...]:
+    """Sinkage and slip of a self-propelled wheel (F_x = 0, eq. 2.28) over a range of wheel loads.
+
+    Section 6.3 decouples slip and sinkage: each wheel's contact geometry comes from the single-wheel
+    model at its load (eq. 2.28 with zero drawbar pull). The scalar (z, s) solve is done once per
+    (terrain, wheel) at 25 loads from 2 % to 200 % of the nominal wheel load and interpolated in
+    log(load): a batch of operating points then needs no per-point Newton solve.
+    """
+    loads = nominal_load * np.geomspace(0.02, 2.0, 25)
+    sink, slip = [], []
+    for w in loads:
+        state = solve_wheel(terrain, float(w), 0.0, radius, width)
+        sink.append(float(state.sinkage_m))
+        slip.append(float(state.slip))
+    return np.log(loads), np.array(sink), np.array(slip)
+
+
+def wheel_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
+    """Flattened wheel contacts with quadratic normal stress (eqs. 6.8-6.11); side loads (P, 2) [N]."""
+    r, b = float(vehicle.wheel_radius_m), float(vehicle.wheel_width_m)  # type: ignore[arg-type]
+    per_side = vehicle.wheels_per_side
+    nominal = vehicle.weight_N / (2 * per_side)
+    log_w, sink_tab, slip_tab = _free_wheel_table(terrain, r, b, nominal)
+    wheel_load = np.maximum(loads, 1e-9 * nominal) / per_side  # (P, 2)
+    lw = np.log(wheel_load)
+    z = np.interp(lw, log_w, sink_tab)
+    s = np.interp(lw, log_w, slip_tab)
+    tf, tm, tr = wheel_angles(terrain, z, s, r)
+    front, rear = quadratic_stress_coefficients(terrain, z, s, r, b)  # eq. 6.10, (P, 2, 3)
+    u = np.linspace(0.0, 1.0, n + 1)
+    theta = tf[..., None] - (tf - tr)[..., None] * u  # nodes from entry to exit, (P, 2, N)
+    coef = np.where((theta >= tm[..., None])[..., None], front[..., None, :], rear[..., None, :])
+    sigma = np.maximum((coef[..., 0] * theta + coef[..., 1]) * theta + coef[..., 2], 0.0)  # eq. 6.9
+    dtheta = ((tf - tr)[..., None] * _trapezoid_weights(n)) * r * b  # rim area weights (P, 2, N)
+    rim = dtheta[:, :, None, :]
+    centre = np.array(vehicle.axle_positions_m())[None, None, :, None]
+    resistance = per_side * np.sum(sigma * np.sin(theta) * dtheta, axis=-1)  # rb int sigma sin (2.27)
+    return Contact(
+        centre=centre,
+        fwd=(r * np.sin(theta))[:, :, None, :],  # flat contact: x = r sin(theta) (eq. 6.11)
+        entry=(r * np.sin(tf))[:, :, None, None],
+        tau_max=(terrain.c + sigma * math.tan(terrain.phi))[:, :, None, :],
+        wx=rim * np.cos(theta)[:, :, None, :],
+        wy=rim,
+        wt=rim,
+        resistance=resistance,
+        sinkage=np.where(loads > 0, z, 0.0),
+        length_scale=float(vehicle.wheelbase_m) + 2 * r,  # type: ignore[arg-type]
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# The residual of eq. 3.18 over a batch of operating points and trial states
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Problem:
+    """Everything fixed for a batch of P operating points (forward speed V >= 0)."""
+
+    vehicle: Vehicle
+    terrain: Terrain
+    speed: np.ndarray  # (P,) V >= 0 [m/s]
+    yaw: np.ndarray  # (P,) signed yaw rate [rad/s]; straight points carry STRAIGHT_YAW (see residual)
+    loads: np.ndarray  # (P, 2) left, right [N]
+    contact: Contact
+    radius: float  # drive radius r [m]
+    half_tread: float  # B / 2 [m]
+    lateral_scale: np.ndarray  # (P,) 1, or 1 / STRAIGHT_YAW [s] for straight points
+
+    def take(self, idx: np.ndarray) -> Problem:
+        """The sub-problem of the operating points ``idx``."""
+        return Problem(
+            self.vehicle,
+            self.terrain,
+            self.speed[idx],
+            self.yaw[idx],
+            self.loads[idx],
+            self.contact.take(idx),
+            self.radius,
+            self.half_tread,
+            self.lateral_scale[idx],
+        )
+
+    @property
+    def turn_radius(self) -> np.ndarray:
+        """(P,) signed R = V / w_z [m] (0 when spinning in place)."""
+        return self.speed / self.yaw
+
+    @property
+    def side_speed(self) -> np.ndarray:
+        """(P, 2) ground speed of each side's centreline along x, V - w_z y_side [m/s]."""
+        return self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+
+
+def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shear displacement (eq. 6.6) of every element for trial states x (P, S, 3).
+
+    Returns (jx, jy, xk), shapes (P, S, 2, G, N): the displacement [m] of each element from the
+    ground point it gripped at touch-down, along the vehicle's current x and y axes, and each
+    element's x relative to the turning-centre projection [m].
+    """
+    c = problem.contact
+    s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
+    omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
+    direction = np.where(omega >= 0, 1.0, -1.0)  # omega < 0: entry at the rear (mirrored contact)
+    t = c.xi[:, None] / np.maximum(np.abs(omega) * problem.radius, 1e-12)  # time in contact, eq. 6.5 [s]
+    yaw = problem.yaw[:, None, None, None, None]
+    # lateral distance of the side centreline from the turning centre O = (0, R) [m]; R = V / w_z is
+    # finite because straight points run at STRAIGHT_YAW, and 0 when spinning in place
+    dy = (SIDE_Y_SIGN * problem.half_tread)[None, None, :, None, None] - problem.turn_radius[
+        :, None, None, None, None
+    ]
+    half = 0.5 * yaw * t  # half the angle turned since the element touched down, eq. 6.3
+    sh, ch = np.sin(half), np.cos(half)
+    sin, one_minus_cos = 2.0 * sh * ch, 2.0 * sh * sh
+    xk = c.centre + direction * c.fwd[:, None] - s0  # element now, relative to the turning centre
+    xe = c.centre + direction * c.entry[:, None] - s0  # where it touched down
+    # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); 1 - cos written as 2 sin^2 (no cancellation)
+    jx = xk - xe + one_minus_cos * xe - dy * sin
+    jy = dy * one_minus_cos + xe * sin
+    return jx, jy, xk
+
+
+def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per-element shear forces for trial states x (P, S, 3) = (s0, omega_left, omega_right).
+
+    Returns (fx, fy, xk) with shapes (P, S, 2, G, N): the force on the vehicle per unit area [Pa]
+    along x and y (eq. 6.7, against the displacement), and each element's x as in
+    :func:`element_displacement`.
+    """
+    c = problem.contact
+    jx, jy, xk = element_displacement(problem, x)
+    j = np.hypot(jx, jy)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        scale = np.where(j > 0, c.tau_max[:, None] * shear_fraction(problem.terrain, j) / j, 0.0)  # eq. 6.7
+    return -scale * jx, -scale * jy, xk
+
+
+def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centrifugal force components (x, y) on the CG [N], eq. 3.18: m V^2/R (-sin beta, -cos beta)."""
+    v, w = problem.speed[:, None], problem.yaw[:, None]
+    mass = problem.vehicle.mass_kg
+    q = np.hypot(v, w * s0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        sin_b = np.where(q > 0, s0 * np.abs(w) / q, 0.0)  # beta = atan(s0 / R)
+        cos_b = np.where(q > 0, np.abs(v) / q, 1.0)
+    return -mass * np.abs(v * w) * sin_b, -mass * v * w * cos_b
+
+
+def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
+    """Equilibrium residuals (P, S, 3) of eq. 3.19 at trial states x (P, S, 3) [N, N, N m]."""
+    c = problem.contact
+    fx, fy, xk = element_forces(problem, x)
+    sum_axes = (-2, -1)
+    fx_side = np.sum(fx * c.wx[:, None], axis=sum_axes)  # (P, S, 2) trapezoid sums
+    fy_side = np.sum(fy * c.wy[:, None], axis=sum_axes)
+    mz_lat = np.sum(xk * fy * c.wy[:, None], axis=(-3, -2, -1))
+    ys = SIDE_Y_SIGN * problem.half_tread
+    rolling = (c.resistance * np.sign(problem.side_speed))[:, None, :]  # against each side's motion
+    s0 = x[..., 0]
+    cfx, cfy = _centrifugal(problem, s0)
+    e1 = np.sum(fx_side - rolling, axis=-1) + cfx  # sum F_x = 0
+    e2 = np.sum(fy_side, axis=-1) + cfy  # sum F_y = 0
+    e3 = mz_lat - np.sum(ys * (fx_side - rolling), axis=-1) - s0 * cfy  # sum M_z about the turning centre
+    # straight running has no lateral force and s0 is free; the kernel runs these points at a tiny
+    # yaw rate and the lateral balance is scaled up by 1/STRAIGHT_YAW, so s0 takes its limit as
+    # R -> inf (continuous across w_z = 0 in a map) while torques differ by O(STRAIGHT_YAW^2).
+    e2 = e2 * problem.lateral_scale[:, None]
+    return np.stack([e1, e2, e3], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------------
+# Batched damped Newton-Raphson (eqs. 3.20-3.22)
+# --------------------------------------------------------------------------------------------------
+
+
+def initial_guess(problem: Problem) -> np.ndarray:
+    """x0 (P, 3): no-slip side speeds (eq. 3.21) and Steeds' s0 = V w_z l / (2 mu g) (eq. 3.7).
+
+    mu = 0.5 stands in for the unknown mu_t; s0 is kept inside a quarter of the contact span.
+    """
+    r = problem.radius
+    omega = problem.side_speed / r
+    s0 = problem.speed * np.abs(problem.yaw) * problem.contact.length_scale / (2 * 0.5 * 9.81)
+    s0 = np.minimum(s0, 0.25 * problem.contact.length_scale)
+    return np.column_stack([s0, omega])
+
+
+def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
+    """Finite-difference steps (P, 3) for the Jacobian of eq. 3.22."""
+    omega_ref = np.maximum(np.max(np.abs(problem.side_speed), axis=1), 1e-3) / problem.radius
+    h_s0 = np.full(len(x), 1e-7 * problem.contact.length_scale)
+    h_w = 1e-7 * np.maximum(np.abs(x[:, 1:]), omega_ref[:, None])
+    return np.column_stack([h_s0, h_w])
+
+
+def _solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the batched 3x3 systems a x = b by Cramer's rule; (x, ok) with ok False where singular."""
+    det = np.linalg.det(a)
+    scale = np.prod(np.linalg.norm(a, axis=2), axis=1)
+    ok = np.abs(det) > 1e-14 * scale
+    safe = np.where(ok, det, 1.0)
+    out = np.empty_like(b)
+    for i in range(3):
+        ai = a.copy()
+        ai[:, :, i] = b
+        out[:, i] = np.linalg.det(ai) / safe
+    return np.where(ok[:, None], out, 0.0), ok
+
+
+def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Scale each Newton step so s0 moves < 20 % of the contact span and omega < 50 % (trust region)."""
+    omega_ref = np.maximum(np.max(np.abs(problem.side_speed[idx]), axis=1), 1e-3) / problem.radius
+    caps = np.column_stack(
+        [
+            np.full(len(x), 0.2 * problem.contact.length_scale),
+            0.5 * np.maximum(np.abs(x[:, 1:]), omega_ref[:, None]),
+        ]
+    )
+    ratio = np.max(np.abs(step) / caps, axis=1)
+    return step / np.maximum(ratio, 1.0)[:, None]
+
+
+@dataclass
+class NewtonResult:
+    x: np.ndarray  # (P, 3)
+    residual: np.ndarray  # (P, 3)
+    converged: np.ndarray  # (P,)
+    iterations: int
+
+
+def newton(
+    problem: Problem, x0: np.ndarray, tol: float = FORCE_TOL_N, fixed: np.ndarray | None = None
+) -> NewtonResult:
+    """Damped Newton on all points at once (eqs. 3.20-3.22).
+
+    Each iteration is ONE batched residual call over the points not yet converged, evaluating every
+    state together with its three forward-difference perturbations (eq. 3.22). A step that does not
+    reduce the largest residual is halved (backtracking) before the Jacobian is refreshed.
+    """
+    x = x0.astype(float).copy()
+    p = len(x)
+    done = np.zeros(p, dtype=bool) if fixed is None else fixed.copy()
+    gave_up = np.zeros(p, dtype=bool)
+    x_prev = x.copy()
+    norm_prev = np.full(p, np.inf)
+    step_prev = np.zeros_like(x)
+    halvings = np.zeros(p, dtype=int)
+    f = np.full_like(x, np.nan)
+    it = 0
+    for it in range(1, MAX_ITERATIONS + 1):  # noqa: B007
+        act = np.flatnonzero(~done & ~gave_up)
+        if len(act) == 0:
+            break
+        sub = problem if len(act) == p else problem.take(act)
+        xa = x[act]
+        h = _steps(sub, xa)
+        trial = np.repeat(xa[:, None, :], 4, axis=1)
+        trial[:, 1, 0] += h[:, 0]
+        trial[:, 2, 1] += h[:, 1]
+        trial[:, 3, 2] += h[:, 2]
+        fall = residual(sub, trial)
+        fa = fall[:, 0]
+        f[act] = fa
+        finite = np.all(np.isfinite(fa), axis=1)
+        norm = np.where(finite, np.max(np.abs(fa), axis=1), np.inf)
+        ok = norm < tol
+        done[act[ok]] = True
+        worse = ~ok & (norm >= norm_prev[act])
+        gave_up[act[worse & (halvings[act] >= MAX_HALVINGS)]] = True
+        back = act[worse & (halvings[act] < MAX_HALVINGS)]  # backtrack: halve the last step
+        step_prev[back] *= 0.5
+        x[back] = x_prev[back] + step_prev[back]
+        halvings[back] += 1
+        good = ~ok & ~worse & finite
+        if not np.any(good):
+            continue
+        jac = (fall[good, 1:] - fa[good, None, :]).transpose(0, 2, 1) / h[good, None, :]
+        step, _ = _solve3(jac, -fa[good])
+        idx = act[good]
+        step = _limit(problem, idx, x[idx], step)
+        x_prev[idx] = x[idx]
+        norm_prev[idx] = norm[good]
+        step_prev[idx] = step
+        halvings[idx] = 0
+        x[idx] = x[idx] + step
+    return NewtonResult(x, f, done, it)
+
+
+# --------------------------------------------------------------------------------------------------
+# Public API
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class TwistSolution:
+    """FESS steady state over a batch of (V, yaw rate) points, per side (left, right), SI units."""
+
+    speed: np.ndarray  # V [m/s]
+    yaw_rate: np.ndarray  # w_z [rad/s]
+    s0: np.ndarray  # turning-centre offset along x, ahead of the CG [m] (negative in reverse)
+    omega: np.ndarray  # (P, 2) [rad/s]
+    torque: np.ndarray  # (P, 2) drive torque [N m]
+    thrust: np.ndarray  # (P, 2) longitudinal shear force [N]
+    lateral: np.ndarray  # (P, 2) lateral shear force [N]
+    slip: np.ndarray  # (P, 2) [-] eq. 2.13
+    sinkage: np.ndarray  # (P,) largest sinkage [m]
+    traction_margin: np.ndarray  # (P,) [-]
+    converged: np.ndarray  # (P,)
+    residual: np.ndarray  # (P, 3)
+    iterations: int
+
+    @property
+    def power(self) -> np.ndarray:
+        """(P, 2) mechanical power torque * omega [W]."""
+        return self.torque * self.omega
+
+    @property
+    def state(self) -> np.ndarray:
+        """(P, 3) solver state (s0, omega_left, omega_right), forward-driving frame, for warm starts."""
+        return np.column_stack([self.s0, self.omega])
+
+
+@dataclass
+class PointSolution:
+    """One FESS steady state (left, right sides), SI units; see :meth:`FessSolver.solve_point`."""
+
+    s0: float  # [m]
+    omega: np.ndarray  # (2,) [rad/s]
+    torque: np.ndarray  # (2,) [N m]
+    converged: bool
+    iterations: int
+
+    @property
+    def power(self) -> np.ndarray:
+        """(2,) torque * omega [W]."""
+        return self.torque * self.omega
+
+    @property
+    def state(self) -> np.ndarray:
+        """(s0, omega_left, omega_right), to warm-start the next call."""
+        return np.array([self.s0, *self.omega])
+
+
+class _PointKernel:
+    """The residual of eq. 3.19 for one operating point on flat (S, 2, M) arrays (M = gears x n)."""
+
+    def __init__(self, prob: Problem) -> None:
+        c = prob.contact
+
+        full = (
+            1,
+            2,
+            *np.broadcast_shapes(*(a.shape[2:] for a in (c.centre, c.fwd, c.entry, c.tau_max, c.wx))),
+        )
+
+        def flat(a: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(np.broadcast_to(a, full)[0].reshape(2, -1))
+
+        self.fwd, self.centre, self.entry = flat(c.fwd), flat(c.centre), flat(c.entry)
+        self.xi = self.entry - self.fwd
+        self.tau_max = flat(c.tau_max)
+        self.wx, self.wy, self.wt = flat(c.wx), flat(c.wy), flat(c.wt)
+        self.terrain = prob.terrain
+        self.type_a = prob.terrain.shear_type == 'A'
+        self.k = prob.terrain.K
+        self.r = prob.radius
+        self.v = float(prob.speed[0])
+        self.yaw = float(prob.yaw[0])
+        self.ys = SIDE_Y_SIGN * prob.half_tread
+        self.dy = (self.ys - float(prob.turn_radius[0]))[:, None]
+        rolling = c.resistance[0] * np.sign(prob.side_speed[0])
+        self.rolling_sum = float(np.sum(rolling))
+        self.rolling_moment = float(np.sum(self.ys * rolling))
+        self.mass = prob.vehicle.mass_kg
+        self.lateral_scale = float(prob.lateral_scale[0])
+        self.length_scale = c.length_scale
+        self.omega_ref = max(float(np.max(np.abs(prob.side_speed[0]))), 1e-3) / prob.radius
+
+    def forces(self, x: np.ndarray, with_xk: bool = False) -> Any:
+        """(fx, fy[, xk]) per unit area [Pa], shapes (S, 2, M), for states x (S, 3)."""
+        omega = x[:, 1:, None]
+        direction = np.where(omega >= 0, 1.0, -1.0)
+        half = (0.5 * self.yaw / self.r) * self.xi / np.maximum(np.abs(omega), 1e-12)
+        sh, ch = np.sin(half), np.cos(half)
+        sin, omc = 2.0 * sh * ch, 2.0 * sh * sh
+        s0 = x[:, 0, None, None]
+        xk = self.centre + direction * self.fwd - s0
+        xe = self.centre + direction * self.entry - s0
+        jx = xk - xe + omc * xe - self.dy * sin
+        jy = self.dy * omc + xe * sin
+        j = np.hypot(jx, jy)
+        frac = -np.expm1(-j / self.k) if self.type_a else shear_fraction(self.terrain, j)
+        scale = self.tau_max * frac / np.where(j > 0, j, 1.0)  # eq. 6.7 (frac = 0 where j = 0)
+        if with_xk:
+            return -scale * jx, -scale * jy, xk
+        return -scale * jx, -scale * jy
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """(S, 3) residuals of eq. 3.19 [N, N, N m] (same as :func:`residual`)."""
+        fx, fy, xk = self.forces(x, with_xk=True)
+        fx_side = np.sum(fx * self.wx, axis=-1)
+        fyw = fy * self.wy
+        fy_sum = np.sum(fyw, axis=(-2, -1))
+        mz_lat = np.sum(xk * fyw, axis=(-2, -1))
+        s0 = x[:, 0]
+        q = np.maximum(np.hypot(self.v, self.yaw * s0), 1e-300)  # centrifugal force (eq. 3.18)
+        cfx = -self.mass * abs(self.v * self.yaw) * s0 * abs(self.yaw) / q  # -m V^2/R sin(beta)
+        cfy = -self.mass * self.v * self.yaw * abs(self.v) / q  # -m V^2/R cos(beta)
+        e1 = np.sum(fx_side, axis=-1) - self.rolling_sum + cfx
+        e2 = (fy_sum + cfy) * self.lateral_scale
+        e3 = mz_lat - fx_side @ self.ys + self.rolling_moment - s0 * cfy
+        return np.stack([e1, e2, e3], axis=-1)
+
+    def newton(self, x: np.ndarray, tol: float) -> tuple[np.ndarray, bool, int]:
+        """Damped Newton with a forward-difference Jacobian (eqs. 3.20-3.22), one point."""
+        h = np.array([1e-7 * self.length_scale, 0.0, 0.0])
+        norm_prev, step, x_prev = math.inf, np.zeros(3), x.copy()
+        halvings = 0
+        for it in range(1, MAX_ITERATIONS + 1):
+            h[1:] = 1e-7 * np.maximum(np.abs(x[1:]), self.omega_ref)
+            trial = np.repeat(x[None, :], 4, axis=0)
+            trial[1, 0] += h[0]
+            trial[2, 1] += h[1]
+            trial[3, 2] += h[2]
+            f_all = self.residual(trial)
+            f = f_all[0]
+            norm = float(np.max(np.abs(f)))
+            if norm < tol:
+                return x, True, it
+            if not math.isfinite(norm) or norm >= norm_prev:
+                if halvings >= MAX_HALVINGS:
+                    return x, False, it
+                step *= 0.5  # backtrack
+                x = x_prev + step
+                halvings += 1
+                continue
+            jac = (f_all[1:] - f).T / h
+            try:
+                step = np.linalg.solve(jac, -f)
+            except np.linalg.LinAlgError:
+                return x, False, it
+            caps = np.array([0.2 * self.length_scale, *(0.5 * np.maximum(np.abs(x[1:]), self.omega_ref))])
+            step = step / max(1.0, float(np.max(np.abs(step) / caps)))
+            x_prev, norm_prev, halvings = x, norm, 0
+            x = x + step
+        return x, False, MAX_ITERATIONS
+
+
+class FessSolver:
+    """FESS for one vehicle and terrain, prepared once; :meth:`solve_twist` is the batched solve.
+
+    ``n`` is the number of elements per contact (eq. 6.5). Holding a solver avoids re-checking the
+    vehicle on every call and keeps the single-wheel table warm; :meth:`solve_point` is the lean
+    single-point path for on-board use (about 0.5 ms for a track, benchmarks/bench_fess.py).
+    """
+
+    def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
+        if not isinstance(n, (int, np.integer)) or n < 2:
+            raise InputError(f'number of FESS elements must be an integer >= 2, got {n!r}')
+        self.vehicle = vehicle
+        self.terrain = terrain
+        self.n = int(n)
+
+    def problem(self, speed: np.ndarray, yaw: np.ndarray) -> Problem:
+        """Set up the batch (V >= 0 required here; :meth:`solve_twist` mirrors reverse points)."""
+        veh = self.vehicle
+        pts = OperatingPoints(
+            speed, np.full_like(speed, np.inf), np.full_like(speed, np.inf), np.abs(yaw), speed.shape
+        )
+        outer, inner = side_loads(veh, pts)  # eq. 6.12 with m V^2/R = m V |w_z|
+        left_outer = yaw < 0
+        loads = np.column_stack([np.where(left_outer, outer, inner), np.where(left_outer, inner, outer)])
+        build = track_contact if veh.is_tracked else wheel_contact
+        contact = build(veh, self.terrain, loads, self.n)
+        straight = yaw == 0
+        kin_yaw = np.where(straight, STRAIGHT_YAW, yaw)
+        scale = np.where(straight, 1.0 / STRAIGHT_YAW, 1.0)
+        return Problem(
+            veh, self.terrain, speed, kin_yaw, loads, contact, veh.drive_radius_m, 0.5 * veh.tread_m, scale
+        )
+
+    def solve_twist(
+        self, speed: ArrayLike, yaw_rate: ArrayLike, *, x0: np.ndarray | None = None, tol: float = FORCE_TOL_N
+    ) -> TwistSolution:
+        """Solve all (V [m/s], w_z [rad/s]) points at once (broadcast, flattened to P points).
+
+        ``x0`` (P, 3) warm-starts the Newton iteration with (s0, omega_left, omega_right) of the
+        forward-driving frame (e.g. :attr:`TwistSolution.state` of neighbours).
+        """
+        v, w = _twist_arrays(speed, yaw_rate)
+        reverse = v < 0
+        v_fwd = np.abs(v)
+        w_fwd = np.where(reverse, -w, w)  # fore-aft mirror: (-V, w) == (V, -w) with omega negated
+        prob = self.problem(v_fwd, w_fwd)
+        guess = initial_guess(prob)
+        if x0 is not None:
+            x0 = np.where(reverse[:, None], -np.asarray(x0, dtype=float), x0)  # into the forward frame
+            guess = np.where(np.isfinite(x0), x0, guess)
+        standing = (v_fwd == 0) & (w_fwd == 0)  # at rest: nothing to solve, every output 0
+        result = newton(prob, guess, tol, fixed=standing)
+        for _ in range(RETRY_ROUNDS):
+            if not self._retry_from_neighbours(prob, result, tol):
+                break
+        sol = _outputs(prob, result, standing)
+        sol.yaw_rate = w_fwd
+        return _mirror_reverse(sol, reverse, v, w)
+
+    def solve_point(
+        self, speed: float, yaw_rate: float, *, x0: np.ndarray | None = None, tol: float = FORCE_TOL_N
+    ) -> PointSolution:
+        """One operating point (V [m/s], w_z [rad/s]) on the lean path for on-board use.
+
+        Same equations and answers as :meth:`solve_twist` (test_fess_track.py compares them), with
+        the per-iteration numpy bookkeeping of the batched solver stripped: a plain Newton loop on
+        flat (4 states, 2 sides, elements) arrays. ``x0`` = (s0, omega_left, omega_right) warm-starts
+        it, e.g. with the previous command's :attr:`PointSolution.state`.
+        """
+        v, w = float(speed), float(yaw_rate)
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise InputError('speed and yaw rate must be finite numbers (m/s, rad/s)')
+        flip = -1.0 if v < 0 else 1.0  # reverse: the fore-aft mirror image (module doc)
+        v, w = abs(v), w * flip
+        if v == 0 and w == 0:
+            zero = np.zeros(2)
+            return PointSolution(0.0, zero, zero.copy(), True, 0)
+        prob = self.problem(np.array([v]), np.array([w]))
+        kernel = _PointKernel(prob)
+        guess = initial_guess(prob)[0] if x0 is None else np.asarray(x0, dtype=float) * flip
+        x, ok, iterations = kernel.newton(guess, tol)
+        fx = kernel.forces(x[None, :])[0]
+        torque = prob.radius * np.sum(fx * kernel.wt, axis=-1)[0]
+        slip = _slip(prob.side_speed[0], x[1:] * prob.radius)
+        ok = ok and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
+        return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
+
+    def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
+        """Re-solve failed points warm-started from the nearest converged point (in V and w_z scaled
+        by their spans): the warm start along the grid. Updates ``result``; False if nothing to do."""
+        failed = np.flatnonzero(~result.converged)
+        good = np.flatnonzero(result.converged)
+        if len(failed) == 0 or len(good) == 0:
+            return False
+        span = np.array([np.ptp(prob.speed) or 1.0, np.ptp(prob.yaw) or 1.0])
+        pts = np.column_stack([prob.speed, prob.yaw]) / span
+        dist = np.linalg.norm(pts[failed, None, :] - pts[None, good, :], axis=2)
+        x0 = result.x[good[np.argmin(dist, axis=1)]]
+        sub = self.problem(
+            prob.speed[failed], np.where(prob.lateral_scale[failed] > 1, 0.0, prob.yaw[failed])
+        )
+        again = newton(sub, x0, tol)
+        fixed = again.converged
+        if not np.any(fixed):
+            return False
+        result.x[failed[fixed]] = again.x[fixed]
+        result.residual[failed[fixed]] = again.residual[fixed]
+        result.converged[failed[fixed]] = True
+        return True
+
+
+def _twist_arrays(speed: ArrayLike, yaw_rate: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
+    v, w = v.ravel().copy(), w.ravel().copy()
+    if np.any(~np.isfinite(v)) or np.any(~np.isfinite(w)):
+        raise InputError('speed and yaw rate must be finite numbers (m/s, rad/s)')
+    return v, w
+
+
+def _outputs(prob: Problem, result: NewtonResult, standing: np.ndarray) -> TwistSolution:
+    c = prob.contact
+    x = result.x
+    fx, fy, _ = element_forces(prob, x[:, None, :])
+    thrust = np.sum(fx * c.wx[:, None], axis=(-2, -1))[:, 0]
+    lateral = np.sum(fy * c.wy[:, None], axis=(-2, -1))[:, 0]
+    torque = prob.radius * np.sum(fx * c.wt[:, None], axis=(-2, -1))[:, 0]  # shear about the axle
+    capacity = np.sum(c.tau_max * c.wx * np.ones_like(c.wx), axis=(-2, -1))  # F_max per side, eq. 2.12
+    with np.errstate(invalid='ignore', divide='ignore'):
+        margin = 1.0 - np.max(np.abs(thrust) / capacity, axis=1)  # 1 - required / available thrust
+    omega = x[:, 1:]
+    slip = _slip(prob.side_speed, omega * prob.radius)
+    rest = standing[:, None]
+    omega, torque, thrust, lateral, slip = (
+        np.where(rest, 0.0, a) for a in (omega, torque, thrust, lateral, slip)
+    )
+    margin = np.where(standing, 1.0, margin)
+    x = np.where(rest, 0.0, x)
+    # a side spinning at |slip| > SLIP_LIMIT means its thrust saturated before the balance was met:
+    # the residual then creeps below the tolerance only as omega runs away, which is no steady state
+    physical = np.all(np.abs(slip) <= SLIP_LIMIT, axis=1)
+    converged = (result.converged & physical | standing) & np.all(prob.loads > 0, axis=1)
+    return TwistSolution(
+        speed=prob.speed,
+        yaw_rate=prob.yaw,
+        s0=x[:, 0],
+        omega=omega,
+        torque=torque,
+        thrust=thrust,
+        lateral=lateral,
+        slip=slip,
+        sinkage=np.max(c.sinkage, axis=1),
+        traction_margin=margin,
+        converged=converged,
+        residual=result.residual,
+        iterations=result.iterations,
+    )
+
+
+def _slip(side_speed: np.ndarray, rim_speed: np.ndarray) -> np.ndarray:
+    """Slip of eq. 2.13 for either direction of travel (computed in the side's own direction)."""
+    d = np.where(side_speed < 0, -1.0, 1.0)
+    v, rim = side_speed * d, rim_speed * d
+    with np.errstate(invalid='ignore', divide='ignore'):
+        s = np.where(rim >= v, np.where(rim != 0, (rim - v) / rim, 0.0), (rim - v) / v)
+    return np.clip(s, -1.0, 1.0)
+
+
+def _mirror_reverse(sol: TwistSolution, reverse: np.ndarray, v: np.ndarray, w: np.ndarray) -> TwistSolution:
+    """Map solutions of the mirrored forward problem back to reverse driving (see module doc)."""
+    if not np.any(reverse):
+        return sol
+    flip = np.where(reverse, -1.0, 1.0)
+    sol.speed, sol.yaw_rate = v, w
+    sol.s0 = sol.s0 * flip
+    sol.omega = sol.omega * flip[:, None]
+    sol.torque = sol.torque * flip[:, None]
+    sol.thrust = sol.thrust * flip[:, None]
+    return sol
+
+
+def to_steady_state(sol: TwistSolution, turn_radius: np.ndarray, solve_time: float) -> SteadyState:
+    """Convert left/right results to the outer/inner :class:`SteadyState` (R >= 0: outer = right)."""
+    outer_left = turn_radius < 0
+    o = np.where(outer_left, LEFT, RIGHT)
+    i = 1 - o
+    rows = np.arange(len(o))
+
+    def pick(a: np.ndarray, side: np.ndarray) -> np.ndarray:
+        return a[rows, side]
+
+    power = sol.power
+    return SteadyState(
+        speed_m_s=sol.speed,
+        turn_radius_m=turn_radius,
+        s0_m=sol.s0,
+        omega_outer_rad_s=pick(sol.omega, o),
+        omega_inner_rad_s=pick(sol.omega, i),
+        torque_outer_Nm=pick(sol.torque, o),
+        torque_inner_Nm=pick(sol.torque, i),
+        power_outer_W=pick(power, o),
+        power_inner_W=pick(power, i),
+        slip_outer=pick(sol.slip, o),
+        slip_inner=pick(sol.slip, i),
+        thrust_outer_N=pick(sol.thrust, o),
+        thrust_inner_N=pick(sol.thrust, i),
+        sinkage_m=sol.sinkage,
+        traction_margin=sol.traction_margin,
+        converged=sol.converged,
+        model='fess',
+        extra={
+            'lateral_outer_N': pick(sol.lateral, o),
+            'lateral_inner_N': pick(sol.lateral, i),
+            'solve_time_s': np.full(len(o), solve_time),
+            'iterations': np.full(len(o), sol.iterations),
+        },
+    )
+
+
+def _reshape(state: SteadyState, shape: tuple[int, ...]) -> SteadyState:
+    for name, value in list(vars(state).items()):
+        if isinstance(value, np.ndarray) and value.ndim == 1:
+            setattr(state, name, value.reshape(shape))
+    state.extra = {k: v.reshape(shape) for k, v in state.extra.items()}
+    return state
+
+
+def solve(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    speed: ArrayLike,
+    turn_radius: ArrayLike,
+    *,
+    n: int = DEFAULT_ELEMENTS,
+    raise_on_failure: bool | None = None,
+    tol: float = FORCE_TOL_N,
+    **options: Any,
+) -> SteadyState:
+    """FESS steady state at forward speed V [m/s] and signed turning radius R [m] (inf = straight).
+
+    Arrays broadcast; the whole batch is one Newton solve. A scalar call raises ConvergenceError
+    naming (V, R) if it fails; a batch marks failures ``converged=False`` unless
+    ``raise_on_failure=True``. ``n`` is the number of contact elements per track or wheel.
+    """
+    if options:
+        raise InputError(f'unknown FESS option(s): {", ".join(sorted(options))}')
+    v, r = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(turn_radius, dtype=float))
+    shape = v.shape
+    v, r = v.ravel(), r.ravel()
+    if np.any(~np.isfinite(v)) or np.any(np.isnan(r)) or np.any(r == 0):
+        raise InputError('speed must be finite and the turning radius non-zero (inf = straight)')
+    yaw = np.where(np.isinf(r), 0.0, v / np.where(np.isinf(r), 1.0, r))
+    start = time.perf_counter()
+    sol = FessSolver(vehicle, terrain, n).solve_twist(v, yaw, tol=tol)
+    elapsed = time.perf_counter() - start
+    state = to_steady_state(sol, r, elapsed)
+    if raise_on_failure is None:
+        raise_on_failure = shape == ()
+    if raise_on_failure and not np.all(state.converged):
+        k = int(np.flatnonzero(~state.converged)[0])
+        raise ConvergenceError(
+            f'FESS did not converge at V = {v[k]:.6g} m/s, R = {r[k]:.6g} m on {terrain.name!r} '
+            f'(residuals {np.array2string(sol.residual[k], precision=3)})'
+        )
+    return _reshape(state, shape)
