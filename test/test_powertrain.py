@@ -29,14 +29,30 @@ def test_ec45_constants_in_si():
     assert pytest.approx(4.8 * 2.5) == GEAR_RATIO  # ch. 7.1.1
 
 
-def test_table_7_1_read_as_currents_is_below_no_load_current():
-    """The Table 7.1 interpretation: the motor alone at the no-load speed draws less than 193 mA."""
+def test_table_7_1_is_read_as_eq_7_1_torques_at_the_motor_shaft():
+    """Table 7.1 read literally as eq. 7.1's b [N m s/rad] and c [N m] (see internal.py docstring)."""
     pt = Powertrain.default_test_robot('wheel')
     motor = pt.left.components['motor']
-    current = motor.torque(EC45.no_load_speed_rad_s) / EC45.torque_constant_Nm_A
-    # hand calculation: 0.0617 A + 0.0001 A s/rad * 419.9 rad/s = 0.1037 A
-    assert current == pytest.approx(0.0617 + 0.0001 * 4010 * 2 * math.pi / 60, rel=1e-9)
-    assert current < EC45.no_load_current_A
+    omega = EC45.no_load_speed_rad_s
+    # hand calculation: 0.0617 N m + 0.0001 N m s/rad * 419.9 rad/s = 0.1037 N m
+    assert motor.torque(omega) == pytest.approx(0.0617 + 0.0001 * 4010 * 2 * math.pi / 60, rel=1e-9)
+    # recorded conflict with Appendix B: that torque needs more current than the no-load 193 mA
+    assert motor.torque(omega) / EC45.torque_constant_Nm_A > EC45.no_load_current_A
+
+
+def test_current_reading_of_table_7_1_stays_available():
+    """The alternative reading (motor currents, converted with K_t) is a data-only change."""
+    from skidsteer_power.powertrain.internal import side_from_config
+
+    entries = {
+        'motor': {'viscous_A_s': 0.0001, 'coulomb_A': 0.0617},  # Table 7.1, left drivetrain
+        'gear_train': {'viscous_A_s': 0.00008, 'coulomb_A': 0.0177},
+        'roller_chain': {'viscous_A_s': 0.0001, 'coulomb_A': 0.0448},
+    }
+    side = side_from_config(entries, EC45.torque_constant_Nm_A, 'wheel')
+    # hand calculation: K_t * (0.0617 A + 0.0001 A s/rad * 419.9 rad/s) = 0.114 * 0.1037 A
+    expected = EC45.torque_constant_Nm_A * (0.0617 + 0.0001 * EC45.no_load_speed_rad_s)
+    assert side.components['motor'].torque(EC45.no_load_speed_rad_s) == pytest.approx(expected)
 
 
 def test_track_has_more_internal_resistance_than_wheels():
@@ -54,9 +70,8 @@ def test_track_has_more_internal_resistance_than_wheels():
 
 def test_internal_torque_hand_calculation_and_sign():
     pt = Powertrain.default_test_robot('track')
-    kt = 0.114
-    b = kt * (0.0001 + 0.00008 + 0.0001 + 0.00012)  # Table 7.1, left column 1 [A s/rad] -> N m s/rad
-    c = kt * (0.0617 + 0.0177 + 0.0448 + 0.6489)  # Table 7.1, left column 2 [A] -> N m
+    b = 0.0001 + 0.00008 + 0.0001 + 0.00012  # Table 7.1, left column 1 [N m s/rad at the motor]
+    c = 0.0617 + 0.0177 + 0.0448 + 0.6489  # Table 7.1, left column 2 [N m at the motor]
     w = 2.0  # axle rad/s -> motor 24 rad/s
     expected = 12 * (b * 24 + c)
     assert pt.internal_torque('left', w) == pytest.approx(expected)

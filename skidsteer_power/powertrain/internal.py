@@ -14,20 +14,21 @@ motor's and gear train's terms, which use the motor speed, from the same motor-c
 equation is only consistent with motor-shaft speed, which is what we use (the track's viscous term
 is so small that the choice changes its power by < 1 % at mission speeds anyway).
 
-Table 7.1 (the decision, recorded here and in ``config/powertrains/test_robot.yaml``):
-the table heads its columns "a, a_g, a_c, a_t" and "b, b_g, b_c, b_t", while the equations call the
-viscous constants b, b_g, b_r, b_t and the Coulomb constants c, c_g, c_r, c_t. From the magnitudes,
+Table 7.1 (the decision, recorded here, in ``config/powertrains/test_robot.yaml`` and in
+docs/PHYSICS_NOTES.md): the table heads its columns "a, a_g, a_c, a_t" and "b, b_g, b_c, b_t", while
+the equations call the viscous constants b, b_g, b_r, b_t and the Coulomb constants c, c_g, c_r, c_t.
 
-* the first column (1e-4) is the viscous, the second (0.02-0.65) the Coulomb coefficient;
-* the values are motor **currents** (the fit of i against omega, i.e. eq. 7.1 divided by K_t), in A per
-  rad/s and A. Read as torques in N m, the motor's own Coulomb term alone (0.0617 N m = 0.54 A) would
-  exceed the EC-45's whole no-load current (Appendix B: 193 mA at 4010 rpm), and the track's 0.65 N m
-  would exceed the motor's max. continuous torque (0.635 N m) with the robot on a jack stand. Read as
-  currents with omega in rad/s, the motor alone draws 0.0617 + 0.0001 x 420 = 0.104 A at the no-load
-  speed (below the datasheet's 0.193 A, which also contains iron losses at 48 V); with omega in rpm it
-  would draw 0.46 A, more than twice the datasheet value, so the unit is rad/s.
+* the first column (1e-4) is the viscous, the second (0.02-0.65) the Coulomb coefficient (a Coulomb
+  term of 1e-4 would be invisible in Figures 7.12-7.14);
+* the values are **torques** at the motor shaft, N m s/rad and N m, as eq. 7.1 defines b and c
+  (K_t i = b omega + c) and as the text says they are "listed in Table 7.1". This literal reading is
+  the model the dissertation's chapter 8 results were computed with: only under it does the tracked
+  Packbot use more energy than the wheeled ones (ch. 8.1-8.4, 9.1).
 
-Hence b_k = K_t a_col [N m s/rad] and c_k = K_t b_col [N m] at the motor shaft.
+Against it, kept on record: the EC-45 alone would then draw (0.0617 + 0.0001 x 420) / K_t = 0.91 A at
+its no-load speed, 4.7 x Appendix B's 193 mA; read as motor *currents* (A per rad/s and A) the motor
+draws 0.104 A, which fits the hardware better. That alternative is a data-only change: give the
+components ``viscous_A_s``/``coulomb_A`` instead of ``viscous_Nm_s``/``coulomb_Nm``.
 """
 
 from __future__ import annotations
@@ -111,9 +112,9 @@ def side_from_config(
 ) -> SideResistance:
     """Build one side from a config mapping ``component -> coefficients``.
 
-    Each component gives either torques (``viscous_Nm_s``, ``coulomb_Nm``) or, as Table 7.1 does,
-    currents (``viscous_A_s``, ``coulomb_A``; converted with K_t [N m/A]). Components not used by
-    ``running_gear`` ('track' | 'wheel') are dropped (ch. 7.2.3).
+    Each component gives either torques (``viscous_Nm_s``, ``coulomb_Nm``; the project's reading of
+    Table 7.1) or motor currents (``viscous_A_s``, ``coulomb_A``; converted with K_t [N m/A]).
+    Components not used by ``running_gear`` ('track' | 'wheel') are dropped (ch. 7.2.3).
     """
     try:
         wanted = COMPONENTS_BY_RUNNING_GEAR[running_gear]
