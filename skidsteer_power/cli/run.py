@@ -1,0 +1,143 @@
+"""``skidsteer-power run``: start the on-board suite (power_estimator + des_driver) without ROS launch.
+
+    skidsteer-power run [--simulate] [--vehicle V] [--terrain T] [--duration S] [--speed V --yaw-rate R]
+
+With ``--simulate`` the amplifiers are simulated on pseudo-terminals and loaded by the terramechanics
+of the vehicle on ``--sim-terrain`` (default ``--terrain``). ``--speed``/``--yaw-rate`` publish a
+constant cmd_vel at 10 Hz (a quick drive without a teleop). A status line is printed every
+``--status-every`` s; at the end a summary (``--json``: duration_s, joint_states_received,
+predicted_received, soc_start, soc_end, remaining_wh_start, remaining_wh_end, energy_used_J,
+energy_source, rejected_inputs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        'run', help='start power_estimator and des_driver (optionally against simulated amplifiers)'
+    )
+    parser.add_argument('--simulate', action='store_true', help='simulated DES 70/10 amplifiers on ptys')
+    parser.add_argument('--vehicle', default='test_robot_track', help='vehicle name or YAML file')
+    parser.add_argument('--terrain', default='dry_sand', help="the estimator's terrain (preset or YAML)")
+    parser.add_argument(
+        '--sim-terrain', default='', help='ground truth of the simulation (default --terrain)'
+    )
+    parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
+    parser.add_argument('--speed', type=finite_float, help='publish cmd_vel with this forward speed [m/s]')
+    parser.add_argument('--yaw-rate', type=finite_float, default=0.0, help='... and this yaw rate [rad/s]')
+    parser.add_argument('--left-port', default='/dev/ttyUSB0', help='left amplifier port (hardware)')
+    parser.add_argument('--right-port', default='/dev/ttyUSB1', help='right amplifier port (hardware)')
+    parser.add_argument('--map-cache', default='', help='map cache directory')
+    parser.add_argument('--state-file', default='', help='energy state file')
+    parser.add_argument('--status-every', type=positive_float, default=1.0, help='status line period [s]')
+    parser.add_argument('--quiet', action='store_true', help='no status lines')
+    add_json_flag(parser)
+    parser.set_defaults(func=run)
+
+
+def _snapshot(suite: Any) -> dict[str, Any]:
+    estimator = suite.estimator
+    now = estimator.now_s()
+    with estimator._lock:
+        core = estimator.core
+        core.tick(now)
+        return {
+            'soc': core.battery.soc,
+            'remaining_wh': core.battery.remaining_wh,
+            'energy_source': core.energy.source(now),
+            'energy_used_J': sum(core.energy.energy_J.values()),
+            'battery_W': core.energy.power_W(now),
+            'rejected_inputs': sum(core.rejects.counts.values()),
+        }
+
+
+class _Counters:
+    def __init__(self) -> None:
+        self.joint_states = 0
+        self.predicted = 0
+
+
+def run(args: argparse.Namespace) -> int:
+    import rclpy
+    from geometry_msgs.msg import Twist
+    from rclpy.context import Context
+    from sensor_msgs.msg import JointState
+
+    from skidsteer_power.nodes.suite import Suite, SuiteOptions
+
+    options = SuiteOptions(
+        vehicle=args.vehicle, terrain=args.terrain, sim_terrain=args.sim_terrain, simulate=args.simulate,
+        map_cache_dir=args.map_cache, state_file=args.state_file, left_port=args.left_port,
+        right_port=args.right_port,
+    )  # fmt: skip
+    context = Context()
+    rclpy.init(context=context)
+    suite = None
+    counters = _Counters()
+    try:
+        suite = Suite(options, context=context)
+        helper = rclpy.create_node('run_cli', context=context)
+        suite.nodes.append(helper)
+        suite.executor.add_node(helper)
+        helper.create_subscription(JointState, 'joint_states', lambda m: _count(counters, 'joint_states'), 50)
+        helper.create_subscription(JointState, 'power/predicted', lambda m: _count(counters, 'predicted'), 50)
+        if args.speed is not None:
+            publisher = helper.create_publisher(Twist, 'cmd_vel', 10)
+            command = Twist()
+            command.linear.x, command.angular.z = args.speed, args.yaw_rate
+            helper.create_timer(0.1, lambda: publisher.publish(command))
+        start = _snapshot(suite)
+        started = time.monotonic()
+        suite.start()
+        _wait(suite, args, started, counters)
+        end = _snapshot(suite)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if suite is not None:
+            suite.shutdown()
+        rclpy.try_shutdown(context=context)
+    emit(
+        {
+            'duration_s': time.monotonic() - started,
+            'joint_states_received': counters.joint_states,
+            'predicted_received': counters.predicted,
+            'soc_start': start['soc'],
+            'soc_end': end['soc'],
+            'remaining_wh_start': start['remaining_wh'],
+            'remaining_wh_end': end['remaining_wh'],
+            'energy_used_J': end['energy_used_J'] - start['energy_used_J'],
+            'energy_source': end['energy_source'],
+            'rejected_inputs': end['rejected_inputs'],
+        },
+        args.json,
+    )
+    return 0
+
+
+def _count(counters: _Counters, name: str) -> None:
+    setattr(counters, name, getattr(counters, name) + 1)
+
+
+def _wait(suite: Any, args: argparse.Namespace, started: float, counters: _Counters) -> None:
+    duration = args.duration if args.duration is not None else math.inf
+    next_status = started + args.status_every
+    while time.monotonic() - started < duration:
+        time.sleep(min(0.05, max(0.0, started + duration - time.monotonic())))
+        if not args.quiet and not args.json and time.monotonic() >= next_status:
+            next_status += args.status_every
+            s = _snapshot(suite)
+            print(
+                f'{time.monotonic() - started:7.1f} s  battery {100 * s["soc"]:6.2f} %  '
+                f'{s["remaining_wh"]:7.2f} Wh  drive {s["battery_W"]:7.1f} W ({s["energy_source"]})  '
+                f'joint_states {counters.joint_states}',
+                flush=True,
+            )

@@ -1,0 +1,231 @@
+"""The estimator core: commands and motor readings in; predictions, measurements, energy out.
+
+:class:`EstimatorCore` holds no ROS object: every method takes the current time ``now_s`` [s]
+(any monotonic clock), so it runs the same in a node, a replay or a unit test.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.energy import EnergyTracker
+from skidsteer_power.estimator.inputs import (
+    Freshness,
+    InputLimits,
+    RejectCounter,
+    check_command,
+    check_joint_state,
+)
+from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
+from skidsteer_power.estimator.prediction import Prediction, Predictor
+from skidsteer_power.powertrain import Powertrain
+
+LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
+
+
+class RejectedInput(InputError):
+    """An input message was rejected; ``warn`` says whether the throttled warning is due."""
+
+    def __init__(self, message: str, warn: bool) -> None:
+        super().__init__(message)
+        self.warn = warn
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Tunables of the core (the node declares each as a parameter).
+
+    cmd_timeout_s, joint_timeout_s : an input older than this is stale [s]
+    traction_warning_margin : warn when the traction margin falls to this or below [-]
+    power_filter_s : time constant of the power filter behind time to empty [s]
+    warn_period_s : least time between two warnings about rejected inputs on one topic [s]
+    """
+
+    cmd_timeout_s: float = 0.5
+    joint_timeout_s: float = 0.5
+    traction_warning_margin: float = 0.1
+    power_filter_s: float = 5.0
+    warn_period_s: float = 2.0
+    limits: InputLimits = field(default_factory=InputLimits)
+
+    def __post_init__(self) -> None:
+        for name in ('cmd_timeout_s', 'joint_timeout_s', 'warn_period_s'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f'{name} must be a finite number > 0, got {value!r}')
+        if not (math.isfinite(self.power_filter_s) and self.power_filter_s >= 0):
+            raise ConfigError(f'power_filter_s must be >= 0, got {self.power_filter_s!r}')
+        if not math.isfinite(self.traction_warning_margin):
+            raise ConfigError('traction_warning_margin must be finite')
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Measured against predicted, per side (left, right): error = measured - predicted.
+
+    torque_error_Nm : motor torque error [N m]; power_error_W : motor terminal power error [W];
+    NaN when no prediction exists yet.
+    """
+
+    measured: MeasuredPower
+    torque_error_Nm: tuple[float, float]
+    power_error_W: tuple[float, float]
+
+
+class EstimatorCore:
+    """Per-command prediction, per-reading measurement, battery integration and diagnostics.
+
+    ``battery`` is a :class:`skidsteer_power.powertrain.Battery` (``step``, ``remaining_wh``,
+    ``time_to_empty_s``, ``to_dict``/``from_dict``); ``powertrain`` (a
+    :class:`skidsteer_power.powertrain.Powertrain`) gives the motor and amplifier that convert
+    joint_states into power.
+    """
+
+    def __init__(
+        self,
+        predictor: Predictor,
+        battery: Any,
+        powertrain: Powertrain,
+        settings: EstimatorSettings | None = None,
+    ) -> None:
+        self.settings = settings or EstimatorSettings()
+        self.predictor = predictor
+        self.powertrain = powertrain
+        self.energy = EnergyTracker(
+            battery,
+            measured_timeout_s=self.settings.joint_timeout_s,
+            predicted_timeout_s=self.settings.cmd_timeout_s,
+            filter_s=self.settings.power_filter_s,
+        )
+        self.rejects = RejectCounter(period_s=self.settings.warn_period_s)
+        self.cmd_fresh = Freshness(self.settings.cmd_timeout_s)
+        self.joint_fresh = Freshness(self.settings.joint_timeout_s)
+        self.prediction: Prediction | None = None
+        self.comparison: Comparison | None = None
+        self.command: tuple[float, float] | None = None
+        self.clamped_count = 0
+        self.time_to_empty_s = math.inf
+
+    @property
+    def battery(self) -> Any:
+        return self.energy.battery
+
+    def _reject(self, topic: str, err: InputError, now_s: float) -> RejectedInput:
+        return RejectedInput(f'{topic}: {err}', self.rejects.reject(topic, now_s))
+
+    def on_command(self, speed_m_s: float, yaw_rate_rad_s: float, now_s: float) -> Prediction:
+        """Predict for a cmd_vel (V [m/s], yaw rate [rad/s]); raises RejectedInput for a bad one."""
+        try:
+            speed, yaw_rate = check_command(speed_m_s, yaw_rate_rad_s, self.settings.limits)
+        except InputError as err:
+            raise self._reject('cmd_vel', err, now_s) from err
+        self.cmd_fresh.mark(now_s)
+        self.command = (speed, yaw_rate)
+        return self._update_prediction(now_s)
+
+    def _update_prediction(self, now_s: float) -> Prediction:
+        assert self.command is not None
+        self.prediction = self.predictor.predict(*self.command)
+        self.clamped_count += int(self.prediction.clamped)
+        self.energy.set_predicted(self.prediction.bus_total_W, now_s)
+        return self.prediction
+
+    def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
+        """Swap the predictor (a terrain change); re-predict the current command with it."""
+        self.energy.advance(now_s)
+        self.predictor = predictor
+        if self.command is None:
+            return None
+        return self._update_prediction(now_s) if self.cmd_fresh.is_fresh(now_s) else None
+
+    def on_joint_state(
+        self, names: Sequence[str], velocity: Sequence[float], effort: Sequence[float], now_s: float
+    ) -> Comparison:
+        """Measure power from joint_states (motor rad/s, Kt*I N m); raises RejectedInput for a bad one."""
+        try:
+            omega, torque = check_joint_state(names, velocity, effort, self.settings.limits)
+        except InputError as err:
+            raise self._reject('joint_states', err, now_s) from err
+        self.joint_fresh.mark(now_s)
+        pt = self.powertrain
+        measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
+        self.energy.set_measured(measured.bus_total_W, now_s)
+        self.comparison = self._compare(measured)
+        return self.comparison
+
+    def _compare(self, measured: MeasuredPower) -> Comparison:
+        p = self.prediction
+        if p is None:
+            nan = (math.nan, math.nan)
+            return Comparison(measured, nan, nan)
+        return Comparison(
+            measured,
+            (measured.torque_Nm[0] - p.motor_torque_Nm[0], measured.torque_Nm[1] - p.motor_torque_Nm[1]),
+            (measured.electrical_W[0] - p.electrical_W[0], measured.electrical_W[1] - p.electrical_W[1]),
+        )
+
+    def tick(self, now_s: float) -> None:
+        """Integrate the battery up to ``now_s`` and refresh the time to empty [s].
+
+        Call from a timer, so the gauge moves between inputs; the time to empty (an integral over the
+        battery's voltage curve) is refreshed only here, not per message.
+        """
+        self.energy.advance(now_s)
+        self.energy.flush()
+        self.time_to_empty_s = self.energy.time_to_empty_s()
+
+    def traction_warning(self) -> bool:
+        """True when the last prediction's traction margin is at or below the warning margin."""
+        p = self.prediction
+        return p is not None and p.traction_margin <= self.settings.traction_warning_margin
+
+    def diagnostics(self, now_s: float) -> tuple[int, str, dict[str, str]]:
+        """(level, message, key/values) describing the estimator at ``now_s``."""
+        self.energy.flush()
+        problems = []
+        if not self.cmd_fresh.is_fresh(now_s):
+            problems.append('cmd_vel stale')
+        if not self.joint_fresh.is_fresh(now_s):
+            problems.append('joint_states stale')
+        if self.traction_warning():
+            problems.append('traction margin low: robot may get stuck')
+        level = LEVEL_WARN if problems else LEVEL_OK
+        source = self.energy.source(now_s)
+        values = {
+            'energy_source': source,
+            'cmd_vel_age_s': f'{self.cmd_fresh.age_s(now_s):.3f}',
+            'joint_states_age_s': f'{self.joint_fresh.age_s(now_s):.3f}',
+            'cmd_vel_stale': str(not self.cmd_fresh.is_fresh(now_s)).lower(),
+            'joint_states_stale': str(not self.joint_fresh.is_fresh(now_s)).lower(),
+            'rejected_cmd_vel': str(self.rejects.counts['cmd_vel']),
+            'rejected_joint_states': str(self.rejects.counts['joint_states']),
+            'clamped_commands': str(self.clamped_count),
+            'energy_measured_J': f'{self.energy.energy_J["measured"]:.3f}',
+            'energy_predicted_J': f'{self.energy.energy_J["predicted"]:.3f}',
+            'remaining_wh': f'{self.battery.remaining_wh:.4f}',
+            'predictor': self.predictor.description,
+        }
+        if self.prediction is not None:
+            values['traction_margin'] = f'{self.prediction.traction_margin:.4f}'
+        message = '; '.join(problems) if problems else f'ok, energy from {source} power'
+        return level, message, values
+
+    def state_dict(self) -> dict[str, Any]:
+        """What a restart needs: the battery state and the energy tallies."""
+        self.energy.flush()
+        return {'battery': self.battery.to_dict(), 'energy_J': dict(self.energy.energy_J)}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Restore from :meth:`state_dict` output; ConfigError if it does not fit."""
+        try:
+            battery = type(self.battery).from_dict(state['battery'])
+            energy = {k: float(state['energy_J'][k]) for k in ('measured', 'predicted')}
+        except (KeyError, TypeError, ValueError) as err:
+            raise ConfigError(f'saved energy state does not fit this battery: {err}') from err
+        self.energy.flush()
+        self.energy.battery = battery
+        self.energy.energy_J.update(energy)

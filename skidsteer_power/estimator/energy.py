@@ -1,0 +1,138 @@
+"""Battery energy integration from measured or predicted power.
+
+Power is piecewise constant between samples (zero-order hold): :meth:`EnergyTracker.advance` is called
+before each new sample is stored, so a step in power is integrated exactly. Over an interval
+[a, b] the sources are used in priority order:
+
+1. ``measured`` -- battery-side power from joint_states, while fresh (age <= ``measured_timeout_s``);
+2. ``predicted`` -- the model's battery-side power for the last cmd_vel, while fresh;
+3. ``none`` -- neither is fresh: no drive power is drawn (the DES driver stops the motors when
+   cmd_vel stops, so the drive train is assumed idle). Nothing is integrated.
+
+An interval is split at the moment a source goes stale, so the result does not depend on how often
+``advance`` is called. The energy tallies are exact at every call; the battery is stepped with the
+mean power of everything integrated since the last :meth:`EnergyTracker.flush` (the node flushes
+from its 5 Hz timer): stepping the battery model per message cost ~95 us, half the node's time per
+message at 1 kHz, and over 0.2 s the mean power gives the same charge to within the battery's
+I^2 R nonlinearity (its resistance loss is ~0.2 % of the power at 100 W). The battery itself
+(capacity, voltage, state of charge) is
+:class:`skidsteer_power.powertrain.Battery`; this module only decides which power it is stepped with.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+SOURCES = ('measured', 'predicted', 'none')
+
+
+class BatteryLike(Protocol):
+    """What the tracker needs of a battery (``skidsteer_power.powertrain.Battery``)."""
+
+    def step(self, power_W: float, dt_s: float) -> None: ...
+
+    @property
+    def remaining_wh(self) -> float: ...
+
+    def time_to_empty_s(self, power_W: float) -> float: ...
+
+
+@dataclass
+class _Held:
+    """The last sample of one power source: value [W], arrival time [s], timeout [s]."""
+
+    timeout_s: float
+    power_W: float = 0.0
+    time_s: float | None = None
+
+    def fresh_until(self) -> float:
+        return -math.inf if self.time_s is None else self.time_s + self.timeout_s
+
+
+@dataclass
+class EnergyTracker:
+    """Steps ``battery`` with the best available power; tallies energy per source [J].
+
+    ``filter_s`` is the time constant [s] of the first-order filter on drawn power used for the time
+    to empty (the track's power oscillates, 7.3.4).
+    """
+
+    battery: BatteryLike
+    measured_timeout_s: float = 0.5
+    predicted_timeout_s: float = 0.5
+    filter_s: float = 5.0
+    energy_J: dict[str, float] = field(default_factory=lambda: {'measured': 0.0, 'predicted': 0.0})
+    filtered_power_W: float = 0.0
+    _measured: _Held = field(init=False)
+    _predicted: _Held = field(init=False)
+    _time_s: float | None = field(default=None, init=False)
+    _pending_J: float = field(default=0.0, init=False)
+    _pending_s: float = field(default=0.0, init=False)
+
+    def __post_init__(self) -> None:
+        self._measured = _Held(self.measured_timeout_s)
+        self._predicted = _Held(self.predicted_timeout_s)
+
+    def set_measured(self, power_W: float, now_s: float) -> None:
+        """Store a measured battery-side power [W] arriving at ``now_s`` [s]."""
+        self.advance(now_s)
+        self._measured.power_W, self._measured.time_s = float(power_W), now_s
+
+    def set_predicted(self, power_W: float, now_s: float) -> None:
+        """Store a predicted battery-side power [W] for a command arriving at ``now_s`` [s]."""
+        self.advance(now_s)
+        self._predicted.power_W, self._predicted.time_s = float(power_W), now_s
+
+    def source(self, now_s: float) -> str:
+        """Which power the battery is being stepped with at ``now_s``: one of :data:`SOURCES`."""
+        if now_s <= self._measured.fresh_until():
+            return 'measured'
+        if now_s <= self._predicted.fresh_until():
+            return 'predicted'
+        return 'none'
+
+    def power_W(self, now_s: float) -> float:
+        """Battery-side drive power in use at ``now_s`` [W] (0 with no fresh source)."""
+        held = {'measured': self._measured, 'predicted': self._predicted}.get(self.source(now_s))
+        return 0.0 if held is None else held.power_W
+
+    def advance(self, now_s: float) -> None:
+        """Integrate from the last call up to ``now_s`` [s], splitting where a source goes stale."""
+        start = self._time_s
+        if start is None or now_s <= start:
+            self._time_s = now_s if start is None else max(start, now_s)
+            return
+        for name, held in (('measured', self._measured), ('predicted', self._predicted)):
+            end = min(now_s, held.fresh_until())
+            if end > start:
+                self._integrate(name, held.power_W, end - start)
+                start = end
+        if now_s > start:
+            self._filter(0.0, now_s - start)
+        self._time_s = now_s
+
+    def _integrate(self, name: str, power_W: float, dt_s: float) -> None:
+        self._pending_J += power_W * dt_s
+        self._pending_s += dt_s
+        self.energy_J[name] += power_W * dt_s
+        self._filter(power_W, dt_s)
+
+    def flush(self) -> None:
+        """Step the battery with the mean power [W] integrated since the last flush."""
+        if self._pending_s > 0.0:
+            self.battery.step(self._pending_J / self._pending_s, self._pending_s)
+        self._pending_J = self._pending_s = 0.0
+
+    def _filter(self, power_W: float, dt_s: float) -> None:
+        # exact first-order response to a held input over dt
+        alpha = 1.0 - math.exp(-dt_s / self.filter_s) if self.filter_s > 0 else 1.0
+        self.filtered_power_W += alpha * (power_W - self.filtered_power_W)
+
+    def time_to_empty_s(self) -> float:
+        """Time to empty at the filtered drive power [s] (inf when no power is drawn)."""
+        self.flush()
+        if self.filtered_power_W <= 1e-9:
+            return math.inf
+        return float(self.battery.time_to_empty_s(self.filtered_power_W))

@@ -1,0 +1,81 @@
+"""Build the estimator's parts from names: vehicle, terrain, map, powertrain, battery, state path.
+
+Pure (no ROS): the node, the suite and tests share these, so a parameter means the same everywhere.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from skidsteer_power.estimator.prediction import MapPredictor
+from skidsteer_power.powertrain import Battery, Powertrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
+from skidsteer_power.vehicle import Vehicle, load_vehicle
+
+SECONDS_PER_HOUR = 3600.0
+
+
+def load_vehicle_config(name_or_path: str) -> Vehicle:
+    """The vehicle named (config/vehicles/<name>.yaml) or in a YAML file; ConfigError if bad."""
+    return load_vehicle(name_or_path)
+
+
+def check_terrain(name_or_path: str) -> Terrain:
+    """The terrain preset or YAML file; ConfigError if unknown or non-physical."""
+    return load_terrain(name_or_path)
+
+
+def state_path(configured: str, vehicle: Vehicle) -> Path:
+    """The energy-state file: ``configured`` if set, else
+    $XDG_STATE_HOME/skidsteer_power/energy_<vehicle>.json."""
+    if configured:
+        return Path(configured).expanduser()
+    base = os.environ.get('XDG_STATE_HOME') or Path.home() / '.local' / 'state'
+    return Path(base) / 'skidsteer_power' / f'energy_{vehicle.name}.json'
+
+
+def powertrain_for(vehicle: Vehicle) -> Powertrain:
+    return Powertrain.for_vehicle(vehicle)
+
+
+def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:
+    """The vehicle's battery (its powertrain's ``battery`` preset), at state of charge ``soc`` [-]."""
+    return Battery.from_config(powertrain_for(vehicle).battery, soc)
+
+
+def map_predictor(
+    vehicle: Vehicle, terrain_name: str, cache_dir: str | os.PathLike | None = None
+) -> tuple[MapPredictor, bool, str]:
+    """A :class:`MapPredictor` for ``vehicle`` on the named terrain; the map is loaded from
+    ``cache_dir`` (default: $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power) or built there
+    (FESS) if missing.
+
+    Returns (predictor, built, description of the map).
+    """
+    from skidsteer_power.maps import cache_path, load_or_build
+
+    terrain = check_terrain(terrain_name)
+    power_map, built = load_or_build(vehicle, terrain, cache_dir or None)
+    where = cache_path(vehicle, terrain, cache_dir or None)
+    description = f'{vehicle.name} on {terrain.name} ({where})'
+    return MapPredictor(power_map, powertrain_for(vehicle), description=description), built, str(where)
+
+
+def battery_message_fields(battery: Battery, power_W: float) -> dict[str, float]:
+    """sensor_msgs/BatteryState fields (V, A, Ah, fraction) for the battery under ``power_W`` [W].
+
+    ``current`` follows the message's convention: negative while discharging.
+    """
+    state = battery.state
+    config = battery.config
+    capacity_Ah = config.capacity_C / SECONDS_PER_HOUR
+    current = battery.current_for_power(power_W) if power_W != 0 else 0.0
+    return {
+        'voltage': float(config.ocv(state.soc) - config.resistance_ohm * current),
+        'current': float(-current),
+        'charge': float(state.charge_C / SECONDS_PER_HOUR),
+        'capacity': float(capacity_Ah),
+        'design_capacity': float(capacity_Ah),
+        'percentage': float(state.soc),
+    }

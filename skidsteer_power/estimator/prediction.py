@@ -1,0 +1,141 @@
+"""Predicted per-side torque and power for a (V, yaw rate) command, from a FESS look-up map.
+
+A :class:`Predictor` turns a command into a :class:`Prediction`. :class:`MapPredictor` is the real
+one: the map (chapter 5/6, built with the FESS model) gives each side's axle speed, the torque the
+terrain needs and the traction margin; the powertrain adds the internal resistance (eqs. 7.1-7.4),
+the 12:1 reduction, the EC-45 winding loss and the DES 70/10 amplifier.
+
+Reverse driving (V < 0) and spinning in place (V = 0, r != 0) are answered by the map
+(:mod:`skidsteer_power.maps.power_map`, whose module docstring gives the reasoning):
+
+* reverse at (-V, r) is the forward solution at (V, r) seen from a frame turned 180 degrees about the
+  vertical: left and right swap, each side's speed and torque change sign, power and traction margin
+  do not (valid for a CG midway along the contact, which all vehicles here have, 7.1.1);
+* turns tighter than the map's small-radius limit (twice the tread), spinning in place included, take
+  the turning resistance of the tightest reliable turn at the same yaw rate (section 3.4: the soil
+  fails and the shear force saturates), with each side's speed following its own ground speed; both
+  sides then run in opposite directions, their torques opposite but not equal in size;
+* at rest (V = r = 0) every torque is zero, so the prediction is the powertrain at standstill.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Protocol
+
+import numpy as np
+
+Pair = tuple[float, float]
+SIDES = ('left', 'right')
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Predicted steady state for one command, per side (left, right), SI units.
+
+    speed_m_s, yaw_rate_rad_s : the command [m/s], [rad/s]
+    axle_omega_rad_s : axle (sprocket / wheel) speed [rad/s]
+    terrain_torque_Nm : axle torque the terrain needs [N m]
+    terrain_W : terrain (running-gear / soil) power, torque x axle speed [W]
+    internal_W : powertrain internal-resistance power, eqs. 7.1-7.4 [W]
+    motor_omega_rad_s, motor_torque_Nm : at the motor shaft (comparable with joint_states) [rad/s], [N m]
+    current_A : motor current [A]
+    electrical_W : motor terminal power with winding loss [W]
+    bus_W : battery-side power through the amplifier [W]
+    traction_margin : 1 - required / available thrust (<= 0: about to get stuck) [-]
+    clamped : the command lay outside the map and was clamped to its edge
+    """
+
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    axle_omega_rad_s: Pair
+    terrain_torque_Nm: Pair
+    terrain_W: Pair
+    internal_W: Pair
+    motor_omega_rad_s: Pair
+    motor_torque_Nm: Pair
+    current_A: Pair
+    electrical_W: Pair
+    bus_W: Pair
+    traction_margin: float
+    clamped: bool
+
+    @property
+    def bus_total_W(self) -> float:
+        """Battery power of both sides [W]."""
+        return self.bus_W[0] + self.bus_W[1]
+
+    @property
+    def terrain_total_W(self) -> float:
+        return self.terrain_W[0] + self.terrain_W[1]
+
+    @property
+    def internal_total_W(self) -> float:
+        return self.internal_W[0] + self.internal_W[1]
+
+    @property
+    def terrain_share(self) -> float:
+        """Terrain share of the mechanical power at the axles [-] (nan when both are zero)."""
+        total = self.terrain_total_W + self.internal_total_W
+        return self.terrain_total_W / total if abs(total) > 1e-12 else float('nan')
+
+
+class Predictor(Protocol):
+    """Anything that predicts a :class:`Prediction` for a command (V [m/s], yaw rate [rad/s])."""
+
+    description: str
+
+    def predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction: ...
+
+
+def _pair(left: Any, right: Any) -> Pair:
+    return float(np.asarray(left).reshape(-1)[0]), float(np.asarray(right).reshape(-1)[0])
+
+
+class MapPredictor:
+    """Prediction from a :class:`skidsteer_power.maps.PowerMap` and a powertrain.
+
+    ``powertrain`` is a :class:`skidsteer_power.powertrain.Powertrain`, whose ``motor_side`` adds the
+    internal resistance, reduction, motor and amplifier to the map's axle torque and speed.
+    Repeated commands (teleoperation repeats the last one) are answered from a small cache.
+    """
+
+    def __init__(
+        self,
+        power_map: Any,
+        powertrain: Any,
+        *,
+        description: str = '',
+        cache_size: int = 256,
+    ) -> None:
+        self.power_map = power_map
+        self.powertrain = powertrain
+        self.description = description or 'power map'
+        self.predict = lru_cache(maxsize=cache_size)(self._predict)  # type: ignore[method-assign]
+
+    def _predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction:
+        q = self.power_map.query(speed_m_s, yaw_rate_rad_s)
+        omega = _pair(q.omega_left_rad_s, q.omega_right_rad_s)
+        torque = _pair(q.torque_left_Nm, q.torque_right_Nm)
+        return self._with_powertrain(speed_m_s, yaw_rate_rad_s, omega, torque, q)
+
+    def _with_powertrain(
+        self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: Any
+    ) -> Prediction:
+        left, right = (self.powertrain.motor_side(side, torque[i], omega[i]) for i, side in enumerate(SIDES))
+        return Prediction(
+            speed_m_s=speed,
+            yaw_rate_rad_s=yaw_rate,
+            axle_omega_rad_s=omega,
+            terrain_torque_Nm=torque,
+            terrain_W=_pair(left.terrain_power_W, right.terrain_power_W),
+            internal_W=_pair(left.internal_power_W, right.internal_power_W),
+            motor_omega_rad_s=_pair(left.motor_omega_rad_s, right.motor_omega_rad_s),
+            motor_torque_Nm=_pair(left.motor_torque_Nm, right.motor_torque_Nm),
+            current_A=_pair(left.current_A, right.current_A),
+            electrical_W=_pair(left.terminal_power_W, right.terminal_power_W),
+            bus_W=_pair(left.electrical_power_W, right.electrical_power_W),
+            traction_margin=float(np.asarray(q.traction_margin).reshape(-1)[0]),
+            clamped=bool(np.asarray(q.clamped).reshape(-1)[0]),
+        )

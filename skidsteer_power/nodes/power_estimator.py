@@ -1,0 +1,360 @@
+"""``power_estimator`` node: predicted and measured locomotion power, battery state, diagnostics.
+
+A thin rclpy shell around :class:`skidsteer_power.estimator.EstimatorCore` (all physics is there).
+
+Topics (names are defaults; remap freely)
+----------------------------------------
+subscribes
+    ``cmd_vel``  geometry_msgs/Twist (or TwistStamped with ``cmd_vel_stamped: true``):
+                 linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
+    ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
+                 velocity = motor shaft speed [rad/s], effort = Kt * I [N m]
+publishes (at once, per cmd_vel)
+    ``power/predicted`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` (motor shaft: velocity
+                 [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
+                 ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
+                 terrain needs [N m])
+    ``power/summary`` std_msgs/Float64MultiArray, 1-D; its layout dimension's label lists the entries'
+                 names, comma-separated (:mod:`skidsteer_power.estimator.summary`; units in the
+                 names). Also sent per joint_states.
+periodic (``publish_period_s``)
+    ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction); ``energy/remaining_wh``
+    std_msgs/Float64 [Wh]; ``energy/time_to_empty_s`` std_msgs/Float64 [s] (inf when idle);
+    ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy source, stale inputs, rejected-input counts,
+    traction warning) every ``diagnostics_period_s``.
+
+The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
+restored on start. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker
+thread and swapped in when ready; the old map serves until then.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Twist, TwistStamped
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import BatteryState, JointState
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
+
+from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.estimator import factory
+from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
+from skidsteer_power.estimator.inputs import InputLimits
+from skidsteer_power.estimator.persistence import load_state, save_state
+from skidsteer_power.estimator.summary import SUMMARY_FIELDS, SUMMARY_LABEL, summary_values
+
+NODE_NAME = 'power_estimator'
+
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    'vehicle': ('test_robot_track', 'vehicle name in config/vehicles/ or a YAML file'),
+    'terrain': ('dry_sand', 'terrain preset or YAML file; may be changed at run time (swaps maps)'),
+    'map_cache_dir': (
+        '',
+        'directory of cached maps ("" = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
+    ),
+    'state_file': ('', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'),
+    'persist': (True, 'save the energy state and restore it on start'),
+    'initial_soc': (-1.0, 'state of charge at start when nothing is restored [-]; < 0 = full'),
+    'cmd_vel_stamped': (False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
+    'cmd_timeout_s': (0.5, 'cmd_vel older than this is stale [s]'),
+    'joint_timeout_s': (0.5, 'joint_states older than this is stale [s]'),
+    'traction_warning_margin': (0.1, 'warn when the traction margin is at or below this [-]'),
+    'power_filter_s': (5.0, 'time constant of the power filter behind time to empty [s]'),
+    'warn_period_s': (2.0, 'least time between two warnings about rejected inputs [s]'),
+    'max_speed_m_s': (5.0, 'cmd_vel |linear.x| above this is rejected [m/s]'),
+    'max_yaw_rate_rad_s': (10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]'),
+    'max_motor_speed_rad_s': (1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
+    'max_motor_torque_Nm': (5.0, 'joint_states |effort| above this is rejected [N m]'),
+    'publish_period_s': (0.2, 'period of battery and energy topics [s]'),
+    'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
+    'save_period_s': (10.0, 'period of energy-state saves [s]'),
+    'qos_depth': (100, 'subscription queue depth'),
+}
+
+
+class PowerEstimator(Node):
+    """Predicts per-side power from cmd_vel, measures it from joint_states, tracks the battery."""
+
+    def __init__(self, predictor: Any = None, **node_kwargs: Any) -> None:
+        """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
+        go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
+        super().__init__(NODE_NAME, **node_kwargs)
+        for name, (default, description) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        self._lock = threading.Lock()
+        self._terrain_worker: threading.Thread | None = None
+        self.pending_terrain = ''
+        self._traction_warned = False
+        settings = self._settings(p)
+        self.vehicle = factory.load_vehicle_config(p['vehicle'])
+        self.terrain_name = p['terrain']
+        if predictor is None:
+            predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
+        self.core = EstimatorCore(
+            predictor, factory.battery_for(self.vehicle), factory.powertrain_for(self.vehicle), settings
+        )
+        self.state_file = factory.state_path(p['state_file'], self.vehicle) if p['persist'] else None
+        self._restore(p['initial_soc'])
+        self._make_interfaces(p)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    # --- set-up -------------------------------------------------------------------------------
+    @staticmethod
+    def _settings(p: dict[str, Any]) -> EstimatorSettings:
+        for name in ('publish_period_s', 'diagnostics_period_s', 'save_period_s', 'qos_depth'):
+            if not p[name] > 0:
+                raise ConfigError(f'{name} must be > 0, got {p[name]!r}')
+        limits = InputLimits(
+            p['max_speed_m_s'], p['max_yaw_rate_rad_s'], p['max_motor_speed_rad_s'], p['max_motor_torque_Nm']
+        )
+        return EstimatorSettings(
+            cmd_timeout_s=p['cmd_timeout_s'],
+            joint_timeout_s=p['joint_timeout_s'],
+            traction_warning_margin=p['traction_warning_margin'],
+            power_filter_s=p['power_filter_s'],
+            warn_period_s=p['warn_period_s'],
+            limits=limits,
+        )
+
+    def _make_predictor(self, terrain: str, cache_dir: str) -> Any:
+        started = time.monotonic()
+        predictor, built, path = factory.map_predictor(self.vehicle, terrain, cache_dir or None)
+        if built:
+            self.get_logger().info(
+                f'built the power map for {self.vehicle.name} on {terrain} '
+                f'in {time.monotonic() - started:.1f} s '
+                f'and cached it at {path}'
+            )
+        else:
+            self.get_logger().info(f'loaded the power map {path}')
+        return predictor
+
+    def _restore(self, initial_soc: float) -> None:
+        state = None
+        if self.state_file is not None:
+            try:
+                state = load_state(self.state_file)
+                if state is not None and state.get('vehicle') != self.vehicle.name:
+                    raise ConfigError(f'{self.state_file} holds the state of {state.get("vehicle")!r}')
+                if state is not None:
+                    self.core.restore(state)
+                    self.get_logger().info(
+                        f'restored energy state from {self.state_file}: '
+                        f'{self.core.battery.remaining_wh:.2f} Wh left'
+                    )
+            except SkidsteerError as err:
+                state = None
+                self.get_logger().warning(f'{err}; starting from a fresh battery')
+        if state is None and initial_soc >= 0:
+            self.core.energy.battery = factory.battery_for(self.vehicle, soc=initial_soc)
+
+    def _make_interfaces(self, p: dict[str, Any]) -> None:
+        qos = QoSProfile(depth=int(p['qos_depth']))
+        cmd_type = TwistStamped if p['cmd_vel_stamped'] else Twist
+        self.create_subscription(cmd_type, 'cmd_vel', self._on_cmd_vel, qos)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, qos)
+        self.pub_predicted = self.create_publisher(JointState, 'power/predicted', qos)
+        self.pub_summary = self.create_publisher(Float64MultiArray, 'power/summary', qos)
+        self.pub_battery = self.create_publisher(BatteryState, 'battery/state', 10)
+        self.pub_remaining = self.create_publisher(Float64, 'energy/remaining_wh', 10)
+        self.pub_tte = self.create_publisher(Float64, 'energy/time_to_empty_s', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
+        self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
+        if self.state_file is not None:
+            self.create_timer(float(p['save_period_s']), self.save)
+        size = len(SUMMARY_FIELDS)
+        self._summary_layout = [MultiArrayDimension(label=SUMMARY_LABEL, size=size, stride=size)]
+
+    # --- inputs -------------------------------------------------------------------------------
+    def now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        now = self.now_s()
+        try:
+            with self._lock:
+                prediction = self.core.on_command(twist.linear.x, twist.angular.z, now)
+        except RejectedInput as err:
+            self._warn_rejected(err)
+            return
+        self._publish_predicted(prediction, msg)
+        self._publish_summary(now)
+        self._log_traction_change()
+
+    def _log_traction_change(self) -> None:
+        warning = self.core.traction_warning()
+        if warning and not self._traction_warned:
+            margin = self.core.prediction.traction_margin
+            self.get_logger().warning(
+                f'traction margin {margin:.2f} at V {self.core.command[0]:.2f} m/s, yaw rate '
+                f'{self.core.command[1]:.2f} rad/s: the robot may get stuck (chapter 7.3.4)'
+            )
+        self._traction_warned = warning
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        now = self.now_s()
+        try:
+            with self._lock:
+                self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now)
+        except RejectedInput as err:
+            self._warn_rejected(err)
+            return
+        self._publish_summary(now)
+
+    def _warn_rejected(self, err: RejectedInput) -> None:
+        if err.warn:
+            counts = self.core.rejects.counts
+            self.get_logger().warning(f'rejected {err} (rejected so far: {dict(counts)})')
+
+    # --- outputs ------------------------------------------------------------------------------
+    def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
+        msg = JointState()
+        if isinstance(source_msg, TwistStamped):
+            msg.header.stamp = source_msg.header.stamp
+        else:
+            msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
+        msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
+        msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
+        self.pub_predicted.publish(msg)
+
+    def _publish_summary(self, now: float) -> None:
+        with self._lock:
+            values = summary_values(self.core, now)
+        msg = Float64MultiArray()
+        msg.layout.dim = self._summary_layout
+        msg.data = values
+        self.pub_summary.publish(msg)
+
+    def _on_publish_timer(self) -> None:
+        now = self.now_s()
+        with self._lock:
+            self.core.tick(now)
+            msg = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
+            remaining = float(self.core.battery.remaining_wh)
+            tte = float(self.core.energy.time_to_empty_s())
+        battery = BatteryState()
+        battery.header.stamp = self.get_clock().now().to_msg()
+        for key, value in msg.items():
+            setattr(battery, key, value)
+        battery.power_supply_status = BatteryState.POWER_SUPPLY_STATUS_DISCHARGING
+        battery.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_LIPO
+        battery.present = True
+        self.pub_battery.publish(battery)
+        self.pub_remaining.publish(Float64(data=remaining))
+        self.pub_tte.publish(Float64(data=tte))
+
+    def _publish_diagnostics(self) -> None:
+        now = self.now_s()
+        with self._lock:
+            level, message, values = self.core.diagnostics(now)
+        values['terrain'] = self.terrain_name
+        values['vehicle'] = self.vehicle.name
+        if self.pending_terrain:
+            values['pending_terrain'] = self.pending_terrain
+        status = DiagnosticStatus(level=bytes([level]), name=f'{self.get_name()}: energy', message=message)
+        status.hardware_id = self.vehicle.name
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(array)
+
+    # --- persistence --------------------------------------------------------------------------
+    def save(self) -> None:
+        """Write the energy state now (atomic); a failure is logged, never fatal."""
+        if self.state_file is None:
+            return
+        with self._lock:
+            self.core.tick(self.now_s())
+            state = self.core.state_dict()
+        state['vehicle'] = self.vehicle.name
+        state['saved_unix_s'] = time.time()
+        try:
+            save_state(self.state_file, state)
+        except OSError as err:
+            self.get_logger().error(f'cannot save the energy state to {self.state_file}: {err}')
+
+    # --- run-time terrain change --------------------------------------------------------------
+    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+        for param in params:
+            if param.name == 'terrain':
+                try:
+                    factory.check_terrain(param.value)
+                except SkidsteerError as err:
+                    return SetParametersResult(successful=False, reason=str(err))
+                if self._terrain_worker is not None and self._terrain_worker.is_alive():
+                    return SetParametersResult(successful=False, reason='a terrain change is in progress')
+                self._start_terrain_change(param.value)
+            elif param.name in PARAMETERS and param.name != 'terrain':
+                return SetParametersResult(successful=False, reason=f'{param.name} is read at start only')
+        return SetParametersResult(successful=True)
+
+    def _start_terrain_change(self, terrain: str) -> None:
+        self.pending_terrain = terrain
+        cache_dir = self.get_parameter('map_cache_dir').value
+        self._terrain_worker = threading.Thread(
+            target=self._change_terrain, args=(terrain, cache_dir), name='terrain-change', daemon=True
+        )
+        self._terrain_worker.start()
+
+    def _change_terrain(self, terrain: str, cache_dir: str) -> None:
+        try:
+            predictor = self._make_predictor(terrain, cache_dir)
+        except SkidsteerError as err:
+            self.get_logger().error(f'terrain change to {terrain} failed, keeping {self.terrain_name}: {err}')
+            self.pending_terrain = ''
+            return
+        with self._lock:
+            self.core.set_predictor(predictor, self.now_s())
+            self.terrain_name = terrain
+        self.pending_terrain = ''
+        self.get_logger().info(f'terrain changed to {terrain}')
+
+    def wait_for_terrain_change(self, timeout_s: float | None = None) -> bool:
+        """Block until a pending terrain change finished (for callers and tests); True if none pending."""
+        worker = self._terrain_worker
+        if worker is not None:
+            worker.join(timeout_s)
+            return not worker.is_alive()
+        return True
+
+    def destroy_node(self) -> None:
+        self.save()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    exit_code = 0
+    try:
+        node = PowerEstimator()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (SkidsteerError, ParameterException) as err:  # bad configuration: one line, exit 2
+        print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
+        exit_code = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if exit_code:
+        sys.exit(exit_code)
+
+
+if __name__ == '__main__':
+    main()

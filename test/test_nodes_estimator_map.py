@@ -1,0 +1,122 @@
+"""power_estimator on the real FESS map: cmd_vel -> power/predicted + power/summary round trip (Twist
+and TwistStamped), reverse and spin in place, and a run-time terrain change."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from rclpy.parameter import Parameter
+from test_nodes_estimator import Rig
+
+from skidsteer_power.estimator.factory import map_predictor
+from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_from_arrays
+from skidsteer_power.nodes.power_estimator import PowerEstimator
+from skidsteer_power.vehicle import load_vehicle
+
+
+@pytest.fixture(scope='module')
+def cache_dir(tmp_path_factory):
+    return str(tmp_path_factory.mktemp('maps'))
+
+
+@pytest.fixture
+def rig(ros_context, tmp_path, cache_dir):
+    rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand')
+    yield rig
+    rig.close()
+
+
+def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
+    predictor, _, _ = map_predictor(load_vehicle('test_robot_track'), terrain, cache_dir)
+    return predictor.predict(speed, yaw_rate)
+
+
+@pytest.mark.parametrize(('speed', 'yaw_rate'), [(0.2, 0.1), (-0.2, 0.1), (0.0, 0.5), (0.1, -0.35)])
+def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate):
+    """Forward, reverse, spin in place and a right turn all answer at once with the map's values."""
+    rig.command(speed, yaw_rate)
+    rig.spin_until(lambda: rig.received['power/predicted'] and rig.received['power/summary'])
+    msg = rig.received['power/predicted'][-1]
+    p = expected(cache_dir, 'dry_sand', speed, yaw_rate)
+    assert list(msg.name) == ['left_motor', 'right_motor', 'left_axle', 'right_axle']
+    assert list(msg.velocity) == pytest.approx([*p.motor_omega_rad_s, *p.axle_omega_rad_s])
+    assert list(msg.effort) == pytest.approx([*p.motor_torque_Nm, *p.terrain_torque_Nm])
+    summary_msg = rig.received['power/summary'][-1]
+    assert [d.label for d in summary_msg.layout.dim] == [','.join(SUMMARY_FIELDS)]
+    assert summary_msg.layout.dim[0].size == len(summary_msg.data) == len(SUMMARY_FIELDS)
+    summary = summary_from_arrays([d.label for d in summary_msg.layout.dim], summary_msg.data)
+    assert summary['speed_cmd_m_s'] == speed and summary['yaw_rate_cmd_rad_s'] == yaw_rate
+    assert summary['predicted_battery_W'] == pytest.approx(p.bus_total_W)
+    assert summary['terrain_W'] == pytest.approx(p.terrain_total_W)
+    assert summary['traction_margin'] == pytest.approx(p.traction_margin)
+    assert math.isnan(summary['measured_battery_W'])  # no joint_states yet
+
+
+def test_twist_stamped_keeps_the_stamp(ros_context, tmp_path, cache_dir):
+    rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, cmd_vel_stamped=True)
+    try:
+        rig.command(0.2, 0.0, stamp=Time(sec=1234, nanosec=5678))
+        rig.spin_until(lambda: rig.received['power/predicted'])
+        out = rig.received['power/predicted'][-1]
+        assert (out.header.stamp.sec, out.header.stamp.nanosec) == (1234, 5678)
+        assert list(out.effort[:2]) == pytest.approx(
+            list(expected(cache_dir, 'dry_sand', 0.2, 0.0).motor_torque_Nm)
+        )
+    finally:
+        rig.close()
+
+
+def test_terrain_changes_at_run_time(rig, cache_dir):
+    rig.command(0.2, 0.1)
+    rig.spin_until(lambda: rig.received['power/predicted'])
+    on_sand = list(rig.received['power/predicted'][-1].effort)
+    result = rig.node.set_parameters([Parameter('terrain', value='clay')])[0]
+    assert result.successful
+    assert rig.node.wait_for_terrain_change(timeout_s=60.0)
+    assert rig.node.terrain_name == 'clay'
+    rig.received['power/predicted'].clear()
+    rig.command(0.2, 0.1)
+    rig.spin_until(lambda: rig.received['power/predicted'])
+    on_clay = list(rig.received['power/predicted'][-1].effort)
+    clay = expected(cache_dir, 'clay', 0.2, 0.1)
+    assert on_clay == pytest.approx([*clay.motor_torque_Nm, *clay.terrain_torque_Nm])
+    assert on_clay != pytest.approx(on_sand)
+
+
+def test_unknown_terrain_is_refused_and_the_map_kept(rig):
+    result = rig.node.set_parameters([Parameter('terrain', value='lava_field')])[0]
+    assert not result.successful and 'lava_field' in result.reason
+    assert rig.node.get_parameter('terrain').value == 'dry_sand' and rig.node.terrain_name == 'dry_sand'
+
+
+def test_start_only_parameters_are_read_only_at_run_time(rig):
+    result = rig.node.set_parameters([Parameter('vehicle', value='packbot_track')])[0]
+    assert not result.successful and 'read at start only' in result.reason
+
+
+def test_parameter_file_matches_the_node_and_is_read(tmp_path, cache_dir):
+    """config/estimator.yaml lists every parameter with the node's default; a node started with a
+    --params-file (here with terrain changed to clay) takes its values."""
+    import yaml
+    from rclpy.context import Context
+
+    from skidsteer_power.nodes.power_estimator import PARAMETERS
+
+    path = Path(__file__).resolve().parents[1] / 'config' / 'estimator.yaml'
+    values = yaml.safe_load(path.read_text())['power_estimator']['ros__parameters']
+    assert values == {name: default for name, (default, _) in PARAMETERS.items()}
+    values.update(terrain='clay', map_cache_dir=cache_dir, persist=False)
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump({'power_estimator': {'ros__parameters': values}}))
+    context = Context()
+    rclpy.init(args=['--ros-args', '--params-file', str(params)], context=context)
+    try:
+        node = PowerEstimator(context=context)
+        assert node.terrain_name == 'clay' and node.get_parameter('persist').value is False
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -1,0 +1,98 @@
+"""The node suite under ``run --simulate``: power_estimator + des_driver against simulated DES 70/10
+amplifiers on ptys, loaded by the FESS map of the test robot on dry sand (real rclpy, DDS, pyserial)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+import uuid
+
+import pytest
+import rclpy
+from geometry_msgs.msg import Twist
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import BatteryState, JointState
+
+from skidsteer_power.nodes.suite import Suite, SuiteOptions
+
+
+def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery(ros_context, tmp_path):
+    namespace = f'suite_{uuid.uuid4().hex[:8]}'
+    options = SuiteOptions(
+        simulate=True, map_cache_dir=str(tmp_path / 'maps'), state_file=str(tmp_path / 'energy.json'),
+        namespace=namespace, estimator_params={'publish_period_s': 0.1},
+    )  # fmt: skip
+    suite = Suite(options, context=ros_context).start()
+    probe = rclpy.create_node('suite_probe', namespace=namespace, context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe)
+    joints: list[JointState] = []
+    predicted: list[JointState] = []
+    battery: list[BatteryState] = []
+    probe.create_subscription(JointState, 'joint_states', joints.append, 100)
+    probe.create_subscription(JointState, 'power/predicted', predicted.append, 100)
+    probe.create_subscription(BatteryState, 'battery/state', battery.append, 100)
+    publisher = probe.create_publisher(Twist, 'cmd_vel', 10)
+    command = Twist()
+    command.linear.x, command.angular.z = 0.2, 0.1  # Table 7.3: V = 0.2 m/s, yaw rate 0.1 rad/s
+    try:
+        deadline = time.monotonic() + 60.0
+        next_command = 0.0
+        moving = []
+        while time.monotonic() < deadline and (len(moving) < 20 or len(battery) < 10):
+            if time.monotonic() >= next_command:
+                publisher.publish(command)
+                next_command = time.monotonic() + 0.1
+            executor.spin_once(timeout_sec=0.02)
+            moving = [j for j in joints if all(math.isfinite(v) and v > 1.0 for v in j.velocity)]
+        energy = dict(suite.estimator.core.energy.energy_J)
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        suite.shutdown()
+    assert len(moving) >= 20, 'the simulated motors never turned'
+    assert moving[-1].name == ['left_motor', 'right_motor']
+    assert moving[-1].velocity[1] > moving[-1].velocity[0]  # left turn: right side faster
+    assert predicted and predicted[-1].name[:2] == ['left_motor', 'right_motor']
+    assert battery[-1].percentage < battery[0].percentage < 1.0 + 1e-12
+    assert energy['measured'] > 0.0
+    assert (tmp_path / 'energy.json').exists()  # saved on shutdown
+
+
+def run_cli(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, **(env_extra or {})}
+    return subprocess.run(
+        [sys.executable, '-m', 'skidsteer_power.cli.main', 'run', *args],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_run_simulate_cli_reports_a_falling_battery(tmp_path):
+    result = run_cli(
+        '--simulate', '--duration', '4', '--speed', '0.2', '--json',
+        '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'),
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads(result.stdout)
+    assert report['joint_states_received'] > 0 and report['predicted_received'] > 0
+    assert report['soc_end'] < report['soc_start'] and report['energy_used_J'] > 0
+
+
+@pytest.mark.parametrize(
+    ('args', 'match'),
+    [
+        (('--vehicle', 'no_such_robot', '--simulate', '--duration', '1'), 'no_such_robot'),
+        (('--terrain', 'lava', '--simulate', '--duration', '1'), 'lava'),
+        (('--duration', '-1'), 'must be > 0'),
+    ],
+)
+def test_run_bad_arguments_give_one_line(tmp_path, args, match):
+    result = run_cli(*args, '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0] and 'Traceback' not in result.stderr
