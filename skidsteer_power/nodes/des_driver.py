@@ -24,14 +24,11 @@ wire's byte time emulated, 0.86 of the line's byte-time limit).
 from __future__ import annotations
 
 import math
-import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty
@@ -40,7 +37,8 @@ from skidsteer_power.des.kinematics import RPM, twist_to_motor_rpm
 from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCommand
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
-from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.errors import ConfigError
+from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain.motor import EC45, GEAR_RATIO
 
 NODE_NAME = 'des_driver'
@@ -320,23 +318,7 @@ class DesDriver(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    exit_code = 0
-    try:
-        node = DesDriver()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except SkidsteerError as err:
-        print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
-        exit_code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if exit_code:
-        sys.exit(exit_code)
+    spin_node(DesDriver, NODE_NAME, args)
 
 
 if __name__ == '__main__':

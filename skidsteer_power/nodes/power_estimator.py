@@ -30,17 +30,13 @@ thread and swapped in when ready; the old map serves until then.
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import BatteryState, JointState
@@ -52,6 +48,7 @@ from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, Rej
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.persistence import load_state, save_state
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, SUMMARY_LABEL, summary_values
+from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
 
@@ -337,23 +334,7 @@ class PowerEstimator(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    exit_code = 0
-    try:
-        node = PowerEstimator()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SkidsteerError, ParameterException) as err:  # bad configuration: one line, exit 2
-        print(f'{NODE_NAME}: error: {err}', file=sys.stderr)
-        exit_code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if exit_code:
-        sys.exit(exit_code)
+    spin_node(PowerEstimator, NODE_NAME, args)
 
 
 if __name__ == '__main__':
