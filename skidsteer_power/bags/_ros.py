@@ -1,0 +1,122 @@
+"""rclpy helpers shared by record and replay: message classes by type name, QoS conversion, signals."""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from rclpy.duration import Duration
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+from skidsteer_power.errors import InputError
+
+# Queue depth for recording and replay: deep enough that a 2 kHz burst never overwrites a message
+# the other side has not taken yet.
+QUEUE_DEPTH = 1000
+
+
+def message_class(msgtype: str) -> Any:
+    """The rclpy message class of ``pkg/msg/Name``. Raises InputError if it is not installed."""
+    parts = msgtype.split('/')
+    if len(parts) != 3 or not all(parts):
+        raise InputError(f'not a ROS message type name: {msgtype!r}')
+    package, kind, name = parts
+    try:
+        module = importlib.import_module(f'{package}.{kind}')
+        return getattr(module, name)
+    except (ImportError, AttributeError) as err:
+        raise InputError(f'message type {msgtype} is not installed for Python ({err})') from err
+
+
+def _qos_time(duration: Duration) -> QosTime:
+    sec, nsec = divmod(int(duration.nanoseconds), 1_000_000_000)
+    return QosTime(sec, nsec)
+
+
+def to_bag_qos(profile: QoSProfile) -> Qos:
+    """A publisher's rclpy QoS profile as the rosbags record stored in a bag's metadata."""
+    return Qos(
+        history=QosHistory(int(profile.history)),
+        depth=int(profile.depth),
+        reliability=QosReliability(int(profile.reliability)),
+        durability=QosDurability(int(profile.durability)),
+        deadline=_qos_time(profile.deadline),
+        lifespan=_qos_time(profile.lifespan),
+        liveliness=QosLiveliness(int(profile.liveliness)),
+        liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
+    )
+
+
+def matching_qos(
+    reliable: Sequence[bool], transient_local: Sequence[bool], depth: int = QUEUE_DEPTH
+) -> QoSProfile:
+    """QoS that matches every endpoint described: reliable only if all are, transient-local likewise.
+
+    ``reliable`` and ``transient_local`` hold one flag per known endpoint (empty: reliable, volatile).
+    """
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if all(reliable) else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL
+        if transient_local and all(transient_local)
+        else DurabilityPolicy.VOLATILE,
+        liveliness=LivelinessPolicy.AUTOMATIC,
+    )
+
+
+def qos_for_stored(profiles: Sequence[Qos]) -> QoSProfile:
+    """Publisher QoS for replay from the profiles a bag stored for the original publishers."""
+    return matching_qos(
+        [p.reliability != QosReliability.BEST_EFFORT for p in profiles],
+        [p.durability == QosDurability.TRANSIENT_LOCAL for p in profiles],
+    )
+
+
+class StopFlag:
+    """Set by SIGINT or SIGTERM (see :func:`stop_on_signals`), or by :meth:`set`."""
+
+    def __init__(self) -> None:
+        self._event = threading.Event()
+        self.signal_name = ''
+
+    def set(self, signal_name: str = '') -> None:
+        self.signal_name = self.signal_name or signal_name
+        self._event.set()
+
+    def is_set(self) -> bool:
+        return self._event.is_set()
+
+    def wait(self, timeout: float) -> bool:
+        return self._event.wait(timeout)
+
+
+@contextmanager
+def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
+    """Within the block, SIGINT and SIGTERM set ``flag`` instead of raising or killing.
+
+    Only possible from the main thread; elsewhere the block runs with the handlers untouched.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        previous[signum] = signal.signal(signum, lambda num, _frame: flag.set(signal.Signals(num).name))
+    try:
+        yield flag
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

@@ -1,0 +1,488 @@
+"""One reading API over rosbag2 bags: MCAP (file or directory) and sqlite3 (directory or .db3 file).
+
+Built on ``rosbags``. Types come from, in order of precedence: the definitions stored in the bag
+(MCAP schemas), extra ``.msg`` definitions given by the caller, and the ROS 2 Jazzy type store.
+A topic whose type none of them knows stays readable as raw CDR bytes (replay needs nothing more);
+only deserializing it fails, and :func:`open_bag` warns once about such topics.
+
+Damage: a bag that is truncated or corrupt raises :class:`~skidsteer_power.errors.InputError` naming
+the file and what is wrong. With ``salvage=True`` an MCAP file is read by streaming from its start and
+everything before the damage is returned (message order is then file order, which is receive order for
+bags written by :mod:`skidsteer_power.bags.record`); the reader's ``damage`` says what stopped it.
+An sqlite3 file is salvaged by a plain table scan, which keeps the rows sqlite can still reach.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sqlite3
+import struct
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+from rosbags.interfaces import MessageDefinitionFormat, Qos
+from rosbags.rosbag2 import Reader as Rosbag2Reader
+from rosbags.rosbag2 import ReaderError
+from rosbags.rosbag2.metadata import parse_qos
+from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
+
+from skidsteer_power.errors import InputError
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
+
+LOG = logging.getLogger(__name__)
+
+DEFAULT_STORE = Stores.ROS2_JAZZY
+_SALVAGE_HINT = '; --salvage reads what precedes the damage'
+_IDL_SEPARATOR = '=' * 80 + '\n'
+# Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
+_DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
+    ReaderError,
+    sqlite3.Error,
+    struct.error,
+    EOFError,
+    ValueError,
+    KeyError,
+    IndexError,
+    AssertionError,
+    ArithmeticError,
+    MemoryError,
+)
+try:  # rosbags reads sqlite3 through apsw when it is installed
+    import apsw
+
+    _DAMAGE_ERRORS += (apsw.Error,)
+except ImportError:  # pragma: no cover - depends on the rosbags build
+    pass
+
+
+class BagMessage(NamedTuple):
+    """One stored message: topic, receive time [ns since the epoch], CDR bytes, ROS type name."""
+
+    topic: str
+    timestamp_ns: int
+    data: bytes
+    msgtype: str
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """A topic in a bag: its type, message count, offered QoS profiles and stored definition."""
+
+    name: str
+    msgtype: str
+    count: int
+    qos: tuple[Qos, ...] = ()
+    msgdef: str = ''
+    decodable: bool = False
+
+
+def load_msg_definitions(paths: Iterable[str | os.PathLike[str]]) -> dict[str, str]:
+    """Read extra ``.msg`` definitions: files laid out as ``<pkg>/msg/<Name>.msg`` or trees of them.
+
+    Returns ``{'pkg/msg/Name': text}``. Raises InputError for a missing path or a file whose package
+    cannot be told from its location.
+    """
+    found: dict[str, str] = {}
+    for entry in map(Path, paths):
+        if not entry.exists():
+            raise InputError(f'message definition path does not exist: {entry}')
+        files = sorted(entry.rglob('*.msg')) if entry.is_dir() else [entry]
+        for file in files:
+            if file.suffix != '.msg' or file.parent.name != 'msg' or not file.parent.parent.name:
+                raise InputError(f'{file}: expected a .msg file at <package>/msg/<Name>.msg')
+            found[f'{file.parent.parent.name}/msg/{file.stem}'] = file.read_text(encoding='utf-8')
+    return found
+
+
+def _types_from_definition(msgtype: str, fmt: MessageDefinitionFormat, text: str) -> dict[str, Any]:
+    if fmt == MessageDefinitionFormat.MSG:
+        return get_types_from_msg(text, msgtype)
+    if text.startswith(f'{_IDL_SEPARATOR}IDL: '):
+        types: dict[str, Any] = {}
+        for section in text.split(_IDL_SEPARATOR)[1:]:
+            types.update(get_types_from_idl(section.split('\n', 1)[1]))
+        return types
+    return get_types_from_idl(text)
+
+
+def build_typestore(
+    stored: Iterable[tuple[str, MessageDefinitionFormat, str]] = (),
+    extra: Mapping[str, str] | None = None,
+) -> Typestore:
+    """A type store: Jazzy's types, overridden by ``extra`` .msg texts, overridden by ``stored`` ones.
+
+    ``stored`` holds (type name, definition format, definition text) as found in a bag. A stored
+    definition that does not parse is skipped with a warning (the Jazzy or extra one, if any, stays).
+    """
+    fielddefs: dict[str, Any] = dict(get_typestore(DEFAULT_STORE).fielddefs)
+    for name, text in (extra or {}).items():
+        try:
+            fielddefs.update(get_types_from_msg(text, name))
+        except TypesysError as err:
+            raise InputError(f'message definition of {name} does not parse: {err}') from err
+    for name, fmt, text in stored:
+        if fmt == MessageDefinitionFormat.NONE or not text:
+            continue
+        try:
+            fielddefs.update(_types_from_definition(name, fmt, text))
+        except (TypesysError, IndexError, ValueError) as err:
+            LOG.warning('stored definition of %s does not parse (%s); using the type store', name, err)
+    store = get_typestore(Stores.EMPTY)
+    store.register(fielddefs)
+    return store
+
+
+def _damage_text(path: Path, err: BaseException) -> str:
+    reason = str(err).strip() or type(err).__name__
+    return f'{path}: bag is truncated or corrupt ({reason})'
+
+
+@dataclass
+class BagReader:
+    """An open bag. Use as a context manager or call :meth:`close`.
+
+    Attributes: ``path``; ``storage`` ('mcap' | 'sqlite3'); ``topics`` by name; ``start_ns`` and
+    ``end_ns`` (first and last receive time, ns since the epoch); ``message_count``; ``typestore``;
+    ``damage`` ('' for an intact bag, else what stopped a salvage read).
+    """
+
+    path: Path
+    storage: str
+    topics: dict[str, TopicInfo]
+    start_ns: int
+    end_ns: int
+    message_count: int
+    typestore: Typestore
+    damage: str = ''
+    salvage: bool = False
+    _reader: Rosbag2Reader | None = None
+    _connections: list[Connection] = field(default_factory=list)
+    _salvaged: list[BagMessage] | None = None
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last message [s]."""
+        return max(0, self.end_ns - self.start_ns) * 1e-9
+
+    @property
+    def undecodable_topics(self) -> list[str]:
+        """Topics whose type no definition describes (readable as bytes only)."""
+        return sorted(name for name, info in self.topics.items() if not info.decodable)
+
+    def messages(
+        self,
+        topics: Sequence[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[BagMessage]:
+        """Messages in time order, optionally only ``topics`` and ``start_ns <= t < stop_ns`` [ns].
+
+        Raises InputError for an unknown topic, or (after yielding what precedes it) at damage found
+        while reading.
+        """
+        wanted = set(self.topics if topics is None else topics)
+        unknown = wanted - set(self.topics)
+        if unknown:
+            raise InputError(f'{self.path}: no topic {", ".join(sorted(unknown))} in the bag')
+        if self._salvaged is not None:
+            for message in self._salvaged:
+                if (
+                    message.topic in wanted
+                    and (start_ns is None or message.timestamp_ns >= start_ns)
+                    and (stop_ns is None or message.timestamp_ns < stop_ns)
+                ):
+                    yield message
+            return
+        assert self._reader is not None
+        connections = [c for c in self._connections if c.topic in wanted]
+        if not connections:
+            return
+        last: tuple[int, int] = (-1, 0)  # (timestamp, messages yielded at it)
+        try:
+            for connection, timestamp, data in self._reader.messages(
+                connections=connections, start=start_ns, stop=stop_ns
+            ):
+                last = (timestamp, last[1] + 1 if timestamp == last[0] else 1)
+                yield BagMessage(connection.topic, timestamp, data, connection.msgtype)
+        except _DAMAGE_ERRORS as err:
+            if not self.salvage:
+                raise InputError(_damage_text(self.path, err) + _SALVAGE_HINT) from err
+            yield from self._salvage_after(err, last, wanted, start_ns, stop_ns)
+
+    def _salvage_after(
+        self,
+        err: BaseException,
+        last: tuple[int, int],
+        wanted: set[str],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> Iterator[BagMessage]:
+        """Damage met while reading through the index: stream the file and go on after ``last``."""
+        file = _single_file(self.path, err)
+        messages = _scan_sqlite(file)[1] if file.suffix == '.db3' else _scan_mcap(file)[1]
+        self._salvaged = messages
+        self.damage = f'damaged ({str(err) or type(err).__name__}); read by streaming up to the damage'
+        LOG.warning('%s: %s', self.path, self.damage)
+        skip = last[1]
+        for message in messages:
+            if message.topic not in wanted or message.timestamp_ns < last[0]:
+                continue
+            if message.timestamp_ns == last[0] and skip:
+                skip -= 1
+                continue
+            if (start_ns is None or message.timestamp_ns >= start_ns) and (
+                stop_ns is None or message.timestamp_ns < stop_ns
+            ):
+                yield message
+
+    def deserialize(self, message: BagMessage) -> Any:
+        """The message as a ``rosbags`` object. Raises InputError if its type is unknown or bytes bad."""
+        info = self.topics[message.topic]
+        if not info.decodable:
+            raise InputError(f'{message.topic}: type {message.msgtype} is unknown; give its .msg definition')
+        try:
+            return self.typestore.deserialize_cdr(message.data, message.msgtype)
+        except Exception as err:  # rosbags raises assorted errors for bad bytes; report one clear line
+            raise InputError(f'{message.topic}: cannot decode a {message.msgtype} message: {err}') from err
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+    def __enter__(self) -> BagReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _resolve(path: Path) -> Path:
+    """A bag directory without metadata.yaml (a crashed recorder) is opened through its one file."""
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        files = sorted(path.glob('*.mcap')) + sorted(path.glob('*.db3'))
+        if len(files) == 1:
+            return files[0]
+        raise InputError(f'{path}: not a bag (no metadata.yaml and not exactly one .mcap/.db3 file)')
+    return path
+
+
+def _storage_of(path: Path) -> str:
+    if path.is_file():
+        return 'sqlite3' if path.suffix == '.db3' else 'mcap'
+    files = list(path.glob('*.db3'))
+    return 'sqlite3' if files else 'mcap'
+
+
+def open_bag(
+    path: str | os.PathLike[str],
+    *,
+    extra_types: Mapping[str, str] | None = None,
+    salvage: bool = False,
+    warn_unknown: bool = True,
+) -> BagReader:
+    """Open a rosbag2 bag (MCAP file, .db3 file, or bag directory) for reading.
+
+    Parameters
+    ----------
+    path : bag file or directory
+    extra_types : ``{'pkg/msg/Name': msg text}`` for types neither the bag nor Jazzy defines
+        (see :func:`load_msg_definitions`)
+    salvage : read a damaged bag up to the damage instead of raising
+    warn_unknown : log one warning naming topics whose type is unknown
+
+    Raises
+    ------
+    InputError for a missing path, a path that is not a bag, or (without ``salvage``) a damaged bag.
+    """
+    bag_path = Path(path)
+    if not bag_path.exists():
+        raise InputError(f'bag not found: {bag_path}')
+    bag_path = _resolve(bag_path)
+    try:
+        bag = _open_intact(bag_path, extra_types)
+        bag.salvage = salvage
+    except _DAMAGE_ERRORS as err:
+        if not salvage:
+            raise InputError(_damage_text(bag_path, err) + _SALVAGE_HINT) from err
+        bag = _open_salvage(bag_path, extra_types, err)
+    except FileNotFoundError as err:
+        raise InputError(f'{bag_path}: {err}') from err
+    if warn_unknown and bag.undecodable_topics:
+        LOG.warning(
+            '%s: no definition for the type of %s; these topics are kept as raw bytes only',
+            bag_path,
+            ', '.join(f'{t} ({bag.topics[t].msgtype})' for t in bag.undecodable_topics),
+        )
+    return bag
+
+
+def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader:
+    reader = Rosbag2Reader(path)
+    reader.open()
+    try:
+        connections = list(reader.connections)
+        store = build_typestore(
+            ((c.msgtype, c.msgdef.format, c.msgdef.data) for c in connections), extra_types
+        )
+        topics = _topic_infos(
+            (c.topic, c.msgtype, c.msgcount, getattr(c.ext, 'offered_qos_profiles', ()), c.msgdef.data)
+            for c in connections
+        )
+        topics = {k: _with_decodable(v, store) for k, v in topics.items()}
+        count = reader.message_count
+        return BagReader(
+            path=path,
+            storage=_storage_of(path),
+            topics=topics,
+            start_ns=reader.start_time if count else 0,
+            end_ns=max(reader.end_time - 1, reader.start_time) if count else 0,
+            message_count=count,
+            typestore=store,
+            _reader=reader,
+            _connections=connections,
+        )
+    except BaseException:
+        reader.close()
+        raise
+
+
+def _topic_infos(rows: Iterable[tuple[str, str, int, Sequence[Qos], str]]) -> dict[str, TopicInfo]:
+    """Merge connections per topic (a topic may have several connections of one type)."""
+    topics: dict[str, TopicInfo] = {}
+    for name, msgtype, count, qos, msgdef in rows:
+        if name in topics:
+            old = topics[name]
+            if old.msgtype != msgtype:
+                raise InputError(f'topic {name} is stored with two types: {old.msgtype}, {msgtype}')
+            topics[name] = TopicInfo(name, msgtype, old.count + count, old.qos, old.msgdef or msgdef)
+        else:
+            topics[name] = TopicInfo(name, msgtype, count, tuple(qos), msgdef)
+    return topics
+
+
+def _with_decodable(info: TopicInfo, store: Typestore) -> TopicInfo:
+    decodable = info.msgtype in store.fielddefs
+    return TopicInfo(info.name, info.msgtype, info.count, info.qos, info.msgdef, decodable)
+
+
+def _single_file(path: Path, cause: BaseException) -> Path:
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap')) + sorted(path.glob('*.db3'))
+        if len(files) != 1:
+            raise InputError(f'{_damage_text(path, cause)}; cannot salvage a multi-file bag') from cause
+        return files[0]
+    return path
+
+
+def _open_salvage(path: Path, extra_types: Mapping[str, str] | None, cause: BaseException) -> BagReader:
+    path = _single_file(path, cause)
+    if path.suffix == '.db3':
+        topics, messages, damage = _scan_sqlite(path)
+        stored: list[tuple[str, MessageDefinitionFormat, str]] = []
+    else:
+        topics, messages, damage, stored = _scan_mcap(path)
+    store = build_typestore(stored, extra_types)
+    topics = {k: _with_decodable(v, store) for k, v in topics.items()}
+    if damage:
+        LOG.warning('%s: %s; read the %d messages before it', path, damage, len(messages))
+    stamps = [m.timestamp_ns for m in messages]
+    return BagReader(
+        path=path,
+        storage='sqlite3' if path.suffix == '.db3' else 'mcap',
+        topics=topics,
+        start_ns=min(stamps, default=0),
+        end_ns=max(stamps, default=0),
+        message_count=len(messages),
+        typestore=store,
+        damage=damage or f'unreadable index ({cause})',
+        salvage=True,
+        _salvaged=messages,
+    )
+
+
+def _scan_mcap(
+    path: Path,
+) -> tuple[dict[str, TopicInfo], list[BagMessage], str, list[tuple[str, MessageDefinitionFormat, str]]]:
+    """Stream an MCAP file from its start; stop at the first damaged record."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[BagMessage] = []
+    damage = ''
+    with path.open('rb') as stream:
+        try:
+            for record in StreamReader(stream, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    channel = channels[record.channel_id]
+                    msgtype = schemas[channel.schema_id].name if channel.schema_id in schemas else ''
+                    messages.append(BagMessage(channel.topic, record.log_time, bytes(record.data), msgtype))
+        except (McapError, *_DAMAGE_ERRORS) as err:
+            damage = f'damaged after byte {stream.tell()} ({str(err) or type(err).__name__})'
+    counts: dict[int, int] = {}
+    by_topic = {c.topic: c.id for c in channels.values()}
+    for message in messages:
+        counts[by_topic[message.topic]] = counts.get(by_topic[message.topic], 0) + 1
+    topics = {}
+    for channel in channels.values():
+        schema = schemas.get(channel.schema_id)
+        qos_text = channel.metadata.get('offered_qos_profiles', '')
+        try:
+            qos = tuple(parse_qos(qos_text)) if qos_text else ()
+        except Exception:  # QoS is advisory; a salvage read goes on without it
+            qos = ()
+        topics[channel.topic] = TopicInfo(
+            channel.topic,
+            schema.name if schema else '',
+            counts.get(channel.id, 0),
+            qos,
+            schema.data.decode() if schema else '',
+        )
+    stored = [
+        (s.name, formats[s.encoding], s.data.decode()) for s in schemas.values() if s.encoding in formats
+    ]
+    return topics, messages, damage, stored
+
+
+def _scan_sqlite(path: Path) -> tuple[dict[str, TopicInfo], list[BagMessage], str]:
+    """Table-scan an sqlite3 bag's rows in storage order; stop where sqlite reports damage."""
+    topics: dict[str, TopicInfo] = {}
+    messages: list[BagMessage] = []
+    names: dict[int, tuple[str, str]] = {}
+    damage = ''
+    try:
+        connection = sqlite3.connect(f'file:{path}?mode=ro', uri=True)
+    except sqlite3.Error as err:
+        return topics, messages, f'not readable by sqlite ({err})'
+    try:
+        for topic_id, name, msgtype in connection.execute('SELECT id, name, type FROM topics'):
+            names[topic_id] = (name, msgtype)
+        for topic_id, stamp, data in connection.execute('SELECT topic_id, timestamp, data FROM messages'):
+            name, msgtype = names[topic_id]
+            messages.append(BagMessage(name, stamp, bytes(data), msgtype))
+    except (sqlite3.Error, KeyError) as err:
+        damage = f'sqlite stopped after {len(messages)} rows ({err})'
+    finally:
+        connection.close()
+    messages.sort(key=lambda m: m.timestamp_ns)
+    counts: dict[str, int] = {}
+    for message in messages:
+        counts[message.topic] = counts.get(message.topic, 0) + 1
+    for name, msgtype in names.values():
+        topics[name] = TopicInfo(name, msgtype, counts.get(name, 0))
+    return topics, messages, damage

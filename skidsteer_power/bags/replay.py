@@ -1,0 +1,297 @@
+"""Replay a bag: publish its stored CDR bytes with the original timing.
+
+Each message is due at ``t0 + (stamp - first stamp) / rate`` on ``time.monotonic()``; the loop sleeps
+until that deadline, then hands the stored bytes to ``publisher.publish(bytes)``, so subscribers get
+the recorded message byte for byte. Publisher QoS follows the QoS the bag stored for the original
+publishers (reliable unless they were all best-effort; transient-local if they all were).
+
+A topic whose message type is not installed for Python (rclpy needs the generated type support to
+create a publisher) is skipped with a warning; so is a bag topic not named in ``topics``. With
+``clock`` the bag time is published on ``/clock`` (rosgraph_msgs/Clock) at ``clock_hz``.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skidsteer_power.bags._ros import StopFlag, message_class, qos_for_stored
+from skidsteer_power.bags.reader import BagMessage, BagReader
+from skidsteer_power.errors import InputError
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+LOG = logging.getLogger(__name__)
+
+NS = 1_000_000_000
+ACK_TIMEOUT_S = 5.0  # longest wait at the end for subscribers to acknowledge [s]
+MATCH_SETTLE_S = 0.3  # pause after every publisher is matched, before the first message [s]
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """How to replay.
+
+    rate : playback speed factor [-] (> 0; 2 = twice as fast)
+    loop : start over at the end until stopped
+    topics : bag topics to publish (None: all publishable)
+    start_s : skip this much of the bag from its first message [s]
+    duration_s : publish only this much bag time from ``start_s`` [s] (None: to the end)
+    clock : publish /clock with the bag time
+    clock_hz : /clock publish rate [Hz]
+    wait_for_subscribers_s : before the first message, wait up to this long until every publisher
+        has a subscriber [s] (0: do not wait)
+    """
+
+    rate: float = 1.0
+    loop: bool = False
+    topics: Sequence[str] | None = None
+    start_s: float = 0.0
+    duration_s: float | None = None
+    clock: bool = False
+    clock_hz: float = 40.0
+    wait_for_subscribers_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.rate) and self.rate > 0):
+            raise InputError(f'rate must be a finite number > 0, got {self.rate}')
+        if not (np.isfinite(self.start_s) and self.start_s >= 0):
+            raise InputError(f'start must be >= 0 s, got {self.start_s}')
+        if self.duration_s is not None and not (np.isfinite(self.duration_s) and self.duration_s > 0):
+            raise InputError(f'duration must be > 0 s, got {self.duration_s}')
+        if not (np.isfinite(self.clock_hz) and self.clock_hz > 0):
+            raise InputError(f'clock rate must be > 0 Hz, got {self.clock_hz}')
+
+
+@dataclass
+class ReplayResult:
+    """What a replay did: messages per topic, skipped topics with reason, passes, lateness [s]."""
+
+    counts: dict[str, int]
+    skipped: dict[str, str]
+    passes: int
+    wall_s: float
+    late_s: np.ndarray = field(repr=False)
+    log: list[tuple[str, float, float]] = field(default_factory=list, repr=False)
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.counts.values())
+
+    @property
+    def max_late_s(self) -> float:
+        """Largest delay of a publish after its deadline [s]."""
+        return float(self.late_s.max()) if self.late_s.size else 0.0
+
+
+@contextmanager
+def _no_gc_pauses() -> Iterator[None]:
+    """Keep the cyclic garbage collector out of the timed loop: a full collection over a large heap
+    stalls the interpreter for milliseconds, longer than the gap between messages at kHz rates
+    (benchmarks/bench_bags.py: the worst timing error vs the bag fell from 5.2 to 3.7 ms with it).
+    The loop itself makes almost no reference cycles."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def deadlines(stamps_ns: Sequence[int], window_start_ns: int, rate: float, t0: float = 0.0) -> np.ndarray:
+    """Publish deadlines [s on the monotonic clock] of messages stamped ``stamps_ns`` [ns].
+
+    ``t0 + (stamp - window_start) / rate``: the bag's timing, scaled by ``rate``.
+    """
+    offsets = (np.asarray(stamps_ns, dtype=np.int64) - np.int64(window_start_ns)).astype(float) / NS
+    return t0 + offsets / rate
+
+
+def window_ns(bag: BagReader, options: ReplayOptions) -> tuple[int, int | None]:
+    """[start, stop) bag time to replay [ns]; stop None means to the end."""
+    start = bag.start_ns + round(options.start_s * NS)
+    if bag.message_count and start > bag.end_ns:
+        raise InputError(f'start {options.start_s} s is past the end of the bag ({bag.duration_s:.3f} s)')
+    stop = None if options.duration_s is None else start + round(options.duration_s * NS)
+    return start, stop
+
+
+class Replayer:
+    """Publishers for a bag's topics on ``node``; :meth:`run` replays until done or stopped."""
+
+    def __init__(self, bag: BagReader, node: Node, options: ReplayOptions | None = None) -> None:
+        self.bag = bag
+        self.node = node
+        self.options = options or ReplayOptions()
+        self.skipped: dict[str, str] = {}
+        self.publishers: dict[str, Any] = {}
+        wanted = list(bag.topics) if self.options.topics is None else list(self.options.topics)
+        missing = [t for t in wanted if t not in bag.topics]
+        if missing:
+            raise InputError(f'{bag.path}: no topic {", ".join(missing)} in the bag')
+        for topic in wanted:
+            info = bag.topics[topic]
+            try:
+                cls = message_class(info.msgtype)
+            except InputError as err:
+                self.skipped[topic] = str(err)
+                LOG.warning('not replaying %s: %s', topic, err)
+                continue
+            self.publishers[topic] = node.create_publisher(cls, topic, qos_for_stored(info.qos))
+        self._clock_pub = None
+        if self.options.clock:
+            from rosgraph_msgs.msg import Clock
+
+            self._clock_pub = node.create_publisher(Clock, '/clock', 10)
+        if not self.publishers:
+            raise InputError(f'{bag.path}: nothing to replay (no topic with an installed message type)')
+
+    def wait_for_subscribers(self, stop: StopFlag) -> bool:
+        """Wait up to ``options.wait_for_subscribers_s`` until every publisher is matched with every
+        subscription to its topic on the graph (a recorder that just joined included)."""
+        end = time.monotonic() + self.options.wait_for_subscribers_s
+        while time.monotonic() < end and not stop.is_set():
+            if self._all_matched():
+                # DDS matching is two-sided: our writer can see a reader before that reader has
+                # discovered the writer, and a volatile reader then skips what came before. A short
+                # pause lets the other side finish (as ``ros2 bag play --delay`` would).
+                stop.wait(MATCH_SETTLE_S)
+                return True
+            time.sleep(0.01)
+        return self._all_matched()
+
+    def _all_matched(self) -> bool:
+        """Every publisher has a subscriber, and is matched with every subscription the graph shows."""
+        return all(
+            pub.get_subscription_count() >= max(1, self.node.count_subscribers(topic))
+            for topic, pub in self.publishers.items()
+        )
+
+    def _messages(self, start: int, stop: int | None) -> Iterator[BagMessage]:
+        return self.bag.messages(list(self.publishers), start_ns=start, stop_ns=stop)
+
+    def run(
+        self,
+        stop: StopFlag | None = None,
+        *,
+        keep_log: bool = False,
+        on_message: Callable[[BagMessage], None] | None = None,
+    ) -> ReplayResult:
+        """Replay (looping if asked) until the window ends or ``stop`` is set.
+
+        ``keep_log``: record (topic, deadline, publish time) per message [s, monotonic] in the result.
+        """
+        stop = stop or StopFlag()
+        if self.options.wait_for_subscribers_s > 0 and not self.wait_for_subscribers(stop):
+            LOG.warning('not every replayed topic has a subscriber yet; replaying anyway')
+        with _no_gc_pauses():
+            return self._run(stop, keep_log, on_message)
+
+    def _run(
+        self, stop: StopFlag, keep_log: bool, on_message: Callable[[BagMessage], None] | None
+    ) -> ReplayResult:
+        start, stop_ns = window_ns(self.bag, self.options)
+        counts = dict.fromkeys(self.publishers, 0)
+        late: list[float] = []
+        log: list[tuple[str, float, float]] = []
+        rate = self.options.rate
+        began = t0 = time.monotonic()
+        passes = 0
+        self._next_clock = t0
+        while not stop.is_set():
+            passes += 1
+            last, published = start, 0
+            for message in self._messages(start, stop_ns):
+                deadline = t0 + (message.timestamp_ns - start) / NS / rate
+                if not self._sleep_until(deadline, t0, start, stop):
+                    break
+                self.publishers[message.topic].publish(message.data)
+                now = time.monotonic()
+                late.append(now - deadline)
+                counts[message.topic] += 1
+                published += 1
+                last = message.timestamp_ns
+                if keep_log:
+                    log.append((message.topic, deadline, now))
+                if on_message is not None:
+                    on_message(message)
+            if not self.options.loop or stop.is_set() or not published:
+                break
+            t0 += ((stop_ns if stop_ns is not None else last) - start) / NS / rate
+        wall = time.monotonic() - began
+        self.wait_for_acks(ACK_TIMEOUT_S)
+        return ReplayResult(counts, dict(self.skipped), passes, wall, np.array(late), log)
+
+    def wait_for_acks(self, timeout_s: float) -> bool:
+        """Wait until reliable subscribers have acknowledged every message, up to ``timeout_s`` [s].
+
+        Without this, a replay that exits right after its last publish can take messages still in
+        flight with it.
+        """
+        from rclpy.duration import Duration
+
+        end = time.monotonic() + timeout_s
+        acked = True
+        for publisher in self.publishers.values():
+            remaining = max(0.0, end - time.monotonic())
+            acked &= publisher.wait_for_all_acked(Duration(nanoseconds=round(remaining * NS)))
+        return acked
+
+    def _sleep_until(self, deadline: float, t0: float, start_ns: int, stop: StopFlag) -> bool:
+        """Sleep until ``deadline`` [s, monotonic], publishing /clock ticks due before it."""
+        while True:
+            if stop.is_set():
+                return False
+            clock_first = self._clock_pub is not None and self._next_clock <= deadline
+            remaining = (self._next_clock if clock_first else deadline) - time.monotonic()
+            if remaining > 0:
+                stop.wait(remaining)
+                continue
+            if not clock_first:
+                return True
+            self._publish_clock(t0, start_ns)
+
+    def _publish_clock(self, t0: float, start_ns: int) -> None:
+        from rosgraph_msgs.msg import Clock
+
+        bag_ns = start_ns + round((self._next_clock - t0) * self.options.rate * NS)
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(bag_ns, NS)
+        assert self._clock_pub is not None
+        self._clock_pub.publish(msg)
+        self._next_clock += 1.0 / self.options.clock_hz
+
+
+def replay(
+    bag: BagReader,
+    options: ReplayOptions | None = None,
+    *,
+    stop: StopFlag | None = None,
+    context: Any = None,
+    node_name: str = 'skidsteer_replay',
+) -> ReplayResult:
+    """Replay ``bag`` on a node of its own; ``context`` None initialises (and shuts down) one here."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    own_context = context is None
+    if own_context:
+        context = Context()
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(node_name, context=context)
+    try:
+        return Replayer(bag, node, options).run(stop)
+    finally:
+        node.destroy_node()
+        if own_context:
+            rclpy.try_shutdown(context=context)

@@ -1,0 +1,178 @@
+"""``record``, ``replay`` and ``validate``: bags in and out of the ROS graph, and offline validation."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float, positive_float, print_json
+
+
+def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        '--msg',
+        action='append',
+        default=[],
+        metavar='PATH',
+        help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
+    )
+    parser.add_argument(
+        '--salvage', action='store_true', help='read a damaged bag up to the damage instead of failing'
+    )
+
+
+def _open(args: argparse.Namespace) -> Any:
+    from skidsteer_power.bags.reader import load_msg_definitions, open_bag
+
+    return open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
+
+
+def _log_to_stderr() -> None:
+    logging.basicConfig(level=logging.WARNING, format='%(levelname)s: %(message)s', stream=sys.stderr)
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from skidsteer_power.bags._ros import StopFlag, stop_on_signals
+    from skidsteer_power.bags.record import record
+
+    _log_to_stderr()
+    stop = StopFlag()
+
+    def ready(recorder: Any) -> None:
+        what = ', '.join(recorder.recorded) or 'none yet'
+        print(f'recording to {args.output} (topics: {what}); Ctrl-C to stop', file=sys.stderr, flush=True)
+
+    with stop_on_signals(stop):
+        result = record(args.output, args.topics, stop=stop, duration_s=args.duration, on_ready=ready)
+    emit(
+        {
+            'bag': str(result.path),
+            'message_count': sum(result.counts.values()),
+            'counts': result.counts,
+            'skipped': result.skipped,
+            'stopped_by': result.stopped_by,
+        },
+        args.json,
+    )
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from skidsteer_power.bags._ros import StopFlag, stop_on_signals
+    from skidsteer_power.bags.replay import ReplayOptions, replay
+
+    _log_to_stderr()
+    options = ReplayOptions(
+        rate=args.rate,
+        loop=args.loop,
+        topics=args.topics,
+        start_s=args.start,
+        duration_s=args.duration,
+        clock=args.clock,
+        clock_hz=args.clock_hz,
+        wait_for_subscribers_s=args.wait_for_subscribers,
+    )
+    stop = StopFlag()
+    with _open(args) as bag, stop_on_signals(stop):
+        result = replay(bag, options, stop=stop)
+    emit(
+        {
+            'message_count': result.message_count,
+            'counts': result.counts,
+            'skipped': result.skipped,
+            'passes': result.passes,
+            'wall_time_s': result.wall_s,
+            'max_late_s': result.max_late_s,
+            'stopped_by': stop.signal_name or 'end',
+        },
+        args.json,
+    )
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from skidsteer_power.bags.report import one_screen
+    from skidsteer_power.bags.validate import ValidateOptions, validate
+
+    _log_to_stderr()
+    options = ValidateOptions(
+        vehicle=args.vehicle,
+        terrain=args.terrain,
+        report_dir=args.report,
+        cmd_vel_topic=args.cmd_vel,
+        joint_states_topic=args.joint_states,
+        odom_topic=args.odom,
+        map_cache_dir=args.map_cache,
+        plots=not args.no_plots,
+    )
+    with _open(args) as bag:
+        summary = validate(bag, options)
+    if args.json:
+        print_json(summary)
+    else:
+        print(one_screen(summary))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    rec = subparsers.add_parser(
+        'record',
+        help='record topics into a rosbag2 MCAP bag (Ctrl-C/SIGTERM stop cleanly)',
+        description='Record topics (all but /rosout and /parameter_events if none named) into a '
+        'rosbag2-compatible MCAP with message definitions. OUT.mcap gives one file; another name a '
+        'rosbag2 directory. SIGINT/SIGTERM stop cleanly without losing a received message.',
+    )
+    rec.add_argument('-o', '--output', required=True, metavar='OUT.mcap', help='bag to write (new)')
+    rec.add_argument('topics', nargs='*', metavar='TOPIC', help='topics to record (default: all)')
+    rec.add_argument('--duration', type=positive_float, default=None, metavar='S', help='stop after S s')
+    add_json_flag(rec)
+    rec.set_defaults(func=_cmd_record)
+
+    rep = subparsers.add_parser(
+        'replay',
+        help='publish a bag (MCAP or sqlite3) with its original timing',
+        description='Publish the stored CDR bytes of a bag with the original timing. Topics whose '
+        'message type is not installed for Python are skipped with a warning.',
+    )
+    rep.add_argument('bag', metavar='BAG', help='bag file (.mcap/.db3) or rosbag2 directory')
+    rep.add_argument('--rate', type=positive_float, default=1.0, metavar='R', help='speed factor (default 1)')
+    rep.add_argument('--loop', action='store_true', help='start over at the end until stopped')
+    rep.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='only these topics')
+    rep.add_argument('--start', type=nonnegative_float, default=0.0, metavar='S', help='skip the first S s')
+    rep.add_argument(
+        '--duration', type=positive_float, default=None, metavar='D', help='only D s of bag time'
+    )
+    rep.add_argument('--clock', action='store_true', help='publish the bag time on /clock')
+    rep.add_argument('--clock-hz', type=positive_float, default=40.0, metavar='HZ', help='/clock rate (40)')
+    rep.add_argument(
+        '--wait-for-subscribers',
+        type=nonnegative_float,
+        default=0.0,
+        metavar='S',
+        help='wait up to S s for every topic to have a subscriber before starting',
+    )
+    _add_bag_reading(rep)
+    add_json_flag(rep)
+    rep.set_defaults(func=_cmd_replay)
+
+    val = subparsers.add_parser(
+        'validate',
+        help='run the estimator offline over a bag; compare with measured torque/power; report',
+        description="Offline (no ROS graph): predict per-side torque and power from the bag's cmd_vel "
+        'and compare with joint_states; trace analysis (eqs. 7.8-7.10) from odometry; CSV, PNG plots, '
+        'a Markdown report and a JSON summary in DIR.',
+    )
+    val.add_argument('bag', metavar='BAG', help='bag file (.mcap/.db3) or rosbag2 directory')
+    val.add_argument('--vehicle', required=True, metavar='FILE', help='vehicle YAML or config name')
+    val.add_argument('--terrain', required=True, metavar='T', help='terrain preset or YAML file')
+    val.add_argument('--report', required=True, metavar='DIR', help='folder for the report (created)')
+    val.add_argument('--cmd-vel', default='/cmd_vel', metavar='TOPIC', help='command topic (/cmd_vel)')
+    val.add_argument('--joint-states', default='/joint_states', metavar='TOPIC', help='(/joint_states)')
+    val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
+    val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
+    val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    _add_bag_reading(val)
+    add_json_flag(val)
+    val.set_defaults(func=_cmd_validate)
