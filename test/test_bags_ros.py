@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from skidsteer_power.bags import open_bag
-from skidsteer_power.bags._ros import StopFlag
 from skidsteer_power.bags.record import Recorder, record
 from skidsteer_power.bags.replay import Replayer, ReplayOptions, deadlines
 from skidsteer_power.bags.synthetic import START_NS
 from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.stop_signals import StopFlag
 
 pytestmark = pytest.mark.ros
 

@@ -20,9 +20,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.bags._ros import StopFlag, message_class, qos_for_stored, to_bag_qos
+from skidsteer_power.bags._ros import message_class, qos_for_stored, to_bag_qos
 from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.errors import InputError
+from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
     from rclpy.context import Context

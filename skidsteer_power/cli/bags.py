@@ -34,8 +34,8 @@ def _log_to_stderr() -> None:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags._ros import StopFlag, stop_on_signals
     from skidsteer_power.bags.record import record
+    from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
     _log_to_stderr()
     stop = StopFlag()
@@ -60,8 +60,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags._ros import StopFlag, stop_on_signals
     from skidsteer_power.bags.replay import ReplayOptions, replay
+    from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
     _log_to_stderr()
     options = ReplayOptions(

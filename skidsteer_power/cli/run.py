@@ -18,6 +18,7 @@ import time
 from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
+from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -97,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         start = _snapshot(suite)
         started = time.monotonic()
         suite.start()
-        _wait(suite, args, started, counters)
+        with stop_on_signals(StopFlag()) as stop:
+            _wait(suite, args, started, counters, stop)
         end = _snapshot(suite)
     except KeyboardInterrupt:
         return 130
@@ -127,10 +129,11 @@ def _count(counters: _Counters, name: str) -> None:
     setattr(counters, name, getattr(counters, name) + 1)
 
 
-def _wait(suite: Any, args: argparse.Namespace, started: float, counters: _Counters) -> None:
+def _wait(suite: Any, args: argparse.Namespace, started: float, counters: _Counters, stop: StopFlag) -> None:
+    """Print status lines until ``--duration`` has passed or SIGINT / SIGTERM arrived."""
     duration = args.duration if args.duration is not None else math.inf
     next_status = started + args.status_every
-    while time.monotonic() - started < duration:
+    while time.monotonic() - started < duration and not stop.is_set():
         time.sleep(min(0.05, max(0.0, started + duration - time.monotonic())))
         if not args.quiet and not args.json and time.monotonic() >= next_status:
             next_status += args.status_every

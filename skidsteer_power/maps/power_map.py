@@ -44,7 +44,9 @@ reported (never silently dropped); a query touching such a cell is flagged ``cla
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -128,13 +130,34 @@ def terrain_fingerprint(terrain: Terrain) -> str:
     return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]
 
 
+# Modules whose code decides a map's numbers: a change to any of them invalidates cached maps, so a
+# map built by older code is rebuilt instead of silently used (a hand-bumped tag alone was forgotten).
+_MAP_SOURCES = (
+    'skidsteer_power.models.fess',
+    'skidsteer_power.models.loads',
+    'skidsteer_power.maps.grid',
+    'skidsteer_power.maps.power_map',
+    'skidsteer_power.terramechanics.soil',
+    'skidsteer_power.terramechanics.track',
+    'skidsteer_power.terramechanics.wheel',
+)
+
+
+@functools.lru_cache(maxsize=1)
+def _source_digest() -> str:
+    digest = hashlib.sha256()
+    for name in _MAP_SOURCES:
+        digest.update(Path(importlib.import_module(name).__file__).read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def model_version(model: str) -> str:
-    """Version string of the model that builds maps; a stored map must match it."""
+    """Version string of the model that builds maps (tag + digest of the code); a stored map must match."""
     if model == 'fess':
         from skidsteer_power.models.fess import MODEL_VERSION
 
-        return f'{MODEL_VERSION}/map{MAP_FORMAT}'
-    return f'{model}/map{MAP_FORMAT}'
+        return f'{MODEL_VERSION}+{_source_digest()}/map{MAP_FORMAT}'
+    return f'{model}+{_source_digest()}/map{MAP_FORMAT}'
 
 
 def default_cache_dir() -> Path:
