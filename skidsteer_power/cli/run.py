@@ -86,8 +86,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         suite = Suite(options, context=context)
         helper = rclpy.create_node('run_cli', context=context)
-        suite.nodes.append(helper)
-        suite.executor.add_node(helper)
+        suite.add_node(helper)
         helper.create_subscription(JointState, 'joint_states', lambda m: _count(counters, 'joint_states'), 50)
         helper.create_subscription(JointState, 'power/predicted', lambda m: _count(counters, 'predicted'), 50)
         if args.speed is not None:

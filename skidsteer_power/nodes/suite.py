@@ -1,8 +1,12 @@
 """The on-board node suite without ROS launch: ``power_estimator`` + ``des_driver`` in one process.
 
-Both nodes share one :class:`rclpy.executors.MultiThreadedExecutor` (the driver's serial I/O runs in
-its own threads anyway). With ``simulate=True`` the amplifiers are :class:`SimulatedPair` on
-pseudo-terminals, driven through the robot's own pyserial code path, and each simulated motor is
+Each node spins in its own thread with its own :class:`rclpy.executors.SingleThreadedExecutor`: one
+shared MultiThreadedExecutor spent most of the process's time building wait sets and, sharing the GIL
+with the serial threads, let joint_states fall from 50 Hz to 1-5 Hz (measured with ``run
+--simulate``; des_driver alone in its own process kept 49 Hz).
+
+With ``simulate=True`` the amplifiers are :class:`SimulatedPair` on pseudo-terminals, driven through
+the robot's own pyserial code path, and each simulated motor is
 loaded like the test robot's: the axle torque the FESS map gives for the current command on the
 chosen vehicle and terrain (the "ground truth" terrain, which may differ from the estimator's), plus
 the side's internal resistance of Table 7.1 (eqs. 7.1-7.4), seen at the motor through the 12:1
@@ -20,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from geometry_msgs.msg import Twist, TwistStamped
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -134,8 +138,8 @@ class Suite:
         self.vehicle = factory.load_vehicle_config(options.vehicle)
         self.sim = None
         self.nodes: list[Node] = []
-        self.executor = MultiThreadedExecutor(num_threads=4, context=context)
-        self._thread: threading.Thread | None = None
+        self._executors: list[SingleThreadedExecutor] = []
+        self._threads: list[threading.Thread] = []
         try:
             left_port, right_port = options.left_port, options.right_port
             if options.simulate:
@@ -145,8 +149,6 @@ class Suite:
             self.nodes.append(self.estimator)
             self.driver = DesDriver(parameter_overrides=self._driver_params(left_port, right_port), **kwargs)
             self.nodes.append(self.driver)
-            for node in self.nodes:
-                self.executor.add_node(node)
         except BaseException:
             self.shutdown()
             raise
@@ -186,17 +188,29 @@ class Suite:
         self.nodes.append(sim_node)
         return self.sim.left.port, self.sim.right.port
 
+    def add_node(self, node: Node) -> None:
+        """Add a node (before :meth:`start`); it gets its own executor and thread."""
+        self.nodes.append(node)
+
     def start(self) -> Suite:
-        """Spin in a background thread (for tests and the CLI's status loop)."""
-        self._thread = threading.Thread(target=self.executor.spin, name='suite-executor', daemon=True)
-        self._thread.start()
+        """Spin every node in a background thread of its own (for tests and the CLI's status loop)."""
+        for node in self.nodes:
+            executor = SingleThreadedExecutor(context=self.context)
+            executor.add_node(node)
+            thread = threading.Thread(target=executor.spin, name=f'spin-{node.get_name()}', daemon=True)
+            self._executors.append(executor)
+            self._threads.append(thread)
+            thread.start()
         return self
 
     def shutdown(self) -> None:
         """Save the energy state, stop the motors, destroy the nodes, stop the simulated amplifiers."""
-        self.executor.shutdown(timeout_sec=2.0)
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        for executor in self._executors:
+            executor.shutdown(timeout_sec=2.0)
+        for thread in self._threads:
+            thread.join(timeout=5.0)
+        self._executors.clear()
+        self._threads.clear()
         for node in reversed(self.nodes):
             node.destroy_node()
         self.nodes.clear()
