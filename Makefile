@@ -19,7 +19,7 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py
 setup: $(STAMP)
 
 run: setup
-	$(BIN)/python -m skidsteer_power.main_job
+	bash bags/replay_and_validate.sh
 
 lint: setup
 	$(BIN)/ruff check .

@@ -262,19 +262,20 @@ def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp
 def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
     import rclpy
     from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import LaserScan
 
     listener = rclpy.create_node('bag_real_listener', context=ros_context)
-    received: dict[str, list[bytes]] = {'/cmd_vel': [], '/scan': []}
-    listener.create_subscription(Twist, '/cmd_vel', lambda d: received['/cmd_vel'].append(d), 1000, raw=True)
-    listener.create_subscription(LaserScan, '/scan', lambda d: received['/scan'].append(d), 1000, raw=True)
+    received: dict[str, list[bytes]] = {'/cmd_vel': [], '/scan': [], '/odom': []}
+    for topic, msg_class in (('/cmd_vel', Twist), ('/scan', LaserScan), ('/odom', Odometry)):
+        listener.create_subscription(msg_class, topic, received[topic].append, 1000, raw=True)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(listener)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     # 14.8-16.9 s of the bag holds the (0.3 m/s, -1 rad/s) command: teleop traffic on both topics.
-    args = ['replay', str(REAL_BAG), '--topics', '/cmd_vel', '/scan', '--start', '14.5', '--duration', '2.5']
+    args = ['replay', str(REAL_BAG), '--topics', *received, '--start', '14.5', '--duration', '2.5']
     run = subprocess.run(
         _cli(*args, '--rate', '2', '--wait-for-subscribers', '20', '--json'),
         capture_output=True,
@@ -293,7 +294,7 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
             t: [m.data for m in bag.messages([t], start_ns=start, stop_ns=start + 2_500_000_000)]
             for t in received
         }
-    assert len(expected['/cmd_vel']) > 20 and len(expected['/scan']) > 5
+    assert len(expected['/cmd_vel']) > 20 and len(expected['/scan']) > 5 and len(expected['/odom']) > 5
     assert json.loads(run.stdout)['counts'] == {t: len(v) for t, v in expected.items()}
     assert {t: len(v) for t, v in received.items()} == {t: len(v) for t, v in expected.items()}
     assert received == expected
