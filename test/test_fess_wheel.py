@@ -64,3 +64,45 @@ def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name
     scale = np.maximum(np.abs(ref.torque_outer_Nm), np.abs(ref.torque_inner_Nm))[ok]
     assert np.max(np.abs(got.torque_outer_Nm - ref.torque_outer_Nm)[ok] / scale) < 0.10
     assert np.max(np.abs(got.torque_inner_Nm - ref.torque_inner_Nm)[ok] / scale) < 0.10
+
+
+@pytest.mark.parametrize('name', ['test_robot_4wheel', 'test_robot_6wheel'])
+def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(name):
+    """The available thrust behind the traction margin is F_max = c A + W tan(phi) (eqs. 2.2 / 2.12)
+    summed over EVERY wheel of a side (it once summed a single wheel, so a 6-wheel robot of the same
+    weight reported a third of its capacity). Hand check, sand_bin (Table 7.2: c = 200 Pa, phi = 27
+    deg), 30 kg, straight running (no load transfer, eq. 6.12): each wheel carries W = m g / n_wheels
+    (73.6 N of 4, 49.1 N of 6); its flattened contact spans x = r sin(theta_r) ... r sin(theta_f)
+    (eq. 6.11), area A = b r (sin theta_f - sin theta_r); per side k (c A + W tan phi) = 77.5 N
+    (4 wheels) and 78.4 N (6 wheels). The model integrates c + sigma tan(phi) over the horizontal
+    contact, where sum sigma dA carries W less the tau sin(theta) share of eq. 2.27: within 3 %."""
+    vehicle = load_vehicle(name)
+    terrain = PRESETS['sand_bin']
+    solver = fess.FessSolver(vehicle, terrain, n=40)
+    contact = solver.problem(np.array([0.1]), np.array([0.0])).contact
+    x_front, x_rear = contact.fwd[0, 0, 0, 0], contact.fwd[0, 0, 0, -1]
+    area = vehicle.wheel_width_m * (x_front - x_rear)
+    per_wheel = terrain.c * area + vehicle.weight_N / vehicle.n_wheels * np.tan(terrain.phi)
+    hand = vehicle.wheels_per_side * per_wheel
+    assert hand == pytest.approx(77.5 if vehicle.n_wheels == 4 else 78.4, abs=0.1)  # numbers above
+    sol = solver.solve_twist(0.1, 0.0)
+    assert sol.converged[0]
+    capacity = np.abs(sol.thrust[0, 0]) / (1.0 - sol.traction_margin[0])  # margin = 1 - |F| / F_max
+    assert capacity == pytest.approx(hand, rel=0.03)
+
+
+def test_four_and_six_wheels_of_equal_weight_have_equal_capacity_and_drive_table_7_3_turns():
+    """Same mass and wheels: F_max = c A + W tan(phi) hardly depends on how the weight is split over
+    the axles, so the two capacities agree within 5 %. Table 7.3: both wheeled robots ran on the sand
+    bin at 0.1 m/s up to 0.2 rad/s and at 0.2 m/s up to 0.35 rad/s (only smaller radii stuck), so
+    the model must not call those turns stuck (margin > 0)."""
+    terrain = PRESETS['sand_bin']
+    speed = np.array([0.1, 0.1, 0.2])
+    yaw = np.array([0.0, 0.2, 0.35])
+    caps = []
+    for name in ('test_robot_4wheel', 'test_robot_6wheel'):
+        sol = fess.FessSolver(load_vehicle(name), terrain, n=20).solve_twist(speed, yaw)
+        assert sol.converged.all()
+        assert np.all(sol.traction_margin > 0), name
+        caps.append(np.abs(sol.thrust[0, 0]) / (1.0 - sol.traction_margin[0]))
+    assert caps[1] == pytest.approx(caps[0], rel=0.05)

@@ -716,7 +716,11 @@ def _outputs(prob: Problem, result: NewtonResult, standing: np.ndarray) -> Twist
     thrust = np.sum(fx * c.wx[:, None], axis=(-2, -1))[:, 0]
     lateral = np.sum(fy * c.wy[:, None], axis=(-2, -1))[:, 0]
     torque = prob.radius * np.sum(fx * c.wt[:, None], axis=(-2, -1))[:, 0]  # shear about the axle
-    capacity = np.sum(c.tau_max * c.wx * np.ones_like(c.wx), axis=(-2, -1))  # F_max per side, eq. 2.12
+    # F_max per side, eq. 2.12 (F_max = c A + W tan(phi) of eq. 2.2 summed over the side's contacts).
+    # tau_max and wx describe ONE wheel (gear axis of size 1); the thrust above sums all G gears (fx
+    # broadcasts over ``centre``), so the capacity must too, or a side with k wheels reports k times
+    # the required / available ratio. ones_like(centre) spreads one wheel's strength over every axle.
+    capacity = np.sum(c.tau_max * c.wx * np.ones_like(c.centre), axis=(-2, -1))
     with np.errstate(invalid='ignore', divide='ignore'):
         margin = 1.0 - np.max(np.abs(thrust) / capacity, axis=1)  # 1 - required / available thrust
     omega = x[:, 1:]
