@@ -28,6 +28,7 @@ class Report:
     def figure(
         self, name: str, value: float, unit: str, *, goal: str = '', met: bool | None = None, note: str = ''
     ) -> Figure:
+        met = None if met is None else bool(met)  # numpy bools would escape the `is False` count
         fig = Figure(f'{self.section}: {name}' if self.section else name, float(value), unit, goal, met, note)
         self.figures.append(fig)
         print(format_figure(fig), flush=True)
