@@ -12,6 +12,7 @@ from scipy.interpolate import RegularGridInterpolator
 
 from benchmarks.harness import Report, best_time
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.maps.power_map import DEFAULT_SHAPE
 from skidsteer_power.models import fess
 from skidsteer_power.terramechanics.terrain import PRESETS
 from skidsteer_power.vehicle import load_vehicle
@@ -31,7 +32,7 @@ def _build(report: Report) -> PowerMap:
         elapsed = time.perf_counter() - start
         m = maps[name]
         report.figure(
-            f'build 16x41 map, {name}, dry sand',
+            f'build default {DEFAULT_SHAPE[0]}x{DEFAULT_SHAPE[1]} map, {name}, dry sand',
             elapsed,
             's',
             note=f'{int(m.converged.sum())}/{m.converged.size} converged, {int(m.limited.sum())} limited',

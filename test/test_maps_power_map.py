@@ -48,7 +48,7 @@ def test_grid_nodes_reproduce_direct_fess(small_map):
 
 
 def test_off_grid_interpolation_within_1_percent_of_direct_fess():
-    """Issue 5 accuracy goal, on the default 16 x 41 grid: the mechanical power (what the estimator
+    """Issue 5 accuracy goal, on the default 16 x 101 grid: the mechanical power (what the estimator
     integrates) within 1 % of direct FESS at 150 random off-grid commands outside the small-radius
     limit. (Side torques near straight running, where they are tiny, are reported in
     benchmarks/bench_maps.py.)"""
