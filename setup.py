@@ -38,7 +38,7 @@ setup(
     maintainer_email='skidsteer-power@example.com',
     description='Locomotion power and energy of skid-steered robots on deformable terrain.',
     license='Apache-2.0',
-    tests_require=['pytest'],
+    extras_require={'test': ['pytest', 'hypothesis']},
     entry_points={
         'console_scripts': [
             'skidsteer-power = skidsteer_power.cli.main:main',
