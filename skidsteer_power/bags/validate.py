@@ -471,6 +471,10 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[Segment]:
             fit = fit_circle(xy[:, 0], xy[:, 1])
         except InputError as err:
             note = str(err)
+        if t.size == 2:
+            note = 'only 2 poses: mean speed, no circle'
+        elif t.size == 3 and fit is not None:
+            note = 'only 3 poses: the circle passes through them exactly'
         result.append(
             Segment(
                 t_start_s=start,

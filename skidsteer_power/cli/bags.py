@@ -7,7 +7,14 @@ import logging
 import sys
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float, positive_float, print_json
+from skidsteer_power.cli.common import (
+    _number,
+    add_json_flag,
+    emit,
+    nonnegative_float,
+    positive_float,
+    print_json,
+)
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
@@ -106,6 +113,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         odom_topic=args.odom,
         map_cache_dir=args.map_cache,
         plots=not args.no_plots,
+        cmd_hold_s=args.cmd_hold,
+        left_joints=args.left_joints,
+        right_joints=args.right_joints,
+        effort_is=args.effort,
+        joints_at=args.joints_at,
     )
     with _open(args) as bag:
         summary = validate(bag, options)
@@ -114,6 +126,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     else:
         print(one_screen(summary))
     return 0
+
+
+def _hold_float(text: str) -> float:
+    """argparse type: a command hold > 0 s, or inf."""
+    value = _number(text, allow_inf=True)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f'must be > 0 (or inf): {text!r}')
+    return value
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -173,6 +193,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    val.add_argument(
+        '--cmd-hold',
+        type=_hold_float,
+        default=None,
+        metavar='S',
+        help='hold each command at most S s ("inf": until the next one); default: inferred from the '
+        'bag (stream: its longest ordinary pause; on-change: until the next command or odometry rest)',
+    )
+    val.add_argument('--left-joints', default='', metavar='A,B', help='left joints (default: vehicle file)')
+    val.add_argument('--right-joints', default='', metavar='C,D', help='right joints (default: vehicle file)')
+    val.add_argument(
+        '--effort',
+        default='',
+        choices=('', 'torque', 'current'),
+        help='joint effort: N m or A (vehicle file)',
+    )
+    val.add_argument(
+        '--joints-at', default='', choices=('', 'motor', 'wheel'), help='joint values at (vehicle file)'
+    )
     _add_bag_reading(val)
     add_json_flag(val)
     val.set_defaults(func=_cmd_validate)
