@@ -203,7 +203,7 @@ def test_cli_validate_json_and_clear_errors(tmp_path):
     )
 
 
-@pytest.mark.skipif(not REAL_BAG.exists(), reason=f'real bag folder absent: {REAL_BAG}')
+@pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
 def test_real_bag_validates_with_trace_analysis_from_odom(tmp_path, predictor):
     with open_bag(REAL_BAG, warn_unknown=False) as bag:
         summary = validate(bag, _options(tmp_path), predictor)
