@@ -6,6 +6,7 @@ Decoding goes through the rosbags type store, so any definition the reader knows
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -91,18 +92,21 @@ def decode_joint_arrays(
     t, present = [], []
     columns: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
     nan_row = np.full(k, np.nan)
+    last_names: list[str] | None = None
+    rows: list[int] = []
     for message in bag.messages([topic]):
         msg = bag.deserialize(message)
         t.append(message.timestamp_ns - t0_ns)
-        index = {name: i for i, name in enumerate(msg.name)}
-        rows = [index.get(name, -1) for name in names]
-        present.append(min(rows) >= 0)
+        if msg.name != last_names:  # joint order rarely changes: look the rows up once
+            index = {name: i for i, name in enumerate(msg.name)}
+            rows = [index.get(name, -1) for name in names]
+            last_names = msg.name
+        ok = min(rows) >= 0
+        present.append(ok)
+        top = max(rows)
         for field_name, column in columns.items():
-            values = np.asarray(getattr(msg, field_name), dtype=float)
-            if present[-1] and values.size > max(rows):
-                column.append(values[rows])
-            else:
-                column.append(nan_row)
+            values = getattr(msg, field_name)
+            column.append(values[rows] if ok and len(values) > top else nan_row)
     return (
         np.array(t, dtype=float) / NS,
         *(np.array(columns[f], dtype=float).reshape(-1, k) for f in ('position', 'velocity', 'effort')),
@@ -128,7 +132,7 @@ def decode_planar_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndar
         msg = bag.deserialize(message)
         pose = msg.pose.pose if nested else msg.pose
         q = pose.orientation
-        yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         t.append(message.timestamp_ns - t0_ns)
         rows.append((pose.position.x, pose.position.y, yaw))
     table = np.array(rows, dtype=float).reshape(-1, 3)

@@ -12,8 +12,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-import numpy as np
-
 from skidsteer_power.errors import ConfigError, InputError
 
 JOINT_NAMES = ('left_motor', 'right_motor')  # the test robot's (TEST_ROBOT_JOINTS)
@@ -230,13 +228,19 @@ class JointReader:
         self._torque_factor = (g_dt / g_pt) if at_motor else 1.0 / g_pt
         if joint_map.effort_is == 'current':
             self._torque_factor *= kt * (1.0 if at_motor else g_dt)
-        self._sign = np.array([-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints])
+        self._sign = [-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints]
         self._n_left = len(joint_map.left)
-        self._last: tuple[float, np.ndarray] | None = None
+        self._last: tuple[float, list[float]] | None = None
 
-    def _pick(self, what: str, values: Sequence[float], rows: list[int]) -> np.ndarray:
-        out = np.empty(len(rows))
-        for k, (name, i) in enumerate(zip(self.map.joints, rows, strict=True)):
+    def _pick(self, what: str, values: Sequence[float], rows: list[int]) -> list[float]:
+        """The mapped joints' values (sign applied); InputError for a missing, NaN or infinite one."""
+        try:
+            out = [values[i] * sign for i, sign in zip(rows, self._sign)]  # noqa: B905 (same length)
+        except IndexError:
+            out = []
+        if out and sum(out) - sum(out) == 0:  # NaN - NaN and inf - inf are NaN: every value is finite
+            return out
+        for name, i in zip(self.map.joints, rows, strict=True):  # say which one, and why
             if i >= len(values):
                 raise InputError(f'joint_states has no {what} for {name}')
             value = float(values[i])
@@ -244,8 +248,7 @@ class JointReader:
                 raise InputError(f'{name} {what} is NaN')
             if math.isinf(value):
                 raise InputError(f'{name} {what} is infinite')
-            out[k] = value
-        return out * self._sign
+        raise AssertionError('unreachable: every value was finite')
 
     def read(
         self,
@@ -259,10 +262,11 @@ class JointReader:
         speed needs a second sample. Raises InputError for a missing joint or value, NaN, infinity or
         a value beyond ``limits``."""
         index = {name: i for i, name in enumerate(names)}
-        missing = [n for n in self.map.joints if n not in index]
-        if missing:
-            raise InputError(f'joint_states lacks {", ".join(missing)}')
-        rows = [index[n] for n in self.map.joints]
+        try:
+            rows = [index[n] for n in self.map.joints]
+        except KeyError:
+            missing = [n for n in self.map.joints if n not in index]
+            raise InputError(f'joint_states lacks {", ".join(missing)}') from None
         interfaces = self.map.interfaces
         if 'effort' not in interfaces:
             raise InputError('the drivetrain mapping declares no effort: no measured power')
@@ -274,24 +278,22 @@ class JointReader:
             last, self._last = self._last, (now_s, angle)
             if last is None or now_s <= last[0]:
                 return None
-            omega = (angle - last[1]) / (now_s - last[0])
+            dt = now_s - last[0]
+            omega = [(a - b) / dt for a, b in zip(angle, last[1], strict=True)]
         else:
             raise InputError('the drivetrain mapping declares neither velocity nor position')
-        n = self._n_left
-        omega_m = (
-            float(np.mean(omega[:n])) * self._omega_factor,
-            float(np.mean(omega[n:])) * self._omega_factor,
-        )
-        torque_m = (
-            float(np.sum(torque[:n])) * self._torque_factor,
-            float(np.sum(torque[n:])) * self._torque_factor,
-        )
-        for side, joints, w, t in zip(
-            ('left', 'right'), (self.map.left, self.map.right), omega_m, torque_m, strict=True
-        ):
-            label = joints[0] if len(joints) == 1 else f'{side} side (motor-equivalent)'
-            _finite_within(f'{label} velocity', w, self.limits.max_motor_speed_rad_s, 'rad/s')
-            _finite_within(f'{label} effort', t, self.limits.max_motor_torque_Nm, 'N m')
+        n, m = self._n_left, len(omega) - self._n_left
+        w_f, t_f = self._omega_factor, self._torque_factor
+        omega_m = (sum(omega[:n]) / n * w_f, sum(omega[n:]) / m * w_f)
+        torque_m = (sum(torque[:n]) * t_f, sum(torque[n:]) * t_f)
+        limits = self.limits
+        for k, joints in enumerate((self.map.left, self.map.right)):
+            w, t = omega_m[k], torque_m[k]
+            if abs(w) <= limits.max_motor_speed_rad_s and abs(t) <= limits.max_motor_torque_Nm:
+                continue
+            label = joints[0] if len(joints) == 1 else f'{("left", "right")[k]} side (motor-equivalent)'
+            _finite_within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
+            _finite_within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
         return omega_m, torque_m
 
 
