@@ -209,6 +209,40 @@ def test_diagnostics_warn_while_a_command_is_outside_the_map(track):
     assert values['command_outside_map'] == 'true' and values['commands_outside_map'] == '1'
 
 
+@pytest.mark.ros
+def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(ros_context, track):
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.estimator.core import RejectedInput
+    from skidsteer_power.nodes.power_estimator import PowerEstimator
+
+    overrides = {
+        'left_joints': 'fl, rl',
+        'right_joints': 'fr,rr',
+        'effort_is': 'current',
+        'joint_gear_ratio': 20.0,
+    }
+    node = PowerEstimator(
+        predictor=track,
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('vehicle', value='husky_a200'),
+            Parameter('terrain', value=TERRAIN),
+            Parameter('persist', value=False),
+            *(Parameter(k, value=v) for k, v in overrides.items()),
+        ],
+    )
+    try:
+        joint_map = node.core.settings.joint_map
+        assert (joint_map.left, joint_map.right) == (('fl', 'rl'), ('fr', 'rr'))
+        assert (joint_map.effort_is, joint_map.gear_ratio, joint_map.location) == ('current', 20.0, 'wheel')
+        assert joint_map.interfaces == ('position', 'velocity')  # husky_a200.yaml: no effort exported
+        with pytest.raises(RejectedInput, match='declares no effort'):
+            node.core.on_joint_state(['fl', 'rl', 'fr', 'rr'], [1.0] * 4, [], 0.0, [0.0] * 4)
+    finally:
+        node.destroy_node()
+
+
 # --- command semantics ----------------------------------------------------------------------------
 # On change: three commands at irregular times, each different from the one before (no repeats).
 ON_CHANGE = [(0.0, 0.2, 0.0), (1.3, 0.2, 0.3), (2.0, 0.0, 0.0)]
