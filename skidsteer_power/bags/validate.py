@@ -62,7 +62,7 @@ class ValidateOptions:
     map_cache_dir : where the power map is cached (None: the estimator's default)
     battery_window_s : battery stepped with the mean power of windows this long [s] (0: per input)
     settle_s : start of each constant-command segment left out of the trace analysis [s]
-    min_segment_s : shortest segment analysed [s]
+    min_segment_s : shortest segment analysed [s] (just over settle_s: a short leg of a square counts)
     segment_gap_s : unused (kept for callers); segments end where a command's hold ends
     plots : write PNG plots
     cmd_hold_s : how long a command stays in force [s] (None: inferred, see bags/commands.py; inf:
@@ -80,7 +80,7 @@ class ValidateOptions:
     map_cache_dir: str | Path | None = None
     battery_window_s: float = 0.2
     settle_s: float = 0.5
-    min_segment_s: float = 1.0
+    min_segment_s: float = 0.6
     segment_gap_s: float = 1.0
     plots: bool = True
     cmd_hold_s: float | None = None
