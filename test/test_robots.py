@@ -16,7 +16,7 @@ from conftest import REQUIRE_SHARED_ENV, shared_path
 from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bags import open_bag
-from skidsteer_power.bags.commands import command_timing
+from skidsteer_power.bags.cmd_timing import command_timing
 from skidsteer_power.bags.validate import ValidateOptions, validate
 from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.errors import ConfigError, InputError

@@ -13,7 +13,7 @@ import numpy as np
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import Inputs, RunSeries, Segment
+    from skidsteer_power.bags.validate import Inputs, RunSeries, TraceSegment
 
 SEGMENT_COLUMNS = (
     't_start_s',
@@ -60,7 +60,7 @@ def write_series_csv(path: Path, series: RunSeries) -> None:
     np.savetxt(path, table, delimiter=',', header=','.join(names), comments='', fmt='%.9g')
 
 
-def write_segments_csv(path: Path, segments: list[Segment]) -> None:
+def write_segments_csv(path: Path, segments: list[TraceSegment]) -> None:
     with path.open('w', newline='', encoding='utf-8') as handle:
         writer = csv.writer(handle)
         writer.writerow(SEGMENT_COLUMNS)
@@ -91,7 +91,9 @@ def held_steps(t: np.ndarray, y: np.ndarray, hold: np.ndarray) -> tuple[np.ndarr
     return x[keep], v[keep]
 
 
-def write_plots(directory: Path, series: RunSeries, inputs: Inputs, segments: list[Segment]) -> list[str]:
+def write_plots(
+    directory: Path, series: RunSeries, inputs: Inputs, segments: list[TraceSegment]
+) -> list[str]:
     """PNG plots: torque and power per side (predicted vs measured, sample-and-hold steps), and the
     recorded path with the circles fitted to its constant-command segments."""
     import matplotlib
@@ -128,7 +130,7 @@ def write_plots(directory: Path, series: RunSeries, inputs: Inputs, segments: li
     return written
 
 
-def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[Segment]) -> str:
+def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
     """The recorded path, scaled to itself, with the fitted circles clipped to the path's window."""
     fig, ax = plt.subplots(figsize=(6, 6))
     every = _thin(len(inputs.pose_t))
@@ -330,7 +332,7 @@ def write_report(
     summary: dict[str, Any],
     series: RunSeries,
     inputs: Inputs,
-    segments: list[Segment],
+    segments: list[TraceSegment],
     plots: bool,
 ) -> dict[str, Any]:
     """Write every report file into ``directory``; returns their paths (also put into the JSON)."""

@@ -7,7 +7,7 @@ shaft speed [rad/s], effort = Kt*I [N m]) are fed in receive-time order to
 :class:`skidsteer_power.estimator.EstimatorCore`, as the live ``power_estimator`` node feeds it, so
 each joint_states sample is aligned with the prediction in force when it arrived. How long a command
 stays in force depends on how it was published (a stream or only on change) and, for on-change
-commands, on whether odometry shows the robot still moving (:mod:`skidsteer_power.bags.commands`).
+commands, on whether odometry shows the robot still moving (:mod:`skidsteer_power.bags.cmd_timing`).
 Compared per side at the motor (motor-equivalent for wheel joints): torque [N m] and terminal
 (electrical) power [W]; metrics over samples whose command is in force: MAE, RMSE and the error of
 the energy over the run [%]. The share of time and energy whose prediction came from outside the
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.analysis.trace import fit_circle, mean_speed
-from skidsteer_power.bags.commands import CommandTiming, at_rest, command_timing, hold_ends
+from skidsteer_power.bags.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
 from skidsteer_power.bags.decode import (
     decode_joint_arrays,
     decode_joint_states,
@@ -65,7 +65,7 @@ class ValidateOptions:
     min_segment_s : shortest segment analysed [s] (just over settle_s: a short leg of a square counts)
     segment_gap_s : unused (kept for callers); segments end where a command's hold ends
     plots : write PNG plots
-    cmd_hold_s : how long a command stays in force [s] (None: inferred, see bags/commands.py; inf:
+    cmd_hold_s : how long a command stays in force [s] (None: inferred, see bags/cmd_timing.py; inf:
         until the next command)
     left_joints, right_joints, effort_is, joints_at : override the vehicle file's joint_states
         mapping ('' = the file's; joint lists comma-separated)
@@ -409,8 +409,8 @@ def map_coverage(series: RunSeries) -> dict[str, float]:
 
 
 @dataclass(frozen=True)
-class Segment:
-    """A stretch of constant command and what the trace says about it (SI units; inf = straight)."""
+class TraceSegment:
+    """What the trace says about one held command (the command: commands.Segment); SI, inf = straight."""
 
     t_start_s: float
     t_end_s: float
@@ -435,7 +435,7 @@ def command_segments(
 ) -> list[tuple[float, float, float, float]]:
     """(start, end, V, yaw rate) of runs of one repeated command, split where it stops being in force.
 
-    ``hold_end`` [s]: when each command stops being in force (:func:`bags.commands.hold_ends`);
+    ``hold_end`` [s]: when each command stops being in force (:func:`bags.cmd_timing.hold_ends`);
     None: at the next command, at most ``timeout_s`` later. A run ends where its last command's hold
     ends. Runs shorter than ``min_duration_s`` and standstill runs (V = yaw rate = 0) are dropped.
     """
@@ -455,10 +455,10 @@ def command_segments(
     return segments
 
 
-def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[Segment]:
+def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegment]:
     """Trace analysis (eqs. 7.8-7.10) of every constant-command segment (a note says why where the
     poses are too few or collinear)."""
-    result: list[Segment] = []
+    result: list[TraceSegment] = []
     if inputs.pose_t.size < 3:
         return result
     runs = command_segments(
@@ -481,7 +481,7 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[Segment]:
         elif t.size == 3 and fit is not None:
             note = 'only 3 poses: the circle passes through them exactly'
         result.append(
-            Segment(
+            TraceSegment(
                 t_start_s=start,
                 t_end_s=end,
                 speed_cmd_m_s=speed,

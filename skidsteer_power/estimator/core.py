@@ -140,7 +140,7 @@ class EstimatorCore:
         """Predict for a cmd_vel (V [m/s], yaw rate [rad/s]); raises RejectedInput for a bad one.
 
         The command is in force for ``hold_s`` [s] (None: ``settings.cmd_timeout_s``); offline
-        validation passes each recorded command's hold (:mod:`skidsteer_power.bags.commands`).
+        validation passes each recorded command's hold (:mod:`skidsteer_power.bags.cmd_timing`).
         """
         try:
             speed, yaw_rate = check_command(speed_m_s, yaw_rate_rad_s, self.settings.limits)
