@@ -52,7 +52,8 @@ def ament_prefix(tmp_path, monkeypatch):
     marker.write_text('')
     config = prefix / 'share' / 'skidsteer_power' / 'config'
     (config / 'vehicles').mkdir(parents=True)
-    shutil.copy(SOURCE_CONFIG / 'vehicles' / 'test_robot_track.yaml', config / 'vehicles' / 'installed_only.yaml')
+    source = SOURCE_CONFIG / 'vehicles' / 'test_robot_track.yaml'
+    shutil.copy(source, config / 'vehicles' / 'installed_only.yaml')
     shutil.copytree(SOURCE_CONFIG / 'powertrains', config / 'powertrains')
     shutil.copytree(SOURCE_CONFIG / 'batteries', config / 'batteries')
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(prefix))
