@@ -159,3 +159,37 @@ def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
     published |= {'/battery/state', '/energy/time_to_empty_s', '/energy/remaining_wh', '/odom'}
     used = topics_used(shipped)
     assert used <= published and {'/power/predicted_left_w', '/power/measured_right_w'} <= used
+
+
+def test_latched_topics_reach_the_bridge_and_others_match_any_publisher(ros_context):
+    """A transient-local message published before the bridge starts still reaches its channel; a
+    best-effort (sensor-data) publisher matches too. In-process bridge (real rclpy + foxglove-sdk)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
+
+    from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
+
+    ns = f'/latch_{uuid.uuid4().hex[:6]}'
+    node = rclpy.create_node('latch_probe', context=ros_context)
+    latched = node.create_publisher(
+        String, f'{ns}/robot_description', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    )
+    latched.publish(String(data='<robot/>'))
+    sensor = node.create_publisher(JointState, f'{ns}/joint_states', qos_profile_sensor_data)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    bridge = FoxgloveBridge(
+        node, host='127.0.0.1', port=0, topics=[f'{ns}/robot_description', f'{ns}/joint_states']
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while not (len(bridge.forwarded) == 2 and all(f.messages for f in bridge.forwarded.values())):
+            assert time.monotonic() < deadline, {t: f.messages for t, f in bridge.forwarded.items()}
+            sensor.publish(JointState(name=['left_motor'], velocity=[1.0]))
+            executor.spin_once(timeout_sec=0.05)
+        assert bridge.forwarded[f'{ns}/robot_description'].messages == 1  # the latched one, published once
+    finally:
+        bridge.close()
+        executor.shutdown()
+        node.destroy_node()

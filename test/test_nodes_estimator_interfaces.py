@@ -179,3 +179,21 @@ def test_bad_qos_parameters_are_one_clear_error(ros_context):
                 parameter_overrides=[Parameter(name, value=value), Parameter('persist', value=False)],
             )
     assert rclpy.ok(context=ros_context)
+
+
+def test_battery_fields_status_follows_the_current_sign():
+    """Pure: drawing power discharges (current < 0 by the message's convention), regenerating
+    charges (current > 0), nothing drawn is neither; unknown quantities are NaN, never 0."""
+    from skidsteer_power.estimator.factory import battery_message_fields
+    from skidsteer_power.powertrain import Battery
+
+    battery = Battery.default_test_robot(soc=0.5)
+    drawing = battery_message_fields(battery, 100.0)
+    regen = battery_message_fields(battery, -30.0)
+    idle = battery_message_fields(battery, 0.0)
+    assert drawing['status'] == 'discharging' and drawing['current'] < 0
+    assert regen['status'] == 'charging' and regen['current'] > 0
+    assert idle['status'] == 'not_charging' and idle['current'] == 0.0
+    assert math.isnan(idle['temperature']) and idle['present'] and idle['chemistry'] == 'LiPo'
+    # terminal voltage: above open circuit while charging, below while discharging (R > 0)
+    assert regen['voltage'] > idle['voltage'] > drawing['voltage']

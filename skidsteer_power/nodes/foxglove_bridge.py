@@ -9,7 +9,9 @@ package's (:func:`foxglove.start_server`); it sends a channel's messages only to
 subscribed to it.
 
 Subscriptions are best effort, so every publisher matches (reliable or not), and a slow viewer
-never slows the robot down. Topics appear as they are discovered (every ``discover_period_s``).
+never slows the robot down; a topic whose publishers are all transient-local (latched: ``tf_static``,
+``robot_description``) is subscribed transient-local, so its last messages reach the app too.
+Topics appear as they are discovered (every ``discover_period_s``).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from skidsteer_power.bags._ros import message_class
 from skidsteer_power.bags.writer import message_definition
@@ -85,7 +87,6 @@ class FoxgloveBridge:
             self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context)
         except (OSError, RuntimeError) as err:
             raise InputError(f'cannot serve Foxglove on {host}:{port}: {err}') from err
-        self._qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.discover()
         self._timer = node.create_timer(discover_period_s, self.discover)
 
@@ -122,9 +123,23 @@ class FoxgloveBridge:
             topic, schema=schema, message_encoding=MESSAGE_ENCODING, context=self.context
         )
         entry = Forwarded(topic, msgtype, channel, None)
-        entry.subscription = self.node.create_subscription(cls, topic, _forwarder(entry), self._qos, raw=True)
+        entry.subscription = self.node.create_subscription(
+            cls, topic, _forwarder(entry), self._qos_for(topic), raw=True
+        )
         self.forwarded[topic] = entry
         LOG.info('bridging %s (%s)', topic, msgtype)
+
+    def _qos_for(self, topic: str) -> QoSProfile:
+        """Best effort, volatile; transient-local (reliable if every publisher is) for latched topics."""
+        publishers = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
+        if publishers and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
+            reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+            return QoSProfile(
+                depth=10,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            )
+        return QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 
     def close(self) -> None:
         """Stop the server and the subscriptions."""
