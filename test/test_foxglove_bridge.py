@@ -30,10 +30,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from test_estimator_core import FixedPowerPredictor
+from websockets.sync import client as websockets_sync  # requirements-dev.txt
 
 from skidsteer_power.nodes.power_estimator import PowerEstimator
-
-websockets_sync = pytest.importorskip('websockets.sync.client')
 
 MESSAGE_DATA = struct.Struct('<BIQ')  # opcode 0x01, subscription id, log time [ns]
 # What the Foxglove app offers. foxglove-sdk 0.30.3 accepts only the first (its name for protocol v1:
