@@ -168,7 +168,7 @@ def test_joint_mapping_errors_are_clear():
         JointMap(effort_is='amps')
     with pytest.raises(ConfigError, match='unknown key'):
         JointMap.from_config({'left': ['a'], 'right': ['b'], 'wheels': 4})
-    with pytest.raises(ConfigError, match='no_such_drivetrain.*shipped: ros2_control_4wheel, test_robot'):
+    with pytest.raises(ConfigError, match=r'no_such_drivetrain.*shipped: ros2_control_4wheel, test_robot'):
         JointMap.from_config({'preset': 'no_such_drivetrain'})
     reader = JointReader(JointMap.from_config({'preset': 'ros2_control_4wheel'}), 12.0, 0.114, LIMITS)
     with pytest.raises(InputError, match='lacks rear_left_wheel_joint'):
