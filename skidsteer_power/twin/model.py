@@ -496,6 +496,44 @@ class Twin:
         for _ in range(n_steps):
             self._step()
 
+    def _move(self, force: np.ndarray, omega_m: np.ndarray) -> None:
+        """Body (hull frame: m (dv/dt + yaw x v) = F, Iz dyaw/dt = M), motor angles, pose and the
+        contact's shear transport over one step, with the new motor speeds [rad/s]."""
+        dt = self.dt
+        vx, vy, wz = (float(v) for v in self.vel)
+        vx, vy, wz = (
+            vx + dt * (force[0] / self.mass + wz * vy),
+            vy + dt * (force[1] / self.mass - wz * vx),
+            wz + dt * force[2] / self.Iz,
+        )
+        self.vel = np.array([vx, vy, wz])
+        self.omega_m = omega_m
+        self.theta_m = self.theta_m + dt * self.omega_m
+        x, y, yaw = (float(v) for v in self.pose)
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
+        if self.vehicle.is_tracked:
+            self._advance_tracks(dt)
+        else:
+            self._advance_wheels(dt)
+
+    def step_with_motor_speeds(self, omega_m: np.ndarray) -> np.ndarray:
+        """One step with the motor speeds [rad/s, forward positive] imposed from outside (the live
+        suite's simulated amplifiers integrate the motors); returns the terrain's resisting axle
+        torque of each side [N m]. The energy ledger then holds only the terrain work."""
+        omega_m = np.asarray(omega_m, dtype=float)
+        self.omega_m = omega_m
+        loads = self._side_loads()
+        if self.vehicle.is_tracked:
+            force, axle, dissipation, sinkage = self._track_forces(loads)
+        else:
+            force, axle, dissipation, sinkage = self._wheel_forces(loads)
+        self.max_sinkage_m = max(self.max_sinkage_m, sinkage)
+        self._move(force, omega_m)
+        self.energy.terrain_J += dissipation * self.dt
+        self.t += self.dt
+        return axle
+
     def _step(self) -> None:
         dt = self.dt
         loads = self._side_loads()
@@ -541,23 +579,7 @@ class Twin:
             p_term = kt * current * mid + res * current * current
             p_bus = p_term / eta if p_term >= 0.0 else p_term * eta_regen  # = motor.bus_power (4-Q)
             currents[k], omegas[k], mids[k], p_terms[k], p_buses[k] = current, new, mid, p_term, p_bus
-        # body (hull frame): m (dv/dt + yaw x v) = F, Iz dyaw/dt = M
-        vx, vy, wz = (float(v) for v in self.vel)
-        vx, vy, wz = (
-            vx + dt * (force[0] / self.mass + wz * vy),
-            vy + dt * (force[1] / self.mass - wz * vx),
-            wz + dt * force[2] / self.Iz,
-        )
-        self.vel = np.array([vx, vy, wz])
-        self.omega_m = np.array(omegas)
-        self.theta_m = self.theta_m + dt * self.omega_m
-        x, y, yaw = (float(v) for v in self.pose)
-        c, s = math.cos(yaw), math.sin(yaw)
-        self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
-        if self.vehicle.is_tracked:
-            self._advance_tracks(dt)
-        else:
-            self._advance_wheels(dt)
+        self._move(force, np.array(omegas))
         # electrical side and energy ledger
         e = self.energy
         total = p_buses[0] + p_buses[1]
