@@ -7,7 +7,8 @@ For each configuration of the test robot (track, 4-wheel, 6-wheel):
    faster than real time and is deterministic; the live suite would add DDS timing, not physics);
 2. ``validate`` runs the estimator over the bag: per-side motor torque and power errors, energy
    error, and the trace analysis (circle fits of eqs. 7.8-7.10) on ``/ground_truth/odom``, the
-   motion a motion-capture system would see (ch. 7.3.3);
+   motion a motion-capture system would see (ch. 7.3.3); it predicts from the command and, as
+   ch. 7.3.4 did, from the measured (here: true) motion;
 3. per experiment set (the last ``WINDOW_S`` of each hold): the twin's axle torque and power (from
    K_t I and the motor speed, as the experiments derived them) next to FESS predicted from the
    command and FESS predicted from the twin's actual motion (ch. 7.3.4 validated FESS with the
@@ -85,7 +86,7 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir)
     powertrain = factory.powertrain_for(vehicle)
     sets = _experiment_sets(trace, predictor, powertrain, vehicle.tread_m)
-    motion_energy = _energy_from_motion(trace, predictor, powertrain)
+    motion_energy = summary['motion_prediction']['metrics']['energy_error_pct']  # from ground truth
     keys = {'speed_cmd_m_s': 'speed_cmd_m_s', 'yaw_cmd': 'yaw_rate_cmd_rad_s'}
     keys.update(radius_cmd_m='radius_cmd_m', radius_m='radius_m')
     radius = [{k: s[v] for k, v in keys.items()} for s in summary['segments']]
@@ -139,27 +140,6 @@ def _experiment_sets(trace: Any, predictor: Any, powertrain: Any, tread_m: float
             }
         )
     return rows
-
-
-def _energy_from_motion(trace: Any, predictor: Any, powertrain: Any) -> float:
-    """Error [%] of the terminal energy predicted from the twin's true motion (ground truth twist)
-    against the twin's measured terminal energy (K_t I w + R I^2), over samples while commanded."""
-    moving = (np.abs(trace.cmd[:, 0]) > 0) | (np.abs(trace.cmd[:, 1]) > 0)
-    dt = np.diff(trace.t, append=trace.t[-1])
-    predicted = 0.0
-    cache: dict[tuple[float, float], float] = {}
-    for i in np.flatnonzero(moving):
-        key = (round(float(trace.twist[i, 0]), 3), round(float(trace.twist[i, 2]), 3))
-        if key not in cache:
-            cache[key] = float(sum(predictor.predict(*key).electrical_W))
-        predicted += cache[key] * dt[i]
-    current = trace.joint_effort_Nm / powertrain.motor.torque_constant_Nm_A
-    resistance = powertrain.motor.terminal_resistance_ohm
-    measured_power = (trace.joint_effort_Nm * trace.joint_velocity_rad_s + resistance * current**2).sum(
-        axis=1
-    )
-    measured = float((measured_power * dt)[moving].sum())
-    return 100.0 * (predicted - measured) / measured
 
 
 def plot_configuration(result: dict[str, Any], path: Path) -> None:
