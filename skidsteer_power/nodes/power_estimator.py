@@ -46,7 +46,7 @@ from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
-from skidsteer_power.estimator.persistence import load_state, save_state
+from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, SUMMARY_LABEL, summary_values
 from skidsteer_power.nodes.spin import spin_node
 
@@ -140,21 +140,21 @@ class PowerEstimator(Node):
     def _restore(self, initial_soc: float) -> None:
         state = None
         if self.state_file is not None:
-            try:
-                state = load_state(self.state_file)
-                if state is not None and state.get('vehicle') != self.vehicle.name:
-                    raise ConfigError(f'{self.state_file} holds the state of {state.get("vehicle")!r}')
-                if state is not None:
-                    self.core.restore(state)
-                    self.get_logger().info(
-                        f'restored energy state from {self.state_file}: '
-                        f'{self.core.battery.remaining_wh:.2f} Wh left'
-                    )
-            except SkidsteerError as err:
-                state = None
-                self.get_logger().warning(f'{err}; starting from a fresh battery')
+            state, warning = load_or_quarantine(self.state_file, self._accept_state)
+            if warning:
+                self.get_logger().warning(warning)
+            elif state is not None:
+                self.get_logger().info(
+                    f'restored energy state from {self.state_file}: '
+                    f'{self.core.battery.remaining_wh:.2f} Wh left'
+                )
         if state is None and initial_soc >= 0:
             self.core.energy.battery = factory.battery_for(self.vehicle, soc=initial_soc)
+
+    def _accept_state(self, state: dict[str, Any]) -> None:
+        if state.get('vehicle') != self.vehicle.name:
+            raise ConfigError(f'it holds the state of vehicle {state.get("vehicle")!r}')
+        self.core.restore(state)
 
     def _make_interfaces(self, p: dict[str, Any]) -> None:
         qos = QoSProfile(depth=int(p['qos_depth']))
