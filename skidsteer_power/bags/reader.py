@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 LOG = logging.getLogger(__name__)
 
 DEFAULT_STORE = Stores.ROS2_JAZZY
-_SALVAGE_HINT = '; --salvage reads what precedes the damage'
+_SALVAGE_HINT = '; --salvage recovers every intact message'
 _IDL_SEPARATOR = '=' * 80 + '\n'
 # Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
 _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
@@ -144,6 +144,13 @@ def build_typestore(
 
 def _damage_text(path: Path, err: BaseException) -> str:
     reason = str(err).strip() or type(err).__name__
+    if isinstance(err, TypeError):  # rosbags reading past the end of a record
+        reason = 'the file ends inside a record'
+    if path.is_file() and path.stat().st_size <= 8:
+        reason = f'only {path.stat().st_size} bytes: no records after the MCAP magic'
+    if isinstance(err, MemoryError) or 'ssize_t' in reason:
+        reason = 'a record length field is damaged'
+
     return f'{path}: bag is truncated or corrupt ({reason})'
 
 
@@ -178,12 +185,9 @@ class BagReader:
 
     @property
     def complete(self) -> bool:
-        """True when every message the bag says it holds was read (or, before a full pass, found)."""
-        return (
-            not self.damage
-            and self.messages_expected is not None
-            and (self.messages_read is None or self.messages_read >= self.messages_expected)
-        )
+        """True when every message the bag says it holds was read (False when that count is unknown)."""
+        read = self.messages_read if self.messages_read is not None else self.message_count
+        return self.messages_expected is not None and read >= self.messages_expected
 
     def integrity(self) -> dict[str, Any]:
         """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``."""
@@ -451,8 +455,10 @@ def _open_salvage(
     topics = {k: _with_decodable(v, store) for k, v in topics.items()}
     if not damage and cause is not None:
         damage = f'unreadable index ({str(cause) or type(cause).__name__})'
+    held = 'an unknown number of' if expected is None else f'{expected}'
+    if not messages:
+        raise InputError(f'{path}: nothing intact to salvage (0 of {held} messages; {damage or "no data"})')
     if damage or expected is None or len(messages) < expected:
-        held = 'an unknown number of' if expected is None else f'{expected}'
         LOG.warning('%s: salvaged %d of %s messages; %s', path, len(messages), held, damage or 'no count')
     stamps = [m.timestamp_ns for m in messages]
     return BagReader(

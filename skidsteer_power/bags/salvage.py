@@ -9,7 +9,8 @@
    CRC does not match, or whose header is damaged, is decompressed as far as it goes and its records
    are read one at a time, each checked (known opcode, length within the chunk, known channel, log
    time inside the chunk's time range, and either the chunk's message index naming that offset,
-   channel and time, or the record after it starting where this one ends); after a bad stretch the
+   channel and time, or the record after it starting where this one ends; a message the index places
+   at that offset with another channel or time is dropped); after a bad stretch the
    reader re-synchronises on the next record that passes those checks. Between chunks
    it re-synchronises on the next chunk record (its length must equal the sum of its fields).
 3. counts what the file says it holds (``expected``): the statistics record, else the rosbag2
@@ -294,9 +295,11 @@ def _record_end(
     body, end = pos + _RECORD.size, pos + _RECORD.size + length
     if opcode not in _IN_CHUNK or end > len(buf) or (not strict and limit is not None and end > limit):
         return None
-    if indexed is not None and opcode == Opcode.MESSAGE and length >= _MESSAGE.size:
+    if indexed is not None and opcode == Opcode.MESSAGE and length >= _MESSAGE.size and not strict:
         channel, _, log_time, _ = _MESSAGE.unpack_from(buf, body)
-        strict = strict or (channel, log_time) == indexed  # the index vouches for place, channel, time
+        if (channel, log_time) != indexed:
+            return None  # record and index disagree: one of them is damaged, trust neither
+        strict = True  # the index vouches for place, channel and time
     if not strict and end + _RECORD.size <= len(buf):  # the next record must start where this ends
         next_op, next_len = _RECORD.unpack_from(buf, end)
         if next_op not in _IN_CHUNK or end + _RECORD.size + next_len > len(buf):
