@@ -147,3 +147,26 @@ def test_replay_salvage_of_flipped_bytes_skips_and_counts_undecodable_messages(i
     skipped = sum(out['undecodable'].values())
     assert out['messages_expected'] == written and out['complete'] is False
     assert out['message_count'] + skipped == out['messages_read'] <= written
+
+
+def test_sqlite_bag_missing_rows_is_measured_against_its_metadata(tmp_path, capsys):
+    """rosbag2 sqlite3: metadata.yaml counts the messages; rows lost from the database are missing."""
+    import sqlite3
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    String = store.types['std_msgs/msg/String']
+    with Writer(tmp_path / 'sq', version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        conn = writer.add_connection('/s', 'std_msgs/msg/String', typestore=store)
+        for i in range(200):
+            writer.write(conn, 1_700_000_000 * 10**9 + i, store.serialize_cdr(String(f'm{i}'), conn.msgtype))
+    with sqlite3.connect(tmp_path / 'sq' / 'sq.db3') as db:
+        db.execute('DELETE FROM messages WHERE id % 10 = 0')  # 20 rows lost
+    assert main(['replay', str(tmp_path / 'sq'), '--rate', '1000']) == 2
+    line = capsys.readouterr().err.strip().splitlines()
+    assert len(line) == 1 and 'read 180 of 200 messages (20 missing: /s 180 of 200)' in line[0]
+    with open_bag(tmp_path / 'sq', salvage=True) as bag:
+        assert bag.count_all() == 180
+        assert bag.integrity() == {'messages_expected': 200, 'messages_read': 180, 'complete': False}
