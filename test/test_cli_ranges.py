@@ -142,3 +142,17 @@ def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length,
         assert np.hypot(*end) == pytest.approx(2 * float(radius) * abs(np.sin(turned / 2)), abs=1e-9)
     assert main([*_set(MISSION, '--route', str(csv)), '--json']) == 0
     assert json.loads(capsys.readouterr().out)['distance_m'] == pytest.approx(float(length))
+
+
+@pytest.mark.parametrize(
+    ('row', 'match'),
+    [('10,100,inf,0', 'speed = 100 m/s is outside'), ('10,0.2,1e-6,0', 'turn radius = 1e-06 m is outside'),
+     ('10,0.2,inf,1e7', 'payload = 1e\\+07 kg is outside')],
+)  # fmt: skip
+def test_route_csv_rows_have_the_same_ranges(tmp_path, capsys, row, match):
+    import re
+
+    csv = tmp_path / 'route.csv'
+    csv.write_text(f'length_m,speed_m_s,turn_radius_m,payload_kg\n{row}\n')
+    line = _one_line_error(capsys, _set(MISSION, '--route', str(csv)))
+    assert re.search(match, line) and 'route.csv:2' in line, line

@@ -25,10 +25,11 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power import models
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     FORWARD_SPEED_M_S,
+    FRICTION,
     MAX_RESOLUTION_NODES,
     TURN_RADIUS_M,
     check_resolution,
@@ -73,10 +74,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument('--model', required=True, choices=sorted(models.MODELS), help='skid-steering model')
     parser.add_argument(
-        '--mu-t', type=positive_float, help='steeds: coefficient of lateral resistance (Table 3.1)'
+        '--mu-t',
+        type=FRICTION.arg(),
+        help=FRICTION.help('steeds: coefficient of lateral resistance (Table 3.1)'),
     )
     parser.add_argument(
-        '--mu', type=positive_float, help='icr: Coulomb friction coefficient (1.12 in the text)'
+        '--mu',
+        type=FRICTION.arg(),
+        help=FRICTION.help('icr: Coulomb friction coefficient (1.12 in the text)'),
     )
     parser.add_argument(
         '--resolution',

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, PAYLOAD_KG, TURN_RADIUS_M
 
 PATROL_TOTAL_M = 154.4  # ch. 8.1
 PATROL_TURN_RADIUS_M = 1.0  # ch. 8.1
@@ -64,12 +65,12 @@ class Segment:
         given = self.length_m if self.length_m is not None else self.duration_s
         if not (math.isfinite(given) and given > 0):  # type: ignore[arg-type]
             raise InputError(f'segment length/duration must be finite and > 0, got {given}')
-        if not (math.isfinite(self.speed_m_s) and self.speed_m_s > 0):
-            raise InputError(f'segment speed must be finite and > 0 m/s, got {self.speed_m_s}')
+        FORWARD_SPEED_M_S.check(self.speed_m_s)
         if self.turn_radius_m == 0 or math.isnan(self.turn_radius_m):
             raise InputError('segment turning radius must be non-zero (inf = straight)')
-        if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
-            raise InputError(f'payload must be finite and >= 0 kg, got {self.payload_kg}')
+        if not math.isinf(self.turn_radius_m):
+            TURN_RADIUS_M.check(self.turn_radius_m)
+        PAYLOAD_KG.check(self.payload_kg)
 
     @property
     def length(self) -> float:

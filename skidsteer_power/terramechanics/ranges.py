@@ -86,6 +86,7 @@ FORWARD_SPEED_M_S = Range('speed', 0.0, 10.0, 'm/s', positive=True)
 TURN_RADIUS_M = Range('turn radius', 1e-3, 1e6, 'm', symmetric=True)  # |R|; inf = straight is separate
 PAYLOAD_KG = Range('payload', 0.0, 1000.0, 'kg')
 HEIGHT_M = Range('track height', 0.005, 2.0, 'm', positive=True)
+FRICTION = Range('coefficient', 0.0, 10.0, '-', positive=True)  # mu_t (Table 3.1), mu: order 1
 
 DEFAULT_TRACK_HEIGHT_M = 0.2
 """Track height assumed when none is given [m]: twice the test robot's 0.1 m sprocket radius (the
