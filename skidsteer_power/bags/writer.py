@@ -32,7 +32,7 @@ import time
 from collections.abc import Sequence
 from importlib.metadata import version
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 from mcap.data_stream import RecordBuilder
 from mcap.records import Channel, Schema
@@ -48,7 +48,7 @@ from skidsteer_power.errors import InputError
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
-ROSBAG2_VERSION = 9
+ROSBAG2_VERSION: Literal[9] = 9
 CHUNK_SIZE = 1 << 20
 """A chunk is closed when its records reach this size [bytes] (the rosbag2 MCAP plugin's default)."""
 FLUSH_PERIOD_S = 0.5

@@ -183,11 +183,11 @@ class EstimatorCore:
         limit = self.power_limit_W()
         if not abs(measured.bus_total_W) <= limit:
             self._flag_implausible('joint_states', now_s)
-            err = InputError(
+            reason = InputError(
                 f'implausible reading skipped: battery-side power {measured.bus_total_W:.0f} W is more '
                 f'than the battery can deliver ({limit:.0f} W)'
             )
-            raise self._reject('joint_states', err, now_s)
+            raise self._reject('joint_states', reason, now_s)
         self.joint_fresh.mark(now_s)
         self.energy.set_measured(measured.bus_total_W, now_s)
         self.comparison = self._compare(measured)
