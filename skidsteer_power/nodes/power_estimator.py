@@ -21,11 +21,12 @@ periodic (``publish_period_s``)
     ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction); ``energy/remaining_wh``
     std_msgs/Float64 [Wh]; ``energy/time_to_empty_s`` std_msgs/Float64 [s] (inf when idle);
     ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy source, stale inputs, rejected-input counts,
-    traction warning) every ``diagnostics_period_s``.
+    implausible-power counts (WARN), traction warning) every ``diagnostics_period_s``.
 
 The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
-restored on start. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker
-thread and swapped in when ready; the old map serves until then.
+restored on start; an unusable file is moved aside to ``<file>.corrupt-<UTC time>`` with one
+warning. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker thread and
+swapped in when ready; the old map serves until then.
 """
 
 from __future__ import annotations
