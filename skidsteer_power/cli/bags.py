@@ -141,7 +141,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     else:
         print(one_screen(summary))
         motion = summary.get('motion_prediction')
-        if motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
+        if motion and not summary['has_motor_data']:  # nothing to compare with: say what it predicts
+            energy = motion['metrics']['energy_predicted_J']
+            print(f'predicted from the measured motion ({motion["kinematics"]}): energy {energy:.4g} J')
+        elif motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
             m = motion['metrics']
             print(
                 f'predicted from the measured motion ({motion["kinematics"]}): energy error '
