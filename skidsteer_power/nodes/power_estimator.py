@@ -22,6 +22,9 @@ periodic (``publish_period_s``)
     std_msgs/Float64 [Wh]; ``energy/time_to_empty_s`` std_msgs/Float64 [s] (inf when idle);
     ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy source, stale inputs, rejected-input counts,
     traction warning) every ``diagnostics_period_s``.
+path energy (:mod:`skidsteer_power.nodes.path_hook`)
+    ``plan`` nav_msgs/Path in; ``energy/path_required_wh``, ``energy/path_margin_wh`` std_msgs/Float64
+    [Wh] out, and a ``path energy`` diagnostic that WARNs while the margin is negative.
 
 The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
 restored on start. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker
@@ -48,6 +51,8 @@ from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, Rej
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.persistence import load_state, save_state
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, SUMMARY_LABEL, summary_values
+from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
+from skidsteer_power.nodes.path_hook import PathEnergyHook
 from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
@@ -76,6 +81,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
     'save_period_s': (10.0, 'period of energy-state saves [s]'),
     'qos_depth': (100, 'subscription queue depth'),
+    **PATH_PARAMETERS,
 }
 
 
@@ -173,6 +179,7 @@ class PowerEstimator(Node):
             self.create_timer(float(p['save_period_s']), self.save)
         size = len(SUMMARY_FIELDS)
         self._summary_layout = [MultiArrayDimension(label=SUMMARY_LABEL, size=size, stride=size)]
+        self.path_energy = PathEnergyHook(self, p, qos)
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
