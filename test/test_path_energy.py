@@ -117,8 +117,8 @@ def _rig_with_path_topics(ros_context, tmp_path, cache_dir, **params):
 
 def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir, capsys):
     """Real rclpy: a Path published on ``plan`` gives ``mission --route FILE.csv``'s battery energy to
-    1 % (measured: -0.025 % at 4 poses per metre, -0.09 % at 1 per metre: the chords), and the margin is remaining -
-    there - back - reserve."""
+    1 % (measured: -0.025 % at 4 poses per metre, -0.09 % at 1 per metre: the chords), and the
+    margin is remaining - there - back - reserve."""
     csv = tmp_path / 'route.csv'
     csv.write_text(ROUTE_CSV)
     argv = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--route', str(csv)]
@@ -170,3 +170,16 @@ def test_negative_reserve_is_refused(ros_context, tmp_path, cache_dir):
 
     with pytest.raises(ConfigError, match='path_reserve_wh'):
         Rig(ros_context, tmp_path, map_cache_dir=cache_dir, path_reserve_wh=-1.0)
+
+
+def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
+    from rich.console import Console
+
+    from skidsteer_power.estimator.monitor import MonitorView, render
+
+    console = Console(width=120, record=True)
+    console.print(render(MonitorView(path_required_wh=3.25, path_margin_wh=-1.5)))
+    text = console.export_text()
+    assert 'planned path needs 3.25 Wh, margin after return -1.50 Wh' in text
+    console.print(render(MonitorView()))
+    assert console.export_text().count('planned path') == 0  # no path: no line

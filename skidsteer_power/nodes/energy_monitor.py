@@ -10,7 +10,8 @@ Modes
 ``view``  watch only; nothing is published.
 
 Subscribes ``power/summary``, ``joint_states``, ``battery/state``, ``energy/remaining_wh``,
-``energy/time_to_empty_s``; publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
+``energy/time_to_empty_s``, ``energy/path_required_wh``, ``energy/path_margin_wh``; publishes
+``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
 ``--rate`` Hz in free and case mode. Every frame shown is appended to ``--csv`` (default
 ``energy_monitor_<UTC time>.csv``). The drawing is :func:`skidsteer_power.estimator.monitor.render`.
 """
@@ -120,6 +121,10 @@ class EnergyMonitor(Node):
         self.create_subscription(BatteryState, 'battery/state', self._on_battery, 10)
         self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, 10)
         self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, 10)
+        for topic in ('path_required_wh', 'path_margin_wh'):  # power_estimator's path energy [Wh]
+            self.create_subscription(
+                Float64, f'energy/{topic}', lambda msg, k=topic: setattr(self.view, k, msg.data), 10
+            )
         if mode != 'view':
             self.pub_cmd = self.create_publisher(TwistStamped if stamped else Twist, 'cmd_vel', 10)
             self.create_timer(1.0 / rate_hz, self._on_drive_timer)
