@@ -91,7 +91,10 @@ class ParameterSpread:
             raise ConfigError(f'{self.source}: covariance must be a finite {n} x {n} matrix')
         if not np.allclose(cov, cov.T, rtol=1e-6, atol=0.0):
             raise ConfigError(f'{self.source}: covariance is not symmetric')
-        if np.min(np.linalg.eigvalsh(cov)) < -1e-9 * max(np.max(np.abs(np.diag(cov))), 1e-300):
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        live = sd > 0
+        corr = cov[np.ix_(live, live)] / np.outer(sd[live], sd[live])  # scale-free check
+        if np.any(np.diag(cov) < 0) or (corr.size and np.min(np.linalg.eigvalsh(corr)) < -1e-9):
             raise ConfigError(f'{self.source}: covariance is not positive semi-definite')
         for name in self.names:
             if not _is_terrain(name) and not _is_powertrain(name):
