@@ -40,7 +40,8 @@ def test_default_sigmas_are_relative_to_the_nominal(sandy, pt):
 def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(tmp_path, sandy, pt):
     path = tmp_path / 'u.yaml'
     path.write_text(
-        'terrain:\n  kphi_kN: {sigma: 100}\n  phi_deg: {sigma: 1.5}\n  n: 0.02\npowertrain:\n  internal_scale: 0.2\n'
+        'terrain:\n  kphi_kN: {sigma: 100}\n  phi_deg: {sigma: 1.5}\n  n: 0.02\n'
+        'powertrain:\n  internal_scale: 0.2\n'
     )
     sigma = u.spread_from_yaml(path, sandy, pt).sigma
     assert sigma == pytest.approx(

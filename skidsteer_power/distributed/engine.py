@@ -50,7 +50,7 @@ class Engine:
                 n_workers=self.workers,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=':0',  # any free port (8787 may be another cluster's)
                 silence_logs=logging.ERROR,
             )
             self.client = Client(self.cluster)
