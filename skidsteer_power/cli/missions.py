@@ -83,6 +83,14 @@ def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
     _add_source_args(p)
     p.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
     p.add_argument('--plot', metavar='PNG', help='write a bar chart of the changes to this PNG')
+    p.add_argument(
+        '--method',
+        choices=('oat', 'sobol'),
+        default='oat',
+        help='oat: the one-at-a-time table (default); sobol: also first-order and total Sobol indices '
+        "over the parameters' spread (--samples N base samples, default 64; N (D+2) missions per vehicle)",
+    )
+    _add_uncertainty_args(p, calibration=False)
     add_json_flag(p)
     p.set_defaults(func=run_sensitivity_cmd)
 
@@ -255,8 +263,26 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
     vehicles, terrain = [v for v, _ in loaded], loaded[0][1]
     route = _route(args.route, args.speed, None)
     table = sensitivity(
-        vehicles, terrain, route, delta=args.delta, model=args.model, workers=_workers(args.workers)
+        vehicles,
+        terrain,
+        route,
+        delta=args.delta,
+        source=_source(args),
+        model=args.model,
+        workers=_workers(args.workers),
     )
+    if args.method == 'sobol':
+        from skidsteer_power.powertrain import Powertrain
+        from skidsteer_power.studies.sobol import sobol_indices
+
+        spread = _spread(args, terrain, Powertrain.for_vehicle(vehicles[0]))
+        with _engine(args) as engine:
+            table['sobol'] = sobol_indices(
+                engine, vehicles, terrain, route, spread, samples=args.samples or 64, seed=args.seed,
+                source=_source(args), model=args.model,
+            )  # fmt: skip
+    elif args.samples or args.uncertainty or args.scheduler:
+        raise InputError('--samples, --uncertainty and --scheduler go with --method sobol')
     if args.plot:
         from skidsteer_power.missions.plots import plot_sensitivity
 
@@ -269,6 +295,9 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
             print(f'{name}: baseline ' + ', '.join(f'{k} {v:.4g}' for k, v in res['baseline'].items()))
             for case, changes in res['changes_percent'].items():
                 print(f'  {case:<7} ' + '  '.join(f'{k} {v:+.3f} %' for k, v in changes.items()))
+            for metric, indices in table.get('sobol', {}).get('indices', {}).get(name, {}).items():
+                cells = '  '.join(f'{p} {i["S1"]:.2f}/{i["ST"]:.2f}' for p, i in indices.items())
+                print(f'  Sobol S1/ST of {metric}: {cells}')
     return 0
 
 
