@@ -32,6 +32,8 @@ setup(
         'mcap',
         'rich',
         'matplotlib',
+        'dask[distributed]',
+        'SALib',
     ],
     zip_safe=True,
     maintainer='skidsteer_power developers',
