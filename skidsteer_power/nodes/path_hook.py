@@ -4,7 +4,7 @@ A thin rclpy helper the node owns (the physics is :mod:`skidsteer_power.estimato
 
 subscribes ``plan`` nav_msgs/Path (nav2's name; remappable): poses' x, y [m] (frame ignored: only
     lengths and heading changes matter)
-publishes (at once on a new path, then every ``publish_period_s`` as the battery drains)
+publishes (at once on a new path, then with the node's battery topics, every ``publish_period_s``)
     ``energy/path_required_wh`` std_msgs/Float64 [Wh]: battery energy to drive the path at
         ``path_speed_m_s`` (0: the last commanded |V|) with the current map and powertrain
     ``energy/path_margin_wh`` std_msgs/Float64 [Wh]: remaining - path - back to the path's start along
@@ -49,8 +49,8 @@ class PathEnergyHook:
         self.pub_required = node.create_publisher(Float64, 'energy/path_required_wh', 10)
         self.pub_margin = node.create_publisher(Float64, 'energy/path_margin_wh', 10)
         self.pub_diag = node.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        node.create_timer(float(p['publish_period_s']), self.publish)
-        node.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
+        # no timers of its own: the node calls publish() from its battery timer and
+        # publish_diagnostics() from its diagnostics timer (one executor entity less each)
 
     def _on_path(self, msg: Path) -> None:
         x = [pose.pose.position.x for pose in msg.poses]
@@ -95,7 +95,7 @@ class PathEnergyHook:
         self.pub_required.publish(Float64(data=energy.required_wh))
         self.pub_margin.publish(Float64(data=margin))
 
-    def _publish_diagnostics(self) -> None:
+    def publish_diagnostics(self) -> None:
         if self.tracker.xy is None and self.status == 'no path received':
             return
         level, message = DiagnosticStatus.OK, self.status

@@ -260,6 +260,7 @@ class PowerEstimator(Node):
         self.pub_battery.publish(battery)
         self.pub_remaining.publish(Float64(data=remaining))
         self.pub_tte.publish(Float64(data=tte))
+        self.path_energy.publish()  # the battery changed: the path margin too
 
     def _publish_diagnostics(self) -> None:
         now = self.now_s()
@@ -275,6 +276,7 @@ class PowerEstimator(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
+        self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
     def save(self) -> None:
