@@ -126,7 +126,7 @@ def _fleet(report: Report) -> None:
         root = Path(tmp)
         bags = []
         segments = table_7_3_segments(hold_s=2.0, pause_s=0.5)
-        duration = sum(s.duration for s in segments)
+        duration = sum(s.duration_s for s in segments)
         for k in range(6):
             bags.append(root / f'bag{k}.mcap')
             write_drive_bag(bags[-1], segments, rate_hz=50)

@@ -49,7 +49,7 @@ def test_polyline_keeps_length_and_heading_change():
     route = route_from_polyline(x, y, 0.5)
     chord = 2 * 2.0 * math.sin(math.radians(2.5))
     assert route.length_m == pytest.approx(18 * chord)
-    turn = sum(s.length / s.turn_radius_m for s in route.segments if s.is_turning)
+    turn = sum(s.length_m / s.turn_radius_m for s in route.segments if s.is_turning)
     assert turn == pytest.approx(math.pi / 2 - math.radians(5))  # first and last chord headings
     radii = [s.turn_radius_m for s in route.segments if s.is_turning]
     # chord-based curvature: 1/R * (ds/2R)/sin(ds/2R) with ds/2R = 2.5 deg -> R * sinc
@@ -64,7 +64,7 @@ def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
     assert route.length_m == pytest.approx(5.0) and route.turning_length_m == 0.0
     energy = path_energy(x, np.zeros(5), SPEED, power_map, powertrain)
     straight = run_mission(
-        vehicle, load_terrain('dry_sand'), Route('s', (Segment(SPEED, length_m=5.0),))
+        vehicle, load_terrain('dry_sand'), Route('s', (Segment.along(SPEED, length_m=5.0),))
     ).energy_battery_J
     assert energy.required_J == pytest.approx(straight, rel=1e-12)
     assert energy.return_J == pytest.approx(straight, rel=1e-12)

@@ -64,7 +64,7 @@ def route_from_polyline(x: Any, y: Any, speed_m_s: float, name: str = 'path') ->
     )
     pieces = [(0.5 * length[0], math.inf), *zip(share.tolist(), radius.tolist(), strict=True)]
     pieces.append((0.5 * length[-1], math.inf))
-    segments = tuple(Segment(speed_m_s, float(r), length_m=float(s)) for s, r in pieces)
+    segments = tuple(Segment.along(speed_m_s, float(r), length_m=float(s)) for s, r in pieces)
     return Route(name, segments, f'polyline of {len(length) + 1} points', xy=xy[np.r_[True, keep]])
 
 
