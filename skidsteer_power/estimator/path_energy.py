@@ -104,7 +104,7 @@ def path_energy(x: Any, y: Any, speed_m_s: float, power_map: Any, powertrain: An
         speed_m_s=abs(speed_m_s),
         required_J=e_there['energy_battery_J'],
         return_J=e_back['energy_battery_J'],
-        clamped_segments=e_there['clamped_segments'] + e_back['clamped_segments'],
+        clamped_segments=int(e_there['clamped_segments'] + e_back['clamped_segments']),
     )
 
 

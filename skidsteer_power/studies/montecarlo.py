@@ -136,7 +136,7 @@ def design_uncertainty(
     ]
     done = engine.map(_design_task, jobs, label=f'design study x {samples} samples')
     by_row = {r['index']: r for r in rows}
-    merit = {r['index']: [] for r in rows}
+    merit: dict[int, list[float]] = {r['index']: [] for r in rows}
     wins: dict[str, Counter[int]] = {}
     per_sample = len(parts)
     for k in range(samples):

@@ -168,7 +168,7 @@ def draw(
 
 def apply_terrain(terrain: Terrain, sample: Mapping[str, float]) -> Terrain:
     """``terrain`` with the sample's terrain parameters (SI) replaced (validated as any terrain)."""
-    changes = {k: v for k, v in sample.items() if _is_terrain(k)}
+    changes: dict[str, Any] = {k: v for k, v in sample.items() if _is_terrain(k)}
     if not changes:
         return terrain
     return dataclasses.replace(terrain, name=f'{terrain.name}~', **changes)
