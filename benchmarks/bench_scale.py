@@ -65,11 +65,20 @@ def _samples_per_second(report: Report) -> None:
         with Engine(workers=workers, progress=False) as engine:
             started = time.perf_counter() - start
             engine.map(abs, [0])  # workers warm (imports) before timing
+            cpu0 = engine.client.run(time.process_time)  # CPU seconds of each worker process
             t0 = time.perf_counter()
             mission_uncertainty(engine, vehicle, terrain, patrol(), pt, spread, samples=n, seed=workers)
-            rates[workers] = n / (time.perf_counter() - t0)
+            wall = time.perf_counter() - t0
+            cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
+            rates[workers] = n / wall
         report.figure(
             f'mission Monte Carlo, test_robot_track patrol, {workers} worker(s)', rates[workers], 'samples/s'
+        )
+        report.figure(
+            f'CPU the {workers} worker(s) got, per worker and second of wall time',
+            cpu / (wall * workers),
+            '-',
+            note='1 = a core each; less: other jobs held the cores',
         )
         report.figure(f'LocalCluster start-up, {workers} worker(s)', started, 's')
     efficiency = rates[2] / (2 * rates[1])
