@@ -175,7 +175,7 @@ def test_negative_reserve_is_refused(ros_context, tmp_path, cache_dir):
 def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
     from rich.console import Console
 
-    from skidsteer_power.estimator.monitor import MonitorView, render
+    from skidsteer_power.ui.monitor import MonitorView, render
 
     console = Console(width=120, record=True)
     console.print(render(MonitorView(path_required_wh=3.25, path_margin_wh=-1.5)))
