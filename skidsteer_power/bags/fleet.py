@@ -67,6 +67,7 @@ class BagJob:
     map_cache_dir: str | None = None
     plots: bool = True
     salvage: bool = False
+    kinematics: str = 'cmd'
 
 
 def is_bag(path: Path) -> bool:
@@ -159,6 +160,7 @@ def validate_job(job: BagJob) -> dict[str, Any]:
             odom_topic=job.odom_topic,
             map_cache_dir=job.map_cache_dir,
             plots=job.plots,
+            kinematics=job.kinematics,
         )
         with open_bag(job.bag, salvage=job.salvage, warn_unknown=False) as bag:
             summary = validate(bag, options)
@@ -372,6 +374,7 @@ def run_fleet_cmd(args: Any) -> int:
         map_cache_dir=args.map_cache,
         plots=not args.no_plots,
         salvage=args.salvage,
+        kinematics=args.kinematics,
     )
     with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
         summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
