@@ -7,8 +7,9 @@ and the error; the others go on. The fleet summary in ``OUT``:
 
 * ``fleet.csv``: one row per bag (:data:`CSV_COLUMNS`, SI units);
 * ``summary.md``: the same as a table, plus means per vehicle and terrain;
-* ``energy_per_metre.png``: measured (else predicted) battery energy per metre driven [J/m], per
-  vehicle and terrain; ``prediction_error.png``: distribution of the energy error [%] of the bags
+* ``energy_per_metre.png``: measured (else predicted) motor energy per metre driven [J/m] (both
+  motors' terminal energy, as ``metrics.energy_measured_J`` of the single-bag report), per vehicle
+  and terrain; ``prediction_error.png``: distribution of the energy error [%] of the bags
   with motor data (``metrics.energy_error_pct`` of each report).
 
 Distance driven [m]: the path length of the bag's odometry/poses when it has at least two, else the
@@ -320,7 +321,7 @@ def _plots(out: Path, rows: list[dict[str, Any]], groups: list[dict[str, Any]]) 
     labels = [f'{g["vehicle"]}\n{g["terrain"]}' for g in groups]
     ax.bar(range(len(groups)), [g['energy_per_m_J_m'] for g in groups])
     ax.set_xticks(range(len(groups)), labels, fontsize=7)
-    ax.set_ylabel('battery energy per metre [J/m]')
+    ax.set_ylabel('motor energy per metre [J/m]')
     ax.set_title('Energy per metre by vehicle and terrain')
     fig.tight_layout()
     files['energy_per_metre_png'] = str(out / 'energy_per_metre.png')
