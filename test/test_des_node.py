@@ -18,7 +18,8 @@ from skidsteer_power.des.simulator import SimulatedPair
 pytestmark = pytest.mark.ros
 
 RPM = 2 * math.pi / 60
-# Set points for v = 0.2 m/s, yaw rate 0.5 rad/s, tread 0.426 m, r = 0.1 m, 12:1 (node defaults):
+# Set points for v = 0.2 m/s, yaw rate 0.5 rad/s on the default vehicle file test_robot_track.yaml
+# (tread 0.426 m, sprocket r = 0.1 m; its powertrain 12:1):
 # v_left = 0.2 - 0.5 * 0.426 / 2 = 0.0935 m/s -> 0.0935 / 0.1 * 12 rad/s = 11.22 rad/s = 107.14 rpm;
 # v_right = 0.3065 m/s -> 36.78 rad/s = 351.22 rpm. Right motor mirrored (polarity -1): -351.
 LEFT_RPM, RIGHT_RPM = 107, -351
@@ -33,14 +34,15 @@ def pair():
 class Harness:
     """The driver node, a test node publishing cmd_vel and recording outputs, one executor."""
 
-    def __init__(self, context, pair: SimulatedPair, **overrides) -> None:
+    def __init__(self, context, pair: SimulatedPair, activate: bool = True, **overrides) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist, TwistStamped
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.lifecycle import TransitionCallbackReturn
         from rclpy.node import Node
         from rclpy.parameter import Parameter
         from sensor_msgs.msg import JointState
-        from std_msgs.msg import Empty
+        from std_srvs.srv import Trigger
 
         from skidsteer_power.nodes.des_driver import DesDriver
 
@@ -63,7 +65,7 @@ class Harness:
         self.cmd_pub = self.node.create_publisher(
             TwistStamped if self.stamped else Twist, f'{ns}/cmd_vel', 10
         )
-        self.clear_pub = self.node.create_publisher(Empty, f'{ns}/des_driver/clear_faults', 10)
+        self.clear_client = self.node.create_client(Trigger, f'{ns}/des_driver/clear_faults')
         self.joints: list[JointState] = []
         self.diags: list[DiagnosticArray] = []
         self.node.create_subscription(JointState, f'{ns}/joint_states', self.joints.append, 10)
@@ -73,6 +75,9 @@ class Harness:
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.driver)
         self.executor.add_node(self.node)
+        if activate:
+            assert self.driver.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            assert self.driver.trigger_activate() == TransitionCallbackReturn.SUCCESS
 
     def _publish_cmd(self) -> None:
         from geometry_msgs.msg import Twist, TwistStamped
@@ -91,6 +96,13 @@ class Harness:
             if predicate():
                 return True
         return predicate()
+
+    def call(self, client, request, timeout_s: float = 10.0):
+        """Call a service through DDS and spin until the answer arrives."""
+        assert client.wait_for_service(timeout_sec=timeout_s)
+        future = client.call_async(request)
+        assert self.spin_until(future.done, timeout_s)
+        return future.result()
 
     def side_diag(self, side: str):
         for array in reversed(self.diags):
@@ -170,7 +182,7 @@ def test_watchdog_stops_the_motors(harness, pair):
 
 def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
     from diagnostic_msgs.msg import DiagnosticStatus
-    from std_msgs.msg import Empty
+    from std_srvs.srv import Trigger
 
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.right.speed_setpoint_rpm < 0 and pair.left.speed_setpoint_rpm > 0)
@@ -189,7 +201,8 @@ def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
     # cmd_vel keeps coming, but the latch holds: still stopped after a while.
     harness.spin_until(lambda: False, timeout_s=0.5)
     assert pair.right.speed_setpoint_rpm == 0
-    harness.clear_pub.publish(Empty())
+    answer = harness.call(harness.clear_client, Trigger.Request())
+    assert answer.success, answer.message
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     assert pair.left.errors == DesErrorFlags(0) and pair.left.enabled
     assert harness.spin_until(lambda: harness.side_diag('left')[0].level == DiagnosticStatus.OK)
@@ -242,7 +255,7 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
         [
             sys.executable, '-m', 'skidsteer_power.nodes.des_driver', '--ros-args', '-r', f'__ns:={ns}',
             '-p', f'left_port:={pair.left.port}', '-p', f'right_port:={pair.right.port}',
-            '-p', 'ack_timeout_s:=0.3', '-p', 'cmd_vel_timeout_s:=5.0',
+            '-p', 'ack_timeout_s:=0.3', '-p', 'cmd_timeout_s:=5.0', '-p', 'autostart:=true',
         ],
         env=os.environ.copy(),
     )  # fmt: skip
