@@ -254,10 +254,10 @@ class DesDriver(LifecycleNode):
         except SkidsteerError as err:
             self.configure_error = str(err)
             self.get_logger().error(f'configure failed: {err}')
-            self._stop_pollers()
+            self._teardown()
             return TransitionCallbackReturn.FAILURE
         except Exception:
-            self._stop_pollers()
+            self._teardown()
             self.get_logger().error('configure failed with an exception (bug)')
             raise
         msg_type = TwistStamped if p['twist_stamped'] else Twist
