@@ -56,6 +56,7 @@ class DriveCommand:
         limits: CommandLimits | None = None,
         stop_both_on_link_loss: bool = True,
         active: bool = True,
+        sides: tuple[str, ...] = ('left', 'right'),
     ) -> None:
         self.timeout_s = timeout_s
         self.max_rpm = min(max_rpm, MAX_MOTOR_RPM)
@@ -68,7 +69,7 @@ class DriveCommand:
         self._slew = SlewLimiter(self.limits)
         self._stamp = -math.inf
         self._halted_by: set[str] = set()
-        self._down: dict[str, str] = {}
+        self._down: dict[str, str] = dict.fromkeys(sides, 'not connected yet')  # up after a good cycle
         self._clear_requests: set[str] = set()
         self._active = active
         self.shutting_down = False
