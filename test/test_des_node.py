@@ -160,7 +160,8 @@ def test_silent_amplifier_is_reported_and_reconnected(harness, pair):
     assert harness.spin_until(lambda: not math.isnan(harness.joints[-1].velocity[1]))
 
 
-def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -186,7 +187,7 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
             pub.publish(msg)
             executor.spin_once(timeout_sec=0.05)
         assert pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signum)
         assert proc.wait(timeout=15) == 0
         for sim in (pair.left, pair.right):
             assert sim.speed_setpoint_rpm == 0 and not sim.enabled
