@@ -423,9 +423,8 @@ class AmplifierPoller:
     def _lost(self, err: Exception) -> None:
         self.command.link_down(self.side, 'port lost')
         self.amp.close()
-        self._update(
-            connected=False, message=f'port lost, reopening every {self.reconnect_period_s:g} s: {err}'
-        )
+        what = 'port lost' if self._sample.sequence else 'no port'
+        self._update(connected=False, message=f'{what}, retrying every {self.reconnect_period_s:g} s: {err}')
 
     def _cycle_once(self) -> None:
         amp, command = self.amp, self.command

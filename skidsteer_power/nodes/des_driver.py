@@ -136,7 +136,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'ack_timeout_s', 0.05, 'wait for each acknowledge / reply from an amplifier [s]', (0.001, 10.0)
     ),
     ParamSpec(
-        'configure_timeout_s', 3.0, 'configure fails unless both amplifiers answer within [s]', (0.1, 60.0)
+        'configure_timeout_s', 5.0, 'configure fails unless both amplifiers answer within [s]', (0.1, 60.0)
     ),
     ParamSpec('diagnostics_rate_hz', 2.0, 'diagnostics rate [Hz]', (0.01, 100.0)),
     ParamSpec(
