@@ -193,6 +193,11 @@ class DriveCommand:
             self._clear_requests.update(sides)
             self.generation += 1
 
+    def withdraw_clear_requests(self) -> None:
+        """Forget clear requests no poller took (a side that was unreachable must not clear later)."""
+        with self._lock:
+            self._clear_requests.clear()
+
     def take_clear_request(self, side: str) -> bool:
         with self._lock:
             if side in self._clear_requests:

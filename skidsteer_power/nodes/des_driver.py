@@ -428,6 +428,7 @@ class DesDriver(LifecycleNode):
         self.get_logger().info('clearing amplifier errors on request')
         command.request_clear(list(SIDES))
         reached = self._wait_applied()
+        command.withdraw_clear_requests()  # an unreachable side is not cleared behind the caller's back
         latched = {s: p.sample.errors.describe() for s, p in self.pollers.items() if p.sample.fault_latched}
         response.success = reached and not latched
         if latched:
