@@ -54,6 +54,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -182,6 +183,20 @@ def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
+def _traceback_logged(transition: Callable[..., Any]) -> Callable[..., Any]:
+    """rclpy turns an exception in a transition callback into ERROR without a word: log it first."""
+
+    @functools.wraps(transition)
+    def wrapper(self: DesDriver, state: LifecycleState) -> Any:
+        try:
+            return transition(self, state)
+        except Exception:
+            self.get_logger().error(f'{transition.__name__} raised (a bug):\n{traceback.format_exc()}')
+            raise
+
+    return wrapper
+
+
 class DesDriver(LifecycleNode):
     """Two DES amplifiers behind ``cmd_vel`` / ``joint_states`` / ``diagnostics`` (managed node)."""
 
@@ -246,6 +261,7 @@ class DesDriver(LifecycleNode):
 
     # -- lifecycle ------------------------------------------------------------------------------
 
+    @_traceback_logged
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self.params = p = self._read_parameters()
@@ -258,7 +274,6 @@ class DesDriver(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         except Exception:
             self._teardown()
-            self.get_logger().error('configure failed with an exception (bug)')
             raise
         msg_type = TwistStamped if p['twist_stamped'] else Twist
         self._runtime = [
@@ -269,6 +284,7 @@ class DesDriver(LifecycleNode):
         self.configure_error = ''
         return TransitionCallbackReturn.SUCCESS
 
+    @_traceback_logged
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.command is not None
         self.command.active = True
@@ -276,6 +292,7 @@ class DesDriver(LifecycleNode):
             self.get_logger().warn('activated, but a side is not connected: motors stay at zero')
         return super().on_activate(state)
 
+    @_traceback_logged
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.command is not None
         self.command.active = False
@@ -283,14 +300,17 @@ class DesDriver(LifecycleNode):
             self.get_logger().warn('deactivated; a side not connected could not be disabled')
         return super().on_deactivate(state)
 
+    @_traceback_logged
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
 
+    @_traceback_logged
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
 
+    @_traceback_logged
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.get_logger().error(f'transition from {state.label} failed: motors zeroed, ports closed')
         self._teardown()
