@@ -13,6 +13,7 @@ energy_source, rejected_inputs).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import time
 from typing import Any
@@ -83,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     rclpy.init(context=context)
     suite = None
     counters = _Counters()
+    signals = contextlib.ExitStack()  # from here on, also during start-up: SIGINT/SIGTERM end cleanly
+    stop = signals.enter_context(stop_on_signals(StopFlag()))
     try:
         suite = Suite(options, context=context)
         helper = rclpy.create_node('run_cli', context=context)
@@ -97,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
         start = _snapshot(suite)
         started = time.monotonic()
         suite.start()
-        with stop_on_signals(StopFlag()) as stop:
-            _wait(suite, args, started, counters, stop)
+        _wait(suite, args, started, counters, stop)
         end = _snapshot(suite)
     except KeyboardInterrupt:
         return 130
@@ -106,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         if suite is not None:
             suite.shutdown()
         rclpy.try_shutdown(context=context)
+        signals.close()
     emit(
         {
             'duration_s': time.monotonic() - started,
