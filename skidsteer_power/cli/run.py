@@ -15,6 +15,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
+import sys
 import time
 from typing import Any
 
@@ -80,12 +82,14 @@ def run(args: argparse.Namespace) -> int:
         map_cache_dir=args.map_cache, state_file=args.state_file, left_port=args.left_port,
         right_port=args.right_port,
     )  # fmt: skip
+    signals = contextlib.ExitStack()  # from here on, also during start-up: SIGINT/SIGTERM end cleanly
+    stop = signals.enter_context(stop_on_signals(StopFlag()))
+    if args.json:  # stdout carries the JSON alone: DDS's own log lines go to stderr
+        signals.enter_context(_fd_stdout_to_stderr())
     context = Context()
     rclpy.init(context=context)
     suite = None
     counters = _Counters()
-    signals = contextlib.ExitStack()  # from here on, also during start-up: SIGINT/SIGTERM end cleanly
-    stop = signals.enter_context(stop_on_signals(StopFlag()))
     try:
         suite = Suite(options, context=context)
         helper = rclpy.create_node('run_cli', context=context)
@@ -125,6 +129,21 @@ def run(args: argparse.Namespace) -> int:
         args.json,
     )
     return 0
+
+
+@contextlib.contextmanager
+def _fd_stdout_to_stderr():
+    """Point file descriptor 1 at stderr for the block (native code, e.g. Fast DDS's
+    "RTPS_TRANSPORT_SHM Error" lines, writes there directly), then restore it."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def _count(counters: _Counters, name: str) -> None:
