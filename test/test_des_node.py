@@ -404,3 +404,34 @@ def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch)
     with pytest.raises(RuntimeError, match='injected bug'):
         harness.spin_until(lambda: False, timeout_s=5.0)
     assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+
+
+def test_geometry_comes_from_the_vehicle_file(ros_context, pair, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.nodes.des_driver import DesDriver
+
+    vehicle = tmp_path / 'narrow.yaml'
+    vehicle.write_text(
+        'name: narrow\nrunning_gear: track\nmass_kg: 30.0\ncg_height_m: 0.15\ntread_m: 0.3\n'
+        'track_length_m: 0.45\ntrack_width_m: 0.074\nsprocket_radius_m: 0.08\n'
+        'powertrain: {preset: test_robot, gear_ratio: 10.0}\n'
+    )
+    driver = DesDriver(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('left_port', value=pair.left.port),
+            Parameter('right_port', value=pair.right.port),
+            Parameter('vehicle', value=str(vehicle)),
+        ],
+    )
+    try:
+        geometry = driver.params['geometry']
+        assert (geometry.tread_m, geometry.drive_radius_m, geometry.gear_ratio) == (0.3, 0.08, 10.0)
+        # V 0.2 m/s, yaw rate 0.5 rad/s: v_left = 0.2 - 0.5 * 0.3 / 2 = 0.125 m/s -> 0.125 / 0.08 * 10
+        # = 15.625 rad/s = 149.2 rpm; v_right = 0.275 m/s -> 34.375 rad/s = 328.3 rpm (mirrored: -).
+        rpm = geometry.motor_rpm(0.2, 0.5)
+        assert rpm['left'] == pytest.approx(149.21, abs=0.01)
+        assert rpm['right'] == pytest.approx(-328.25, abs=0.01)
+    finally:
+        driver.destroy_node()
