@@ -121,3 +121,18 @@ def test_rpm_targets_are_capped_at_the_motor_limit():
     command.set({'left': 1e12, 'right': math.nan})
     assert command.wanted_rpm('left') == 10000
     assert command.wanted_rpm('right') == 0 and command.nonfinite_setpoints == 1
+
+
+def test_a_stalled_poller_counts_as_a_lost_link():
+    command = DriveCommand(10.0, geometry=GEOMETRY, limits=LIMITS, stall_timeout_s=0.1)
+    command.link_up('left')
+    command.link_up('right')
+    command.set_twist(0.2, 0.0)
+    command.wanted_rpm('left')
+    time.sleep(0.05)
+    assert command.wanted_rpm('left') > 0
+    time.sleep(0.1)  # the right poller has not reported a good cycle since: hung or dead
+    command.link_up('left')
+    assert command.wanted_rpm('left') == 0 and 'right (poller stalled' in command.stop_reason()
+    command.link_up('right')
+    assert command.stop_reason() == ''

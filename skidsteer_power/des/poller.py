@@ -43,8 +43,9 @@ class DriveCommand:
     motor speeds (:meth:`set`, [rpm, amplifier sense]). :meth:`wanted_rpm` gives 0 unless every
     condition for motion holds: active (lifecycle), not shutting down, no amplifier fault latched on
     either side, a command younger than ``timeout_s`` [s], this side's link up, and with
-    ``stop_both_on_link_loss`` the other side's link up too. A set point is always a finite integer
-    within +-``max_rpm``.
+    ``stop_both_on_link_loss`` the other side's link up too (a link is up after a good poll cycle and
+    for ``stall_timeout_s`` [s] after the latest one, so a hung poller counts as a lost link). A set
+    point is always a finite integer within +-``max_rpm``.
     """
 
     def __init__(
@@ -57,6 +58,7 @@ class DriveCommand:
         stop_both_on_link_loss: bool = True,
         active: bool = True,
         sides: tuple[str, ...] = ('left', 'right'),
+        stall_timeout_s: float = 1.0,
     ) -> None:
         self.timeout_s = timeout_s
         self.max_rpm = min(max_rpm, MAX_MOTOR_RPM)
@@ -70,6 +72,8 @@ class DriveCommand:
         self._stamp = -math.inf
         self._halted_by: set[str] = set()
         self._down: dict[str, str] = dict.fromkeys(sides, 'not connected yet')  # up after a good cycle
+        self._up_at: dict[str, float] = {}  # time.monotonic() of each side's last good cycle [s]
+        self.stall_timeout_s = stall_timeout_s
         self._clear_requests: set[str] = set()
         self._active = active
         self.shutting_down = False
@@ -128,7 +132,7 @@ class DriveCommand:
             if self._stop_reason_locked(now):
                 self._slew.reset(now)
                 return 0
-            if side in self._down:
+            if side in self._down_locked(now):
                 return 0
             if self._twist is not None:
                 assert self.geometry is not None
@@ -152,8 +156,9 @@ class DriveCommand:
             return 'inactive'
         if self._halted_by:
             return f'amplifier fault on {", ".join(sorted(self._halted_by))}'
-        if self.stop_both_on_link_loss and self._down:
-            return f'link down: {", ".join(f"{s} ({r})" for s, r in sorted(self._down.items()))}'
+        down = self._down_locked(now)
+        if self.stop_both_on_link_loss and down:
+            return f'link down: {", ".join(f"{s} ({r})" for s, r in sorted(down.items()))}'
         if now - self._stamp > self.timeout_s:
             return 'no fresh command'
         return ''
@@ -179,13 +184,23 @@ class DriveCommand:
             self._down[side] = reason
 
     def link_up(self, side: str) -> None:
+        """A good cycle on this side (a heartbeat: without one for ``stall_timeout_s`` the side
+        counts as down, so a hung poller stops the other side too)."""
         with self._lock:
             self._down.pop(side, None)
+            self._up_at[side] = time.monotonic()
 
     @property
     def links_down(self) -> dict[str, str]:
         with self._lock:
-            return dict(self._down)
+            return self._down_locked(time.monotonic())
+
+    def _down_locked(self, now: float) -> dict[str, str]:
+        down = dict(self._down)
+        for side, at in self._up_at.items():
+            if side not in down and now - at > self.stall_timeout_s:
+                down[side] = f'poller stalled for {now - at:.1f} s'
+        return down
 
     def request_clear(self, sides: list[str]) -> None:
         """Ask each side's poller to clear its amplifier errors and re-enable."""

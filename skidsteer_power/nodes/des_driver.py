@@ -59,10 +59,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle.node import LifecycleNodeMixin
 from sensor_msgs.msg import JointState
@@ -334,6 +336,7 @@ class DesDriver(LifecycleNode):
             limits=p['limits'],
             stop_both_on_link_loss=p['stop_both_on_link_loss'],
             active=False,
+            stall_timeout_s=max(1.0, 5.0 / p['poll_rate_hz']),  # no good cycle for this long: down
         )
         config = DesConfig(
             baudrate=p['baud'],
@@ -611,11 +614,26 @@ def bring_down(node: DesDriver) -> None:
 
 
 def make_driver(**kwargs: Any) -> DesDriver:
-    """A :class:`DesDriver`; with ``autostart`` configured and activated (ConfigError if that fails)."""
-    node = DesDriver(**kwargs)
+    """A :class:`DesDriver`; with ``autostart`` configured and activated (ConfigError if that fails).
+
+    A SIGINT / SIGTERM during start-up (rclpy then invalidates the context under the node) is an
+    external shutdown, not an error.
+    """
+    context = kwargs.get('context')
+    try:
+        node = DesDriver(**kwargs)
+    except RCLError:
+        if rclpy.ok(context=context):
+            raise
+        raise ExternalShutdownException from None
     if node.params['autostart']:
         try:
             bring_up(node)
+        except RCLError:
+            node.destroy_node()
+            if rclpy.ok(context=context):
+                raise
+            raise ExternalShutdownException from None
         except BaseException:
             node.destroy_node()
             raise
