@@ -354,26 +354,3 @@ def test_cli_des_sim_prints_ports_and_stops_on_sigint():
         proc.kill()
         proc.wait()
 
-
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_des_sim_in_the_background_stops_on_sigint_and_sigterm(signum):
-    # A background job of a non-interactive shell inherits SIGINT as ignored (POSIX job control):
-    # start it that way and check that both signals still stop it cleanly.
-    proc = subprocess.Popen(
-        [sys.executable, '-m', 'skidsteer_power.cli.main', 'des-sim', '--count', '1', '--json'],
-        stdout=subprocess.PIPE,
-        text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
-    )
-    try:
-        lines = []
-        while not lines or lines[-1] != '}\n':
-            lines.append(proc.stdout.readline())
-        port = json.loads(''.join(lines))['port']
-        assert os.path.exists(port)
-        proc.send_signal(signum)
-        assert proc.wait(timeout=10) == 0
-        assert not os.path.exists(port)
-    finally:
-        proc.kill()
-        proc.wait()
