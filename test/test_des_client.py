@@ -353,4 +353,3 @@ def test_cli_des_sim_prints_ports_and_stops_on_sigint():
     finally:
         proc.kill()
         proc.wait()
-
