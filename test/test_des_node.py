@@ -295,7 +295,7 @@ def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
         h.close()
 
 
-def test_clear_faults_answers_unconfigured_and_latched(ros_context, pair):
+def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair, monkeypatch):
     from std_srvs.srv import Trigger
 
     h = Harness(ros_context, pair, activate=False)
@@ -306,10 +306,22 @@ def test_clear_faults_answers_unconfigured_and_latched(ros_context, pair):
         h.driver.trigger_activate()
         pair.right.raise_error(DesErrorFlags.OVER_CURRENT)
         assert h.spin_until(lambda: h.side_diag('right')[1].get('fault_latched') == 'True')
-        pair.right.raise_error(DesErrorFlags.OVER_CURRENT)  # ... and it comes back at once
+        # A fault that persists (the amplifier ignores the clear, as an over-temperature would):
+        with monkeypatch.context() as m:
+            m.setattr(pair.right, '_op_clear_error', lambda words: ())
+            answer = h.call(h.clear_client, Trigger.Request())
+        assert not answer.success and 'still latched: right (OVER_CURRENT' in answer.message
+        assert not pair.right.enabled and pair.left.speed_setpoint_rpm == 0
+        # An unreachable side is reported, and its request is not left pending for later.
+        pair.left.close_port()
+        assert h.spin_until(lambda: 'left' in h.driver.command.links_down)
         answer = h.call(h.clear_client, Trigger.Request())
-        # The simulator clears on request, so the error is gone; a persisting one would be reported.
+        assert not answer.success
+        pair.left.reopen_port()
+        assert h.spin_until(lambda: not h.driver.command.links_down)
+        answer = h.call(h.clear_client, Trigger.Request())
         assert answer.success, answer.message
+        assert pair.right.errors == DesErrorFlags(0) and pair.right.enabled
     finally:
         h.close()
 
