@@ -178,6 +178,12 @@ def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
     def wrapper(self: DesDriver, *args: Any) -> Any:
         try:
             return callback(self, *args)
+        except RCLError:
+            self.emergency_stop(f'RCLError in {callback.__name__}')
+            if self.context.ok():
+                raise
+            # SIGINT / SIGTERM invalidated the context under a running callback: a shutdown, no bug.
+            raise ExternalShutdownException from None
         except BaseException:
             self.emergency_stop(f'exception in {callback.__name__}')
             raise
@@ -371,7 +377,7 @@ class DesDriver(LifecycleNode):
         problems = [f'{s}: {p.sample.message}' for s, p in self.pollers.items() if p.sample.sequence == 0]
         raise ConfigError(f'DES amplifiers not ready after {timeout_s:g} s ({"; ".join(problems)})')
 
-    def _wait_applied(self, timeout_s: float = 1.0) -> bool:
+    def _wait_applied(self, timeout_s: float = 3.0) -> bool:
         """Wait until every poller has run a cycle with the command's current state."""
         assert self.command is not None
         generation = self.command.generation
