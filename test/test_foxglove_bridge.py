@@ -163,6 +163,7 @@ def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
     assert shipped == layout_json()
     published = {f'/{topic}' for topic, _ in (*COMMAND_FIGURES, *MEASUREMENT_FIGURES)}
     published |= {'/battery/state', '/energy/time_to_empty_s', '/energy/remaining_wh', '/odom'}
+    published |= {'/energy/path_required_wh', '/energy/path_margin_wh'}  # nodes/path_hook.py
     used = topics_used(shipped)
     assert used <= published and {'/power/predicted_left_w', '/power/measured_right_w'} <= used
 
