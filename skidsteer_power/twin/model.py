@@ -373,7 +373,8 @@ class Twin:
         terrains per wheel for ``soil.shear_fraction``)."""
         index = self._terrain_index(self.wheel_x, self.wheel_y)
         self._wheel_index = index
-        terrains = [self.field.base] * self.n_wheels if index is None else [self.field.terrains[i] for i in index]
+        field = self.field
+        terrains = [field.base] * self.n_wheels if index is None else [field.terrains[i] for i in index]
         r, b = self.r, self.width
 
         def column(values: list[float]) -> np.ndarray:
@@ -450,7 +451,8 @@ class Twin:
         if self._wp_inv_k is not None:
             fraction = -np.expm1(mag * self._wp_inv_k)  # eq. 2.3
         else:
-            fraction = np.array([soil.shear_fraction(t, m) for t, m in zip(self._wp_terrains, mag)])  # 2.4-2.5
+            pairs = zip(self._wp_terrains, mag, strict=True)
+            fraction = np.array([soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
         # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping
         mag += 1e-300
         gain = strength * fraction
@@ -513,7 +515,8 @@ class Twin:
         ratio = np.minimum(np.maximum(w_wheel / np.maximum(fz, 1e-9), 0.5), 2.0)
         travel = (self.r * om + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
         fraction = np.minimum(dt * (travel + 1.0 / SINKAGE_SETTLING_S), 1.0)
-        self.z = np.minimum(np.maximum(self.z * ratio ** (fraction * self._sinkage_exponent), 1e-6), 0.95 * self.r)
+        z = self.z * ratio ** (fraction * self._sinkage_exponent)
+        self.z = np.minimum(np.maximum(z, 1e-6), 0.95 * self.r)
 
     # ------------------------------------------------------------------ stepping
     def kinetic_energy(self) -> float:
@@ -555,7 +558,11 @@ class Twin:
         dt = self.dt
         vx, vy, wz = self.vel.tolist()
         fx, fy, mz = force.tolist()
-        vx, vy, wz = (vx + dt * (fx / self.mass + wz * vy), vy + dt * (fy / self.mass - wz * vx), wz + dt * mz / self.Iz)
+        vx, vy, wz = (
+            vx + dt * (fx / self.mass + wz * vy),
+            vy + dt * (fy / self.mass - wz * vx),
+            wz + dt * mz / self.Iz,
+        )
         self.vel = np.array([vx, vy, wz])
         self.omega_m = omega_m
         self.theta_m = self.theta_m + dt * omega_m
