@@ -210,7 +210,8 @@ class Twin:
             self.n_wheels = nw
             self._wheels_per_side = nw // 2
             self._sinkage_exponent = 1.0 / (self.field.base.n + 0.5)  # eq. 2.32: Fz ~ z^(n + 1/2)
-            self._wheel_soil()  # a uniform floor: once (patches: refreshed while stepping)
+            if self.field.uniform:
+                self._wheel_soil()  # once (with patches: refreshed while stepping)
 
     def reset(self) -> None:
         """Rest at the origin, heading +x, shear relaxed, static sinkage, full battery."""
