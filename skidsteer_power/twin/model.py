@@ -396,12 +396,12 @@ class Twin:
     def _wheel_kinematics(self) -> tuple[np.ndarray, ...]:
         """Per wheel: axle ground speed forward and lateral [m/s], |omega| [rad/s], rolling direction
         (+-1), forward speed in the rolling frame [m/s] and slip (eq. 2.13) [-]."""
-        vx, vy, wz = (float(v) for v in self.vel)
+        vx, vy, wz = self.vel.tolist()
         vxa = vx - wz * self.wheel_y  # axle ground speed, forward [m/s]
         vya = vy + wz * self.wheel_x  # lateral [m/s]
         per_side = []
-        for w in self.omega_m:
-            w = float(w) / self.G
+        for w in self.omega_m.tolist():
+            w /= self.G
             per_side.append((1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0), abs(w)))
         k = self._wheels_per_side
         direction = np.array([per_side[0][0]] * k + [per_side[1][0]] * k)
@@ -481,12 +481,13 @@ class Twin:
         fz = s_cos + t_sin
         fy = y_sum  # eq. 4.9, lateral
         torque = direction * (r * t_sum)  # eq. 2.34: the terrain's resisting torque
-        force = np.array([fx.sum(), fy.sum(), float(self.wheel_x @ fy - self.wheel_y @ fx)])
+        force = np.array([sum(fx.tolist()), sum(fy.tolist()), float(self.wheel_x @ fy - self.wheel_y @ fx)])
         # power of the contact stresses on the slip velocity (vxm cos(theta) - r om, vya), and the rut's
-        dissipation = float((vxm * normal).sum() - (vxm * t_cos - (r * om) * t_sum + vya * y_sum).sum())
+        dissipation = float(vxm @ (normal - t_cos) + (r * om) @ t_sum - vya @ y_sum)
         self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self._wheels_per_side)
         half = self._wheels_per_side
-        axle = np.array([torque[:half].sum(), torque[half:].sum()])
+        torques = torque.tolist()
+        axle = np.array([sum(torques[:half]), sum(torques[half:])])
         return force, axle, dissipation, float(z.max())
 
     def _advance_wheels(self, dt: float) -> None:
