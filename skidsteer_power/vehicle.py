@@ -17,6 +17,8 @@ names carry the unit)::
     wheel_width_m: 0.074
     wheelbase_m: 0.45            # front axle to rear axle
     powertrain: {preset: test_robot}
+    max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
+    max_yaw_rate_rad_s: 2.0
 
 Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
 """
@@ -43,6 +45,8 @@ RUNNING_GEARS = ('track', 'wheel')
 WHEEL_COUNTS = (4, 6)
 TRACK_FIELDS = ('track_length_m', 'track_width_m', 'sprocket_radius_m')
 WHEEL_FIELDS = ('n_wheels', 'wheel_radius_m', 'wheel_width_m', 'wheelbase_m')
+DEFAULT_MAX_SPEED_M_S = 1.5  # the dissertation's largest simulated speed (section 3.5) [m/s]
+DEFAULT_MAX_YAW_RATE_RAD_S = 2.0  # a spin in place of the test robots at full motor speed or less [rad/s]
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,9 @@ class Vehicle:
     wheelbase_m : front axle to rear axle wb [m] (wheels); a 6-wheel vehicle's middle axle is midway
     powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
     source : where the numbers come from; flags assumed values
+    max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
+        maps cover it, commands beyond it are flagged ``clamped``
+    max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
     """
 
     name: str
@@ -80,6 +87,8 @@ class Vehicle:
     wheelbase_m: float | None = None
     powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
     source: str = ''
+    max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
+    max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -139,7 +148,7 @@ def _validate(vehicle: Vehicle) -> None:
         raise _fail(
             vehicle.name, f'running_gear must be one of {RUNNING_GEARS}, not {vehicle.running_gear!r}'
         )
-    for name in ('mass_kg', 'cg_height_m', 'tread_m'):
+    for name in ('mass_kg', 'cg_height_m', 'tread_m', 'max_speed_m_s', 'max_yaw_rate_rad_s'):
         _check_positive(vehicle, name)
     own, other = (TRACK_FIELDS, WHEEL_FIELDS) if vehicle.is_tracked else (WHEEL_FIELDS, TRACK_FIELDS)
     for name in own:
@@ -257,8 +266,8 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
     payload = {
         f.name: getattr(vehicle, f.name)
         for f in dataclasses.fields(vehicle)
-        if f.name not in ('name', 'source')
-    }
+        if f.name not in ('name', 'source', 'max_speed_m_s', 'max_yaw_rate_rad_s')  # the envelope
+    }  # is no physics: maps key on it separately (skidsteer_power.maps.power_map.cache_path)
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             payload[key] = repr(float(value))  # 4 and 4.0 hash alike

@@ -206,9 +206,17 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
         emit(table, True)
     else:
         for name, res in table['results'].items():
+            if res['baseline'] is None:
+                print(f'{name}: baseline did not converge')
+                continue
             print(f'{name}: baseline ' + ', '.join(f'{k} {v:.4g}' for k, v in res['baseline'].items()))
-            for case, changes in res['changes_percent'].items():
-                print(f'  {case:<7} ' + '  '.join(f'{k} {v:+.3f} %' for k, v in changes.items()))
+            print('  d(metric)/d(parameter) [% per %], central differences of converged direct solves:')
+            for group, per_metric in res['derivatives'].items():
+                cells = (
+                    f'{k} {d["derivative"]:+.3f}' if d['status'] == 'ok' else f'{k} {d["status"].upper()}'
+                    for k, d in per_metric.items()
+                )
+                print(f'  {group:<5} ' + '  '.join(cells))
     return 0
 
 

@@ -44,7 +44,8 @@ class Prediction:
     electrical_W : motor terminal power with winding loss [W]
     bus_W : battery-side power through the amplifier [W]
     traction_margin : 1 - required / available thrust (<= 0: about to get stuck) [-]
-    clamped : the command lay outside the map and was clamped to its edge
+    clamped : the command lay outside the map's command envelope and was answered at its edge
+    limited : a physics limit (a turn tighter than the map's small-radius limit, or no steady state)
     """
 
     speed_m_s: float
@@ -60,6 +61,7 @@ class Prediction:
     bus_W: Pair
     traction_margin: float
     clamped: bool
+    limited: bool = False
 
     @property
     def bus_total_W(self) -> float:
@@ -138,4 +140,5 @@ class MapPredictor:
             bus_W=_pair(left.electrical_power_W, right.electrical_power_W),
             traction_margin=float(np.asarray(q.traction_margin).reshape(-1)[0]),
             clamped=bool(np.asarray(q.clamped).reshape(-1)[0]),
+            limited=bool(np.asarray(q.limited).reshape(-1)[0]),
         )

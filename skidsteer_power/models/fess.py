@@ -54,7 +54,6 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-MODEL_VERSION = 'fess-1'
 DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
 FORCE_TOL_N = 1e-3  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
 MAX_ITERATIONS = 60

@@ -173,6 +173,7 @@ class PowerEstimator(Node):
             self.create_timer(float(p['save_period_s']), self.save)
         size = len(SUMMARY_FIELDS)
         self._summary_layout = [MultiArrayDimension(label=SUMMARY_LABEL, size=size, stride=size)]
+        self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -218,12 +219,11 @@ class PowerEstimator(Node):
 
     # --- outputs ------------------------------------------------------------------------------
     def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
-        msg = JointState()
+        msg = self._predicted_msg  # preallocated: only the stamp and the numbers change
         if isinstance(source_msg, TwistStamped):
             msg.header.stamp = source_msg.header.stamp
         else:
             msg.header.stamp = self.get_clock().now().to_msg()
-        msg.name = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
         msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
