@@ -8,6 +8,7 @@ Grid: 8 speeds 0.2 ... 1.5 m/s x 16 radii 1 ... 500 m (geometric), as in Figures
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -50,7 +51,7 @@ def _tracks(report: Report) -> None:
             f'track torque vs Wong, max over 8x16, {soil}', err * 100, '%', goal='< 3 %', met=err < 0.03
         )
     for n in (10, 20, 80):
-        t = best_time(lambda n=n: fess.solve(track, dry, V, R, n=n), repeat=3)
+        t = best_time(functools.partial(fess.solve, track, dry, V, R, n=n), repeat=3)
         report.figure(f'track 8x16 map, n = {n} elements', t * 1e3, 'ms')
     solver = fess.FessSolver(track, dry)
     cold = best_time(lambda: solver.solve_point(0.5, 0.25), repeat=5, number=50)

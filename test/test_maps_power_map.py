@@ -23,7 +23,7 @@ DRY = PRESETS['dry_sand']
 
 @pytest.fixture(scope='module')
 def small_map() -> PowerMap:
-    return PowerMap.build(TRACK, DRY, shape=(6, 15), n=20)
+    return PowerMap.build(TRACK, DRY, shape=(6, 15), n=20, refine=0)
 
 
 def test_build_covers_the_box_and_reports_its_points(small_map):
@@ -223,8 +223,11 @@ def test_cache_key_holds_the_options_and_the_physics_code(tmp_path):
     from skidsteer_power.cache import physics_files
 
     default = cache_path(PACKBOT, DRY, tmp_path)
-    assert cache_path(PACKBOT, DRY, tmp_path, shape=pm.DEFAULT_SHAPE, max_yaw_rate=2.0) == default
+    assert (
+        cache_path(PACKBOT, DRY, tmp_path, max_yaw_rate=2.0, min_radius=0.8) == default
+    )  # explicit defaults
     assert cache_path(PACKBOT, DRY, tmp_path, shape=(16, 41)) != default
+    assert cache_path(PACKBOT, DRY, tmp_path, refine=0) != default
     assert cache_path(PACKBOT, DRY, tmp_path, min_radius=0.5) != default
     names = {p.name for p in physics_files()}
     assert {'vehicle.py', 'terrain.py', 'base.py', 'fess.py', 'power_map.py', 'interpolation.py'} <= names

@@ -111,7 +111,9 @@ def run_build(args: argparse.Namespace) -> int:
     options = {
         'max_speed': args.max_speed,
         'max_yaw_rate': args.max_yaw_rate,
-        'shape': (args.rings or DEFAULT_SHAPE[0], args.angles or DEFAULT_SHAPE[1]),
+        'shape': None
+        if args.rings is None and args.angles is None
+        else (args.rings or DEFAULT_SHAPE[0], args.angles or DEFAULT_SHAPE[1]),
         'n': args.elements,
         'min_radius': args.min_radius,
     }
@@ -122,7 +124,7 @@ def run_build(args: argparse.Namespace) -> int:
         power_map = PowerMap.build(vehicle, terrain, **options)
     else:
         with bar:
-            task = bar.add_task('build', total=options['shape'][0])
+            task = bar.add_task('build', total=args.rings or DEFAULT_SHAPE[0])
             power_map = PowerMap.build(
                 vehicle, terrain, **options, progress=lambda done, total: bar.update(task, completed=done)
             )

@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
+from skidsteer_power.errors import ConfigError, InputError
 
 ACK_OK = 0x4F
 """'O': op code or frame accepted (either direction)."""
@@ -213,9 +214,9 @@ class DesConfig:
 
     def __post_init__(self) -> None:
         if self.baudrate not in BAUD_CODES:
-            raise ValueError(f'baud rate {self.baudrate} is not one the DES supports: {sorted(BAUD_CODES)}')
+            raise ConfigError(f'baud rate {self.baudrate} is not one the DES supports: {sorted(BAUD_CODES)}')
         if self.current_source not in ('status_variable', 'is_must'):
-            raise ValueError(
+            raise ConfigError(
                 f"current_source must be 'status_variable' or 'is_must', not {self.current_source!r}"
             )
 
@@ -227,7 +228,7 @@ def to_word(value: int) -> int:
     """A signed (int16) or unsigned (uint16) integer as the 16-bit word on the wire."""
     value = int(value)
     if not _WORD_MIN <= value <= _WORD_MAX:
-        raise ValueError(f'{value} does not fit in a 16-bit word')
+        raise InputError(f'{value} does not fit in a 16-bit word')
     return value & 0xFFFF
 
 
@@ -240,7 +241,7 @@ def split_lword(value: int, config: DesConfig) -> tuple[int, int]:
     """A 32-bit value (signed or unsigned) as two words in the configured (UNCONFIRMED) order."""
     value = int(value)
     if not -0x8000_0000 <= value <= 0xFFFF_FFFF:
-        raise ValueError(f'{value} does not fit in 32 bits')
+        raise InputError(f'{value} does not fit in 32 bits')
     value &= 0xFFFF_FFFF
     low, high = value & 0xFFFF, value >> 16
     return (low, high) if config.lword_low_word_first else (high, low)

@@ -6,14 +6,17 @@ psi = atan2(L w_z, V) [rad], with the length L = max_speed / max_yaw_rate [m]. W
 depend mostly on the turning radius R = V / w_z = L cot(psi); on a rectangular (V, w_z) grid the
 torque rises so steeply with w_z near straight running at low V (R drops from infinity to a metre
 within one yaw-rate step) that bilinear interpolation was measured 36 % off at off-grid points
-(16 x 81 grid). On the (s, psi) grid of 16 x 101 (psi warped, see :func:`_angle_coordinate`) each
-side torque is within 0.5 % of the larger one from direct FESS (1000 random commands,
-benchmarks/bench_maps.py; 16 x 41 gave 1.3 %, 16 x 81 1.0 %: the turn angle is what needs
-resolution, the command magnitude does not). A track map builds in about 0.1 s, a 6-wheel one in
-under 1 s. Straight running is
+(16 x 81 grid). The default grid is 31 rings x 101 warped turn angles (psi warped, see
+:func:`_angle_coordinate`) plus 40 more angles per side over the turns of radius min_radius ...
+3 min_radius, where a wheeled vehicle's outer-side slip rises steeply towards the traction limit.
+The map stores torques and slip speeds; each side's axle speed is derived from its exact ground
+speed plus the interpolated slip speed, and its power as torque x speed. Accuracy against direct
+FESS for every shipped vehicle x terrain: README ("Map accuracy"; ``python -m benchmarks.bench_maps``).
+Straight running is
 psi = 0, spinning in place psi = +-pi/2 and rest s = 0: no division by zero anywhere (hypot,
-atan2). The grid covers V up to ``max_speed`` and |w_z| up to ``max_yaw_rate`` (the corner
-included: s_max = sqrt(2) max_speed); queries beyond s_max are clamped radially and flagged. At
+atan2). The grid covers the vehicle's command envelope, V up to ``max_speed`` and |w_z| up to
+``max_yaw_rate`` (its vehicle-file fields; the corner included: s_max = sqrt(2) max_speed); a query
+outside the envelope is answered at the grid's edge and flagged ``clamped``. At
 exactly V = w_z = 0 the query answers rest (all zeros); the s = 0 grid row holds the s -> 0 limit
 (the breakaway torques) for interpolation.
 
@@ -31,7 +34,8 @@ rate*, i.e. at V' = min_radius |w_z|, and keeps that point's shear state: its to
 slip speed r omega - v_side, s0, sinkage and traction margin. Each side's omega then follows its own
 ground speed, omega = omega' + (v_side - v_side') / r. The text's argument for this limit: at small
 radii "the soil fails and the shear force on the contact surface is saturated" (section 3.4), so the
-turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``.
+turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``
+(the map's and every query's).
 A spin in place therefore gets both sides driven in opposite directions with the turning resistance
 of the tightest reliable turn at that yaw rate. It inherits that turn's asymmetry: the side that
 was outer keeps its driving slip speed and torque, the other its braking ones, so the two sides'
@@ -40,7 +44,12 @@ At rest (V = w_z = 0) every torque is 0.
 
 Points that do not converge even after warm starts from converged neighbours keep
 ``converged=False`` in the map, are filled with the nearest converged point's values and are
-reported (never silently dropped); a query touching such a cell is flagged ``clamped``.
+reported (never silently dropped). Those, and nodes whose slip ratio reaches :data:`SLIP_LIMIT` (the
+traction limit: slip -> 1, where speed and power change too steeply for any interpolation), mark
+their cells: a query touching one is flagged ``limited``.
+
+Right turns are the mirror image of left turns (every vehicle here is laterally symmetric): only
+psi >= 0 is solved, so mirrored commands give mirrored answers exactly.
 """
 
 from __future__ import annotations
@@ -67,7 +76,9 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-DEFAULT_SHAPE = (16, 101)  # rings (command magnitude) x turn angles (module doc: accuracy)
+DEFAULT_SHAPE = (31, 101)  # rings (command magnitude) x turn angles (module doc: accuracy)
+DEFAULT_REFINE = 40  # extra turn angles per side where 1 < R / min_radius < REFINE_SPAN (module doc)
+REFINE_SPAN = 3.0
 ENVELOPE_TOLERANCE = 1e-9  # relative: commands this close to the envelope's edge count as inside
 
 FIELDS = (  # stored on the grid and interpolated
@@ -78,8 +89,9 @@ FIELDS = (  # stored on the grid and interpolated
     's0_m',
     'sinkage_m',
     'traction_margin',
-    'suspect',  # 1 where the cell holds a filled (non-converged) value; interpolates to > 0 near it
+    'suspect',  # 1 at nodes past the traction limit (module doc); a query touching one is ``limited``
 )
+SLIP_LIMIT = 0.7  # slip ratio from which a node counts as at the traction limit (module doc) [-]
 QUERY_FIELDS = (  # what a query answers
     'torque_left_Nm',
     'torque_right_Nm',
@@ -146,6 +158,7 @@ def build_options(
     shape: tuple[int, int] | None = None,
     n: int | None = None,
     min_radius: float | None = None,
+    refine: int | None = None,
 ) -> dict[str, Any]:
     """Every option that changes a map, defaults resolved: the vehicle's command envelope
     (``max_speed_m_s``, ``max_yaw_rate_rad_s``), :data:`DEFAULT_SHAPE`, FESS's default element
@@ -153,12 +166,14 @@ def build_options(
     same options give the same cache file and different options never share one."""
     from skidsteer_power.models import fess
 
-    options = {
+    options: dict[str, Any] = {
         'max_speed': float(vehicle.max_speed_m_s if max_speed is None else max_speed),
         'max_yaw_rate': float(vehicle.max_yaw_rate_rad_s if max_yaw_rate is None else max_yaw_rate),
         'shape': [int(k) for k in (DEFAULT_SHAPE if shape is None else shape)],
         'n': int(fess.DEFAULT_ELEMENTS if n is None else n),
         'min_radius': float(2.0 * vehicle.tread_m if min_radius is None else min_radius),
+        # the refinement belongs to the default grid; an explicit shape is taken as it is
+        'refine': int((DEFAULT_REFINE if shape is None else 0) if refine is None else refine),
     }
     for name in ('max_speed', 'max_yaw_rate'):
         if not np.isfinite(options[name]) or options[name] <= 0:
@@ -221,6 +236,7 @@ class PowerMap:
         progress: ProgressCallback | None = None,
         n: int | None = None,
         min_radius: float | None = None,
+        refine: int | None = None,
         speeds: ArrayLike | None = None,
         yaw_rates: ArrayLike | None = None,
     ) -> PowerMap:
@@ -251,13 +267,20 @@ class PowerMap:
         from skidsteer_power.models import fess
 
         options = build_options(
-            vehicle, max_speed=max_speed, max_yaw_rate=max_yaw_rate, shape=shape, n=n, min_radius=min_radius
+            vehicle,
+            max_speed=max_speed,
+            max_yaw_rate=max_yaw_rate,
+            shape=shape,
+            n=n,
+            min_radius=min_radius,
+            refine=refine,
         )
         n_s, n_psi = options['shape']
         r_min = options['min_radius']
         length = options['max_speed'] / options['max_yaw_rate']
         radial = np.linspace(0.0, np.sqrt(2.0) * options['max_speed'], n_s)
-        angles = _angle_from_coordinate(np.linspace(-1.0, 1.0, n_psi))
+        angles = _refined_angles(n_psi, options['refine'], length, r_min)
+        n_psi = len(angles)
         left = angles >= 0  # solved; the rest mirrored
         solver = fess.FessSolver(vehicle, terrain, options['n'])
         rows: list[dict[str, Any]] = []
@@ -303,7 +326,7 @@ class PowerMap:
             converged=self.converged,
             limited=self.limited,
             meta=np.array(json.dumps(self.meta)),
-            **arrays,
+            **arrays,  # type: ignore[arg-type]
         )
         os.replace(tmp, target)  # atomic: a reader never sees half a map
         self.path = target
@@ -320,7 +343,7 @@ class PowerMap:
             with np.load(source, allow_pickle=False) as data:
                 meta = json.loads(str(data['meta']))
                 values = {name: np.array(data[f'value_{name}']) for name in FIELDS}
-                arrays = {
+                arrays: dict[str, np.ndarray] = {
                     k: np.array(data[k]) for k in ('radial', 'angles', 'length_m', 'converged', 'limited')
                 }
         except FileNotFoundError:
@@ -349,7 +372,7 @@ class PowerMap:
         V < 0 is answered by the 180-degree symmetry (module doc). Flags: see :class:`MapQuery`.
         """
         if np.ndim(speed) == 0 and np.ndim(yaw_rate) == 0:
-            return self._query_scalar(float(speed), float(yaw_rate))
+            return self._query_scalar(float(speed), float(yaw_rate))  # type: ignore[arg-type]
         v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
         shape = v.shape
         v, w = v.ravel(), w.ravel()
@@ -451,6 +474,20 @@ def _angle_from_coordinate(u: np.ndarray) -> np.ndarray:
     return _HALF_PI * np.sinh(ANGLE_WARP * np.asarray(u)) / math.sinh(ANGLE_WARP)
 
 
+def _refined_angles(n_psi: int, refine: int, length: float, r_min: float) -> np.ndarray:
+    """The warped turn angles [rad] plus ``refine`` more per side, evenly spaced in psi over the turns
+    of radius min_radius ... REFINE_SPAN x min_radius, where the outer side's slip rises steeply
+    towards the traction limit (measured: most of the remaining map error was there). Symmetric."""
+    base = _angle_from_coordinate(np.linspace(-1.0, 1.0, n_psi))
+    if refine <= 0:
+        return base
+    hi, lo = math.atan2(length, r_min), math.atan2(length, REFINE_SPAN * r_min)
+    extra = np.linspace(lo, hi, refine + 2)[1:-1]
+    merged = np.unique(np.concatenate([base, extra, -extra]))
+    gaps = np.diff(_angle_coordinate(merged))
+    return merged[np.concatenate([[True], gaps > 1e-9])]
+
+
 def _axis(values: ArrayLike, name: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).ravel()
     if len(arr) < 2 or not np.all(np.isfinite(arr)) or not np.all(np.diff(arr) > 0):
@@ -520,6 +557,9 @@ def _solve_row(
         's0': sol.s0,
         'sinkage': sol.sinkage,
         'margin': sol.traction_margin,
+        'slip_ratio': np.max(
+            np.abs(slip) / np.maximum(np.maximum(np.abs(side_v + slip), np.abs(side_v)), 1e-12), axis=1
+        ),
         'converged': sol.converged,
         'limited': limited,
         'state': np.where(sol.converged[:, None], sol.state, np.nan),
@@ -557,6 +597,9 @@ def _assemble(rows: list[dict[str, Any]]) -> tuple[dict[str, np.ndarray], np.nda
         'traction_margin': np.stack([r['margin'] for r in rows]),
         'suspect': (~converged).astype(float),
     }
+    steep = np.stack([r['slip_ratio'] for r in rows]) >= SLIP_LIMIT
+    steep[0] = False  # ring 0 is the s -> 0 limit: slip over a vanishing ground speed means nothing
+    values['suspect'] = (~converged | steep).astype(float)
     if np.any(~converged) and np.any(converged):
         _fill_nearest(values, converged)
     return values, converged, limited

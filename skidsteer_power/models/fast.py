@@ -97,7 +97,7 @@ def _mu_t_from_balance(vehicle: Vehicle, terrain: Terrain, state: SteadyState) -
     half = 0.5 * vehicle.tread_m
     moment = (np.ravel(state.thrust_outer_N) - np.ravel(state.thrust_inner_N)) * half - (rto - rti) * half
     moment = moment + np.ravel(state.s0_m) * np.cos(beta) * fc
-    return (moment / (vehicle.weight_N * float(vehicle.track_length_m))).reshape(np.shape(state.s0_m))
+    return (moment / (vehicle.weight_N * float(vehicle.track_length_m or 0.0))).reshape(np.shape(state.s0_m))
 
 
 def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -121,9 +121,10 @@ def turning_tables(vehicle: Vehicle, terrain: Terrain, source: str = 'wong') -> 
     if path.exists():
         try:
             with np.load(path, allow_pickle=False) as data:
-                return TurningTables(
-                    *(np.array(data[k]) for k in ('speeds', 'curvatures', 'mu_t', 's0')), source
+                speeds, curvatures, mu_t, s0 = (
+                    np.array(data[k]) for k in ('speeds', 'curvatures', 'mu_t', 's0')
                 )
+                return TurningTables(speeds, curvatures, mu_t, s0, source)
         except (OSError, KeyError, ValueError):
             pass  # damaged: regenerate
     tables = generate_tables(vehicle, terrain, source)
