@@ -168,8 +168,7 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
     )
     payload = result.summary()
     battery = Battery.from_config(powertrain.battery)
-    for power, dt in zip(result.power_battery_W, result.duration_s, strict=True):
-        battery.step(float(power), float(dt))
+    battery.run_profile(result.power_battery_W, result.duration_s)
     payload['battery_end_soc'] = battery.soc
     payload['battery_remaining_wh'] = battery.remaining_wh
     if args.plot:

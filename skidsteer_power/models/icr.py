@@ -39,7 +39,7 @@ from scipy.special import roots_legendre
 from skidsteer_power.errors import InputError
 from skidsteer_power.models import loads, steeds
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.wong_track import MAX_ITERATIONS, TOLERANCE, newton_solve
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, newton_solve
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
 

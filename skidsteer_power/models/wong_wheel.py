@@ -54,7 +54,7 @@ from scipy.special import roots_legendre
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models import loads
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.wong_track import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
 from skidsteer_power.terramechanics import wheel as single_wheel
 from skidsteer_power.terramechanics.soil import shear_fraction, shear_strength
 from skidsteer_power.terramechanics.terrain import Terrain
