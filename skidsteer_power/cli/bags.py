@@ -19,14 +19,25 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
         help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
     )
     parser.add_argument(
-        '--salvage', action='store_true', help='read a damaged bag up to the damage instead of failing'
+        '--salvage',
+        action='store_true',
+        help='read every intact message of a damaged bag instead of failing (exit 0; the JSON says '
+        'messages_expected, messages_read, complete)',
     )
 
 
 def _open(args: argparse.Namespace) -> Any:
+    """The bag, checked complete first unless ``--salvage`` (a damaged bag: one line, exit 2)."""
     from skidsteer_power.bags.reader import load_msg_definitions, open_bag
 
-    return open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
+    bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
+    if not args.salvage:
+        try:
+            bag.count_all()  # reads every message once; raises InputError saying what is missing
+        except BaseException:
+            bag.close()
+            raise
+    return bag
 
 
 def _log_to_stderr() -> None:
@@ -86,6 +97,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             'wall_time_s': result.wall_s,
             'max_late_s': result.max_late_s,
             'stopped_by': stop.signal_name or 'end',
+            'undecodable': result.undecodable,
+            **bag.integrity(),
         },
         args.json,
     )
@@ -106,13 +119,23 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         odom_topic=args.odom,
         map_cache_dir=args.map_cache,
         plots=not args.no_plots,
+        kinematics=args.kinematics,
     )
     with _open(args) as bag:
         summary = validate(bag, options)
+        summary.update(bag.integrity())
     if args.json:
         print_json(summary)
     else:
         print(one_screen(summary))
+        motion = summary.get('motion_prediction')
+        if motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
+            m = motion['metrics']
+            print(
+                f'predicted from the measured motion ({motion["kinematics"]}): energy error '
+                f'{m["energy_error_pct"]:+.1f} %, torque MAE left/right {m["torque_left"]["mae_Nm"]:.3f} / '
+                f'{m["torque_right"]["mae_Nm"]:.3f} N m'
+            )
     return 0
 
 
@@ -173,6 +196,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    val.add_argument(
+        '--kinematics',
+        choices=('cmd', 'odom', 'ground_truth'),
+        default='cmd',
+        help='predict from the command (default), the --odom twist, or /ground_truth/odom; with cmd, '
+        'a bag with odometry also gets the prediction from the measured motion',
+    )
     _add_bag_reading(val)
     add_json_flag(val)
     val.set_defaults(func=_cmd_validate)

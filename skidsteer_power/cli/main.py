@@ -19,6 +19,7 @@ import sys
 from collections.abc import Sequence
 
 from skidsteer_power import __version__
+from skidsteer_power.cli.common import native_stdout_to_stderr
 from skidsteer_power.errors import SkidsteerError
 
 PROG = 'skidsteer-power'
@@ -69,7 +70,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
-        code = func(args)
+        with native_stdout_to_stderr():  # DDS logs must not mix into --json output
+            code = func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit
     except SkidsteerError as err:
         return fail(str(err))
