@@ -29,6 +29,9 @@ periodic (``publish_period_s``)
     std_msgs/Float64 [s] (inf when idle); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
     source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
     every ``diagnostics_period_s``.
+path energy (:mod:`skidsteer_power.nodes.path_hook`)
+    ``plan`` nav_msgs/Path in; ``energy/path_required_wh``, ``energy/path_margin_wh`` std_msgs/Float64
+    [Wh] out, and a ``path energy`` diagnostic that WARNs while the margin is negative.
 service
     ``~/reset_energy`` std_srvs/Trigger: the battery was swapped for a full one; state of charge back
     to full, energy tallies to 0 J, state file rewritten.
@@ -77,6 +80,8 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
+from skidsteer_power.nodes.path_hook import PathEnergyHook
 from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
@@ -111,6 +116,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         'publishers) or reliable (matches reliable publishers only)',
     ),
     'output_qos': ('reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'),
+    **PATH_PARAMETERS,
 }
 
 INPUT_RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT, 'reliable': ReliabilityPolicy.RELIABLE}
@@ -256,6 +262,7 @@ class PowerEstimator(Node):
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
         self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
+        self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -336,6 +343,7 @@ class PowerEstimator(Node):
         self.pub_summary.publish(summary)
         self.pub_remaining.publish(Float64(data=remaining))
         self.pub_tte.publish(Float64(data=tte))
+        self.path_energy.publish()  # the battery changed: the path margin too
 
     def _on_reset_energy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """``~/reset_energy``: a full battery is in; tallies restart; the state file is rewritten."""
@@ -364,6 +372,7 @@ class PowerEstimator(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
+        self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
     def save(self) -> None:
