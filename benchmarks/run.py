@@ -3,7 +3,8 @@
     python -m benchmarks.run              # all
     python -m benchmarks.run fess maps    # bench_fess.py and bench_maps.py
 
-Each module defines ``run(report: benchmarks.harness.Report) -> None``.
+Each module defines ``run(report: benchmarks.harness.Report) -> None``. The exit code is 1 when any
+goal was missed (so ``make bench`` fails), 0 when every goal was met.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
         importlib.import_module(f'benchmarks.{name}').run(report)
         missed += sum(1 for f in report.figures if f.met is False)
     print(f'\n{missed} goal(s) missed')
-    return 0
+    return 1 if missed else 0
 
 
 if __name__ == '__main__':

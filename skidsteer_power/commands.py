@@ -47,8 +47,8 @@ class Segment:
         straight, |R| > 0) for ``length_m`` [m] or ``duration_s`` [s] (exactly one)."""
         if (length_m is None) == (duration_s is None):
             raise InputError('a segment needs exactly one of length_m and duration_s')
-        given = length_m if length_m is not None else duration_s
-        if not (math.isfinite(given) and given > 0):  # type: ignore[arg-type]
+        given = float(length_m if length_m is not None else duration_s)  # type: ignore[arg-type]
+        if not (math.isfinite(given) and given > 0):
             raise InputError(f'segment length/duration must be finite and > 0, got {given}')
         if not (math.isfinite(speed_m_s) and speed_m_s > 0):
             raise InputError(f'segment speed must be finite and > 0 m/s, got {speed_m_s}')

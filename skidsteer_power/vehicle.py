@@ -19,6 +19,8 @@ names carry the unit)::
     yaw_inertia_kg_m2: 1.5       # optional; default: a uniform box (see Vehicle.yaw_inertia)
     powertrain: {preset: test_robot}
     drivetrain: {preset: test_robot}   # joint_states mapping (skidsteer_power.estimator.inputs.JointMap)
+    max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
+    max_yaw_rate_rad_s: 2.0
 
 Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
 """
@@ -45,6 +47,8 @@ RUNNING_GEARS = ('track', 'wheel')
 WHEEL_COUNTS = (4, 6)
 TRACK_FIELDS = ('track_length_m', 'track_width_m', 'sprocket_radius_m')
 WHEEL_FIELDS = ('n_wheels', 'wheel_radius_m', 'wheel_width_m', 'wheelbase_m')
+DEFAULT_MAX_SPEED_M_S = 1.5  # the dissertation's largest simulated speed (section 3.5) [m/s]
+DEFAULT_MAX_YAW_RATE_RAD_S = 2.0  # a spin in place of the test robots at full motor speed or less [rad/s]
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,9 @@ class Vehicle:
     drivetrain : how its joint_states map to the sides (joint names, units), interpreted by
         :class:`skidsteer_power.estimator.inputs.JointMap` (empty: the test robot's left_motor/right_motor)
     source : where the numbers come from; flags assumed values
+    max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
+        maps cover it, commands beyond it are flagged ``clamped``
+    max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
     """
 
     name: str
@@ -88,6 +95,8 @@ class Vehicle:
     powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
     source: str = ''
     drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
+    max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -159,7 +168,7 @@ def _validate(vehicle: Vehicle) -> None:
         raise _fail(
             vehicle.name, f'running_gear must be one of {RUNNING_GEARS}, not {vehicle.running_gear!r}'
         )
-    for name in ('mass_kg', 'cg_height_m', 'tread_m'):
+    for name in ('mass_kg', 'cg_height_m', 'tread_m', 'max_speed_m_s', 'max_yaw_rate_rad_s'):
         _check_positive(vehicle, name)
     own, other = (TRACK_FIELDS, WHEEL_FIELDS) if vehicle.is_tracked else (WHEEL_FIELDS, TRACK_FIELDS)
     for name in own:
@@ -255,6 +264,16 @@ def load_vehicle(path_or_name: str | os.PathLike[str] | Vehicle) -> Vehicle:
     return vehicle_from_dict(data, origin=str(path))
 
 
+_NOT_FINGERPRINTED = (
+    'name',
+    'source',
+    'drivetrain',
+    'yaw_inertia_kg_m2',
+    'max_speed_m_s',
+    'max_yaw_rate_rad_s',
+)
+
+
 def vehicle_fingerprint(vehicle: Vehicle) -> str:
     """Stable hex digest of the vehicle's physical parameters and powertrain (not name, source or
     the joint_states mapping, which changes no model result).
@@ -264,7 +283,9 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
     payload = {
         f.name: getattr(vehicle, f.name)
         for f in dataclasses.fields(vehicle)
-        if f.name not in ('name', 'source', 'drivetrain', 'yaw_inertia_kg_m2')  # no steady-state physics
+        # no steady-state physics: the envelope (maps key on it separately: maps.power_map.cache_path),
+        # the inertia (the steady models ignore it) and the joint_states mapping
+        if f.name not in _NOT_FINGERPRINTED
     }
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):

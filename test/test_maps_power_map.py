@@ -23,7 +23,7 @@ DRY = PRESETS['dry_sand']
 
 @pytest.fixture(scope='module')
 def small_map() -> PowerMap:
-    return PowerMap.build(TRACK, DRY, shape=(6, 15), n=20)
+    return PowerMap.build(TRACK, DRY, shape=(6, 15), n=20, refine=0)
 
 
 def test_build_covers_the_box_and_reports_its_points(small_map):
@@ -69,12 +69,15 @@ def test_scalar_and_vector_queries_agree_with_scipy(small_map):
     v = np.array([0.0, 0.3, 0.77, 1.2, 1.49])
     w = np.array([0.5, -1.3, 0.01, 0.0, 1.9])
     q = small_map.query(v, w)
-    grid = RegularGridInterpolator(
-        (small_map.radial, pm._angle_coordinate(small_map.angles)), small_map.values['power_left_W']
-    )
+    axes = (small_map.radial, pm._angle_coordinate(small_map.angles))
     lw = small_map.length_m * w
-    ref = grid(np.column_stack([np.hypot(v, lw), pm._angle_coordinate(np.arctan2(lw, v))]))
-    assert q.power_left_W == pytest.approx(ref, rel=1e-12)
+    at = np.column_stack([np.hypot(v, lw), pm._angle_coordinate(np.arctan2(lw, v))])
+    torque = RegularGridInterpolator(axes, small_map.values['torque_left_Nm'])(at)
+    slip = RegularGridInterpolator(axes, small_map.values['slip_left_m_s'])(at)
+    # axle speed = (exact ground speed of the side + interpolated slip speed) / r; power = T omega
+    omega = (v - w * 0.5 * TRACK.tread_m + slip) / TRACK.drive_radius_m
+    assert q.torque_left_Nm == pytest.approx(torque, rel=1e-12)
+    assert q.power_left_W == pytest.approx(torque * omega, rel=1e-9, abs=1e-12)
     for k in range(len(v)):
         one = small_map.query(float(v[k]), float(w[k]))
         assert one.torque_right_Nm == pytest.approx(q.torque_right_Nm[k], rel=1e-12)
@@ -156,7 +159,7 @@ def test_wheeled_map_flags_unconverged_cells():
         assert wheeled.values['traction_margin'][i, j] <= 0.0
         s, psi = wheeled.radial[i], wheeled.angles[j]
         q = wheeled.query(s * math.cos(psi), s * math.sin(psi) / wheeled.length_m)
-        assert q.clamped
+        assert q.limited  # no steady state there: the traction limit, a physics limit
 
 
 def test_interface_keywords_speeds_and_yaw_rates_set_the_box():
@@ -166,3 +169,65 @@ def test_interface_keywords_speeds_and_yaw_rates_set_the_box():
     assert m.converged.shape == (4, 5)
     assert m.meta['max_speed_m_s'] == 1.0 and m.meta['max_yaw_rate_rad_s'] == 0.5
     assert m.length_m == pytest.approx(2.0)
+
+
+# --- coverage: the vehicle's command envelope, flags, symmetry (issue 16) ------------------------
+PACKBOT = load_vehicle('packbot_4wheel')
+
+
+@pytest.fixture(scope='module')
+def packbot_map():
+    return PowerMap.build(PACKBOT, PRESETS['sandy_soil'], shape=(6, 41))
+
+
+def test_map_spans_the_vehicles_declared_envelope(packbot_map):
+    # vehicle.py: max_speed_m_s 1.5 m/s, max_yaw_rate_rad_s 2.0 rad/s unless the file says otherwise
+    assert packbot_map.meta['max_speed_m_s'] == PACKBOT.max_speed_m_s == 1.5
+    assert packbot_map.meta['max_yaw_rate_rad_s'] == PACKBOT.max_yaw_rate_rad_s == 2.0
+    inside = packbot_map.query(np.array([1.5, 0.0, -1.5]), np.array([0.0, 2.0, -2.0]))
+    assert not inside.clamped.any()
+    beyond = packbot_map.query(np.array([0.0, 1.6, 0.2]), np.array([3.1, 0.0, -2.5]))
+    assert beyond.clamped.all()  # outside the envelope: never silently clamped
+
+
+def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map):
+    r_min = 2.0 * PACKBOT.tread_m  # module doc: the small-radius limit
+    q = packbot_map.query(np.array([0.0, 0.1, 0.5]), np.array([1.0, 1.0, 0.1]))  # R = 0, 0.1, 5 m
+    assert q.limited.tolist() == [True, r_min > 0.1, False]
+    assert not q.clamped.any()
+    assert packbot_map.query(0.0, 1.0).limited
+
+
+def test_mirrored_commands_give_mirrored_answers(packbot_map):
+    rng = np.random.default_rng(5)
+    v, w = rng.uniform(-1.5, 1.5, 200), rng.uniform(-2.0, 2.0, 200)
+    a, b = packbot_map.query(v, w), packbot_map.query(v, -w)
+    # mirror image about the vehicle's long axis: left and right swap, nothing else changes
+    assert a.torque_left_Nm == pytest.approx(b.torque_right_Nm, rel=1e-6, abs=1e-9)
+    assert a.omega_right_rad_s == pytest.approx(b.omega_left_rad_s, rel=1e-6, abs=1e-9)
+    assert a.total_power_W == pytest.approx(b.total_power_W, rel=1e-6, abs=1e-9)
+    spin_l, spin_r = packbot_map.query(0.0, 2.0), packbot_map.query(0.0, -2.0)
+    assert spin_l.total_power_W == pytest.approx(spin_r.total_power_W, rel=1e-9)
+
+
+def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map):
+    w = np.linspace(1.0, 2.0, 201)
+    q = packbot_map.query(np.zeros_like(w), w)
+    for torque in (q.torque_left_Nm, q.torque_right_Nm):
+        span = np.abs(torque).max()
+        # a 0.005 rad/s step moves the torque by far less than 2 % of its size (no jump)
+        assert np.abs(np.diff(torque)).max() < 0.02 * span
+
+
+def test_cache_key_holds_the_options_and_the_physics_code(tmp_path):
+    from skidsteer_power.cache import physics_files
+
+    default = cache_path(PACKBOT, DRY, tmp_path)
+    assert (
+        cache_path(PACKBOT, DRY, tmp_path, max_yaw_rate=2.0, min_radius=0.8) == default
+    )  # explicit defaults
+    assert cache_path(PACKBOT, DRY, tmp_path, shape=(16, 41)) != default
+    assert cache_path(PACKBOT, DRY, tmp_path, refine=0) != default
+    assert cache_path(PACKBOT, DRY, tmp_path, min_radius=0.5) != default
+    names = {p.name for p in physics_files()}
+    assert {'vehicle.py', 'terrain.py', 'base.py', 'fess.py', 'power_map.py', 'interpolation.py'} <= names

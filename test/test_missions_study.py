@@ -110,3 +110,24 @@ def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
     ratio = {cfg: max(c['drawbar_pull_ratio'] for c in first['candidates'] if c['configuration'] == cfg)
              for cfg in ('track', '4-wheel', '6-wheel')}  # fmt: skip
     assert ratio['track'] > max(ratio['4-wheel'], ratio['6-wheel'])
+
+
+def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases():
+    from skidsteer_power.missions.sensitivity import derivatives
+
+    base = dict.fromkeys(('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m'), 100.0)
+    # smooth: f(+1 %) = 101, f(-1 %) = 99 -> (101 - 99) / 100 / 0.02 = +1.0 % per %
+    smooth = derivatives(base, dict.fromkeys(base, 101.0), dict.fromkeys(base, 99.0), 0.01)
+    assert smooth['energy_J'] == {'derivative': pytest.approx(1.0), 'status': 'ok'}
+    # issue 18: both +1 % and -1 % lowered the energy: not smooth, no number reported
+    rough = derivatives(base, dict.fromkeys(base, 89.7), dict.fromkeys(base, 97.3), 0.01)
+    assert rough['energy_J'] == {'derivative': None, 'status': 'non_smooth'}
+    assert derivatives(base, None, dict.fromkeys(base, 99.0), 0.01)['energy_J']['status'] == 'failed'
+
+
+def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
+    derivs = track_sensitivity['results']['packbot_track']['derivatives']
+    assert set(derivs) == {*SOIL_PARAMETERS, 'all'}
+    # eq. 2.6 above: sinkage falls with kphi, about -0.90 % per % (central difference)
+    assert derivs['kphi']['max_sinkage_m']['status'] == 'ok'
+    assert derivs['kphi']['max_sinkage_m']['derivative'] == pytest.approx(-0.9, abs=0.02)

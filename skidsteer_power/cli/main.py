@@ -4,13 +4,16 @@ Subcommands live in sibling modules of this package; each defines ``register(sub
 adds its parsers and sets ``func`` (a callable ``func(args) -> int | None``) as a default. Modules are
 discovered, so a new command needs no edit here.
 
-Errors: a bad argument or file gives one line on stderr and exit code 2, never a traceback.
+Errors: a bad argument or file (a :class:`SkidsteerError`, or an OSError on a user's path) gives
+one line on stderr and exit code 2, never a traceback; any other exception is a bug and shows its
+traceback. When the reader of stdout goes away (``... --json | head``) the command stops quietly.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -69,8 +72,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with native_stdout_to_stderr():  # DDS logs must not mix into --json output
             code = func(args)
-    except (SkidsteerError, ValueError) as err:
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit
+    except SkidsteerError as err:
         return fail(str(err))
+    except BrokenPipeError:
+        # Python docs (signal, "Note on SIGPIPE"): point stdout at devnull so the final flush is quiet
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as err:
         return fail(f'{err.strerror or err}: {err.filename}' if err.filename else str(err))
     except KeyboardInterrupt:

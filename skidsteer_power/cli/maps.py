@@ -1,13 +1,16 @@
 """Command ``map build|show``: FESS look-up maps over (forward speed, yaw rate).
 
-skidsteer-power map build --vehicle V --terrain T [--out FILE | --cache-dir DIR] [--max-speed 1.5]
-                          [--max-yaw-rate 2] [--rings 16] [--angles 41] [--elements N]
+skidsteer-power map build --vehicle V --terrain T [--out FILE | --cache-dir DIR] [--max-speed V]
+                          [--max-yaw-rate W] [--rings 16] [--angles 101] [--elements N]
                           [--min-radius M] [--no-progress] [--json]
     -> path, build_time_s, vehicle, terrain, model_version, converged_points, total_points, ...
 skidsteer-power map show (FILE | --vehicle V --terrain T [--cache-dir DIR])
                          [--speed V --yaw-rate W] [--json]
     -> the map's metadata and extent; with --speed/--yaw-rate the interpolated values there
 
+Defaults are the library's (skidsteer_power.maps.build_options: the vehicle's command envelope,
+the 16 x 101 grid): a map built here with defaults is the very file the estimator and missions load,
+and a map built with other options is cached under another name.
 A file built for another vehicle, terrain or model version is refused (one error line, exit 2).
 The progress bar goes to stderr, so ``--json`` output on stdout stays clean.
 """
@@ -23,6 +26,7 @@ from typing import Any
 from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.maps import PowerMap, cache_path
+from skidsteer_power.maps.power_map import DEFAULT_SHAPE
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -52,12 +56,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         help='cache directory (default $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
     )
-    build.add_argument('--max-speed', type=positive_float, default=1.5, help='largest forward speed [m/s]')
-    build.add_argument('--max-yaw-rate', type=positive_float, default=2.0, help='largest |yaw rate| [rad/s]')
     build.add_argument(
-        '--rings', type=_count, default=16, help='grid rings of command magnitude (default 16)'
+        '--max-speed', type=positive_float, help="largest |forward speed| [m/s] (default: the vehicle file's)"
     )
-    build.add_argument('--angles', type=_count, default=41, help='grid turn angles, -90..90 deg (default 41)')
+    build.add_argument(
+        '--max-yaw-rate', type=positive_float, help="largest |yaw rate| [rad/s] (default: the vehicle file's)"
+    )
+    build.add_argument(
+        '--rings', type=_count, help=f'grid rings of command magnitude (default {DEFAULT_SHAPE[0]})'
+    )
+    build.add_argument(
+        '--angles', type=_count, help=f'grid turn angles, -90..90 deg (default {DEFAULT_SHAPE[1]})'
+    )
     build.add_argument('--elements', type=_count, help='FESS elements per contact (default 40)')
     build.add_argument('--min-radius', type=positive_float, help='small-radius limit [m] (default 2 x tread)')
     build.add_argument('--no-progress', action='store_true', help='no progress bar')
@@ -96,23 +106,25 @@ def _progress_bar(enabled: bool) -> Any:
 def run_build(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     terrain = load_terrain(args.terrain)
-    if args.angles < 3:
+    if args.angles is not None and args.angles < 3:
         raise InputError('--angles must be at least 3')
-    target = args.out if args.out is not None else cache_path(vehicle, terrain, args.cache_dir)
     options = {
         'max_speed': args.max_speed,
         'max_yaw_rate': args.max_yaw_rate,
-        'shape': (args.rings, args.angles),
+        'shape': None
+        if args.rings is None and args.angles is None
+        else (args.rings or DEFAULT_SHAPE[0], args.angles or DEFAULT_SHAPE[1]),
         'n': args.elements,
         'min_radius': args.min_radius,
     }
+    target = args.out if args.out is not None else cache_path(vehicle, terrain, args.cache_dir, **options)
     bar = _progress_bar(not args.no_progress)
     start = time.perf_counter()
     if bar is None:
         power_map = PowerMap.build(vehicle, terrain, **options)
     else:
         with bar:
-            task = bar.add_task('build', total=args.rings)
+            task = bar.add_task('build', total=args.rings or DEFAULT_SHAPE[0])
             power_map = PowerMap.build(
                 vehicle, terrain, **options, progress=lambda done, total: bar.update(task, completed=done)
             )
@@ -133,8 +145,13 @@ def run_show(args: argparse.Namespace) -> int:
         if vehicle is None or terrain is None:
             raise InputError('give a map file, or --vehicle and --terrain to find the cached map')
         path = cache_path(vehicle, terrain, args.cache_dir)
-        if not path.exists():
-            raise ConfigError(f'no cached map for {vehicle.name} on {terrain.name} (run: map build)')
+        if not path.exists():  # built with other options: same name up to the options' digest
+            others = sorted(
+                path.parent.glob(path.name.rsplit('_', 1)[0] + '_*.npz'), key=lambda p: p.stat().st_mtime
+            )
+            if not others:
+                raise ConfigError(f'no cached map for {vehicle.name} on {terrain.name} (run: map build)')
+            path = others[-1]  # the newest
     power_map = PowerMap.load(path, vehicle, terrain)
     if (args.speed is None) != (args.yaw_rate is None):
         raise InputError('give both --speed and --yaw-rate to query the map')

@@ -227,8 +227,7 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
     )
     payload = result.summary()
     battery = Battery.from_config(powertrain.battery)
-    for power, dt in zip(result.power_battery_W, result.duration_s, strict=True):
-        battery.step(float(power), float(dt))
+    battery.run_profile(result.power_battery_W, result.duration_s)
     payload['battery_end_soc'] = battery.soc
     payload['battery_remaining_wh'] = battery.remaining_wh
     if args.samples or args.uncertainty or getattr(args, 'from_calibration', None) or args.scheduler:
@@ -294,9 +293,17 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
         emit(table, True)
     else:
         for name, res in table['results'].items():
+            if res['baseline'] is None:
+                print(f'{name}: baseline did not converge')
+                continue
             print(f'{name}: baseline ' + ', '.join(f'{k} {v:.4g}' for k, v in res['baseline'].items()))
-            for case, changes in res['changes_percent'].items():
-                print(f'  {case:<7} ' + '  '.join(f'{k} {v:+.3f} %' for k, v in changes.items()))
+            print('  d(metric)/d(parameter) [% per %], central differences of converged direct solves:')
+            for group, per_metric in res['derivatives'].items():
+                parts = (
+                    f'{k} {d["derivative"]:+.3f}' if d['status'] == 'ok' else f'{k} {d["status"].upper()}'
+                    for k, d in per_metric.items()
+                )
+                print(f'  {group:<5} ' + '  '.join(parts))
             for metric, indices in table.get('sobol', {}).get('indices', {}).get(name, {}).items():
                 cells = '  '.join(f'{p} {i["S1"]:.2f}/{i["ST"]:.2f}' for p, i in indices.items())
                 print(f'  Sobol S1/ST of {metric}: {cells}')

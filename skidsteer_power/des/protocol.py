@@ -23,7 +23,7 @@ import struct
 from dataclasses import dataclass, field
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.errors import ConfigError, InputError
 
 ACK_OK = 0x4F
 """'O': op code or frame accepted (either direction)."""
@@ -228,7 +228,7 @@ def to_word(value: int) -> int:
     """A signed (int16) or unsigned (uint16) integer as the 16-bit word on the wire."""
     value = int(value)
     if not _WORD_MIN <= value <= _WORD_MAX:
-        raise ValueError(f'{value} does not fit in a 16-bit word')
+        raise InputError(f'{value} does not fit in a 16-bit word')
     return value & 0xFFFF
 
 
@@ -241,7 +241,7 @@ def split_lword(value: int, config: DesConfig) -> tuple[int, int]:
     """A 32-bit value (signed or unsigned) as two words in the configured (UNCONFIRMED) order."""
     value = int(value)
     if not -0x8000_0000 <= value <= 0xFFFF_FFFF:
-        raise ValueError(f'{value} does not fit in 32 bits')
+        raise InputError(f'{value} does not fit in 32 bits')
     value &= 0xFFFF_FFFF
     low, high = value & 0xFFFF, value >> 16
     return (low, high) if config.lword_low_word_first else (high, low)

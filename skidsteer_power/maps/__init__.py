@@ -8,8 +8,10 @@ from __future__ import annotations
 from skidsteer_power.errors import MapMismatchError
 from skidsteer_power.maps.power_map import (
     FIELDS,
+    QUERY_FIELDS,
     MapQuery,
     PowerMap,
+    build_options,
     cache_path,
     default_cache_dir,
     load_or_build,
@@ -18,9 +20,11 @@ from skidsteer_power.maps.power_map import (
 
 __all__ = [
     'FIELDS',
+    'QUERY_FIELDS',
     'MapMismatchError',
     'MapQuery',
     'PowerMap',
+    'build_options',
     'cache_path',
     'default_cache_dir',
     'load_or_build',

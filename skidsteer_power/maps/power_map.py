@@ -6,14 +6,17 @@ psi = atan2(L w_z, V) [rad], with the length L = max_speed / max_yaw_rate [m]. W
 depend mostly on the turning radius R = V / w_z = L cot(psi); on a rectangular (V, w_z) grid the
 torque rises so steeply with w_z near straight running at low V (R drops from infinity to a metre
 within one yaw-rate step) that bilinear interpolation was measured 36 % off at off-grid points
-(16 x 81 grid). On the (s, psi) grid of 16 x 101 (psi warped, see :func:`_angle_coordinate`) each
-side torque is within 0.5 % of the larger one from direct FESS (1000 random commands,
-benchmarks/bench_maps.py; 16 x 41 gave 1.3 %, 16 x 81 1.0 %: the turn angle is what needs
-resolution, the command magnitude does not). A track map builds in about 0.1 s, a 6-wheel one in
-under 1 s. Straight running is
+(16 x 81 grid). The default grid is 31 rings x 101 warped turn angles (psi warped, see
+:func:`_angle_coordinate`) plus 40 more angles per side over the turns of radius min_radius ...
+3 min_radius, where a wheeled vehicle's outer-side slip rises steeply towards the traction limit.
+The map stores torques and slip speeds; each side's axle speed is derived from its exact ground
+speed plus the interpolated slip speed, and its power as torque x speed. Accuracy against direct
+FESS for every shipped vehicle x terrain: README ("Map accuracy"; ``python -m benchmarks.bench_maps``).
+Straight running is
 psi = 0, spinning in place psi = +-pi/2 and rest s = 0: no division by zero anywhere (hypot,
-atan2). The grid covers V up to ``max_speed`` and |w_z| up to ``max_yaw_rate`` (the corner
-included: s_max = sqrt(2) max_speed); queries beyond s_max are clamped radially and flagged. At
+atan2). The grid covers the vehicle's command envelope, V up to ``max_speed`` and |w_z| up to
+``max_yaw_rate`` (its vehicle-file fields; the corner included: s_max = sqrt(2) max_speed); a query
+outside the envelope is answered at the grid's edge and flagged ``clamped``. At
 exactly V = w_z = 0 the query answers rest (all zeros); the s = 0 grid row holds the s -> 0 limit
 (the breakaway torques) for interpolation.
 
@@ -31,7 +34,8 @@ rate*, i.e. at V' = min_radius |w_z|, and keeps that point's shear state: its to
 slip speed r omega - v_side, s0, sinkage and traction margin. Each side's omega then follows its own
 ground speed, omega = omega' + (v_side - v_side') / r. The text's argument for this limit: at small
 radii "the soil fails and the shear force on the contact surface is saturated" (section 3.4), so the
-turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``.
+turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``
+(the map's and every query's).
 A spin in place therefore gets both sides driven in opposite directions with the turning resistance
 of the tightest reliable turn at that yaw rate. It inherits that turn's asymmetry: the side that
 was outer keeps its driving slip speed and torque, the other its braking ones, so the two sides'
@@ -40,15 +44,16 @@ At rest (V = w_z = 0) every torque is 0.
 
 Points that do not converge even after warm starts from converged neighbours keep
 ``converged=False`` in the map, are filled with the nearest converged point's values and are
-reported (never silently dropped); a query touching such a cell is flagged ``clamped``.
+reported (never silently dropped). Those, and nodes whose slip ratio reaches :data:`SLIP_LIMIT` (the
+traction limit: slip -> 1, where speed and power change too steeply for any interpolation), mark
+their cells: a query touching one is flagged ``limited``.
+
+Right turns are the mirror image of left turns (every vehicle here is laterally symmetric): only
+psi >= 0 is solved, so mirrored commands give mirrored answers exactly.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import hashlib
-import importlib
 import json
 import math
 import os
@@ -59,8 +64,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from skidsteer_power.cache import default_cache_dir, options_digest, physics_digest
 from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
-from skidsteer_power.maps.grid import Axis, BilinearGrid
+from skidsteer_power.interpolation import Axis, BilinearGrid
+from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 from skidsteer_power.vehicle import vehicle_fingerprint
 
 if TYPE_CHECKING:
@@ -69,13 +76,23 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-MAP_FORMAT = 1
-DEFAULT_MAX_SPEED = 1.5  # [m/s] the dissertation's largest simulated speed (section 3.5)
-DEFAULT_MAX_YAW_RATE = 2.0  # [rad/s]
-DEFAULT_SHAPE = (16, 101)  # rings (command magnitude) x turn angles (module doc: accuracy)
-CACHE_ENV = 'SKIDSTEER_POWER_CACHE'
+DEFAULT_SHAPE = (31, 101)  # rings (command magnitude) x turn angles (module doc: accuracy)
+DEFAULT_REFINE = 40  # extra turn angles per side where 1 < R / min_radius < REFINE_SPAN (module doc)
+REFINE_SPAN = 3.0
+ENVELOPE_TOLERANCE = 1e-9  # relative: commands this close to the envelope's edge count as inside
 
-FIELDS = (
+FIELDS = (  # stored on the grid and interpolated
+    'torque_left_Nm',
+    'torque_right_Nm',
+    'slip_left_m_s',  # slip speed r omega - v_side [m/s]: speed and power are derived from it
+    'slip_right_m_s',
+    's0_m',
+    'sinkage_m',
+    'traction_margin',
+    'suspect',  # 1 at nodes past the traction limit (module doc); a query touching one is ``limited``
+)
+SLIP_LIMIT = 0.7  # slip ratio from which a node counts as at the traction limit (module doc) [-]
+QUERY_FIELDS = (  # what a query answers
     'torque_left_Nm',
     'torque_right_Nm',
     'omega_left_rad_s',
@@ -85,12 +102,11 @@ FIELDS = (
     's0_m',
     'sinkage_m',
     'traction_margin',
-    'suspect',  # 1 where the cell holds a filled (non-converged) value; interpolates to > 0 near it
 )
 # quantities that change sign in reverse driving (after the left/right swap)
 _ODD_IN_REVERSE = ('torque_left_Nm', 'torque_right_Nm', 'omega_left_rad_s', 'omega_right_rad_s', 's0_m')
 
-_REST = {name: (1.0 if name == 'traction_margin' else 0.0) for name in FIELDS}  # V = w_z = 0
+_REST = {name: (1.0 if name == 'traction_margin' else 0.0) for name in QUERY_FIELDS}  # V = w_z = 0
 
 ProgressCallback = Callable[[int, int], None]
 
@@ -101,8 +117,14 @@ class MapQuery:
 
     torque_*_Nm : axle / sprocket torque per side [N m]; omega_*_rad_s : axle speed [rad/s];
     power_*_W : torque x omega [W]; s0_m : turning-centre offset [m]; sinkage_m [m];
-    traction_margin [-]; clamped : the point lay outside the grid (clamped to its edge) or next to
-    a cell the solver could not converge.
+    traction_margin [-].
+
+    Flags (bools, arrays for array queries) -- a flagged value is not the map's accuracy:
+    clamped : the command lies outside the map's command envelope (|V| > max_speed or |w_z| >
+        max_yaw_rate, or not finite); it was answered at the edge of the grid.
+    limited : a physics limit: the turn is tighter than the small-radius limit (|V| < min_radius
+        |w_z|, spinning in place included; solved at the limit radius, module doc), or the point
+        touches a cell where no steady state was found (the traction limit).
     """
 
     torque_left_Nm: Any
@@ -115,57 +137,55 @@ class MapQuery:
     sinkage_m: Any
     traction_margin: Any
     clamped: Any
+    limited: Any
 
     @property
     def total_power_W(self) -> Any:
         return self.power_left_W + self.power_right_W
 
 
-def terrain_fingerprint(terrain: Terrain) -> str:
-    """Stable hex digest of the terrain's physical parameters (not its name)."""
-    payload = {
-        k: (repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
-        for k, v in dataclasses.asdict(terrain).items()
-        if k != 'name'
+def model_version(model: str = 'fess') -> str:
+    """The model and a digest of the whole physics code (:func:`skidsteer_power.cache.physics_digest`);
+    a stored map must match it, so a map built by older code is rebuilt, never used."""
+    return f'{model}-{physics_digest()}'
+
+
+def build_options(
+    vehicle: Vehicle,
+    *,
+    max_speed: float | None = None,
+    max_yaw_rate: float | None = None,
+    shape: tuple[int, int] | None = None,
+    n: int | None = None,
+    min_radius: float | None = None,
+    refine: int | None = None,
+) -> dict[str, Any]:
+    """Every option that changes a map, defaults resolved: the vehicle's command envelope
+    (``max_speed_m_s``, ``max_yaw_rate_rad_s``), :data:`DEFAULT_SHAPE`, FESS's default element
+    count, the small-radius limit 2 x tread [m]. ``map build`` and the library both use this, so the
+    same options give the same cache file and different options never share one."""
+    from skidsteer_power.models import fess
+
+    options: dict[str, Any] = {
+        'max_speed': float(vehicle.max_speed_m_s if max_speed is None else max_speed),
+        'max_yaw_rate': float(vehicle.max_yaw_rate_rad_s if max_yaw_rate is None else max_yaw_rate),
+        'shape': [int(k) for k in (DEFAULT_SHAPE if shape is None else shape)],
+        'n': int(fess.DEFAULT_ELEMENTS if n is None else n),
+        'min_radius': float(2.0 * vehicle.tread_m if min_radius is None else min_radius),
+        # the refinement belongs to the default grid; an explicit shape is taken as it is
+        'refine': int((DEFAULT_REFINE if shape is None else 0) if refine is None else refine),
     }
-    text = json.dumps(payload, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]
-
-
-# Modules whose code decides a map's numbers: a change to any of them invalidates cached maps, so a
-# map built by older code is rebuilt instead of silently used (a hand-bumped tag alone was forgotten).
-_MAP_SOURCES = (
-    'skidsteer_power.models.fess',
-    'skidsteer_power.models.loads',
-    'skidsteer_power.maps.grid',
-    'skidsteer_power.maps.power_map',
-    'skidsteer_power.terramechanics.soil',
-    'skidsteer_power.terramechanics.track',
-    'skidsteer_power.terramechanics.wheel',
-)
-
-
-@functools.lru_cache(maxsize=1)
-def _source_digest() -> str:
-    digest = hashlib.sha256()
-    for name in _MAP_SOURCES:
-        digest.update(Path(importlib.import_module(name).__file__).read_bytes())
-    return digest.hexdigest()[:12]
-
-
-def model_version(model: str) -> str:
-    """Version string of the model that builds maps (tag + digest of the code); a stored map must match."""
-    if model == 'fess':
-        from skidsteer_power.models.fess import MODEL_VERSION
-
-        return f'{MODEL_VERSION}+{_source_digest()}/map{MAP_FORMAT}'
-    return f'{model}+{_source_digest()}/map{MAP_FORMAT}'
-
-
-def default_cache_dir() -> Path:
-    """$SKIDSTEER_POWER_CACHE, else ~/.cache/skidsteer_power."""
-    env = os.environ.get(CACHE_ENV)
-    return Path(env).expanduser() if env else Path.home() / '.cache' / 'skidsteer_power'
+    for name in ('max_speed', 'max_yaw_rate'):
+        if not np.isfinite(options[name]) or options[name] <= 0:
+            raise InputError(f'{name} must be a finite number > 0, got {options[name]!r}')
+    if not np.isfinite(options['min_radius']) or options['min_radius'] <= 0:
+        raise InputError(f'min_radius must be a finite number > 0 m, got {min_radius!r}')
+    n_s, n_psi = options['shape']
+    if n_s < 2 or n_psi < 3:
+        raise InputError(f'map shape must be at least (2, 3), got {shape!r}')
+    if options['n'] < 2:
+        raise InputError(f'FESS elements per contact must be at least 2, got {n!r}')
+    return options
 
 
 @dataclass
@@ -186,6 +206,11 @@ class PowerMap:
         self._axis_psi = Axis(_angle_coordinate(self.angles), 'turn angle')
         stacked = np.stack([self.values[name] for name in FIELDS], axis=-1)
         self._grid = BilinearGrid(self._axis_s, self._axis_psi, stacked)
+        self._radius = float(self.meta['drive_radius_m'])
+        self._half_tread = 0.5 * float(self.meta['tread_m'])
+        self._r_min = float(self.meta['min_radius_m'])
+        self._v_max = float(self.meta['max_speed_m_s']) * (1.0 + ENVELOPE_TOLERANCE)
+        self._w_max = float(self.meta['max_yaw_rate_rad_s']) * (1.0 + ENVELOPE_TOLERANCE)
 
     @property
     def speeds(self) -> np.ndarray:
@@ -204,13 +229,14 @@ class PowerMap:
         vehicle: Vehicle,
         terrain: Terrain,
         *,
-        max_speed: float = DEFAULT_MAX_SPEED,
-        max_yaw_rate: float = DEFAULT_MAX_YAW_RATE,
+        max_speed: float | None = None,
+        max_yaw_rate: float | None = None,
         shape: tuple[int, int] | None = None,
         model: str = 'fess',
         progress: ProgressCallback | None = None,
         n: int | None = None,
         min_radius: float | None = None,
+        refine: int | None = None,
         speeds: ArrayLike | None = None,
         yaw_rates: ArrayLike | None = None,
     ) -> PowerMap:
@@ -219,13 +245,16 @@ class PowerMap:
         (Warm-starting whole rings from the previous ring was tried and dropped: near rest and in
         tight turns the equilibrium has several roots, and a wrong one propagated outwards.)
 
-        max_speed [m/s] and max_yaw_rate [rad/s] set the covered box; shape = (rings, angles),
-        default :data:`DEFAULT_SHAPE`;
-        ``progress(done, total)`` is called after each ring; ``n`` FESS elements per contact;
-        ``min_radius`` [m] the small-radius limit (default 2 x tread). ``speeds`` [m/s] and
-        ``yaw_rates`` [rad/s] (the interface of docs/INTERFACES.md) are accepted for compatibility:
-        they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates| and shape = (their
-        lengths); the grid itself stays polar (module doc).
+        Only left turns (psi >= 0) are solved; right turns are their mirror image (left and right
+        swap; every vehicle here is laterally symmetric), so mirrored commands give mirrored
+        answers exactly and the build takes half the solves.
+
+        Options default per :func:`build_options` (max_speed [m/s] and max_yaw_rate [rad/s]: the
+        vehicle's command envelope; shape = (rings, angles); ``n`` FESS elements per contact;
+        ``min_radius`` [m] the small-radius limit). ``progress(done, total)`` is called after each
+        ring. ``speeds`` [m/s] and ``yaw_rates`` [rad/s] (the interface of docs/INTERFACES.md) are
+        accepted for compatibility: they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates|
+        and shape = (their lengths); the grid itself stays polar (module doc).
         """
         if speeds is not None:
             max_speed = float(np.max(np.abs(_axis(speeds, 'speeds'))))
@@ -237,25 +266,29 @@ class PowerMap:
             raise InputError(f"maps are built with the FESS model only (model='fess'), not {model!r}")
         from skidsteer_power.models import fess
 
-        for name, value in (('max_speed', max_speed), ('max_yaw_rate', max_yaw_rate)):
-            if not np.isfinite(value) or value <= 0:
-                raise InputError(f'{name} must be a finite number > 0, got {value!r}')
-        n_s, n_psi = (int(k) for k in (DEFAULT_SHAPE if shape is None else shape))
-        if n_s < 2 or n_psi < 3:
-            raise InputError(f'map shape must be at least (2, 3), got {shape!r}')
-        r_min = 2.0 * vehicle.tread_m if min_radius is None else float(min_radius)
-        if not np.isfinite(r_min) or r_min <= 0:
-            raise InputError(f'min_radius must be a finite number > 0 m, got {min_radius!r}')
-        length = max_speed / max_yaw_rate
-        radial = np.linspace(0.0, np.sqrt(2.0) * max_speed, n_s)
-        angles = _angle_from_coordinate(np.linspace(-1.0, 1.0, n_psi))
-        solver = fess.FessSolver(vehicle, terrain, fess.DEFAULT_ELEMENTS if n is None else n)
+        options = build_options(
+            vehicle,
+            max_speed=max_speed,
+            max_yaw_rate=max_yaw_rate,
+            shape=shape,
+            n=n,
+            min_radius=min_radius,
+            refine=refine,
+        )
+        n_s, n_psi = options['shape']
+        r_min = options['min_radius']
+        length = options['max_speed'] / options['max_yaw_rate']
+        radial = np.linspace(0.0, np.sqrt(2.0) * options['max_speed'], n_s)
+        angles = _refined_angles(n_psi, options['refine'], length, r_min)
+        n_psi = len(angles)
+        left = angles >= 0  # solved; the rest mirrored
+        solver = fess.FessSolver(vehicle, terrain, options['n'])
         rows: list[dict[str, Any]] = []
         for k, s in enumerate(radial):
             ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
-            v = ring * np.cos(angles)
-            w = ring * np.sin(angles) / length
-            rows.append(_solve_row(solver, v, w, r_min, None))
+            v = ring * np.cos(angles[left])
+            w = ring * np.sin(angles[left]) / length
+            rows.append(_mirror(_solve_row(solver, v, w, r_min, None), n_psi))
             if progress is not None:
                 progress(k + 1, n_s)
         values, converged, limited = _assemble(rows)
@@ -266,10 +299,14 @@ class PowerMap:
             'terrain_fingerprint': terrain_fingerprint(terrain),
             'model': model,
             'model_version': model_version(model),
+            'options': options,
+            'options_digest': options_digest(options),
             'elements': solver.n,
             'min_radius_m': r_min,
-            'max_speed_m_s': float(max_speed),
-            'max_yaw_rate_rad_s': float(max_yaw_rate),
+            'max_speed_m_s': options['max_speed'],
+            'max_yaw_rate_rad_s': options['max_yaw_rate'],
+            'drive_radius_m': float(vehicle.drive_radius_m),
+            'tread_m': float(vehicle.tread_m),
             'failed_points': int(np.sum(~converged)),
         }
         return cls(radial, angles, float(length), values, converged, limited, meta)
@@ -289,7 +326,7 @@ class PowerMap:
             converged=self.converged,
             limited=self.limited,
             meta=np.array(json.dumps(self.meta)),
-            **arrays,
+            **arrays,  # type: ignore[arg-type]
         )
         os.replace(tmp, target)  # atomic: a reader never sees half a map
         self.path = target
@@ -306,7 +343,7 @@ class PowerMap:
             with np.load(source, allow_pickle=False) as data:
                 meta = json.loads(str(data['meta']))
                 values = {name: np.array(data[f'value_{name}']) for name in FIELDS}
-                arrays = {
+                arrays: dict[str, np.ndarray] = {
                     k: np.array(data[k]) for k in ('radial', 'angles', 'length_m', 'converged', 'limited')
                 }
         except FileNotFoundError:
@@ -330,53 +367,61 @@ class PowerMap:
     def query(self, speed: ArrayLike, yaw_rate: ArrayLike) -> MapQuery:
         """Interpolated values at (V [m/s], w_z [rad/s]); broadcast arrays or scalars.
 
-        V < 0 is answered by the 180-degree symmetry (module doc). Points outside the grid are
-        clamped to its edge and flagged ``clamped``.
+        Torques, slip speeds, s0, sinkage and margin are interpolated; each side's axle speed is
+        (its exact ground speed V -/+ w_z B/2 + its slip speed) / r and its power torque x speed.
+        V < 0 is answered by the 180-degree symmetry (module doc). Flags: see :class:`MapQuery`.
         """
         if np.ndim(speed) == 0 and np.ndim(yaw_rate) == 0:
-            return self._query_scalar(float(speed), float(yaw_rate))
+            return self._query_scalar(float(speed), float(yaw_rate))  # type: ignore[arg-type]
         v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
         shape = v.shape
         v, w = v.ravel(), w.ravel()
         reverse = v < 0
+        va = np.abs(v)
         lw = self.length_m * w
-        out, clamped = self._grid(np.hypot(v, lw), _angle_coordinate(np.arctan2(lw, np.abs(v))))
+        out, off_grid = self._grid(np.hypot(v, lw), _angle_coordinate(np.arctan2(lw, va)))
         bad = ~np.isfinite(v) | ~np.isfinite(w)
         rest = (v == 0) & (w == 0)
-        columns = {name: out[:, k] for k, name in enumerate(FIELDS)}
+        grid = {name: out[:, k] for k, name in enumerate(FIELDS)}
+        omega_l = (va - w * self._half_tread + grid['slip_left_m_s']) / self._radius
+        omega_r = (va + w * self._half_tread + grid['slip_right_m_s']) / self._radius
+        columns = {
+            'torque_left_Nm': grid['torque_left_Nm'],
+            'torque_right_Nm': grid['torque_right_Nm'],
+            'omega_left_rad_s': omega_l,
+            'omega_right_rad_s': omega_r,
+            'power_left_W': grid['torque_left_Nm'] * omega_l,
+            'power_right_W': grid['torque_right_Nm'] * omega_r,
+            's0_m': grid['s0_m'],
+            'sinkage_m': grid['sinkage_m'],
+            'traction_margin': grid['traction_margin'],
+        }
         if np.any(reverse):
             columns = _reverse(columns, reverse)
-        suspect = columns.pop('suspect') > 0
         fields = {
             name: np.where(bad, np.nan, np.where(rest, _REST[name], col)).reshape(shape)
             for name, col in columns.items()
         }
-        return MapQuery(**fields, clamped=(clamped | suspect | bad).reshape(shape))
+        clamped = off_grid | bad | (va > self._v_max) | (np.abs(w) > self._w_max)
+        limited = (grid['suspect'] > 0) | (va < self._r_min * np.abs(w))
+        return MapQuery(**fields, clamped=clamped.reshape(shape), limited=(limited & ~bad).reshape(shape))
 
     def _query_scalar(self, v: float, w: float) -> MapQuery:
         if v != v or w != w or math.isinf(v) or math.isinf(w):  # never a silent number
-            return MapQuery(**dict.fromkeys(FIELDS[:-1], float('nan')), clamped=True)
+            return MapQuery(**dict.fromkeys(QUERY_FIELDS, float('nan')), clamped=True, limited=False)
+        va = abs(v)
         lw = self.length_m * w
-        psi = math.atan2(lw, abs(v))
-        vals, clamped = self._grid.scalar(math.hypot(v, lw), _angle_coordinate_scalar(psi))
-        d = dict(zip(FIELDS, vals, strict=True))
+        vals, off_grid = self._grid.scalar(math.hypot(v, lw), _angle_coordinate_scalar(math.atan2(lw, va)))
+        tl, tr, sl, sr, s0, sinkage, margin, suspect = vals
+        clamped = off_grid or va > self._v_max or abs(w) > self._w_max
+        limited = suspect > 0 or va < self._r_min * abs(w)
         if v == 0 and w == 0:
-            d = dict(_REST)
-        if v < 0:
-            d = {
-                'torque_left_Nm': -d['torque_right_Nm'],
-                'torque_right_Nm': -d['torque_left_Nm'],
-                'omega_left_rad_s': -d['omega_right_rad_s'],
-                'omega_right_rad_s': -d['omega_left_rad_s'],
-                'power_left_W': d['power_right_W'],
-                'power_right_W': d['power_left_W'],
-                's0_m': -d['s0_m'],
-                'sinkage_m': d['sinkage_m'],
-                'traction_margin': d['traction_margin'],
-                'suspect': d['suspect'],
-            }
-        suspect = d.pop('suspect') > 0
-        return MapQuery(**d, clamped=clamped or suspect)
+            return MapQuery(**_REST, clamped=False, limited=False)
+        ol = (va - w * self._half_tread + sl) / self._radius
+        orr = (va + w * self._half_tread + sr) / self._radius
+        if v < 0:  # 180-degree symmetry (module doc)
+            tl, tr, ol, orr, s0 = -tr, -tl, -orr, -ol, -s0
+        return MapQuery(tl, tr, ol, orr, tl * ol, tr * orr, s0, sinkage, margin, clamped, limited)
 
     # ---------------------------------------------------------------- description
     def summary(self) -> dict[str, Any]:
@@ -393,9 +438,15 @@ class PowerMap:
             'converged_points': int(np.sum(self.converged)),
             'total_points': int(self.converged.size),
             'limited_points': int(np.sum(self.limited)),
-            'max_power_W': float(np.max(self.values['power_left_W'] + self.values['power_right_W'])),
+            'max_power_W': float(np.nanmax(self._node_power())),
             'min_traction_margin': float(np.min(self.values['traction_margin'])),
         }
+
+    def _node_power(self) -> np.ndarray:
+        """Total terrain power [W] at the grid nodes (rings x angles)."""
+        s, psi = np.meshgrid(self.radial, self.angles, indexing='ij')
+        q = self.query(s * np.cos(psi), s * np.sin(psi) / self.length_m)
+        return q.power_left_W + q.power_right_W
 
 
 _HALF_PI = 0.5 * math.pi
@@ -423,6 +474,20 @@ def _angle_from_coordinate(u: np.ndarray) -> np.ndarray:
     return _HALF_PI * np.sinh(ANGLE_WARP * np.asarray(u)) / math.sinh(ANGLE_WARP)
 
 
+def _refined_angles(n_psi: int, refine: int, length: float, r_min: float) -> np.ndarray:
+    """The warped turn angles [rad] plus ``refine`` more per side, evenly spaced in psi over the turns
+    of radius min_radius ... REFINE_SPAN x min_radius, where the outer side's slip rises steeply
+    towards the traction limit (measured: most of the remaining map error was there). Symmetric."""
+    base = _angle_from_coordinate(np.linspace(-1.0, 1.0, n_psi))
+    if refine <= 0:
+        return base
+    hi, lo = math.atan2(length, r_min), math.atan2(length, REFINE_SPAN * r_min)
+    extra = np.linspace(lo, hi, refine + 2)[1:-1]
+    merged = np.unique(np.concatenate([base, extra, -extra]))
+    gaps = np.diff(_angle_coordinate(merged))
+    return merged[np.concatenate([[True], gaps > 1e-9])]
+
+
 def _axis(values: ArrayLike, name: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).ravel()
     if len(arr) < 2 or not np.all(np.isfinite(arr)) or not np.all(np.diff(arr) > 0):
@@ -446,7 +511,7 @@ def _reverse(columns: dict[str, np.ndarray], reverse: np.ndarray) -> dict[str, n
 
 
 def _check_meta(source: Path, meta: dict[str, Any], vehicle: Vehicle | None, terrain: Terrain | None) -> None:
-    current = model_version(str(meta.get('model', 'fess')))
+    current = model_version(str(meta.get('model', 'fess')))  # the whole physics code's digest
     if meta.get('model_version') != current:
         raise MapMismatchError(
             f'{source}: built by model version {meta.get("model_version")!r}, this package is {current!r}'
@@ -484,13 +549,17 @@ def _solve_row(
     ys = np.array([half, -half])
     side_v = v[:, None] - w[:, None] * ys  # actual ground speed of each side [m/s]
     side_v_eff = v_eff[:, None] - w[:, None] * ys
-    omega = sol.omega + (side_v - side_v_eff) / r  # keep each side's slip speed (module doc)
+    slip = r * sol.omega - side_v_eff  # each side keeps its slip speed (module doc)
     return {
         'torque': sol.torque,
-        'omega': omega,
+        'slip': slip,
+        'omega': (side_v + slip) / r,
         's0': sol.s0,
         'sinkage': sol.sinkage,
         'margin': sol.traction_margin,
+        'slip_ratio': np.max(
+            np.abs(slip) / np.maximum(np.maximum(np.abs(side_v + slip), np.abs(side_v)), 1e-12), axis=1
+        ),
         'converged': sol.converged,
         'limited': limited,
         'state': np.where(sol.converged[:, None], sol.state, np.nan),
@@ -498,23 +567,39 @@ def _solve_row(
     }
 
 
+def _mirror(row: dict[str, Any], n_psi: int) -> dict[str, Any]:
+    """Extend a ring solved for psi >= 0 to all ``n_psi`` angles: the right turn at -psi is the
+    left turn at psi with left and right swapped (s0, sinkage and margin unchanged)."""
+    m = len(row['converged'])
+    take = np.concatenate([np.arange(m - 1, m - 1 - (n_psi - m), -1), np.arange(m)])  # mirror indices
+    right = np.arange(n_psi) < n_psi - m
+    out = {}
+    for key, arr in row.items():
+        full = np.asarray(arr)[take]
+        if full.ndim == 2 and full.shape[1] == 2 and key in ('torque', 'slip', 'omega'):
+            full = np.where(right[:, None], full[:, ::-1], full)
+        out[key] = full
+    return out
+
+
 def _assemble(rows: list[dict[str, Any]]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     torque = np.stack([r['torque'] for r in rows])  # (Nv, Nw, 2)
-    omega = np.stack([r['omega'] for r in rows])
+    slip = np.stack([r['slip'] for r in rows])
     converged = np.stack([r['converged'] for r in rows])
     limited = np.stack([r['limited'] for r in rows])
     values = {
         'torque_left_Nm': torque[..., 0],
         'torque_right_Nm': torque[..., 1],
-        'omega_left_rad_s': omega[..., 0],
-        'omega_right_rad_s': omega[..., 1],
-        'power_left_W': torque[..., 0] * omega[..., 0],
-        'power_right_W': torque[..., 1] * omega[..., 1],
+        'slip_left_m_s': slip[..., 0],
+        'slip_right_m_s': slip[..., 1],
         's0_m': np.stack([r['s0'] for r in rows]),
         'sinkage_m': np.stack([r['sinkage'] for r in rows]),
         'traction_margin': np.stack([r['margin'] for r in rows]),
         'suspect': (~converged).astype(float),
     }
+    steep = np.stack([r['slip_ratio'] for r in rows]) >= SLIP_LIMIT
+    steep[0] = False  # ring 0 is the s -> 0 limit: slip over a vanishing ground speed means nothing
+    values['suspect'] = (~converged | steep).astype(float)
     if np.any(~converged) and np.any(converged):
         _fill_nearest(values, converged)
     return values, converged, limited
@@ -536,14 +621,21 @@ def _fill_nearest(values: dict[str, np.ndarray], converged: np.ndarray) -> None:
 
 
 def cache_path(
-    vehicle: Vehicle, terrain: Terrain, cache_dir: str | os.PathLike[str] | None = None, model: str = 'fess'
+    vehicle: Vehicle,
+    terrain: Terrain,
+    cache_dir: str | os.PathLike[str] | None = None,
+    model: str = 'fess',
+    **options: Any,
 ) -> Path:
-    """Where :func:`load_or_build` keeps the map of this vehicle and terrain."""
+    """Where :func:`load_or_build` (and ``map build``) keep the map of this vehicle and terrain built
+    with ``options`` (:func:`build_options`; defaults resolved first, so explicit defaults and
+    omitted ones name the same file). The name holds every input that changes the map: vehicle and
+    terrain fingerprints, the physics-code digest and the options' digest."""
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    version = model_version(model).replace('/', '-')
+    digest = options_digest(build_options(vehicle, **options))
     vehicle_part = f'{vehicle.name}-{vehicle_fingerprint(vehicle)}'
     terrain_part = f'{terrain.name}-{terrain_fingerprint(terrain)}'
-    return folder / f'{vehicle_part}_{terrain_part}_{version}.npz'
+    return folder / f'{vehicle_part}_{terrain_part}_{model_version(model)}_{digest}.npz'
 
 
 def load_or_build(
@@ -553,18 +645,20 @@ def load_or_build(
     *,
     progress: ProgressCallback | None = None,
     rebuild: bool = False,
+    **options: Any,
 ) -> tuple[PowerMap, bool]:
-    """The cached default-grid map of ``vehicle`` on ``terrain``, building (and saving) it if it is
-    missing, unreadable or was built for another vehicle, terrain or model version.
+    """The cached map of ``vehicle`` on ``terrain`` (default options: :func:`build_options`),
+    building (and saving) it if it is missing, unreadable or was built for another vehicle, terrain,
+    physics code or options.
 
     Returns (map, built). cache_dir defaults to $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power.
     """
-    path = cache_path(vehicle, terrain, cache_dir)
+    path = cache_path(vehicle, terrain, cache_dir, **options)
     if path.exists() and not rebuild:
         try:
             return PowerMap.load(path, vehicle, terrain), False
         except (MapMismatchError, ConfigError):
             pass  # stale or damaged: rebuild below, never use it
-    built = PowerMap.build(vehicle, terrain, progress=progress)
+    built = PowerMap.build(vehicle, terrain, progress=progress, **options)
     built.save(path)
     return built, True

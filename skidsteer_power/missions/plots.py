@@ -97,7 +97,7 @@ def plot_sensitivity(table: dict[str, Any], path: str | os.PathLike[str]) -> Non
     for ax, metric in zip(axes, metrics, strict=True):
         for k, name in enumerate(vehicles):
             changes = table['results'][name]['changes_percent']
-            ax.bar(x + k * width, [changes[c][metric] for c in cases], width, label=name)
+            ax.bar(x + k * width, [(changes[c] or {}).get(metric, np.nan) for c in cases], width, label=name)
         ax.set_xticks(x + 0.4 - width / 2, cases, rotation=45, fontsize=7)
         ax.set(ylabel='change [%]', title=metric)
         ax.grid(True, axis='y', alpha=0.3)

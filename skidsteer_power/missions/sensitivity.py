@@ -1,6 +1,15 @@
 """Sensitivity of a mission to the soil parameters (ch. 8.2): each of n, k_c, k_phi, c, phi, K changed
 by +-1 %, and all of them at once, for each vehicle; relative changes of energy, mobility (max drawbar
-pull / weight) and max sinkage. Cases run in parallel processes (concurrent.futures)."""
+pull / weight) and max sinkage. Cases run in parallel processes (concurrent.futures).
+
+Every case is a converged DIRECT solve of the route's states (``source='direct'``): a map's
+interpolation error (largest near the traction limit) is of the order of a 1 % change and would
+show up as noise. The derivative is the central difference (f(+h) - f(-h)) / 2h, in percent of the
+baseline per percent of the parameter. A case is flagged ``non_smooth`` (and its derivative not
+reported as a number) when the one-sided changes f(+h) - f(0) and f(0) - f(-h) disagree in sign
+with the central derivative (e.g. both signs lowering the energy: the response is not smooth there,
+typically at the traction limit), and ``failed`` when a solve did not converge.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +18,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
+from skidsteer_power.errors import ConvergenceError
 from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route
 
@@ -33,10 +43,38 @@ def cases(delta: float) -> dict[str, tuple[tuple[str, ...], float]]:
     return out
 
 
-def _metrics(job: tuple[Any, Any, Route, str, str]) -> dict[str, float]:
+def _metrics(job: tuple[Any, Any, Route, str, str]) -> dict[str, float] | None:
+    """The case's metrics; None when a solve did not converge."""
     vehicle, terrain, route, source, model = job
-    summary = run_mission(vehicle, terrain, route, source=source, model=model).summary()
+    try:
+        summary = run_mission(vehicle, terrain, route, source=source, model=model).summary()
+    except ConvergenceError:
+        return None
     return {m: float(summary[m]) for m in METRICS}
+
+
+SMOOTH_TOLERANCE = 1e-9  # relative changes below this count as zero (no sign)
+
+
+def derivatives(
+    base: dict[str, float], plus: dict[str, float] | None, minus: dict[str, float] | None, delta: float
+) -> dict[str, Any]:
+    """Central-difference derivatives [% per %] of each metric and whether each is smooth.
+
+    Returns {metric: {'derivative': value or None, 'status': 'ok' | 'non_smooth' | 'failed'}}.
+    """
+    out: dict[str, Any] = {}
+    for m in METRICS:
+        if plus is None or minus is None or not base[m]:
+            out[m] = {'derivative': None, 'status': 'failed'}
+            continue
+        up, down = (plus[m] - base[m]) / abs(base[m]), (base[m] - minus[m]) / abs(base[m])
+        central = (up + down) / (2.0 * delta)  # (f(+h) - f(-h)) / 2h, relative to f(0)
+        sign = 0 if abs(central * delta) < SMOOTH_TOLERANCE else (1 if central > 0 else -1)
+        sides = [0 if abs(x) < SMOOTH_TOLERANCE else (1 if x > 0 else -1) for x in (up, down)]
+        smooth = all(side == sign for side in sides)
+        out[m] = {'derivative': central if smooth else None, 'status': 'ok' if smooth else 'non_smooth'}
+    return out
 
 
 def sensitivity(
@@ -45,7 +83,7 @@ def sensitivity(
     route: Route,
     *,
     delta: float = 0.01,
-    source: str = 'map',
+    source: str = 'direct',
     model: str = 'fess',
     workers: int | None = None,
 ) -> dict[str, Any]:
@@ -71,11 +109,27 @@ def sensitivity(
     for k, vehicle in enumerate(vehicles):
         chunk = dict(zip(labels, values[k * per_vehicle : (k + 1) * per_vehicle], strict=True))
         base = chunk.pop('baseline')
+        if base is None:
+            results[vehicle.name] = {
+                'baseline': None,
+                'failed': True,
+                'changes_percent': {},
+                'derivatives': {},
+            }
+            continue
         results[vehicle.name] = {
             'baseline': base,
             'changes_percent': {
-                label: {m: 100.0 * (vals[m] - base[m]) / base[m] if base[m] else 0.0 for m in METRICS}
+                label: (
+                    None
+                    if vals is None
+                    else {m: 100.0 * (vals[m] - base[m]) / base[m] if base[m] else 0.0 for m in METRICS}
+                )
                 for label, vals in chunk.items()
+            },
+            'derivatives': {
+                group: derivatives(base, chunk[f'{group}+'], chunk[f'{group}-'], delta)
+                for group in (*SOIL_PARAMETERS, 'all')
             },
         }
     return {

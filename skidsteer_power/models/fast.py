@@ -41,7 +41,6 @@ if TYPE_CHECKING:
 
 TABLE_SPEEDS = np.linspace(0.1, 1.5, 8)  # [m/s]
 TABLE_RADII = np.geomspace(1.0, 500.0, 16)  # [m]
-TABLE_VERSION = 'fast-1'
 SOURCES = ('wong', 'fess')
 
 
@@ -57,7 +56,7 @@ class TurningTables:
 
     def lookup(self, speed: np.ndarray, curvature: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bilinear (mu_t, s0, clamped) at |V| [m/s] and |1/R| [1/m], clamped to the table."""
-        from skidsteer_power.maps.grid import Axis, BilinearGrid
+        from skidsteer_power.interpolation import Axis, BilinearGrid
 
         grid = BilinearGrid(
             Axis(self.speeds, 'speed'),
@@ -98,7 +97,7 @@ def _mu_t_from_balance(vehicle: Vehicle, terrain: Terrain, state: SteadyState) -
     half = 0.5 * vehicle.tread_m
     moment = (np.ravel(state.thrust_outer_N) - np.ravel(state.thrust_inner_N)) * half - (rto - rti) * half
     moment = moment + np.ravel(state.s0_m) * np.cos(beta) * fc
-    return (moment / (vehicle.weight_N * float(vehicle.track_length_m))).reshape(np.shape(state.s0_m))
+    return (moment / (vehicle.weight_N * float(vehicle.track_length_m or 0.0))).reshape(np.shape(state.s0_m))
 
 
 def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -113,20 +112,19 @@ def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarr
 @lru_cache(maxsize=16)
 def turning_tables(vehicle: Vehicle, terrain: Terrain, source: str = 'wong') -> TurningTables:
     """The cached tables: process memory, then the disk cache, else :func:`generate_tables`."""
-    from skidsteer_power.maps.power_map import default_cache_dir, terrain_fingerprint
+    from skidsteer_power.cache import default_cache_dir, physics_digest
+    from skidsteer_power.terramechanics.terrain import terrain_fingerprint
     from skidsteer_power.vehicle import vehicle_fingerprint
 
-    folder = default_cache_dir()
-    path = (
-        folder
-        / f'fast_{vehicle_fingerprint(vehicle)}_{terrain_fingerprint(terrain)}_{source}_{TABLE_VERSION}.npz'
-    )
+    key = f'{vehicle_fingerprint(vehicle)}_{terrain_fingerprint(terrain)}_{source}_{physics_digest()}'
+    path = default_cache_dir() / f'fast_{key}.npz'
     if path.exists():
         try:
             with np.load(path, allow_pickle=False) as data:
-                return TurningTables(
-                    *(np.array(data[k]) for k in ('speeds', 'curvatures', 'mu_t', 's0')), source
+                speeds, curvatures, mu_t, s0 = (
+                    np.array(data[k]) for k in ('speeds', 'curvatures', 'mu_t', 's0')
                 )
+                return TurningTables(speeds, curvatures, mu_t, s0, source)
         except (OSError, KeyError, ValueError):
             pass  # damaged: regenerate
     tables = generate_tables(vehicle, terrain, source)

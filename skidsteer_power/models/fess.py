@@ -44,6 +44,7 @@ import numpy as np
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.loads import OperatingPoints, side_loads
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult
 from skidsteer_power.terramechanics.soil import shear_fraction
 from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
 from skidsteer_power.terramechanics.wheel import quadratic_stress_coefficients, solve_wheel, wheel_angles
@@ -54,10 +55,8 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-MODEL_VERSION = 'fess-1'
 DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
-FORCE_TOL_N = 1e-3  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
-MAX_ITERATIONS = 60
+FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
 MAX_HALVINGS = 12
 RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
@@ -364,18 +363,11 @@ def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -
     return step / np.maximum(ratio, 1.0)[:, None]
 
 
-@dataclass
-class NewtonResult:
-    x: np.ndarray  # (P, 3)
-    residual: np.ndarray  # (P, 3)
-    converged: np.ndarray  # (P,)
-    iterations: int
-
-
 def newton(
     problem: Problem, x0: np.ndarray, tol: float = FORCE_TOL_N, fixed: np.ndarray | None = None
 ) -> NewtonResult:
-    """Damped Newton on all points at once (eqs. 3.20-3.22).
+    """Damped Newton on all points at once (eqs. 3.20-3.22): the iteration of
+    :func:`skidsteer_power.models.newton.newton_solve`, specialised to FESS's residual.
 
     Each iteration is ONE batched residual call over the points not yet converged, evaluating every
     state together with its three forward-difference perturbations (eq. 3.22). A step that does not
@@ -390,11 +382,12 @@ def newton(
     step_prev = np.zeros_like(x)
     halvings = np.zeros(p, dtype=int)
     f = np.full_like(x, np.nan)
-    it = 0
-    for it in range(1, MAX_ITERATIONS + 1):  # noqa: B007
+    iterations = np.zeros(p, dtype=int)
+    for _ in range(MAX_ITERATIONS):
         act = np.flatnonzero(~done & ~gave_up)
         if len(act) == 0:
             break
+        iterations[act] += 1
         sub = problem if len(act) == p else problem.take(act)
         xa = x[act]
         h = _steps(sub, xa)
@@ -427,7 +420,7 @@ def newton(
         step_prev[idx] = step
         halvings[idx] = 0
         x[idx] = x[idx] + step
-    return NewtonResult(x, f, done, it)
+    return NewtonResult(x, f, done, iterations)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -451,7 +444,7 @@ class TwistSolution:
     traction_margin: np.ndarray  # (P,) [-]
     converged: np.ndarray  # (P,)
     residual: np.ndarray  # (P, 3)
-    iterations: int
+    iterations: np.ndarray  # (P,) Newton steps per point
 
     @property
     def power(self) -> np.ndarray:
@@ -483,111 +476,6 @@ class PointSolution:
     def state(self) -> np.ndarray:
         """(s0, omega_left, omega_right), to warm-start the next call."""
         return np.array([self.s0, *self.omega])
-
-
-class _PointKernel:
-    """The residual of eq. 3.19 for one operating point on flat (S, 2, M) arrays (M = gears x n)."""
-
-    def __init__(self, prob: Problem) -> None:
-        c = prob.contact
-
-        full = (
-            1,
-            2,
-            *np.broadcast_shapes(*(a.shape[2:] for a in (c.centre, c.fwd, c.entry, c.tau_max, c.wx))),
-        )
-
-        def flat(a: np.ndarray) -> np.ndarray:
-            return np.ascontiguousarray(np.broadcast_to(a, full)[0].reshape(2, -1))
-
-        self.fwd, self.centre, self.entry = flat(c.fwd), flat(c.centre), flat(c.entry)
-        self.xi = self.entry - self.fwd
-        self.tau_max = flat(c.tau_max)
-        self.wx, self.wy, self.wt = flat(c.wx), flat(c.wy), flat(c.wt)
-        self.terrain = prob.terrain
-        self.type_a = prob.terrain.shear_type == 'A'
-        self.k = prob.terrain.K
-        self.r = prob.radius
-        self.v = float(prob.speed[0])
-        self.yaw = float(prob.yaw[0])
-        self.ys = SIDE_Y_SIGN * prob.half_tread
-        self.dy = (self.ys - float(prob.turn_radius[0]))[:, None]
-        rolling = c.resistance[0] * np.sign(prob.side_speed[0])
-        self.rolling_sum = float(np.sum(rolling))
-        self.rolling_moment = float(np.sum(self.ys * rolling))
-        self.mass = prob.vehicle.mass_kg
-        self.lateral_scale = float(prob.lateral_scale[0])
-        self.length_scale = c.length_scale
-        self.omega_ref = max(float(np.max(np.abs(prob.side_speed[0]))), 1e-3) / prob.radius
-
-    def forces(self, x: np.ndarray, with_xk: bool = False) -> Any:
-        """(fx, fy[, xk]) per unit area [Pa], shapes (S, 2, M), for states x (S, 3)."""
-        omega = x[:, 1:, None]
-        direction = np.where(omega >= 0, 1.0, -1.0)
-        half = (0.5 * self.yaw / self.r) * self.xi / np.maximum(np.abs(omega), 1e-12)
-        sh, ch = np.sin(half), np.cos(half)
-        sin, omc = 2.0 * sh * ch, 2.0 * sh * sh
-        s0 = x[:, 0, None, None]
-        xk = self.centre + direction * self.fwd - s0
-        xe = self.centre + direction * self.entry - s0
-        jx = xk - xe + omc * xe - self.dy * sin
-        jy = self.dy * omc + xe * sin
-        j = np.hypot(jx, jy)
-        frac = -np.expm1(-j / self.k) if self.type_a else shear_fraction(self.terrain, j)
-        scale = self.tau_max * frac / np.where(j > 0, j, 1.0)  # eq. 6.7 (frac = 0 where j = 0)
-        if with_xk:
-            return -scale * jx, -scale * jy, xk
-        return -scale * jx, -scale * jy
-
-    def residual(self, x: np.ndarray) -> np.ndarray:
-        """(S, 3) residuals of eq. 3.19 [N, N, N m] (same as :func:`residual`)."""
-        fx, fy, xk = self.forces(x, with_xk=True)
-        fx_side = np.sum(fx * self.wx, axis=-1)
-        fyw = fy * self.wy
-        fy_sum = np.sum(fyw, axis=(-2, -1))
-        mz_lat = np.sum(xk * fyw, axis=(-2, -1))
-        s0 = x[:, 0]
-        q = np.maximum(np.hypot(self.v, self.yaw * s0), 1e-300)  # centrifugal force (eq. 3.18)
-        cfx = -self.mass * abs(self.v * self.yaw) * s0 * abs(self.yaw) / q  # -m V^2/R sin(beta)
-        cfy = -self.mass * self.v * self.yaw * abs(self.v) / q  # -m V^2/R cos(beta)
-        e1 = np.sum(fx_side, axis=-1) - self.rolling_sum + cfx
-        e2 = (fy_sum + cfy) * self.lateral_scale
-        e3 = mz_lat - fx_side @ self.ys + self.rolling_moment - s0 * cfy
-        return np.stack([e1, e2, e3], axis=-1)
-
-    def newton(self, x: np.ndarray, tol: float) -> tuple[np.ndarray, bool, int]:
-        """Damped Newton with a forward-difference Jacobian (eqs. 3.20-3.22), one point."""
-        h = np.array([1e-7 * self.length_scale, 0.0, 0.0])
-        norm_prev, step, x_prev = math.inf, np.zeros(3), x.copy()
-        halvings = 0
-        for it in range(1, MAX_ITERATIONS + 1):
-            h[1:] = 1e-7 * np.maximum(np.abs(x[1:]), self.omega_ref)
-            trial = np.repeat(x[None, :], 4, axis=0)
-            trial[1, 0] += h[0]
-            trial[2, 1] += h[1]
-            trial[3, 2] += h[2]
-            f_all = self.residual(trial)
-            f = f_all[0]
-            norm = float(np.max(np.abs(f)))
-            if norm < tol:
-                return x, True, it
-            if not math.isfinite(norm) or norm >= norm_prev:
-                if halvings >= MAX_HALVINGS:
-                    return x, False, it
-                step *= 0.5  # backtrack
-                x = x_prev + step
-                halvings += 1
-                continue
-            jac = (f_all[1:] - f).T / h
-            try:
-                step = np.linalg.solve(jac, -f)
-            except np.linalg.LinAlgError:
-                return x, False, it
-            caps = np.array([0.2 * self.length_scale, *(0.5 * np.maximum(np.abs(x[1:]), self.omega_ref))])
-            step = step / max(1.0, float(np.max(np.abs(step) / caps)))
-            x_prev, norm_prev, halvings = x, norm, 0
-            x = x + step
-        return x, False, MAX_ITERATIONS
 
 
 class FessSolver:
@@ -654,9 +542,8 @@ class FessSolver:
     ) -> PointSolution:
         """One operating point (V [m/s], w_z [rad/s]) on the lean path for on-board use.
 
-        Same equations and answers as :meth:`solve_twist` (test_fess_track.py compares them), with
-        the per-iteration numpy bookkeeping of the batched solver stripped: a plain Newton loop on
-        flat (4 states, 2 sides, elements) arrays. ``x0`` = (s0, omega_left, omega_right) warm-starts
+        Same equations, solver and answers as :meth:`solve_twist` (test_fess_track.py compares
+        them) for one point, without the neighbour retries. ``x0`` = (s0, omega_left, omega_right) warm-starts
         it, e.g. with the previous command's :attr:`PointSolution.state`.
         """
         v, w = float(speed), float(yaw_rate)
@@ -668,13 +555,11 @@ class FessSolver:
             zero = np.zeros(2)
             return PointSolution(0.0, zero, zero.copy(), True, 0)
         prob = self.problem(np.array([v]), np.array([w]))
-        kernel = _PointKernel(prob)
-        guess = initial_guess(prob)[0] if x0 is None else np.asarray(x0, dtype=float) * flip
-        x, ok, iterations = kernel.newton(guess, tol)
-        fx = kernel.forces(x[None, :])[0]
-        torque = prob.radius * np.sum(fx * kernel.wt, axis=-1)[0]
-        slip = _slip(prob.side_speed[0], x[1:] * prob.radius)
-        ok = ok and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
+        guess = initial_guess(prob) if x0 is None else np.asarray(x0, dtype=float)[None, :] * flip
+        result = newton(prob, guess, tol)
+        sol = _outputs(prob, result, np.zeros(1, dtype=bool))
+        x, iterations, ok = result.x[0], int(result.iterations[0]), bool(sol.converged[0])
+        torque = sol.torque[0]
         return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
 
     def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
@@ -807,7 +692,7 @@ def to_steady_state(sol: TwistSolution, turn_radius: np.ndarray, solve_time: flo
             'lateral_outer_N': pick(sol.lateral, o),
             'lateral_inner_N': pick(sol.lateral, i),
             'solve_time_s': np.full(len(o), solve_time),
-            'iterations': np.full(len(o), sol.iterations),
+            'iterations': np.asarray(sol.iterations, dtype=float),
         },
     )
 

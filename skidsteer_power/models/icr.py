@@ -39,7 +39,7 @@ from scipy.special import roots_legendre
 from skidsteer_power.errors import InputError
 from skidsteer_power.models import loads, steeds
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.wong_track import MAX_ITERATIONS, TOLERANCE, newton_solve
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, newton_solve
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
 
@@ -133,7 +133,11 @@ def solve(
 
     turning = ~points.straight
     n = points.speed.size
-    lead = 0.25 * float(np.max(patches.lengths)) if vehicle.is_tracked else 0.25 * float(vehicle.wheelbase_m)
+    lead = (
+        0.25 * float(np.max(patches.lengths))
+        if vehicle.is_tracked
+        else 0.25 * float(vehicle.wheelbase_m or 0.0)
+    )
     x0 = np.stack([np.full(n, lead), np.full(n, -1.1 * half_b), np.full(n, 1.1 * half_b)], axis=1)
     x = np.zeros((n, 3))
     converged = np.ones(n, dtype=bool)
@@ -180,7 +184,7 @@ def _state(
         margin = np.minimum(1.0 - np.abs(fxo) / (mu * patches.load_o), 1.0 - np.abs(fxi) / (mu * load_i))
     tipping = patches.load_i <= 0
     failure = np.select([tipping, ~converged], [2, 1], 0)
-    length = float(np.max(patches.lengths)) if vehicle.is_tracked else float(vehicle.wheelbase_m)
+    length = float(np.max(patches.lengths)) if vehicle.is_tracked else float(vehicle.wheelbase_m or 0.0)
     state = loads.assemble_state(
         points,
         'icr',

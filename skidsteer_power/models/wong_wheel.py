@@ -54,7 +54,7 @@ from scipy.special import roots_legendre
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models import loads
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.wong_track import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
 from skidsteer_power.terramechanics import wheel as single_wheel
 from skidsteer_power.terramechanics.soil import shear_fraction, shear_strength
 from skidsteer_power.terramechanics.terrain import Terrain
@@ -249,11 +249,15 @@ def initial_guess(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoi
     """x0 of eq. 4.12 from the straight single-wheel solution (see module doc)."""
     r, b = vehicle.drive_radius_m, vehicle.contact_width_m
     try:
-        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / int(vehicle.n_wheels), 0.0, r, b)  # type: ignore[arg-type]
+        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), 0.0, r, b)  # type: ignore[arg-type]
         z0, s_0 = float(single.sinkage_m), float(single.slip)
     except ConvergenceError:
         z0 = min(
-            float(single_wheel.bekker_wheel_sinkage(terrain, vehicle.weight_N / int(vehicle.n_wheels), r, b)),
+            float(
+                single_wheel.bekker_wheel_sinkage(
+                    terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), r, b
+                )
+            ),
             0.5 * r,
         )  # type: ignore[arg-type]
         s_0 = 0.2  # eqs. 2.31, 2.32
@@ -349,7 +353,7 @@ def _state(setup: _Setup, x: np.ndarray, result: NewtonResult, failure: np.ndarr
         extra={
             'sinkage_outer_m': x[:, 2],
             'sinkage_inner_m': x[:, 3],
-            'mu_t': turning / (v.weight_N * float(v.wheelbase_m)),  # eq. 3.27 with L = wheelbase
+            'mu_t': turning / (v.weight_N * float(v.wheelbase_m or 0.0)),  # eq. 3.27 with L = wheelbase
             'turning_moment_Nm': turning,
             'saturation': (o.mobilised + i.mobilised) / (o.strength + i.strength),
             'longitudinal_outer_N': o.fx,

@@ -285,6 +285,7 @@ class PowerEstimator(Node):
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
+        self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
         self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
@@ -340,12 +341,11 @@ class PowerEstimator(Node):
 
     # --- outputs ------------------------------------------------------------------------------
     def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
-        msg = JointState()
+        msg = self._predicted_msg  # preallocated: only the stamp and the numbers change
         if isinstance(source_msg, TwistStamped):
             msg.header.stamp = source_msg.header.stamp
         else:
             msg.header.stamp = self.get_clock().now().to_msg()
-        msg.name = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
         msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)

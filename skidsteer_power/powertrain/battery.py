@@ -195,6 +195,12 @@ class Battery:
         self.state.drawn_J += power_W * used
         self._refresh(current=self.current_for_power(power_W, soc) if used > 0 else 0.0, power=power_W)
 
+    def run_profile(self, power_W: Any, dt_s: Any) -> None:
+        """Step through a piecewise-constant power profile: ``power_W[k]`` [W] held for ``dt_s[k]`` [s]
+        (e.g. a mission's battery power per segment), in order."""
+        for power, dt in zip(np.ravel(power_W), np.ravel(dt_s), strict=True):
+            self.step(float(power), float(dt))
+
     def _dsoc(self, soc: float, power_W: float) -> float:
         soc = min(max(soc, 0.0), 1.0)
         return -self.current_for_power(power_W, soc) / self.config.capacity_C

@@ -19,6 +19,9 @@ YAML terrain file (see ``config/terrains/example_terrain.yaml``)::
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import math
 import os
 from collections.abc import Mapping
@@ -214,3 +217,14 @@ def load_terrain(name_or_path: str | os.PathLike[str]) -> Terrain:
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise ConfigError(f'cannot read terrain file {text}: {err}'.replace('\n', ' ')) from err
     return terrain_from_mapping(data, default_name=path.stem)
+
+
+def terrain_fingerprint(terrain: Terrain) -> str:
+    """Stable hex digest of the terrain's physical parameters (not its name)."""
+    payload = {
+        k: (repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
+        for k, v in dataclasses.asdict(terrain).items()
+        if k != 'name'
+    }
+    text = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]

@@ -1,4 +1,5 @@
-"""Bilinear interpolation on a rectilinear (V, yaw rate) grid, with clamping.
+"""Bilinear interpolation on a rectilinear grid, with clamping (used by the power maps and the fast
+model's tables; a neutral module so that models and maps need not import each other).
 
 Hand-written rather than ``scipy.interpolate.RegularGridInterpolator``, because it measured faster
 on the same table (``benchmarks/bench_maps.py``, kernels alone): one point ~2-4 us against ~40 us
@@ -13,6 +14,8 @@ import math
 
 import numpy as np
 
+from skidsteer_power.errors import InputError
+
 
 class Axis:
     """One strictly increasing grid axis; index/fraction lookup with clamping."""
@@ -20,7 +23,7 @@ class Axis:
     def __init__(self, values: np.ndarray, name: str) -> None:
         v = np.asarray(values, dtype=float)
         if v.ndim != 1 or len(v) < 2 or not np.all(np.isfinite(v)) or not np.all(np.diff(v) > 0):
-            raise ValueError(f'map axis {name!r} must hold >= 2 finite, strictly increasing values')
+            raise InputError(f'map axis {name!r} must hold >= 2 finite, strictly increasing values')
         self.values = v
         self.name = name
         self.lo, self.hi = float(v[0]), float(v[-1])
