@@ -141,6 +141,7 @@ def _design(report: Report) -> None:
 def _fleet(report: Report) -> None:
     from skidsteer_power.bags.fleet import plan_jobs, validate_fleet
     from skidsteer_power.bags.synthetic import table_7_3_segments, write_drive_bag
+    from skidsteer_power.bags.validate import ValidateOptions
     from skidsteer_power.distributed.engine import Engine
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -154,9 +155,10 @@ def _fleet(report: Report) -> None:
         cache = str(root / 'maps')
         rates = {}
         for workers in (1, 2):
-            jobs = plan_jobs(
-                bags, root / f'out{workers}', 'test_robot_track', 'sand_bin', map_cache_dir=cache, plots=False
+            shared = ValidateOptions(
+                'test_robot_track', 'sand_bin', root / f'out{workers}', map_cache_dir=cache, plots=False
             )
+            jobs = plan_jobs(bags, shared)
             with Engine(workers=workers, progress=False) as engine:
                 validate_fleet(engine, jobs[:1], root / 'warm', plots=False)  # map built, imports done
                 t0 = time.perf_counter()

@@ -108,7 +108,8 @@ def test_fleet_validation_on_a_cluster_reports_every_bag(scheduler, tmp_path, ca
     (bags / 'broken.mcap').write_bytes(b'not a bag')
     out = tmp_path / 'fleet'
     argv = ['validate', str(bags / '*.mcap'), '--vehicle', 'test_robot_track', '--terrain', 'dry_sand']
-    code = main([*argv, '--report', str(out), '--scheduler', scheduler, '--no-plots', '--json'])
+    fleet_options = ['--scheduler', scheduler, '--no-plots', '--cmd-hold', '0.7', '--json']
+    code = main([*argv, '--report', str(out), *fleet_options])
     assert code == 1  # one bag failed, and said so
     summary = json.loads(capsys.readouterr().out)
     assert (summary['bags'], summary['ok'], summary['failed']) == (3, 2, 1)
@@ -117,7 +118,8 @@ def test_fleet_validation_on_a_cluster_reports_every_bag(scheduler, tmp_path, ca
     for name in ('a.mcap', 'b.mcap'):
         assert rows[name]['ok'] and rows[name]['distance_source'] == 'poses'
         assert rows[name]['distance_m'] == pytest.approx(0.6, rel=0.02)
-        assert (Path(rows[name]['report_dir']) / 'summary.json').is_file()  # the single-bag report
+        single = json.loads((Path(rows[name]['report_dir']) / 'summary.json').read_text())  # its own report
+        assert single['cmd_hold_s'] == 0.7  # every single-bag option reaches every bag of the fleet
     with open(out / 'fleet.csv', newline='') as stream:
         assert len(list(csv.DictReader(stream))) == 3
     assert 'FAILED' in (out / 'summary.md').read_text()

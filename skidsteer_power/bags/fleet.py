@@ -26,13 +26,16 @@ import csv
 import glob
 import math
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from skidsteer_power.errors import InputError
+
+if TYPE_CHECKING:
+    from skidsteer_power.bags.validate import ValidateOptions
 
 BAG_SUFFIXES = ('.mcap', '.db3')
 CMD_HOLD_S = 0.5  # [s] a command counts as driven for at most this long (the estimator's staleness)
@@ -56,19 +59,24 @@ CSV_COLUMNS = (
 
 @dataclass(frozen=True)
 class BagJob:
-    """One bag to validate, with its vehicle, terrain and report folder, and the shared options."""
+    """One bag to validate: its path, whether to salvage it, and the single-bag options (vehicle,
+    terrain and report folder set for this bag; every other option shared by the fleet)."""
 
     bag: str
-    vehicle: str
-    terrain: str
-    report_dir: str
-    cmd_vel_topic: str = '/cmd_vel'
-    joint_states_topic: str = '/joint_states'
-    odom_topic: str = '/odom'
-    map_cache_dir: str | None = None
-    plots: bool = True
+    options: ValidateOptions
     salvage: bool = False
-    kinematics: str = 'cmd'
+
+    @property
+    def vehicle(self) -> str:
+        return self.options.vehicle
+
+    @property
+    def terrain(self) -> str:
+        return self.options.terrain
+
+    @property
+    def report_dir(self) -> str:
+        return str(self.options.report_dir)
 
 
 def is_bag(path: Path) -> bool:
@@ -114,16 +122,15 @@ def read_manifest(path: str) -> dict[str, tuple[str, str]]:
 
 def plan_jobs(
     bags: list[Path],
-    report_dir: str | Path,
-    vehicle: str,
-    terrain: str,
+    shared: ValidateOptions,
     manifest: dict[str, tuple[str, str]] | None = None,
-    **options: Any,
+    salvage: bool = False,
 ) -> list[BagJob]:
-    """One :class:`BagJob` per bag; report folders ``report_dir/<bag name>`` (made unique)."""
+    """One :class:`BagJob` per bag, with ``shared``'s options; vehicle and terrain from the manifest
+    where it names the bag; report folders ``shared.report_dir/<bag name>`` (made unique)."""
     jobs, used = [], set()
     for bag in bags:
-        v, t = vehicle, terrain
+        v, t = shared.vehicle, shared.terrain
         for key in (str(bag), bag.name, bag.stem):
             if manifest and key in manifest:
                 v, t = manifest[key]
@@ -133,7 +140,8 @@ def plan_jobs(
             k += 1
             name = f'{bag.stem}_{k}'
         used.add(name)
-        jobs.append(BagJob(str(bag), v, t, str(Path(report_dir) / name), **options))
+        report_dir = str(Path(shared.report_dir) / name)
+        jobs.append(BagJob(str(bag), replace(shared, vehicle=v, terrain=t, report_dir=report_dir), salvage))
     return jobs
 
 
@@ -150,19 +158,9 @@ def validate_job(job: BagJob) -> dict[str, Any]:
     }
     try:
         from skidsteer_power.bags.reader import open_bag
-        from skidsteer_power.bags.validate import ValidateOptions, read_inputs, validate
+        from skidsteer_power.bags.validate import read_inputs, validate
 
-        options = ValidateOptions(
-            vehicle=job.vehicle,
-            terrain=job.terrain,
-            report_dir=job.report_dir,
-            cmd_vel_topic=job.cmd_vel_topic,
-            joint_states_topic=job.joint_states_topic,
-            odom_topic=job.odom_topic,
-            map_cache_dir=job.map_cache_dir,
-            plots=job.plots,
-            kinematics=job.kinematics,
-        )
+        options = job.options
         with open_bag(job.bag, salvage=job.salvage, warn_unknown=False) as bag:
             summary = validate(bag, options)
             distance, source = distance_driven(read_inputs(bag, options))
@@ -356,27 +354,15 @@ def is_fleet(args: Any) -> bool:
     )
 
 
-def run_fleet_cmd(args: Any) -> int:
-    """``validate`` in fleet mode (see cli/bags.py)."""
+def run_fleet_cmd(args: Any, shared: ValidateOptions) -> int:
+    """``validate`` in fleet mode (see cli/bags.py): ``shared`` holds the single-bag options."""
     from skidsteer_power.cli.common import print_json
     from skidsteer_power.distributed.engine import Engine
 
     if args.msg:
         raise InputError('--msg is not supported with several bags yet')
-    jobs = plan_jobs(
-        expand(args.bag),
-        args.report,
-        args.vehicle,
-        args.terrain,
-        read_manifest(args.manifest) if args.manifest else None,
-        cmd_vel_topic=args.cmd_vel,
-        joint_states_topic=args.joint_states,
-        odom_topic=args.odom,
-        map_cache_dir=args.map_cache,
-        plots=not args.no_plots,
-        salvage=args.salvage,
-        kinematics=args.kinematics,
-    )
+    manifest = read_manifest(args.manifest) if args.manifest else None
+    jobs = plan_jobs(expand(args.bag), shared, manifest, salvage=args.salvage)
     with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
         summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
     if args.json:

@@ -117,10 +117,6 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from skidsteer_power.bags.report import one_screen
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
-    if is_fleet(args):  # several bags: skidsteer_power.bags.fleet (Dask)
-        return run_fleet_cmd(args)
-    args.bag = args.bag[0]
-    _log_to_stderr()
     options = ValidateOptions(
         vehicle=args.vehicle,
         terrain=args.terrain,
@@ -137,6 +133,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         joints_at=args.joints_at,
         kinematics=args.kinematics,
     )
+    if is_fleet(args):  # several bags: skidsteer_power.bags.fleet (Dask), each with these options
+        return run_fleet_cmd(args, options)
+    args.bag = args.bag[0]
+    _log_to_stderr()
     with _open(args) as bag:
         summary = validate(bag, options)
         summary.update(bag.integrity())
