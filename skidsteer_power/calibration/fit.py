@@ -75,10 +75,10 @@ TERRAIN_PARAMS: dict[str, ParamSpec] = {
     'K': ParamSpec('m', True, (1e-4, 0.2)),
 }
 INTERNAL_PARAMS: dict[str, ParamSpec] = {
-    'internal_b_left': ParamSpec('N m s/rad', False, (0.0, 0.05)),
-    'internal_c_left': ParamSpec('N m', False, (0.0, 3.0)),
-    'internal_b_right': ParamSpec('N m s/rad', False, (0.0, 0.05)),
-    'internal_c_right': ParamSpec('N m', False, (0.0, 3.0)),
+    'left_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
+    'left_c': ParamSpec('N m', False, (0.0, 3.0)),
+    'right_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
+    'right_c': ParamSpec('N m', False, (0.0, 3.0)),
 }
 PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
@@ -118,7 +118,7 @@ class Model:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
         if name in TERRAIN_PARAMS:
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
-        kind, side = name.split('_')[1:]
+        side, kind = name.split('_')
         total = getattr(self.powertrain, side).total
         return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
 
@@ -129,7 +129,7 @@ class Model:
         powertrain = self.powertrain
         sides = {}
         for side in ('left', 'right'):
-            b, c = values.get(f'internal_b_{side}'), values.get(f'internal_c_{side}')
+            b, c = values.get(f'{side}_b'), values.get(f'{side}_c')
             if b is not None or c is not None:
                 sides[side] = scaled_side(getattr(powertrain, side), b, c)
         if sides:

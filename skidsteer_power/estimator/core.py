@@ -11,7 +11,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.adaptation import AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.energy import EnergyTracker
 from skidsteer_power.estimator.inputs import (
     Freshness,
@@ -22,9 +25,25 @@ from skidsteer_power.estimator.inputs import (
 )
 from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
 from skidsteer_power.estimator.prediction import Prediction, Predictor
+from skidsteer_power.estimator.tte_bounds import TimeToEmptyBounds
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
+TERRAIN_CHANGE_SHOWN_S = 10.0  # diagnostics warn "terrain changed" this long after a detection [s]
+
+
+def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
+    """Diagnostic key/values of a :class:`~skidsteer_power.estimator.adaptation.Correction`."""
+    return {
+        'adaptation': 'on' if enabled else 'off',
+        'terrain_changes': str(c.terrain_changes),
+        'terrain_changed_at_s': f'{c.last_change_s:.3f}',
+        'correction_scale_left': f'{c.scale[0]:.4f}',
+        'correction_scale_right': f'{c.scale[1]:.4f}',
+        'correction_offset_left_Nm': f'{c.offset_Nm[0]:.4f}',
+        'correction_offset_right_Nm': f'{c.offset_Nm[1]:.4f}',
+    }
 
 
 class RejectedInput(InputError):
@@ -91,8 +110,14 @@ class EstimatorCore:
         battery: Any,
         powertrain: Powertrain,
         settings: EstimatorSettings | None = None,
+        adaptation: AdaptationSettings | None = None,
     ) -> None:
         self.settings = settings or EstimatorSettings()
+        # online correction of the prediction and terrain-change detection (estimator/adaptation.py),
+        # time-to-empty bounds (estimator/tte_bounds.py)
+        self.adaptation = TorqueAdaptation(adaptation)
+        self.tte_bounds = TimeToEmptyBounds()
+        self.time_to_empty_p10_s = self.time_to_empty_p90_s = math.inf
         self.predictor = predictor
         self.powertrain = powertrain
         self.energy = EnergyTracker(
@@ -125,14 +150,37 @@ class EstimatorCore:
             raise self._reject('cmd_vel', err, now_s) from err
         self.cmd_fresh.mark(now_s)
         self.command = (speed, yaw_rate)
+        self.adaptation.on_command(self.command, now_s)
         return self._update_prediction(now_s)
 
     def _update_prediction(self, now_s: float) -> Prediction:
         assert self.command is not None
         self.prediction = self.predictor.predict(*self.command)
         self.clamped_count += int(self.prediction.clamped)
-        self.energy.set_predicted(self.prediction.bus_total_W, now_s)
+        self.energy.set_predicted(self.corrected_bus_W(), now_s)
         return self.prediction
+
+    def corrected_torque_Nm(self) -> tuple[float, float]:
+        """Predicted motor torques [N m] with the online correction applied (left, right)."""
+        assert self.prediction is not None
+        return self.adaptation.corrected(self.prediction.motor_torque_Nm)
+
+    def corrected_bus_W(self) -> float:
+        """Battery power [W] of the corrected prediction: the prediction's own plus the change the
+        correction makes through the motor and amplifier (exactly the prediction's when uncorrected)."""
+        p = self.prediction
+        assert p is not None
+        corrected = np.asarray(self.corrected_torque_Nm())
+        if np.array_equal(corrected, p.motor_torque_Nm):
+            return p.bus_total_W
+        pt = self.powertrain
+        omega = np.asarray(p.motor_omega_rad_s)
+
+        def bus(torque: np.ndarray) -> float:
+            terminal = terminal_power(pt.motor, torque, omega)
+            return float(np.sum(bus_power(terminal, pt.amplifier, pt.regen_efficiency)))
+
+        return p.bus_total_W + bus(corrected) - bus(np.asarray(p.motor_torque_Nm))
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""
@@ -155,6 +203,9 @@ class EstimatorCore:
         measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
         self.energy.set_measured(measured.bus_total_W, now_s)
         self.comparison = self._compare(measured)
+        p = self.prediction
+        if p is not None and self.cmd_fresh.is_fresh(now_s):
+            self.adaptation.update(now_s, p.motor_torque_Nm, p.motor_omega_rad_s, torque, omega)
         return self.comparison
 
     def _compare(self, measured: MeasuredPower) -> Comparison:
@@ -177,6 +228,13 @@ class EstimatorCore:
         self.energy.advance(now_s)
         self.energy.flush()
         self.time_to_empty_s = self.energy.time_to_empty_s()
+        self.tte_bounds.add(now_s, self.energy.power_W(now_s))
+        model_spread = 0.0
+        if self.energy.source(now_s) == 'predicted' and self.prediction is not None:
+            model_spread = self.adaptation.state().relative_residual(self.prediction.motor_torque_Nm)
+        self.time_to_empty_p10_s, self.time_to_empty_p90_s = self.tte_bounds.bounds(
+            self.battery, self.energy.filtered_power_W, model_spread
+        )
 
     def traction_warning(self) -> bool:
         """True when the last prediction's traction margin is at or below the warning margin."""
@@ -193,6 +251,9 @@ class EstimatorCore:
             problems.append('joint_states stale')
         if self.traction_warning():
             problems.append('traction margin low: robot may get stuck')
+        correction = self.adaptation.state()
+        if now_s - correction.last_change_s <= TERRAIN_CHANGE_SHOWN_S:
+            problems.append('terrain changed: adaptation restarted')
         level = LEVEL_WARN if problems else LEVEL_OK
         source = self.energy.source(now_s)
         values = {
@@ -211,6 +272,7 @@ class EstimatorCore:
         }
         if self.prediction is not None:
             values['traction_margin'] = f'{self.prediction.traction_margin:.4f}'
+        values.update(adaptation_values(correction, self.adaptation.settings.enabled))
         message = '; '.join(problems) if problems else f'ok, energy from {source} power'
         return level, message, values
 

@@ -20,6 +20,11 @@ publishes (at once, per cmd_vel)
 periodic (``publish_period_s``)
     ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction); ``energy/remaining_wh``
     std_msgs/Float64 [Wh]; ``energy/time_to_empty_s`` std_msgs/Float64 [s] (inf when idle);
+    ``energy/time_to_empty_p10_s``, ``energy/time_to_empty_p90_s`` std_msgs/Float64 [s] (bounds,
+    :mod:`skidsteer_power.estimator.tte_bounds`); ``power/correction`` sensor_msgs/JointState whose
+    names are the online correction's fields (units in the names) and whose positions are their values
+    (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`); the terrain-change flag is in
+    ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a warning for 10 s);
     ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy source, stale inputs, rejected-input counts,
     traction warning) every ``diagnostics_period_s``.
 
@@ -44,6 +49,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
 
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
+from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.persistence import load_state, save_state
@@ -76,6 +82,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
     'save_period_s': (10.0, 'period of energy-state saves [s]'),
     'qos_depth': (100, 'subscription queue depth'),
+    'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
+    'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
 }
 
 
@@ -98,8 +106,15 @@ class PowerEstimator(Node):
         self.terrain_name = p['terrain']
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
+        adaptation = AdaptationSettings(
+            enabled=bool(p['adaptation']), memory_s=float(p['adaptation_memory_s'])
+        )
         self.core = EstimatorCore(
-            predictor, factory.battery_for(self.vehicle), factory.powertrain_for(self.vehicle), settings
+            predictor,
+            factory.battery_for(self.vehicle),
+            factory.powertrain_for(self.vehicle),
+            settings,
+            adaptation,
         )
         self.state_file = factory.state_path(p['state_file'], self.vehicle) if p['persist'] else None
         self._restore(p['initial_soc'])
@@ -166,6 +181,9 @@ class PowerEstimator(Node):
         self.pub_battery = self.create_publisher(BatteryState, 'battery/state', 10)
         self.pub_remaining = self.create_publisher(Float64, 'energy/remaining_wh', 10)
         self.pub_tte = self.create_publisher(Float64, 'energy/time_to_empty_s', 10)
+        self.pub_tte_p10 = self.create_publisher(Float64, 'energy/time_to_empty_p10_s', 10)
+        self.pub_tte_p90 = self.create_publisher(Float64, 'energy/time_to_empty_p90_s', 10)
+        self.pub_correction = self.create_publisher(JointState, 'power/correction', 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
@@ -243,6 +261,10 @@ class PowerEstimator(Node):
             msg = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
             remaining = float(self.core.battery.remaining_wh)
             tte = float(self.core.energy.time_to_empty_s())
+            bounds = (self.core.time_to_empty_p10_s, self.core.time_to_empty_p90_s)
+            correction = JointState(
+                name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
+            )
         battery = BatteryState()
         battery.header.stamp = self.get_clock().now().to_msg()
         for key, value in msg.items():
@@ -253,6 +275,10 @@ class PowerEstimator(Node):
         self.pub_battery.publish(battery)
         self.pub_remaining.publish(Float64(data=remaining))
         self.pub_tte.publish(Float64(data=tte))
+        self.pub_tte_p10.publish(Float64(data=float(bounds[0])))
+        self.pub_tte_p90.publish(Float64(data=float(bounds[1])))
+        correction.header.stamp = battery.header.stamp
+        self.pub_correction.publish(correction)
 
     def _publish_diagnostics(self) -> None:
         now = self.now_s()
