@@ -16,6 +16,7 @@ names carry the unit)::
     wheel_radius_m: 0.1
     wheel_width_m: 0.074
     wheelbase_m: 0.45            # front axle to rear axle
+    yaw_inertia_kg_m2: 1.5       # optional; default: a uniform box (see Vehicle.yaw_inertia)
     powertrain: {preset: test_robot}
 
 Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
@@ -62,6 +63,8 @@ class Vehicle:
     n_wheels : total number of wheels, 4 or 6 (wheels)
     wheel_radius_m, wheel_width_m : wheel radius r and width b [m] (wheels)
     wheelbase_m : front axle to rear axle wb [m] (wheels); a 6-wheel vehicle's middle axle is midway
+    yaw_inertia_kg_m2 : yaw moment of inertia about the CG [kg m^2] (optional; the dynamic twin uses
+        it, the steady models do not; default :attr:`yaw_inertia`)
     powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
     source : where the numbers come from; flags assumed values
     """
@@ -78,6 +81,7 @@ class Vehicle:
     wheel_radius_m: float | None = None
     wheel_width_m: float | None = None
     wheelbase_m: float | None = None
+    yaw_inertia_kg_m2: float | None = None
     powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
     source: str = ''
 
@@ -95,6 +99,18 @@ class Vehicle:
         radius = self.sprocket_radius_m if self.is_tracked else self.wheel_radius_m
         assert radius is not None  # guaranteed by validation
         return radius
+
+    @property
+    def yaw_inertia(self) -> float:
+        """Yaw moment of inertia I_z [kg m^2]: ``yaw_inertia_kg_m2`` if given, else ASSUMED a uniform
+        box m (L^2 + W^2) / 12 of the overall footprint, L = contact length (tracks) or wheelbase
+        (wheels) + 2 r, W = tread + b (the dissertation gives no inertia)."""
+        if self.yaw_inertia_kg_m2 is not None:
+            return float(self.yaw_inertia_kg_m2)
+        span = self.track_length_m if self.is_tracked else self.wheelbase_m
+        length = float(span or 0.0) + 2.0 * self.drive_radius_m
+        width = self.tread_m + self.contact_width_m
+        return self.mass_kg * (length**2 + width**2) / 12.0
 
     @property
     def is_tracked(self) -> bool:
@@ -163,6 +179,8 @@ def _validate(vehicle: Vehicle) -> None:
         spacing = float(vehicle.wheelbase_m) / (vehicle.wheels_per_side - 1)  # type: ignore[arg-type]
         if spacing <= 2.0 * float(vehicle.wheel_radius_m):  # type: ignore[arg-type]
             raise _fail(vehicle.name, f'wheelbase_m ({vehicle.wheelbase_m}) is too short: the wheels overlap')
+    if vehicle.yaw_inertia_kg_m2 is not None:
+        _check_positive(vehicle, 'yaw_inertia_kg_m2')
     if not isinstance(vehicle.powertrain, dict):
         raise _fail(vehicle.name, f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
     if not isinstance(vehicle.source, str):
@@ -257,7 +275,7 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
     payload = {
         f.name: getattr(vehicle, f.name)
         for f in dataclasses.fields(vehicle)
-        if f.name not in ('name', 'source')
+        if f.name not in ('name', 'source', 'yaw_inertia_kg_m2')  # steady models ignore the inertia
     }
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):

@@ -1,0 +1,567 @@
+"""The twin's dynamics: planar rigid body, two drivetrains with DES speed loops, terrain contact.
+
+Fixed step dt (default 2 ms, 500 Hz), semi-implicit (symplectic) Euler: the forces of the current
+state (shear displacements, sinkage) accelerate the motors and the body; the new velocities then
+move the pose and advance the shear displacements. SI units throughout. Sides: index 0 = left
+(y = +B/2), 1 = right (y = -B/2); hull frame x forward, y left, z up (REP 103).
+
+Terrain contact (see docs/TWIN.md for where this agrees with and departs from the steady models):
+
+* tracks: each patch is a grid of nodes, ``TRACK_NODES`` + 1 along (x = l/2 ... -l/2) times
+  ``TRACK_ROWS`` Gauss-Legendre rows across. Every node carries the shear displacement j (2-D, in
+  the current hull frame) of the belt element passing over it, relative to the soil it touched.
+  A belt element moves back along the hull at r omega and slips over the ground at
+  v_s = (v_x - yaw y - r omega, v_y + yaw x); in the rotating hull frame (Eulerian form)
+
+      dj/dt + (-r omega) dj/dx = v_s - yaw e_z x j,          j = 0 where the belt touches down
+
+  (first-order upwind, touchdown at the front for omega > 0, at the rear for omega < 0). Its steady
+  state is the displacement of eqs. 3.8-3.11 / 6.6 (module doc of ``models/wong_track.py``), and
+  for straight running eq. 2.15. Shear stress: Janosi-Hanamoto (eqs. 2.2-2.5, 3.12) at the node's
+  uniform pressure (eq. 3.17) with lateral load transfer (eq. 3.1, from the instantaneous v_x yaw);
+  it acts against j (3.13-3.15). Compaction resistance eq. 2.10 against the side's travel.
+* wheels: each wheel's contact arc [theta_r, theta_f] (eqs. 2.19-2.22 at its sinkage and its
+  instantaneous slip, eq. 2.13) carries ``WHEEL_NODES`` + 1 nodes in a normalised coordinate
+  xi = (theta_f - theta) / (theta_f - theta_r); the rim element moves through them at omega /
+  (theta_f - theta_r) and slips at u = (V_x cos(theta) - r omega, V_y) (eq. 4.3 without the
+  r sin(theta) yaw term): the same transport equation, whose steady state is eq. 2.25 (and 4.4
+  without yaw during contact). Wong-Reece normal stress (eq. 2.21), forces eq. 2.27 plus the
+  lateral integral of eq. 4.9, axle torque eq. 2.34. The sinkage is a state relaxed each step
+  towards the vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer.
+
+Drivetrain, per side (``powertrain``: Table 7.1 internal resistance, left/right asymmetric):
+J dw_m/dt = K_t i - (b w_m + c tanh(w_m / 1 rad/s)) - T_axle / G, the current from the DES speed
+loop (PI, the gains of ``des/simulator.MotorModel``, 10 A limit, voltage limit 0.9 V_bus - EMF),
+with the PI and friction terms implicit so the stiff zero-speed friction stays stable.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import roots_legendre
+
+from skidsteer_power.des.kinematics import RPM, twist_to_motor_rpm
+from skidsteer_power.errors import InputError
+from skidsteer_power.powertrain import Battery, Powertrain
+from skidsteer_power.terramechanics import soil
+from skidsteer_power.terramechanics import track as single_track
+from skidsteer_power.terramechanics import wheel as single_wheel
+from skidsteer_power.terramechanics.terrain import Terrain
+from skidsteer_power.twin.terrain_field import Patch, TerrainField
+from skidsteer_power.vehicle import Vehicle
+
+DEFAULT_DT_S = 2e-3
+"""Default fixed step [s] (500 Hz): the 1 ms step gives the same steady torques and speeds to 4
+digits (measured on the three test-robot configurations) at half the speed."""
+TRACK_NODES = 32
+"""Intervals along each track patch [-] (nodes every l / 32; 1.4 cm on the test robot)."""
+TRACK_ROWS = 2
+"""Gauss-Legendre rows across each track [-]."""
+WHEEL_NODES = 24
+"""Intervals along each wheel's contact arc [-]."""
+SPEED_LOOP_BANDWIDTH_RAD_S = 60.0
+"""DES speed-loop bandwidth [rad/s], as ``des/simulator.MotorModel`` (ASSUMED there: the real gains
+are in units the sources do not give)."""
+SETPOINT_ACCEL_RAD_S2 = 10.0 * 1000.0 * RPM
+"""Set-point ramp of the DES [rad/s^2 at the motor]: parameter ACCELERATION = 10 rpm/ms, as the
+driver configures it (``des/simulator.default_parameters``)."""
+MAX_MOTOR_RPM = 10000.0
+"""Max. permissible EC-45 speed [rpm] (Appendix B), the driver's set-point limit."""
+FRICTION_SMOOTHING_RAD_S = 1.0
+"""Motor speed over which the Coulomb terms change sign (tanh) [rad/s], as nodes/suite.py."""
+TRACK_ASSEMBLY_INERTIA_KG_M2 = 0.015
+"""ASSUMED: one side's track belt (~1 kg at r = 0.1 m) and two sprockets (0.5 kg each) [kg m^2 at the
+axle], scaled by (r / 0.1 m)^2 for other vehicles."""
+WHEEL_INERTIA_KG_M2 = 0.0035
+"""ASSUMED: one HPI Baja class wheel (~0.5 kg, mostly tyre, at r = 0.1 m): 0.7 m r^2 [kg m^2],
+scaled by (r / 0.1 m)^2."""
+DIRECTION_SMOOTHING_M_S = 0.005
+"""Ground speed over which the compaction resistance changes direction [m/s]."""
+BATTERY_STEP_S = 0.01
+"""Interval at which the battery (open-circuit voltage, internal resistance) is updated [s]."""
+SOIL_REFRESH_STEPS = 10
+"""Steps between refreshes of the load-dependent soil terms (pressure, compaction, sinkage, terrain
+under the contact): loads change over tens of ms, not 1 ms [-]."""
+SHEAR_DAMPING_S = 0.05
+"""ASSUMED transient shear damping: a node adds c dj/dt (at the fixed node, i.e. zero in steady
+state) with c = (tau_max / K) t_d, t_d = 0.05 s. Without it the Janosi-Hanamoto curve acts as an
+undamped spring between body and soil (a real soil unloads along a stiffer, dissipative path) and
+the 30 kg body surges at ~1.7 Hz; see docs/TWIN.md."""
+SINKAGE_SETTLING_S = 0.5
+"""Time constant of a standing wheel's sinkage towards the vertical balance [s] (ASSUMED)."""
+
+
+@dataclass
+class StepOutput:
+    """Quantities of the last step (per side arrays [left, right]) for sensors and bookkeeping."""
+
+    current_A: np.ndarray
+    axle_torque_Nm: np.ndarray  # terrain's resisting torque at the sprocket / axle
+    bus_power_W: np.ndarray
+    terminal_power_W: np.ndarray
+    sinkage_m: float
+
+
+@dataclass
+class EnergyLedger:
+    """Accumulated energies since the start [J]."""
+
+    bus_J: float = 0.0  # electrical energy drawn from the bus by both amplifiers
+    amplifier_J: float = 0.0  # amplifier loss (bus - terminal)
+    copper_J: float = 0.0  # R i^2
+    friction_J: float = 0.0  # drivetrain internal resistance (eqs. 7.1-7.4)
+    terrain_J: float = 0.0  # dissipated by soil shear and compaction
+    kinetic0_J: float = 0.0
+
+
+class Twin:
+    """Dynamic twin of a skid-steered robot on its own terrain (see the module doc).
+
+    vehicle, terrain (the truth), powertrain (default: the vehicle's), ``patches`` (other terrains
+    in polygons), ``seed`` (sensor noise, used by :mod:`skidsteer_power.twin.sensors`), ``dt`` [s].
+    """
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        terrain: Terrain,
+        powertrain: Powertrain | None = None,
+        *,
+        patches: list[Patch] | None = None,
+        seed: int = 0,
+        dt: float = DEFAULT_DT_S,
+    ) -> None:
+        if not (0 < dt <= DEFAULT_DT_S):
+            raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
+        self.vehicle = vehicle
+        self.field = TerrainField(terrain, patches or ())
+        self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
+        self.battery = Battery.from_config(self.powertrain.battery)
+        self.seed = seed
+        self.dt = dt
+        pt, motor = self.powertrain, self.powertrain.motor
+        self.G = pt.gear_ratio
+        self.r = vehicle.drive_radius_m
+        self.half_tread = 0.5 * vehicle.tread_m
+        self.y_side = np.array([self.half_tread, -self.half_tread])
+        self.kt = motor.torque_constant_Nm_A
+        self.R = motor.terminal_resistance_ohm
+        self.kn = motor.speed_constant_rad_s_V
+        self.peak_A = pt.amplifier.continuous_current_A
+        self.v_fraction = pt.amplifier.max_output_voltage_fraction
+        self.friction_b = np.array([pt.left.total.viscous_Nm_s, pt.right.total.viscous_Nm_s])
+        self.friction_c = np.array([pt.left.total.coulomb_Nm, pt.right.total.coulomb_Nm])
+        scale = (self.r / 0.1) ** 2
+        if vehicle.is_tracked:
+            axle_inertia = TRACK_ASSEMBLY_INERTIA_KG_M2 * scale
+        else:
+            axle_inertia = vehicle.wheels_per_side * WHEEL_INERTIA_KG_M2 * scale
+        self.J = motor.rotor_inertia_kg_m2 + axle_inertia / self.G**2
+        # PI gains of des/simulator.MotorModel: designed on the rotor + half the robot's mass at r
+        j_design = motor.rotor_inertia_kg_m2 + 0.5 * vehicle.mass_kg * self.r**2 / self.G**2
+        self.kp = SPEED_LOOP_BANDWIDTH_RAD_S * j_design / self.kt
+        self.ki = self.kp * SPEED_LOOP_BANDWIDTH_RAD_S / 4.0
+        self.mass = vehicle.mass_kg
+        amp = self.powertrain.amplifier
+        self._eta = amp.efficiency
+        regen = self.powertrain.regen_efficiency
+        self._eta_regen = (amp.efficiency if amp.four_quadrant else 0.0) if regen is None else regen
+        self.Iz = vehicle.yaw_inertia
+        self._init_contact()
+        self.reset()
+
+    # ------------------------------------------------------------------ set-up
+    def _init_contact(self) -> None:
+        v = self.vehicle
+        if v.is_tracked:
+            length, b = float(v.track_length_m), float(v.track_width_m)  # type: ignore[arg-type]
+            n = TRACK_NODES
+            dx = length / n
+            x = 0.5 * length - dx * np.arange(n + 1)
+            t, w = roots_legendre(TRACK_ROWS)
+            eta = 0.5 * b * t
+            trap = np.full(n + 1, dx)
+            trap[[0, -1]] *= 0.5
+            self.node_x = np.broadcast_to(x[None, :, None], (2, n + 1, TRACK_ROWS)).copy()
+            self.node_y = (self.y_side[:, None, None] + eta[None, None, :]) * np.ones_like(self.node_x)
+            self.node_w = np.broadcast_to(trap[:, None] * (0.5 * b * w)[None, :], self.node_x.shape).copy()
+            self.node_p = self.node_x + 1j * self.node_y  # hull positions as x + i y [m]
+            self.node_dx = dx
+            self.track_length, self.width = length, b
+        else:
+            nw = int(v.n_wheels)  # type: ignore[arg-type]
+            axles = np.array(v.axle_positions_m())
+            self.wheel_side = np.repeat([0, 1], len(axles))
+            self.wheel_x = np.tile(axles, 2)
+            self.wheel_y = self.y_side[self.wheel_side]
+            self.width = float(v.wheel_width_m)  # type: ignore[arg-type]
+            self.xi = np.linspace(0.0, 1.0, WHEEL_NODES + 1)
+            trap = np.full(WHEEL_NODES + 1, 1.0 / WHEEL_NODES)
+            trap[[0, -1]] *= 0.5
+            self.xi_w = trap
+            self.n_wheels = nw
+
+    def reset(self) -> None:
+        """Rest at the origin, heading +x, shear relaxed, static sinkage, full battery."""
+        self.t = 0.0
+        self.pose = np.zeros(3)  # x, y [m], yaw [rad] (world)
+        self.vel = np.zeros(3)  # v_x, v_y [m/s] (hull), yaw rate [rad/s]
+        self.omega_m = np.zeros(2)  # motor speeds, forward positive [rad/s]
+        self.theta_m = np.zeros(2)  # motor angles [rad]
+        self.integral_A = np.zeros(2)
+        self.setpoint = np.zeros(2)  # ramped speed set point [rad/s]
+        self.command = (0.0, 0.0)
+        self.energy = EnergyLedger()
+        self.battery = Battery.from_config(self.powertrain.battery)
+        self.bus_voltage_V = self.battery.state.voltage_V
+        self._battery_pending = [0.0, 0.0]  # energy [J], time [s] not yet given to the battery
+        self.bus_current_A = 0.0
+        self.max_sinkage_m = 0.0
+        v = self.vehicle
+        if v.is_tracked:
+            self.j = np.zeros(self.node_x.shape, dtype=complex)  # j_x + i j_y [m] (side, along, across)
+            self._soil_age = 0
+        else:
+            w_wheel = v.weight_N / self.n_wheels
+            z0 = float(single_wheel.bekker_wheel_sinkage(self.field.base, w_wheel, self.r, self.width))
+            self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
+            self.j = np.zeros((self.n_wheels, WHEEL_NODES + 1), dtype=complex)  # j_t + i j_y [m]
+            self._soil_age = 0
+        self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
+        self._j_rate = np.zeros_like(self.j)
+        self._damping = SHEAR_DAMPING_S / self.field.base.K  # [s/m]: c = tau_max t_d / K
+
+    # ------------------------------------------------------------------ terrain
+    def _side_loads(self) -> np.ndarray:
+        """Vertical load of each side [N] with lateral load transfer (eq. 3.1, instantaneous)."""
+        v = self.vehicle
+        transfer = self.mass * self.vel[0] * self.vel[2] * v.cg_height_m / v.tread_m
+        half = 0.5 * v.weight_N
+        return np.maximum(np.array([half - transfer, half + transfer]), 0.0)
+
+    def _terrain_index(self, hx: np.ndarray, hy: np.ndarray) -> np.ndarray | None:
+        """Terrain index of hull points (hx, hy) [m]; None if the floor is uniform."""
+        if self.field.uniform:
+            return None
+        x, y, yaw = self.pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        return self.field.index_at(x + c * hx - s * hy, y + s * hx + c * hy)
+
+    def _by_terrain(self, index: np.ndarray | None, shape: tuple[int, ...], fn) -> np.ndarray:
+        """Evaluate ``fn(terrain, mask)`` per terrain present; mask None = everywhere."""
+        if index is None:
+            return fn(self.field.base, None)
+        out = np.zeros(shape)
+        for i in np.unique(index):
+            mask = index == i
+            out[mask] = fn(self.field.terrains[i], mask)
+        return out
+
+    def _track_soil(self, loads: np.ndarray) -> None:
+        """Per-node shear strength [Pa x m^2], per-side compaction resistance [N] and sinkage [m]
+        at the side loads [N] (eqs. 2.2, 2.6, 2.10, 3.17); refreshed every ``SOIL_REFRESH_STEPS``."""
+        b, length = self.width, self.track_length
+        pressure = loads / (b * length)  # eq. 3.17
+        index = self._terrain_index(self.node_x, self.node_y)
+        self._track_index = index
+        if index is None:
+            t = self.field.base
+            self._tau_max_w = soil.shear_strength(t, pressure)[:, None, None] * self.node_w  # eq. 2.2
+            self._rc = single_track.compaction_resistance(t, loads, b, length)  # eq. 2.10
+            self._sinkage = float(np.max(single_track.track_sinkage(t, loads, b, length)))  # eq. 2.6
+            return
+        p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
+        strength = np.zeros(p.shape)
+        rc = np.zeros(p.shape)
+        sink = np.zeros(p.shape)
+        for i in np.unique(index):
+            mask = index == i
+            t = self.field.terrains[i]
+            strength[mask] = soil.shear_strength(t, p[mask])
+            rc[mask] = single_track.compaction_resistance(t, p[mask] * b * length, b, length)
+            sink[mask] = soil.sinkage_for_pressure(t, p[mask], b)
+        share = self.node_w / (b * length)  # each node's share of the rut
+        self._tau_max_w = strength * self.node_w
+        self._rc = (rc * share).sum(axis=(1, 2))
+        self._sinkage = float(sink.max())
+
+    def _shear_fraction(self, magnitude: np.ndarray, index: np.ndarray | None) -> np.ndarray:
+        """tau / tau_max at |j| [m] per node (eqs. 2.3-2.5), by the node's terrain."""
+        if index is None:
+            return soil.shear_fraction(self.field.base, magnitude)
+        out = np.zeros(magnitude.shape)
+        for i in np.unique(index):
+            mask = index == i
+            out[mask] = soil.shear_fraction(self.field.terrains[i], magnitude[mask])
+        return out
+
+    def _track_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Body force (F_x, F_y, M_z) [N, N, N m], axle torques [N m], dissipation [W], sinkage [m].
+
+        Vectors in the hull plane are complex numbers x + i y (j, forces, velocities).
+        """
+        if self._soil_age <= 0:
+            self._track_soil(loads)
+            self._soil_age = SOIL_REFRESH_STEPS
+        self._soil_age -= 1
+        vx, vy, wz = self.vel
+        j = self.j
+        mag = np.abs(j)
+        tau_w = self._tau_max_w * self._shear_fraction(mag, self._track_index)  # eq. 3.12
+        safe = np.where(mag > 0, mag, 1.0)
+        f = -tau_w * j / safe  # eqs. 3.13-3.15: against the displacement
+        f -= self._damping * self._tau_max_w * self._j_rate  # transient damping, 0 in steady state
+        belt = self.r * self.omega_m / self.G  # belt speed relative to the hull [m/s]
+        side_speed = vx - wz * self.y_side
+        fc = -self._rc * np.tanh(side_speed / DIRECTION_SMOOTHING_M_S)  # eq. 2.10, against travel
+        f_side = f.sum(axis=(1, 2))
+        total = f_side.sum()
+        force = np.array(
+            [
+                total.real + fc.sum(),
+                total.imag,
+                float((self.node_p.conjugate() * f).imag.sum()) - float((self.y_side * fc).sum()),
+            ]
+        )
+        axle = self.r * f_side.real  # the ground's pull on the belt resists the sprocket
+        slip = (vx + 1j * vy) + 1j * wz * self.node_p - belt[:, None, None]
+        dissipation = float(-(f.conjugate() * slip).real.sum() - (fc * side_speed).sum())
+        return force, axle, dissipation, self._sinkage
+
+    def _advance_tracks(self, dt: float) -> None:
+        """Transport the shear displacement with the belt and add the slip (see the module doc)."""
+        vx, vy, wz = self.vel
+        j = self.j
+        belt = self.r * self.omega_m / self.G
+        source = (vx + 1j * vy) + 1j * wz * (self.node_p - j) - belt[:, None, None]  # - yaw e_z x j
+        courant = np.minimum(np.abs(belt) * dt / self.node_dx, 1.0)[:, None, None]
+        upstream = np.empty_like(j)
+        for side in (0, 1):
+            if belt[side] >= 0:  # touchdown at the front (node 0)
+                upstream[side, 0] = 0.0
+                upstream[side, 1:] = j[side, :-1]
+            else:  # reversing: touchdown at the rear
+                upstream[side, -1] = 0.0
+                upstream[side, :-1] = j[side, 1:]
+        j = j + dt * source + courant * (upstream - j)
+        for side in (0, 1):
+            if belt[side] > 0:
+                j[side, 0] = 0.0
+            elif belt[side] < 0:
+                j[side, -1] = 0.0
+        self._j_rate = (j - self.j) / dt
+        self.j = j
+
+    def _wheel_kinematics(self) -> tuple[np.ndarray, ...]:
+        vx, vy, wz = self.vel
+        vxa = vx - wz * self.wheel_y  # axle ground speed, forward [m/s]
+        vya = vy + wz * self.wheel_x  # lateral [m/s]
+        omega = self.omega_m[self.wheel_side] / self.G
+        direction = np.where(np.abs(omega) > 1e-9, np.sign(omega), np.where(vxa < 0, -1.0, 1.0))
+        vxm, om = direction * vxa, direction * omega  # mirrored so the wheel rolls forward
+        rw = self.r * om
+        with np.errstate(invalid='ignore', divide='ignore'):
+            slip = np.where(
+                rw >= np.abs(vxm),
+                np.where(rw > 0, 1.0 - vxm / rw, 0.0),
+                np.where(np.abs(vxm) > 0, rw / np.abs(vxm) - 1.0, 0.0),
+            )  # eq. 2.13
+        return vxa, vya, om, direction, vxm, np.clip(slip, -1.0, 1.0)
+
+    def _wheel_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Body force (F_x, F_y, M_z), axle torques per side [N m], dissipation [W], sinkage [m].
+
+        Shear displacement j = j_t + i j_y (tangential along the rim, lateral) [m], per rim node.
+        """
+        _vxa, vya, om, direction, vxm, slip = self._wheel_kinematics()
+        r, b = self.r, self.width
+        z = self.z
+        index = self._terrain_index(self.wheel_x, self.wheel_y) if self._soil_age <= 0 else self._wheel_index
+        self._wheel_index = index
+        self._soil_age = SOIL_REFRESH_STEPS if self._soil_age <= 0 else self._soil_age - 1
+        terrains = (
+            [self.field.base] * self.n_wheels if index is None else [self.field.terrains[i] for i in index]
+        )
+        if index is None:
+            tf, tm, tr = single_wheel.wheel_angles(self.field.base, z, slip, r)  # eqs. 2.19-2.22
+        else:
+            tf, tm, tr = np.array(
+                [single_wheel.wheel_angles(t, z[k], slip[k], r) for k, t in enumerate(terrains)]
+            ).T
+        span = tf - tr
+        theta = tf[:, None] - self.xi[None, :] * span[:, None]
+        j = self.j
+        mag = np.abs(j)
+        if index is None:
+            t = self.field.base
+            sigma = single_wheel.normal_stress(t, theta, tf[:, None], tm[:, None], tr[:, None], r, b)  # 2.21
+            tau = soil.shear_strength(t, sigma) * soil.shear_fraction(t, mag)  # eqs. 2.2-2.5
+        else:
+            sigma, tau = np.zeros(theta.shape), np.zeros(theta.shape)
+            for k, t in enumerate(terrains):
+                sigma[k] = single_wheel.normal_stress(t, theta[k], tf[k], tm[k], tr[k], r, b)
+                tau[k] = soil.shear_strength(t, sigma[k]) * soil.shear_fraction(t, mag[k])
+        safe = np.where(mag > 0, mag, 1.0)
+        shear = -tau * j / safe  # tau_t + i tau_y, against the displacement (4.7, 4.8)
+        if index is None:
+            shear -= self._damping * soil.shear_strength(self.field.base, sigma) * self._j_rate
+        tau_t = shear.real
+        sin, cos = np.sin(theta), np.cos(theta)
+        area = (r * b) * span[:, None] * self.xi_w[None, :]
+        # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
+        # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
+        normal = area * sigma * sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)[:, None]
+        fx_m = (area * tau_t * cos).sum(axis=1) - normal.sum(axis=1)  # eq. 2.27 (rolling frame)
+        fz = (area * (sigma * cos + tau_t * sin)).sum(axis=1)
+        fy = (area * shear.imag).sum(axis=1)  # eq. 4.9, lateral
+        torque_m = r * (area * tau_t).sum(axis=1)  # eq. 2.34: the terrain's resisting torque
+        fx, torque = direction * fx_m, direction * torque_m
+        force = np.array([fx.sum(), fy.sum(), (self.wheel_x * fy - self.wheel_y * fx).sum()])
+        slip_velocity = vxm[:, None] * cos - (r * om)[:, None] + 1j * vya[:, None]
+        dissipation = float(
+            -(area * (shear.conjugate() * slip_velocity).real).sum() + (vxm * normal.sum(axis=1)).sum()
+        )
+        self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self.vehicle.wheels_per_side)
+        axle = np.array([torque[: self.n_wheels // 2].sum(), torque[self.n_wheels // 2 :].sum()])
+        return force, axle, dissipation, float(z.max())
+
+    def _advance_wheels(self, dt: float) -> None:
+        """Transport the rim's shear displacement and relax the sinkage (see the module doc)."""
+        cos, span, fz, w_wheel = self._wheel_state
+        vxa, vya, om, _direction, vxm, _ = self._wheel_kinematics()  # the new velocities
+        source = vxm[:, None] * cos - (self.r * om)[:, None] + 1j * vya[:, None]
+        courant = np.minimum(om / np.maximum(span, 1e-6) * dt * WHEEL_NODES, 1.0)[:, None]
+        j = self.j
+        upstream = np.empty_like(j)
+        upstream[:, 0] = 0.0
+        upstream[:, 1:] = j[:, :-1]
+        j = j + dt * source + courant * (upstream - j)
+        j[om > 0, 0] = 0.0
+        self._j_rate = (j - self.j) / dt
+        self.j = j
+        # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
+        # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
+        # (the same time scale as the shear), plus a slow settling at rest.
+        n = self.field.base.n
+        ratio = np.clip(w_wheel / np.maximum(fz, 1e-9), 0.5, 2.0)
+        travel = (self.r * np.abs(om) + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
+        fraction = np.minimum(dt * (travel + 1.0 / SINKAGE_SETTLING_S), 1.0)
+        self.z = np.clip(self.z * ratio ** (fraction / (n + 0.5)), 1e-6, 0.95 * self.r)
+
+    # ------------------------------------------------------------------ stepping
+    def kinetic_energy(self) -> float:
+        """Kinetic energy of body and drivetrains [J]."""
+        vx, vy, wz = self.vel
+        return float(
+            0.5 * self.mass * (vx * vx + vy * vy)
+            + 0.5 * self.Iz * wz * wz
+            + 0.5 * self.J * (self.omega_m**2).sum()
+        )
+
+    def set_command(self, speed_m_s: float, yaw_rate_rad_s: float) -> None:
+        """Hold forward speed [m/s] and yaw rate [rad/s] until the next command."""
+        self.command = (float(speed_m_s), float(yaw_rate_rad_s))
+        rpm = twist_to_motor_rpm(
+            self.command[0],
+            self.command[1],
+            tread_m=self.vehicle.tread_m,
+            drive_radius_m=self.r,
+            gear_ratio=self.G,
+            max_rpm=MAX_MOTOR_RPM,
+        )
+        self._target = np.array(rpm) * RPM
+
+    def step(
+        self, cmd_speed: float | None = None, cmd_yaw_rate: float | None = None, n_steps: int = 1
+    ) -> None:
+        """Advance ``n_steps`` steps of dt, holding the command (or the given new one)."""
+        if cmd_speed is not None or cmd_yaw_rate is not None:
+            self.set_command(cmd_speed or 0.0, cmd_yaw_rate or 0.0)
+        elif not hasattr(self, '_target'):
+            self.set_command(0.0, 0.0)
+        for _ in range(n_steps):
+            self._step()
+
+    def _step(self) -> None:
+        dt = self.dt
+        loads = self._side_loads()
+        if self.vehicle.is_tracked:
+            force, axle, dissipation, sinkage = self._track_forces(loads)
+        else:
+            force, axle, dissipation, sinkage = self._wheel_forces(loads)
+        self.max_sinkage_m = max(self.max_sinkage_m, sinkage)
+        # Per side, in plain floats (two-element numpy arrays cost more than they save here).
+        # Amplifier: ramped set point, PI speed loop, current and voltage limits (des/simulator).
+        ramp = SETPOINT_ACCEL_RAD_S2 * dt
+        v_max = self.v_fraction * self.bus_voltage_V
+        kp, ki, kt, res, peak, inertia, gear = self.kp, self.ki, self.kt, self.R, self.peak_A, self.J, self.G
+        currents, omegas, mids, p_terms, p_buses = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
+        friction_power = 0.0
+        eta, eta_regen = self._eta, self._eta_regen
+        for k in (0, 1):
+            omega = float(self.omega_m[k])
+            set_k = float(self.setpoint[k])
+            set_k += min(ramp, max(-ramp, float(self._target[k]) - set_k))
+            self.setpoint[k] = set_k
+            error = set_k - omega
+            integral = min(peak, max(-peak, float(self.integral_A[k]) + ki * error * dt))
+            self.integral_A[k] = integral
+            wanted = kp * error + integral
+            emf = omega / self.kn
+            upper = min(peak, (v_max - emf) / res)
+            lower = max(-peak, (-v_max - emf) / res)
+            current = min(upper, max(lower, wanted))
+            free = lower < wanted < upper
+            # implicit in omega: the PI proportional part (where not limited) and the friction slope
+            th = math.tanh(omega / FRICTION_SMOOTHING_RAD_S)
+            b, c = float(self.friction_b[k]), float(self.friction_c[k])
+            friction = b * omega + c * th
+            slope = b + c * (1.0 - th * th) / FRICTION_SMOOTHING_RAD_S + (kt * kp if free else 0.0)
+            drive = kt * current - friction - float(axle[k]) / gear
+            d_omega = dt * drive / (inertia + dt * slope)
+            if free:
+                current -= kp * d_omega
+            new = omega + d_omega
+            mid = 0.5 * (omega + new)
+            friction_power += (friction + (slope - (kt * kp if free else 0.0)) * d_omega) * mid
+            p_term = kt * current * mid + res * current * current
+            p_bus = p_term / eta if p_term >= 0.0 else p_term * eta_regen  # = motor.bus_power (4-Q)
+            currents[k], omegas[k], mids[k], p_terms[k], p_buses[k] = current, new, mid, p_term, p_bus
+        # body (hull frame): m (dv/dt + yaw x v) = F, Iz dyaw/dt = M
+        vx, vy, wz = (float(v) for v in self.vel)
+        vx, vy, wz = (
+            vx + dt * (force[0] / self.mass + wz * vy),
+            vy + dt * (force[1] / self.mass - wz * vx),
+            wz + dt * force[2] / self.Iz,
+        )
+        self.vel = np.array([vx, vy, wz])
+        self.omega_m = np.array(omegas)
+        self.theta_m = self.theta_m + dt * self.omega_m
+        x, y, yaw = (float(v) for v in self.pose)
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
+        if self.vehicle.is_tracked:
+            self._advance_tracks(dt)
+        else:
+            self._advance_wheels(dt)
+        # electrical side and energy ledger
+        e = self.energy
+        total = p_buses[0] + p_buses[1]
+        e.bus_J += total * dt
+        e.amplifier_J += (total - p_terms[0] - p_terms[1]) * dt
+        e.copper_J += res * (currents[0] ** 2 + currents[1] ** 2) * dt
+        e.friction_J += friction_power * dt
+        e.terrain_J += dissipation * dt
+        self.bus_current_A = total / self.bus_voltage_V
+        pending = self._battery_pending
+        pending[0] += total * dt
+        pending[1] += dt
+        if pending[1] >= BATTERY_STEP_S - 1e-12:  # the battery changes slowly: step it every 10 ms
+            self.battery.step(pending[0] / pending[1], pending[1])
+            self.bus_voltage_V = self.battery.state.voltage_V
+            pending[0] = pending[1] = 0.0
+        self.t += dt
+        self.last = StepOutput(np.array(currents), axle, np.array(p_buses), np.array(p_terms), sinkage)

@@ -1,0 +1,396 @@
+"""Drive the twin through a command sequence, sample its sensors, write the bag.
+
+Sensors, as the robot has them (sampled at ``SENSOR_RATE_HZ``, seeded noise):
+
+* joint_states (``left_motor``, ``right_motor``): position from the quadrature encoder (2048 lines x
+  4 counts per motor turn, ch. 7.1.2), velocity = change of the quantized position over the sample
+  interval [rad/s at the motor, forward positive], effort = K_t I [N m] with I the amplifier's
+  current averaged over the interval plus Gaussian noise (``CURRENT_NOISE_A``, ASSUMED) quantized
+  to 1 mA (the DES reports mA);
+* odom (nav_msgs/Odometry): dead reckoning from those encoder speeds (side speed = omega r / G,
+  V = mean, yaw rate = difference / B), so it drifts with slip like real wheel odometry;
+* ground_truth/odom: the true pose and hull-frame twist;
+* battery/measured (sensor_msgs/BatteryState): bus voltage [V] and current [A], ROS sign
+  (negative while discharging), at ``BATTERY_RATE_HZ``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+
+from skidsteer_power.bags.synthetic import NS, START_NS, Segment
+from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.errors import InputError
+from skidsteer_power.twin.model import Twin
+
+SENSOR_RATE_HZ = 50.0
+"""joint_states, odom and ground_truth/odom rate [Hz] (the des_driver's joint_states rate)."""
+CMD_RATE_HZ = 25.0
+"""cmd_vel rate written to the bag [Hz]."""
+BATTERY_RATE_HZ = 10.0
+"""battery/measured rate [Hz]."""
+CURRENT_NOISE_A = 0.02
+"""ASSUMED standard deviation of the amplifier's current reading [A]."""
+CURRENT_QUANTUM_A = 0.001
+"""Current resolution of the DES reading: 1 mA."""
+QUADRATURE = 4
+"""Counts per encoder line (quadrature decoding)."""
+STUCK_WINDOW_S = 2.0
+"""Window over which a commanded robot must make progress [s]."""
+STUCK_PROGRESS = 0.2
+"""Fraction of the commanded motion below which a window counts as stuck [-]."""
+COMMAND_TIMEOUT_S = 0.5
+"""A bag's command older than this stops the robot (the des_driver's fail-safe timeout) [s]."""
+
+
+@dataclass
+class TwinTrace:
+    """Samples of a twin run at ``SENSOR_RATE_HZ`` (arrays over samples; [..., 2] = left, right).
+
+    Truth: t [s], cmd (V [m/s], yaw rate [rad/s]), pose (x, y [m], yaw [rad], world),
+    twist (v_x, v_y [m/s] hull frame, yaw rate [rad/s]), current_A (true, mean over the interval),
+    axle_torque_Nm (terrain's resisting torque), motor_omega_rad_s (true), bus_voltage_V,
+    bus_current_A (mean), energy_J (cumulative bus energy), sinkage_m.
+    Sensors: joint_position_rad, joint_velocity_rad_s, joint_effort_Nm, odom_pose, odom_twist.
+    """
+
+    vehicle: str
+    terrain: str
+    t: np.ndarray
+    cmd: np.ndarray
+    pose: np.ndarray
+    twist: np.ndarray
+    current_A: np.ndarray
+    axle_torque_Nm: np.ndarray
+    motor_omega_rad_s: np.ndarray
+    bus_voltage_V: np.ndarray
+    bus_current_A: np.ndarray
+    energy_J: np.ndarray
+    sinkage_m: np.ndarray
+    joint_position_rad: np.ndarray
+    joint_velocity_rad_s: np.ndarray
+    joint_effort_Nm: np.ndarray
+    odom_pose: np.ndarray
+    odom_twist: np.ndarray
+    ledger: dict[str, float] = field(default_factory=dict)
+    messages: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t[-1]) if self.t.size else 0.0
+
+    @property
+    def distance_m(self) -> float:
+        """True path length travelled [m]."""
+        return float(np.hypot(*np.diff(self.pose[:, :2], axis=0).T).sum()) if self.t.size > 1 else 0.0
+
+    def stuck(self, tread_m: float) -> bool:
+        """True if, over some ``STUCK_WINDOW_S`` window with a non-zero command throughout, the robot's
+        motion (|v| + |yaw rate| B / 2) stayed below ``STUCK_PROGRESS`` of the commanded motion."""
+        n = max(1, round(STUCK_WINDOW_S * SENSOR_RATE_HZ))
+        if self.t.size < n:
+            return False
+        wanted = np.abs(self.cmd[:, 0]) + np.abs(self.cmd[:, 1]) * 0.5 * tread_m
+        actual = np.hypot(self.twist[:, 0], self.twist[:, 1]) + np.abs(self.twist[:, 2]) * 0.5 * tread_m
+        kernel = np.ones(n)
+        commanded = np.convolve(wanted > 1e-6, kernel, 'valid') == n
+        ratio = np.convolve(actual, kernel, 'valid') / np.maximum(np.convolve(wanted, kernel, 'valid'), 1e-12)
+        return bool(np.any(commanded & (ratio < STUCK_PROGRESS)))
+
+    def summary(self, tread_m: float) -> dict[str, object]:
+        """The ``simulate --json`` keys: duration_s, messages, energy_J, distance_m, max_sinkage_m, stuck."""
+        return {
+            'duration_s': self.duration_s,
+            'messages': dict(self.messages),
+            'energy_J': float(self.energy_J[-1]) if self.energy_J.size else 0.0,
+            'distance_m': self.distance_m,
+            'max_sinkage_m': float(self.sinkage_m.max()) if self.sinkage_m.size else 0.0,
+            'stuck': self.stuck(tread_m),
+        }
+
+
+def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SENSOR_RATE_HZ) -> TwinTrace:
+    """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz]."""
+    every = max(1, round(1.0 / (rate_hz * twin.dt)))
+    rows: list[tuple] = []
+    current_sum = np.zeros(2)
+    bus_sum = 0.0
+    count = 0
+
+    def sample() -> None:
+        nonlocal current_sum, bus_sum, count
+        k = max(count, 1)
+        rows.append(
+            (
+                twin.t,
+                twin.command,
+                twin.pose.copy(),
+                twin.vel.copy(),
+                current_sum / k,
+                twin.last.axle_torque_Nm.copy(),
+                twin.omega_m.copy(),
+                twin.theta_m.copy(),
+                twin.bus_voltage_V,
+                bus_sum / k,
+                twin.energy.bus_J,
+                twin.last.sinkage_m,
+            )
+        )
+        current_sum, bus_sum, count = np.zeros(2), 0.0, 0
+
+    sample()
+    for segment in commands:
+        if not (math.isfinite(segment.speed) and math.isfinite(segment.yaw_rate)) or segment.duration < 0:
+            raise InputError(f'bad command {segment}: speed and yaw rate must be finite, duration >= 0')
+        twin.set_command(segment.speed, segment.yaw_rate)
+        for _ in range(round(segment.duration / twin.dt)):
+            twin._step()
+            current_sum = current_sum + twin.last.current_A
+            bus_sum += twin.bus_current_A
+            count += 1
+            if count >= every:
+                sample()
+    return _trace(twin, rows)
+
+
+def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
+    cols = list(zip(*rows, strict=True))
+    arr = [np.array(c, dtype=float) for c in cols]
+    t, cmd, pose, twist, current, axle, omega, theta, volt, bus, energy, sinkage = arr
+    rng = np.random.default_rng(twin.seed)
+    motor = twin.powertrain.motor
+    counts_per_rad = motor.encoder_counts_per_turn * QUADRATURE / (2.0 * math.pi)
+    position = np.floor(theta * counts_per_rad) / counts_per_rad
+    dt = np.diff(t, prepend=t[0])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        velocity = np.where(
+            dt[:, None] > 0, np.diff(position, axis=0, prepend=position[:1]) / dt[:, None], 0.0
+        )
+    measured = np.round((current + rng.normal(0.0, CURRENT_NOISE_A, current.shape)) / CURRENT_QUANTUM_A)
+    effort = motor.torque_constant_Nm_A * measured * CURRENT_QUANTUM_A
+    side = velocity * twin.r / twin.G
+    v = side.mean(axis=1)
+    yaw_rate = (side[:, 1] - side[:, 0]) / twin.vehicle.tread_m
+    heading = np.concatenate([[0.0], np.cumsum(yaw_rate[1:] * dt[1:])])
+    step = v * dt
+    odom_xy = np.cumsum(np.column_stack([step * np.cos(heading), step * np.sin(heading)]), axis=0)
+    odom_pose = np.column_stack([odom_xy, heading])
+    odom_twist = np.column_stack([v, np.zeros_like(v), yaw_rate])
+    e = twin.energy
+    ledger = {
+        'bus_J': e.bus_J,
+        'amplifier_J': e.amplifier_J,
+        'copper_J': e.copper_J,
+        'friction_J': e.friction_J,
+        'terrain_J': e.terrain_J,
+        'kinetic_J': twin.kinetic_energy(),
+    }
+    return TwinTrace(
+        vehicle=twin.vehicle.name,
+        terrain=twin.field.base.name,
+        t=t,
+        cmd=cmd,
+        pose=pose,
+        twist=twist,
+        current_A=current,
+        axle_torque_Nm=axle,
+        motor_omega_rad_s=omega,
+        bus_voltage_V=volt,
+        bus_current_A=bus,
+        energy_J=energy,
+        sinkage_m=sinkage,
+        joint_position_rad=position,
+        joint_velocity_rad_s=velocity,
+        joint_effort_Nm=effort,
+        odom_pose=odom_pose,
+        odom_twist=odom_twist,
+        ledger=ledger,
+        messages=_message_counts(t.size),
+    )
+
+
+def _message_counts(n: int) -> dict[str, int]:
+    every_cmd = round(SENSOR_RATE_HZ / CMD_RATE_HZ)
+    every_bat = round(SENSOR_RATE_HZ / BATTERY_RATE_HZ)
+    return {
+        '/cmd_vel': len(range(0, n, every_cmd)),
+        '/joint_states': n,
+        '/odom': n,
+        '/ground_truth/odom': n,
+        '/battery/measured': len(range(0, n, every_bat)),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# commands
+# ---------------------------------------------------------------------------------------------
+
+
+def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
+    """Columns t_s, speed_m_s, yaw_rate_rad_s; each row holds until the next; the last row's t_s
+    ends the run (its command is not held). InputError naming the line for bad rows."""
+    import csv
+
+    file = Path(path)
+    try:
+        with file.open(newline='', encoding='utf-8') as handle:
+            reader = csv.DictReader(handle)
+            missing = {'t_s', 'speed_m_s', 'yaw_rate_rad_s'} - set(reader.fieldnames or ())
+            if missing:
+                raise InputError(f'{file}: missing column(s) {", ".join(sorted(missing))}')
+            rows = []
+            for line, row in enumerate(reader, start=2):
+                try:
+                    values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
+                except (TypeError, ValueError):
+                    raise InputError(
+                        f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers'
+                    ) from None
+                if not all(math.isfinite(v) for v in values):
+                    raise InputError(f'{file}:{line}: values must be finite')
+                rows.append(values)
+    except OSError as err:
+        raise InputError(f'cannot read command file {file}: {err.strerror or err}') from err
+    if len(rows) < 2:
+        raise InputError(f'{file}: need at least two rows (the last one ends the run)')
+    times = np.array([r[0] for r in rows])
+    if np.any(np.diff(times) < 0) or times[0] < 0:
+        raise InputError(f'{file}: t_s must start >= 0 and not decrease')
+    segments = [Segment(0.0, 0.0, times[0])] if times[0] > 0 else []
+    segments += [Segment(a[1], a[2], b[0] - a[0]) for a, b in itertools.pairwise(rows)]
+    return segments
+
+
+def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> list[Segment]:
+    """The bag's cmd_vel (Twist or TwistStamped), each held until the next or for at most
+    ``COMMAND_TIMEOUT_S`` (then the robot stops, as the des_driver does)."""
+    from skidsteer_power.bags.decode import decode_twists
+    from skidsteer_power.bags.reader import open_bag
+
+    with open_bag(path) as bag:
+        if topic not in bag.topics:
+            raise InputError(f'{path}: no topic {topic} (topics: {", ".join(sorted(bag.topics))})')
+        t, values = decode_twists(bag, topic, bag.start_ns)
+    if t.size == 0:
+        raise InputError(f'{path}: {topic} has no messages')
+    segments = [Segment(0.0, 0.0, float(t[0]))] if t[0] > 0 else []
+    ends = np.append(t[1:], t[-1] + COMMAND_TIMEOUT_S)
+    for start, end, (speed, yaw) in zip(t, ends, values, strict=True):
+        held = min(end - start, COMMAND_TIMEOUT_S)
+        segments.append(Segment(float(speed), float(yaw), float(held)))
+        if end - start > held:
+            segments.append(Segment(0.0, 0.0, float(end - start - held)))
+    return segments
+
+
+def commands_from_route(route: object) -> list[Segment]:
+    """A mission route (``missions.routes.Route``) as (V, yaw rate = V / R, duration) holds, then 1 s stop."""
+    segments = [
+        Segment(s.speed_m_s, 0.0 if not s.is_turning else s.speed_m_s / s.turn_radius_m, s.duration)
+        for s in route.segments  # type: ignore[attr-defined]
+    ]
+    return [*segments, Segment(0.0, 0.0, 1.0)]
+
+
+# ---------------------------------------------------------------------------------------------
+# bag
+# ---------------------------------------------------------------------------------------------
+
+
+def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int = START_NS) -> Path:
+    """Write the trace's messages (see the module doc) to a rosbag2 MCAP bag at ``path``."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    T = store.types
+    ser = store.serialize_cdr
+    stamps = start_ns + np.round(trace.t * NS).astype(np.int64)
+    every_cmd = round(SENSOR_RATE_HZ / CMD_RATE_HZ)
+    every_bat = round(SENSOR_RATE_HZ / BATTERY_RATE_HZ)
+    vec, twist_t = T['geometry_msgs/msg/Vector3'], T['geometry_msgs/msg/Twist']
+    with BagWriter(path) as writer:
+        cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
+        js = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        odom = writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
+        truth = writer.add_topic('/ground_truth/odom', 'nav_msgs/msg/Odometry')
+        battery = writer.add_topic('/battery/measured', 'sensor_msgs/msg/BatteryState')
+        for i, stamp in enumerate(stamps.tolist()):
+            if i % every_cmd == 0:
+                msg = twist_t(vec(float(trace.cmd[i, 0]), 0.0, 0.0), vec(0.0, 0.0, float(trace.cmd[i, 1])))
+                writer.write(cmd, stamp, ser(msg, 'geometry_msgs/msg/Twist'))
+            joint = T['sensor_msgs/msg/JointState'](
+                _header(T, stamp, ''),
+                ['left_motor', 'right_motor'],
+                trace.joint_position_rad[i].astype(float),
+                trace.joint_velocity_rad_s[i].astype(float),
+                trace.joint_effort_Nm[i].astype(float),
+            )
+            writer.write(js, stamp + 1000, ser(joint, 'sensor_msgs/msg/JointState'))
+            writer.write(
+                odom,
+                stamp + 2000,
+                ser(_odometry(T, stamp, trace.odom_pose[i], trace.odom_twist[i]), 'nav_msgs/msg/Odometry'),
+            )
+            writer.write(
+                truth,
+                stamp + 3000,
+                ser(_odometry(T, stamp, trace.pose[i], trace.twist[i]), 'nav_msgs/msg/Odometry'),
+            )
+            if i % every_bat == 0:
+                writer.write(
+                    battery, stamp + 4000, ser(_battery(T, stamp, trace, i), 'sensor_msgs/msg/BatteryState')
+                )
+        trace.messages = dict(writer.counts)
+    return Path(path)
+
+
+def _header(types: dict, stamp_ns: int, frame: str) -> object:
+    sec, nsec = divmod(int(stamp_ns), NS)
+    return types['std_msgs/msg/Header'](types['builtin_interfaces/msg/Time'](sec, nsec), frame)
+
+
+def _odometry(types: dict, stamp_ns: int, pose: np.ndarray, twist: np.ndarray) -> object:
+    half = float(pose[2]) / 2
+    p = types['geometry_msgs/msg/Pose'](
+        types['geometry_msgs/msg/Point'](float(pose[0]), float(pose[1]), 0.0),
+        types['geometry_msgs/msg/Quaternion'](0.0, 0.0, math.sin(half), math.cos(half)),
+    )
+    vec = types['geometry_msgs/msg/Vector3']
+    tw = types['geometry_msgs/msg/Twist'](
+        vec(float(twist[0]), float(twist[1]), 0.0), vec(0.0, 0.0, float(twist[2]))
+    )
+    return types['nav_msgs/msg/Odometry'](
+        _header(types, stamp_ns, 'odom'),
+        'base_link',
+        types['geometry_msgs/msg/PoseWithCovariance'](p, np.zeros(36)),
+        types['geometry_msgs/msg/TwistWithCovariance'](tw, np.zeros(36)),
+    )
+
+
+def _battery(types: dict, stamp_ns: int, trace: TwinTrace, i: int) -> object:
+    msg = types['sensor_msgs/msg/BatteryState']
+    nan = float('nan')
+    return msg(
+        header=_header(types, stamp_ns, 'base_link'),
+        voltage=float(trace.bus_voltage_V[i]),
+        temperature=nan,
+        current=-float(trace.bus_current_A[i]),  # ROS: negative while discharging
+        charge=nan,
+        capacity=nan,
+        design_capacity=nan,
+        percentage=nan,
+        power_supply_status=msg.POWER_SUPPLY_STATUS_DISCHARGING,
+        power_supply_health=msg.POWER_SUPPLY_HEALTH_UNKNOWN,
+        power_supply_technology=msg.POWER_SUPPLY_TECHNOLOGY_LIPO,
+        present=True,
+        cell_voltage=np.zeros(0),
+        cell_temperature=np.zeros(0),
+        location='bus',
+        serial_number='',
+    )
