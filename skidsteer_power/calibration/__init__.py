@@ -35,7 +35,7 @@ def calibrate_bags(
     seed: int = 0,
     settle_s: float = 1.5,
     min_segment_s: float = 1.0,
-    topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', '/odom'),
+    topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', ''),
 ) -> tuple[CalibrationResult, list[Segment]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain`` (see fit.py)."""
     from skidsteer_power.estimator import factory

@@ -7,10 +7,11 @@ state (chapter 3: the skid-steer models solve for steady turning). A segment is 
 the mean motor speed of each side may differ between the window's two halves by no more than
 ``settle_tol`` of its value (or 2 rad/s at the motor, whichever is larger).
 
-The measured motion of a segment is the mean body twist of ``nav_msgs/Odometry`` (linear.x [m/s],
-angular.z [rad/s], REP 103) over the window, or, for pose-only topics (PoseStamped, ground truth),
-the path length over time and the slope of the unwrapped heading from the orientation quaternion.
-Without any pose topic the command itself is used (and the segment says so).
+The measured motion of a segment (see :class:`SegmentOptions` for which topic) is the mean body
+twist of ``nav_msgs/Odometry`` (linear.x [m/s], angular.z [rad/s], REP 103) over the window, or, for
+pose-only topics (PoseStamped), the path length over time and the slope of the unwrapped heading
+from the orientation quaternion. Without any pose topic the command itself is used (and the segment
+says so).
 """
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ class SegmentOptions:
     settle_s : start of each constant-command run left out [s]; min_s : shortest window kept [s];
     gap_s : a pause in commands longer than this ends a run [s]; cmd_tol : commands closer than this
     (m/s, rad/s) are the same command; settle_tol : allowed relative drift of the mean motor speed
-    between the window's halves [-]; odom_topic : preferred pose/odometry topic.
+    between the window's halves [-]; odom_topic : pose/odometry topic ('' = ground truth if the bag
+    has a ``*ground_truth*`` topic, else /odom, else any pose topic). Wheel odometry dead-reckons
+    from the motor speeds, so it does not see slip: the FESS would be solved at the wrong (V, R).
     """
 
     settle_s: float = 1.5
@@ -51,7 +54,7 @@ class SegmentOptions:
     settle_tol: float = 0.05
     cmd_vel_topic: str = '/cmd_vel'
     joint_states_topic: str = '/joint_states'
-    odom_topic: str = '/odom'
+    odom_topic: str = ''
 
 
 @dataclass
@@ -96,9 +99,14 @@ class Segment:
 
 
 def _pose_topic(bag: BagReader, wanted: str) -> str:
-    if wanted in bag.topics and bag.topics[wanted].msgtype in POSE_TYPES:
+    """``wanted`` if given; else ground truth first (it sees slip), then /odom, then any pose topic."""
+    poses = [t for t, info in bag.topics.items() if info.msgtype in POSE_TYPES]
+    if wanted:
+        if wanted not in poses:
+            raise InputError(f'{bag.path}: no odometry or pose topic {wanted} ({", ".join(POSE_TYPES)})')
         return wanted
-    return next((t for t, info in bag.topics.items() if info.msgtype in POSE_TYPES), '')
+    truth = [t for t in poses if 'ground_truth' in t]
+    return next(iter([*truth, *[t for t in poses if t == '/odom'], *poses]), '')
 
 
 def _quaternion_yaw(q: object) -> float:

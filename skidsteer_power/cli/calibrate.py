@@ -54,7 +54,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument('--cmd-vel-topic', default='/cmd_vel')
     parser.add_argument('--joint-states-topic', default='/joint_states')
-    parser.add_argument('--odom-topic', default='/odom', help='odometry or ground-truth pose topic')
+    parser.add_argument(
+        '--odom-topic',
+        default='',
+        help='odometry or ground-truth pose topic (default: a *ground_truth* topic if any, else /odom)',
+    )
     parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
     add_json_flag(parser)
     parser.set_defaults(func=run)

@@ -1,0 +1,148 @@
+"""Calibration benchmark (issue 15): calibrate on 5 minutes of twin driving over the Table 7.3 command
+sets, on a terrain that is not a preset; then the confidence-interval coverage over 20 seeded runs.
+
+Truth: :data:`TRUTH`, a sand between the presets (ASSUMED values, none of them a preset's). The
+starting terrain is the nearest preset (:func:`nearest_preset`: smallest RMS of the relative
+differences of n, phi and ln kphi, ln c, ln K). The twin (``skidsteer_power.twin``) never uses FESS or
+the maps, so the fit meets a model it does not contain, as on a real robot.
+
+Figures: calibration time (fresh: bag reading, segment cutting, every FESS solve; no cache), hold-out
+energy error before/after, and per fitted parameter over 20 seeds: the coverage of its 95 % interval
+(of the truth, and of the "pseudo-true" value = the mean fit over the seeds, which is what FESS can
+reach of the twin), and the bias of the mean fit from the truth (the twin-vs-FESS model difference).
+``python -m benchmarks.run calibration``; the coverage part alone takes several minutes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.harness import Report
+from skidsteer_power.bags.synthetic import table_7_3_segments
+from skidsteer_power.calibration import calibrate_bags
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
+from skidsteer_power.twin import Twin, run_commands, write_bag
+from skidsteer_power.vehicle import load_vehicle
+
+VEHICLE = 'test_robot_4wheel'
+TRUTH = dataclasses.replace(
+    PRESETS['dry_sand'],
+    name='bench_truth_sand',
+    n=0.92,
+    kc=2500.0,
+    kphi=2.2e6,
+    c=1400.0,
+    phi=math.radians(33.0),
+    K=0.018,
+)
+COVERAGE_RUNS = 20
+
+
+def nearest_preset(terrain: Terrain) -> str:
+    """The preset closest to ``terrain`` (RMS relative difference of n, phi, kphi, c, K; logs for moduli)."""
+
+    def key(t: Terrain) -> np.ndarray:
+        return np.array([t.n, t.phi, math.log(t.kphi), math.log(t.c), math.log(t.K)])
+
+    ref = key(terrain)
+    scale = np.array([terrain.n, terrain.phi, 1.0, 1.0, 1.0])
+    return min(PRESETS, key=lambda name: float(np.sqrt(np.mean(((key(PRESETS[name]) - ref) / scale) ** 2))))
+
+
+def table_7_3_drive(hold_s: float, pause_s: float, passes: int) -> list:
+    return table_7_3_segments(hold_s, pause_s) * passes
+
+
+def twin_bag(path: Path, commands: list, seed: int) -> float:
+    """Simulate ``commands`` on the twin at :data:`TRUTH`; returns the simulated duration [s]."""
+    twin = Twin(load_vehicle(VEHICLE), TRUTH, seed=seed)
+    trace = run_commands(twin, commands)
+    write_bag(trace, path)
+    return float(trace.t[-1])
+
+
+def _main(report: Report, folder: Path) -> None:
+    start = nearest_preset(TRUTH)
+    bag = folder / 'five_minutes.mcap'
+    sim_s = twin_bag(bag, table_7_3_drive(4.5, 0.8, 3), seed=0)
+    report.figure(
+        'twin drive over the Table 7.3 sets', sim_s / 60, 'min', note=f'truth {TRUTH.name}, start {start}'
+    )
+    began = time.perf_counter()
+    result, _ = calibrate_bags([str(bag)], VEHICLE, start)
+    seconds = time.perf_counter() - began
+    report.figure(
+        'calibrate (fresh, 5 min of driving)', seconds, 's', goal='< 60 s on 2 cores', met=seconds < 60
+    )
+    report.figure(
+        'steady segments fit / hold-out', result.segments_fit, '', note=f'{result.segments_holdout} hold-out'
+    )
+    before = abs(result.holdout_energy_error_before)
+    after = abs(result.holdout_energy_error_after)
+    report.figure(
+        f'hold-out energy error before (nearest preset {start})',
+        before * 100,
+        '%',
+        goal='> 20 %',
+        met=before > 0.2,
+    )
+    report.figure('hold-out energy error after', after * 100, '%', goal='<= 5 %', met=after <= 0.05)
+    report.figure(
+        'hold-out torque RMSE before -> after',
+        result.torque_rmse_after_Nm,
+        'N m',
+        note=f'before {result.torque_rmse_before_Nm:.4g} N m',
+    )
+    for name in result.names:
+        truth = getattr(TRUTH, name) / (math.pi / 180 if name == 'phi' else 1.0)
+        lo, hi = result.ci95[name]
+        report.figure(
+            f'fitted {name}', result.values[name], '', note=f'95 % CI [{lo:.4g}, {hi:.4g}], truth {truth:.4g}'
+        )
+    fixed = [n for n, ok in result.identifiable.items() if not ok]
+    report.figure('parameters reported non-identifiable', len(fixed), '', note=', '.join(fixed))
+
+
+def _coverage(report: Report, folder: Path) -> None:
+    start = nearest_preset(TRUTH)
+    commands = table_7_3_drive(4.0, 0.8, 1)
+    fits: dict[str, list[tuple[float, float, float]]] = {}
+    for seed in range(COVERAGE_RUNS):
+        bag = folder / f'seed{seed}.mcap'
+        twin_bag(bag, commands, seed=seed + 1)
+        result, _ = calibrate_bags([str(bag)], VEHICLE, start, holdout=0.0)
+        for name in result.names:
+            lo, hi = result.ci95[name]
+            fits.setdefault(name, []).append((result.values[name], lo, hi))
+    for name, rows in fits.items():
+        arr = np.array(rows)
+        truth = getattr(TRUTH, name) / (math.pi / 180 if name == 'phi' else 1.0)
+        pseudo = float(arr[:, 0].mean())
+        cover_truth = float(np.mean((arr[:, 1] <= truth) & (truth <= arr[:, 2])))
+        cover_pseudo = float(np.mean((arr[:, 1] <= pseudo) & (pseudo <= arr[:, 2])))
+        report.figure(
+            f'{name}: 95 % CI coverage of the truth over {len(rows)} runs',
+            cover_truth * 100,
+            '%',
+            note=f'mean fit {pseudo:.4g} vs truth {truth:.4g}: bias {100 * (pseudo / truth - 1):+.1f} % '
+            '(twin-vs-FESS model difference and the parameters held fixed)',
+        )
+        report.figure(
+            f'{name}: 95 % CI coverage of the mean fit over {len(rows)} runs',
+            cover_pseudo * 100,
+            '%',
+            note='the CI as a measure of run-to-run scatter (goal ~95 %)',
+        )
+
+
+def run(report: Report) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        _main(report, folder)
+        _coverage(report, folder)
