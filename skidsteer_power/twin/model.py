@@ -339,14 +339,21 @@ class Twin:
         source = (vx + 1j * vy) + 1j * wz * (self.node_p - j) - belt[:, None, None]  # - yaw e_z x j
         courant = np.minimum(np.abs(belt) * dt / self.node_dx, 1.0)[:, None, None]
         upstream = np.empty_like(j)
+        source_up = np.empty_like(j)
         for side in (0, 1):
             if belt[side] >= 0:  # touchdown at the front (node 0)
                 upstream[side, 0] = 0.0
                 upstream[side, 1:] = j[side, :-1]
+                source_up[side, 0] = source[side, 0]
+                source_up[side, 1:] = source[side, :-1]
             else:  # reversing: touchdown at the rear
                 upstream[side, -1] = 0.0
                 upstream[side, :-1] = j[side, 1:]
-        j = j + dt * source + courant * (upstream - j)
+                source_up[side, -1] = source[side, -1]
+                source_up[side, :-1] = source[side, 1:]
+        # the source averaged over the cell (trapezoid): the steady state integrates the slip
+        # velocity along the patch to second order
+        j = j + (0.5 * dt) * (source + source_up) + courant * (upstream - j)
         for side in (0, 1):
             if belt[side] > 0:
                 j[side, 0] = 0.0
@@ -398,16 +405,17 @@ class Twin:
         if index is None:
             t = self.field.base
             sigma = single_wheel.normal_stress(t, theta, tf[:, None], tm[:, None], tr[:, None], r, b)  # 2.21
-            tau = soil.shear_strength(t, sigma) * soil.shear_fraction(t, mag)  # eqs. 2.2-2.5
+            strength = soil.shear_strength(t, sigma)
+            tau = strength * soil.shear_fraction(t, mag)  # eqs. 2.2-2.5
         else:
-            sigma, tau = np.zeros(theta.shape), np.zeros(theta.shape)
+            sigma, tau, strength = np.zeros(theta.shape), np.zeros(theta.shape), np.zeros(theta.shape)
             for k, t in enumerate(terrains):
                 sigma[k] = single_wheel.normal_stress(t, theta[k], tf[k], tm[k], tr[k], r, b)
-                tau[k] = soil.shear_strength(t, sigma[k]) * soil.shear_fraction(t, mag[k])
+                strength[k] = soil.shear_strength(t, sigma[k])
+                tau[k] = strength[k] * soil.shear_fraction(t, mag[k])
         safe = np.where(mag > 0, mag, 1.0)
         shear = -tau * j / safe  # tau_t + i tau_y, against the displacement (4.7, 4.8)
-        if index is None:
-            shear -= self._damping * soil.shear_strength(self.field.base, sigma) * self._j_rate
+        shear -= self._damping * strength * self._j_rate  # transient damping, 0 in steady state
         tau_t = shear.real
         sin, cos = np.sin(theta), np.cos(theta)
         area = (r * b) * span[:, None] * self.xi_w[None, :]
@@ -438,7 +446,10 @@ class Twin:
         upstream = np.empty_like(j)
         upstream[:, 0] = 0.0
         upstream[:, 1:] = j[:, :-1]
-        j = j + dt * source + courant * (upstream - j)
+        source_up = np.empty_like(j)
+        source_up[:, 0] = source[:, 0]
+        source_up[:, 1:] = source[:, :-1]
+        j = j + (0.5 * dt) * (source + source_up) + courant * (upstream - j)  # cell-averaged source
         j[om > 0, 0] = 0.0
         self._j_rate = (j - self.j) / dt
         self.j = j
