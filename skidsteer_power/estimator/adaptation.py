@@ -9,7 +9,10 @@ old weighs exp(-dt / memory_s)), so the estimate does not depend on the joint_st
 constant command the regressor (T_pred, 1) does not excite both directions and plain forgetting
 would blow the covariance up (wind-up); the covariance is therefore capped at its initial trace.
 Only settled motion is used: the command has been held ``settle_s`` [s] and the measured motor speed
-is within ``speed_tol`` of the predicted one (no acceleration, no stall).
+is within ``speed_tol`` of the predicted one (no acceleration, no stall). The model's error differs
+from one command to the next (a turn is not a straight run), so when a new command has settled the
+covariance is reset to its initial value (the correction re-converges in a fraction of a second)
+and the change detector waits ``warmup_s`` [s]: a new command is not a new terrain.
 
 Change detector
 ---------------
@@ -17,8 +20,10 @@ Each settled sample's innovation (measured minus corrected torque, before the up
 by its scale sigma = max(running RMS innovation, ``sigma_rel`` |T_pred|, ``sigma_floor_Nm``) and fed
 to a two-sided CUSUM per side (Page 1954): g+ = max(0, g+ + z - k), g- = max(0, g- - z - k). When
 either side's statistic passes ``cusum_h``, the terrain is flagged as changed, and the adaptation
-restarts from (a, b) = (1, 0) with its initial covariance. The running RMS is updated only from
-samples with |z| < 3, so a change cannot inflate it and hide itself.
+restarts from (a, b) = (1, 0) with its initial covariance (and waits ``warmup_s`` again). The running
+RMS is updated only outside the warm-up and from samples with |z| < 3, so a change cannot inflate it
+and hide itself. So a change is flagged while a command is held; one that coincides with a new
+command is absorbed into that command's correction.
 """
 
 from __future__ import annotations
@@ -38,7 +43,8 @@ class AdaptationSettings:
     """Tunables (the node declares each as a parameter).
 
     enabled : adapt at all; memory_s : forgetting time constant [s]; settle_s : command hold before
-    samples count [s]; speed_tol : allowed relative difference of measured and predicted motor
+    samples count [s]; warmup_s : settled time after a new command or a restart before the change
+    detector runs [s]; speed_tol : allowed relative difference of measured and predicted motor
     speed [-]; cusum_k : CUSUM drift allowance [sigma]; cusum_h : CUSUM alarm threshold [sigma];
     sigma_rel : least residual scale relative to the predicted torque [-]; sigma_floor_Nm : least
     residual scale [N m]; scale_limits : the scale a is kept within these [-].
@@ -47,6 +53,7 @@ class AdaptationSettings:
     enabled: bool = True
     memory_s: float = 10.0
     settle_s: float = 1.0
+    warmup_s: float = 1.0
     speed_tol: float = 0.3
     cusum_k: float = 0.5
     cusum_h: float = 10.0
@@ -65,7 +72,7 @@ class AdaptationSettings:
                 raise ConfigError(f'adaptation {name} must be a finite number >= 0, got {value!r}')
 
 
-P0 = np.diag([0.25, 0.05**2])  # initial covariance of (a [-], b [N m])
+P0 = np.diag([100.0, 1.0])  # initial covariance of (a [-], b [N m]): a weak prior (+-10, +-1 N m)
 
 
 @dataclass
@@ -128,6 +135,8 @@ class TorqueAdaptation:
         self._command_since = math.nan
         self._last_update_s = math.nan
         self._settled = False
+        self._new_command = True
+        self._detect_from_s = math.inf
 
     def on_command(self, command: tuple[float, float], now_s: float) -> None:
         """Note a command (V [m/s], yaw rate [rad/s]); a different one restarts the settle clock."""
@@ -135,6 +144,7 @@ class TorqueAdaptation:
             abs(a - b) > 1e-6 for a, b in zip(command, self._command, strict=True)
         ):
             self._command_since = now_s
+            self._new_command = True
         self._command = command
 
     def corrected(self, predicted_Nm: tuple[float, float]) -> tuple[float, float]:
@@ -163,36 +173,43 @@ class TorqueAdaptation:
         ):
             return False
         self._settled = True
+        if self._new_command:  # the model's error is another one now: re-converge, do not detect yet
+            self._new_command = False
+            self._detect_from_s = now_s + s.warmup_s
+            for side in self.sides:
+                side.P = P0.copy()
+                side.g_pos = side.g_neg = 0.0
+        detect = now_s >= self._detect_from_s
         dt = now_s - self._last_update_s if math.isfinite(self._last_update_s) else 0.0
         self._last_update_s = now_s
         lam = math.exp(-max(dt, 0.0) / s.memory_s)
         alarm = False
         for side, pred, meas in zip(self.sides, predicted_Nm, measured_Nm, strict=True):
-            alarm |= self._update_side(side, float(pred), float(meas), lam)
+            alarm |= self._update_side(side, float(pred), float(meas), lam, detect)
         if alarm:
             self.terrain_changes += 1
             self.last_change_s = now_s
+            self._detect_from_s = now_s + s.warmup_s
             for side in self.sides:
                 side.reset()
         return alarm
 
-    def _update_side(self, side: SideEstimator, pred: float, meas: float, lam: float) -> bool:
+    def _update_side(self, side: SideEstimator, pred: float, meas: float, lam: float, detect: bool) -> bool:
         s = self.settings
         phi = np.array([pred, 1.0])
         innovation = meas - float(phi @ side.theta)
         rms = math.sqrt(side.ms_innovation) if math.isfinite(side.ms_innovation) else 0.0
         sigma = max(rms, s.sigma_rel * abs(pred), s.sigma_floor_Nm)
         z = innovation / sigma
-        if side.samples > 0:  # the first sample after a restart only starts the estimate
+        if detect:
             side.g_pos = max(0.0, side.g_pos + z - s.cusum_k)
             side.g_neg = max(0.0, side.g_neg - z - s.cusum_k)
             if max(side.g_pos, side.g_neg) > s.cusum_h:
                 return True
-        if abs(z) < 3.0 or not math.isfinite(side.ms_innovation):
-            w = 1.0 - lam if math.isfinite(side.ms_innovation) else 1.0
-            side.ms_innovation = (
-                innovation**2 if w >= 1.0 else (1 - w) * side.ms_innovation + w * innovation**2
-            )
+            if not math.isfinite(side.ms_innovation):
+                side.ms_innovation = innovation**2
+            elif abs(z) < 3.0:
+                side.ms_innovation = lam * side.ms_innovation + (1.0 - lam) * innovation**2
         # RLS with forgetting factor lam (covariance capped at its initial trace: no wind-up)
         gain = side.P @ phi / (lam + float(phi @ side.P @ phi))
         side.theta = side.theta + gain * innovation

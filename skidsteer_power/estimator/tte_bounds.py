@@ -15,9 +15,12 @@ until empty is not known; it is taken to be uncertain like what it drew recently
    integrated from predicted power, so it is added only then.
 3. s = sqrt(s_p^2 + s_m^2); with fewer than ``min_blocks`` blocks, s = ``default_spread`` (we
    do not know yet, and say so with a wide band).
-4. p10 of the time to empty is the battery's time at power P (1 + z s), p90 at P max(1 - z s,
-   ``min_fraction``), with z = 1.2816 (the standard normal's 90 % point): a normal spread of the
-   future mean power, mapped through the monotone battery curve.
+4. The centre is the mean of the block means (the best guess of the future mean power; the filtered
+   power behind the point value lags and follows the last few seconds), or P before ``min_blocks``.
+   p10 of the time to empty is the battery's time at power max(M (1 + z s), P), p90 at
+   min(M max(1 - z s, ``min_fraction``), P), with z = 1.2816 (the standard normal's 90 % point): a
+   normal spread of the future mean power, mapped through the monotone battery curve; the max/min
+   keep the point value between its bounds.
 
 The bounds are conservative (a block-mean spread is wider than the spread of the mean over the
 hours a battery lasts), which is the side to err on for a robot that must come back.
@@ -61,20 +64,22 @@ class TimeToEmptyBounds:
         while self._samples and self._samples[0][0] < now_s - self.settings.window_s:
             self._samples.popleft()
 
-    def spread(self) -> float:
-        """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data)."""
-        s = self.settings
+    def block_means(self) -> np.ndarray:
+        """Mean power of every complete block in the window [W] (the last block is still filling)."""
         if len(self._samples) < 2:
-            return s.default_spread
+            return np.zeros(0)
         t = np.array([a for a, _ in self._samples])
         p = np.array([b for _, b in self._samples])
-        block = np.floor((t - t[0]) / s.block_s).astype(int)
-        complete = block < block.max()  # the last block is still filling
-        if np.unique(block[complete]).size < s.min_blocks:
-            return s.default_spread
-        means = np.array([p[block == k].mean() for k in np.unique(block[complete])])
-        mean = float(means.mean())
-        return float(means.std(ddof=1) / mean) if mean > 1e-9 else s.default_spread
+        block = np.floor((t - t[0]) / self.settings.block_s).astype(int)
+        done = np.unique(block[block < block.max()])
+        return np.array([p[block == k].mean() for k in done])
+
+    def spread(self) -> float:
+        """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data)."""
+        means = self.block_means()
+        if means.size < self.settings.min_blocks or means.mean() <= 1e-9:
+            return self.settings.default_spread
+        return float(means.std(ddof=1) / means.mean())
 
     def bounds(self, battery: Any, power_W: float, model_spread: float = 0.0) -> tuple[float, float]:
         """(p10, p90) time to empty [s] at filtered power ``power_W`` [W]; (inf, inf) when idle.
@@ -85,6 +90,8 @@ class TimeToEmptyBounds:
             return math.inf, math.inf
         ms = model_spread if math.isfinite(model_spread) else 0.0
         s = math.hypot(self.spread(), ms)
-        high = power_W * (1.0 + Z90 * s)
-        low = power_W * max(1.0 - Z90 * s, self.settings.min_fraction)
+        means = self.block_means()
+        centre = float(means.mean()) if means.size >= self.settings.min_blocks else power_W
+        high = max(centre * (1.0 + Z90 * s), power_W)
+        low = min(centre * max(1.0 - Z90 * s, self.settings.min_fraction), power_W)
         return float(battery.time_to_empty_s(high)), float(battery.time_to_empty_s(low))
