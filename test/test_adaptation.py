@@ -207,3 +207,47 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
 def test_correction_fields_are_named_with_units():
     assert len(CORRECTION_FIELDS) == len(set(CORRECTION_FIELDS)) == 10
     assert 'offset_left_Nm' in CORRECTION_FIELDS and 'scale_right' in CORRECTION_FIELDS
+
+
+# --- the node ------------------------------------------------------------------------------------
+@pytest.mark.parametrize('enabled', [True, False])
+def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, enabled):
+    """power_estimator over real DDS on sim time: the predictor says 0.1 N m per motor at 12 rad/s
+    (test_estimator_core.FixedPowerPredictor); the motors measure 0.13 N m. After the 1 s settle and
+    1 s warm-up the published correction maps 0.1 to 0.13 (adaptation on), or stays 1 / 0 (off)."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+    from test_estimator_core import FixedPowerPredictor
+    from test_nodes_estimator import Rig
+
+    rig = Rig(
+        ros_context, tmp_path, FixedPowerPredictor(60.0), use_sim_time=True, persist=False, adaptation=enabled
+    )
+    try:
+        got: dict[str, list] = {'power/correction': [], 'p10': [], 'p90': []}
+        rig.probe.create_subscription(JointState, 'power/correction', got['power/correction'].append, 10)
+        rig.probe.create_subscription(Float64, 'energy/time_to_empty_p10_s', got['p10'].append, 10)
+        rig.probe.create_subscription(Float64, 'energy/time_to_empty_p90_s', got['p90'].append, 10)
+        for k in range(61):  # 3 s at 20 Hz
+            t = k * 0.05
+            rig.set_clock(t)
+            rig.command(0.2, 0.0)
+            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+            rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+        count = len(got['power/correction'])
+        rig.run_clock(3.05, lambda: len(got['power/correction']) > count and got['p90'])
+        msg = got['power/correction'][-1]
+        values = dict(zip(msg.name, msg.position, strict=True))
+        assert tuple(msg.name) == CORRECTION_FIELDS
+        if enabled:
+            corrected = values['scale_left'] * 0.1 + values['offset_left_Nm']
+            assert corrected == pytest.approx(0.13, abs=1e-3)
+            assert values['enabled'] == 1.0
+        else:
+            assert (values['scale_left'], values['offset_left_Nm'], values['enabled']) == (1.0, 0.0, 0.0)
+        assert 0.0 < got['p10'][-1].data <= got['p90'][-1].data
+        diagnostics = rig.latest_diagnostics()
+        assert diagnostics['adaptation'] == ('on' if enabled else 'off')
+        assert diagnostics['terrain_changes'] == '0'
+    finally:
+        rig.close()
