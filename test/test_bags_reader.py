@@ -215,11 +215,11 @@ def test_synthetic_drive_bag_has_expected_topics_and_counts(tmp_path: Path) -> N
 def test_table_7_3_command_sets() -> None:
     from skidsteer_power.bags.synthetic import table_7_3_segments
 
-    runs = [s for s in table_7_3_segments() if s.speed != 0]
+    runs = [s for s in table_7_3_segments() if s.speed_m_s != 0]
     # Table 7.3: 8 sets at 0.1 m/s (yaw 0 ... 0.2 rad/s) and 11 at 0.2 m/s (yaw 0 ... 0.35 rad/s).
     assert len(runs) == 19
-    assert max(s.yaw_rate for s in runs if s.speed == 0.1) == 0.2
-    assert max(s.yaw_rate for s in runs if s.speed == 0.2) == 0.35
+    assert max(s.yaw_rate_rad_s for s in runs if s.speed_m_s == 0.1) == 0.2
+    assert max(s.yaw_rate_rad_s for s in runs if s.speed_m_s == 0.2) == 0.35
 
 
 def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> None:

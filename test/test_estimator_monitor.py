@@ -12,11 +12,11 @@ import time
 import pytest
 from rich.console import Console
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.monitor import (
     CSV_COLUMNS,
     CaseProfile,
-    CaseStep,
     CsvLog,
     FreeDrive,
     MonitorView,
@@ -101,7 +101,7 @@ def test_free_drive_steps_and_clamps():
 
 
 def test_case_profile_commands():
-    profile = CaseProfile((CaseStep(2.0, 0.1, 0.0), CaseStep(3.0, 0.2, 0.35)))
+    profile = CaseProfile((Segment(0.1, 0.0, 2.0), Segment(0.2, 0.35, 3.0)))
     assert profile.duration_s == 5.0
     assert profile.command_at(1.9) == (0.1, 0.0)
     assert profile.command_at(2.0) == (0.2, 0.35)
@@ -111,7 +111,7 @@ def test_case_profile_commands():
 def test_case_file(tmp_path):
     path = tmp_path / 'case.csv'
     path.write_text('# Table 7.3 row: V = 0.2 m/s\nduration_s,speed_m_s,yaw_rate_rad_s\n5,0.2,0\n5,0.2,0.1\n')
-    assert load_case_csv(path).steps[1] == CaseStep(5.0, 0.2, 0.1)
+    assert load_case_csv(path).steps[1] == Segment(0.2, 0.1, 5.0)
 
 
 @pytest.mark.parametrize(

@@ -162,7 +162,7 @@ def test_route_csv(tmp_path, sandy):
         'length_m,duration_s,speed_m_s,turn_radius_m,payload_kg\n10,,0.3,inf,0\n,20,0.2,-2,5\n5,,,,\n'
     )
     route = read_route_csv(path, default_speed_m_s=0.25)
-    assert [s.length for s in route.segments] == pytest.approx([10.0, 4.0, 5.0])
+    assert [s.length_m for s in route.segments] == pytest.approx([10.0, 4.0, 5.0])
     assert route.segments[1].turn_radius_m == -2.0 and route.segments[1].payload_kg == 5.0
     assert route.segments[2].speed_m_s == 0.25 and math.isinf(route.segments[2].turn_radius_m)
     bad = tmp_path / 'bad.csv'
@@ -170,7 +170,7 @@ def test_route_csv(tmp_path, sandy):
     with pytest.raises(InputError, match=r'bad\.csv:2: .*non-zero'):
         read_route_csv(bad)
     with pytest.raises(InputError, match='exactly one'):
-        Segment(0.2, length_m=1.0, duration_s=1.0)
+        Segment.along(0.2, length_m=1.0, duration_s=1.0)
 
 
 def test_mission_cli_json_and_plot(tmp_path, capsys):

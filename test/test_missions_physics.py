@@ -49,7 +49,7 @@ def short_route():
     """10 m straight and a 180-degree U-turn of R = 1 m at 0.2 m/s (the ch. 8.1 patrol's two states)."""
     return Route(
         'straight+uturn',
-        (Segment(0.2, math.inf, length_m=10.0), Segment(0.2, 1.0, length_m=math.pi)),
+        (Segment.along(0.2, math.inf, length_m=10.0), Segment.along(0.2, 1.0, length_m=math.pi)),
     )
 
 

@@ -16,7 +16,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rich.console import Console
 
-from skidsteer_power.estimator.monitor import CaseProfile, CaseStep, render
+from skidsteer_power.commands import Segment
+from skidsteer_power.estimator.monitor import CaseProfile, render
 from skidsteer_power.nodes.energy_monitor import EnergyMonitor, KeyReader, build_parser, profile_from_args
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 
@@ -61,7 +62,7 @@ def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, r
         console.print(render(view))
         frames.append(console.export_text())
 
-    profile = CaseProfile((CaseStep(1.0, 0.2, 0.1),))
+    profile = CaseProfile((Segment(0.2, 0.1, 1.0),))
     monitor = add(
         EnergyMonitor('case', profile=profile, csv_path=tmp_path / 'shown.csv', on_frame=draw,
                       refresh_hz=20.0, namespace=namespace, context=ros_context)
@@ -114,7 +115,7 @@ def test_command_line_profiles(tmp_path):
     args = build_parser().parse_args(
         ['--mode', 'case', '--speed', '0.2', '--yaw-rate', '0.35', '--duration', '3']
     )
-    assert profile_from_args(args).steps == (CaseStep(3.0, 0.2, 0.35),)
+    assert profile_from_args(args).steps == (Segment(0.2, 0.35, 3.0),)
     (tmp_path / 'c.csv').write_text('duration_s,speed_m_s,yaw_rate_rad_s\n2,0.1,0\n')
     args = build_parser().parse_args(['--mode', 'case', '--case-file', str(tmp_path / 'c.csv')])
     assert profile_from_args(args).duration_s == 2.0

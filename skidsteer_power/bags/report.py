@@ -13,7 +13,7 @@ import numpy as np
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import Inputs, RunSeries, Segment
+    from skidsteer_power.bags.validate import Inputs, RunSeries, TraceSegment
 
 SEGMENT_COLUMNS = (
     't_start_s',
@@ -60,7 +60,7 @@ def write_series_csv(path: Path, series: RunSeries) -> None:
     np.savetxt(path, table, delimiter=',', header=','.join(names), comments='', fmt='%.9g')
 
 
-def write_segments_csv(path: Path, segments: list[Segment]) -> None:
+def write_segments_csv(path: Path, segments: list[TraceSegment]) -> None:
     with path.open('w', newline='', encoding='utf-8') as handle:
         writer = csv.writer(handle)
         writer.writerow(SEGMENT_COLUMNS)
@@ -76,7 +76,9 @@ def _thin(n: int) -> slice:
     return slice(None, None, max(1, n // _MAX_PLOT_POINTS))
 
 
-def write_plots(directory: Path, series: RunSeries, inputs: Inputs, segments: list[Segment]) -> list[str]:
+def write_plots(
+    directory: Path, series: RunSeries, inputs: Inputs, segments: list[TraceSegment]
+) -> list[str]:
     """PNG plots: torque and power per side (predicted vs measured), trace with fitted circles."""
     import matplotlib
 
@@ -111,7 +113,7 @@ def write_plots(directory: Path, series: RunSeries, inputs: Inputs, segments: li
     return written
 
 
-def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[Segment]) -> str:
+def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
     fig, ax = plt.subplots(figsize=(6, 6))
     every = _thin(len(inputs.pose_t))
     x, y = inputs.pose_xy[every, 0], inputs.pose_xy[every, 1]
@@ -246,7 +248,7 @@ def write_report(
     summary: dict[str, Any],
     series: RunSeries,
     inputs: Inputs,
-    segments: list[Segment],
+    segments: list[TraceSegment],
     plots: bool,
 ) -> dict[str, Any]:
     """Write every report file into ``directory``; returns their paths (also put into the JSON)."""

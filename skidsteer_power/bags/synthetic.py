@@ -17,19 +17,11 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.commands import Segment
 
 NS = 1_000_000_000
 MotorArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 START_NS = 1_700_000_000 * NS  # an arbitrary epoch time for synthetic bags [ns]
-
-
-@dataclass(frozen=True)
-class Segment:
-    """Hold forward speed ``speed`` [m/s] and yaw rate ``yaw_rate`` [rad/s] for ``duration`` [s]."""
-
-    speed: float
-    yaw_rate: float
-    duration: float
 
 
 @dataclass(frozen=True)
@@ -66,12 +58,12 @@ def table_7_3_segments(hold_s: float = 4.0, pause_s: float = 1.0) -> list[Segmen
 
 def sample_drive(segments: Sequence[Segment], rate_hz: float) -> DriveSamples:
     """Sample the ideal unicycle driving ``segments`` at ``rate_hz`` [Hz]; exact per-step integration."""
-    durations = np.array([s.duration for s in segments], dtype=float)
+    durations = np.array([s.duration_s for s in segments], dtype=float)
     n = max(1, round(durations.sum() * rate_hz))
     t = np.arange(n) / rate_hz
     index = np.minimum(np.searchsorted(np.cumsum(durations), t, side='right'), len(segments) - 1)
-    speed = np.array([s.speed for s in segments])[index]
-    yaw = np.array([s.yaw_rate for s in segments])[index]
+    speed = np.array([s.speed_m_s for s in segments])[index]
+    yaw = np.array([s.yaw_rate_rad_s for s in segments])[index]
     dt = 1.0 / rate_hz
     heading = np.concatenate([[0.0], np.cumsum(yaw * dt)[:-1]])
     # Exact displacement of a constant (V, r) step: chord of the arc (sinc form covers r = 0).

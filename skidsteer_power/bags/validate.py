@@ -309,8 +309,8 @@ def error_metrics(series: RunSeries, hold_cap_s: float) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class Segment:
-    """A stretch of constant command and what the trace says about it (SI units; inf = straight)."""
+class TraceSegment:
+    """What the trace says about one held command (the command: commands.Segment); SI, inf = straight."""
 
     t_start_s: float
     t_end_s: float
@@ -348,7 +348,7 @@ def command_segments(
     return segments
 
 
-def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[Segment]:
+def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegment]:
     """Trace analysis (eqs. 7.8-7.10) of every constant-command segment (a note says why where the
     poses are too few or collinear)."""
     result = []
@@ -366,7 +366,7 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[Segment]:
         except InputError as err:
             note = str(err)
         result.append(
-            Segment(
+            TraceSegment(
                 t_start_s=start,
                 t_end_s=end,
                 speed_cmd_m_s=speed,

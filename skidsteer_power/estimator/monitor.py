@@ -23,6 +23,7 @@ from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
@@ -97,19 +98,10 @@ class FreeDrive:
 
 # --- case mode ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class CaseStep:
-    """Hold speed ``speed_m_s`` [m/s] and yaw rate ``yaw_rate_rad_s`` [rad/s] for ``duration_s`` [s]."""
-
-    duration_s: float
-    speed_m_s: float
-    yaw_rate_rad_s: float
-
-
-@dataclass(frozen=True)
 class CaseProfile:
-    """A sequence of :class:`CaseStep`; after the last one the command is (0, 0) and the case is done."""
+    """A sequence of command :class:`Segment`; after the last one the command is (0, 0), the case done."""
 
-    steps: tuple[CaseStep, ...]
+    steps: tuple[Segment, ...]
 
     def __post_init__(self) -> None:
         if not self.steps:
@@ -154,9 +146,13 @@ def load_case_csv(path: str | os.PathLike) -> CaseProfile:
     steps = []
     for line, row in enumerate(rows, 2):
         try:
-            steps.append(CaseStep(*(float(row[col]) for col in CASE_COLUMNS)))
+            values = {col: float(row[col]) for col in CASE_COLUMNS}
         except (TypeError, ValueError):
             raise InputError(f'case file {source}, line {line}: not a number in {dict(row)}') from None
+        try:
+            steps.append(Segment(**values))
+        except InputError as err:
+            raise InputError(f'case file {source}, line {line}: {err}') from None
     try:
         return CaseProfile(tuple(steps))
     except InputError as err:

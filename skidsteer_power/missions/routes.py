@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 
 PATROL_TOTAL_M = 154.4  # ch. 8.1
@@ -37,53 +38,6 @@ SEARCH_MIN_RADIUS_M = 0.5  # ch. 8.2, Figure 8.7
 SEARCH_SPEED_M_S = 0.5  # ch. 8.2
 SEARCH_PAYLOAD_KG = 10.0  # ch. 8.2, on the way back
 STRAIGHT_CURVATURE = 1e-3  # [1/m]: gentler curvature (R > 1 km) counts as straight
-
-
-@dataclass(frozen=True)
-class Segment:
-    """One constant-state piece of a route.
-
-    Attributes
-    ----------
-    length_m : path length [m] (or None if ``duration_s`` is given)
-    duration_s : duration [s] (or None if ``length_m`` is given)
-    speed_m_s : forward speed V [m/s], > 0
-    turn_radius_m : signed turning radius R [m] (+ left, - right, inf straight), |R| > 0
-    payload_kg : payload carried on this segment [kg]
-    """
-
-    speed_m_s: float
-    turn_radius_m: float = math.inf
-    length_m: float | None = None
-    duration_s: float | None = None
-    payload_kg: float = 0.0
-
-    def __post_init__(self) -> None:
-        if (self.length_m is None) == (self.duration_s is None):
-            raise InputError('a segment needs exactly one of length_m and duration_s')
-        given = self.length_m if self.length_m is not None else self.duration_s
-        if not (math.isfinite(given) and given > 0):  # type: ignore[arg-type]
-            raise InputError(f'segment length/duration must be finite and > 0, got {given}')
-        if not (math.isfinite(self.speed_m_s) and self.speed_m_s > 0):
-            raise InputError(f'segment speed must be finite and > 0 m/s, got {self.speed_m_s}')
-        if self.turn_radius_m == 0 or math.isnan(self.turn_radius_m):
-            raise InputError('segment turning radius must be non-zero (inf = straight)')
-        if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
-            raise InputError(f'payload must be finite and >= 0 kg, got {self.payload_kg}')
-
-    @property
-    def length(self) -> float:
-        """Path length [m]."""
-        return self.length_m if self.length_m is not None else self.speed_m_s * self.duration_s  # type: ignore[operator]
-
-    @property
-    def duration(self) -> float:
-        """Duration [s]."""
-        return self.duration_s if self.duration_s is not None else self.length_m / self.speed_m_s  # type: ignore[operator]
-
-    @property
-    def is_turning(self) -> bool:
-        return math.isfinite(self.turn_radius_m)
 
 
 @dataclass(frozen=True)
@@ -102,15 +56,15 @@ class Route:
 
     @property
     def length_m(self) -> float:
-        return float(sum(s.length for s in self.segments))
+        return float(sum(s.length_m for s in self.segments))
 
     @property
     def duration_s(self) -> float:
-        return float(sum(s.duration for s in self.segments))
+        return float(sum(s.duration_s for s in self.segments))
 
     @property
     def turning_length_m(self) -> float:
-        return float(sum(s.length for s in self.segments if s.is_turning))
+        return float(sum(s.length_m for s in self.segments if s.is_turning))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Per-segment arrays: speed, turn_radius, payload, length, duration (SI units)."""
@@ -118,14 +72,15 @@ class Route:
             'speed_m_s': np.array([s.speed_m_s for s in self.segments]),
             'turn_radius_m': np.array([s.turn_radius_m for s in self.segments]),
             'payload_kg': np.array([s.payload_kg for s in self.segments]),
-            'length_m': np.array([s.length for s in self.segments]),
-            'duration_s': np.array([s.duration for s in self.segments]),
+            'length_m': np.array([s.length_m for s in self.segments]),
+            'duration_s': np.array([s.duration_s for s in self.segments]),
         }
 
     def with_speed(self, speed_m_s: float) -> Route:
         """The same path driven at another constant speed [m/s] (lengths kept)."""
         segments = tuple(
-            replace(s, speed_m_s=speed_m_s, length_m=s.length, duration_s=None) for s in self.segments
+            Segment.along(speed_m_s, s.turn_radius_m, length_m=s.length_m, payload_kg=s.payload_kg)
+            for s in self.segments
         )
         return replace(self, segments=segments)
 
@@ -136,10 +91,10 @@ def patrol(speed_m_s: float = PATROL_SPEED_M_S) -> Route:
     lane = (PATROL_TOTAL_M - PATROL_U_TURNS * turn_length) / (PATROL_U_TURNS + 1)
     segments: list[Segment] = []
     for k in range(PATROL_U_TURNS + 1):
-        segments.append(Segment(speed_m_s, math.inf, length_m=lane))
+        segments.append(Segment.along(speed_m_s, math.inf, length_m=lane))
         if k < PATROL_U_TURNS:
             side = 1.0 if k % 2 == 0 else -1.0  # alternate left / right U-turns
-            segments.append(Segment(speed_m_s, side * PATROL_TURN_RADIUS_M, length_m=turn_length))
+            segments.append(Segment.along(speed_m_s, side * PATROL_TURN_RADIUS_M, length_m=turn_length))
     route = Route('patrol', tuple(segments), 'ch. 8.1 patrol of a 15 m x 22 m area (lawn-mower path)')
     return replace(route, xy=_trace(route))
 
@@ -159,8 +114,8 @@ def search_retrieve(
     radius = np.where(
         np.abs(curvature) < STRAIGHT_CURVATURE, np.inf, 1.0 / np.where(curvature == 0, 1, curvature)
     )
-    out = [Segment(speed_m_s, float(r), length_m=ds) for r in radius]
-    back = [Segment(speed_m_s, float(-r), length_m=ds, payload_kg=payload_kg) for r in radius[::-1]]
+    out = [Segment.along(speed_m_s, float(r), length_m=ds) for r in radius]
+    back = [Segment.along(speed_m_s, float(-r), length_m=ds, payload_kg=payload_kg) for r in radius[::-1]]
     route = Route(
         'search-retrieve',
         tuple(out + back),
@@ -204,8 +159,8 @@ def _trace(route: Route, points_per_m: float = 4.0) -> np.ndarray:
     x, y, heading = 0.0, 0.0, 0.0
     pts = [(x, y)]
     for seg in route.segments:
-        n = max(1, math.ceil(seg.length * points_per_m))
-        ds = seg.length / n
+        n = max(1, math.ceil(seg.length_m * points_per_m))
+        ds = seg.length_m / n
         curvature = 0.0 if not seg.is_turning else 1.0 / seg.turn_radius_m
         for _ in range(n):
             heading_mid = heading + 0.5 * ds * curvature
@@ -267,7 +222,7 @@ def _segment(row: dict[str, str], path: object, line: int, default_speed: float 
     if speed is None:
         raise InputError(f'{path}:{line}: no speed_m_s and no --speed given')
     try:
-        return Segment(
+        return Segment.along(
             speed_m_s=speed,
             turn_radius_m=number('turn_radius_m', math.inf),  # type: ignore[arg-type]
             length_m=number('length_m'),

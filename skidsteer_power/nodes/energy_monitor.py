@@ -36,10 +36,10 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.estimator.monitor import (
     CaseProfile,
-    CaseStep,
     CsvLog,
     FreeDrive,
     MonitorView,
@@ -214,7 +214,7 @@ def profile_from_args(args: argparse.Namespace) -> CaseProfile | None:
     if args.case_file:
         return load_case_csv(args.case_file)
     if args.speed is not None:
-        return CaseProfile((CaseStep(args.duration, args.speed, args.yaw_rate),))
+        return CaseProfile((Segment(args.speed, args.yaw_rate, args.duration),))
     return None
 
 
