@@ -19,7 +19,7 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py
 setup: $(STAMP)
 
 run: setup
-	bash bags/replay_and_validate.sh
+	bash bags/twin_main_job.sh
 
 lint: setup
 	$(BIN)/ruff check .

@@ -227,3 +227,70 @@ def test_write_bag_needs_a_new_path(tmp_path):
     write_bag(trace, tmp_path / 'a.mcap')
     with pytest.raises(InputError, match='exists'):
         write_bag(trace, tmp_path / 'a.mcap')
+
+
+# --------------------------------------------------------------------------- live coupling, kinematics
+
+
+def test_live_coupling_moves_the_twin_with_the_amplifiers_motor_speeds():
+    from skidsteer_power.twin.live import TwinCoupling, TwinLoad
+
+    twin = Twin(load_vehicle('test_robot_4wheel'), SAND_BIN)
+    coupling = TwinCoupling(twin)
+    left, right = TwinLoad(coupling, 'left', 1), TwinLoad(coupling, 'right', -1)
+    omega = 0.2 / twin.r * twin.G  # 0.2 m/s at the wheels [rad/s at the motor]
+    for k in range(2000):  # 1 s of 0.5 ms amplifier steps; the right amplifier turns the other way
+        t = 0.0005 * k
+        load_left = left(omega, t)
+        load_right = right(-omega, t + 0.0001)
+    assert twin.t == pytest.approx(1.0, abs=0.01)
+    assert 0.1 < twin.vel[0] < 0.2  # the robot drives forward, slower than its wheels (slip)
+    friction = twin.powertrain.left.total.coulomb_Nm
+    assert load_left > friction + 0.05  # the soil adds torque over the drivetrain's own friction
+    assert load_right < -(friction + 0.05)  # in the right amplifier's sense
+    pose, _twist, odom = coupling.snapshot()
+    assert odom[0] > pose[0] > 0.05  # encoder odometry runs ahead of the slipping robot
+
+
+@pytest.fixture(scope='module')
+def turning_bag(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('kinematics')
+    trace = run_commands(
+        Twin(load_vehicle('test_robot_4wheel'), SAND_BIN), [Segment(0.0, 0.0, 1.0), Segment(0.2, 0.2, 5.0)]
+    )
+    return write_bag(trace, folder / 'turn.mcap'), folder
+
+
+def test_validate_kinematics_predicts_from_the_motion(turning_bag):
+    from skidsteer_power.bags.reader import open_bag
+    from skidsteer_power.bags.validate import ValidateOptions, validate
+
+    bag_path, folder = turning_bag
+    summaries = {}
+    for kinematics in ('cmd', 'odom', 'ground_truth'):
+        options = ValidateOptions(
+            'test_robot_4wheel', 'sand_bin', folder / kinematics, map_cache_dir=folder / 'maps', plots=False,
+            kinematics=kinematics,
+        )  # fmt: skip
+        with open_bag(bag_path) as bag:
+            summaries[kinematics] = validate(bag, options)
+    cmd = summaries['cmd']
+    assert cmd['kinematics'] == 'cmd' and cmd['motion_prediction']['kinematics'] == 'ground_truth'
+    error = {k: abs(s['metrics']['energy_error_pct']) for k, s in summaries.items()}
+    # the wheeled robot turns far less than commanded: the true motion predicts its energy better
+    assert error['ground_truth'] < 0.5 * error['cmd']
+    assert cmd['motion_prediction']['metrics']['energy_error_pct'] == pytest.approx(
+        summaries['ground_truth']['metrics']['energy_error_pct']
+    )
+    assert summaries['odom']['motion_prediction'] is None
+
+
+def test_validate_kinematics_without_odometry_is_one_clear_error(tmp_path, capsys):
+    from skidsteer_power.bags.synthetic import write_drive_bag
+
+    bag = tmp_path / 'no_odom.mcap'
+    write_drive_bag(bag, [Segment(0.2, 0.0, 1.0)], odom_hz=None)
+    argv = ['validate', str(bag), '--vehicle', 'test_robot_4wheel', '--terrain', 'sand_bin']
+    code = main([*argv, '--report', str(tmp_path / 'r'), '--kinematics', 'ground_truth', '--no-plots'])
+    assert code == 2
+    assert 'ground_truth' in capsys.readouterr().err

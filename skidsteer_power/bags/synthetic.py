@@ -162,3 +162,16 @@ def _odometry(types: dict, stamp_ns: int, s: DriveSamples, i: int) -> object:
         types['geometry_msgs/msg/PoseWithCovariance'](pose, np.zeros(36)),
         types['geometry_msgs/msg/TwistWithCovariance'](twist, np.zeros(36)),
     )
+
+
+def write_command_csv(path: str | Path, segments: Sequence[Segment]) -> Path:
+    """Write ``segments`` as a command CSV (t_s, speed_m_s, yaw_rate_rad_s; each row held until the
+    next, the last row ends the run), the input of ``skidsteer-power simulate --commands``."""
+    lines = ['t_s,speed_m_s,yaw_rate_rad_s']
+    t = 0.0
+    for s in segments:
+        lines.append(f'{t:.6g},{s.speed:.6g},{s.yaw_rate:.6g}')
+        t += s.duration
+    lines.append(f'{t:.6g},0,0')
+    Path(path).write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    return Path(path)

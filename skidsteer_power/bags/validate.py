@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +55,8 @@ class ValidateOptions:
     segment_gap_s : a pause in commands longer than this ends a segment [s] (teleop keyboards
         repeat a held key only after ~0.5 s, so this is longer than the estimator's staleness)
     plots : write PNG plots
+    kinematics : what the estimator predicts from: 'cmd' (the command, as the live node), 'odom'
+        (the twist of the Odometry ``odom_topic``) or 'ground_truth' (``/ground_truth/odom``)
     """
 
     vehicle: str
@@ -69,6 +71,7 @@ class ValidateOptions:
     min_segment_s: float = 1.0
     segment_gap_s: float = 1.0
     plots: bool = True
+    kinematics: str = 'cmd'
 
 
 @dataclass
@@ -434,6 +437,33 @@ def _next_position(sorted_positions: list[np.ndarray], start: int) -> int | None
     return found
 
 
+KINEMATICS = ('cmd', 'odom', 'ground_truth')
+GROUND_TRUTH_TOPIC = '/ground_truth/odom'
+
+
+def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> tuple[str, Inputs] | None:
+    """``inputs`` with the commands replaced by a measured twist (V [m/s], yaw rate [rad/s]) of an
+    Odometry topic: ``/ground_truth/odom`` for 'ground_truth', ``odom_topic`` for 'odom'; for 'cmd'
+    the ground truth if the bag has it, else ``odom_topic``. Returns (kinematics, inputs) or None."""
+    if options.kinematics not in KINEMATICS:
+        raise InputError(f'kinematics must be one of {", ".join(KINEMATICS)}, not {options.kinematics!r}')
+    candidates = {'odom': ['odom'], 'ground_truth': ['ground_truth']}.get(
+        options.kinematics, ['ground_truth', 'odom']
+    )
+    for kind in candidates:
+        topic = GROUND_TRUTH_TOPIC if kind == 'ground_truth' else options.odom_topic
+        if topic in bag.topics and bag.topics[topic].msgtype == 'nav_msgs/msg/Odometry':
+            t, twist = [], []
+            for message in bag.messages([topic]):
+                msg = bag.deserialize(message).twist.twist
+                t.append(message.timestamp_ns - bag.start_ns)
+                twist.append((msg.linear.x, msg.angular.z))
+            if t:
+                cmd = np.array(twist, dtype=float).reshape(-1, 2)
+                return kind, replace(inputs, cmd_t=np.array(t, dtype=float) / 1e9, cmd=cmd)
+    return None
+
+
 def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
     """Run the whole validation of ``bag``; write the report; return the JSON summary."""
     from skidsteer_power.bags.report import write_report
@@ -441,8 +471,16 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     began = time.perf_counter()
     inputs = read_inputs(bag, options)
     core = build_core(options, predictor, options.battery_window_s)
-    series = run_estimator(core, inputs)
+    motion = motion_inputs(bag, options, inputs)
+    if options.kinematics != 'cmd' and motion is None:
+        raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
+    series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
     metrics = error_metrics(series, core.settings.joint_timeout_s)
+    motion_summary = None
+    if motion is not None and options.kinematics == 'cmd':  # ch. 7.3: also predict from the motion
+        other = build_core(options, core.predictor, options.battery_window_s)
+        motion_metrics = error_metrics(run_estimator(other, motion[1]), other.settings.joint_timeout_s)
+        motion_summary = {'kinematics': motion[0], 'metrics': motion_metrics}
     segments = trace_segments(inputs, options)
     live = live_comparison(inputs, core.predictor)
     elapsed = time.perf_counter() - began
@@ -462,7 +500,9 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
         },
         'rejected': series.rejected,
         'undecodable_topics': bag.undecodable_topics,
+        'kinematics': options.kinematics,
         'metrics': metrics,
+        'motion_prediction': motion_summary,
         'battery': {
             'energy_measured_J': series.energy_J.get('measured', math.nan),
             'energy_predicted_J': series.energy_J.get('predicted', math.nan),

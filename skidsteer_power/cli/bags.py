@@ -106,6 +106,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         odom_topic=args.odom,
         map_cache_dir=args.map_cache,
         plots=not args.no_plots,
+        kinematics=args.kinematics,
     )
     with _open(args) as bag:
         summary = validate(bag, options)
@@ -113,6 +114,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print_json(summary)
     else:
         print(one_screen(summary))
+        motion = summary.get('motion_prediction')
+        if motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
+            m = motion['metrics']
+            print(
+                f'predicted from the measured motion ({motion["kinematics"]}): energy error '
+                f'{m["energy_error_pct"]:+.1f} %, torque MAE left/right {m["torque_left"]["mae_Nm"]:.3f} / '
+                f'{m["torque_right"]["mae_Nm"]:.3f} N m'
+            )
     return 0
 
 
@@ -173,6 +182,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    val.add_argument(
+        '--kinematics',
+        choices=('cmd', 'odom', 'ground_truth'),
+        default='cmd',
+        help='predict from the command (default), the --odom twist, or /ground_truth/odom; with cmd, '
+        'a bag with odometry also gets the prediction from the measured motion',
+    )
     _add_bag_reading(val)
     add_json_flag(val)
     val.set_defaults(func=_cmd_validate)

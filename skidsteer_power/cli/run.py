@@ -2,8 +2,9 @@
 
     skidsteer-power run [--simulate] [--vehicle V] [--terrain T] [--duration S] [--speed V --yaw-rate R]
 
-With ``--simulate`` the amplifiers are simulated on pseudo-terminals and loaded by the terramechanics
-of the vehicle on ``--sim-terrain`` (default ``--terrain``). ``--speed``/``--yaw-rate`` publish a
+With ``--simulate`` the amplifiers are simulated on pseudo-terminals and loaded by the digital twin
+(``skidsteer_power.twin``) on ``--terrain-truth`` (alias ``--sim-terrain``, default ``--terrain``)
+and ``--patches``. ``--speed``/``--yaw-rate`` publish a
 constant cmd_vel at 10 Hz (a quick drive without a teleop). A status line is printed every
 ``--status-every`` s; at the end a summary (``--json``: duration_s, joint_states_received,
 predicted_received, soc_start, soc_end, remaining_wh_start, remaining_wh_end, energy_used_J,
@@ -29,8 +30,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--vehicle', default='test_robot_track', help='vehicle name or YAML file')
     parser.add_argument('--terrain', default='dry_sand', help="the estimator's terrain (preset or YAML)")
     parser.add_argument(
-        '--sim-terrain', default='', help='ground truth of the simulation (default --terrain)'
+        '--terrain-truth',
+        '--sim-terrain',
+        dest='sim_terrain',
+        default='',
+        help="--simulate: the digital twin's (true) terrain (default --terrain)",
     )
+    parser.add_argument('--patches', default='', help='--simulate: YAML polygons of other truth terrains')
     parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
     parser.add_argument('--speed', type=finite_float, help='publish cmd_vel with this forward speed [m/s]')
     parser.add_argument('--yaw-rate', type=finite_float, default=0.0, help='... and this yaw rate [rad/s]')
@@ -76,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
 
     options = SuiteOptions(
         vehicle=args.vehicle, terrain=args.terrain, sim_terrain=args.sim_terrain, simulate=args.simulate,
-        map_cache_dir=args.map_cache, state_file=args.state_file, left_port=args.left_port,
-        right_port=args.right_port,
+        patches=args.patches, map_cache_dir=args.map_cache, state_file=args.state_file,
+        left_port=args.left_port, right_port=args.right_port,
     )  # fmt: skip
     context = Context()
     rclpy.init(context=context)

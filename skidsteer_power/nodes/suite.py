@@ -6,106 +6,60 @@ with the serial threads, let joint_states fall from 50 Hz to 1-5 Hz (measured wi
 --simulate``; des_driver alone in its own process kept 49 Hz).
 
 With ``simulate=True`` the amplifiers are :class:`SimulatedPair` on pseudo-terminals, driven through
-the robot's own pyserial code path, and each simulated motor is
-loaded like the test robot's: the axle torque the FESS map gives for the current command on the
-chosen vehicle and terrain (the "ground truth" terrain, which may differ from the estimator's), plus
-the side's internal resistance of Table 7.1 (eqs. 7.1-7.4), seen at the motor through the 12:1
-reduction. A small ``terrain_sim`` node follows ``cmd_vel`` for that; without cmd_vel for
-``cmd_timeout_s`` the load falls to the internal resistance alone (the driver has stopped).
+the robot's own pyserial code path, and each simulated motor is loaded by the digital twin
+(``skidsteer_power.twin``, never the estimator's FESS map): the twin's body and terrain contact on
+its own ("truth") terrain and patches advance in real time with the two motors' speeds
+(``twin/live.py``), and each motor feels its side's axle torque through the 12:1 reduction plus the
+side's internal resistance of Table 7.1 (eqs. 7.1-7.4). A small ``terrain_sim`` node publishes the
+twin's ``odom`` (encoder dead reckoning) and ``ground_truth/odom`` at 20 Hz.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from skidsteer_power.estimator import factory
-from skidsteer_power.estimator.prediction import MapPredictor
-from skidsteer_power.powertrain import Powertrain
 
 SMOOTHING_RAD_S = 1.0
 """Motor speed over which the Coulomb terms change sign (tanh), so the explicit motor model does not
 chatter at standstill [rad/s]."""
 
 
-@dataclass
-class CommandHolder:
-    """The latest (V [m/s], yaw rate [rad/s]) and when it arrived (time.monotonic [s]); thread-safe."""
-
-    timeout_s: float = 0.5
-    command: tuple[float, float] = (0.0, 0.0)
-    stamp_s: float = -math.inf
-    _lock: threading.Lock = field(default_factory=threading.Lock)
-
-    def set(self, speed: float, yaw_rate: float) -> None:
-        with self._lock:
-            self.command, self.stamp_s = (speed, yaw_rate), time.monotonic()
-
-    def current(self) -> tuple[float, float]:
-        with self._lock:
-            fresh = time.monotonic() - self.stamp_s <= self.timeout_s
-            return self.command if fresh else (0.0, 0.0)
-
-
-class TerrainLoad:
-    """Load torque at one simulated motor shaft [N m] for ``SimulatedDes.set_load``.
-
-    T_load(w_m) = T_axle(V, r) / G + b w_m + c tanh(w_m / w_s), in the robot's sense of the side,
-    mapped into the amplifier's sense by ``polarity`` (+1/-1, as the driver's parameter). T_axle is
-    the map's torque of this side for the held command; b and c the side's internal resistance.
-    """
-
-    def __init__(
-        self,
-        side: str,
-        predictor: MapPredictor,
-        powertrain: Powertrain,
-        commands: CommandHolder,
-        polarity: int,
-    ) -> None:
-        self.side = side
-        self.index = 0 if side == 'left' else 1
-        self.predictor = predictor
-        self.gear_ratio = powertrain.gear_ratio
-        self.resistance = powertrain.resistance(side).total
-        self.commands = commands
-        self.polarity = polarity
-
-    def robot_sense(self, omega_m: float) -> float:
-        """Load [N m] at motor speed ``omega_m`` [rad/s], both in the robot's forward-positive sense."""
-        speed, yaw_rate = self.commands.current()
-        axle = 0.0
-        if speed != 0.0 or yaw_rate != 0.0:
-            axle = self.predictor.predict(speed, yaw_rate).terrain_torque_Nm[self.index]
-        r = self.resistance
-        internal = r.viscous_Nm_s * omega_m + r.coulomb_Nm * math.tanh(omega_m / SMOOTHING_RAD_S)
-        return axle / self.gear_ratio + internal
-
-    def __call__(self, omega_rad_s: float, t_s: float) -> float:
-        return self.polarity * self.robot_sense(self.polarity * omega_rad_s)
-
-
 class TerrainSim(Node):
-    """Follows cmd_vel for the simulated loads (no output)."""
+    """Publishes the twin's odom (encoder dead reckoning) and ground_truth/odom at 20 Hz."""
 
-    def __init__(self, commands: CommandHolder, stamped: bool = False, **kwargs: Any) -> None:
+    def __init__(self, coupling: Any, **kwargs: Any) -> None:
+        from nav_msgs.msg import Odometry
+
         super().__init__('terrain_sim', **kwargs)
-        self.commands = commands
-        self.create_subscription(TwistStamped if stamped else Twist, 'cmd_vel', self._on_cmd_vel, 10)
+        self.coupling = coupling
+        self._odom = self.create_publisher(Odometry, 'odom', 10)
+        self._truth = self.create_publisher(Odometry, 'ground_truth/odom', 10)
+        self._message = Odometry
+        self.create_timer(0.05, self._publish)
 
-    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
-        twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        if math.isfinite(twist.linear.x) and math.isfinite(twist.angular.z):
-            self.commands.set(twist.linear.x, twist.angular.z)
+    def _publish(self) -> None:
+        pose, twist, odom = self.coupling.snapshot()
+        stamp = self.get_clock().now().to_msg()
+        for publisher, (x, y, yaw, vx, vy, wz) in (
+            (self._odom, (odom[0], odom[1], odom[2], odom[3], 0.0, odom[4])),
+            (self._truth, (*pose, *twist)),
+        ):
+            msg = self._message()
+            msg.header.stamp, msg.header.frame_id, msg.child_frame_id = stamp, 'odom', 'base_link'
+            msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
+            msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+            msg.twist.twist.linear.x, msg.twist.twist.linear.y = float(vx), float(vy)
+            msg.twist.twist.angular.z = float(wz)
+            publisher.publish(msg)
 
 
 @dataclass
@@ -116,6 +70,7 @@ class SuiteOptions:
     vehicle: str = 'test_robot_track'
     terrain: str = 'dry_sand'
     sim_terrain: str = ''  # ground truth of the simulation ('' = terrain)
+    patches: str = ''  # YAML file of polygons with other truth terrains (twin/terrain_field.py)
     simulate: bool = False
     map_cache_dir: str = ''
     state_file: str = ''
@@ -172,19 +127,20 @@ class Suite:
 
     def _start_simulation(self) -> tuple[str, str]:
         from skidsteer_power.des.simulator import SimulatedPair
+        from skidsteer_power.terramechanics import load_terrain
+        from skidsteer_power.twin import Twin, load_patches
+        from skidsteer_power.twin.live import TwinCoupling, TwinLoad
 
         o = self.options
-        predictor, _, _ = factory.map_predictor(
-            self.vehicle, o.sim_terrain or o.terrain, o.map_cache_dir or None
-        )
-        powertrain = factory.powertrain_for(self.vehicle)
-        commands = CommandHolder()
+        patches = load_patches(o.patches) if o.patches else None
+        twin = Twin(self.vehicle, load_terrain(o.sim_terrain or o.terrain), patches=patches)
+        coupling = TwinCoupling(twin)
         self.sim = SimulatedPair().start()
         polarity = {'left': int(o.driver_params.get('left_polarity', 1))}
         polarity['right'] = int(o.driver_params.get('right_polarity', -1))
         for side, amp in (('left', self.sim.left), ('right', self.sim.right)):
-            amp.set_load(TerrainLoad(side, predictor, powertrain, commands, polarity[side]))
-        sim_node = TerrainSim(commands, context=self.context, namespace=o.namespace)
+            amp.set_load(TwinLoad(coupling, side, polarity[side]))
+        sim_node = TerrainSim(coupling, context=self.context, namespace=o.namespace)
         self.nodes.append(sim_node)
         return self.sim.left.port, self.sim.right.port
 

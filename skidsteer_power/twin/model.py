@@ -363,20 +363,20 @@ class Twin:
         self.j = j
 
     def _wheel_kinematics(self) -> tuple[np.ndarray, ...]:
+        """Per wheel: axle ground speed forward and lateral [m/s], |omega| [rad/s], rolling direction
+        (+-1), forward speed in the rolling frame [m/s] and slip (eq. 2.13) [-]."""
         vx, vy, wz = self.vel
         vxa = vx - wz * self.wheel_y  # axle ground speed, forward [m/s]
         vya = vy + wz * self.wheel_x  # lateral [m/s]
-        omega = self.omega_m[self.wheel_side] / self.G
-        direction = np.where(np.abs(omega) > 1e-9, np.sign(omega), np.where(vxa < 0, -1.0, 1.0))
-        vxm, om = direction * vxa, direction * omega  # mirrored so the wheel rolls forward
+        side_omega = self.omega_m / self.G
+        side_direction = [1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0) for w in side_omega]
+        direction = np.array(side_direction)[self.wheel_side]
+        om = (np.abs(side_omega))[self.wheel_side]
+        vxm = direction * vxa  # mirrored so the wheel rolls forward
         rw = self.r * om
-        with np.errstate(invalid='ignore', divide='ignore'):
-            slip = np.where(
-                rw >= np.abs(vxm),
-                np.where(rw > 0, 1.0 - vxm / rw, 0.0),
-                np.where(np.abs(vxm) > 0, rw / np.abs(vxm) - 1.0, 0.0),
-            )  # eq. 2.13
-        return vxa, vya, om, direction, vxm, np.clip(slip, -1.0, 1.0)
+        # eq. 2.13: (r w - V) / (r w) driving, (r w - V) / V braking: one denominator, max(r w, |V|)
+        slip = (rw - vxm) / np.maximum(np.maximum(rw, np.abs(vxm)), 1e-12)
+        return vxa, vya, om, direction, vxm, np.minimum(np.maximum(slip, -1.0), 1.0)
 
     def _wheel_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
         """Body force (F_x, F_y, M_z), axle torques per side [N m], dissipation [W], sinkage [m].
@@ -414,24 +414,24 @@ class Twin:
                 strength[k] = soil.shear_strength(t, sigma[k])
                 tau[k] = strength[k] * soil.shear_fraction(t, mag[k])
         safe = np.where(mag > 0, mag, 1.0)
-        shear = -tau * j / safe  # tau_t + i tau_y, against the displacement (4.7, 4.8)
-        shear -= self._damping * strength * self._j_rate  # transient damping, 0 in steady state
-        tau_t = shear.real
+        # tau_t + i tau_y against the displacement (4.7, 4.8), plus the transient damping
+        shear = -(tau / safe) * j - (self._damping * strength) * self._j_rate
         sin, cos = np.sin(theta), np.cos(theta)
         area = (r * b) * span[:, None] * self.xi_w[None, :]
+        a_shear = area * shear
+        a_tau = a_shear.real
+        a_sigma = area * sigma
         # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
         # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
-        normal = area * sigma * sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)[:, None]
-        fx_m = (area * tau_t * cos).sum(axis=1) - normal.sum(axis=1)  # eq. 2.27 (rolling frame)
-        fz = (area * (sigma * cos + tau_t * sin)).sum(axis=1)
-        fy = (area * shear.imag).sum(axis=1)  # eq. 4.9, lateral
-        torque_m = r * (area * tau_t).sum(axis=1)  # eq. 2.34: the terrain's resisting torque
+        normal = (a_sigma * sin).sum(axis=1) * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
+        fx_m = (a_tau * cos).sum(axis=1) - normal  # eq. 2.27 (rolling frame)
+        fz = (a_sigma * cos + a_tau * sin).sum(axis=1)
+        fy = a_shear.imag.sum(axis=1)  # eq. 4.9, lateral
+        torque_m = r * a_tau.sum(axis=1)  # eq. 2.34: the terrain's resisting torque
         fx, torque = direction * fx_m, direction * torque_m
         force = np.array([fx.sum(), fy.sum(), (self.wheel_x * fy - self.wheel_y * fx).sum()])
         slip_velocity = vxm[:, None] * cos - (r * om)[:, None] + 1j * vya[:, None]
-        dissipation = float(
-            -(area * (shear.conjugate() * slip_velocity).real).sum() + (vxm * normal.sum(axis=1)).sum()
-        )
+        dissipation = float(-(a_shear.conjugate() * slip_velocity).real.sum() + (vxm * normal).sum())
         self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self.vehicle.wheels_per_side)
         axle = np.array([torque[: self.n_wheels // 2].sum(), torque[self.n_wheels // 2 :].sum()])
         return force, axle, dissipation, float(z.max())
@@ -457,10 +457,10 @@ class Twin:
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
         # (the same time scale as the shear), plus a slow settling at rest.
         n = self.field.base.n
-        ratio = np.clip(w_wheel / np.maximum(fz, 1e-9), 0.5, 2.0)
+        ratio = np.minimum(np.maximum(w_wheel / np.maximum(fz, 1e-9), 0.5), 2.0)
         travel = (self.r * np.abs(om) + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
         fraction = np.minimum(dt * (travel + 1.0 / SINKAGE_SETTLING_S), 1.0)
-        self.z = np.clip(self.z * ratio ** (fraction / (n + 0.5)), 1e-6, 0.95 * self.r)
+        self.z = np.minimum(np.maximum(self.z * ratio ** (fraction / (n + 0.5)), 1e-6), 0.95 * self.r)
 
     # ------------------------------------------------------------------ stepping
     def kinetic_energy(self) -> float:
@@ -495,6 +495,44 @@ class Twin:
             self.set_command(0.0, 0.0)
         for _ in range(n_steps):
             self._step()
+
+    def _move(self, force: np.ndarray, omega_m: np.ndarray) -> None:
+        """Body (hull frame: m (dv/dt + yaw x v) = F, Iz dyaw/dt = M), motor angles, pose and the
+        contact's shear transport over one step, with the new motor speeds [rad/s]."""
+        dt = self.dt
+        vx, vy, wz = (float(v) for v in self.vel)
+        vx, vy, wz = (
+            vx + dt * (force[0] / self.mass + wz * vy),
+            vy + dt * (force[1] / self.mass - wz * vx),
+            wz + dt * force[2] / self.Iz,
+        )
+        self.vel = np.array([vx, vy, wz])
+        self.omega_m = omega_m
+        self.theta_m = self.theta_m + dt * self.omega_m
+        x, y, yaw = (float(v) for v in self.pose)
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
+        if self.vehicle.is_tracked:
+            self._advance_tracks(dt)
+        else:
+            self._advance_wheels(dt)
+
+    def step_with_motor_speeds(self, omega_m: np.ndarray) -> np.ndarray:
+        """One step with the motor speeds [rad/s, forward positive] imposed from outside (the live
+        suite's simulated amplifiers integrate the motors); returns the terrain's resisting axle
+        torque of each side [N m]. The energy ledger then holds only the terrain work."""
+        omega_m = np.asarray(omega_m, dtype=float)
+        self.omega_m = omega_m
+        loads = self._side_loads()
+        if self.vehicle.is_tracked:
+            force, axle, dissipation, sinkage = self._track_forces(loads)
+        else:
+            force, axle, dissipation, sinkage = self._wheel_forces(loads)
+        self.max_sinkage_m = max(self.max_sinkage_m, sinkage)
+        self._move(force, omega_m)
+        self.energy.terrain_J += dissipation * self.dt
+        self.t += self.dt
+        return axle
 
     def _step(self) -> None:
         dt = self.dt
@@ -541,23 +579,7 @@ class Twin:
             p_term = kt * current * mid + res * current * current
             p_bus = p_term / eta if p_term >= 0.0 else p_term * eta_regen  # = motor.bus_power (4-Q)
             currents[k], omegas[k], mids[k], p_terms[k], p_buses[k] = current, new, mid, p_term, p_bus
-        # body (hull frame): m (dv/dt + yaw x v) = F, Iz dyaw/dt = M
-        vx, vy, wz = (float(v) for v in self.vel)
-        vx, vy, wz = (
-            vx + dt * (force[0] / self.mass + wz * vy),
-            vy + dt * (force[1] / self.mass - wz * vx),
-            wz + dt * force[2] / self.Iz,
-        )
-        self.vel = np.array([vx, vy, wz])
-        self.omega_m = np.array(omegas)
-        self.theta_m = self.theta_m + dt * self.omega_m
-        x, y, yaw = (float(v) for v in self.pose)
-        c, s = math.cos(yaw), math.sin(yaw)
-        self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
-        if self.vehicle.is_tracked:
-            self._advance_tracks(dt)
-        else:
-            self._advance_wheels(dt)
+        self._move(force, np.array(omegas))
         # electrical side and energy ledger
         e = self.energy
         total = p_buses[0] + p_buses[1]

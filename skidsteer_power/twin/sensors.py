@@ -9,7 +9,7 @@ Sensors, as the robot has them (sampled at ``SENSOR_RATE_HZ``, seeded noise):
   to 1 mA (the DES reports mA);
 * odom (nav_msgs/Odometry): dead reckoning from those encoder speeds (side speed = omega r / G,
   V = mean, yaw rate = difference / B), so it drifts with slip like real wheel odometry;
-* ground_truth/odom: the true pose and hull-frame twist;
+* ground_truth/odom: the true pose and hull-frame twist (both odometries at ``ODOM_RATE_HZ``);
 * battery/measured (sensor_msgs/BatteryState): bus voltage [V] and current [A], ROS sign
   (negative while discharging), at ``BATTERY_RATE_HZ``.
 """
@@ -32,7 +32,9 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.twin.model import Twin
 
 SENSOR_RATE_HZ = 50.0
-"""joint_states, odom and ground_truth/odom rate [Hz] (the des_driver's joint_states rate)."""
+"""Sample rate of the trace and of joint_states in the bag [Hz] (the des_driver's joint_states rate)."""
+ODOM_RATE_HZ = 10.0
+"""odom and ground_truth/odom rate in the bag [Hz] (a motion-capture rate; keeps bags small)."""
 CMD_RATE_HZ = 25.0
 """cmd_vel rate written to the bag [Hz]."""
 BATTERY_RATE_HZ = 10.0
@@ -218,15 +220,19 @@ def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
 
 
 def _message_counts(n: int) -> dict[str, int]:
-    every_cmd = round(SENSOR_RATE_HZ / CMD_RATE_HZ)
-    every_bat = round(SENSOR_RATE_HZ / BATTERY_RATE_HZ)
+    every_cmd, every_odom, every_bat = _every()
     return {
         '/cmd_vel': len(range(0, n, every_cmd)),
         '/joint_states': n,
-        '/odom': n,
-        '/ground_truth/odom': n,
+        '/odom': len(range(0, n, every_odom)),
+        '/ground_truth/odom': len(range(0, n, every_odom)),
         '/battery/measured': len(range(0, n, every_bat)),
     }
+
+
+def _every() -> tuple[int, int, int]:
+    """Samples between cmd_vel, odom and battery messages in the bag."""
+    return tuple(round(SENSOR_RATE_HZ / rate) for rate in (CMD_RATE_HZ, ODOM_RATE_HZ, BATTERY_RATE_HZ))  # type: ignore[return-value]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -311,8 +317,7 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
     T = store.types
     ser = store.serialize_cdr
     stamps = start_ns + np.round(trace.t * NS).astype(np.int64)
-    every_cmd = round(SENSOR_RATE_HZ / CMD_RATE_HZ)
-    every_bat = round(SENSOR_RATE_HZ / BATTERY_RATE_HZ)
+    every_cmd, every_odom, every_bat = _every()
     vec, twist_t = T['geometry_msgs/msg/Vector3'], T['geometry_msgs/msg/Twist']
     with BagWriter(path) as writer:
         cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
@@ -332,16 +337,19 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
                 trace.joint_effort_Nm[i].astype(float),
             )
             writer.write(js, stamp + 1000, ser(joint, 'sensor_msgs/msg/JointState'))
-            writer.write(
-                odom,
-                stamp + 2000,
-                ser(_odometry(T, stamp, trace.odom_pose[i], trace.odom_twist[i]), 'nav_msgs/msg/Odometry'),
-            )
-            writer.write(
-                truth,
-                stamp + 3000,
-                ser(_odometry(T, stamp, trace.pose[i], trace.twist[i]), 'nav_msgs/msg/Odometry'),
-            )
+            if i % every_odom == 0:
+                writer.write(
+                    odom,
+                    stamp + 2000,
+                    ser(
+                        _odometry(T, stamp, trace.odom_pose[i], trace.odom_twist[i]), 'nav_msgs/msg/Odometry'
+                    ),
+                )
+                writer.write(
+                    truth,
+                    stamp + 3000,
+                    ser(_odometry(T, stamp, trace.pose[i], trace.twist[i]), 'nav_msgs/msg/Odometry'),
+                )
             if i % every_bat == 0:
                 writer.write(
                     battery, stamp + 4000, ser(_battery(T, stamp, trace, i), 'sensor_msgs/msg/BatteryState')

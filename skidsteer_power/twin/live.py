@@ -1,0 +1,102 @@
+"""The twin as the live load of the simulated DES 70/10 amplifiers (``run --simulate``).
+
+Each simulated amplifier (``des/simulator.SimulatedDes``) integrates its own motor and asks its
+load for the torque at the motor shaft, ``load(omega_rad_s, t_s)``, from its own thread every
+0.5 ms. :class:`TwinCoupling` keeps the latest speed of both motors and advances the twin's body
+and terrain contact (``Twin.step_with_motor_speeds``) in wall-clock time whenever a step is due;
+each side's :class:`TwinLoad` returns the twin's axle torque of that side over the gear ratio plus
+the side's internal resistance (eqs. 7.1-7.4, Table 7.1), in the amplifier's sense of rotation.
+
+Approximation of the live path (docs/TWIN.md): the amplifier model's inertia already includes half
+the robot's mass reflected through the reduction, so the body's inertia is felt twice (there and
+through the soil); the offline ``simulate`` path integrates the motors inside the twin and has not
+this double count.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from skidsteer_power.twin.model import FRICTION_SMOOTHING_RAD_S, Twin
+
+MAX_CATCH_UP_STEPS = 50
+"""At most this many twin steps per load call; a stalled process does not replay the backlog."""
+
+
+class TwinCoupling:
+    """Advances ``twin`` in real time with the motor speeds the amplifiers report (thread-safe)."""
+
+    def __init__(self, twin: Twin) -> None:
+        self.twin = twin
+        self.omega_m = np.zeros(2)  # latest motor speeds, robot sense [rad/s]
+        self.axle_Nm = np.zeros(2)
+        self._t0: float | None = None
+        self._side_t = [math.nan, math.nan]  # each amplifier's latest time [s] (own clock)
+        self._lock = threading.Lock()
+        # encoder dead reckoning (what odom publishes): x, y [m], yaw [rad], V [m/s], yaw rate [rad/s]
+        self.odom = np.zeros(5)
+
+    def update(self, side: int, omega_m: float, t_s: float) -> float:
+        """Record side ``side``'s motor speed [rad/s] at time ``t_s`` [s]; return its axle torque [N m]."""
+        with self._lock:
+            self.omega_m[side] = omega_m
+            self._side_t[side] = t_s
+            now = min(self._side_t)  # both amplifiers have reported up to here (NaN until both have)
+            if math.isnan(now):
+                return float(self.axle_Nm[side])
+            if self._t0 is None:
+                self._t0 = now - self.twin.t
+            due = int((now - self._t0 - self.twin.t) / self.twin.dt)
+            for _ in range(min(max(due, 0), MAX_CATCH_UP_STEPS)):
+                self.axle_Nm = self.twin.step_with_motor_speeds(self.omega_m.copy())
+                self._dead_reckon()
+            if due > MAX_CATCH_UP_STEPS:
+                self._t0 = now - self.twin.t  # drop the backlog
+            return float(self.axle_Nm[side])
+
+    def _dead_reckon(self) -> None:
+        twin = self.twin
+        side = self.omega_m * twin.r / twin.G
+        speed, yaw_rate = side.mean(), (side[1] - side[0]) / twin.vehicle.tread_m
+        x, y, yaw = self.odom[:3]
+        self.odom[:] = (
+            x + twin.dt * speed * math.cos(yaw),
+            y + twin.dt * speed * math.sin(yaw),
+            yaw + twin.dt * yaw_rate,
+            speed,
+            yaw_rate,
+        )
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(true pose x, y, yaw; true hull twist v_x, v_y, yaw rate; odom x, y, yaw, V, yaw rate)."""
+        with self._lock:
+            return self.twin.pose.copy(), self.twin.vel.copy(), self.odom.copy()
+
+
+class TwinLoad:
+    """Load torque [N m] at one simulated motor shaft for ``SimulatedDes.set_load``.
+
+    T_load(w_m) = T_axle / G + b w_m + c tanh(w_m / w_s), robot sense, mapped into the amplifier's
+    sense by ``polarity`` (+1/-1, as the driver's parameter); T_axle from the twin.
+    """
+
+    def __init__(self, coupling: TwinCoupling, side: str, polarity: int) -> None:
+        self.coupling = coupling
+        self.index = 0 if side == 'left' else 1
+        pt = coupling.twin.powertrain
+        self.gear_ratio = pt.gear_ratio
+        self.resistance = pt.resistance(side).total
+        self.polarity = polarity
+
+    def robot_sense(self, omega_m: float, t_s: float) -> float:
+        """Load [N m] at motor speed ``omega_m`` [rad/s], both in the robot's forward-positive sense."""
+        axle = self.coupling.update(self.index, omega_m, t_s)
+        r = self.resistance
+        internal = r.viscous_Nm_s * omega_m + r.coulomb_Nm * math.tanh(omega_m / FRICTION_SMOOTHING_RAD_S)
+        return axle / self.gear_ratio + internal
+
+    def __call__(self, omega_rad_s: float, t_s: float) -> float:
+        return self.polarity * self.robot_sense(self.polarity * omega_rad_s, t_s)
