@@ -201,7 +201,7 @@ def test_segments_are_the_settled_moving_commands(tmp_path):
     """Synthetic ideal drive (bags/synthetic.py): odometry twist = command, so the measured motion of
     each segment is its command; stops are dropped, and each window starts settle_s after the change."""
     bag = tmp_path / 'ideal.mcap'
-    plan = [Segment(0.2, 0.0, 4.0), Segment(0.0, 0.0, 1.0), Segment(0.1, 0.2, 4.0), Segment(0.1, 0.2, 0.0)]
+    plan = [Segment(0.2, 0.0, 4.0), Segment(0.0, 0.0, 1.0), Segment(0.1, 0.2, 4.0)]
     write_drive_bag(bag, plan, rate_hz=50)
     segments, dropped = find_segments(read_recording(bag), SegmentOptions(settle_s=1.5))
     assert [s.command for s in segments] == [(0.2, 0.0), (0.1, 0.2)]
@@ -221,3 +221,43 @@ def test_a_parameter_the_others_explain_is_not_selected():
     assert picked == ['a', 'c'] or picked == ['b', 'c']
     assert unexplained['d'] < 1e-3
     assert min(unexplained['a'], unexplained['b']) < 1e-9
+
+
+def test_internal_resistance_of_the_bundled_track_bag(tmp_path):
+    """The bundled twin bag of the tracked robot (bags/README.md) was driven with the Table 7.1
+    drivetrain, whose Coulomb terms sum per side to 0.0617 + 0.0177 + 0.0448 + 0.6489 = 0.7731 N m
+    (left) and 0.0499 + 0.0248 + 0.0497 + 0.6314 = 0.7558 N m (right). The fit of ``internal`` finds
+    them within 1 % (the rest is the twin-vs-FESS difference of the small terrain torque) and writes a
+    powertrain file that loads as a preset."""
+    from skidsteer_power.powertrain import Powertrain
+
+    bag = Path(__file__).resolve().parents[1] / 'bags' / 'test_robot_track_sand_bin.mcap'
+    out, pt_out = tmp_path / 't.yaml', tmp_path / 'pt.yaml'
+    code, stdout, err = run_cli(
+        [
+            'calibrate',
+            str(bag),
+            '--vehicle',
+            'test_robot_track',
+            '--terrain',
+            'sand_bin',
+            '--fit',
+            'phi,internal',
+            '--out-terrain',
+            str(out),
+            '--out-powertrain',
+            str(pt_out),
+            '--json',
+        ]
+    )
+    assert code == 0, err
+    params = json.loads(stdout)['parameters']
+    assert params['left_c']['value'] == pytest.approx(0.7731, rel=0.01)
+    assert params['right_c']['value'] == pytest.approx(0.7558, rel=0.01)
+    powertrain = Powertrain.from_config({'preset': str(pt_out)}, 'track')
+    assert powertrain.left.total.coulomb_Nm == pytest.approx(params['left_c']['value'], rel=1e-9)
+    assert set(powertrain.left.components) == {'motor', 'gear_train', 'roller_chain', 'track'}
+    block = yaml.safe_load(pt_out.read_text())['calibration']
+    assert 'left_c' in block['parameters'] and len(block['covariance']) == len(block['parameters'])
+    terrain_block = yaml.safe_load(out.read_text())['calibration']
+    assert 'left_c' in terrain_block['powertrain_parameters']
