@@ -28,8 +28,3 @@ $BIN/skidsteer-power replay "$BAG" --topics /cmd_vel --wait-for-subscribers 30 >
 sleep 1
 kill -INT "$rec"; wait "$rec"
 $BIN/skidsteer-power validate "$LIVE" --vehicle "$VEHICLE" --terrain sand_bin --report "$OUT/report"
-# Calibration (issue 15): fit the terrain to the bag's own steady segments, starting from the terrain
-# validated above; prints the parameters with 95 % intervals and the hold-out error before -> after.
-$BIN/skidsteer-power calibrate "$BAG" --vehicle "$VEHICLE" --terrain sand_bin \
-    --out-terrain "$OUT/calibrated_terrain.yaml" --plot "$OUT/report/calibration.png" \
-    || echo "calibration: not possible on $BAG (see the error above)"
