@@ -7,7 +7,8 @@ differences of n, phi and ln kphi, ln c, ln K). The twin (``skidsteer_power.twin
 the maps, so the fit meets a model it does not contain, as on a real robot.
 
 Figures: calibration time (fresh: bag reading, segment cutting, every FESS solve; no cache), hold-out
-energy error before/after, and per fitted parameter over 20 seeds: the coverage of its 95 % interval
+energy error before/after, the online adaptation on a sand -> loam patch, time-to-empty bounds in
+drain runs, and per fitted parameter over 20 seeds: the coverage of its 95 % interval
 (of the truth, and of the "pseudo-true" value = the mean fit over the seeds, which is what FESS can
 reach of the twin), and the bias of the mean fit from the truth (the twin-vs-FESS model difference).
 ``python -m benchmarks.run calibration``; the coverage part alone takes several minutes.
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.harness import Report
-from skidsteer_power.bags.synthetic import table_7_3_segments
+from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, run_commands, write_bag
@@ -141,7 +142,111 @@ def _coverage(report: Report, folder: Path) -> None:
         )
 
 
+def _core(vehicle, terrain, battery=None):
+    from skidsteer_power.calibration.direct import DirectFessMap
+    from skidsteer_power.estimator.core import EstimatorCore
+    from skidsteer_power.estimator.prediction import MapPredictor
+    from skidsteer_power.powertrain import Battery, Powertrain
+
+    pt = Powertrain.for_vehicle(vehicle)
+    battery = battery or Battery.from_config(pt.battery)
+    return EstimatorCore(MapPredictor(DirectFessMap(vehicle, terrain), pt), battery, pt)
+
+
+def _replay(core, trace, tick_every: int = 25) -> list[float]:
+    """Feed a twin trace to ``core`` (command, then joint_states per sample); times of terrain flags."""
+    flags = []
+    for i in range(trace.t.size):
+        now = float(trace.t[i])
+        core.on_command(float(trace.cmd[i, 0]), float(trace.cmd[i, 1]), now)
+        before = core.adaptation.terrain_changes
+        names = ('left_motor', 'right_motor')
+        core.on_joint_state(names, trace.joint_velocity_rad_s[i], trace.joint_effort_Nm[i], now)
+        if core.adaptation.terrain_changes > before:
+            flags.append(now)
+        if i % tick_every == 0:
+            core.tick(now)
+    return flags
+
+
+def _adaptation(report: Report) -> None:
+    """Sand -> loam patch 2 m ahead (twin), estimator on dry sand: delay of the first flag after the
+    front wheels reach the patch, and the corrected vs uncorrected torque error on loam."""
+    from skidsteer_power.twin.terrain_field import Patch
+
+    vehicle = load_vehicle(VEHICLE)
+    loam = Patch(PRESETS['sandy_loam'], np.array([[2.0, -5.0], [60.0, -5.0], [60.0, 5.0], [2.0, 5.0]]))
+    twin = Twin(vehicle, PRESETS['dry_sand'], patches=[loam], seed=2)
+    trace = run_commands(twin, [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 12.0)])
+    core = _core(vehicle, PRESETS['dry_sand'])
+    flags = _replay(core, trace, tick_every=1000)
+    front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
+    onset = float(trace.t[np.argmax(front >= 2.0)])
+    before = [t for t in flags if t < onset]
+    delay = (min(t for t in flags if t >= onset) - onset) if any(t >= onset for t in flags) else math.inf
+    report.figure('terrain change sand -> loam flagged after', delay, 's', goal='<= 5 s', met=delay <= 5.0)
+    report.figure('false terrain-change flags before the patch', len(before), '', goal='0', met=not before)
+    report.figure(
+        'terrain-change flags on the patch edge', len(flags) - len(before), '', note='one per wheel pair'
+    )
+    last = trace.t >= trace.t[-1] - 2.0
+    measured = trace.joint_effort_Nm[last].mean(axis=0)
+    corrected = np.array(core.corrected_torque_Nm())
+    raw = np.array(core.prediction.motor_torque_Nm)
+    report.figure(
+        'motor torque error on loam, corrected',
+        100 * float(np.max(np.abs(corrected / measured - 1))),
+        '%',
+        note=f'uncorrected {100 * float(np.max(np.abs(raw / measured - 1))):.1f} %',
+    )
+
+
+def _drain(report: Report) -> None:
+    """Drain runs (twin, sandy loam, a varied command pattern) from a nearly empty battery: whether the
+    estimator's p10/p90 time to empty, at every 4 s after the first 12 s, contain the actual one."""
+    from skidsteer_power.estimator.tte_bounds import BoundSettings, TimeToEmptyBounds
+    from skidsteer_power.powertrain import Battery, Powertrain
+
+    vehicle = load_vehicle(VEHICLE)
+    pt = Powertrain.for_vehicle(vehicle)
+    pattern = [Segment(0.2, 0.0, 4.0), Segment(0.1, 0.2, 4.0), Segment(0.2, 0.3, 3.0), Segment(0.0, 0.0, 1.0)]
+    inside = total = 0
+    widths = []
+    for seed, soc0 in ((5, 0.0015), (6, 0.002), (7, 0.003)):
+        twin = Twin(vehicle, PRESETS['sandy_loam'], seed=seed)
+        twin.battery = Battery.from_config(pt.battery, soc=soc0)
+        traces, empty_at = [], None
+        while empty_at is None:
+            for seg in pattern:
+                traces.append(run_commands(twin, [seg]))
+                if twin.battery.is_empty:
+                    empty_at = twin.t
+                    break
+        core = _core(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
+        core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))
+        for trace in traces:
+            _replay(core, trace)
+            now = float(trace.t[-1])
+            if now >= 12.0 and empty_at - now > 2.0:
+                core.tick(now)
+                total += 1
+                actual = empty_at - now
+                inside += core.time_to_empty_p10_s <= actual <= core.time_to_empty_p90_s
+                widths.append((core.time_to_empty_p90_s - core.time_to_empty_p10_s) / actual)
+    report.figure(
+        'drain runs: actual time to empty within p10..p90',
+        100 * inside / total,
+        '%',
+        goal='>= 80 %',
+        met=inside / total >= 0.8,
+        note=f'{inside} of {total} checks in 3 runs; median band width '
+        f'{100 * float(np.median(widths)):.0f} % of actual',
+    )
+
+
 def run(report: Report) -> None:
+    _adaptation(report)
+    _drain(report)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         _main(report, folder)

@@ -8,12 +8,12 @@ real rclpy and DDS.
 from __future__ import annotations
 
 import math
-import types
 
 import numpy as np
 import pytest
 
 from skidsteer_power.bags.synthetic import Segment
+from skidsteer_power.calibration.direct import DirectFessMap
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.core import EstimatorCore
 from skidsteer_power.estimator.prediction import MapPredictor
@@ -84,29 +84,9 @@ def test_bad_settings_are_config_errors():
 
 
 # --- the twin: a sand -> loam patch -------------------------------------------------------------
-class FessMap:
-    """A 'map' that answers every query with a direct FESS solve (no map to build in a test)."""
-
-    def __init__(self, vehicle, terrain) -> None:
-        from skidsteer_power.models.fess import FessSolver
-
-        self.solver = FessSolver(vehicle, terrain)
-
-    def query(self, speed, yaw_rate):
-        sol = self.solver.solve_twist(speed, yaw_rate)
-        return types.SimpleNamespace(
-            omega_left_rad_s=sol.omega[0, 0],
-            omega_right_rad_s=sol.omega[0, 1],
-            torque_left_Nm=sol.torque[0, 0],
-            torque_right_Nm=sol.torque[0, 1],
-            traction_margin=sol.traction_margin[0],
-            clamped=False,
-        )
-
-
 def core_on(vehicle, terrain, battery=None) -> EstimatorCore:
     pt = Powertrain.for_vehicle(vehicle)
-    predictor = MapPredictor(FessMap(vehicle, terrain), pt)
+    predictor = MapPredictor(DirectFessMap(vehicle, terrain), pt)
     return EstimatorCore(predictor, battery or Battery.from_config(pt.battery), pt)
 
 
