@@ -11,7 +11,8 @@ from __future__ import annotations
 import time
 
 from benchmarks.harness import Report
-from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
+from skidsteer_power.bags.synthetic import table_7_3_segments
+from skidsteer_power.commands import Segment
 from skidsteer_power.terramechanics import load_terrain
 from skidsteer_power.twin import Twin, run_commands
 from skidsteer_power.vehicle import load_vehicle
@@ -25,14 +26,14 @@ def _commands(seconds: float) -> list[Segment]:
         if total >= seconds:
             break
         out.append(segment)
-        total += segment.duration
+        total += segment.duration_s
     return out
 
 
 def run(report: Report) -> None:
     terrain = load_terrain('sand_bin')
     commands = _commands(20.0)
-    simulated = sum(s.duration for s in commands)
+    simulated = sum(s.duration_s for s in commands)
     for name in ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'):
         for dt in (2e-3, 1e-3):
             twin = Twin(load_vehicle(name), terrain, dt=dt)

@@ -170,8 +170,8 @@ def write_command_csv(path: str | Path, segments: Sequence[Segment]) -> Path:
     lines = ['t_s,speed_m_s,yaw_rate_rad_s']
     t = 0.0
     for s in segments:
-        lines.append(f'{t:.6g},{s.speed:.6g},{s.yaw_rate:.6g}')
-        t += s.duration
+        lines.append(f'{t:.6g},{s.speed_m_s:.6g},{s.yaw_rate_rad_s:.6g}')
+        t += s.duration_s
     lines.append(f'{t:.6g},0,0')
     Path(path).write_text('\n'.join(lines) + '\n', encoding='utf-8')
     return Path(path)

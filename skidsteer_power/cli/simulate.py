@@ -59,7 +59,8 @@ def run_simulate_cmd(args: argparse.Namespace) -> int:
 
         commands = sensors.commands_from_route(resolve_route(args.route, args.speed))
     twin = Twin(vehicle, terrain, patches=patches, seed=args.seed)
-    trace = run_commands(twin, [Segment(0.0, 0.0, args.lead_in), *commands])
+    lead_in = [Segment(0.0, 0.0, args.lead_in)] if args.lead_in > 0 else []
+    trace = run_commands(twin, [*lead_in, *commands])
     write_bag(trace, output)
     payload = trace.summary(vehicle.tread_m)
     emit(payload if args.json else {**payload, 'output': str(output)}, args.json)

@@ -11,14 +11,14 @@ Stable API (used by the calibration helper and the CLI)::
                                                        # /ground_truth/odom /battery/measured
     trace.summary() -> {duration_s, messages, energy_J, distance_m, max_sinkage_m, stuck}
 
-``Segment`` is :class:`skidsteer_power.bags.synthetic.Segment`; patches come from
-:func:`load_patches` (YAML polygons). Physics: ``twin/model.py``; sensors: ``twin/sensors.py``;
-agreement with and departures from the steady models: docs/TWIN.md.
+``Segment`` is :class:`skidsteer_power.commands.Segment` (speed_m_s, yaw_rate_rad_s, duration_s);
+patches come from :func:`load_patches` (YAML polygons). Physics: ``twin/model.py``; sensors:
+``twin/sensors.py``; agreement with and departures from the steady models: docs/TWIN.md.
 """
 
 from __future__ import annotations
 
-from skidsteer_power.bags.synthetic import Segment
+from skidsteer_power.commands import Segment
 from skidsteer_power.twin.model import Twin
 from skidsteer_power.twin.sensors import (
     TwinTrace,

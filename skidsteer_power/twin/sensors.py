@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags.synthetic import NS, START_NS, Segment
+from skidsteer_power.bags.synthetic import NS, START_NS
 from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.twin.model import Twin
 
@@ -150,10 +151,8 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
 
     sample()
     for segment in commands:
-        if not (math.isfinite(segment.speed) and math.isfinite(segment.yaw_rate)) or segment.duration < 0:
-            raise InputError(f'bad command {segment}: speed and yaw rate must be finite, duration >= 0')
-        twin.set_command(segment.speed, segment.yaw_rate)
-        for _ in range(round(segment.duration / twin.dt)):
+        twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
+        for _ in range(round(segment.duration_s / twin.dt)):
             twin._step()
             current_sum = current_sum + twin.last.current_A
             bus_sum += twin.bus_current_A
@@ -270,8 +269,8 @@ def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     times = np.array([r[0] for r in rows])
     if np.any(np.diff(times) < 0) or times[0] < 0:
         raise InputError(f'{file}: t_s must start >= 0 and not decrease')
-    segments = [Segment(0.0, 0.0, times[0])] if times[0] > 0 else []
-    segments += [Segment(a[1], a[2], b[0] - a[0]) for a, b in itertools.pairwise(rows)]
+    segments = [Segment(0.0, 0.0, float(times[0]))] if times[0] > 0 else []
+    segments += [Segment(a[1], a[2], b[0] - a[0]) for a, b in itertools.pairwise(rows) if b[0] > a[0]]
     return segments
 
 
@@ -291,6 +290,8 @@ def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> 
     ends = np.append(t[1:], t[-1] + COMMAND_TIMEOUT_S)
     for start, end, (speed, yaw) in zip(t, ends, values, strict=True):
         held = min(end - start, COMMAND_TIMEOUT_S)
+        if held <= 0:  # a later message with the same stamp replaces this one
+            continue
         segments.append(Segment(float(speed), float(yaw), float(held)))
         if end - start > held:
             segments.append(Segment(0.0, 0.0, float(end - start - held)))
@@ -299,11 +300,7 @@ def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> 
 
 def commands_from_route(route: object) -> list[Segment]:
     """A mission route (``missions.routes.Route``) as (V, yaw rate = V / R, duration) holds, then 1 s stop."""
-    segments = [
-        Segment(s.speed_m_s, 0.0 if not s.is_turning else s.speed_m_s / s.turn_radius_m, s.duration)
-        for s in route.segments  # type: ignore[attr-defined]
-    ]
-    return [*segments, Segment(0.0, 0.0, 1.0)]
+    return [*route.segments, Segment(0.0, 0.0, 1.0)]  # type: ignore[attr-defined]
 
 
 # ---------------------------------------------------------------------------------------------
