@@ -27,6 +27,7 @@ import numpy as np
 from benchmarks.harness import Report
 from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
+from skidsteer_power.calibration.direct import feed_trace
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, run_commands, write_bag
 from skidsteer_power.vehicle import load_vehicle
@@ -153,22 +154,6 @@ def _core(vehicle, terrain, battery=None):
     return EstimatorCore(MapPredictor(DirectFessMap(vehicle, terrain), pt), battery, pt)
 
 
-def _replay(core, trace, tick_every: int = 25) -> list[float]:
-    """Feed a twin trace to ``core`` (command, then joint_states per sample); times of terrain flags."""
-    flags = []
-    for i in range(trace.t.size):
-        now = float(trace.t[i])
-        core.on_command(float(trace.cmd[i, 0]), float(trace.cmd[i, 1]), now)
-        before = core.adaptation.terrain_changes
-        names = ('left_motor', 'right_motor')
-        core.on_joint_state(names, trace.joint_velocity_rad_s[i], trace.joint_effort_Nm[i], now)
-        if core.adaptation.terrain_changes > before:
-            flags.append(now)
-        if i % tick_every == 0:
-            core.tick(now)
-    return flags
-
-
 def _adaptation(report: Report) -> None:
     """Sand -> loam patch 2 m ahead (twin), estimator on dry sand: delay of the first flag after the
     front wheels reach the patch, and the corrected vs uncorrected torque error on loam."""
@@ -179,7 +164,7 @@ def _adaptation(report: Report) -> None:
     twin = Twin(vehicle, PRESETS['dry_sand'], patches=[loam], seed=2)
     trace = run_commands(twin, [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 12.0)])
     core = _core(vehicle, PRESETS['dry_sand'])
-    flags = _replay(core, trace, tick_every=1000)
+    flags = feed_trace(core, trace, tick_every=1000)
     front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
     before = [t for t in flags if t < onset]
@@ -224,9 +209,10 @@ def _drain(report: Report) -> None:
                     break
         core = _core(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
         core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))
+        last = -math.inf
         for trace in traces:
-            _replay(core, trace)
-            now = float(trace.t[-1])
+            feed_trace(core, trace, after_s=last)
+            now = last = float(trace.t[-1])
             if now >= 12.0 and empty_at - now > 2.0:
                 core.tick(now)
                 total += 1

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from skidsteer_power.bags.synthetic import Segment
-from skidsteer_power.calibration.direct import DirectFessMap
+from skidsteer_power.calibration.direct import DirectFessMap, feed_trace
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.core import EstimatorCore
 from skidsteer_power.estimator.prediction import MapPredictor
@@ -90,22 +90,6 @@ def core_on(vehicle, terrain, battery=None) -> EstimatorCore:
     return EstimatorCore(predictor, battery or Battery.from_config(pt.battery), pt)
 
 
-def replay(core: EstimatorCore, trace, every_tick: int = 10) -> list[tuple[float, bool]]:
-    """Feed a twin trace to ``core`` as the node would (command, then joint_states, per sample)."""
-    flags = []
-    for i in range(trace.t.size):
-        now = float(trace.t[i])
-        core.on_command(float(trace.cmd[i, 0]), float(trace.cmd[i, 1]), now)
-        before = core.adaptation.terrain_changes
-        core.on_joint_state(
-            ('left_motor', 'right_motor'), trace.joint_velocity_rad_s[i], trace.joint_effort_Nm[i], now
-        )
-        flags.append((now, core.adaptation.terrain_changes > before))
-        if i % every_tick == 0:
-            core.tick(now)
-    return flags
-
-
 def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges():
     from skidsteer_power.twin import Twin, run_commands
     from skidsteer_power.twin.terrain_field import Patch
@@ -116,11 +100,10 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     plan = [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 10.0)]
     trace = run_commands(twin, plan)
     core = core_on(vehicle, PRESETS['dry_sand'])  # the estimator believes it is on dry sand
-    flags = replay(core, trace)
+    flagged = feed_trace(core, trace, tick_every=10)
     # the front wheels reach the patch when the CG is half a wheelbase plus a wheel radius short of it
     front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
-    flagged = [t for t, f in flags if f]
     assert flagged, 'the change to loam was never flagged'
     assert all(t >= onset for t in flagged), 'flagged before the robot reached the patch'
     assert flagged[0] - onset <= 5.0
@@ -172,8 +155,10 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     core = core_on(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
     core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))  # the method, on a short run
     checked = False
+    last = -math.inf
     for trace in traces:
-        replay(core, trace, every_tick=25)
+        feed_trace(core, trace, after_s=last)
+        last = float(trace.t[-1])
         if not checked and trace.t[-1] >= 13.0:  # three complete 4 s blocks of power
             now = float(trace.t[-1])
             core.tick(now)

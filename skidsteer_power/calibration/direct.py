@@ -1,4 +1,5 @@
-"""A stand-in for a power map that answers every query with a direct FESS solve (no map to build).
+"""Checking the estimator directly against the twin: a map stand-in answering each query with a FESS
+solve (no map to build), and feeding a twin trace to an estimator core.
 
 For checks of a calibrated terrain or of the online adaptation on a few commands, where building a
 16 x 101 map first would cost more than the solves: ``MapPredictor(DirectFessMap(vehicle, terrain),
@@ -8,6 +9,7 @@ predictor's cache answers repeated commands.
 
 from __future__ import annotations
 
+import math
 import types
 from typing import Any
 
@@ -30,3 +32,27 @@ class DirectFessMap:
             traction_margin=sol.traction_margin[0],
             clamped=not bool(sol.converged[0]),
         )
+
+
+def feed_trace(core: Any, trace: Any, *, tick_every: int = 25, after_s: float = -math.inf) -> list[float]:
+    """Feed a twin trace (``skidsteer_power.twin.TwinTrace``) to an ``EstimatorCore`` as the node
+    would: per sample the command, then joint_states; ``tick`` every ``tick_every`` samples.
+
+    Samples at or before ``after_s`` [s] are skipped: a trace of a run continued with another
+    ``run_commands`` call starts with a sample at the previous trace's last time, whose current
+    average is still empty. Returns the times [s] at which a terrain change was flagged.
+    """
+    names = ('left_motor', 'right_motor')
+    flags = []
+    for i in range(trace.t.size):
+        now = float(trace.t[i])
+        if now <= after_s:
+            continue
+        core.on_command(float(trace.cmd[i, 0]), float(trace.cmd[i, 1]), now)
+        before = core.adaptation.terrain_changes
+        core.on_joint_state(names, trace.joint_velocity_rad_s[i], trace.joint_effort_Nm[i], now)
+        if core.adaptation.terrain_changes > before:
+            flags.append(now)
+        if i % tick_every == 0:
+            core.tick(now)
+    return flags
