@@ -100,7 +100,7 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     plan = [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 10.0)]
     trace = run_commands(twin, plan)
     core = core_on(vehicle, PRESETS['dry_sand'])  # the estimator believes it is on dry sand
-    flagged = feed_trace(core, trace, tick_every=10)
+    flagged = feed_trace(core, trace)
     # the front wheels reach the patch when the CG is half a wheelbase plus a wheel radius short of it
     front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
@@ -133,7 +133,9 @@ def test_bounds_follow_the_documented_formula():
 
 def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     """The twin drives a varied Table 7.3 pattern from a nearly empty battery until it is empty; the
-    estimator (its own battery model, measured joint_states power) gives p10/p90 after 13 s."""
+    estimator (its own battery model, measured joint_states power) gives p10/p90 once a second
+    once three 4 s blocks of power are in: the twin's actual time to empty lies between them
+    at >= 80 % of those checks (the benchmark: 219 of 227 in three longer runs)."""
     from skidsteer_power.twin import Twin, run_commands
 
     vehicle = load_vehicle(VEHICLE)
@@ -143,30 +145,34 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     twin.battery = Battery.from_config(pt.battery, soc=soc0)
     pattern = [Segment(0.2, 0.0, 4.0), Segment(0.1, 0.2, 4.0), Segment(0.2, 0.3, 3.0), Segment(0.0, 0.0, 1.0)]
     traces, empty_at = [], None
-    for _ in range(40):
-        for seg in pattern:
-            traces.append(run_commands(twin, [seg]))
-            if twin.battery.is_empty:
-                empty_at = twin.t
+    while empty_at is None and len(traces) < 2000:
+        for (
+            seg
+        ) in pattern:  # in 0.2 s pieces (whole 50 Hz sample periods), so the empty moment is known to 0.2 s
+            for _ in range(round(seg.duration_s / 0.2)):
+                traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, 0.2)]))
+                if twin.battery.is_empty:
+                    empty_at = twin.t
+                    break
+            if empty_at is not None:
                 break
-        if empty_at is not None:
-            break
     assert empty_at is not None and empty_at > 20.0
     core = core_on(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
     core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))  # the method, on a short run
-    checked = False
+    results = []
     last = -math.inf
     for trace in traces:
         feed_trace(core, trace, after_s=last)
-        last = float(trace.t[-1])
-        if not checked and trace.t[-1] >= 13.0:  # three complete 4 s blocks of power
-            now = float(trace.t[-1])
+        now = last = float(trace.t[-1])
+        if (
+            now >= 12.0 and empty_at - now > 2.0 and abs(now - round(now)) < 1e-6
+        ):  # once a second  # three complete 4 s blocks of power; not at the end
             core.tick(now)
-            actual = empty_at - now
-            assert core.time_to_empty_p10_s <= actual <= core.time_to_empty_p90_s
+            results.append(core.time_to_empty_p10_s <= empty_at - now <= core.time_to_empty_p90_s)
             assert core.time_to_empty_p10_s <= core.time_to_empty_s <= core.time_to_empty_p90_s
-            checked = True
-    assert checked
+    print(f'p10 <= actual <= p90 at {sum(results)} of {len(results)} checks')
+    assert len(results) >= 5
+    assert sum(results) >= 0.8 * len(results)  # an 80 % band, checked at every segment's end
 
 
 def test_correction_fields_are_named_with_units():

@@ -34,16 +34,21 @@ class DirectFessMap:
         )
 
 
-def feed_trace(core: Any, trace: Any, *, tick_every: int = 25, after_s: float = -math.inf) -> list[float]:
+def feed_trace(
+    core: Any, trace: Any, *, tick_period_s: float = 0.2, after_s: float = -math.inf
+) -> list[float]:
     """Feed a twin trace (``skidsteer_power.twin.TwinTrace``) to an ``EstimatorCore`` as the node
-    would: per sample the command, then joint_states; ``tick`` every ``tick_every`` samples.
+    would: per sample the command, then joint_states; ``tick`` whenever a multiple of
+    ``tick_period_s`` [s] is passed (the node's publish timer, default 0.2 s).
 
     Samples at or before ``after_s`` [s] are skipped: a trace of a run continued with another
     ``run_commands`` call starts with a sample at the previous trace's last time, whose current
-    average is still empty. Returns the times [s] at which a terrain change was flagged.
+    average is still empty; pass that time. Returns the times [s] at which a terrain change was
+    flagged.
     """
     names = ('left_motor', 'right_motor')
     flags = []
+    previous = after_s
     for i in range(trace.t.size):
         now = float(trace.t[i])
         if now <= after_s:
@@ -53,6 +58,9 @@ def feed_trace(core: Any, trace: Any, *, tick_every: int = 25, after_s: float = 
         core.on_joint_state(names, trace.joint_velocity_rad_s[i], trace.joint_effort_Nm[i], now)
         if core.adaptation.terrain_changes > before:
             flags.append(now)
-        if i % tick_every == 0:
+        if not math.isfinite(previous) or math.floor(now / tick_period_s) > math.floor(
+            previous / tick_period_s
+        ):
             core.tick(now)
+        previous = now
     return flags
