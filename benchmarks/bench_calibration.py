@@ -143,6 +143,62 @@ def _coverage(report: Report, folder: Path) -> None:
         )
 
 
+def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
+    """A bag whose torques are FESS at ``truth`` plus white current noise (0.02 N m per sample): the
+    model the fit uses, so its intervals can be checked without model error."""
+    from skidsteer_power.bags.synthetic import write_drive_bag
+    from skidsteer_power.models.fess import FessSolver
+    from skidsteer_power.powertrain import Powertrain
+
+    vehicle = load_vehicle(VEHICLE)
+    pt = Powertrain.for_vehicle(vehicle)
+    rng = np.random.default_rng(seed)
+
+    def motors(samples):
+        key = np.round(np.c_[samples.speed, samples.yaw_rate], 9)
+        unique, inverse = np.unique(key, axis=0, return_inverse=True)
+        sol = FessSolver(vehicle, truth).solve_twist(unique[:, 0], unique[:, 1])
+        omega, torque = np.zeros((key.shape[0], 2)), np.zeros((key.shape[0], 2))
+        for i, side in enumerate(('left', 'right')):
+            point = pt.motor_side(side, sol.torque[:, i], sol.omega[:, i])
+            omega[:, i] = point.motor_omega_rad_s[inverse.ravel()]
+            torque[:, i] = np.where(omega[:, i] != 0, point.motor_torque_Nm[inverse.ravel()], 0.0)
+        torque += rng.normal(0.0, 0.02, torque.shape)
+        return omega[:, 0], omega[:, 1], torque[:, 0], torque[:, 1]
+
+    write_drive_bag(
+        path,
+        table_7_3_drive(4.0, 0.8, 1),
+        rate_hz=50,
+        tread_m=vehicle.tread_m,
+        drive_radius_m=vehicle.drive_radius_m,
+        motors=motors,
+    )
+
+
+def _coverage_fess(report: Report, folder: Path) -> None:
+    """CI coverage without model error: bags from FESS itself at a truth that differs from the start
+    (dry sand) only in n, phi and K, so the fixed parameters are right and only noise remains."""
+    start = PRESETS['dry_sand']
+    truth = dataclasses.replace(start, name='fess_truth', n=0.95, phi=math.radians(33.0), K=0.018)
+    hits: dict[str, list[bool]] = {}
+    for seed in range(COVERAGE_RUNS):
+        bag = folder / f'fess{seed}.mcap'
+        _fess_bag(bag, truth, seed)
+        result, _ = calibrate_bags([str(bag)], VEHICLE, 'dry_sand', holdout=0.0)
+        for name in result.names:
+            value = getattr(truth, name) / (math.pi / 180 if name == 'phi' else 1.0)
+            lo, hi = result.ci95[name]
+            hits.setdefault(name, []).append(lo <= value <= hi)
+    for name, rows in hits.items():
+        report.figure(
+            f'{name}: 95 % CI coverage, FESS-made bags (no model error), {len(rows)} runs',
+            100 * float(np.mean(rows)),
+            '%',
+            note='the interval arithmetic itself (goal ~95 %)',
+        )
+
+
 def _core(vehicle, terrain, battery=None):
     from skidsteer_power.calibration.direct import DirectFessMap
     from skidsteer_power.estimator.core import EstimatorCore
@@ -245,3 +301,4 @@ def run(report: Report) -> None:
         folder = Path(tmp)
         _main(report, folder)
         _coverage(report, folder)
+        _coverage_fess(report, folder)
