@@ -7,8 +7,8 @@ its identity, so every output is matched to its input:
 
 * cmd_vel is TwistStamped (``cmd_vel_stamped``) whose stamp is the send time; power/predicted copies
   the stamp, so latency = receive time - stamp;
-* joint_states carry a sequence number in the left motor speed (k x 0.1 rad/s); power/summary
-  echoes it as ``measured_speed_left_rad_s``.
+* joint_states carry a sequence number in the left motor speed (k x 0.1 rad/s); power/measured
+  echoes it as its ``left_motor`` velocity.
 
 "Lost" counts inputs with no matching output (loss anywhere on the way counts). Latency includes
 DDS both ways and the receiver's Python path, so it is an upper bound for the node alone. On this
@@ -72,7 +72,6 @@ class Load:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
 
         self.context = Context()
         rclpy.init(context=self.context)
@@ -88,22 +87,16 @@ class Load:
         if receive:
             self.subs = [
                 self.node.create_subscription(JointState, 'power/predicted', self._on_predicted, qos),
-                self.node.create_subscription(Float64MultiArray, 'power/summary', self._on_summary, qos),
+                self.node.create_subscription(JointState, 'power/measured', self._on_measured, qos),
             ]
         self._msg_types = (TwistStamped, JointState)
-        self._speed_index: int | None = None
 
     def _on_predicted(self, msg) -> None:
         sent = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         self.predicted_latency.append(time.time() - sent)
 
-    def _on_summary(self, msg) -> None:
-        now = time.time()
-        if self._speed_index is None:
-            self._speed_index = msg.layout.dim[0].label.split(',').index('measured_speed_left_rad_s')
-        value = msg.data[self._speed_index]
-        if value == value:  # not NaN: a joint_states answer
-            self.joint_received.setdefault(round(value / 0.1), now)
+    def _on_measured(self, msg) -> None:
+        self.joint_received.setdefault(round(msg.velocity[0] / 0.1), time.time())
 
     def wait_connected(self, subscribers: int, timeout_s: float = 30.0) -> bool:
         """Wait until the node (and the receiver) subscribe to the inputs."""
@@ -203,7 +196,8 @@ def _sustained(report: Report, load: Load) -> None:
                   met=lost_cmd == 0, note=f'of {n}')  # fmt: skip
     report.figure('joint_states lost at 1 kHz (+1 kHz cmd_vel)', lost_joint, 'msgs', goal='0',
                   met=lost_joint == 0, note=f'of {n}')  # fmt: skip
-    for name, values in (('cmd_vel -> power/predicted', predicted), ('joint_states -> power/summary', joint)):
+    pairs = (('cmd_vel -> power/predicted', predicted), ('joint_states -> power/measured', joint))
+    for name, values in pairs:
         if values:
             p99 = float(np.percentile(values, 99)) * 1e3
             report.figure(f'{name} p99 latency', p99, 'ms', goal='< 2 ms', met=p99 < 2.0,

@@ -29,13 +29,13 @@ import hashlib
 import json
 import math
 import os
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
 
 GRAVITY_M_S2 = 9.81  # [m/s^2], the value used throughout the dissertation
@@ -215,36 +215,17 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
 
 
 def vehicle_dirs() -> list[Path]:
-    """Directories searched for vehicle names: the source tree, then the installed share folder."""
-    package_root = Path(__file__).resolve().parent.parent
-    return [
-        package_root / 'config' / 'vehicles',
-        Path(sys.prefix) / 'share' / 'skidsteer_power' / 'config' / 'vehicles',
-    ]
+    """Folders searched for vehicle names (:func:`skidsteer_power.resources.config_dirs`)."""
+    return resources.config_dirs('vehicles')
 
 
 def available_vehicles() -> list[str]:
     """Names of the shipped vehicle files (without .yaml)."""
-    names: set[str] = set()
-    for folder in vehicle_dirs():
-        if folder.is_dir():
-            names.update(p.stem for p in folder.glob('*.yaml'))
-    return sorted(names)
+    return sorted(resources.shipped('vehicles'))
 
 
 def _resolve(path_or_name: str | os.PathLike[str]) -> Path:
-    candidate = Path(path_or_name)
-    if candidate.is_file():
-        return candidate
-    text = str(path_or_name)
-    if os.sep not in text and '/' not in text:
-        stem = text[:-5] if text.endswith('.yaml') else text
-        for folder in vehicle_dirs():
-            found = folder / f'{stem}.yaml'
-            if found.is_file():
-                return found
-    known = ', '.join(available_vehicles()) or 'none found'
-    raise ConfigError(f'vehicle {text!r}: no such file or shipped vehicle (shipped: {known})')
+    return resources.find('vehicles', path_or_name)
 
 
 def load_vehicle(path_or_name: str | os.PathLike[str] | Vehicle) -> Vehicle:

@@ -20,7 +20,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64
 from test_estimator_core import FixedPowerPredictor
 
 from skidsteer_power.nodes.power_estimator import PowerEstimator
@@ -39,7 +39,7 @@ class Rig:
         self.received: dict[str, list] = {}
         for topic, kind in (
             ('power/predicted', JointState),
-            ('power/summary', Float64MultiArray),
+            ('power/summary', DiagnosticArray),
             ('battery/state', BatteryState),
             ('energy/remaining_wh', Float64),
             ('energy/time_to_empty_s', Float64),
@@ -103,7 +103,7 @@ class Rig:
             if t > start_s + limit_s:
                 raise AssertionError('condition not met within the simulated time limit')
             self.set_clock(t)
-            for _ in range(3):
+            for _ in range(8):  # every output of a timer tick (~6 topics) reaches the probe
                 self.executor.spin_once(timeout_sec=0.002)
             t += step_s
         return t

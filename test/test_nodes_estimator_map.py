@@ -13,7 +13,7 @@ from rclpy.parameter import Parameter
 from test_nodes_estimator import Rig
 
 from skidsteer_power.estimator.factory import map_predictor
-from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_from_arrays
+from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_from_key_values
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 from skidsteer_power.vehicle import load_vehicle
 
@@ -39,16 +39,24 @@ def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
 def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate):
     """Forward, reverse, spin in place and a right turn all answer at once with the map's values."""
     rig.command(speed, yaw_rate)
-    rig.spin_until(lambda: rig.received['power/predicted'] and rig.received['power/summary'])
+    rig.received['power/summary'].clear()
+
+    def summaries() -> list[dict[str, float]]:
+        return [
+            summary_from_key_values((kv.key, kv.value) for kv in m.status[0].values)
+            for m in rig.received['power/summary']
+        ]
+
+    rig.spin_until(
+        lambda: rig.received['power/predicted'] and any(s['speed_cmd_m_s'] == speed for s in summaries())
+    )
     msg = rig.received['power/predicted'][-1]
     p = expected(cache_dir, 'dry_sand', speed, yaw_rate)
     assert list(msg.name) == ['left_motor', 'right_motor', 'left_axle', 'right_axle']
     assert list(msg.velocity) == pytest.approx([*p.motor_omega_rad_s, *p.axle_omega_rad_s])
     assert list(msg.effort) == pytest.approx([*p.motor_torque_Nm, *p.terrain_torque_Nm])
-    summary_msg = rig.received['power/summary'][-1]
-    assert [d.label for d in summary_msg.layout.dim] == [','.join(SUMMARY_FIELDS)]
-    assert summary_msg.layout.dim[0].size == len(summary_msg.data) == len(SUMMARY_FIELDS)
-    summary = summary_from_arrays([d.label for d in summary_msg.layout.dim], summary_msg.data)
+    summary = next(s for s in summaries() if s['speed_cmd_m_s'] == speed)
+    assert tuple(summary) == SUMMARY_FIELDS
     assert summary['speed_cmd_m_s'] == speed and summary['yaw_rate_cmd_rad_s'] == yaw_rate
     assert summary['predicted_battery_W'] == pytest.approx(p.bus_total_W)
     assert summary['terrain_W'] == pytest.approx(p.terrain_total_W)

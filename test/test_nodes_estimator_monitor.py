@@ -17,9 +17,9 @@ from rclpy.parameter import Parameter
 from rich.console import Console
 
 from skidsteer_power.commands import Segment
-from skidsteer_power.estimator.monitor import CaseProfile, render
 from skidsteer_power.nodes.energy_monitor import EnergyMonitor, KeyReader, build_parser, profile_from_args
 from skidsteer_power.nodes.power_estimator import PowerEstimator
+from skidsteer_power.ui.monitor import CaseProfile, render
 
 
 @pytest.fixture
@@ -119,3 +119,41 @@ def test_command_line_profiles(tmp_path):
     (tmp_path / 'c.csv').write_text('duration_s,speed_m_s,yaw_rate_rad_s\n2,0.1,0\n')
     args = build_parser().parse_args(['--mode', 'case', '--case-file', str(tmp_path / 'c.csv')])
     assert profile_from_args(args).duration_s == 2.0
+
+
+def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tmp_path, ros_context):
+    """The header and the CSV show the command on cmd_vel, whoever sends it (was: always +0.00 in view
+    mode); when the suite stops, what is left on screen is marked stale."""
+    namespace, estimator, executor, add = graph
+    frames: list[str] = []
+
+    def draw(view):
+        console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
+        console.print(render(view))
+        frames.append(console.export_text())
+
+    monitor = add(
+        EnergyMonitor('view', csv_path=tmp_path / 'shown.csv', on_frame=draw, refresh_hz=20.0,
+                      namespace=namespace, context=ros_context)
+    )  # fmt: skip
+    driver = add(rclpy.create_node('teleop', namespace=namespace, context=ros_context))
+    pub = driver.create_publisher(Twist, 'cmd_vel', 10)
+    twist = Twist()
+    twist.linear.x = 0.2
+
+    def shown_driving() -> bool:
+        pub.publish(twist)
+        command = 'command V +0.20 m/s, yaw rate +0.00 rad/s'
+        return any(command in f and f'{command} (stale)' not in f for f in frames)
+
+    spin_until(executor, shown_driving)
+    spin_until(executor, lambda: monitor.view.summary.get('speed_cmd_m_s') == 0.2)
+    executor.remove_node(estimator)  # the suite stops: no summary, battery or energy any more
+    spin_until(executor, lambda: frames and 'Battery (stale)' in frames[-1] and '(stale)' in frames[-1][:120])
+    last = frames[-1]
+    assert 'command V +0.20 m/s, yaw rate +0.00 rad/s (stale)' in last  # the last command seen, marked
+    assert 'predicted power [W] (stale)' in last and 'no data from the robot' in last
+    monitor.close()
+    with (tmp_path / 'shown.csv').open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert any(r['speed_cmd_m_s'] == '0.2' for r in rows)

@@ -49,7 +49,7 @@ def _installed_msg_text(msgtype: str) -> str:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
         share = Path(get_package_share_directory(package))
-    except (ImportError, PackageNotFoundError, LookupError):
+    except (ImportError, PackageNotFoundError, LookupError, OSError):  # OSError: AMENT_PREFIX_PATH unset
         share = Path(sys.prefix) / 'share' / package
     path = share / 'msg' / f'{name}.msg'
     if not path.exists():

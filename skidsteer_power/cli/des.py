@@ -87,7 +87,8 @@ def run_sim(args: argparse.Namespace) -> int:
     names = ['des_left', 'des_right'][: args.count]
     sims = [SimulatedDes(args.baud, name=n, emulate_baud=not args.no_baud_emulation) for n in names]
     done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    for signum in (signal.SIGINT, signal.SIGTERM):  # SIGINT too: a background job inherits it ignored
+        signal.signal(signum, lambda *_: done.set())
     try:
         for sim in sims:
             sim.start()

@@ -281,6 +281,15 @@ class EstimatorCore:
         self.energy.flush()
         return {'battery': self.battery.to_dict(), 'energy_J': dict(self.energy.energy_J)}
 
+    def reset_energy(self, battery: Any, now_s: float) -> None:
+        """A battery swap at ``now_s`` [s]: ``battery`` (a full one) replaces the old, the energy
+        tallies restart at 0 J; power drawn before ``now_s`` is charged to the old battery."""
+        self.energy.advance(now_s)
+        self.energy.flush()
+        self.energy.battery = battery
+        self.energy.energy_J.update(measured=0.0, predicted=0.0)
+        self.time_to_empty_s = self.energy.time_to_empty_s()
+
     def restore(self, state: dict[str, Any]) -> None:
         """Restore from :meth:`state_dict` output; ConfigError if it does not fit."""
         try:

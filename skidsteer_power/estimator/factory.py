@@ -5,8 +5,10 @@ Pure (no ROS): the node, the suite and tests share these, so a parameter means t
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
+from typing import Any
 
 from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
@@ -62,15 +64,30 @@ def map_predictor(
     return MapPredictor(power_map, powertrain_for(vehicle), description=description), built, str(where)
 
 
-def battery_message_fields(battery: Battery, power_W: float) -> dict[str, float]:
-    """sensor_msgs/BatteryState fields (V, A, Ah, fraction) for the battery under ``power_W`` [W].
+CURRENT_DEADBAND_A = 1e-3
+"""|current| [A] below which the battery is neither charging nor discharging."""
 
-    ``current`` follows the message's convention: negative while discharging.
+
+def battery_message_fields(battery: Battery, power_W: float) -> dict[str, Any]:
+    """sensor_msgs/BatteryState fields for the battery under ``power_W`` [W] (battery side).
+
+    The message's conventions: ``current`` [A] negative while discharging; voltage [V]; charge,
+    capacity, design_capacity [Ah]; percentage 0..1; NaN where nothing is measured (temperature,
+    per-cell voltages and temperatures, one NaN per cell in series); ``status`` is 'charging',
+    'discharging' or 'not_charging' from the current's sign (the node maps it to the message's
+    constants); ``chemistry`` is the battery file's.
     """
     state = battery.state
     config = battery.config
     capacity_Ah = config.capacity_C / SECONDS_PER_HOUR
     current = battery.current_for_power(power_W) if power_W != 0 else 0.0
+    if current > CURRENT_DEADBAND_A:
+        status = 'discharging'
+    elif current < -CURRENT_DEADBAND_A:
+        status = 'charging'
+    else:
+        status = 'not_charging'
+    cells = [math.nan] * int(config.cells_in_series)
     return {
         'voltage': float(config.ocv(state.soc) - config.resistance_ohm * current),
         'current': float(-current),
@@ -78,4 +95,10 @@ def battery_message_fields(battery: Battery, power_W: float) -> dict[str, float]
         'capacity': float(capacity_Ah),
         'design_capacity': float(capacity_Ah),
         'percentage': float(state.soc),
+        'temperature': math.nan,
+        'cell_voltage': cells,
+        'cell_temperature': list(cells),
+        'present': True,
+        'status': status,
+        'chemistry': config.chemistry,
     }

@@ -1,9 +1,10 @@
-"""The ``power/summary`` vector: named entries, SI units in the names, NaN where unknown.
+"""The estimator's named figures: SI units in the names, NaN where unknown.
 
-One flat list of floats in a one-dimensional layout whose single ``MultiArrayDimension`` has
-``size = stride = len(SUMMARY_FIELDS)`` and the entries' names, comma-separated, as its ``label``
-(:data:`SUMMARY_LABEL`); a subscriber reads it with :func:`summary_from_arrays` without knowing the
-order. (One dimension per entry was tried: it made each message 5x slower to publish, 26 vs 5 us.)
+Published two ways (docs/INTERFACES.md says why): the key figures as one ``std_msgs/Float64`` topic
+each, per input message (:data:`COMMAND_FIGURES` per cmd_vel, :data:`MEASUREMENT_FIGURES` per
+joint_states), so every plotting tool finds them by topic name; and all of :data:`SUMMARY_FIELDS`
+as the key/value pairs of ``power/summary`` (diagnostic_msgs/DiagnosticArray, one status), read
+back with :func:`summary_from_key_values`.
 
 Power entries per side are motor terminal (electrical) power [W]: measured = Kt*I*omega + R*I^2,
 predicted = the same for the predicted operating point. ``*_battery_W`` are both sides at the DC
@@ -15,7 +16,7 @@ bus (through the amplifiers), which is what the battery gives. ``error_*_W`` = m
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable
 from typing import Any
 
 from skidsteer_power.estimator.energy import SOURCES
@@ -59,7 +60,25 @@ SUMMARY_FIELDS: tuple[str, ...] = (
     'joint_states_stale',
 )
 
-SUMMARY_LABEL = ','.join(SUMMARY_FIELDS)
+SUMMARY_STATUS_NAME = 'power summary'
+"""``name`` of the one DiagnosticStatus in ``power/summary``."""
+
+COMMAND_FIGURES: tuple[tuple[str, str], ...] = (
+    ('power/predicted_left_w', 'predicted_left_W'),
+    ('power/predicted_right_w', 'predicted_right_W'),
+    ('power/predicted_battery_w', 'predicted_battery_W'),
+    ('power/terrain_w', 'terrain_W'),
+    ('power/internal_w', 'internal_W'),
+    ('power/traction_margin', 'traction_margin'),
+)
+"""(topic, summary field) published as std_msgs/Float64 on every accepted cmd_vel."""
+
+MEASUREMENT_FIGURES: tuple[tuple[str, str], ...] = (
+    ('power/measured_left_w', 'measured_left_W'),
+    ('power/measured_right_w', 'measured_right_W'),
+    ('power/measured_battery_w', 'measured_battery_W'),
+)
+"""(topic, summary field) published as std_msgs/Float64 on every accepted joint_states."""
 
 
 def _prediction_values(p: Any) -> dict[str, float]:
@@ -130,8 +149,30 @@ def summary_values(core: Any, now_s: float) -> list[float]:
     return [float(values[name]) for name in SUMMARY_FIELDS]
 
 
-def summary_from_arrays(labels: Sequence[str], data: Sequence[float]) -> dict[str, float]:
-    """Name -> value from a received summary: ``labels`` are its layout dimensions' labels (one
-    comma-separated label, or one label per entry)."""
-    names = labels[0].split(',') if len(labels) == 1 else list(labels)
-    return {name: float(value) for name, value in zip(names, data, strict=False)}
+def prediction_figures(prediction: Any) -> list[float]:
+    """:data:`COMMAND_FIGURES` values of a :class:`~skidsteer_power.estimator.prediction.Prediction`."""
+    values = _prediction_values(prediction)
+    return [float(values[field]) for _, field in COMMAND_FIGURES]
+
+
+def measurement_figures(comparison: Any) -> list[float]:
+    """:data:`MEASUREMENT_FIGURES` values of a :class:`~skidsteer_power.estimator.core.Comparison`."""
+    values = _measured_values(comparison)
+    return [float(values[field]) for _, field in MEASUREMENT_FIGURES]
+
+
+def summary_key_values(core: Any, now_s: float) -> list[tuple[str, str]]:
+    """(name, value text) for every :data:`SUMMARY_FIELDS` entry; ``repr``-exact floats, 'nan' if unknown."""
+    values = summary_dict(core, now_s)
+    return [(name, repr(float(values[name]))) for name in SUMMARY_FIELDS]
+
+
+def summary_from_key_values(pairs: Iterable[tuple[str, str]]) -> dict[str, float]:
+    """Name -> value from received (key, value) pairs; values that are not numbers are skipped."""
+    result: dict[str, float] = {}
+    for key, text in pairs:
+        try:
+            result[key] = float(text)
+        except ValueError:
+            continue
+    return result

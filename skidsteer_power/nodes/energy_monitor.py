@@ -9,10 +9,13 @@ Modes
           ``--speed/--yaw-rate/--duration``) is sent, then the robot is stopped and the monitor exits.
 ``view``  watch only; nothing is published.
 
-Subscribes ``power/summary``, ``joint_states``, ``battery/state``, ``energy/remaining_wh``,
-``energy/time_to_empty_s``; publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
-``--rate`` Hz in free and case mode. Every frame shown is appended to ``--csv`` (default
-``energy_monitor_<UTC time>.csv``). The drawing is :func:`skidsteer_power.estimator.monitor.render`.
+Subscribes ``cmd_vel`` (the command shown is the one on the topic, whoever sends it),
+``power/summary`` (diagnostic_msgs/DiagnosticArray, figures by name), ``joint_states``,
+``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s`` (all best effort, so they
+match any publisher); publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
+``--rate`` Hz in free and case mode. A source silent for :data:`~skidsteer_power.ui.monitor.STALE_AFTER_S`
+is greyed and marked stale. Every frame shown is appended to ``--csv`` (default
+``energy_monitor_<UTC time>.csv``). The drawing is :func:`skidsteer_power.ui.monitor.render`.
 """
 
 from __future__ import annotations
@@ -29,16 +32,21 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import BatteryState, JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError, SkidsteerError
-from skidsteer_power.estimator.monitor import (
+from skidsteer_power.estimator.summary import SUMMARY_STATUS_NAME, summary_from_key_values
+from skidsteer_power.powertrain import EC45
+from skidsteer_power.ui.monitor import (
+    STALE_AFTER_S,
     CaseProfile,
     CsvLog,
     FreeDrive,
@@ -48,8 +56,6 @@ from skidsteer_power.estimator.monitor import (
     load_case_csv,
     render,
 )
-from skidsteer_power.estimator.summary import summary_from_arrays
-from skidsteer_power.powertrain import EC45
 
 MODES = ('free', 'case', 'view')
 
@@ -113,13 +119,18 @@ class EnergyMonitor(Node):
         self.stamped = stamped
         self.done = False
         self._started = time.monotonic()
-        self._last_joint = -math.inf
+        self.last_heard = dict.fromkeys(('command', 'joint_states', 'summary', 'battery'), -math.inf)
+        self.target = (0.0, 0.0)
+        """What free/case mode sends [m/s, rad/s]; ``view.command`` is what is seen on cmd_vel."""
         self.csv = CsvLog(csv_path) if csv_path else None
-        self.create_subscription(Float64MultiArray, 'power/summary', self._on_summary, 10)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, 10)
-        self.create_subscription(BatteryState, 'battery/state', self._on_battery, 10)
-        self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, 10)
-        self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, 10)
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)  # matches any publisher
+        cmd_type = TwistStamped if stamped else Twist
+        self.create_subscription(cmd_type, 'cmd_vel', self._on_cmd_vel, qos)
+        self.create_subscription(DiagnosticArray, 'power/summary', self._on_summary, qos)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states, qos)
+        self.create_subscription(BatteryState, 'battery/state', self._on_battery, qos)
+        self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, qos)
+        self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, qos)
         if mode != 'view':
             self.pub_cmd = self.create_publisher(TwistStamped if stamped else Twist, 'cmd_vel', 10)
             self.create_timer(1.0 / rate_hz, self._on_drive_timer)
@@ -128,8 +139,19 @@ class EnergyMonitor(Node):
         self.create_timer(1.0 / refresh_hz, self._on_frame_timer)
 
     # --- inputs -------------------------------------------------------------------------------
-    def _on_summary(self, msg: Float64MultiArray) -> None:
-        self.view.summary = summary_from_arrays([d.label for d in msg.layout.dim], msg.data)
+    def _heard(self, source: str) -> None:
+        self.last_heard[source] = time.monotonic()
+
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        self.view.command = (float(twist.linear.x), float(twist.angular.z))
+        self._heard('command')
+
+    def _on_summary(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name == SUMMARY_STATUS_NAME:
+                self.view.summary = summary_from_key_values((kv.key, kv.value) for kv in status.values)
+                self._heard('summary')
 
     def _on_joint_states(self, msg: JointState) -> None:
         index = {name: i for i, name in enumerate(msg.name)}
@@ -141,16 +163,19 @@ class EnergyMonitor(Node):
         if len(msg.effort) > max(left, right):
             kt = EC45.torque_constant_Nm_A  # effort = Kt * I (DESIGN.md, des_driver)
             self.view.motor_current_A = (msg.effort[left] / kt, msg.effort[right] / kt)
-        self._last_joint = time.monotonic()
+        self._heard('joint_states')
 
     def _on_battery(self, msg: BatteryState) -> None:
         self.view.soc, self.view.voltage_V = msg.percentage, msg.voltage
+        self._heard('battery')
 
     def _on_remaining(self, msg: Float64) -> None:
         self.view.remaining_wh = msg.data
+        self._heard('battery')
 
     def _on_tte(self, msg: Float64) -> None:
         self.view.time_to_empty_s = msg.data
+        self._heard('battery')
 
     # --- driving ------------------------------------------------------------------------------
     def _on_drive_timer(self) -> None:
@@ -159,15 +184,15 @@ class EnergyMonitor(Node):
                 if key == 'quit':
                     self.done = True
                 else:
-                    self.view.command = self.drive.apply(self.view.command, key)
+                    self.target = self.drive.apply(self.target, key)
         if self.profile is not None:
             elapsed = time.monotonic() - self._started
             command = self.profile.command_at(elapsed)
             self.view.case_elapsed_s = min(elapsed, self.profile.duration_s)
             if command is None:
                 self.done = True
-            self.view.command = command or (0.0, 0.0)
-        self.publish_command(*(self.view.command if not self.done else (0.0, 0.0)))
+            self.target = command or (0.0, 0.0)
+        self.publish_command(*(self.target if not self.done else (0.0, 0.0)))
 
     def publish_command(self, speed_m_s: float, yaw_rate_rad_s: float) -> None:
         twist = Twist()
@@ -181,7 +206,9 @@ class EnergyMonitor(Node):
 
     # --- display ------------------------------------------------------------------------------
     def _on_frame_timer(self) -> None:
-        self.view.ready = time.monotonic() - self._last_joint < 1.0
+        now = time.monotonic()
+        self.view.stale = frozenset(k for k, t in self.last_heard.items() if now - t > STALE_AFTER_S)
+        self.view.ready = 'joint_states' not in self.view.stale
         if self.csv is not None:
             self.csv.write([csv_row(self.view, time.monotonic() - self._started)])
         if self.on_frame is not None:

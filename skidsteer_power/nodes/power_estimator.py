@@ -4,29 +4,47 @@ A thin rclpy shell around :class:`skidsteer_power.estimator.EstimatorCore` (all 
 
 Topics (names are defaults; remap freely)
 ----------------------------------------
-subscribes
+subscribes (best-effort by default, so reliable AND best-effort publishers both match; see QoS)
     ``cmd_vel``  geometry_msgs/Twist (or TwistStamped with ``cmd_vel_stamped: true``):
                  linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
     ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
                  velocity = motor shaft speed [rad/s], effort = Kt * I [N m]
-publishes (at once, per cmd_vel)
+publishes per cmd_vel
     ``power/predicted`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` (motor shaft: velocity
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
-                 terrain needs [N m])
-    ``power/summary`` std_msgs/Float64MultiArray, 1-D; its layout dimension's label lists the entries'
-                 names, comma-separated (:mod:`skidsteer_power.estimator.summary`; units in the
-                 names). Also sent per joint_states.
+                 terrain needs [N m]); stamp = the TwistStamped's, else receive time
+    ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
+    ``power/predicted_battery_w`` (both sides at the battery [W]), ``power/terrain_w``,
+    ``power/internal_w`` [W], ``power/traction_margin`` [-]: std_msgs/Float64
+publishes per joint_states
+    ``power/measured`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` as measured (velocity
+                 [rad/s], effort = Kt * I [N m]) after the side mapping; stamp = the joint_states'
+    ``power/measured_left_w``, ``power/measured_right_w``, ``power/measured_battery_w`` [W]: Float64
 periodic (``publish_period_s``)
-    ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction); ``energy/remaining_wh``
-    std_msgs/Float64 [Wh]; ``energy/time_to_empty_s`` std_msgs/Float64 [s] (inf when idle);
-    ``energy/time_to_empty_p10_s``, ``energy/time_to_empty_p90_s`` std_msgs/Float64 [s] (bounds,
-    :mod:`skidsteer_power.estimator.tte_bounds`); ``power/correction`` sensor_msgs/JointState whose
-    names are the online correction's fields (units in the names) and whose positions are their values
-    (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`); the terrain-change flag is in
-    ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a warning for 10 s);
-    ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy source, stale inputs, rejected-input counts,
-    traction warning) every ``diagnostics_period_s``.
+    ``power/summary`` diagnostic_msgs/DiagnosticArray, one status named 'power summary' whose
+    key/values are every named figure (:data:`skidsteer_power.estimator.summary.SUMMARY_FIELDS`);
+    ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction; NaN where unknown, status from
+    the current's sign); ``energy/remaining_wh`` std_msgs/Float64 [Wh]; ``energy/time_to_empty_s``
+    std_msgs/Float64 [s] (inf when idle); ``energy/time_to_empty_p10_s``, ``energy/time_to_empty_p90_s``
+    std_msgs/Float64 [s] (bounds, :mod:`skidsteer_power.estimator.tte_bounds`); ``power/correction``
+    sensor_msgs/JointState whose names are the online correction's fields (units in the names) and
+    whose positions are their values (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`);
+    the terrain-change flag is in ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a
+    warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
+    source, stale inputs, rejected-input counts, traction warning) every ``diagnostics_period_s``.
+service
+    ``~/reset_energy`` std_srvs/Trigger: the battery was swapped for a full one; state of charge back
+    to full, energy tallies to 0 J, state file rewritten.
+
+QoS
+---
+Subscriptions are best-effort by default (``input_reliability``): a best-effort reader matches both
+reliable and best-effort writers, a reliable reader only reliable ones (sensor-data QoS drivers would
+be dropped). ``output_qos: sensor_data`` makes the per-message outputs best-effort, depth 5.
+Every publisher and subscription accepts ``qos_overrides.<topic>.<publisher|subscription>.<policy>``
+parameters (depth, durability, history, reliability), e.g. ``qos_overrides./joint_states.subscription
+.reliability: reliable`` where every joint_states writer is reliable and no loss is acceptable.
 
 The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
 restored on start. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker
@@ -43,9 +61,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import BatteryState, JointState
-from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
 
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
@@ -53,7 +73,14 @@ from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSe
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.persistence import load_state, save_state
-from skidsteer_power.estimator.summary import SUMMARY_FIELDS, SUMMARY_LABEL, summary_values
+from skidsteer_power.estimator.summary import (
+    COMMAND_FIGURES,
+    MEASUREMENT_FIGURES,
+    SUMMARY_STATUS_NAME,
+    measurement_figures,
+    prediction_figures,
+    summary_key_values,
+)
 from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
@@ -81,10 +108,47 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'publish_period_s': (0.2, 'period of battery and energy topics [s]'),
     'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
     'save_period_s': (10.0, 'period of energy-state saves [s]'),
-    'qos_depth': (100, 'subscription queue depth'),
+    'qos_depth': (100, 'queue depth of the subscriptions and the per-message outputs'),
+    'input_reliability': (
+        'best_effort',
+        'cmd_vel / joint_states subscriptions: best_effort (matches reliable and best-effort '
+        'publishers) or reliable (matches reliable publishers only)',
+    ),
+    'output_qos': ('reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'),
     'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
     'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
 }
+
+INPUT_RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT, 'reliable': ReliabilityPolicy.RELIABLE}
+OUTPUT_QOS = ('reliable', 'sensor_data')
+
+
+BATTERY_STATUS = {
+    'charging': BatteryState.POWER_SUPPLY_STATUS_CHARGING,
+    'discharging': BatteryState.POWER_SUPPLY_STATUS_DISCHARGING,
+    'not_charging': BatteryState.POWER_SUPPLY_STATUS_NOT_CHARGING,
+}
+BATTERY_TECHNOLOGY = {
+    'lipo': BatteryState.POWER_SUPPLY_TECHNOLOGY_LIPO,
+    'li-ion': BatteryState.POWER_SUPPLY_TECHNOLOGY_LION,
+    'lion': BatteryState.POWER_SUPPLY_TECHNOLOGY_LION,
+    'life': BatteryState.POWER_SUPPLY_TECHNOLOGY_LIFE,
+    'lifepo4': BatteryState.POWER_SUPPLY_TECHNOLOGY_LIFE,
+    'nimh': BatteryState.POWER_SUPPLY_TECHNOLOGY_NIMH,
+}
+
+
+def battery_state_message(fields: dict[str, Any]) -> BatteryState:
+    """A BatteryState from :func:`skidsteer_power.estimator.factory.battery_message_fields`."""
+    values = dict(fields)
+    status = values.pop('status')
+    chemistry = values.pop('chemistry').lower()
+    msg = BatteryState(**values)
+    msg.power_supply_status = BATTERY_STATUS[status]
+    msg.power_supply_health = BatteryState.POWER_SUPPLY_HEALTH_UNKNOWN
+    unknown = BatteryState.POWER_SUPPLY_TECHNOLOGY_UNKNOWN
+    msg.power_supply_technology = BATTERY_TECHNOLOGY.get(chemistry, unknown)
+    return msg
 
 
 class PowerEstimator(Node):
@@ -127,6 +191,11 @@ class PowerEstimator(Node):
         for name in ('publish_period_s', 'diagnostics_period_s', 'save_period_s', 'qos_depth'):
             if not p[name] > 0:
                 raise ConfigError(f'{name} must be > 0, got {p[name]!r}')
+        if p['input_reliability'] not in INPUT_RELIABILITY:
+            reliability = p['input_reliability']
+            raise ConfigError(f'input_reliability must be best_effort or reliable, got {reliability!r}')
+        if p['output_qos'] not in OUTPUT_QOS:
+            raise ConfigError(f'output_qos must be reliable or sensor_data, got {p["output_qos"]!r}')
         limits = InputLimits(
             p['max_speed_m_s'], p['max_yaw_rate_rad_s'], p['max_motor_speed_rad_s'], p['max_motor_torque_Nm']
         )
@@ -172,25 +241,36 @@ class PowerEstimator(Node):
             self.core.energy.battery = factory.battery_for(self.vehicle, soc=initial_soc)
 
     def _make_interfaces(self, p: dict[str, Any]) -> None:
-        qos = QoSProfile(depth=int(p['qos_depth']))
-        cmd_type = TwistStamped if p['cmd_vel_stamped'] else Twist
-        self.create_subscription(cmd_type, 'cmd_vel', self._on_cmd_vel, qos)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states, qos)
-        self.pub_predicted = self.create_publisher(JointState, 'power/predicted', qos)
-        self.pub_summary = self.create_publisher(Float64MultiArray, 'power/summary', qos)
-        self.pub_battery = self.create_publisher(BatteryState, 'battery/state', 10)
-        self.pub_remaining = self.create_publisher(Float64, 'energy/remaining_wh', 10)
-        self.pub_tte = self.create_publisher(Float64, 'energy/time_to_empty_s', 10)
-        self.pub_tte_p10 = self.create_publisher(Float64, 'energy/time_to_empty_p10_s', 10)
-        self.pub_tte_p90 = self.create_publisher(Float64, 'energy/time_to_empty_p90_s', 10)
-        self.pub_correction = self.create_publisher(JointState, 'power/correction', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        depth = int(p['qos_depth'])
+        overrides = QoSOverridingOptions.with_default_policies()
+        qos_in = QoSProfile(depth=depth, reliability=INPUT_RELIABILITY[p['input_reliability']])
+        qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
+
+        def sub(msg_type: Any, topic: str, callback: Any) -> None:
+            self.create_subscription(msg_type, topic, callback, qos_in, qos_overriding_options=overrides)
+
+        def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
+            return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)
+
+        sub(TwistStamped if p['cmd_vel_stamped'] else Twist, 'cmd_vel', self._on_cmd_vel)
+        sub(JointState, 'joint_states', self._on_joint_states)
+        self.pub_predicted = pub(JointState, 'power/predicted', qos_out)
+        self.pub_measured = pub(JointState, 'power/measured', qos_out)
+        self.pub_command_figures = [pub(Float64, topic, qos_out) for topic, _ in COMMAND_FIGURES]
+        self.pub_measurement_figures = [pub(Float64, topic, qos_out) for topic, _ in MEASUREMENT_FIGURES]
+        self.pub_summary = pub(DiagnosticArray, 'power/summary')
+        self.pub_battery = pub(BatteryState, 'battery/state')
+        self.pub_remaining = pub(Float64, 'energy/remaining_wh')
+        self.pub_tte = pub(Float64, 'energy/time_to_empty_s')
+        self.pub_tte_p10 = pub(Float64, 'energy/time_to_empty_p10_s')
+        self.pub_tte_p90 = pub(Float64, 'energy/time_to_empty_p90_s')
+        self.pub_correction = pub(JointState, 'power/correction')
+        self.pub_diag = pub(DiagnosticArray, 'diagnostics')
+        self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
-        size = len(SUMMARY_FIELDS)
-        self._summary_layout = [MultiArrayDimension(label=SUMMARY_LABEL, size=size, stride=size)]
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -206,7 +286,8 @@ class PowerEstimator(Node):
             self._warn_rejected(err)
             return
         self._publish_predicted(prediction, msg)
-        self._publish_summary(now)
+        for publisher, value in zip(self.pub_command_figures, prediction_figures(prediction), strict=True):
+            publisher.publish(Float64(data=value))
         self._log_traction_change()
 
     def _log_traction_change(self) -> None:
@@ -223,11 +304,17 @@ class PowerEstimator(Node):
         now = self.now_s()
         try:
             with self._lock:
-                self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now)
+                comparison = self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        self._publish_summary(now)
+        measured = JointState(header=msg.header, name=['left_motor', 'right_motor'])
+        measured.velocity = list(comparison.measured.omega_rad_s)
+        measured.effort = list(comparison.measured.torque_Nm)
+        self.pub_measured.publish(measured)
+        figures = measurement_figures(comparison)
+        for publisher, value in zip(self.pub_measurement_figures, figures, strict=True):
+            publisher.publish(Float64(data=value))
 
     def _warn_rejected(self, err: RejectedInput) -> None:
         if err.warn:
@@ -246,39 +333,46 @@ class PowerEstimator(Node):
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
 
-    def _publish_summary(self, now: float) -> None:
-        with self._lock:
-            values = summary_values(self.core, now)
-        msg = Float64MultiArray()
-        msg.layout.dim = self._summary_layout
-        msg.data = values
-        self.pub_summary.publish(msg)
-
     def _on_publish_timer(self) -> None:
         now = self.now_s()
         with self._lock:
             self.core.tick(now)
-            msg = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
+            fields = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
             remaining = float(self.core.battery.remaining_wh)
-            tte = float(self.core.energy.time_to_empty_s())
+            tte = float(self.core.time_to_empty_s)
+            pairs = summary_key_values(self.core, now)
             bounds = (self.core.time_to_empty_p10_s, self.core.time_to_empty_p90_s)
             correction = JointState(
                 name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
             )
-        battery = BatteryState()
-        battery.header.stamp = self.get_clock().now().to_msg()
-        for key, value in msg.items():
-            setattr(battery, key, value)
-        battery.power_supply_status = BatteryState.POWER_SUPPLY_STATUS_DISCHARGING
-        battery.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_LIPO
-        battery.present = True
+        stamp = self.get_clock().now().to_msg()
+        battery = battery_state_message(fields)
+        battery.header.stamp = stamp
         self.pub_battery.publish(battery)
+        status = DiagnosticStatus(name=SUMMARY_STATUS_NAME, hardware_id=self.vehicle.name)
+        status.values = [KeyValue(key=k, value=v) for k, v in pairs]
+        summary = DiagnosticArray(status=[status])
+        summary.header.stamp = stamp
+        self.pub_summary.publish(summary)
         self.pub_remaining.publish(Float64(data=remaining))
         self.pub_tte.publish(Float64(data=tte))
         self.pub_tte_p10.publish(Float64(data=float(bounds[0])))
         self.pub_tte_p90.publish(Float64(data=float(bounds[1])))
         correction.header.stamp = battery.header.stamp
         self.pub_correction.publish(correction)
+
+    def _on_reset_energy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/reset_energy``: a full battery is in; tallies restart; the state file is rewritten."""
+        with self._lock:
+            self.core.reset_energy(factory.battery_for(self.vehicle, soc=1.0), self.now_s())
+            remaining = self.core.battery.remaining_wh
+        self.save()
+        response.success = True
+        response.message = f'battery reset to full: {remaining:.2f} Wh' + (
+            f'; saved to {self.state_file}' if self.state_file is not None else ' (persist is off)'
+        )
+        self.get_logger().info(response.message)
+        return response
 
     def _publish_diagnostics(self) -> None:
         now = self.now_s()

@@ -44,6 +44,7 @@ class BatteryConfig:
     soc_empty : state of charge counted as empty [-]
     mass_kg : battery mass [kg]
     source : provenance
+    chemistry : cell chemistry as the battery file names it ('LiPo', 'Li-ion' ...; '' = unknown)
     """
 
     name: str
@@ -57,6 +58,7 @@ class BatteryConfig:
     soc_empty: float = 0.0
     mass_kg: float = 0.0
     source: str = ''
+    chemistry: str = ''
 
     @property
     def cells_in_series(self) -> int:
@@ -282,6 +284,7 @@ def _parse_config(cfg: Mapping[str, Any]) -> BatteryConfig:
             soc_empty=float(cfg.get('soc_empty', 0.0)),
             mass_kg=float(cfg.get('mass_kg', 0.0)),
             source=str(cfg.get('source', '')),
+            chemistry=str(cfg.get('chemistry', '')),
         )
     except (KeyError, TypeError, ValueError) as err:
         raise ConfigError(f'battery config: missing or bad field {err}') from err

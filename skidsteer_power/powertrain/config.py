@@ -2,37 +2,19 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import yaml
 
+from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
 
 
-def config_dirs(kind: str) -> list[Path]:
-    """Folders searched for ``kind`` presets ('powertrains' | 'batteries'): source tree, then share/."""
-    package_root = Path(__file__).resolve().parents[2]
-    return [
-        package_root / 'config' / kind,
-        Path(sys.prefix) / 'share' / 'skidsteer_power' / 'config' / kind,
-    ]
-
-
 def load_preset(kind: str, name_or_path: str) -> dict[str, Any]:
-    """Read a preset by name (a file in ``config/<kind>/``) or by YAML path; ConfigError if absent/bad."""
-    candidate = Path(name_or_path)
-    path = candidate if candidate.is_file() else None
-    if path is None:
-        for folder in config_dirs(kind):
-            found = folder / f'{name_or_path}.yaml'
-            if found.is_file():
-                path = found
-                break
-    if path is None:
-        raise ConfigError(f'{kind[:-1] if kind.endswith("s") else kind} preset {name_or_path!r} not found')
+    """Read a preset by name (a file in ``config/<kind>/``, found by :mod:`skidsteer_power.resources`)
+    or by YAML path; ConfigError if absent (listing the shipped presets) or bad."""
+    path = resources.find(kind, name_or_path)
     try:
         data = yaml.safe_load(path.read_text(encoding='utf-8'))
     except (OSError, yaml.YAMLError) as err:

@@ -28,6 +28,7 @@ from typing import Any
 
 import yaml
 
+from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
 
 # Table 2.4 (Wong and Reece, dry sand): the only wheel coefficients the dissertation gives. Chapter 2
@@ -196,17 +197,22 @@ PRESETS: dict[str, Terrain] = {
 
 
 def load_terrain(name_or_path: str | os.PathLike[str]) -> Terrain:
-    """A preset by name (see :data:`PRESETS`) or a YAML terrain file; ConfigError otherwise."""
+    """A preset by name (see :data:`PRESETS`), a shipped terrain file by name (``config/terrains/``,
+    found by :mod:`skidsteer_power.resources`) or a YAML terrain file; ConfigError otherwise."""
     text = os.fspath(name_or_path)
     if text in PRESETS:
         return PRESETS[text]
-    path = Path(text)
-    if path.suffix.lower() not in ('.yaml', '.yml') and not path.exists():
-        raise ConfigError(f'unknown terrain {text!r}: not a preset ({", ".join(PRESETS)}) nor a YAML file')
+    try:
+        path = resources.find('terrains', text, ('.yaml', '.yml'))
+    except ConfigError:
+        if Path(text).suffix.lower() in ('.yaml', '.yml'):
+            raise ConfigError(f'terrain file not found: {text}') from None
+        shipped = sorted(set(PRESETS) | set(resources.shipped('terrains', ('.yaml', '.yml'))))
+        raise ConfigError(
+            f'unknown terrain {text!r}: not a preset nor a YAML file (shipped: {", ".join(shipped)})'
+        ) from None
     try:
         data = yaml.safe_load(path.read_text(encoding='utf-8'))
-    except FileNotFoundError:
-        raise ConfigError(f'terrain file not found: {text}') from None
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise ConfigError(f'cannot read terrain file {text}: {err}'.replace('\n', ' ')) from err
     return terrain_from_mapping(data, default_name=path.stem)

@@ -14,7 +14,7 @@ from rich.console import Console
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
-from skidsteer_power.estimator.monitor import (
+from skidsteer_power.ui.monitor import (
     CSV_COLUMNS,
     CaseProfile,
     CsvLog,
@@ -166,3 +166,16 @@ def test_key_reader_on_a_pseudo_terminal():
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_render_marks_stale_sources_but_keeps_their_last_values():
+    from skidsteer_power.ui.monitor import SOURCES
+
+    text = screen(full_view(stale=frozenset(SOURCES), ready=False))
+    assert 'command V +0.20 m/s, yaw rate +0.10 rad/s (stale)' in text
+    assert 'speed [rpm] (stale)' in text and '2400' in text
+    assert 'measured power [W] (stale)' in text and '44.0' in text
+    assert 'Battery (stale)' in text and 'traction margin 0.42 (stale)' in text
+    assert 'no data from the robot' in text
+    fresh = screen(full_view())
+    assert 'stale' not in fresh

@@ -1,5 +1,7 @@
-"""Energy-aware teleoperation view, pure parts: what is shown, how keys and case profiles become
-commands, and the CSV of what was shown. No ROS and no terminal here, so all of it is testable.
+"""Energy-aware teleoperation view (the UI layer of ``energy_monitor``): what is shown and how it is
+drawn with rich, how keys and case profiles become commands, and the CSV of what was shown. No ROS
+and no terminal here, so all of it is testable; the rclpy shell is
+:mod:`skidsteer_power.nodes.energy_monitor`.
 
 Modelled on the test robot's own control software (chapter 7.1.3): a case mode (forward velocity and
 yaw rate as inputs), a free mode (Up/Down/Left/Right keys drive the robot like a remote-controlled
@@ -27,6 +29,10 @@ from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+STALE_AFTER_S = 1.0
+"""A source silent for this long [s] is shown as stale (greyed, marked 'stale')."""
+SOURCES = ('command', 'joint_states', 'summary', 'battery')
+"""What the view shows comes from these; each may go stale on its own."""
 SOURCE_NAMES = ('measured', 'predicted', 'none')
 GAUGE_WIDTH = 30
 
@@ -177,6 +183,8 @@ class MonitorView:
     remaining_wh: float = math.nan
     time_to_empty_s: float = math.nan
     status: str = ''
+    stale: frozenset[str] = frozenset()
+    """Sources (:data:`SOURCES`) not heard from for :data:`STALE_AFTER_S`; their values are greyed."""
 
     def get(self, name: str) -> float:
         return float(self.summary.get(name, math.nan))
@@ -196,20 +204,35 @@ def format_duration(seconds: float) -> str:
     return f'{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}'
 
 
+def _stale_label(label: str, stale: bool) -> Text:
+    return Text(f'{label} (stale)', style='dim') if stale else Text(label)
+
+
 def _motor_table(view: MonitorView) -> Table:
     table = Table(title='Motors and power', expand=True)
     table.add_column('')
     table.add_column('left', justify='right')
     table.add_column('right', justify='right')
     rows = [
-        ('speed [rpm]', [v * RPM_PER_RAD_S for v in view.motor_speed_rad_s], '.0f'),
-        ('current [A]', list(view.motor_current_A), '.2f'),
-        ('predicted power [W]', [view.get('predicted_left_W'), view.get('predicted_right_W')], '.1f'),
-        ('measured power [W]', [view.get('measured_left_W'), view.get('measured_right_W')], '.1f'),
-        ('error meas-pred [W]', [view.get('error_left_W'), view.get('error_right_W')], '+.1f'),
+        ('speed [rpm]', [v * RPM_PER_RAD_S for v in view.motor_speed_rad_s], '.0f', 'joint_states'),
+        ('current [A]', list(view.motor_current_A), '.2f', 'joint_states'),
+        (
+            'predicted power [W]',
+            [view.get('predicted_left_W'), view.get('predicted_right_W')],
+            '.1f',
+            'summary',
+        ),
+        ('measured power [W]', [view.get('measured_left_W'), view.get('measured_right_W')], '.1f', 'summary'),
+        ('error meas-pred [W]', [view.get('error_left_W'), view.get('error_right_W')], '+.1f', 'summary'),
     ]
-    for label, (left, right), fmt in rows:
-        table.add_row(Text(label), _num(left, fmt), _num(right, fmt))
+    for label, (left, right), fmt, source in rows:
+        stale = source in view.stale
+        style = 'dim' if stale else ''
+        table.add_row(
+            _stale_label(label, stale),
+            Text(_num(left, fmt), style=style),
+            Text(_num(right, fmt), style=style),
+        )
     return table
 
 
@@ -227,11 +250,17 @@ def _battery_panel(view: MonitorView) -> Panel:
         f'battery power: predicted {_num(view.get("predicted_battery_W"), ".1f")} W, ',
         f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})',
     )
+    if 'battery' in view.stale:
+        gauge.stylize('dim')
+        lines.stylize('dim')
+        return Panel(Group(gauge, lines), title='Battery (stale)', style='dim')
     return Panel(Group(gauge, lines), title='Battery')
 
 
 def _traction_text(view: MonitorView) -> Text:
     margin = view.get('traction_margin')
+    if 'summary' in view.stale:
+        return Text(f'traction margin {_num(margin, ".2f")} (stale)', style='dim')
     if view.get('traction_warning') == 1.0:
         return Text(
             f'TRACTION WARNING: margin {_num(margin, ".2f")} - the robot may get stuck', style='bold red'
@@ -246,16 +275,25 @@ def render(view: MonitorView) -> Group:
     case = ''
     if view.mode == 'case':
         case = f'   case {_num(view.case_elapsed_s, ".1f")} / {_num(view.case_total_s, ".1f")} s'
+    command = f'command V {speed:+.2f} m/s, yaw rate {yaw:+.2f} rad/s'
     header = Text.assemble(
         ready,
-        f'   mode {view.mode}   command V {speed:+.2f} m/s, yaw rate {yaw:+.2f} rad/s{case}',
+        f'   mode {view.mode}   ',
+        (f'{command} (stale)', 'dim') if 'command' in view.stale else command,
+        case,
     )
     share = view.get('terrain_share')
     split = Text(
         f'terrain {_num(view.get("terrain_W"), ".1f")} W, internal {_num(view.get("internal_W"), ".1f")} W '
         f'(terrain share {_num(100.0 * share, ".0f")} %)'
     )
+    if 'summary' in view.stale:
+        split.stylize('dim')
     parts = [header, _motor_table(view), split, _traction_text(view), _battery_panel(view)]
+    if view.stale >= {'joint_states', 'summary', 'battery'}:
+        parts.append(
+            Text('no data from the robot: values shown are the last received (stale)', style='bold yellow')
+        )
     if view.status:
         parts.append(Text(view.status, style='yellow'))
     if view.mode == 'free':

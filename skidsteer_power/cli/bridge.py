@@ -1,0 +1,84 @@
+"""``skidsteer-power bridge``: a Foxglove WebSocket server forwarding the suite's topics.
+
+    skidsteer-power bridge [--host 0.0.0.0] [--port 8765] [--topics T ...] [--duration S] [--json]
+
+For robots without ``foxglove_bridge``: the Foxglove app connects to ``ws://ROBOT:8765`` and gets
+every topic (or only ``--topics``) as ros2msg schemas with CDR payloads
+(:mod:`skidsteer_power.nodes.foxglove_bridge`). Open ``config/foxglove/operator_layout.json`` in
+the app for the operator's view. Prints ``serving ws://HOST:PORT`` when ready; runs until SIGINT /
+SIGTERM (or ``--duration``), then prints what it forwarded (``--json``: url, topics: {topic:
+messages}, skipped: {topic: reason}).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.errors import InputError
+from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a port number: {text!r}') from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f'port must be 0..65535 (0 = any free port), got {value}')
+    return value
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from skidsteer_power.nodes.foxglove_bridge import DEFAULT_PORT
+
+    parser = subparsers.add_parser(
+        'bridge', help='Foxglove WebSocket server forwarding ROS topics (ros2msg schemas, CDR)'
+    )
+    parser.add_argument('--host', default='0.0.0.0', help='address to listen on (default: all)')
+    parser.add_argument('--port', type=_port, default=DEFAULT_PORT, help='TCP port (0 = any free one)')
+    parser.add_argument('--topics', nargs='+', default=[], help='only these topics (default: all)')
+    parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
+    add_json_flag(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
+
+    try:
+        import foxglove  # noqa: F401
+    except ImportError as err:
+        raise InputError(f'the Foxglove bridge needs the foxglove-sdk package ({err})') from err
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('foxglove_bridge', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    bridge = None
+    try:
+        bridge = FoxgloveBridge(node, host=args.host, port=args.port, topics=args.topics)
+        url = f'ws://{args.host}:{bridge.port}'
+        print(f'serving {url}', file=sys.stderr if args.json else sys.stdout, flush=True)
+        duration = args.duration if args.duration is not None else math.inf
+        started = time.monotonic()
+        with stop_on_signals(StopFlag()) as stop:
+            while not stop.is_set() and time.monotonic() - started < duration:
+                executor.spin_once(timeout_sec=0.1)
+        topics = {t: f.messages for t, f in sorted(bridge.forwarded.items())}
+        skipped = dict(bridge.skipped)
+    finally:
+        if bridge is not None:
+            bridge.close()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    emit({'url': url, 'topics': topics, 'skipped': skipped}, args.json)
+    return 0

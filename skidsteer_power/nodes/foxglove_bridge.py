@@ -1,0 +1,150 @@
+"""A Foxglove WebSocket server that forwards ROS 2 topics, for robots without ``foxglove_bridge``.
+
+Each ROS topic becomes one Foxglove channel: schema encoding ``ros2msg`` (the .msg definition text
+with its dependencies, as rosbag2 stores it in MCAP; :func:`skidsteer_power.bags.writer.message_definition`),
+message encoding ``cdr`` (the serialized message exactly as DDS delivered it: a raw subscription,
+no decoding on the robot). The Foxglove app connects to ``ws://ROBOT:8765`` (protocol
+``foxglove.websocket.v1``) and decodes the messages itself. The server is the ``foxglove-sdk``
+package's (:func:`foxglove.start_server`); it sends a channel's messages only to clients that
+subscribed to it.
+
+Subscriptions are best effort, so every publisher matches (reliable or not), and a slow viewer
+never slows the robot down; a topic whose publishers are all transient-local (latched: ``tf_static``,
+``robot_description``) is subscribed transient-local, so its last messages reach the app too.
+Topics appear as they are discovered (every ``discover_period_s``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from skidsteer_power.bags._ros import message_class
+from skidsteer_power.bags.writer import message_definition
+from skidsteer_power.errors import InputError
+
+LOG = logging.getLogger(__name__)
+
+DEFAULT_PORT = 8765
+EXCLUDED = frozenset({'/rosout', '/parameter_events'})
+SCHEMA_ENCODING = 'ros2msg'
+MESSAGE_ENCODING = 'cdr'
+
+
+@dataclass
+class Forwarded:
+    """One bridged topic: its type, Foxglove channel, raw subscription and message count."""
+
+    topic: str
+    msgtype: str
+    channel: Any
+    subscription: Any
+    messages: int = 0
+
+
+def _forwarder(entry: Forwarded) -> Any:
+    """The raw-subscription callback of ``entry`` (one argument: rclpy passes only the CDR bytes)."""
+
+    def on_message(data: bytes) -> None:
+        entry.messages += 1
+        entry.channel.log(data, log_time=time.time_ns())
+
+    return on_message
+
+
+class FoxgloveBridge:
+    """Serve the ROS graph seen by ``node`` on a Foxglove WebSocket server at ``host``:``port``.
+
+    ``topics``: only these (absolute names; '' prefix '/' added), else every topic but
+    :data:`EXCLUDED`. ``port=0`` picks a free port (see :attr:`port`).
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        *,
+        host: str = '0.0.0.0',
+        port: int = DEFAULT_PORT,
+        topics: Sequence[str] = (),
+        discover_period_s: float = 0.5,
+        name: str = 'skidsteer_power',
+    ) -> None:
+        import foxglove
+
+        self._foxglove = foxglove
+        self.node = node
+        self.topics = {t if t.startswith('/') else f'/{t}' for t in topics}
+        self.forwarded: dict[str, Forwarded] = {}
+        self.skipped: dict[str, str] = {}
+        self.context = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context)
+        except (OSError, RuntimeError) as err:
+            raise InputError(f'cannot serve Foxglove on {host}:{port}: {err}') from err
+        self.discover()
+        self._timer = node.create_timer(discover_period_s, self.discover)
+
+    @property
+    def port(self) -> int:
+        """The TCP port the server listens on."""
+        return int(self.server.port)
+
+    def _wanted(self, topic: str) -> bool:
+        return topic in self.topics if self.topics else topic not in EXCLUDED
+
+    def discover(self) -> None:
+        """Bridge every wanted topic that appeared on the graph since the last call."""
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.forwarded or topic in self.skipped or not self._wanted(topic):
+                continue
+            if len(types) != 1:
+                self._skip(topic, f'published with several types ({", ".join(types)})')
+                continue
+            try:
+                self._forward(topic, types[0])
+            except InputError as err:
+                self._skip(topic, str(err))
+
+    def _skip(self, topic: str, reason: str) -> None:
+        self.skipped[topic] = reason
+        LOG.warning('not bridging %s: %s', topic, reason)
+
+    def _forward(self, topic: str, msgtype: str) -> None:
+        cls = message_class(msgtype)
+        text, _ = message_definition(msgtype)
+        schema = self._foxglove.Schema(name=msgtype, encoding=SCHEMA_ENCODING, data=text.encode('utf-8'))
+        channel = self._foxglove.Channel(
+            topic, schema=schema, message_encoding=MESSAGE_ENCODING, context=self.context
+        )
+        entry = Forwarded(topic, msgtype, channel, None)
+        entry.subscription = self.node.create_subscription(
+            cls, topic, _forwarder(entry), self._qos_for(topic), raw=True
+        )
+        self.forwarded[topic] = entry
+        LOG.info('bridging %s (%s)', topic, msgtype)
+
+    def _qos_for(self, topic: str) -> QoSProfile:
+        """Best effort, volatile; transient-local (reliable if every publisher is) for latched topics."""
+        publishers = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
+        if publishers and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
+            reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+            return QoSProfile(
+                depth=10,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            )
+        return QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+    def close(self) -> None:
+        """Stop the server and the subscriptions."""
+        self._timer.cancel()
+        for entry in self.forwarded.values():
+            self.node.destroy_subscription(entry.subscription)
+            entry.channel.close()
+        self.server.stop()

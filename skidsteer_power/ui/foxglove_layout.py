@@ -1,0 +1,189 @@
+"""The operator's Foxglove layout (``config/foxglove/operator_layout.json``), built with the
+foxglove-sdk's layout types so the file is what the app reads.
+
+Panels (topics as the suite publishes them, default namespace):
+
+* predicted vs measured motor power, left and right [W] (Plot: ``power/predicted_*_w``,
+  ``power/measured_*_w``; dashed = predicted);
+* battery gauge (state of charge, 0..1, ``battery/state.percentage``) and battery power predicted vs
+  measured [W];
+* time to empty [s] (``energy/time_to_empty_s``; Indicator: red below 10 min);
+* traction margin [-] (Plot + Indicator: red at or below 0.1, the estimator's default warning margin);
+* trace from odometry (XY plot of ``odom.pose.pose.position``, x vs y [m]);
+* estimator diagnostics (stale inputs, energy source).
+
+``python -m skidsteer_power.ui.foxglove_layout [PATH]`` writes it (the shipped file is its output;
+test/test_foxglove_bridge.py checks they agree).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+LOW_TIME_TO_EMPTY_S = 600.0
+TRACTION_WARNING_MARGIN = 0.1  # power_estimator's traction_warning_margin default
+
+PREDICTED = '#1f77b4'
+MEASURED = '#d62728'
+
+
+def _series(fl: Any, topic: str, label: str, color: str, dashed: bool = False) -> Any:
+    return fl.PlotSeries(
+        value=f'{topic}.data',
+        label=label,
+        color=color,
+        enabled=True,
+        timestamp_method='receiveTime',
+        line_style='dashed' if dashed else 'solid',
+    )
+
+
+def _power_plot(fl: Any, side: str) -> Any:
+    return fl.PlotPanel(
+        title=f'{side} motor power: predicted vs measured [W]',
+        config=fl.PlotConfig(
+            paths=[
+                _series(fl, f'/power/predicted_{side}_w', f'predicted {side} [W]', PREDICTED, dashed=True),
+                _series(fl, f'/power/measured_{side}_w', f'measured {side} [W]', MEASURED),
+            ],
+            show_legend=True,
+            legend_display='top',
+            y_axis_label='W',
+            time_window_mode='sliding',
+            following_view_width=60.0,
+        ),
+    )
+
+
+def operator_layout() -> Any:
+    """The layout as a :class:`foxglove.layouts.Layout`."""
+    import foxglove.layouts as fl
+
+    def item(content: Any, proportion: float = 1.0) -> Any:
+        return fl.SplitItem(proportion=proportion, content=content)
+
+    battery_gauge = fl.GaugePanel(
+        title='battery state of charge [-]',
+        config=fl.GaugeConfig(
+            path='/battery/state.percentage', min_value=0.0, max_value=1.0, color_mode='colormap',
+            color_map='red-yellow-green',
+        ),
+    )  # fmt: skip
+    battery_power = fl.PlotPanel(
+        title='battery power: predicted vs measured [W]',
+        config=fl.PlotConfig(
+            paths=[
+                _series(fl, '/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
+                _series(fl, '/power/measured_battery_w', 'measured [W]', MEASURED),
+            ],
+            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=600.0,
+        ),
+    )  # fmt: skip
+    time_to_empty = fl.IndicatorPanel(
+        title='time to empty [s]',
+        config=fl.IndicatorConfig(
+            path='/energy/time_to_empty_s.data', style='background', font_size=28,
+            rules=[fl.IndicatorRule(operator='<', raw_value=str(LOW_TIME_TO_EMPTY_S), color='#d62728',
+                                    label='battery low: under 10 min')],
+            fallback_color='#2ca02c', fallback_label='time to empty',
+        ),
+    )  # fmt: skip
+    traction = fl.IndicatorPanel(
+        title='traction margin [-]',
+        config=fl.IndicatorConfig(
+            path='/power/traction_margin.data', style='background', font_size=28,
+            rules=[fl.IndicatorRule(operator='<=', raw_value=str(TRACTION_WARNING_MARGIN), color='#d62728',
+                                    label='TRACTION WARNING: the robot may get stuck')],
+            fallback_color='#2ca02c', fallback_label='traction ok',
+        ),
+    )  # fmt: skip
+    traction_plot = fl.PlotPanel(
+        title='traction margin [-] and time to empty [s]',
+        config=fl.PlotConfig(
+            paths=[
+                _series(fl, '/power/traction_margin', 'traction margin [-]', '#9467bd'),
+                fl.PlotSeries(value='/energy/time_to_empty_s.data', label='time to empty [s]', enabled=True,
+                              color='#2ca02c', timestamp_method='receiveTime', use_right_y_axis=True),
+            ],
+            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=120.0,
+        ),
+    )  # fmt: skip
+    odom_x = fl.PlotXAxisPath(value='/odom.pose.pose.position.x', enabled=True)
+    trace = fl.PlotPanel(
+        title='trace from odometry: y [m] vs x [m]',
+        config=fl.PlotConfig(
+            paths=[fl.PlotSeries(value='/odom.pose.pose.position.y', label='trace', enabled=True,
+                                 color='#ff7f0e', timestamp_method='receiveTime')],
+            x_axis_val='custom', x_axis_path=odom_x,
+            x_axis_label='x [m]', y_axis_label='y [m]', axis_scales_mode='lockedScales', show_legend=False,
+        ),
+    )  # fmt: skip
+    diagnostics = fl.DiagnosticsSummaryPanel(title='estimator and driver diagnostics')
+    return fl.Layout(
+        content=fl.SplitContainer(
+            direction='row',
+            items=[
+                item(
+                    fl.SplitContainer(
+                        direction='column',
+                        items=[
+                            item(_power_plot(fl, 'left')),
+                            item(_power_plot(fl, 'right')),
+                            item(battery_power),
+                        ],
+                    ),
+                    2.0,
+                ),
+                item(
+                    fl.SplitContainer(
+                        direction='column',
+                        items=[
+                            item(battery_gauge),
+                            item(time_to_empty, 0.5),
+                            item(traction, 0.5),
+                            item(traction_plot),
+                        ],
+                    ),
+                ),
+                item(fl.SplitContainer(direction='column', items=[item(trace, 2.0), item(diagnostics)])),
+            ],
+        ),
+    )
+
+
+def layout_json() -> str:
+    """The layout file's text: the SDK's JSON, indented for review, with a final newline."""
+    return json.dumps(json.loads(operator_layout().to_json()), indent=2) + '\n'
+
+
+def topics_used(text: str) -> set[str]:
+    """Topics the layout reads (the part of each path before the first '.')."""
+    found: set[str] = set()
+
+    def walk(value: Any) -> None:
+        if isinstance(value, dict):
+            for v in value.values():
+                walk(v)
+        elif isinstance(value, list):
+            for v in value:
+                walk(v)
+        elif isinstance(value, str) and value.startswith('/') and '.' in value:
+            found.add(value.split('.', 1)[0])
+
+    walk(json.loads(text))
+    return found
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    path = Path(args[0]) if args else Path('config/foxglove/operator_layout.json')
+    path.write_text(layout_json(), encoding='utf-8')
+    print(f'wrote {path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
