@@ -1,5 +1,6 @@
 """The node suite under ``run --simulate``: power_estimator + des_driver against simulated DES 70/10
-amplifiers on ptys, loaded by the FESS map of the test robot on dry sand (real rclpy, DDS, pyserial)."""
+amplifiers on ptys, loaded in real time by the digital twin of the test robot on dry sand (real rclpy,
+DDS, pyserial)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import uuid
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import BatteryState, JointState
 
@@ -37,6 +39,10 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     probe.create_subscription(JointState, 'joint_states', joints.append, 100)
     probe.create_subscription(JointState, 'power/predicted', predicted.append, 100)
     probe.create_subscription(BatteryState, 'battery/state', battery.append, 100)
+    truth: list[Odometry] = []
+    odom: list[Odometry] = []
+    probe.create_subscription(Odometry, 'ground_truth/odom', truth.append, 100)
+    probe.create_subscription(Odometry, 'odom', odom.append, 100)
     publisher = probe.create_publisher(Twist, 'cmd_vel', 10)
     command = Twist()
     command.linear.x, command.angular.z = 0.2, 0.1  # Table 7.3: V = 0.2 m/s, yaw rate 0.1 rad/s
@@ -44,7 +50,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
         deadline = time.monotonic() + 60.0
         next_command = 0.0
         moving = []
-        while time.monotonic() < deadline and (len(moving) < 20 or len(battery) < 10):
+        while time.monotonic() < deadline and (len(moving) < 20 or len(battery) < 10 or len(truth) < 20):
             if time.monotonic() >= next_command:
                 publisher.publish(command)
                 next_command = time.monotonic() + 0.1
@@ -62,6 +68,10 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     assert battery[-1].percentage < battery[0].percentage < 1.0 + 1e-12
     assert energy['measured'] > 0.0
     assert (tmp_path / 'energy.json').exists()  # saved on shutdown
+    # the twin moved: its true pose advanced; the encoder odometry, blind to the tracks' slip,
+    # believes the robot turned more than it did
+    assert truth[-1].pose.pose.position.x > 0.01
+    assert odom and odom[-1].pose.pose.orientation.z > truth[-1].pose.pose.orientation.z > 0.0
 
 
 def run_cli(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:

@@ -80,8 +80,9 @@ WHEEL_INERTIA_KG_M2 = 0.0035
 scaled by (r / 0.1 m)^2."""
 DIRECTION_SMOOTHING_M_S = 0.005
 """Ground speed over which the compaction resistance changes direction [m/s]."""
-BATTERY_STEP_S = 0.01
-"""Interval at which the battery (open-circuit voltage, internal resistance) is updated [s]."""
+BATTERY_STEP_S = 0.1
+"""Interval at which the battery (state of charge, terminal voltage) is updated with the mean bus
+power of the interval [s]; the bus voltage changes by < 0.1 V within it at the test robot's loads."""
 SOIL_REFRESH_STEPS = 10
 """Steps between refreshes of the load-dependent soil terms (pressure, compaction, sinkage, terrain
 under the contact): loads change over tens of ms, not 1 ms [-]."""
@@ -165,6 +166,8 @@ class Twin:
         self.kp = SPEED_LOOP_BANDWIDTH_RAD_S * j_design / self.kt
         self.ki = self.kp * SPEED_LOOP_BANDWIDTH_RAD_S / 4.0
         self.mass = vehicle.mass_kg
+        self._transfer_coefficient = vehicle.mass_kg * vehicle.cg_height_m / vehicle.tread_m  # eq. 3.1
+        self._half_weight = 0.5 * vehicle.weight_N
         amp = self.powertrain.amplifier
         self._eta = amp.efficiency
         regen = self.powertrain.regen_efficiency
@@ -237,10 +240,9 @@ class Twin:
     # ------------------------------------------------------------------ terrain
     def _side_loads(self) -> np.ndarray:
         """Vertical load of each side [N] with lateral load transfer (eq. 3.1, instantaneous)."""
-        v = self.vehicle
-        transfer = self.mass * self.vel[0] * self.vel[2] * v.cg_height_m / v.tread_m
-        half = 0.5 * v.weight_N
-        return np.maximum(np.array([half - transfer, half + transfer]), 0.0)
+        transfer = self._transfer_coefficient * float(self.vel[0]) * float(self.vel[2])
+        half = self._half_weight
+        return np.array([max(half - transfer, 0.0), max(half + transfer, 0.0)])
 
     def _terrain_index(self, hx: np.ndarray, hy: np.ndarray) -> np.ndarray | None:
         """Terrain index of hull points (hx, hy) [m]; None if the floor is uniform."""
@@ -337,28 +339,22 @@ class Twin:
         j = self.j
         belt = self.r * self.omega_m / self.G
         source = (vx + 1j * vy) + 1j * wz * (self.node_p - j) - belt[:, None, None]  # - yaw e_z x j
-        courant = np.minimum(np.abs(belt) * dt / self.node_dx, 1.0)[:, None, None]
-        upstream = np.empty_like(j)
-        source_up = np.empty_like(j)
+        courant = np.minimum(np.abs(belt) * dt / self.node_dx, 1.0)
+        new = j.copy()
+        half = 0.5 * dt
         for side in (0, 1):
-            if belt[side] >= 0:  # touchdown at the front (node 0)
-                upstream[side, 0] = 0.0
-                upstream[side, 1:] = j[side, :-1]
-                source_up[side, 0] = source[side, 0]
-                source_up[side, 1:] = source[side, :-1]
+            c, jj, ss, nn = float(courant[side]), j[side], source[side], new[side]
+            if belt[side] >= 0:  # touchdown at the front (node 0): node k takes the belt from k - 1
+                nn[1:] += half * (ss[1:] + ss[:-1]) + c * (jj[:-1] - jj[1:])
+                nn[0] += dt * ss[0] - c * jj[0]
+                if belt[side] > 0:
+                    nn[0] = 0.0
             else:  # reversing: touchdown at the rear
-                upstream[side, -1] = 0.0
-                upstream[side, :-1] = j[side, 1:]
-                source_up[side, -1] = source[side, -1]
-                source_up[side, :-1] = source[side, 1:]
-        # the source averaged over the cell (trapezoid): the steady state integrates the slip
-        # velocity along the patch to second order
-        j = j + (0.5 * dt) * (source + source_up) + courant * (upstream - j)
-        for side in (0, 1):
-            if belt[side] > 0:
-                j[side, 0] = 0.0
-            elif belt[side] < 0:
-                j[side, -1] = 0.0
+                nn[:-1] += half * (ss[:-1] + ss[1:]) + c * (jj[1:] - jj[:-1])
+                nn[-1] = 0.0
+        # (the slip source is averaged over each cell, trapezoid: the steady state integrates the
+        # slip velocity along the patch to second order)
+        j = new
         self._j_rate = (j - self.j) / dt
         self.j = j
 
@@ -443,15 +439,13 @@ class Twin:
         source = vxm[:, None] * cos - (self.r * om)[:, None] + 1j * vya[:, None]
         courant = np.minimum(om / np.maximum(span, 1e-6) * dt * WHEEL_NODES, 1.0)[:, None]
         j = self.j
-        upstream = np.empty_like(j)
-        upstream[:, 0] = 0.0
-        upstream[:, 1:] = j[:, :-1]
-        source_up = np.empty_like(j)
-        source_up[:, 0] = source[:, 0]
-        source_up[:, 1:] = source[:, :-1]
-        j = j + (0.5 * dt) * (source + source_up) + courant * (upstream - j)  # cell-averaged source
-        j[om > 0, 0] = 0.0
-        self._j_rate = (j - self.j) / dt
+        new = j.copy()
+        # node k takes the rim element from node k - 1, plus the cell-averaged slip source
+        new[:, 1:] += (0.5 * dt) * (source[:, 1:] + source[:, :-1]) + courant * (j[:, :-1] - j[:, 1:])
+        new[:, 0] += dt * source[:, 0] - courant[:, 0] * j[:, 0]
+        new[om > 0, 0] = 0.0  # touchdown: no shear yet
+        j, new = new, j  # j: the new field, new: the old one
+        self._j_rate = (j - new) / dt
         self.j = j
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
@@ -592,7 +586,7 @@ class Twin:
         pending = self._battery_pending
         pending[0] += total * dt
         pending[1] += dt
-        if pending[1] >= BATTERY_STEP_S - 1e-12:  # the battery changes slowly: step it every 10 ms
+        if pending[1] >= BATTERY_STEP_S - 1e-12:  # the battery changes slowly: step it every 0.1 s
             self.battery.step(pending[0] / pending[1], pending[1])
             self.bus_voltage_V = self.battery.state.voltage_V
             pending[0] = pending[1] = 0.0
