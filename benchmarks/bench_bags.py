@@ -1,4 +1,5 @@
-"""Bags: offline validate throughput; replay rate and timing against the bag, measured by a recorder.
+"""Bags: offline validate throughput; replay rate and timing against the bag, measured by a recorder;
+messages lost when a recorder is killed with SIGKILL at 500 Hz; salvage yield on damaged bags.
 
     python -m benchmarks.run bags
 
@@ -192,8 +193,127 @@ def _replay_figures(report: Report, folder: Path) -> None:
         rclpy.try_shutdown(context=context)
 
 
+def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, seconds: float = 3.0) -> None:
+    """A ``record`` subprocess killed with SIGKILL after ``seconds`` of a topic at ``rate_hz``: how many
+    published messages the file it leaves is missing (the worst case: the kill right before a flush)."""
+    import signal
+
+    import rclpy
+    from rclpy.context import Context
+    from std_msgs.msg import String
+
+    from skidsteer_power.bags import open_bag
+
+    context = Context()
+    rclpy.init(context=context)
+    lost = []
+    try:
+        node = rclpy.create_node('bench_kill', context=context)
+        pub = node.create_publisher(String, '/bench_kill', 1000)
+        for run in range(3):
+            out = folder / f'killed_{run}.mcap'
+            recorder = subprocess.Popen(
+                [sys.executable, '-m', 'skidsteer_power.cli.main', 'record', '-o', str(out), '/bench_kill'],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+            while pub.get_subscription_count() == 0:
+                time.sleep(0.01)
+            time.sleep(0.3)
+            published, t0 = 0, time.monotonic()
+            while time.monotonic() - t0 < seconds:
+                pub.publish(String(data=f'm{published}'))
+                published += 1
+                time.sleep(max(0.0, t0 + published / rate_hz - time.monotonic()))
+            recorder.send_signal(signal.SIGKILL)
+            recorder.wait(timeout=10)
+            _clean_shm_zombies()
+            with open_bag(out, salvage=True) as bag:
+                lost.append(published - sum(1 for _ in bag.messages()))
+            while pub.get_subscription_count() > 0:
+                time.sleep(0.01)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    worst = max(lost)
+    report.figure(
+        f'record killed by SIGKILL at {rate_hz:.0f} Hz: messages lost (worst of 3)',
+        worst,
+        'msgs',
+        goal=f'<= {rate_hz:.0f} (1 s)',
+        met=worst <= rate_hz,
+        note=f'runs: {lost}',
+    )
+    report.figure('record killed by SIGKILL: data lost (worst of 3)', worst / rate_hz, 's', goal='<= 1')
+
+
+def _clean_shm_zombies() -> None:
+    """Remove the Fast DDS shared-memory files a SIGKILLed participant leaves (they make later
+    participants print errors on stdout); see test/test_bags_record_kill.py."""
+    import shutil
+
+    tool = shutil.which('fastdds') or str(Path(sys.executable).with_name('fastdds'))
+    if Path(tool).exists():
+        subprocess.run([tool, 'shm', 'clean'], capture_output=True, timeout=60, check=False)
+
+
+DAMAGE_CASES = ('chunk header zeroed (64 B)', '4 KB zeroed mid-chunk', '100 bytes flipped', 'cut in half')
+
+
+def damage(raw: bytes, case: str) -> bytes:
+    """``raw`` (an MCAP file) with one of :data:`DAMAGE_CASES` written into its first chunk."""
+    from io import BytesIO
+
+    from mcap.reader import make_reader
+
+    index = make_reader(BytesIO(raw)).get_summary().chunk_indexes[0]
+    start, length = index.chunk_start_offset, index.chunk_length
+    records = start + length - index.compressed_size
+    out = bytearray(raw)
+    if case.startswith('chunk header zeroed'):
+        out[start : start + 64] = bytes(64)
+    elif case == '4 KB zeroed mid-chunk':
+        middle = records + (start + length - records) // 2
+        out[middle : middle + 4096] = bytes(4096)
+    elif case == '100 bytes flipped':
+        for i in random.Random(13).sample(range(8, len(out) - 8), 100):
+            out[i] ^= 0xFF
+    else:
+        out = out[: len(out) // 2]
+    return bytes(out)
+
+
+def _salvage_figures(report: Report, folder: Path) -> None:
+    """Salvage yield (messages recovered / written) for each damage case, on a bag from ``record``'s
+    writer (8 s of /cmd_vel and /joint_states at 200 Hz, /odom at 10 Hz), and on the bundled bag."""
+    from skidsteer_power.bags import open_bag
+    from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+
+    made = folder / 'salvage_src.mcap'
+    write_drive_bag(made, [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)], rate_hz=200, odom_hz=10)
+    bundled = Path(__file__).resolve().parents[1] / 'bags' / f'{VEHICLE}_{TERRAIN}.mcap'
+    for label, source in (('written bag', made), ('bundled bag', bundled)):
+        if not source.exists():
+            continue
+        with open_bag(source) as bag:
+            written = bag.count_all()
+        for case in DAMAGE_CASES:
+            path = folder / f'damaged_{source.stem}_{DAMAGE_CASES.index(case)}.mcap'
+            path.write_bytes(damage(source.read_bytes(), case))
+            with open_bag(path, salvage=True) as bag:
+                recovered = sum(1 for _ in bag.messages())
+            report.figure(
+                f'salvage, {label}, {case}',
+                recovered / written * 100,
+                '%',
+                note=f'{recovered} of {written} msgs',
+            )
+
+
 def run(report: Report) -> None:
     with tempfile.TemporaryDirectory(prefix='bench_bags_') as tmp:
         folder = Path(tmp)
+        _salvage_figures(report, folder)
+        _sigkill_figures(report, folder)
         _validate_throughput(report, folder)
         _replay_figures(report, folder)

@@ -206,7 +206,7 @@ def test_mission_cli_csv_route_with_cache(tmp_path, capsys):
     [
         (['--route', 'nowhere'], 'not a built-in'),
         (['--terrain', 'moon_dust'], 'moon_dust'),
-        (['--speed', '-1'], 'must be > 0'),
+        (['--speed', '-1'], 'speed = -1 m/s is outside its range'),
         (['--direct', '', '--route', 'search-retrieve'], 'did not converge|R ='),
     ],
 )

@@ -73,12 +73,15 @@ def test_terrains_lists_presets_with_units(capsys: pytest.CaptureFixture[str]) -
 @pytest.mark.parametrize(
     ('argv', 'match'),
     [
-        ([*WHEEL[:4], '-5', *WHEEL[5:], '--slip', '0.2'], '--load: must be >= 0'),
-        ([*WHEEL[:6], '0', *WHEEL[7:], '--slip', '0.2'], '--width: must be > 0'),
+        (
+            [*WHEEL[:4], '-5', *WHEEL[5:], '--slip', '0.2'],
+            'load = -5 N is outside its range \\[0, 100000\\] N',
+        ),
+        ([*WHEEL[:6], '0', *WHEEL[7:], '--slip', '0.2'], 'width = 0 m is outside its range'),
         ([*WHEEL, '--slip', '1.5'], 'slip must lie in \\[-1, 1\\]'),
         ([*TRACK, '--slip', '-2'], 'slip must lie in \\[-1, 1\\]'),
         (['wheel', '--terrain', 'mud', *WHEEL[3:], '--slip', '0.2'], "unknown terrain 'mud'"),
-        ([*WHEEL[:4], '1e6', *WHEEL[5:], '--slip', '0.2'], 'deeper than its radius'),
+        ([*WHEEL[:4], '9e4', *WHEEL[5:], '--slip', '0.2'], 'deeper than its radius'),
         ([*WHEEL, '--slip', '1', '--speed', '0.5'], 'wheel speed is not set'),
     ],
 )

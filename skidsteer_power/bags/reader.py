@@ -5,11 +5,14 @@ Built on ``rosbags``. Types come from, in order of precedence: the definitions s
 A topic whose type none of them knows stays readable as raw CDR bytes (replay needs nothing more);
 only deserializing it fails, and :func:`open_bag` warns once about such topics.
 
-Damage: a bag that is truncated or corrupt raises :class:`~skidsteer_power.errors.InputError` naming
-the file and what is wrong. With ``salvage=True`` an MCAP file is read by streaming from its start and
-everything before the damage is returned (message order is then file order, which is receive order for
-bags written by :mod:`skidsteer_power.bags.record`); the reader's ``damage`` says what stopped it.
-An sqlite3 file is salvaged by a plain table scan, which keeps the rows sqlite can still reach.
+Damage: the reader compares what it read with what the bag says it holds (the MCAP statistics record,
+or the message counts of the rosbag2 metadata): ``messages_expected``, ``messages_read``, ``complete``.
+Without ``salvage`` a bag that cannot be opened, or a full pass that reads fewer messages than the bag
+holds, raises :class:`~skidsteer_power.errors.InputError` naming the file and how much is missing.
+With ``salvage=True`` an MCAP file is read by :func:`skidsteer_power.bags.salvage.salvage_mcap`, which
+recovers every intact message (below chunk granularity: a damaged chunk is read record by record), in
+time order; ``damage`` says what was damaged and one warning says how much is missing. An sqlite3
+file is salvaged by a plain table scan, which keeps the rows sqlite can still reach.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ if TYPE_CHECKING:
 LOG = logging.getLogger(__name__)
 
 DEFAULT_STORE = Stores.ROS2_JAZZY
-_SALVAGE_HINT = '; --salvage reads what precedes the damage'
+_SALVAGE_HINT = '; --salvage recovers every intact message'
 _IDL_SEPARATOR = '=' * 80 + '\n'
 # Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
 _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
@@ -52,6 +55,7 @@ _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
     AssertionError,
     ArithmeticError,
     MemoryError,
+    TypeError,  # rosbags' MCAP reader on a file that ends inside a record
 )
 try:  # rosbags reads sqlite3 through apsw when it is installed
     import apsw
@@ -140,6 +144,13 @@ def build_typestore(
 
 def _damage_text(path: Path, err: BaseException) -> str:
     reason = str(err).strip() or type(err).__name__
+    if isinstance(err, TypeError):  # rosbags reading past the end of a record
+        reason = 'the file ends inside a record'
+    if path.is_file() and path.stat().st_size <= 8:
+        reason = f'only {path.stat().st_size} bytes: no records after the MCAP magic'
+    if isinstance(err, MemoryError) or 'ssize_t' in reason:
+        reason = 'a record length field is damaged'
+
     return f'{path}: bag is truncated or corrupt ({reason})'
 
 
@@ -161,6 +172,8 @@ class BagReader:
     typestore: Typestore
     damage: str = ''
     salvage: bool = False
+    messages_expected: int | None = None
+    messages_read: int | None = None
     _reader: Rosbag2Reader | None = None
     _connections: list[Connection] = field(default_factory=list)
     _salvaged: list[BagMessage] | None = None
@@ -169,6 +182,24 @@ class BagReader:
     def duration_s(self) -> float:
         """Time from the first to the last message [s]."""
         return max(0, self.end_ns - self.start_ns) * 1e-9
+
+    @property
+    def complete(self) -> bool:
+        """True when every message the bag says it holds was read (False when that count is unknown)."""
+        read = self.messages_read if self.messages_read is not None else self.message_count
+        return self.messages_expected is not None and read >= self.messages_expected
+
+    def integrity(self) -> dict[str, Any]:
+        """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``."""
+        return {
+            'messages_expected': self.messages_expected,
+            'messages_read': self.messages_read,
+            'complete': self.complete,
+        }
+
+    def count_all(self) -> int:
+        """Read every message once (raises InputError, without ``salvage``, if any is missing)."""
+        return sum(1 for _ in self.messages())
 
     @property
     def undecodable_topics(self) -> list[str]:
@@ -192,6 +223,8 @@ class BagReader:
         if unknown:
             raise InputError(f'{self.path}: no topic {", ".join(sorted(unknown))} in the bag')
         if self._salvaged is not None:
+            if topics is None and start_ns is None and stop_ns is None:
+                self.messages_read = len(self._salvaged)
             for message in self._salvaged:
                 if (
                     message.topic in wanted
@@ -205,16 +238,37 @@ class BagReader:
         if not connections:
             return
         last: tuple[int, int] = (-1, 0)  # (timestamp, messages yielded at it)
+        read: dict[str, int] = dict.fromkeys(wanted, 0)
         try:
             for connection, timestamp, data in self._reader.messages(
                 connections=connections, start=start_ns, stop=stop_ns
             ):
                 last = (timestamp, last[1] + 1 if timestamp == last[0] else 1)
+                read[connection.topic] += 1
                 yield BagMessage(connection.topic, timestamp, data, connection.msgtype)
         except _DAMAGE_ERRORS as err:
             if not self.salvage:
                 raise InputError(_damage_text(self.path, err) + _SALVAGE_HINT) from err
             yield from self._salvage_after(err, last, wanted, start_ns, stop_ns)
+            return
+        if start_ns is None and stop_ns is None:
+            self._check_pass(read)
+
+    def _check_pass(self, read: dict[str, int]) -> None:
+        """After a full pass over some topics: did it read all the bag holds of them?"""
+        short = {t: (n, self.topics[t].count) for t, n in read.items() if n < self.topics[t].count}
+        if set(read) == set(self.topics):
+            self.messages_read = sum(read.values())
+        if not short:
+            return
+        got, held = sum(n for n, _ in short.values()), sum(m for _, m in short.values())
+        detail = ', '.join(f'{t} {n} of {m}' for t, (n, m) in sorted(short.items()))
+        text = f'{self.path}: read {got} of {held} messages ({held - got} missing: {detail})'
+        text += '; the bag is damaged'
+        if not self.salvage:
+            raise InputError(text + '; --salvage recovers every intact message')
+        self.damage = self.damage or text
+        LOG.warning('%s', text)
 
     def _salvage_after(
         self,
@@ -307,8 +361,11 @@ def open_bag(
         raise InputError(f'bag not found: {bag_path}')
     bag_path = _resolve(bag_path)
     try:
-        bag = _open_intact(bag_path, extra_types)
-        bag.salvage = salvage
+        if salvage and _storage_of(bag_path) == 'mcap' and bag_path.is_file():
+            bag = _open_salvage(bag_path, extra_types, None)
+        else:
+            bag = _open_intact(bag_path, extra_types)
+            bag.salvage = salvage
     except _DAMAGE_ERRORS as err:
         if not salvage:
             raise InputError(_damage_text(bag_path, err) + _SALVAGE_HINT) from err
@@ -346,6 +403,7 @@ def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader
             end_ns=max(reader.end_time - 1, reader.start_time) if count else 0,
             message_count=count,
             typestore=store,
+            messages_expected=count,
             _reader=reader,
             _connections=connections,
         )
@@ -382,17 +440,26 @@ def _single_file(path: Path, cause: BaseException) -> Path:
     return path
 
 
-def _open_salvage(path: Path, extra_types: Mapping[str, str] | None, cause: BaseException) -> BagReader:
-    path = _single_file(path, cause)
+def _open_salvage(
+    path: Path, extra_types: Mapping[str, str] | None, cause: BaseException | None
+) -> BagReader:
+    bag_dir = path if path.is_dir() else None
+    path = _single_file(path, cause or InputError('salvage'))
     if path.suffix == '.db3':
         topics, messages, damage = _scan_sqlite(path)
         stored: list[tuple[str, MessageDefinitionFormat, str]] = []
+        expected = _metadata_count(bag_dir or path.parent)
     else:
-        topics, messages, damage, stored = _scan_mcap(path)
+        topics, messages, damage, stored, expected = _scan_mcap(path)
     store = build_typestore(stored, extra_types)
     topics = {k: _with_decodable(v, store) for k, v in topics.items()}
-    if damage:
-        LOG.warning('%s: %s; read the %d messages before it', path, damage, len(messages))
+    if not damage and cause is not None:
+        damage = f'unreadable index ({str(cause) or type(cause).__name__})'
+    held = 'an unknown number of' if expected is None else f'{expected}'
+    if not messages:
+        raise InputError(f'{path}: nothing intact to salvage (0 of {held} messages; {damage or "no data"})')
+    if damage or expected is None or len(messages) < expected:
+        LOG.warning('%s: salvaged %d of %s messages; %s', path, len(messages), held, damage or 'no count')
     stamps = [m.timestamp_ns for m in messages]
     return BagReader(
         path=path,
@@ -402,43 +469,47 @@ def _open_salvage(path: Path, extra_types: Mapping[str, str] | None, cause: Base
         end_ns=max(stamps, default=0),
         message_count=len(messages),
         typestore=store,
-        damage=damage or f'unreadable index ({cause})',
+        damage=damage,
         salvage=True,
+        messages_expected=expected,
+        messages_read=len(messages),
         _salvaged=messages,
     )
 
 
+def _metadata_count(folder: Path) -> int | None:
+    """Message count in a rosbag2 directory's metadata.yaml (None if absent or unreadable)."""
+    import yaml
+
+    from skidsteer_power.bags.salvage import message_count_of
+
+    try:
+        return message_count_of(yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8')))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+
+
 def _scan_mcap(
     path: Path,
-) -> tuple[dict[str, TopicInfo], list[BagMessage], str, list[tuple[str, MessageDefinitionFormat, str]]]:
-    """Stream an MCAP file from its start; stop at the first damaged record."""
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Message, Schema
-    from mcap.stream_reader import StreamReader
+) -> tuple[
+    dict[str, TopicInfo], list[BagMessage], str, list[tuple[str, MessageDefinitionFormat, str]], int | None
+]:
+    """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bags.salvage`)."""
+    from skidsteer_power.bags.salvage import salvage_mcap
 
+    found = salvage_mcap(path.read_bytes())
     formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
+    schemas, channels = found.schemas, found.channels
     messages: list[BagMessage] = []
-    damage = ''
-    with path.open('rb') as stream:
-        try:
-            for record in StreamReader(stream, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    channel = channels[record.channel_id]
-                    msgtype = schemas[channel.schema_id].name if channel.schema_id in schemas else ''
-                    messages.append(BagMessage(channel.topic, record.log_time, bytes(record.data), msgtype))
-        except (McapError, *_DAMAGE_ERRORS) as err:
-            damage = f'damaged after byte {stream.tell()} ({str(err) or type(err).__name__})'
     counts: dict[int, int] = {}
-    by_topic = {c.topic: c.id for c in channels.values()}
-    for message in messages:
-        counts[by_topic[message.topic]] = counts.get(by_topic[message.topic], 0) + 1
-    topics = {}
+    for record in found.messages:
+        channel = channels[record.channel_id]
+        schema = schemas.get(channel.schema_id)
+        msgtype = schema.name if schema else ''
+        messages.append(BagMessage(channel.topic, record.log_time, bytes(record.data), msgtype))
+        counts[channel.id] = counts.get(channel.id, 0) + 1
+    messages.sort(key=lambda m: m.timestamp_ns)
+    topics: dict[str, TopicInfo] = {}
     for channel in channels.values():
         schema = schemas.get(channel.schema_id)
         qos_text = channel.metadata.get('offered_qos_profiles', '')
@@ -446,17 +517,20 @@ def _scan_mcap(
             qos = tuple(parse_qos(qos_text)) if qos_text else ()
         except Exception:  # QoS is advisory; a salvage read goes on without it
             qos = ()
+        old = topics.get(channel.topic)
         topics[channel.topic] = TopicInfo(
             channel.topic,
             schema.name if schema else '',
-            counts.get(channel.id, 0),
+            counts.get(channel.id, 0) + (old.count if old else 0),
             qos,
-            schema.data.decode() if schema else '',
+            schema.data.decode(errors='replace') if schema else '',
         )
     stored = [
-        (s.name, formats[s.encoding], s.data.decode()) for s in schemas.values() if s.encoding in formats
+        (s.name, formats[s.encoding], s.data.decode(errors='replace'))
+        for s in schemas.values()
+        if s.encoding in formats
     ]
-    return topics, messages, damage, stored
+    return topics, messages, '; '.join(found.damage), stored, found.expected
 
 
 def _scan_sqlite(path: Path) -> tuple[dict[str, TopicInfo], list[BagMessage], str]:

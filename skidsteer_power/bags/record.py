@@ -7,8 +7,11 @@ definitions come from the rosbags Jazzy type store, or from the ``.msg`` file th
 package installs, so Foxglove/Lichtblick, PlotJuggler and ``ros2 bag`` can decode the bag.
 
 Output layout: see :mod:`skidsteer_power.bags.writer`. A clean stop (SIGINT, SIGTERM, end of
-``duration``) first takes every message still queued, then writes the index and moves the file into
-place. A killed recorder leaves the partial MCAP, readable with ``salvage``.
+``duration``) first takes every message still queued, then writes the index. The file is written in
+place from the start: header and schemas at once, then a chunk at least every
+:data:`~skidsteer_power.bags.writer.FLUSH_PERIOD_S` (also while no message arrives), so a recorder
+killed by SIGKILL or a power cut leaves an MCAP missing at most about that much at its end, readable
+with ``--salvage``.
 """
 
 from __future__ import annotations
@@ -165,6 +168,7 @@ def record(
         end = time.monotonic() + duration_s if duration_s is not None else float('inf')
         while not stop.is_set() and time.monotonic() < end and context.ok():
             executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+            writer.flush_if_due()
         recorder.drain(executor)
     finally:
         if recorder is not None:

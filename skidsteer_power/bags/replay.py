@@ -8,6 +8,10 @@ publishers (reliable unless they were all best-effort; transient-local if they a
 A topic whose message type is not installed for Python (rclpy needs the generated type support to
 create a publisher) is skipped with a warning; so is a bag topic not named in ``topics``. With
 ``clock`` the bag time is published on ``/clock`` (rosgraph_msgs/Clock) at ``clock_hz``.
+
+A salvaged bag (``--salvage``) may hold messages whose frame survived but whose bytes did not: each of
+its messages is first deserialized with rclpy, and one that fails (or that the middleware refuses to
+publish) is skipped and counted in ``ReplayResult.undecodable``, with one warning per topic.
 """
 
 from __future__ import annotations
@@ -82,6 +86,7 @@ class ReplayResult:
     wall_s: float
     late_s: np.ndarray = field(repr=False)
     log: list[tuple[str, float, float]] = field(default_factory=list, repr=False)
+    undecodable: dict[str, int] = field(default_factory=dict)
 
     @property
     def message_count(self) -> int:
@@ -135,6 +140,8 @@ class Replayer:
         self.options = options or ReplayOptions()
         self.skipped: dict[str, str] = {}
         self.publishers: dict[str, Any] = {}
+        self.classes: dict[str, Any] = {}
+        self.undecodable: dict[str, int] = {}
         wanted = list(bag.topics) if self.options.topics is None else list(self.options.topics)
         missing = [t for t in wanted if t not in bag.topics]
         if missing:
@@ -148,6 +155,7 @@ class Replayer:
                 LOG.warning('not replaying %s: %s', topic, err)
                 continue
             self.publishers[topic] = node.create_publisher(cls, topic, qos_for_stored(info.qos))
+            self.classes[topic] = cls
         self._clock_pub = None
         if self.options.clock:
             from rosgraph_msgs.msg import Clock
@@ -213,9 +221,12 @@ class Replayer:
             last, published = start, 0
             for message in self._messages(start, stop_ns):
                 deadline = t0 + (message.timestamp_ns - start) / NS / rate
+                if self.bag.salvage and not self._decodes(message, passes == 1):
+                    continue
                 if not self._sleep_until(deadline, t0, start, stop):
                     break
-                self.publishers[message.topic].publish(message.data)
+                if not self._publish(message, passes == 1):
+                    continue
                 now = time.monotonic()
                 late.append(now - deadline)
                 counts[message.topic] += 1
@@ -230,7 +241,39 @@ class Replayer:
             t0 += ((stop_ns if stop_ns is not None else last) - start) / NS / rate
         wall = time.monotonic() - began
         self.wait_for_acks(ACK_TIMEOUT_S)
-        return ReplayResult(counts, dict(self.skipped), passes, wall, np.array(late), log)
+        return ReplayResult(
+            counts, dict(self.skipped), passes, wall, np.array(late), log, dict(self.undecodable)
+        )
+
+    def _decodes(self, message: BagMessage, count: bool) -> bool:
+        """Whether rclpy can deserialize ``message`` (checked for salvaged bags only)."""
+        from rclpy.serialization import deserialize_message
+
+        try:
+            deserialize_message(message.data, self.classes[message.topic])
+        except Exception as err:  # rclpy raises assorted errors for bad bytes: skip and count
+            self._count_bad(message.topic, f'cannot deserialize ({err})', count)
+            return False
+        return True
+
+    def _publish(self, message: BagMessage, count: bool) -> bool:
+        from rclpy._rclpy_pybind11 import RCLError
+
+        try:
+            self.publishers[message.topic].publish(message.data)
+        except RCLError as err:  # the middleware refused the bytes (damaged CDR)
+            if not self.bag.salvage:
+                raise InputError(f'{message.topic}: a message cannot be published ({err})') from err
+            self._count_bad(message.topic, f'refused by the middleware ({err})', count)
+            return False
+        return True
+
+    def _count_bad(self, topic: str, why: str, count: bool) -> None:
+        if not count:
+            return
+        if topic not in self.undecodable:
+            LOG.warning('%s: skipping damaged messages: %s', topic, why)
+        self.undecodable[topic] = self.undecodable.get(topic, 0) + 1
 
     def wait_for_acks(self, timeout_s: float) -> bool:
         """Wait until reliable subscribers have acknowledged every message, up to ``timeout_s`` [s].

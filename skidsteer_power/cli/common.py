@@ -6,9 +6,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -82,6 +85,34 @@ def radius_float(text: str) -> float:
     if value == 0:
         raise argparse.ArgumentTypeError('turning radius must be non-zero (inf = straight)')
     return value
+
+
+@contextlib.contextmanager
+def native_stdout_to_stderr() -> Iterator[None]:
+    """For the block, what native code writes to file descriptor 1 goes to stderr, while Python's
+    ``print`` still reaches the real stdout: stdout carries only this program's output. Fast DDS
+    prints its log on stdout (e.g. 'RTPS_TRANSPORT_SHM Error ... Failed init_port' when another
+    process holds a shared-memory port), which broke ``--json`` output. A no-op when Python's stdout
+    is not descriptor 1 (captured in tests, embedded)."""
+    try:
+        is_fd1 = sys.stdout.fileno() == 1
+    except (AttributeError, ValueError, OSError):  # io.UnsupportedOperation is an OSError
+        is_fd1 = False
+    if not is_fd1:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    original = sys.stdout
+    sys.stdout = open(saved, 'w', encoding=original.encoding, errors=original.errors, closefd=False)  # noqa: SIM115
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        sys.stdout = original
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def add_json_flag(parser: argparse.ArgumentParser) -> None:

@@ -16,6 +16,7 @@ import sys
 from collections.abc import Sequence
 
 from skidsteer_power import __version__
+from skidsteer_power.cli.common import native_stdout_to_stderr
 from skidsteer_power.errors import SkidsteerError
 
 PROG = 'skidsteer-power'
@@ -66,7 +67,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
-        code = func(args)
+        with native_stdout_to_stderr():  # DDS logs must not mix into --json output
+            code = func(args)
     except (SkidsteerError, ValueError) as err:
         return fail(str(err))
     except OSError as err:

@@ -13,8 +13,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float, positive_float
+from skidsteer_power.cli.common import add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, PAYLOAD_KG
 
 PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 MODEL_CHOICES = ('fess', 'wong', 'steeds', 'icr', 'fast')
@@ -40,13 +41,14 @@ def _register_mission(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--route', required=True, help='patrol | search-retrieve | FILE.csv')
     p.add_argument(
         '--speed',
-        type=positive_float,
-        help='forward speed [m/s] (default: 0.2 patrol, 0.5 search-retrieve; CSV rows)',
+        type=FORWARD_SPEED_M_S.arg(),
+        help=FORWARD_SPEED_M_S.help('forward speed (default: 0.2 patrol, 0.5 search-retrieve; CSV rows)')
+        + "; with the power map (default), above the map's speed envelope is an error",
     )
     p.add_argument(
         '--payload-kg',
-        type=nonnegative_float,
-        help='search-retrieve: payload brought back [kg] (default 10); other routes: carried throughout',
+        type=PAYLOAD_KG.arg(),
+        help=PAYLOAD_KG.help('search-retrieve: payload brought back (default 10); other routes: carried'),
     )
     _add_source_args(p)
     p.add_argument(

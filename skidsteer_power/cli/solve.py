@@ -10,7 +10,10 @@ skidsteer-power solve --vehicle FILE --terrain T --speed V --turn-radius R --mod
        sinkage_m, traction_margin (and mu_t where the model gives it)
 
 R = inf is straight running; R > 0 turns left (outer = right side), R < 0 right (the mirror image).
-``solve_time_s`` is the wall time of the model call alone.
+``solve_time_s`` is the wall time of the model call alone. Inputs have physical ranges (shown in
+--help; skidsteer_power.terramechanics.ranges), --resolution at most a million nodes, and a sinkage
+deeper than the wheel radius (wheels) or the track height (tracks: twice the sprocket radius) is an
+error.
 """
 
 from __future__ import annotations
@@ -22,8 +25,17 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power import models
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float, radius_float
+from skidsteer_power.cli.common import add_json_flag, emit
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import (
+    FORWARD_SPEED_M_S,
+    FRICTION,
+    MAX_RESOLUTION_NODES,
+    TURN_RADIUS_M,
+    check_resolution,
+    check_sinkage,
+    turn_radius_arg,
+)
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -36,7 +48,10 @@ def _resolution(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f'resolution must be two integers like 24,3: {text!r}') from None
     if len(values) != 2 or min(values) < 1:
         raise argparse.ArgumentTypeError(f'resolution must be two positive integers like 24,3: {text!r}')
-    return values
+    try:
+        return check_resolution(values)
+    except InputError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,21 +63,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument('--vehicle', required=True, help='vehicle YAML file or a name in config/vehicles/')
     parser.add_argument('--terrain', required=True, help='terrain preset name or YAML file')
-    parser.add_argument('--speed', required=True, type=positive_float, help='forward speed V [m/s]')
     parser.add_argument(
-        '--turn-radius', required=True, type=radius_float, help='signed turning radius R [m] (inf = straight)'
+        '--speed', required=True, type=FORWARD_SPEED_M_S.arg(), help=FORWARD_SPEED_M_S.help('forward speed V')
+    )
+    parser.add_argument(
+        '--turn-radius',
+        required=True,
+        type=turn_radius_arg,
+        help=f'signed turning radius R [m], inf = straight, else {TURN_RADIUS_M.text}',
     )
     parser.add_argument('--model', required=True, choices=sorted(models.MODELS), help='skid-steering model')
     parser.add_argument(
-        '--mu-t', type=positive_float, help='steeds: coefficient of lateral resistance (Table 3.1)'
+        '--mu-t',
+        type=FRICTION.arg(),
+        help=FRICTION.help('steeds: coefficient of lateral resistance (Table 3.1)'),
     )
     parser.add_argument(
-        '--mu', type=positive_float, help='icr: Coulomb friction coefficient (1.12 in the text)'
+        '--mu',
+        type=FRICTION.arg(),
+        help=FRICTION.help('icr: Coulomb friction coefficient (1.12 in the text)'),
     )
     parser.add_argument(
         '--resolution',
         type=_resolution,
-        help='wong/icr: integration nodes "along,across" (tracks) or "per-panel,nested" (wheels)',
+        help='wong/icr: integration nodes "along,across" (tracks) or "per-panel,nested" (wheels); '
+        f'at most {MAX_RESOLUTION_NODES:,} in all',
     )
     add_json_flag(parser)
     parser.set_defaults(func=run_solve)
@@ -95,7 +120,15 @@ def run_solve(args: argparse.Namespace) -> int:
         elapsed = time.perf_counter() - start
     except ModuleNotFoundError as err:
         raise InputError(f'model {args.model!r} is not available in this build ({err.name} missing)') from err
-    emit(_payload(vehicle.name, terrain.name, state, elapsed), args.json)
+    payload = _payload(vehicle.name, terrain.name, state, elapsed)
+    if payload['sinkage_m'] is not None:
+        if vehicle.is_tracked:
+            check_sinkage(
+                payload['sinkage_m'], 2 * vehicle.drive_radius_m, 'track height (sprocket diameter)'
+            )
+        else:
+            check_sinkage(payload['sinkage_m'], vehicle.drive_radius_m, 'wheel radius')
+    emit(payload, args.json)
     return 0
 
 

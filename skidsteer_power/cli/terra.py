@@ -7,6 +7,9 @@ skidsteer-power wheel  --terrain T --load N --width M --radius M --slip S [--spe
        slip; with --speed also wheel_speed_rad_s and shaft_power_W
 skidsteer-power terrains [--json]
     -> every preset with its values in SI units, the units and the table it came from
+
+Every number has a physical range (skidsteer_power.terramechanics.ranges, shown in --help); a
+sinkage deeper than the track height (--height, default 0.2 m) or the wheel radius is an error.
 """
 
 from __future__ import annotations
@@ -15,8 +18,18 @@ import argparse
 import dataclasses
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float, nonnegative_float, positive_float
+from skidsteer_power.cli.common import add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import (
+    DEFAULT_TRACK_HEIGHT_M,
+    HEIGHT_M,
+    LENGTH_M,
+    LOAD_N,
+    RADIUS_M,
+    SPEED_M_S,
+    WIDTH_M,
+    check_sinkage,
+)
 from skidsteer_power.terramechanics.terrain import PRESET_SOURCES, PRESETS, load_terrain
 from skidsteer_power.terramechanics.track import single_track
 from skidsteer_power.terramechanics.wheel import wheel_at_slip
@@ -48,15 +61,23 @@ def slip_float(text: str) -> float:
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--terrain', required=True, help='preset name or YAML terrain file')
-    parser.add_argument('--load', required=True, type=nonnegative_float, help='normal load W [N]')
-    parser.add_argument('--width', required=True, type=positive_float, help='contact width b [m]')
+    parser.add_argument('--load', required=True, type=LOAD_N.arg(), help=LOAD_N.help('normal load W'))
+    parser.add_argument('--width', required=True, type=WIDTH_M.arg(), help=WIDTH_M.help('contact width b'))
     add_json_flag(parser)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     track = subparsers.add_parser('track', help='single track on deformable terrain (eqs. 2.6-2.18)')
     _common(track)
-    track.add_argument('--length', required=True, type=positive_float, help='contact length l [m]')
+    track.add_argument('--length', required=True, type=LENGTH_M.arg(), help=LENGTH_M.help('contact length l'))
+    track.add_argument(
+        '--height',
+        type=HEIGHT_M.arg(),
+        default=DEFAULT_TRACK_HEIGHT_M,
+        help=HEIGHT_M.help(
+            f'track height; a deeper sinkage is an error (default {DEFAULT_TRACK_HEIGHT_M:g})'
+        ),
+    )
     track.add_argument('--slip', type=slip_float, default=0.0, help='slip ratio s in [-1, 1] (default 0)')
     track.set_defaults(func=run_track)
 
@@ -67,9 +88,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'and torque_Nm, the axle torque that drives the wheel (= -M_y of eq. 2.34; > 0 when driving).',
     )
     _common(wheel)
-    wheel.add_argument('--radius', required=True, type=positive_float, help='wheel radius r [m]')
+    wheel.add_argument('--radius', required=True, type=RADIUS_M.arg(), help=RADIUS_M.help('wheel radius r'))
     wheel.add_argument('--slip', required=True, type=slip_float, help='slip ratio s in [-1, 1]')
-    wheel.add_argument('--speed', type=finite_float, help='forward speed V [m/s] (adds wheel speed, power)')
+    wheel.add_argument(
+        '--speed', type=SPEED_M_S.arg(), help=SPEED_M_S.help('forward speed V (adds wheel speed, power)')
+    )
     wheel.set_defaults(func=run_wheel)
 
     terrains = subparsers.add_parser('terrains', help='list terrain presets with values and units')
@@ -80,6 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_track(args: argparse.Namespace) -> int:
     terrain = load_terrain(args.terrain)
     state = single_track(terrain, args.load, args.width, args.length, args.slip)
+    check_sinkage(float(state.sinkage_m), args.height, 'track height')
     emit(
         {
             'terrain': terrain.name,
@@ -97,6 +121,7 @@ def run_track(args: argparse.Namespace) -> int:
 def run_wheel(args: argparse.Namespace) -> int:
     terrain = load_terrain(args.terrain)
     state = wheel_at_slip(terrain, args.load, args.slip, args.radius, args.width)
+    check_sinkage(float(state.sinkage_m), args.radius, 'wheel radius')
     payload: dict[str, Any] = {
         'terrain': terrain.name,
         'slip': args.slip,

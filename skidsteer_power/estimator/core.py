@@ -2,11 +2,21 @@
 
 :class:`EstimatorCore` holds no ROS object: every method takes the current time ``now_s`` [s]
 (any monotonic clock), so it runs the same in a node, a replay or a unit test.
+
+Physically impossible power never stops it. A joint_states reading within the input limits can still
+ask more battery-side power than the battery can deliver at all (``Battery.max_power_W``, the
+maximum-power-transfer bound OCV^2 / 4R at the lowest OCV): such a reading is SKIPPED (not fed to the
+energy integral, so the measured source goes stale and the prediction takes over), counted in
+``implausible['joint_states']`` and raised as :class:`RejectedInput`. A prediction beyond the bound is
+CLAMPED to it and counted in ``implausible['predictions']``. Either makes :meth:`EstimatorCore.diagnostics`
+WARN for :data:`IMPLAUSIBLE_WARN_S`. So the battery model is only ever stepped with a power it can
+deliver, and no measurement can make a timer callback raise.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,6 +40,8 @@ from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
+IMPLAUSIBLE_WARN_S = 10.0
+"""Diagnostics stay WARN this long after the last implausible reading or prediction [s]."""
 TERRAIN_CHANGE_SHOWN_S = 10.0  # diagnostics warn "terrain changed" this long after a detection [s]
 
 
@@ -134,6 +146,8 @@ class EstimatorCore:
         self.command: tuple[float, float] | None = None
         self.clamped_count = 0
         self.time_to_empty_s = math.inf
+        self.implausible: Counter[str] = Counter()
+        self._implausible_s: float | None = None
 
     @property
     def battery(self) -> Any:
@@ -157,8 +171,22 @@ class EstimatorCore:
         assert self.command is not None
         self.prediction = self.predictor.predict(*self.command)
         self.clamped_count += int(self.prediction.clamped)
-        self.energy.set_predicted(self.corrected_bus_W(), now_s)
+        power = self.corrected_bus_W()  # the online correction feeds the battery forecast
+        limit = self.power_limit_W()
+        if not abs(power) <= limit:  # NaN too
+            self._flag_implausible('predictions', now_s)
+            power = math.copysign(limit, power) if not math.isnan(power) else 0.0
+        self.energy.set_predicted(power, now_s)
         return self.prediction
+
+    def power_limit_W(self) -> float:
+        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say)."""
+        limit = getattr(self.battery, 'max_power_W', None)
+        return float(limit()) if callable(limit) else math.inf
+
+    def _flag_implausible(self, what: str, now_s: float) -> None:
+        self.implausible[what] += 1
+        self._implausible_s = now_s
 
     def corrected_torque_Nm(self) -> tuple[float, float]:
         """Predicted motor torques [N m] with the online correction applied (left, right)."""
@@ -198,9 +226,17 @@ class EstimatorCore:
             omega, torque = check_joint_state(names, velocity, effort, self.settings.limits)
         except InputError as err:
             raise self._reject('joint_states', err, now_s) from err
-        self.joint_fresh.mark(now_s)
         pt = self.powertrain
         measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
+        limit = self.power_limit_W()
+        if not abs(measured.bus_total_W) <= limit:
+            self._flag_implausible('joint_states', now_s)
+            reason = InputError(
+                f'implausible reading skipped: battery-side power {measured.bus_total_W:.0f} W is more '
+                f'than the battery can deliver ({limit:.0f} W)'
+            )
+            raise self._reject('joint_states', reason, now_s)
+        self.joint_fresh.mark(now_s)
         self.energy.set_measured(measured.bus_total_W, now_s)
         self.comparison = self._compare(measured)
         p = self.prediction
@@ -254,6 +290,8 @@ class EstimatorCore:
         correction = self.adaptation.state()
         if now_s - correction.last_change_s <= TERRAIN_CHANGE_SHOWN_S:
             problems.append('terrain changed: adaptation restarted')
+        if self._implausible_s is not None and now_s - self._implausible_s <= IMPLAUSIBLE_WARN_S:
+            problems.append('implausible power (beyond what the battery can deliver) skipped or clamped')
         level = LEVEL_WARN if problems else LEVEL_OK
         source = self.energy.source(now_s)
         values = {
@@ -265,6 +303,8 @@ class EstimatorCore:
             'rejected_cmd_vel': str(self.rejects.counts['cmd_vel']),
             'rejected_joint_states': str(self.rejects.counts['joint_states']),
             'clamped_commands': str(self.clamped_count),
+            'implausible_joint_states': str(self.implausible['joint_states']),
+            'implausible_predictions': str(self.implausible['predictions']),
             'energy_measured_J': f'{self.energy.energy_J["measured"]:.3f}',
             'energy_predicted_J': f'{self.energy.energy_J["predicted"]:.3f}',
             'remaining_wh': f'{self.battery.remaining_wh:.4f}',

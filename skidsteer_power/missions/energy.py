@@ -269,6 +269,12 @@ def _map_states(
         power_map = PowerMap.build(vehicle, terrain)
     else:
         power_map, _built = load_or_build(vehicle, terrain, cache_dir)
+    envelope = float(power_map.meta.get('max_speed_m_s', np.inf))
+    if np.any(np.abs(speed) > envelope):
+        raise InputError(
+            f'speed {float(np.max(np.abs(speed))):g} m/s is beyond the power map of {vehicle.name} '
+            f'(up to {envelope:g} m/s): it would be clamped; solve directly with --direct'
+        )
     q = power_map.query(speed, _yaw_rate(speed, radius))
     return {
         'torque_left': np.asarray(q.torque_left_Nm, dtype=float),

@@ -28,6 +28,7 @@ import numpy as np
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, PAYLOAD_KG, TURN_RADIUS_M
 
 PATROL_TOTAL_M = 154.4  # ch. 8.1
 PATROL_TURN_RADIUS_M = 1.0  # ch. 8.1
@@ -154,21 +155,43 @@ def _synthetic_curvature(u: np.ndarray) -> np.ndarray:
     return shape / np.max(np.abs(shape)) / SEARCH_MIN_RADIUS_M
 
 
-def _trace(route: Route, points_per_m: float = 4.0) -> np.ndarray:
-    """Integrate the segments into x, y path points [m] (start at the origin heading +x)."""
-    x, y, heading = 0.0, 0.0, 0.0
-    pts = [(x, y)]
-    for seg in route.segments:
-        n = max(1, math.ceil(seg.length_m * points_per_m))
-        ds = seg.length_m / n
-        curvature = 0.0 if not seg.is_turning else 1.0 / seg.turn_radius_m
-        for _ in range(n):
-            heading_mid = heading + 0.5 * ds * curvature
-            x += ds * math.cos(heading_mid)
-            y += ds * math.sin(heading_mid)
-            heading += ds * curvature
-            pts.append((x, y))
-    return np.asarray(pts)
+MAX_TRACE_STEP_RAD = math.pi / 36
+"""Largest heading change between two traced points of an arc [rad] (5 degrees; plots stay smooth)."""
+MAX_TRACE_STEPS = 200_000
+"""Most points a route's trace may have; a route needing more is an InputError (not an OOM kill)."""
+
+
+def _trace(route: Route) -> np.ndarray:
+    """x, y path points [m] of the segments (start at the origin heading +x), exact for each arc.
+
+    Sampled by STEPS, not by length: a straight segment is one step whatever its length, an arc one
+    step per :data:`MAX_TRACE_STEP_RAD` of heading change. Raises InputError when the route needs more
+    than :data:`MAX_TRACE_STEPS` points (e.g. a kilometre-long arc of 1 m radius).
+    """
+    a = route.arrays()
+    length, radius = a['length_m'], a['turn_radius_m']
+    curvature = np.where(np.isinf(radius), 0.0, 1.0 / np.where(np.isinf(radius), 1.0, radius))
+    turned = np.abs(length * curvature)  # heading change of each segment [rad]
+    steps = np.ceil(np.minimum(turned / MAX_TRACE_STEP_RAD, MAX_TRACE_STEPS + 1.0)).clip(min=1)
+    total = float(steps.sum())
+    if total > MAX_TRACE_STEPS:
+        raise InputError(
+            f'route {route.name!r} turns through {turned.sum():.3g} rad in all: tracing it needs more '
+            f'than {MAX_TRACE_STEPS:,} points; shorten its arcs'
+        )
+    seg = np.repeat(np.arange(steps.size), steps.astype(int))
+    ds = (length / steps)[seg]  # step length [m]
+    k = curvature[seg]
+    heading_start = np.r_[0.0, np.cumsum(length * curvature)[:-1]][seg]
+    first = np.r_[0, np.cumsum(steps)[:-1]].astype(int)[seg]
+    within = np.arange(seg.size) - first  # step index inside its segment
+    h0 = heading_start + k * ds * within
+    h1 = h0 + k * ds
+    arc = k != 0.0
+    safe_k = np.where(arc, k, 1.0)
+    dx = np.where(arc, (np.sin(h1) - np.sin(h0)) / safe_k, ds * np.cos(h0))  # exact on a circle
+    dy = np.where(arc, (np.cos(h0) - np.cos(h1)) / safe_k, ds * np.sin(h0))
+    return np.column_stack([np.r_[0.0, np.cumsum(dx)], np.r_[0.0, np.cumsum(dy)]])
 
 
 BUILTIN = {'patrol': patrol, 'search-retrieve': search_retrieve}
@@ -221,13 +244,18 @@ def _segment(row: dict[str, str], path: object, line: int, default_speed: float 
     speed = number('speed_m_s', default_speed)
     if speed is None:
         raise InputError(f'{path}:{line}: no speed_m_s and no --speed given')
+    radius, payload = number('turn_radius_m', math.inf), number('payload_kg', 0.0)
     try:
+        FORWARD_SPEED_M_S.check(speed)  # the ranges of the command line (terramechanics.ranges)
+        if radius is not None and not math.isinf(radius) and radius != 0:
+            TURN_RADIUS_M.check(radius)
+        PAYLOAD_KG.check(payload)  # type: ignore[arg-type]
         return Segment.along(
             speed_m_s=speed,
-            turn_radius_m=number('turn_radius_m', math.inf),  # type: ignore[arg-type]
+            turn_radius_m=radius,  # type: ignore[arg-type]
             length_m=number('length_m'),
             duration_s=number('duration_s'),
-            payload_kg=number('payload_kg', 0.0),  # type: ignore[arg-type]
+            payload_kg=payload,  # type: ignore[arg-type]
         )
     except InputError as err:
         raise InputError(f'{path}:{line}: {err}') from None

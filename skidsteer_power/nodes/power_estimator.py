@@ -32,7 +32,8 @@ periodic (``publish_period_s``)
     whose positions are their values (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`);
     the terrain-change flag is in ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a
     warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
-    source, stale inputs, rejected-input counts, traction warning) every ``diagnostics_period_s``.
+    source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
+    every ``diagnostics_period_s``.
 service
     ``~/reset_energy`` std_srvs/Trigger: the battery was swapped for a full one; state of charge back
     to full, energy tallies to 0 J, state file rewritten.
@@ -47,8 +48,9 @@ parameters (depth, durability, history, reliability), e.g. ``qos_overrides./join
 .reliability: reliable`` where every joint_states writer is reliable and no loss is acceptable.
 
 The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
-restored on start. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker
-thread and swapped in when ready; the old map serves until then.
+restored on start; an unusable file is moved aside to ``<file>.corrupt-<UTC time>`` with one
+warning. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker thread and
+swapped in when ready; the old map serves until then.
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
-from skidsteer_power.estimator.persistence import load_state, save_state
+from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -224,21 +226,21 @@ class PowerEstimator(Node):
     def _restore(self, initial_soc: float) -> None:
         state = None
         if self.state_file is not None:
-            try:
-                state = load_state(self.state_file)
-                if state is not None and state.get('vehicle') != self.vehicle.name:
-                    raise ConfigError(f'{self.state_file} holds the state of {state.get("vehicle")!r}')
-                if state is not None:
-                    self.core.restore(state)
-                    self.get_logger().info(
-                        f'restored energy state from {self.state_file}: '
-                        f'{self.core.battery.remaining_wh:.2f} Wh left'
-                    )
-            except SkidsteerError as err:
-                state = None
-                self.get_logger().warning(f'{err}; starting from a fresh battery')
+            state, warning = load_or_quarantine(self.state_file, self._accept_state)
+            if warning:
+                self.get_logger().warning(warning)
+            elif state is not None:
+                self.get_logger().info(
+                    f'restored energy state from {self.state_file}: '
+                    f'{self.core.battery.remaining_wh:.2f} Wh left'
+                )
         if state is None and initial_soc >= 0:
             self.core.energy.battery = factory.battery_for(self.vehicle, soc=initial_soc)
+
+    def _accept_state(self, state: dict[str, Any]) -> None:
+        if state.get('vehicle') != self.vehicle.name:
+            raise ConfigError(f'it holds the state of vehicle {state.get("vehicle")!r}')
+        self.core.restore(state)
 
     def _make_interfaces(self, p: dict[str, Any]) -> None:
         depth = int(p['qos_depth'])

@@ -150,6 +150,16 @@ class Battery:
     def is_empty(self) -> bool:
         return self.state.soc <= self.config.soc_empty + 1e-12
 
+    def max_power_W(self) -> float:
+        """Largest terminal power [W] the battery can deliver at ANY state of charge.
+
+        Maximum power transfer from an OCV source behind resistance R is OCV^2 / (4 R); the lowest
+        OCV of the curve gives the bound valid at every state of charge, so a power within it never
+        makes :meth:`current_for_power`, :meth:`step` or :meth:`time_to_empty_s` fail.
+        """
+        v_min = float(np.min(self.config.ocv(self.config.soc_points)))
+        return v_min * v_min / (4.0 * self.config.resistance_ohm)
+
     def current_for_power(self, power_W: float, soc: float | None = None) -> float:
         """Battery current [A] delivering terminal power ``power_W`` [W] at ``soc`` (default: now)."""
         v = float(self.config.ocv(self.state.soc if soc is None else soc))
