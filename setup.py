@@ -34,6 +34,8 @@ setup(
         'rich',
         'matplotlib',
         'foxglove-sdk',
+        'dask[distributed]',
+        'SALib',
     ],
     zip_safe=True,
     maintainer='skidsteer_power developers',

@@ -8,11 +8,19 @@ The byte-time limit is the baud rate / 10 divided by the bytes one cycle puts on
 directions, handshakes included, no turnaround time): the ratio shows what the handshaking
 protocol, the pty and Python leave of the line. A run without wire emulation gives the software's
 own ceiling.
+
+Fail safe (issue 13): the time from a fault (an exception in a poller, an unplugged port, a silent
+amplifier) to the zero set point arriving at each amplifier, read from the simulator's own command
+log (arrival times), over several trials at a random phase of the poll cycle; here the simulators
+run in the benchmark's process, because the faults are injected into them.
 """
 
 from __future__ import annotations
 
 import json
+import math
+import random
+import statistics
 import subprocess
 import sys
 import time
@@ -73,6 +81,7 @@ def measure(baud: int, emulate: bool) -> tuple[float, float, int]:
 
 
 def run(report: Report) -> None:
+    run_fail_safe(report)
     nbytes = cycle_bytes()
     report.figure('bytes on the line per poll cycle (one side)', nbytes, 'B')
     for baud in (38400, 115200):
@@ -98,3 +107,122 @@ def run(report: Report) -> None:
         'Hz',
         note=f'left {left:.1f}, right {right:.1f}, link failures {failures}',
     )
+
+
+# -- fail safe: time from a fault to zero speed at the amplifier -----------------------------------
+
+FAULT_TRIALS = 7
+DRIVE_RPM = 1000
+
+
+def _wait(predicate, timeout_s: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.002)
+    return predicate()
+
+
+def _driving(pair) -> bool:
+    return (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (DRIVE_RPM, -DRIVE_RPM)
+
+
+def _zeroed_at(sim, after: float) -> float:
+    """Arrival time (simulator clock, time.monotonic) of the first zero set point after ``after``."""
+    for record in list(sim.commands):
+        if record.time_s >= after and record.opcode == OpCode.SET_VELOCITY and record.words == (0,):
+            return record.time_s
+    return math.nan
+
+
+def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], list[float]]:
+    """Per trial: (seconds until the faulted side's amplifier holds zero, until the other side's).
+
+    ``kind``: 'poller' (an exception inside the left poller's cycle), 'silent' (the left amplifier
+    stops answering) or 'unplug' (the left port disappears). Two pollers at the node's 50 Hz and
+    default timing drive simulated amplifiers (wire byte time emulated, 38400 baud) at +-1000 rpm.
+    A faulted side that cannot be reached (silent, unplugged) is NaN: only the other side can be
+    stopped, which is what ``stop_both_on_link_loss`` is for.
+    """
+    from skidsteer_power.des.simulator import Fault, SimulatedPair
+
+    own, other = [], []
+    with SimulatedPair(38400) as pair:
+        command = DriveCommand(timeout_s=1e6)
+        command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})
+        pollers = {
+            side: AmplifierPoller(
+                side, sim.port, command, config=DesConfig(baudrate=38400), timing=LinkTiming(),
+                poll_period_s=1.0 / NODE_RATE_HZ, status_every=STATUS_EVERY, reconnect_period_s=0.1,
+                log_error=lambda text: None,
+            ).start()
+            for side, sim in (('left', pair.left), ('right', pair.right))
+        }  # fmt: skip
+        try:
+            for _ in range(trials):
+                assert _wait(lambda: _driving(pair)), 'the motors never reached the set point'
+                time.sleep(0.05 + 0.02 * random.random())  # a random phase of the poll cycle
+                amp = pollers['left'].amp
+                if kind == 'poller':
+                    real = amp.read_current
+                    started: list[float] = []
+
+                    def broken(*args, _real=real, _started=started, **kwargs):
+                        if not _started:
+                            _started.append(time.monotonic())
+                            raise ZeroDivisionError('injected')
+                        return _real(*args, **kwargs)
+
+                    amp.read_current = broken
+                    _wait(lambda _s=started: bool(_s))
+                    t0 = started[0]
+                elif kind == 'silent':
+                    t0 = time.monotonic()
+                    pair.left.inject(Fault.SILENT, -1)
+                else:
+                    t0 = time.monotonic()
+                    pair.left.close_port()
+                _wait(lambda _t=t0: not math.isnan(_zeroed_at(pair.right, _t)))
+                own.append(_zeroed_at(pair.left, t0) - t0)
+                other.append(_zeroed_at(pair.right, t0) - t0)
+                if kind == 'poller':
+                    del amp.read_current
+                pair.left.clear_faults()
+                pair.left.reopen_port()
+        finally:
+            for poller in pollers.values():
+                poller.stop()
+    return own, other
+
+
+def _p50_max(values: list[float]) -> tuple[float, float]:
+    finite = sorted(v for v in values if not math.isnan(v))
+    if not finite:
+        return math.nan, math.nan
+    return statistics.median(finite), finite[-1]
+
+
+def run_fail_safe(report: Report) -> None:
+    goal_s = 0.5  # the node's default cmd_timeout_s: a detected fault must not stop slower than silence
+    for kind, what in (
+        ('poller', 'poller exception'),
+        ('unplug', 'port unplugged'),
+        ('silent', 'amplifier silent'),
+    ):
+        own, other = fault_to_zero(kind)
+        for side, values in (('faulted side', own), ('other side', other)):
+            p50, worst = _p50_max(values)
+            if math.isnan(p50):
+                report.figure(
+                    f'{what} -> zero speed, {side}', math.nan, 's', note='unreachable: keeps its set point'
+                )
+                continue
+            report.figure(
+                f'{what} -> zero speed, {side}: max of {len(values)}',
+                worst,
+                's',
+                goal=f'< {goal_s:g} s (cmd_timeout_s)',
+                met=worst < goal_s,
+                note=f'p50 {1000 * p50:.0f} ms',
+            )

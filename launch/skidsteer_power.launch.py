@@ -3,6 +3,11 @@ skidsteer_power.launch.py``). Without ROS launch, use ``skidsteer-power run`` (s
 
 Arguments: vehicle, terrain (estimator parameters), left_port, right_port (DES 70/10 amplifiers),
 monitor (true: also open energy_monitor in view mode in this terminal).
+
+des_driver is a managed (lifecycle) node: this file configures it once its process is up, activates
+it once it is inactive, and on shutdown deactivates it (zero speed, power stages off) and cleans it
+up (ports closed). The node zeroes and disables on SIGINT by itself too, should the launch's
+SIGINT arrive before the transitions are through.
 """
 
 from __future__ import annotations
@@ -10,10 +15,15 @@ from __future__ import annotations
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
 from launch.conditions import IfCondition
+from launch.event_handlers import OnProcessStart, OnShutdown
+from launch.events import matches_action
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
+from lifecycle_msgs.msg import Transition
 
 from launch import LaunchDescription
 
@@ -22,6 +32,48 @@ def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('skidsteer_power')
     estimator_defaults = os.path.join(share, 'config', 'estimator.yaml')
     vehicle = LaunchConfiguration('vehicle')
+    driver = LifecycleNode(
+        package='skidsteer_power',
+        executable='des_driver',
+        name='des_driver',
+        namespace='',
+        parameters=[
+            {
+                'vehicle': vehicle,
+                'left_port': LaunchConfiguration('left_port'),
+                'right_port': LaunchConfiguration('right_port'),
+            }
+        ],
+        output='screen',
+    )
+
+    def transition(transition_id: int) -> EmitEvent:
+        return EmitEvent(
+            event=ChangeState(lifecycle_node_matcher=matches_action(driver), transition_id=transition_id)
+        )
+
+    driver_transitions = [
+        RegisterEventHandler(
+            OnProcessStart(target_action=driver, on_start=[transition(Transition.TRANSITION_CONFIGURE)])
+        ),
+        RegisterEventHandler(
+            OnStateTransition(
+                target_lifecycle_node=driver,
+                start_state='configuring',
+                goal_state='inactive',
+                entities=[transition(Transition.TRANSITION_ACTIVATE)],
+            )
+        ),
+        RegisterEventHandler(OnShutdown(on_shutdown=[transition(Transition.TRANSITION_DEACTIVATE)])),
+        RegisterEventHandler(
+            OnStateTransition(
+                target_lifecycle_node=driver,
+                start_state='deactivating',
+                goal_state='inactive',
+                entities=[transition(Transition.TRANSITION_CLEANUP)],
+            )
+        ),
+    ]
     return LaunchDescription(
         [
             DeclareLaunchArgument('vehicle', default_value='test_robot_track'),
@@ -39,18 +91,8 @@ def generate_launch_description() -> LaunchDescription:
                 ],
                 output='screen',
             ),
-            Node(
-                package='skidsteer_power',
-                executable='des_driver',
-                name='des_driver',
-                parameters=[
-                    {
-                        'left_port': LaunchConfiguration('left_port'),
-                        'right_port': LaunchConfiguration('right_port'),
-                    }
-                ],
-                output='screen',
-            ),
+            driver,
+            *driver_transitions,
             Node(
                 package='skidsteer_power',
                 executable='energy_monitor',

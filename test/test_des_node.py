@@ -11,14 +11,16 @@ import time
 import uuid
 
 import pytest
+from des_harness import Harness
 
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
-from skidsteer_power.des.simulator import SimulatedPair
+from skidsteer_power.des.simulator import Fault, SimulatedPair
 
 pytestmark = pytest.mark.ros
 
 RPM = 2 * math.pi / 60
-# Set points for v = 0.2 m/s, yaw rate 0.5 rad/s, tread 0.426 m, r = 0.1 m, 12:1 (node defaults):
+# Set points for v = 0.2 m/s, yaw rate 0.5 rad/s on the default vehicle file test_robot_track.yaml
+# (tread 0.426 m, sprocket r = 0.1 m; its powertrain 12:1):
 # v_left = 0.2 - 0.5 * 0.426 / 2 = 0.0935 m/s -> 0.0935 / 0.1 * 12 rad/s = 11.22 rad/s = 107.14 rpm;
 # v_right = 0.3065 m/s -> 36.78 rad/s = 351.22 rpm. Right motor mirrored (polarity -1): -351.
 LEFT_RPM, RIGHT_RPM = 107, -351
@@ -28,81 +30,6 @@ LEFT_RPM, RIGHT_RPM = 107, -351
 def pair():
     with SimulatedPair(38400) as sims:
         yield sims
-
-
-class Harness:
-    """The driver node, a test node publishing cmd_vel and recording outputs, one executor."""
-
-    def __init__(self, context, pair: SimulatedPair, **overrides) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import Twist, TwistStamped
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.parameter import Parameter
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Empty
-
-        from skidsteer_power.nodes.des_driver import DesDriver
-
-        ns = f'/t{uuid.uuid4().hex[:8]}'
-        params = {
-            'left_port': pair.left.port,
-            'right_port': pair.right.port,
-            'ack_timeout_s': 0.3,
-            'reconnect_period_s': 0.2,
-            'diagnostics_rate_hz': 10.0,
-            **overrides,
-        }
-        self.driver = DesDriver(
-            context=context,
-            namespace=ns,
-            parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
-        )
-        self.node = Node('des_test', namespace=ns, context=context)
-        self.stamped = bool(overrides.get('twist_stamped', False))
-        self.cmd_pub = self.node.create_publisher(
-            TwistStamped if self.stamped else Twist, f'{ns}/cmd_vel', 10
-        )
-        self.clear_pub = self.node.create_publisher(Empty, f'{ns}/des_driver/clear_faults', 10)
-        self.joints: list[JointState] = []
-        self.diags: list[DiagnosticArray] = []
-        self.node.create_subscription(JointState, f'{ns}/joint_states', self.joints.append, 10)
-        self.node.create_subscription(DiagnosticArray, f'{ns}/diagnostics', self.diags.append, 10)
-        self.twist: tuple[float, float] | None = None
-        self.node.create_timer(0.05, self._publish_cmd)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.driver)
-        self.executor.add_node(self.node)
-
-    def _publish_cmd(self) -> None:
-        from geometry_msgs.msg import Twist, TwistStamped
-
-        if self.twist is not None:
-            msg = TwistStamped() if self.stamped else Twist()
-            twist = msg.twist if self.stamped else msg
-            twist.linear.x, twist.angular.z = self.twist
-            self.cmd_pub.publish(msg)
-
-    def spin_until(self, predicate, timeout_s: float = 8.0) -> bool:
-        """Spin until ``predicate()`` holds or the deadline passes (a wait, not a timing assertion)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.02)
-            if predicate():
-                return True
-        return predicate()
-
-    def side_diag(self, side: str):
-        for array in reversed(self.diags):
-            for status in array.status:
-                if status.name == f'des_driver: {side} amplifier':
-                    return status, {kv.key: kv.value for kv in status.values}
-        return None, {}
-
-    def close(self) -> None:
-        self.driver.destroy_node()
-        self.node.destroy_node()
-        self.executor.shutdown()
 
 
 @pytest.fixture
@@ -132,16 +59,26 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
     assert msg.velocity[1] > msg.velocity[0] > 0
     assert all(0 < e < 0.1 for e in msg.effort)
     assert msg.effort[0] == pytest.approx(0.114 * pair.left.model.mean_current_A, abs=0.005)
-    # Position integrates velocity: over ~1 s of joint_states the encoder must agree with the speed.
-    first = msg
+    # Position integrates velocity: over ~1 s of joint_states the encoder agrees with the measured
+    # speed (trapezoid rule over consecutive messages with fresh data on both sides).
+    start = len(harness.joints) - 1
+    first = harness.joints[start]
     harness.spin_until(lambda: harness.joints[-1].header.stamp.sec > first.header.stamp.sec + 1, timeout_s=5)
-    last = harness.joints[-1]
-    dt = (last.header.stamp.sec - first.header.stamp.sec) + 1e-9 * (
-        last.header.stamp.nanosec - first.header.stamp.nanosec
-    )
-    for i, rpm in enumerate((LEFT_RPM, -RIGHT_RPM)):
-        moved = last.position[i] - first.position[i]
-        assert moved == pytest.approx(rpm * RPM * dt, rel=0.1)
+    window = harness.joints[start:]
+    stamp = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in window]
+    pairs = [
+        k
+        for k in range(len(window) - 1)
+        if all(math.isfinite(v) for v in (*window[k].velocity, *window[k + 1].velocity))
+    ]
+    assert len(pairs) > 20
+    for i in (0, 1):
+        moved = sum(window[k + 1].position[i] - window[k].position[i] for k in pairs)
+        integral = sum(
+            0.5 * (window[k].velocity[i] + window[k + 1].velocity[i]) * (stamp[k + 1] - stamp[k])
+            for k in pairs
+        )
+        assert moved > 0 and moved == pytest.approx(integral, rel=0.1)
 
 
 def test_twist_stamped_by_parameter(ros_context, pair):
@@ -170,7 +107,7 @@ def test_watchdog_stops_the_motors(harness, pair):
 
 def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
     from diagnostic_msgs.msg import DiagnosticStatus
-    from std_msgs.msg import Empty
+    from std_srvs.srv import Trigger
 
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.right.speed_setpoint_rpm < 0 and pair.left.speed_setpoint_rpm > 0)
@@ -189,7 +126,8 @@ def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
     # cmd_vel keeps coming, but the latch holds: still stopped after a while.
     harness.spin_until(lambda: False, timeout_s=0.5)
     assert pair.right.speed_setpoint_rpm == 0
-    harness.clear_pub.publish(Empty())
+    answer = harness.call(harness.clear_client, Trigger.Request())
+    assert answer.success, answer.message
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     assert pair.left.errors == DesErrorFlags(0) and pair.left.enabled
     assert harness.spin_until(lambda: harness.side_diag('left')[0].level == DiagnosticStatus.OK)
@@ -232,7 +170,8 @@ def test_silent_amplifier_is_reported_and_reconnected(harness, pair):
     assert harness.spin_until(lambda: not math.isnan(harness.joints[-1].velocity[1]))
 
 
-def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -242,7 +181,7 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
         [
             sys.executable, '-m', 'skidsteer_power.nodes.des_driver', '--ros-args', '-r', f'__ns:={ns}',
             '-p', f'left_port:={pair.left.port}', '-p', f'right_port:={pair.right.port}',
-            '-p', 'ack_timeout_s:=0.3', '-p', 'cmd_vel_timeout_s:=5.0',
+            '-p', 'ack_timeout_s:=0.3', '-p', 'cmd_timeout_s:=5.0', '-p', 'autostart:=true',
         ],
         env=os.environ.copy(),
     )  # fmt: skip
@@ -258,7 +197,7 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair):
             pub.publish(msg)
             executor.spin_once(timeout_sec=0.05)
         assert pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signum)
         assert proc.wait(timeout=15) == 0
         for sim in (pair.left, pair.right):
             assert sim.speed_setpoint_rpm == 0 and not sim.enabled
@@ -289,3 +228,232 @@ def test_bad_parameters_are_one_clear_error(ros_context, pair):
                 Parameter('left_polarity', value=2),
             ],
         )
+
+
+# -- issue 13 / 17: fail safe and managed ---------------------------------------------------------
+
+CLAMPED_RPM = 1719
+# 1e308 m/s is clamped to max_speed_m_s = 1.5 m/s (node default): 1.5 / 0.1 m * 12 = 180 rad/s at the
+# motor = 180 / (2 pi / 60) = 1718.9 rpm, below max_motor_rpm 4000, so no further scaling.
+FIRST_STEP_MAX_RPM = 115
+# The slew limiter advances at most 0.1 s per step at max_accel_m_s2 = 1 m/s^2: 0.1 m/s ->
+# 0.1 / 0.1 * 12 = 12 rad/s = 114.6 rpm is the largest first set point after a stop.
+
+
+def both_zero(pair) -> bool:
+    return pair.left.speed_setpoint_rpm == 0 and pair.right.speed_setpoint_rpm == 0
+
+
+def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair):
+    from lifecycle_msgs.msg import Transition
+
+    h = Harness(ros_context, pair, activate=False)
+    try:
+        assert h.state() == 'unconfigured'
+        assert not h.transition(Transition.TRANSITION_ACTIVATE)  # not from unconfigured; node lives on
+        assert h.transition(Transition.TRANSITION_CONFIGURE)
+        assert h.state() == 'inactive'
+        assert h.driver.pollers['left'].amp.link.is_open and h.driver.pollers['right'].amp.link.is_open
+        assert h.spin_until(lambda: bool(h.joints))  # the amplifiers are read while inactive
+        h.twist = (0.2, 0.0)
+        h.spin_until(lambda: False, timeout_s=0.5)  # cmd_vel flows, but inactive ignores it
+        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+        assert h.transition(Transition.TRANSITION_ACTIVATE)
+        assert h.state() == 'active'
+        assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+        assert pair.left.enabled and pair.right.enabled
+        assert h.transition(Transition.TRANSITION_DEACTIVATE)
+        # At the moment the transition answers: zero speed and power stages off on both sides.
+        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+        assert h.state() == 'inactive'
+        h.spin_until(lambda: False, timeout_s=0.3)
+        assert both_zero(pair)  # cmd_vel still flowing changes nothing
+        assert h.transition(Transition.TRANSITION_CLEANUP)
+        assert h.state() == 'unconfigured' and h.driver.pollers == {}
+        # Configure again (parameters may change while unconfigured) and drive.
+        assert h.transition(Transition.TRANSITION_CONFIGURE)
+        assert h.transition(Transition.TRANSITION_ACTIVATE)
+        assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
+        assert h.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+        assert h.state() == 'finalized'
+        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+    finally:
+        h.close()
+
+
+def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
+    from lifecycle_msgs.msg import Transition
+
+    h = Harness(ros_context, pair, activate=False, configure_timeout_s=1.0)
+    try:
+        pair.right.inject(Fault.SILENT, -1)
+        assert not h.transition(Transition.TRANSITION_CONFIGURE)
+        assert h.state() == 'unconfigured'
+        assert 'right' in h.driver.configure_error and 'not ready' in h.driver.configure_error
+        assert h.driver.pollers == {}
+    finally:
+        h.close()
+
+
+def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair, monkeypatch):
+    from std_srvs.srv import Trigger
+
+    h = Harness(ros_context, pair, activate=False)
+    try:
+        answer = h.call(h.clear_client, Trigger.Request())
+        assert not answer.success and 'not configured' in answer.message
+        h.driver.trigger_configure()
+        h.driver.trigger_activate()
+        pair.right.raise_error(DesErrorFlags.OVER_CURRENT)
+        assert h.spin_until(lambda: h.side_diag('right')[1].get('fault_latched') == 'True')
+        # A fault that persists (the amplifier ignores the clear, as an over-temperature would):
+        with monkeypatch.context() as m:
+            m.setattr(pair.right, '_op_clear_error', lambda words: ())
+            answer = h.call(h.clear_client, Trigger.Request())
+        assert not answer.success and 'still latched: right (OVER_CURRENT' in answer.message
+        assert not pair.right.enabled and pair.left.speed_setpoint_rpm == 0
+        # An unreachable side is reported, and its request is not left pending for later.
+        pair.left.close_port()
+        assert h.spin_until(lambda: 'left' in h.driver.command.links_down)
+        answer = h.call(h.clear_client, Trigger.Request())
+        assert not answer.success
+        pair.left.reopen_port()
+        assert h.spin_until(lambda: not h.driver.command.links_down)
+        answer = h.call(h.clear_client, Trigger.Request())
+        assert answer.success, answer.message
+        assert pair.right.errors == DesErrorFlags(0) and pair.right.enabled
+    finally:
+        h.close()
+
+
+def test_huge_and_non_finite_commands(harness, pair):
+    harness.twist = (1e308, 0.0)
+    assert harness.spin_until(
+        lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (CLAMPED_RPM, -CLAMPED_RPM),
+        timeout_s=10,
+    )
+    moving = [c.words[0] for c in pair.left.commands_of(OpCode.SET_VELOCITY) if c.words[0] != 0]
+    assert 0 < moving[0] <= FIRST_STEP_MAX_RPM  # a ramp, not a step to 1719 rpm
+    assert all(w <= CLAMPED_RPM for w in moving)
+
+    def command_diag():
+        return harness.diag('des_driver: command')[1]
+
+    assert harness.spin_until(lambda: int(command_diag().get('cmd_vel_clamped', 0)) > 0)
+    # A NaN or inf command is rejected: it neither moves the motors nor keeps the last command alive.
+    for bad in ((math.nan, 0.0), (0.2, math.inf), (-math.inf, math.nan)):
+        harness.twist = bad
+        assert harness.spin_until(lambda: both_zero(pair))  # cmd_timeout_s after the last valid one
+    assert harness.spin_until(lambda: int(command_diag()['cmd_vel_rejected_non_finite']) >= 3)
+    assert command_diag()['setpoints_non_finite'] == '0'
+    # Then a valid command drives again, and the node never stopped publishing.
+    harness.twist = (0.2, 0.5)
+    assert harness.spin_until(
+        lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (LEFT_RPM, RIGHT_RPM)
+    )
+
+
+@pytest.mark.parametrize('stop_both', [True, False])
+def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
+    h = Harness(ros_context, pair, stop_both_on_link_loss=stop_both)
+    try:
+        h.twist = (0.2, 0.0)
+        assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+        pair.left.close_port()
+        assert h.spin_until(lambda: h.side_diag('left')[1].get('connected') == 'False')
+        if stop_both:
+            assert h.spin_until(lambda: pair.right.speed_setpoint_rpm == 0)
+            assert h.spin_until(lambda: 'link down: left' in h.side_diag('right')[0].message)
+            h.spin_until(lambda: False, timeout_s=0.3)
+            assert pair.right.speed_setpoint_rpm == 0  # stays stopped although cmd_vel keeps coming
+        else:
+            h.spin_until(lambda: False, timeout_s=0.5)
+            assert pair.right.speed_setpoint_rpm < 0  # opted out: the other side keeps following
+        pair.left.reopen_port()
+        assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+    finally:
+        h.close()
+
+
+def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, monkeypatch):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    harness.twist = (0.2, 0.0)
+    assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+    amp = harness.driver.pollers['left'].amp
+    real_read_current = amp.read_current
+    raised = []
+
+    def read_current_with_a_bug(*args, **kwargs):
+        if not raised:
+            raised.append(time.monotonic())
+            raise ZeroDivisionError('injected bug')
+        return real_read_current(*args, **kwargs)
+
+    monkeypatch.setattr(amp, 'read_current', read_current_with_a_bug)
+    marks = {side: len(sim.commands) for side, sim in (('left', pair.left), ('right', pair.right))}
+    assert harness.spin_until(lambda: harness.side_diag('left')[1].get('poller_faults') == '1')
+    status, values = harness.side_diag('left')
+    assert (
+        status.level == DiagnosticStatus.ERROR
+        and 'ZeroDivisionError: injected bug' in values['last_poller_fault']
+    )
+    # Left: zero, then disable, right after the fault; right: zero (one side down stops both).
+    left_log = [(c.opcode, c.words) for c in list(pair.left.commands)[marks['left'] :]]
+    assert left_log.index((OpCode.SET_VELOCITY, (0,))) < left_log.index((OpCode.ENABLE, (0,)))
+
+    def right_zeroed():
+        new = list(pair.right.commands)[marks['right'] :]
+        return (OpCode.SET_VELOCITY, (0,)) in [(c.opcode, c.words) for c in new]
+
+    assert harness.spin_until(right_zeroed)
+    # Restarted: driving again on the fresh command, with the fault still counted and shown as ERROR.
+    assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+    assert pair.left.enabled and harness.driver.pollers['left'].alive
+    assert harness.spin_until(lambda: harness.side_diag('left')[1].get('connected') == 'True')
+    status, values = harness.side_diag('left')
+    assert status.level == DiagnosticStatus.ERROR and 'restarted after a poller fault' in status.message
+
+
+def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch):
+    harness.twist = (0.2, 0.0)
+    assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
+
+    def broken_set_twist(*args):
+        raise RuntimeError('injected bug in the cmd_vel callback')
+
+    monkeypatch.setattr(harness.driver.command, 'set_twist', broken_set_twist)
+    with pytest.raises(RuntimeError, match='injected bug'):
+        harness.spin_until(lambda: False, timeout_s=5.0)
+    assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+
+
+def test_geometry_comes_from_the_vehicle_file(ros_context, pair, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.nodes.des_driver import DesDriver
+
+    vehicle = tmp_path / 'narrow.yaml'
+    vehicle.write_text(
+        'name: narrow\nrunning_gear: track\nmass_kg: 30.0\ncg_height_m: 0.15\ntread_m: 0.3\n'
+        'track_length_m: 0.45\ntrack_width_m: 0.074\nsprocket_radius_m: 0.08\n'
+        'powertrain: {preset: test_robot, gear_ratio: 10.0}\n'
+    )
+    driver = DesDriver(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('left_port', value=pair.left.port),
+            Parameter('right_port', value=pair.right.port),
+            Parameter('vehicle', value=str(vehicle)),
+        ],
+    )
+    try:
+        geometry = driver.params['geometry']
+        assert (geometry.tread_m, geometry.drive_radius_m, geometry.gear_ratio) == (0.3, 0.08, 10.0)
+        # V 0.2 m/s, yaw rate 0.5 rad/s: v_left = 0.2 - 0.5 * 0.3 / 2 = 0.125 m/s -> 0.125 / 0.08 * 10
+        # = 15.625 rad/s = 149.2 rpm; v_right = 0.275 m/s -> 34.375 rad/s = 328.3 rpm (mirrored: -).
+        rpm = geometry.motor_rpm(0.2, 0.5)
+        assert rpm['left'] == pytest.approx(149.21, abs=0.01)
+        assert rpm['right'] == pytest.approx(-328.25, abs=0.01)
+    finally:
+        driver.destroy_node()

@@ -27,6 +27,7 @@ from skidsteer_power.des.protocol import (
     to_int16,
     to_word,
 )
+from skidsteer_power.errors import ConfigError
 
 words_strategy = st.lists(st.integers(0, 0xFFFF), min_size=1, max_size=MAX_WORDS).map(tuple)
 
@@ -109,9 +110,10 @@ def test_lword_order_is_the_configured_one():
 
 
 def test_config_rejects_unknown_baud_and_current_source():
-    with pytest.raises(ValueError, match='baud rate'):
+    # A configuration error is the project's ConfigError (one line at the CLI), not a bare ValueError.
+    with pytest.raises(ConfigError, match='baud rate'):
         DesConfig(baudrate=12345)
-    with pytest.raises(ValueError, match='current_source'):
+    with pytest.raises(ConfigError, match='current_source'):
         DesConfig(current_source='guess')
 
 

@@ -70,9 +70,16 @@ def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
     argv = [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--host', '127.0.0.1', '--port', '0']
     proc = subprocess.Popen([*argv, '--topics', *topics, '--json'], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
-    line = proc.stderr.readline()  # 'serving ws://127.0.0.1:PORT' (stderr with --json)
-    assert line.startswith('serving ws://'), line + proc.stderr.read()
-    return proc, line.split()[1]
+    seen = []  # 'serving ws://127.0.0.1:PORT' (stderr with --json), after any DDS log lines
+    for line in proc.stderr:
+        if line.startswith('serving ws://'):
+            return proc, line.split()[1]
+        seen.append(line)
+        if len(seen) > 20:
+            break
+    proc.kill()
+    proc.wait()
+    pytest.fail(f'bridge did not start: {"".join(seen)}')
 
 
 def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
@@ -156,6 +163,7 @@ def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
     assert shipped == layout_json()
     published = {f'/{topic}' for topic, _ in (*COMMAND_FIGURES, *MEASUREMENT_FIGURES)}
     published |= {'/battery/state', '/energy/time_to_empty_s', '/energy/remaining_wh', '/odom'}
+    published |= {'/energy/path_required_wh', '/energy/path_margin_wh'}  # nodes/path_hook.py
     used = topics_used(shipped)
     assert used <= published and {'/power/predicted_left_w', '/power/measured_right_w'} <= used
 

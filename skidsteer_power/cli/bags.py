@@ -106,9 +106,13 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from skidsteer_power.bags.fleet import is_fleet, run_fleet_cmd
     from skidsteer_power.bags.report import one_screen
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
+    if is_fleet(args):  # several bags: skidsteer_power.bags.fleet (Dask)
+        return run_fleet_cmd(args)
+    args.bag = args.bag[0]
     _log_to_stderr()
     options = ValidateOptions(
         vehicle=args.vehicle,
@@ -187,7 +191,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'and compare with joint_states; trace analysis (eqs. 7.8-7.10) from odometry; CSV, PNG plots, '
         'a Markdown report and a JSON summary in DIR.',
     )
-    val.add_argument('bag', metavar='BAG', help='bag file (.mcap/.db3) or rosbag2 directory')
+    val.add_argument(
+        'bag',
+        nargs='+',
+        metavar='BAG',
+        help='bag file (.mcap/.db3) or rosbag2 directory; several, a folder of bags or a glob: fleet '
+        'validation (one report per bag in DIR/<bag>/, fleet.csv, summary.md, plots; bags/fleet.py)',
+    )
     val.add_argument('--vehicle', required=True, metavar='FILE', help='vehicle YAML or config name')
     val.add_argument('--terrain', required=True, metavar='T', help='terrain preset or YAML file')
     val.add_argument('--report', required=True, metavar='DIR', help='folder for the report (created)')
@@ -196,6 +206,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    val.add_argument(
+        '--jobs', type=int, default=None, metavar='N', help='fleet: local worker processes (cores)'
+    )
+    val.add_argument(
+        '--scheduler', default=None, metavar='ADDR', help='fleet: existing Dask cluster tcp://HOST:8786'
+    )
+    val.add_argument(
+        '--manifest',
+        default=None,
+        metavar='CSV',
+        help='fleet: per-bag vehicle, terrain (bag,vehicle,terrain)',
+    )
     val.add_argument(
         '--kinematics',
         choices=('cmd', 'odom', 'ground_truth'),

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 
 from skidsteer_power.cli.common import add_json_flag, emit, positive_float
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.protocol import BAUD_CODES
 from skidsteer_power.des.transport import LinkTiming
+from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
 
 def _baud(text: str) -> int:
@@ -82,13 +81,16 @@ def run_probe(args: argparse.Namespace) -> int:
 
 
 def run_sim(args: argparse.Namespace) -> int:
+    """Run until SIGINT or SIGTERM, also as a background job that inherited SIGINT as ignored."""
+    with stop_on_signals(StopFlag()) as stop:
+        return _serve_sims(args, stop)
+
+
+def _serve_sims(args: argparse.Namespace, stop: StopFlag) -> int:
     from skidsteer_power.des.simulator import SimulatedDes
 
     names = ['des_left', 'des_right'][: args.count]
     sims = [SimulatedDes(args.baud, name=n, emulate_baud=not args.no_baud_emulation) for n in names]
-    done = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):  # SIGINT too: a background job inherits it ignored
-        signal.signal(signum, lambda *_: done.set())
     try:
         for sim in sims:
             sim.start()
@@ -102,9 +104,8 @@ def run_sim(args: argparse.Namespace) -> int:
             for sim in sims:
                 print(sim.port)
         sys.stdout.flush()
-        done.wait()
-    except KeyboardInterrupt:
-        pass
+        while not stop.wait(1.0):
+            pass
     finally:
         for sim in sims:
             sim.stop()

@@ -58,6 +58,10 @@ def _register_mission(subparsers: argparse._SubParsersAction) -> None:
         '--no-cache', action='store_true', help='build maps in memory; do not read or write the cache'
     )
     p.add_argument('--plot', metavar='PNG', help='write power and energy along the route to this PNG')
+    _add_uncertainty_args(p, calibration=True)
+    p.add_argument(
+        '--workers', type=int, default=None, help='with --samples: local processes (default: all cores)'
+    )
     add_json_flag(p)
     p.set_defaults(func=run_mission_cmd)
 
@@ -81,12 +85,20 @@ def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
     _add_source_args(p)
     p.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
     p.add_argument('--plot', metavar='PNG', help='write a bar chart of the changes to this PNG')
+    p.add_argument(
+        '--method',
+        choices=('oat', 'sobol'),
+        default='oat',
+        help='oat: the one-at-a-time table (default); sobol: also first-order and total Sobol indices '
+        "over the parameters' spread (--samples N base samples, default 64; N (D+2) missions per vehicle)",
+    )
+    _add_uncertainty_args(p, calibration=False)
     add_json_flag(p)
     p.set_defaults(func=run_sensitivity_cmd)
 
 
 def _register_design(subparsers: argparse._SubParsersAction) -> None:
-    from skidsteer_power.missions.design import CRITERIA
+    from skidsteer_power.missions.design import CONFIGURATIONS, CRITERIA
 
     p = subparsers.add_parser(
         'design-study',
@@ -99,8 +111,15 @@ def _register_design(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument('--model', default='fess', choices=MODEL_CHOICES)
     p.add_argument('--criterion', default='merit', choices=CRITERIA)
+    p.add_argument(
+        '--configuration',
+        action='append',
+        choices=CONFIGURATIONS,
+        help='study only this configuration (repeatable; default: all three)',
+    )
     p.add_argument('--workers', type=int, default=None, help='processes (default: 2 or the cores there are)')
     p.add_argument('--plot', metavar='PNG', help='write the power vs mobility scatter to this PNG')
+    _add_uncertainty_args(p, calibration=False)
     add_json_flag(p)
     p.set_defaults(func=run_design_cmd)
 
@@ -113,6 +132,44 @@ def _add_source_args(p: argparse.ArgumentParser) -> None:
         help='solve the model at every route state instead of querying the FESS power map '
         '(implied by a model other than fess; fails where the model cannot solve a tight turn)',
     )
+
+
+def _add_uncertainty_args(p: argparse.ArgumentParser, calibration: bool) -> None:
+    from skidsteer_power.distributed.engine import add_engine_args
+
+    g = p.add_argument_group(
+        'uncertainty (Monte Carlo over terrain and powertrain; README "Studies with uncertainty")'
+    )
+    g.add_argument('--samples', type=int, default=0, metavar='N', help='samples (default 0: nominal only)')
+    g.add_argument('--seed', type=int, default=0, help='sampling seed (default 0)')
+    g.add_argument(
+        '--sampling', choices=('sobol', 'random'), default='sobol', help='scrambled Sobol (default) or random'
+    )
+    spread = g.add_mutually_exclusive_group()
+    spread.add_argument('--uncertainty', metavar='FILE.yaml', help='sigmas of terrain/powertrain parameters')
+    if calibration:
+        spread.add_argument(
+            '--from-calibration', metavar='F.yaml', help="a calibrated terrain file's covariance (calibrate)"
+        )
+    add_engine_args(g)
+
+
+def _spread(args: argparse.Namespace, terrain: Any, powertrain: Any) -> Any:
+    from skidsteer_power.studies import uncertainty
+
+    if args.samples < 0:
+        raise InputError(f'--samples must be >= 0, not {args.samples}')
+    if getattr(args, 'from_calibration', None):
+        return uncertainty.spread_from_calibration(args.from_calibration)
+    if args.uncertainty:
+        return uncertainty.spread_from_yaml(args.uncertainty, terrain, powertrain)
+    return uncertainty.default_spread(terrain, powertrain)
+
+
+def _engine(args: argparse.Namespace) -> Any:
+    from skidsteer_power.distributed.engine import Engine
+
+    return Engine(args.scheduler, None if args.scheduler else _workers(args.workers))
 
 
 def _source(args: argparse.Namespace) -> str:
@@ -174,6 +231,17 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
         battery.step(float(power), float(dt))
     payload['battery_end_soc'] = battery.soc
     payload['battery_remaining_wh'] = battery.remaining_wh
+    if args.samples or args.uncertainty or getattr(args, 'from_calibration', None) or args.scheduler:
+        from skidsteer_power.studies.montecarlo import mission_uncertainty
+
+        spread = _spread(args, terrain, powertrain)
+        if not args.samples:
+            raise InputError('--uncertainty, --from-calibration and --scheduler need --samples N (N >= 1)')
+        with _engine(args) as engine:
+            payload |= mission_uncertainty(
+                engine, vehicle, terrain, route, powertrain, spread, samples=args.samples, seed=args.seed,
+                method=args.sampling, source=_source(args), model=args.model,
+            )  # fmt: skip
     if args.plot:
         from skidsteer_power.missions.plots import plot_missions
 
@@ -197,8 +265,26 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
     vehicles, terrain = [v for v, _ in loaded], loaded[0][1]
     route = _route(args.route, args.speed, None)
     table = sensitivity(
-        vehicles, terrain, route, delta=args.delta, model=args.model, workers=_workers(args.workers)
+        vehicles,
+        terrain,
+        route,
+        delta=args.delta,
+        source=_source(args),
+        model=args.model,
+        workers=_workers(args.workers),
     )
+    if args.method == 'sobol':
+        from skidsteer_power.powertrain import Powertrain
+        from skidsteer_power.studies.sobol import sobol_indices
+
+        spread = _spread(args, terrain, Powertrain.for_vehicle(vehicles[0]))
+        with _engine(args) as engine:
+            table['sobol'] = sobol_indices(
+                engine, vehicles, terrain, route, spread, samples=args.samples or 64, seed=args.seed,
+                source=_source(args), model=args.model,
+            )  # fmt: skip
+    elif args.samples or args.uncertainty or args.scheduler:
+        raise InputError('--samples, --uncertainty and --scheduler go with --method sobol')
     if args.plot:
         from skidsteer_power.missions.plots import plot_sensitivity
 
@@ -211,15 +297,45 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
             print(f'{name}: baseline ' + ', '.join(f'{k} {v:.4g}' for k, v in res['baseline'].items()))
             for case, changes in res['changes_percent'].items():
                 print(f'  {case:<7} ' + '  '.join(f'{k} {v:+.3f} %' for k, v in changes.items()))
+            for metric, indices in table.get('sobol', {}).get('indices', {}).get(name, {}).items():
+                cells = '  '.join(f'{p} {i["S1"]:.2f}/{i["ST"]:.2f}' for p, i in indices.items())
+                print(f'  Sobol S1/ST of {metric}: {cells}')
     return 0
 
 
 def run_design_cmd(args: argparse.Namespace) -> int:
-    from skidsteer_power.missions.design import design_study
+    from skidsteer_power.missions.design import CONFIGURATIONS, design_study, grid
     from skidsteer_power.terramechanics.terrain import load_terrain
 
     terrain = load_terrain(args.terrain)
-    study = design_study(terrain, model=args.model, criterion=args.criterion, workers=_workers(args.workers))
+    configs = tuple(args.configuration or CONFIGURATIONS)
+    if not (args.samples or args.uncertainty or args.scheduler):
+        study = design_study(
+            terrain, model=args.model, criterion=args.criterion, workers=_workers(args.workers)
+        )
+    else:
+        from skidsteer_power.powertrain import Powertrain
+        from skidsteer_power.studies.montecarlo import design_uncertainty
+
+        spread = _spread(args, terrain, Powertrain.default_test_robot())
+        if args.criterion != 'merit' and args.samples:
+            raise InputError('--samples ranks candidates by merit: use --criterion merit')
+        if args.uncertainty and not args.samples:
+            raise InputError('--uncertainty needs --samples N (N >= 1)')
+        with _engine(args) as engine:
+            study = design_study(
+                terrain, model=args.model, criterion=args.criterion, engine=engine, configurations=configs
+            )
+            if args.samples:
+                rows = [c for c in grid() if c['configuration'] in configs]
+                extra = design_uncertainty(
+                    engine, terrain, spread, samples=args.samples, seed=args.seed, method=args.sampling,
+                    model=args.model, rows=rows,
+                )  # fmt: skip
+                stats = extra.pop('candidate_stats')
+                for c in study['candidates']:
+                    c |= stats[c['index']]
+                study |= extra
     if args.plot:
         from skidsteer_power.missions.plots import plot_design_study
 
@@ -232,6 +348,9 @@ def run_design_cmd(args: argparse.Namespace) -> int:
         print(f'{converged}; criterion: {study["criterion_text"]}')
         for config, best in study['best'].items():
             print(f'best {config:<8} {_design_line(best)}')
+        for config, ranked in study.get('best_probability', {}).items():
+            top = ', '.join(f'#{c["index"]} {100 * c["p_best"]:.0f} %' for c in ranked[:3])
+            print(f'  {config:<8} P(best) under uncertainty: {top}')
     return 0
 
 

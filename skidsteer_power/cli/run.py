@@ -14,6 +14,7 @@ energy_source, rejected_inputs).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import time
 from typing import Any
@@ -85,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         patches=args.patches, map_cache_dir=args.map_cache, state_file=args.state_file,
         left_port=args.left_port, right_port=args.right_port,
     )  # fmt: skip
+    signals = contextlib.ExitStack()  # from here on, also during start-up: SIGINT/SIGTERM end cleanly
+    stop = signals.enter_context(stop_on_signals(StopFlag()))
     context = Context()
     rclpy.init(context=context)
     suite = None
@@ -103,8 +106,7 @@ def run(args: argparse.Namespace) -> int:
         start = _snapshot(suite)
         started = time.monotonic()
         suite.start()
-        with stop_on_signals(StopFlag()) as stop:
-            _wait(suite, args, started, counters, stop)
+        _wait(suite, args, started, counters, stop)
         end = _snapshot(suite)
     except KeyboardInterrupt:
         return 130
@@ -112,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         if suite is not None:
             suite.shutdown()
         rclpy.try_shutdown(context=context)
+        signals.close()
     emit(
         {
             'duration_s': time.monotonic() - started,

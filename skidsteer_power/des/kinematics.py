@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 
+from skidsteer_power.errors import InputError
+
 RPM = 2.0 * math.pi / 60.0
 """One revolution per minute in rad/s."""
 
@@ -34,12 +36,17 @@ def twist_to_motor_rpm(
     """(left, right) motor speed set points [rpm], forward positive, for a body twist.
 
     If either side would exceed ``max_rpm`` [rpm], both are scaled by the same factor so the
-    commanded path curvature is kept.
+    commanded path curvature is kept. A non-finite input is an InputError, never a NaN set point.
     """
+    values = (linear_m_s, yaw_rate_rad_s, tread_m, drive_radius_m, gear_ratio, max_rpm)
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f'non-finite twist or geometry: {values}')
     left, right = side_speeds(linear_m_s, yaw_rate_rad_s, tread_m)
     scale = gear_ratio / drive_radius_m / RPM
     rpm_left, rpm_right = left * scale, right * scale
     peak = max(abs(rpm_left), abs(rpm_right))
+    if not math.isfinite(peak):
+        raise InputError(f'twist ({linear_m_s!r} m/s, {yaw_rate_rad_s!r} rad/s) overflows the motor speed')
     if peak > max_rpm:
         rpm_left, rpm_right = rpm_left * max_rpm / peak, rpm_right * max_rpm / peak
     return rpm_left, rpm_right

@@ -7,52 +7,167 @@ here, away from the executor.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import logging
+import math
 import threading
 import time
+import traceback
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from skidsteer_power.des.client import DesAmplifier
+from skidsteer_power.des.command import CheckedTwist, CommandLimits, DriveGeometry, SlewLimiter, limit_twist
 from skidsteer_power.des.errors import DesLinkError, DesPortError
 from skidsteer_power.des.kinematics import unwrap_counter
 from skidsteer_power.des.protocol import DesConfig, DesErrorFlags, Status
 from skidsteer_power.des.transport import DesLink, LinkTiming
+from skidsteer_power.powertrain.motor import EC45
+
+MAX_MOTOR_RPM = EC45.max_speed_rad_s * 60.0 / (2.0 * math.pi)
+"""The motor's max. permissible speed (EC-45: 10 000 rpm, Appendix B line 23): no set point beyond [rpm]."""
+FAULT_REPORT_HOLD_S = 10.0
+"""A poller fault keeps its side's diagnostics at ERROR this long after the restart [s]."""
+MAX_BACKOFF_S = 10.0
+"""Longest wait before restarting a poller that keeps failing [s]."""
+_log = logging.getLogger(__name__)
 
 
 class DriveCommand:
-    """Per-side motor speed targets shared by the pollers, with the watchdog and the halt latch.
+    """Per-side motor speed targets shared by the pollers: the one place that decides a set point.
 
-    ``set`` stores targets [rpm, amplifier sense] with the time they were given; a target older than
-    ``timeout_s`` [s] reads as 0. Any side's fault halts both sides until every fault is cleared.
+    Targets come as a body twist (:meth:`set_twist`: checked, clamped and slew-limited by
+    :mod:`~skidsteer_power.des.command`, converted by a :class:`DriveGeometry`) or directly as
+    motor speeds (:meth:`set`, [rpm, amplifier sense]). :meth:`wanted_rpm` gives 0 unless every
+    condition for motion holds: active (lifecycle), not shutting down, no amplifier fault latched on
+    either side, a command younger than ``timeout_s`` [s], this side's link up, and with
+    ``stop_both_on_link_loss`` the other side's link up too (a link is up after a good poll cycle and
+    for ``stall_timeout_s`` [s] after the latest one, so a hung poller counts as a lost link). A set
+    point is always a finite integer within +-``max_rpm``.
     """
 
-    def __init__(self, timeout_s: float) -> None:
+    def __init__(
+        self,
+        timeout_s: float,
+        *,
+        max_rpm: float = MAX_MOTOR_RPM,
+        geometry: DriveGeometry | None = None,
+        limits: CommandLimits | None = None,
+        stop_both_on_link_loss: bool = True,
+        active: bool = True,
+        sides: tuple[str, ...] = ('left', 'right'),
+        stall_timeout_s: float = 1.0,
+    ) -> None:
         self.timeout_s = timeout_s
+        self.max_rpm = min(max_rpm, MAX_MOTOR_RPM)
+        self.geometry = geometry
+        self.limits = limits or CommandLimits()
+        self.stop_both_on_link_loss = stop_both_on_link_loss
         self._lock = threading.Lock()
         self._targets: dict[str, float] = {}
-        self._stamp = -float('inf')
+        self._twist: tuple[float, float] | None = None
+        self._slew = SlewLimiter(self.limits)
+        self._stamp = -math.inf
         self._halted_by: set[str] = set()
+        self._down: dict[str, str] = dict.fromkeys(sides, 'not connected yet')  # up after a good cycle
+        self._up_at: dict[str, float] = {}  # time.monotonic() of each side's last good cycle [s]
+        self.stall_timeout_s = stall_timeout_s
         self._clear_requests: set[str] = set()
+        self._active = active
         self.shutting_down = False
+        self.generation = 0
+        self.nonfinite_setpoints = 0
+
+    # -- inputs ---------------------------------------------------------------------------------
 
     def set(self, targets: dict[str, float]) -> None:
+        """Motor speed targets [rpm, amplifier sense] per side, fresh from now."""
         with self._lock:
-            self._targets = dict(targets)
+            self._targets, self._twist = dict(targets), None
             self._stamp = time.monotonic()
 
-    def wanted_rpm(self, side: str) -> int:
-        """The set point to send now [rpm]: 0 when stale, halted or shutting down."""
+    def set_twist(self, linear_m_s: float, yaw_rate_rad_s: float) -> CheckedTwist:
+        """A body twist (V [m/s], w_z [rad/s]), fresh from now: InputError if non-finite, clamped
+        to the limits otherwise (the result says whether it was)."""
+        if self.geometry is None:
+            raise RuntimeError('DriveCommand.set_twist needs a DriveGeometry')
+        checked = limit_twist(linear_m_s, yaw_rate_rad_s, self.limits)
         with self._lock:
-            if self.shutting_down or self._halted_by or self.timed_out_locked():
+            self._twist = (checked.linear_m_s, checked.yaw_rate_rad_s)
+            self._stamp = time.monotonic()
+        return checked
+
+    def forget(self) -> None:
+        """Drop the held command: nothing moves until the next fresh one."""
+        with self._lock:
+            self._stamp = -math.inf
+            self._twist, self._targets = None, {}
+            self.generation += 1
+
+    @property
+    def active(self) -> bool:
+        return self._active
+
+    @active.setter
+    def active(self, value: bool) -> None:
+        """Lifecycle state: inactive means zero speed and the power stages disabled."""
+        with self._lock:
+            self._active = bool(value)
+            self._stamp, self._twist, self._targets = -math.inf, None, {}
+            self.generation += 1
+
+    @property
+    def enable_wanted(self) -> bool:
+        """Whether the power stages should be enabled (active and not shutting down)."""
+        return self._active and not self.shutting_down
+
+    # -- the set point --------------------------------------------------------------------------
+
+    def wanted_rpm(self, side: str) -> int:
+        """The set point to send now [rpm, amplifier sense]; 0 whenever a condition for motion fails."""
+        with self._lock:
+            now = time.monotonic()
+            if self._stop_reason_locked(now):
+                self._slew.reset(now)
                 return 0
-            return round(self._targets.get(side, 0.0))
+            if side in self._down_locked(now):
+                return 0
+            if self._twist is not None:
+                assert self.geometry is not None
+                rpm = self.geometry.motor_rpm(*self._slew.step(*self._twist, now))[side]
+            else:
+                rpm = self._targets.get(side, 0.0)
+            if not math.isfinite(rpm):
+                self.nonfinite_setpoints += 1
+                return 0
+            return round(max(-self.max_rpm, min(self.max_rpm, rpm)))
+
+    def stop_reason(self) -> str:
+        """Why both sides hold zero speed now ('' when a command may drive them)."""
+        with self._lock:
+            return self._stop_reason_locked(time.monotonic())
+
+    def _stop_reason_locked(self, now: float) -> str:
+        if self.shutting_down:
+            return 'shutting down'
+        if not self._active:
+            return 'inactive'
+        if self._halted_by:
+            return f'amplifier fault on {", ".join(sorted(self._halted_by))}'
+        down = self._down_locked(now)
+        if self.stop_both_on_link_loss and down:
+            return f'link down: {", ".join(f"{s} ({r})" for s, r in sorted(down.items()))}'
+        if now - self._stamp > self.timeout_s:
+            return 'no fresh command'
+        return ''
 
     def timed_out(self) -> bool:
         with self._lock:
-            return self.timed_out_locked()
+            return time.monotonic() - self._stamp > self.timeout_s
 
-    def timed_out_locked(self) -> bool:
-        return time.monotonic() - self._stamp > self.timeout_s
+    # -- faults and links -----------------------------------------------------------------------
 
     def halt(self, side: str) -> None:
         with self._lock:
@@ -63,10 +178,40 @@ class DriveCommand:
         with self._lock:
             return set(self._halted_by)
 
+    def link_down(self, side: str, reason: str) -> None:
+        """This side cannot be commanded now (port lost, not answering, poller fault)."""
+        with self._lock:
+            self._down[side] = reason
+
+    def link_up(self, side: str) -> None:
+        """A good cycle on this side (a heartbeat: without one for ``stall_timeout_s`` the side
+        counts as down, so a hung poller stops the other side too)."""
+        with self._lock:
+            self._down.pop(side, None)
+            self._up_at[side] = time.monotonic()
+
+    @property
+    def links_down(self) -> dict[str, str]:
+        with self._lock:
+            return self._down_locked(time.monotonic())
+
+    def _down_locked(self, now: float) -> dict[str, str]:
+        down = dict(self._down)
+        for side, at in self._up_at.items():
+            if side not in down and now - at > self.stall_timeout_s:
+                down[side] = f'poller stalled for {now - at:.1f} s'
+        return down
+
     def request_clear(self, sides: list[str]) -> None:
         """Ask each side's poller to clear its amplifier errors and re-enable."""
         with self._lock:
             self._clear_requests.update(sides)
+            self.generation += 1
+
+    def withdraw_clear_requests(self) -> None:
+        """Forget clear requests no poller took (a side that was unreachable must not clear later)."""
+        with self._lock:
+            self._clear_requests.clear()
 
     def take_clear_request(self, side: str) -> bool:
         with self._lock:
@@ -87,6 +232,7 @@ class AmplifierSample:
     stamp: float = 0.0  # time.monotonic() of the reading [s]
     sequence: int = 0
     connected: bool = False
+    enabled: bool = False  # the power stage as last commanded by this poller
     velocity_rpm: int = 0  # mean actual speed [rpm]
     setpoint_rpm: int = 0  # set point the amplifier holds [rpm]
     current_ma: int = 0  # mean q-axis current [mA]
@@ -96,18 +242,40 @@ class AmplifierSample:
     fault_latched: bool = False
     message: str = 'not connected yet'
     poll_rate_hz: float = 0.0
+    poller_faults: int = 0  # exceptions caught in the poller thread (each: zero, disable, restart)
+    last_poller_fault: str = ''
+    poller_fault_at: float = -math.inf  # time.monotonic() of the last poller fault [s]
     link: dict[str, int | str] = field(default_factory=dict)
+
+    @property
+    def poller_fault_recent(self) -> bool:
+        """A poller fault within the last :data:`FAULT_REPORT_HOLD_S` seconds."""
+        return time.monotonic() - self.poller_fault_at < FAULT_REPORT_HOLD_S
+
+
+_LIVE_POLLERS: weakref.WeakSet[AmplifierPoller] = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_live_pollers() -> None:
+    """Last line of defence at interpreter exit: zero and disable every amplifier still polled."""
+    for poller in list(_LIVE_POLLERS):
+        poller.stop()
 
 
 class AmplifierPoller:
     """Thread that keeps one amplifier polled, commanded and connected.
 
-    Each cycle: send the wanted speed if it changed (or the amplifier holds another), read mean
-    velocity, mean current and the encoder counter, and every ``status_every`` cycles the status
-    word (and the error word if the status says so). An amplifier error halts both sides through
-    :class:`DriveCommand`; a lost port, or ``max_failed_cycles`` failed cycles in a row (a silent
-    amplifier), closes the link, which is then reopened every ``reconnect_period_s``. On :meth:`stop`
-    the motor gets zero velocity, then is disabled.
+    Each cycle: enable or disable the power stage as :class:`DriveCommand` wants (zero speed first),
+    send the wanted speed if it changed (or the amplifier holds another), read mean velocity, mean
+    current and the encoder counter, and every ``status_every`` cycles the status word (and the error
+    word if the status says so). An amplifier error halts both sides through :class:`DriveCommand`;
+    a failed cycle marks the side's link down (the other side stops too, by default); a lost port,
+    or ``max_failed_cycles`` failed cycles in a row (a silent amplifier), closes the link, which is
+    then reopened every ``reconnect_period_s``. Any other exception in the thread (a bug) zeroes and
+    disables the amplifier, closes the link, is reported in the sample (and logged with its
+    traceback through ``log_error``) and the polling restarts after a back-off that doubles up to
+    :data:`MAX_BACKOFF_S`. On :meth:`stop` the motor gets zero velocity, then is disabled.
     """
 
     def __init__(
@@ -123,6 +291,7 @@ class AmplifierPoller:
         reconnect_period_s: float = 0.5,
         encoder_resolution: int = 2048,
         max_failed_cycles: int = 5,
+        log_error: Callable[[str], None] | None = None,
     ) -> None:
         self.side = side
         self.encoder_resolution = encoder_resolution
@@ -133,15 +302,21 @@ class AmplifierPoller:
         self.poll_period_s = poll_period_s
         self.status_every = max(1, status_every)
         self.reconnect_period_s = reconnect_period_s
+        self.log_error = log_error or _log.error
         self._lock = threading.Lock()
+        self._applied = threading.Condition()
+        self._applied_generation = -1
         self._sample = AmplifierSample()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_sent: int | None = None
+        self._enabled: bool | None = None
         self._cycle = 0
         self._counter: int | None = None
         self._counter_time = 0.0
         self._rate_window: list[float] = []
+        self._backoff_s = reconnect_period_s
+        command.link_down(side, 'not connected yet')
 
     @property
     def sample(self) -> AmplifierSample:
@@ -149,8 +324,14 @@ class AmplifierPoller:
         with self._lock:
             return AmplifierSample(**{**self._sample.__dict__, 'link': dict(self._sample.link)})
 
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
     def start(self) -> AmplifierPoller:
+        self._stop.clear()
         self._thread = threading.Thread(target=self._run, name=f'des-{self.side}', daemon=True)
+        _LIVE_POLLERS.add(self)
         self._thread.start()
         return self
 
@@ -161,19 +342,31 @@ class AmplifierPoller:
     def stop(self, timeout_s: float = 2.0) -> None:
         """Stop polling: zero velocity, then disable, then close the port."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout_s)
-            self._thread = None
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout_s)
+        _LIVE_POLLERS.discard(self)
+
+    def wait_applied(self, generation: int, timeout_s: float) -> bool:
+        """Wait until a cycle that began at ``command.generation >= generation`` completed (True), or
+        the side is not connected or the time is up (False)."""
+        with self._applied:
+            return (
+                self._applied.wait_for(
+                    lambda: self._applied_generation >= generation or not self._sample.connected, timeout_s
+                )
+                and self._applied_generation >= generation
+            )
 
     # -- thread ---------------------------------------------------------------------------------
 
     def _run(self) -> None:
         next_cycle = time.monotonic()
         while not self._stop.is_set():
-            if not self.amp.link.is_open and not self._connect():
-                self._stop.wait(self.reconnect_period_s)
-                continue
             try:
+                if not self.amp.link.is_open and not self._connect():
+                    self._stop.wait(self.reconnect_period_s)
+                    continue
                 self._cycle_once()
                 self._failed_cycles = 0
             except DesPortError as err:
@@ -181,24 +374,62 @@ class AmplifierPoller:
                 continue
             except DesLinkError as err:
                 self._failed_cycles += 1
+                self.command.link_down(self.side, f'link error: {err}')
                 if self._failed_cycles >= self.max_failed_cycles:
                     self.amp.close()
                     self._update(connected=False, message=f'amplifier not answering, reconnecting: {err}')
                     continue
                 self._update(message=f'link error: {err}')
+            except Exception as err:  # a bug here must never leave the motor turning
+                self._fault(err)
+                continue
             next_cycle = max(next_cycle + self.poll_period_s, time.monotonic())
             self._stop.wait(max(0.0, next_cycle - time.monotonic()))
         self._shutdown()
 
+    def _fault(self, err: Exception) -> None:
+        """An unexpected exception: zero, disable, close, report, back off, then poll again."""
+        self.command.link_down(self.side, f'poller fault: {type(err).__name__}')
+        with contextlib.suppress(Exception):
+            self._zero_and_disable()
+        with contextlib.suppress(Exception):
+            self.amp.close()
+        now = time.monotonic()
+        if now - self._sample.poller_fault_at > 3.0 * MAX_BACKOFF_S:
+            self._backoff_s = self.reconnect_period_s
+        backoff, self._backoff_s = self._backoff_s, min(MAX_BACKOFF_S, 2.0 * self._backoff_s)
+        text = f'{type(err).__name__}: {err}'
+        with contextlib.suppress(Exception):
+            self.log_error(
+                f'DES {self.side} poller fault, motor zeroed and disabled, restarting in {backoff:g} s: '
+                f'{text}\n{traceback.format_exc()}'
+            )
+        with contextlib.suppress(Exception):
+            self._update(
+                connected=False,
+                poller_faults=self._sample.poller_faults + 1,
+                last_poller_fault=text,
+                poller_fault_at=now,
+                message=f'poller fault (motor zeroed, disabled; restart in {backoff:g} s): {text}',
+            )
+        self._stop.wait(backoff)
+
+    def _zero_and_disable(self) -> None:
+        if self.amp.link.is_open:
+            try:
+                self.amp.set_velocity(0)
+            finally:
+                self._last_sent = None
+                self.amp.disable()
+                self._enabled = False
+
     def _connect(self) -> bool:
+        self._last_sent, self._enabled, self._counter = None, None, None
         try:
             self.amp.link.open()
             self.amp.set_velocity(0)
             self._last_sent = 0
-            self._counter = None
             self._check_errors(force=True)
-            if not self._sample.fault_latched:
-                self.amp.enable()
         except DesPortError as err:
             self._lost(err)
             return False
@@ -210,24 +441,31 @@ class AmplifierPoller:
         return True
 
     def _lost(self, err: Exception) -> None:
+        self.command.link_down(self.side, 'port lost')
         self.amp.close()
-        self._update(
-            connected=False, message=f'port lost, reopening every {self.reconnect_period_s:g} s: {err}'
-        )
+        what = 'port lost' if self._sample.sequence else 'no port'
+        self._update(connected=False, message=f'{what}, retrying every {self.reconnect_period_s:g} s: {err}')
 
     def _cycle_once(self) -> None:
         amp, command = self.amp, self.command
+        generation = command.generation
         if command.take_clear_request(self.side):
             amp.clear_errors()
             self._update(fault_latched=False, errors=DesErrorFlags(0))
             self._check_errors(force=True)
             if not self._sample.fault_latched:
                 command.cleared(self.side)
-                amp.enable()
-        wanted = command.wanted_rpm(self.side)
+        enable = command.enable_wanted and not self._sample.fault_latched
+        if not enable and self._enabled is not False:
+            self._zero_and_disable()
+            self._last_sent = 0
+        wanted = command.wanted_rpm(self.side) if enable else 0
         if wanted != self._last_sent:
             amp.set_velocity(wanted)
             self._last_sent = wanted
+        if enable and self._enabled is not True:
+            amp.enable()
+            self._enabled = True
         velocity = amp.read_velocity()
         if velocity.setpoint_rpm != wanted:
             self._last_sent = None  # the amplifier lost our set point (reset, stop toggle): resend
@@ -239,10 +477,12 @@ class AmplifierPoller:
         if self._cycle % self.status_every == 1 or self.status_every == 1:
             self._check_errors()
         self._rate_window = [t for t in self._rate_window if now - t < 1.0] + [now]
+        command.link_up(self.side)
         self._update(
             stamp=now,
             sequence=self._sample.sequence + 1,
             connected=True,
+            enabled=bool(self._enabled),
             velocity_rpm=velocity.actual_rpm,
             setpoint_rpm=velocity.setpoint_rpm,
             current_ma=current,
@@ -250,6 +490,9 @@ class AmplifierPoller:
             poll_rate_hz=len(self._rate_window) / 1.0,
             message='fault latched: motors stopped' if self._sample.fault_latched else 'ok',
         )
+        with self._applied:
+            self._applied_generation = generation
+            self._applied.notify_all()
 
     def _unwrap(self, counter: int, rpm: int, now: float) -> int:
         if self._counter is None:
@@ -267,22 +510,28 @@ class AmplifierPoller:
         self._update(status=status, errors=errors)
         if errors and not self._sample.fault_latched:
             self.command.halt(self.side)
-            self.amp.set_velocity(0)
+            self._zero_and_disable()
             self._last_sent = 0
-            self.amp.disable()
             self._update(fault_latched=True, message=f'amplifier error: {errors.describe()}')
 
     def _shutdown(self) -> None:
+        self.command.link_down(self.side, 'stopped')
         if self.amp.link.is_open:
-            with contextlib.suppress(DesLinkError):
+            with contextlib.suppress(Exception):
                 self.amp.set_velocity(0)
-            with contextlib.suppress(DesLinkError):
+            with contextlib.suppress(Exception):
                 self.amp.disable()
         self.amp.close()
-        self._update(connected=False, message='stopped')
+        self._enabled = False
+        self._update(connected=False, enabled=False, message='stopped')
+        with self._applied:
+            self._applied.notify_all()
 
     def _update(self, **values: object) -> None:
         with self._lock:
             for key, value in values.items():
                 setattr(self._sample, key, value)
             self._sample.link = self.amp.link.stats.as_dict()
+        if 'connected' in values and not values['connected']:
+            with self._applied:
+                self._applied.notify_all()

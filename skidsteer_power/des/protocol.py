@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
+from skidsteer_power.errors import ConfigError
 
 ACK_OK = 0x4F
 """'O': op code or frame accepted (either direction)."""
@@ -213,9 +214,9 @@ class DesConfig:
 
     def __post_init__(self) -> None:
         if self.baudrate not in BAUD_CODES:
-            raise ValueError(f'baud rate {self.baudrate} is not one the DES supports: {sorted(BAUD_CODES)}')
+            raise ConfigError(f'baud rate {self.baudrate} is not one the DES supports: {sorted(BAUD_CODES)}')
         if self.current_source not in ('status_variable', 'is_must'):
-            raise ValueError(
+            raise ConfigError(
                 f"current_source must be 'status_variable' or 'is_must', not {self.current_source!r}"
             )
 

@@ -33,6 +33,7 @@ from skidsteer_power.des.protocol import (
     body_length,
     encode_body,
 )
+from skidsteer_power.errors import ConfigError
 
 _OK = bytes((ACK_OK,))
 _FAIL = bytes((ACK_FAIL,))
@@ -59,7 +60,7 @@ class LinkTiming:
 
     def __post_init__(self) -> None:
         if min(self.ack_timeout_s, self.reply_timeout_s, self.slack_s) <= 0 or self.retries < 0:
-            raise ValueError(f'timeouts must be > 0 and retries >= 0: {self}')
+            raise ConfigError(f'timeouts must be > 0 and retries >= 0: {self}')
 
 
 @dataclass

@@ -85,11 +85,16 @@ def candidate_vehicle(c: dict[str, Any]) -> Any:
     )
 
 
-def _evaluate_chunk(job: tuple[list[dict[str, Any]], Any, str]) -> list[dict[str, Any]]:
+def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
+    """Solve (candidates, terrain, model[, powertrain sample]) (see skidsteer_power.studies)."""
     from skidsteer_power.models import solve
 
-    candidates, terrain, model = job
+    candidates, terrain, model, *sample = job
     powertrains = {g: Powertrain.default_test_robot(g) for g in ('track', 'wheel')}
+    if sample and sample[0]:
+        from skidsteer_power.studies.uncertainty import apply_powertrain
+
+        powertrains = {g: apply_powertrain(pt, sample[0]) for g, pt in powertrains.items()}
     out = []
     for c in candidates:
         vehicle = candidate_vehicle(c)
@@ -125,32 +130,35 @@ def _evaluate_chunk(job: tuple[list[dict[str, Any]], Any, str]) -> list[dict[str
 
 
 def design_study(
-    terrain: Any, *, model: str = 'fess', criterion: str = 'merit', workers: int | None = None
+    terrain: Any,
+    *,
+    model: str = 'fess',
+    criterion: str = 'merit',
+    workers: int | None = None,
+    engine: Any = None,
+    configurations: tuple[str, ...] = CONFIGURATIONS,
 ) -> dict[str, Any]:
-    """Evaluate the Table 8.4 grid on ``terrain``; returns candidates, best per configuration, criterion."""
+    """Evaluate the Table 8.4 grid on ``terrain``; returns candidates, best per configuration, criterion.
+
+    ``engine`` (a :class:`skidsteer_power.distributed.engine.Engine`) runs the parts on Dask instead;
+    ``configurations`` limits the grid to some of :data:`CONFIGURATIONS`.
+    """
     if criterion not in CRITERIA:
         raise InputError(f'criterion must be one of {", ".join(CRITERIA)}, not {criterion!r}')
-    rows = grid()
+    rows = [c for c in grid() if c['configuration'] in configurations]
     workers = workers or min(2, os.cpu_count() or 1)
     _preload(model)
     parts = _balanced_parts(rows, workers)
     jobs = [(part, terrain, model) for part in parts]
-    if workers > 1:
+    if engine is not None:
+        done = engine.map(_evaluate_chunk, jobs, label='design study')
+    elif workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             done = list(pool.map(_evaluate_chunk, jobs))
     else:
         done = [_evaluate_chunk(job) for job in jobs]
-    evaluated = sorted(itertools.chain.from_iterable(done), key=lambda c: c['index'])
-    dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
-    for c, pull in zip(evaluated, dp, strict=True):
-        weight = c['mass_kg'] * 9.81
-        c['max_drawbar_pull_N'] = float(pull)
-        c['drawbar_pull_ratio'] = float(pull / weight)
-        c['merit'] = _merit(c)
-    best = {
-        config: _best([c for c in evaluated if c['configuration'] == config], criterion)
-        for config in CONFIGURATIONS
-    }
+    evaluated = score(sorted(itertools.chain.from_iterable(done), key=lambda c: c['index']), terrain)
+    best = best_per_configuration(evaluated, criterion)
     return {
         'terrain': terrain.name,
         'model': model,
@@ -160,8 +168,27 @@ def design_study(
         'criterion_text': CRITERION_TEXT[criterion],
         'n_candidates': len(evaluated),
         'n_converged': sum(c['converged'] for c in evaluated),
-        'best': {k: v for k, v in best.items() if v is not None},
+        'best': {k: v for k, v in best.items() if v is not None and k in configurations},
         'candidates': evaluated,
+    }
+
+
+def score(evaluated: list[dict[str, Any]], terrain: Any) -> list[dict[str, Any]]:
+    """Add max drawbar pull [N], its ratio to the weight [-] and the merit [1/W] to solved candidates."""
+    dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
+    for c, pull in zip(evaluated, dp, strict=True):
+        weight = c['mass_kg'] * 9.81
+        c['max_drawbar_pull_N'] = float(pull)
+        c['drawbar_pull_ratio'] = float(pull / weight)
+        c['merit'] = _merit(c)
+    return evaluated
+
+
+def best_per_configuration(evaluated: list[dict[str, Any]], criterion: str) -> dict[str, Any]:
+    """Configuration -> its best scored candidate by ``criterion`` (None if none is eligible)."""
+    return {
+        config: _best([c for c in evaluated if c['configuration'] == config], criterion)
+        for config in CONFIGURATIONS
     }
 
 

@@ -220,16 +220,13 @@ def run_mission(
             axle = _map_states(loaded, terrain, states[:, 0], states[:, 1], cache_dir)
         else:
             axle = _axle_states(loaded, terrain, states[:, 0], states[:, 1], model)
-        side_points = {s: pt.motor_side(s, axle[f'torque_{s}'], axle[f'omega_{s}']) for s in SIDES}
+        powers = state_powers(pt, axle)
         rows = np.flatnonzero(in_group)
         inv = inverse.ravel()
-        left, right = side_points['left'], side_points['right']
-        fields_['Pl'][rows] = left.mechanical_power_W[inv]
-        fields_['Pr'][rows] = right.mechanical_power_W[inv]
-        fields_['P'][rows] = (left.mechanical_power_W + right.mechanical_power_W)[inv]
-        fields_['Pt'][rows] = (left.terrain_power_W + right.terrain_power_W)[inv]
-        fields_['Pi'][rows] = (left.internal_power_W + right.internal_power_W)[inv]
-        fields_['Pb'][rows] = (left.electrical_power_W + right.electrical_power_W)[inv]
+        for key, name in (('Pl', 'left_W'), ('Pr', 'right_W'), ('P', 'mechanical_W')):
+            fields_[key][rows] = powers[name][inv]
+        for key, name in (('Pt', 'terrain_W'), ('Pi', 'internal_W'), ('Pb', 'battery_W')):
+            fields_[key][rows] = powers[name][inv]
         fields_['z'][rows] = axle['sinkage'][inv]
         fields_['tm'][rows] = axle['traction_margin'][inv]
         clamped[rows] = axle['clamped'][inv]
@@ -275,6 +272,12 @@ def _map_states(
             f'speed {float(np.max(np.abs(speed))):g} m/s is beyond the power map of {vehicle.name} '
             f'(up to {envelope:g} m/s): it would be clamped; solve directly with --direct'
         )
+    return map_axle_states(power_map, speed, radius)
+
+
+def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and clamped flags
+    from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed radii [m]."""
     q = power_map.query(speed, _yaw_rate(speed, radius))
     return {
         'torque_left': np.asarray(q.torque_left_Nm, dtype=float),
@@ -284,6 +287,46 @@ def _map_states(
         'sinkage': np.asarray(q.sinkage_m, dtype=float),
         'traction_margin': np.asarray(q.traction_margin, dtype=float),
         'clamped': np.asarray(q.clamped, dtype=bool),
+    }
+
+
+def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Powers [W] at each steady state from its per-side axle torque and speed (:func:`map_axle_states`).
+
+    ``left_W``, ``right_W`` and ``mechanical_W`` (their sum): motor shaft T_m w_m = terrain +
+    internal; ``terrain_W`` (T_a w_a), ``internal_W`` (eqs. 7.1-7.4), ``battery_W`` (DC bus, motor and
+    amplifier losses included; see powertrain.motor). Shared by missions and the robot's path energy.
+    """
+    left, right = (powertrain.motor_side(s, axle[f'torque_{s}'], axle[f'omega_{s}']) for s in SIDES)
+    return {
+        'left_W': left.mechanical_power_W,
+        'right_W': right.mechanical_power_W,
+        'mechanical_W': left.mechanical_power_W + right.mechanical_power_W,
+        'terrain_W': left.terrain_power_W + right.terrain_power_W,
+        'internal_W': left.internal_power_W + right.internal_power_W,
+        'battery_W': left.electrical_power_W + right.electrical_power_W,
+    }
+
+
+def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) -> dict[str, float]:
+    """Energies [J] of driving ``route`` with the loads a ready ``power_map`` holds (the robot's own,
+    no payload changes): the same state grouping, map query and powertrain as :func:`run_mission`.
+
+    Returns energy_J (terrain + internal), energy_terrain_J, energy_internal_J, energy_battery_J and
+    clamped_segments (segments whose map query was clamped).
+    """
+    a = route.arrays()
+    table = np.column_stack([a['speed_m_s'], a['turn_radius_m']])
+    states, inverse = np.unique(table, axis=0, return_inverse=True)
+    axle = map_axle_states(power_map, states[:, 0], states[:, 1])
+    powers = state_powers(powertrain, axle)
+    count = np.bincount(inverse.ravel(), weights=a['duration_s'], minlength=len(states))  # s per state
+    return {
+        'energy_J': float(np.dot(powers['mechanical_W'], count)),
+        'energy_terrain_J': float(np.dot(powers['terrain_W'], count)),
+        'energy_internal_J': float(np.dot(powers['internal_W'], count)),
+        'energy_battery_J': float(np.dot(powers['battery_W'], count)),
+        'clamped_segments': int(np.sum(axle['clamped'][inverse.ravel()])),
     }
 
 

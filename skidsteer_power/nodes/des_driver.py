@@ -1,18 +1,46 @@
-"""``des_driver``: two DES 70/10 amplifiers (one per side) as a ROS 2 node.
+"""``des_driver``: two DES 70/10 amplifiers (one per side) as a managed (lifecycle) ROS 2 node.
+
+Invariant: **no path leaves a motor turning without a fresh, valid command.** Every path that
+could (bad input, a silent or lost amplifier, an exception in a poller or a callback, a lifecycle
+transition, a signal, the end of the process) ends in zero speed, and where the amplifier can still
+be reached, its power stage disabled. ``test/test_des_invariant.py`` checks it with random input.
+
+Lifecycle (rclpy.lifecycle; ``~/change_state``, ``~/get_state`` as usual):
+
+- configure: read the parameters and the vehicle file, open both ports and read the amplifiers
+  (fails if a port cannot be opened or an amplifier does not answer within ``configure_timeout_s``);
+  joint_states and diagnostics are published from here on, the power stages stay disabled.
+- activate: enable the power stages; cmd_vel is accepted from now (older commands never count).
+- deactivate: zero speed, then disable, on both sides before the transition returns.
+- cleanup / shutdown / error: zero, disable, close the ports.
+
+``autostart:=true`` configures and activates at start, for use without a lifecycle manager.
 
 Subscribes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with ``twist_stamped:=true``; m/s and
-rad/s, REP 103) and ``~/clear_faults`` (std_msgs/Empty: clear latched amplifier errors).
+rad/s, REP 103). Every number is checked where it enters: a message with any non-finite field is
+rejected and counted; V and yaw rate are clamped to ``max_speed_m_s`` / ``max_yaw_rate_rad_s`` (a
+throttled warning, counted) and their changes to ``max_accel_m_s2`` / ``max_yaw_accel_rad_s2``; the
+motor set points never exceed ``max_motor_rpm`` (itself at most the motor's 10 000 rpm).
+Service ``~/clear_faults`` (std_srvs/Trigger): clear latched amplifier errors, re-enable; the answer
+says whether every side came back.
 Publishes ``joint_states`` (sensor_msgs/JointState, joints ``left_motor`` and ``right_motor``:
 position [rad], velocity [rad/s] at the motor shaft, effort = Kt * current [N m]; forward motion of
 the robot is positive on both sides, the per-side ``polarity`` maps to the amplifier's sense; a
 side with no fresh data reads NaN) and ``diagnostics`` (diagnostic_msgs/DiagnosticArray, one status
-per amplifier: connection, status and error words, raw current [mA] and speed [rpm], link
-counters).
+per amplifier: connection, power stage, status and error words, raw current [mA] and speed [rpm],
+link counters, poller faults; one for the command: lifecycle state, why the motors hold zero,
+rejected / clamped counts).
 
-Safety: no cmd_vel for ``cmd_vel_timeout_s`` -> zero speed; an amplifier error -> both motors
-stopped, reported, cleared only by ``~/clear_faults``; a lost port -> reopened until it returns;
-SIGINT/SIGTERM -> zero speed, then disable. All serial I/O runs in one thread per amplifier
-(:mod:`skidsteer_power.des.poller`), never in the executor.
+Safety: no valid cmd_vel for ``cmd_timeout_s`` -> zero speed; an amplifier error -> both motors
+stopped, reported, cleared only by ``~/clear_faults``; a failed exchange or a lost port on one side
+-> that side reported ERROR and, with ``stop_both_on_link_loss`` (default), the other side stopped
+too, until the link is back (the port is reopened until it returns); an exception in a poller
+thread -> that amplifier zeroed and disabled, ERROR in diagnostics, the poller restarted after a
+back-off; an exception in a callback -> both amplifiers zeroed and disabled, then the error
+propagates; SIGINT/SIGTERM, destroy and interpreter exit -> zero speed, then disable. All serial I/O
+runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never in the executor.
+
+Geometry (tread, drive radius, gear ratio) comes from the vehicle file named by ``vehicle``.
 
 On the robot: each transaction takes four turn-arounds ('O' handshakes), so a USB-RS232 adapter's
 read latency dominates. FTDI adapters default to a 16 ms latency timer, which could cap the poll
@@ -23,41 +51,299 @@ wire's byte time emulated, 0.86 of the line's byte-time limit).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
+import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.node import Node
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Empty
+from std_srvs.srv import Trigger
 
-from skidsteer_power.des.kinematics import RPM, twist_to_motor_rpm
-from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCommand
+from skidsteer_power.des.command import CommandLimits, DriveGeometry
+from skidsteer_power.des.kinematics import RPM
+from skidsteer_power.des.poller import MAX_MOTOR_RPM, AmplifierPoller, AmplifierSample, DriveCommand
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.nodes.spin import spin_node
-from skidsteer_power.powertrain.motor import EC45, GEAR_RATIO
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.motor import EC45
+from skidsteer_power.vehicle import load_vehicle
 
 NODE_NAME = 'des_driver'
 SIDES = ('left', 'right')
+_WARN_PERIOD_S = 5.0
 
 
-def _float_range(low: float, high: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+@dataclass(frozen=True)
+class ParamSpec:
+    """One declared parameter: name, default (its type is the parameter's), description, range."""
+
+    name: str
+    default: bool | int | float | str
+    description: str
+    range: tuple[float, float] | None = None
 
 
-class DesDriver(Node):
-    """Two DES amplifiers behind ``cmd_vel`` / ``joint_states`` / ``diagnostics``."""
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec('vehicle', 'test_robot_track', 'vehicle name or YAML file: tread, drive radius, gear ratio'),
+    ParamSpec('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier'),
+    ParamSpec('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier'),
+    ParamSpec('baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200'),
+    ParamSpec('left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1'),
+    ParamSpec(
+        'right_polarity', -1, 'amplifier sense of forward motion, right side (mirrored motor): +1 or -1'
+    ),
+    ParamSpec(
+        'encoder_resolution',
+        EC45.encoder_counts_per_turn,
+        'encoder lines per motor turn [-] (ch. 7.1.2)',
+        (1, 65535),
+    ),
+    ParamSpec(
+        'max_motor_rpm',
+        4000.0,
+        'largest motor set point [rpm] (EC-45: 4010 rpm no-load at 48 V)',
+        (1.0, MAX_MOTOR_RPM),
+    ),
+    ParamSpec(
+        'max_speed_m_s', 1.5, '|V| commands beyond are clamped [m/s] (the maps cover 1.5 m/s)', (0.001, 10.0)
+    ),
+    ParamSpec('max_yaw_rate_rad_s', 2.0, '|yaw rate| commands beyond are clamped [rad/s]', (0.001, 20.0)),
+    ParamSpec('max_accel_m_s2', 1.0, 'largest change of the commanded V [m/s^2]', (0.001, 100.0)),
+    ParamSpec(
+        'max_yaw_accel_rad_s2', 4.0, 'largest change of the commanded yaw rate [rad/s^2]', (0.001, 1000.0)
+    ),
+    ParamSpec('cmd_timeout_s', 0.5, 'zero speed when no valid cmd_vel for this long [s]', (0.01, 60.0)),
+    ParamSpec('stop_both_on_link_loss', True, 'a failed or lost link on one side stops the other side too'),
+    ParamSpec('poll_rate_hz', 50.0, 'amplifier poll and joint_states rate [Hz]', (0.1, 1000.0)),
+    ParamSpec('status_every', 5, 'read the status word every N polls [-]', (1, 1000)),
+    ParamSpec(
+        'reconnect_period_s',
+        0.5,
+        'retry period for a lost port; first poller restart back-off [s]',
+        (0.01, 60.0),
+    ),
+    ParamSpec(
+        'ack_timeout_s', 0.05, 'wait for each acknowledge / reply from an amplifier [s]', (0.001, 10.0)
+    ),
+    ParamSpec(
+        'configure_timeout_s', 5.0, 'configure fails unless both amplifiers answer within [s]', (0.1, 60.0)
+    ),
+    ParamSpec('diagnostics_rate_hz', 2.0, 'diagnostics rate [Hz]', (0.01, 100.0)),
+    ParamSpec(
+        'current_source',
+        'status_variable',
+        "currents from 'status_variable' (130, documented) or 'is_must' (op 0x29, UNCONFIRMED)",
+    ),
+    ParamSpec(
+        'encoder_counter_variable',
+        143,
+        'status variable of the 16-bit encoder counter (UNCONFIRMED)',
+        (128, 255),
+    ),
+    ParamSpec('twist_stamped', False, 'cmd_vel is geometry_msgs/TwistStamped instead of Twist'),
+    ParamSpec('frame_id', '', 'header.frame_id of joint_states'),
+    ParamSpec('autostart', False, 'configure and activate at start (no lifecycle manager needed)'),
+)
+"""Every parameter of the node, declared and read from this one table."""
 
-    def __init__(self, **kwargs) -> None:
+
+def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(description=spec.description)
+    if spec.range is not None:
+        low, high = spec.range
+        if isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+        else:
+            descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+    return descriptor
+
+
+def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
+    """An exception in a callback zeroes and disables both amplifiers before it propagates."""
+
+    @functools.wraps(callback)
+    def wrapper(self: DesDriver, *args: Any) -> Any:
+        try:
+            return callback(self, *args)
+        except RCLError:
+            self.emergency_stop(f'RCLError in {callback.__name__}')
+            if self.context.ok():
+                raise
+            # SIGINT / SIGTERM invalidated the context under a running callback: a shutdown, no bug.
+            raise ExternalShutdownException from None
+        except BaseException:
+            self.emergency_stop(f'exception in {callback.__name__}')
+            raise
+
+    return wrapper
+
+
+def _traceback_logged(transition: Callable[..., Any]) -> Callable[..., Any]:
+    """rclpy turns an exception in a transition callback into ERROR without a word: log it first."""
+
+    @functools.wraps(transition)
+    def wrapper(self: DesDriver, state: LifecycleState) -> Any:
+        try:
+            return transition(self, state)
+        except Exception:
+            self.get_logger().error(f'{transition.__name__} raised (a bug):\n{traceback.format_exc()}')
+            raise
+
+    return wrapper
+
+
+class DesDriver(LifecycleNode):
+    """Two DES amplifiers behind ``cmd_vel`` / ``joint_states`` / ``diagnostics`` (managed node)."""
+
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
-        p = self._read_parameters()
-        self.params = p
-        self.command = DriveCommand(p['cmd_vel_timeout_s'])
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        self.params = self._read_parameters()  # a bad value is one clear error at once
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.command: DriveCommand | None = None
+        self.pollers: dict[str, AmplifierPoller] = {}
+        self.configure_error = ''
+        self.counts = {'received': 0, 'rejected_non_finite': 0, 'clamped': 0, 'ignored_inactive': 0}
+        self._published = {side: 0 for side in SIDES}
+        self._runtime: list[Any] = []  # subscription and timers of the configured state
+        self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
+        self.create_service(Trigger, '~/clear_faults', self._on_clear_faults)
+
+    # -- parameters -----------------------------------------------------------------------------
+
+    def _read_parameters(self) -> dict[str, Any]:
+        p = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        if p['baud'] not in BAUD_CODES:
+            raise ConfigError(f'baud must be one of {sorted(BAUD_CODES)}, not {p["baud"]}')
+        for side in SIDES:
+            if p[f'{side}_polarity'] not in (1, -1):
+                raise ConfigError(f'{side}_polarity must be +1 or -1, not {p[f"{side}_polarity"]}')
+        if p['current_source'] not in ('status_variable', 'is_must'):
+            raise ConfigError(
+                f"current_source must be 'status_variable' or 'is_must', not {p['current_source']!r}"
+            )
+        if p['left_port'] == p['right_port']:
+            raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
+        vehicle = load_vehicle(p['vehicle'])
+        p['geometry'] = DriveGeometry(
+            tread_m=float(vehicle.tread_m),
+            drive_radius_m=float(vehicle.drive_radius_m),
+            gear_ratio=float(Powertrain.for_vehicle(vehicle).gear_ratio),
+            polarity={side: p[f'{side}_polarity'] for side in SIDES},
+            max_rpm=float(p['max_motor_rpm']),
+        )
+        p['limits'] = CommandLimits(
+            max_speed_m_s=p['max_speed_m_s'],
+            max_yaw_rate_rad_s=p['max_yaw_rate_rad_s'],
+            max_accel_m_s2=p['max_accel_m_s2'],
+            max_yaw_accel_rad_s2=p['max_yaw_accel_rad_s2'],
+        )
+        return p
+
+    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+        if self.state_label == 'unconfigured':
+            return SetParametersResult(successful=True)
+        return SetParametersResult(
+            successful=False, reason='des_driver parameters take effect at configure: clean up first'
+        )
+
+    @property
+    def state_label(self) -> str:
+        """The lifecycle state: 'unconfigured', 'inactive', 'active', 'finalized', ..."""
+        return self._state_machine.current_state[1]
+
+    # -- lifecycle ------------------------------------------------------------------------------
+
+    @_traceback_logged
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.params = p = self._read_parameters()
+            self._start_pollers(p)
+            self._wait_connected(p['configure_timeout_s'])
+        except SkidsteerError as err:
+            self.configure_error = str(err)
+            self.get_logger().error(f'configure failed: {err}')
+            self._teardown()
+            return TransitionCallbackReturn.FAILURE
+        except Exception:
+            self._teardown()
+            raise
+        msg_type = TwistStamped if p['twist_stamped'] else Twist
+        self._runtime = [
+            self.create_subscription(msg_type, 'cmd_vel', self._on_cmd_vel, 10),
+            self.create_timer(1.0 / p['poll_rate_hz'], self._publish_joint_states),
+            self.create_timer(1.0 / p['diagnostics_rate_hz'], self._publish_diagnostics),
+        ]
+        self.configure_error = ''
+        return TransitionCallbackReturn.SUCCESS
+
+    @_traceback_logged
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self.command is not None
+        self.command.active = True
+        if not self._wait_applied():
+            self.get_logger().warn('activated, but a side is not connected: motors stay at zero')
+        return super().on_activate(state)
+
+    @_traceback_logged
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self.command is not None
+        self.command.active = False
+        if not self._wait_applied():
+            self.get_logger().warn('deactivated; a side not connected could not be disabled')
+        return super().on_deactivate(state)
+
+    @_traceback_logged
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    @_traceback_logged
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    @_traceback_logged
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.get_logger().error(f'transition from {state.label} failed: motors zeroed, ports closed')
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _LifecycleNodeMixin__on_change_state(self, request: Any, response: Any) -> Any:
+        """rclpy's change_state handler raises (and ends the spin) on a transition the current state
+        does not have; answer ``success: false`` instead."""
+        try:
+            return LifecycleNodeMixin._LifecycleNodeMixin__on_change_state(self, request, response)  # type: ignore[attr-defined]
+        except RCLError as err:
+            self.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
+            response.success = False
+            return response
+
+    def _start_pollers(self, p: dict[str, Any]) -> None:
+        self.command = DriveCommand(
+            p['cmd_timeout_s'],
+            max_rpm=p['max_motor_rpm'],
+            geometry=p['geometry'],
+            limits=p['limits'],
+            stop_both_on_link_loss=p['stop_both_on_link_loss'],
+            active=False,
+            stall_timeout_s=max(1.0, 5.0 / p['poll_rate_hz']),  # no good cycle for this long: down
+        )
         config = DesConfig(
             baudrate=p['baud'],
             current_source=p['current_source'],
@@ -75,161 +361,117 @@ class DesDriver(Node):
                 status_every=p['status_every'],
                 reconnect_period_s=p['reconnect_period_s'],
                 encoder_resolution=p['encoder_resolution'],
+                log_error=self.get_logger().error,
             )
             for side in SIDES
         }
-        self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        msg_type = TwistStamped if p['twist_stamped'] else Twist
-        self.create_subscription(msg_type, 'cmd_vel', self._on_cmd_vel, 10)
-        self.create_subscription(Empty, '~/clear_faults', self._on_clear_faults, 10)
-        self._published = {side: 0 for side in SIDES}
-        self.create_timer(1.0 / p['poll_rate_hz'], self._publish_joint_states)
-        self.create_timer(1.0 / p['diagnostics_rate_hz'], self._publish_diagnostics)
         for poller in self.pollers.values():
             poller.start()
 
-    # -- parameters -----------------------------------------------------------------------------
+    def _wait_connected(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if all(p.sample.sequence > 0 for p in self.pollers.values()):
+                return
+            time.sleep(0.01)
+        problems = [f'{s}: {p.sample.message}' for s, p in self.pollers.items() if p.sample.sequence == 0]
+        raise ConfigError(f'DES amplifiers not ready after {timeout_s:g} s ({"; ".join(problems)})')
 
-    def _declare_parameters(self) -> None:
-        def declare(name: str, default: object, description: str, **ranges: object) -> None:
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=description, read_only=True, **ranges)
-            )
+    def _wait_applied(self, timeout_s: float = 3.0) -> bool:
+        """Wait until every poller has run a cycle with the command's current state."""
+        assert self.command is not None
+        generation = self.command.generation
+        return all(p.wait_applied(generation, timeout_s) for p in self.pollers.values())
 
-        declare('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier')
-        declare('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier')
-        declare('baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200')
-        declare('left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1')
-        declare(
-            'right_polarity', -1, 'amplifier sense of forward motion, right side (mirrored motor): +1 or -1'
-        )
-        declare(
-            'gear_ratio',
-            GEAR_RATIO,
-            'motor-to-axle reduction [-] (ch. 7.1.1: 12)',
-            floating_point_range=_float_range(0.01, 1000.0),
-        )
-        declare(
-            'encoder_resolution',
-            EC45.encoder_counts_per_turn,
-            'encoder lines per motor turn [-] (ch. 7.1.2: 2048)',
-            integer_range=[IntegerRange(from_value=1, to_value=65535, step=1)],
-        )
-        declare(
-            'tread_m',
-            0.426,
-            'effective tread for skid-steer kinematics [m] (test_robot_track.yaml, ASSUMED)',
-            floating_point_range=_float_range(0.01, 10.0),
-        )
-        declare(
-            'drive_radius_m',
-            0.1,
-            'sprocket / wheel radius [m] (test_robot_track.yaml, ASSUMED)',
-            floating_point_range=_float_range(0.001, 10.0),
-        )
-        declare(
-            'max_motor_rpm',
-            4000.0,
-            'motor speed limit of the set points [rpm] (EC-45 no-load speed 4010 rpm at 48 V)',
-            floating_point_range=_float_range(1.0, 10000.0),
-        )
-        declare(
-            'poll_rate_hz',
-            50.0,
-            'amplifier poll and joint_states rate [Hz]',
-            floating_point_range=_float_range(0.1, 1000.0),
-        )
-        declare(
-            'status_every',
-            5,
-            'read the status word every N polls [-]',
-            integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)],
-        )
-        declare(
-            'cmd_vel_timeout_s',
-            0.5,
-            'zero speed when no cmd_vel for this long [s]',
-            floating_point_range=_float_range(0.01, 60.0),
-        )
-        declare(
-            'reconnect_period_s',
-            0.5,
-            'retry period for a lost port [s]',
-            floating_point_range=_float_range(0.01, 60.0),
-        )
-        declare(
-            'ack_timeout_s',
-            0.05,
-            'wait for each acknowledge / reply from an amplifier [s]',
-            floating_point_range=_float_range(0.001, 10.0),
-        )
-        declare(
-            'diagnostics_rate_hz',
-            2.0,
-            'diagnostics rate [Hz]',
-            floating_point_range=_float_range(0.01, 100.0),
-        )
-        declare(
-            'current_source',
-            'status_variable',
-            "how currents are read: 'status_variable' (130, documented) or 'is_must' (op 0x29, UNCONFIRMED)",
-        )
-        declare(
-            'encoder_counter_variable',
-            143,
-            'status variable of the 16-bit encoder counter (a source is off by one from 135 on: UNCONFIRMED)',
-            integer_range=[IntegerRange(from_value=128, to_value=255, step=1)],
-        )
-        declare('twist_stamped', False, 'cmd_vel is geometry_msgs/TwistStamped instead of Twist')
-        declare('frame_id', '', 'header.frame_id of joint_states')
+    def _stop_pollers(self) -> None:
+        """Zero speed on both sides, then disable both, then close the ports (idempotent)."""
+        if self.command is not None:
+            self.command.shutting_down = True
+        for poller in self.pollers.values():
+            poller.request_stop()
+        for poller in self.pollers.values():
+            poller.stop()
 
-    def _read_parameters(self) -> dict:
-        names = [
-            'left_port', 'right_port', 'baud', 'left_polarity', 'right_polarity', 'gear_ratio',
-            'encoder_resolution', 'tread_m', 'drive_radius_m', 'max_motor_rpm', 'poll_rate_hz',
-            'status_every', 'cmd_vel_timeout_s', 'reconnect_period_s', 'ack_timeout_s',
-            'diagnostics_rate_hz', 'twist_stamped', 'frame_id', 'current_source', 'encoder_counter_variable',
-        ]  # fmt: skip
-        p = {name: self.get_parameter(name).value for name in names}
-        if p['baud'] not in BAUD_CODES:
-            raise ConfigError(f'baud must be one of {sorted(BAUD_CODES)}, not {p["baud"]}')
-        for side in SIDES:
-            if p[f'{side}_polarity'] not in (1, -1):
-                raise ConfigError(f'{side}_polarity must be +1 or -1, not {p[f"{side}_polarity"]}')
-        if p['current_source'] not in ('status_variable', 'is_must'):
-            raise ConfigError(
-                f"current_source must be 'status_variable' or 'is_must', not {p['current_source']!r}"
-            )
-        if p['left_port'] == p['right_port']:
-            raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
-        return p
+    def _teardown(self) -> None:
+        self._stop_pollers()
+        for entity in self._runtime:
+            if hasattr(entity, 'cancel'):
+                self.destroy_timer(entity)
+            else:
+                self.destroy_subscription(entity)
+        self._runtime = []
+        self.pollers = {}
+        self.command = None
+
+    def emergency_stop(self, reason: str) -> None:
+        """Zero and disable both amplifiers now (from any thread); the node stays up, inactive."""
+        self.get_logger().error(f'{reason}: zeroing and disabling both amplifiers')
+        command = self.command
+        if command is not None:
+            command.active = False
+            for poller in self.pollers.values():
+                poller.wait_applied(command.generation, 1.0)
 
     # -- callbacks ------------------------------------------------------------------------------
 
+    @_fail_safe
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
-        twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        p = self.params
-        values = (twist.linear.x, twist.angular.z)
-        if not all(math.isfinite(v) for v in values):
-            self.get_logger().warn(f'ignoring non-finite cmd_vel {values}', throttle_duration_sec=5.0)
+        self.counts['received'] += 1
+        command = self.command
+        if command is None or not command.active:
+            self.counts['ignored_inactive'] += 1
             return
-        left, right = twist_to_motor_rpm(
-            *values,
-            tread_m=p['tread_m'],
-            drive_radius_m=p['drive_radius_m'],
-            gear_ratio=p['gear_ratio'],
-            max_rpm=p['max_motor_rpm'],
+        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        values = (
+            twist.linear.x,
+            twist.linear.y,
+            twist.linear.z,
+            twist.angular.x,
+            twist.angular.y,
+            twist.angular.z,
         )
-        self.command.set({'left': left * p['left_polarity'], 'right': right * p['right_polarity']})
+        if not all(math.isfinite(v) for v in values):
+            self.counts['rejected_non_finite'] += 1
+            self.get_logger().warn(
+                f'rejected cmd_vel with a non-finite value {values} '
+                f'({self.counts["rejected_non_finite"]} so far)',
+                throttle_duration_sec=_WARN_PERIOD_S,
+            )
+            return
+        checked = command.set_twist(twist.linear.x, twist.angular.z)
+        if checked.clamped:
+            self.counts['clamped'] += 1
+            self.get_logger().warn(
+                f'cmd_vel ({twist.linear.x:g} m/s, {twist.angular.z:g} rad/s) clamped to '
+                f'({checked.linear_m_s:g} m/s, {checked.yaw_rate_rad_s:g} rad/s) '
+                f'({self.counts["clamped"]} so far)',
+                throttle_duration_sec=_WARN_PERIOD_S,
+            )
 
-    def _on_clear_faults(self, msg: Empty) -> None:
+    @_fail_safe
+    def _on_clear_faults(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        command = self.command
+        if command is None:
+            response.success, response.message = False, f'not configured ({self.state_label})'
+            return response
         self.get_logger().info('clearing amplifier errors on request')
-        self.command.request_clear(list(SIDES))
+        command.request_clear(list(SIDES))
+        reached = self._wait_applied()
+        command.withdraw_clear_requests()  # an unreachable side is not cleared behind the caller's back
+        latched = {s: p.sample.errors.describe() for s, p in self.pollers.items() if p.sample.fault_latched}
+        response.success = reached and not latched
+        if latched:
+            response.message = 'still latched: ' + ', '.join(f'{s} ({e})' for s, e in latched.items())
+        elif not reached:
+            response.message = 'a side is not connected: ' + command.stop_reason()
+        else:
+            response.message = 'cleared' if command.active else 'cleared (inactive: power stages stay off)'
+        return response
 
+    @_fail_safe
     def _publish_joint_states(self) -> None:
         samples = {side: poller.sample for side, poller in self.pollers.items()}
-        if all(samples[s].sequence == self._published[s] for s in SIDES):
+        if len(samples) != len(SIDES) or all(samples[s].sequence == self._published[s] for s in SIDES):
             return
         msg = JointState()
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -257,31 +499,49 @@ class DesDriver(Node):
         effort = sign * EC45.torque_constant_Nm_A * sample.current_ma / 1000.0
         return position, velocity, effort
 
+    @_fail_safe
     def _publish_diagnostics(self) -> None:
+        command = self.command
+        if command is None:
+            return
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        halted = self.command.halted_by
+        stop_reason = command.stop_reason()
         for side, poller in self.pollers.items():
-            msg.status.append(self._side_status(side, poller, poller.sample, halted))
+            msg.status.append(self._side_status(side, poller, poller.sample, command, stop_reason))
+        msg.status.append(self._command_status(command, stop_reason))
         self.diag_pub.publish(msg)
 
     def _side_status(
-        self, side: str, poller: AmplifierPoller, sample: AmplifierSample, halted: set[str]
+        self,
+        side: str,
+        poller: AmplifierPoller,
+        sample: AmplifierSample,
+        command: DriveCommand,
+        stop_reason: str,
     ) -> DiagnosticStatus:
-        if sample.fault_latched or not sample.connected:
+        halted = command.halted_by
+        if sample.fault_latched or not sample.connected or sample.poller_fault_recent:
             level = DiagnosticStatus.ERROR
-        elif halted or sample.message != 'ok':
+        elif halted or command.links_down or sample.message != 'ok':
             level = DiagnosticStatus.WARN
         else:
             level = DiagnosticStatus.OK
         message = sample.message
-        if halted and not sample.fault_latched:
+        if sample.connected and sample.poller_fault_recent:
+            message = f'restarted after a poller fault: {sample.last_poller_fault}'
+        elif halted and not sample.fault_latched:
             message = f'stopped: fault on {", ".join(sorted(halted))} side'
-        elif level == DiagnosticStatus.OK and self.command.timed_out():
+        elif level == DiagnosticStatus.WARN and sample.message == 'ok':
+            message = f'stopped: {stop_reason}'
+        elif level == DiagnosticStatus.OK and stop_reason == 'inactive':
+            message = 'ok (inactive: power stage disabled)'
+        elif level == DiagnosticStatus.OK and command.timed_out():
             message = 'ok (no cmd_vel: watchdog holds zero speed)'
         values = {
             'port': poller.amp.port,
             'connected': str(sample.connected),
+            'enabled': str(sample.enabled),
             'fault_latched': str(sample.fault_latched),
             'status_word': f'0x{int(sample.status):04X}',
             'status': sample.status.describe(),
@@ -291,7 +551,9 @@ class DesDriver(Node):
             'velocity_rpm': str(sample.velocity_rpm),
             'velocity_setpoint_rpm': str(sample.setpoint_rpm),
             'poll_rate_hz': f'{sample.poll_rate_hz:.1f}',
-            'watchdog_zero': str(self.command.timed_out()),
+            'watchdog_zero': str(command.timed_out()),
+            'poller_faults': str(sample.poller_faults),
+            'last_poller_fault': sample.last_poller_fault,
             **{f'link_{k}': str(v) for k, v in sample.link.items()},
         }
         return DiagnosticStatus(
@@ -302,23 +564,90 @@ class DesDriver(Node):
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
         )
 
+    def _command_status(self, command: DriveCommand, stop_reason: str) -> DiagnosticStatus:
+        rejected = self.counts['rejected_non_finite']
+        level = DiagnosticStatus.WARN if rejected or command.nonfinite_setpoints else DiagnosticStatus.OK
+        limits = self.params['limits']
+        values = {
+            'lifecycle_state': self.state_label,
+            'stop_reason': stop_reason or 'none (driving on a fresh command)',
+            'cmd_vel_received': str(self.counts['received']),
+            'cmd_vel_rejected_non_finite': str(rejected),
+            'cmd_vel_clamped': str(self.counts['clamped']),
+            'cmd_vel_ignored_inactive': str(self.counts['ignored_inactive']),
+            'setpoints_non_finite': str(command.nonfinite_setpoints),
+            'max_speed_m_s': f'{limits.max_speed_m_s:g}',
+            'max_yaw_rate_rad_s': f'{limits.max_yaw_rate_rad_s:g}',
+            'max_motor_rpm': f'{command.max_rpm:g}',
+        }
+        message = f'{self.state_label}; ' + (f'zero speed: {stop_reason}' if stop_reason else 'driving')
+        if rejected:
+            message += f'; {rejected} non-finite cmd_vel rejected'
+        return DiagnosticStatus(
+            level=level,
+            name=f'{NODE_NAME}: command',
+            message=message,
+            hardware_id='cmd_vel',
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+
     # -- shutdown -------------------------------------------------------------------------------
 
     def stop_motors(self) -> None:
         """Zero speed on both sides, then disable both, then close the ports (idempotent)."""
-        self.command.shutting_down = True
-        for poller in self.pollers.values():
-            poller.request_stop()
-        for poller in self.pollers.values():
-            poller.stop()
+        self._stop_pollers()
 
     def destroy_node(self) -> None:
-        self.stop_motors()
+        self._teardown()
         super().destroy_node()
 
 
+def bring_up(node: DesDriver) -> None:
+    """Configure and activate (as a lifecycle manager would); ConfigError if either fails."""
+    if node.state_label == 'unconfigured' and node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+        raise ConfigError(f'des_driver: configure failed: {node.configure_error or "see the log"}')
+    if node.state_label == 'inactive' and node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+        raise ConfigError('des_driver: activate failed: see the log')
+
+
+def bring_down(node: DesDriver) -> None:
+    """Deactivate (zero, disable) and clean up (close the ports), from whatever state it is in."""
+    if node.state_label == 'active':
+        node.trigger_deactivate()
+    if node.state_label == 'inactive':
+        node.trigger_cleanup()
+    node.stop_motors()  # in any other state too (idempotent)
+
+
+def make_driver(**kwargs: Any) -> DesDriver:
+    """A :class:`DesDriver`; with ``autostart`` configured and activated (ConfigError if that fails).
+
+    A SIGINT / SIGTERM during start-up (rclpy then invalidates the context under the node) is an
+    external shutdown, not an error.
+    """
+    context = kwargs.get('context')
+    try:
+        node = DesDriver(**kwargs)
+    except RCLError:
+        if rclpy.ok(context=context):
+            raise
+        raise ExternalShutdownException from None
+    if node.params['autostart']:
+        try:
+            bring_up(node)
+        except RCLError:
+            node.destroy_node()
+            if rclpy.ok(context=context):
+                raise
+            raise ExternalShutdownException from None
+        except BaseException:
+            node.destroy_node()
+            raise
+    return node
+
+
 def main(args: list[str] | None = None) -> None:
-    spin_node(DesDriver, NODE_NAME, args)
+    spin_node(make_driver, NODE_NAME, args)
 
 
 if __name__ == '__main__':

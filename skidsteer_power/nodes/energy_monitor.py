@@ -11,11 +11,12 @@ Modes
 
 Subscribes ``cmd_vel`` (the command shown is the one on the topic, whoever sends it),
 ``power/summary`` (diagnostic_msgs/DiagnosticArray, figures by name), ``joint_states``,
-``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s`` (all best effort, so they
-match any publisher); publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
-``--rate`` Hz in free and case mode. A source silent for :data:`~skidsteer_power.ui.monitor.STALE_AFTER_S`
-is greyed and marked stale. Every frame shown is appended to ``--csv`` (default
-``energy_monitor_<UTC time>.csv``). The drawing is :func:`skidsteer_power.ui.monitor.render`.
+``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s``, ``energy/path_required_wh``,
+``energy/path_margin_wh`` (all best effort, so they match any publisher); publishes ``cmd_vel``
+(Twist, or TwistStamped with ``--stamped``) at ``--rate`` Hz in free and case mode. A source silent
+for :data:`~skidsteer_power.ui.monitor.STALE_AFTER_S` is greyed and marked stale. Every frame shown
+is appended to ``--csv`` (default ``energy_monitor_<UTC time>.csv``). The drawing is
+:func:`skidsteer_power.ui.monitor.render`.
 """
 
 from __future__ import annotations
@@ -131,6 +132,10 @@ class EnergyMonitor(Node):
         self.create_subscription(BatteryState, 'battery/state', self._on_battery, qos)
         self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, qos)
         self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, qos)
+        for topic in ('path_required_wh', 'path_margin_wh'):  # power_estimator's path energy [Wh]
+            self.create_subscription(
+                Float64, f'energy/{topic}', lambda msg, k=topic: setattr(self.view, k, msg.data), qos
+            )
         if mode != 'view':
             self.pub_cmd = self.create_publisher(TwistStamped if stamped else Twist, 'cmd_vel', 10)
             self.create_timer(1.0 / rate_hz, self._on_drive_timer)

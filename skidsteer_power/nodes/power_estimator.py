@@ -34,6 +34,9 @@ periodic (``publish_period_s``)
     warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
     source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
     every ``diagnostics_period_s``.
+path energy (:mod:`skidsteer_power.nodes.path_hook`)
+    ``plan`` nav_msgs/Path in; ``energy/path_required_wh``, ``energy/path_margin_wh`` std_msgs/Float64
+    [Wh] out, and a ``path energy`` diagnostic that WARNs while the margin is negative.
 service
     ``~/reset_energy`` std_srvs/Trigger: the battery was swapped for a full one; state of charge back
     to full, energy tallies to 0 J, state file rewritten.
@@ -83,6 +86,8 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
+from skidsteer_power.nodes.path_hook import PathEnergyHook
 from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
@@ -119,6 +124,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'output_qos': ('reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'),
     'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
     'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
+    **PATH_PARAMETERS,
 }
 
 INPUT_RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT, 'reliable': ReliabilityPolicy.RELIABLE}
@@ -273,6 +279,7 @@ class PowerEstimator(Node):
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
+        self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -362,6 +369,7 @@ class PowerEstimator(Node):
         self.pub_tte_p90.publish(Float64(data=float(bounds[1])))
         correction.header.stamp = battery.header.stamp
         self.pub_correction.publish(correction)
+        self.path_energy.publish()  # the battery changed: the path margin too
 
     def _on_reset_energy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """``~/reset_energy``: a full battery is in; tallies restart; the state file is rewritten."""
@@ -390,6 +398,7 @@ class PowerEstimator(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
+        self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
     def save(self) -> None:

@@ -119,8 +119,7 @@ class Suite:
         values: dict[str, Any] = {
             'left_port': left_port,
             'right_port': right_port,
-            'tread_m': float(self.vehicle.tread_m),
-            'drive_radius_m': float(self.vehicle.drive_radius_m),
+            'vehicle': self.options.vehicle,
         }
         values.update(self.options.driver_params)
         return [Parameter(k, value=v) for k, v in values.items()]
@@ -150,6 +149,9 @@ class Suite:
 
     def start(self) -> Suite:
         """Spin every node in a background thread of its own (for tests and the CLI's status loop)."""
+        from skidsteer_power.nodes.des_driver import bring_up
+
+        bring_up(self.driver)  # managed node: configure + activate (ConfigError if it fails)
         for node in self.nodes:
             executor = SingleThreadedExecutor(context=self.context)
             executor.add_node(node)
@@ -161,6 +163,10 @@ class Suite:
 
     def shutdown(self) -> None:
         """Save the energy state, stop the motors, destroy the nodes, stop the simulated amplifiers."""
+        from skidsteer_power.nodes.des_driver import bring_down
+
+        if getattr(self, 'driver', None) is not None:
+            bring_down(self.driver)  # managed node: deactivate (zero, disable) + cleanup (close)
         for executor in self._executors:
             executor.shutdown(timeout_sec=2.0)
         for thread in self._threads:

@@ -9,6 +9,8 @@ Panels (topics as the suite publishes them, default namespace):
   measured [W];
 * time to empty [s] (``energy/time_to_empty_s``; Indicator: red below 10 min);
 * traction margin [-] (Plot + Indicator: red at or below 0.1, the estimator's default warning margin);
+* path energy [Wh] (Plot: ``energy/path_required_wh``, ``energy/path_margin_wh``; Indicator on the
+  margin: red below 0 Wh, the robot cannot drive the planned path and come back with the reserve);
 * trace from odometry (XY plot of ``odom.pose.pose.position``, x vs y [m]);
 * estimator diagnostics (stale inputs, energy source).
 
@@ -111,6 +113,25 @@ def operator_layout() -> Any:
             show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=120.0,
         ),
     )  # fmt: skip
+    path_margin = fl.IndicatorPanel(
+        title='path margin [Wh]',
+        config=fl.IndicatorConfig(
+            path='/energy/path_margin_wh.data', style='background', font_size=28,
+            rules=[fl.IndicatorRule(operator='<', raw_value='0', color='#d62728',
+                                    label='CANNOT drive the path and return')],
+            fallback_color='#2ca02c', fallback_label='path and return ok',
+        ),
+    )  # fmt: skip
+    path_energy = fl.PlotPanel(
+        title='planned path: energy required and margin [Wh]',
+        config=fl.PlotConfig(
+            paths=[
+                _series(fl, '/energy/path_required_wh', 'required [Wh]', PREDICTED),
+                _series(fl, '/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
+            ],
+            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=600.0,
+        ),
+    )  # fmt: skip
     odom_x = fl.PlotXAxisPath(value='/odom.pose.pose.position.x', enabled=True)
     trace = fl.PlotPanel(
         title='trace from odometry: y [m] vs x [m]',
@@ -148,7 +169,17 @@ def operator_layout() -> Any:
                         ],
                     ),
                 ),
-                item(fl.SplitContainer(direction='column', items=[item(trace, 2.0), item(diagnostics)])),
+                item(
+                    fl.SplitContainer(
+                        direction='column',
+                        items=[
+                            item(trace, 2.0),
+                            item(path_margin, 0.5),
+                            item(path_energy),
+                            item(diagnostics),
+                        ],
+                    )
+                ),
             ],
         ),
     )

@@ -182,6 +182,8 @@ class MonitorView:
     voltage_V: float = math.nan
     remaining_wh: float = math.nan
     time_to_empty_s: float = math.nan
+    path_required_wh: float = math.nan  # energy/path_required_wh [Wh]
+    path_margin_wh: float = math.nan  # energy/path_margin_wh [Wh]
     status: str = ''
     stale: frozenset[str] = frozenset()
     """Sources (:data:`SOURCES`) not heard from for :data:`STALE_AFTER_S`; their values are greyed."""
@@ -250,6 +252,13 @@ def _battery_panel(view: MonitorView) -> Panel:
         f'battery power: predicted {_num(view.get("predicted_battery_W"), ".1f")} W, ',
         f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})',
     )
+    if math.isfinite(view.path_required_wh):
+        short = math.isfinite(view.path_margin_wh) and view.path_margin_wh < 0
+        lines.append(
+            f'\nplanned path needs {_num(view.path_required_wh, ".2f")} Wh, '
+            f'margin after return {_num(view.path_margin_wh, ".2f")} Wh',
+            style='bold red' if short else None,
+        )
     if 'battery' in view.stale:
         gauge.stylize('dim')
         lines.stylize('dim')

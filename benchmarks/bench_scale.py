@@ -1,0 +1,179 @@
+"""Scale (issue 19): path energy on the robot, Monte Carlo samples/s on 1 and 2 local Dask workers
+(scaling efficiency), the uncertain design study on 2 cores and its projection to N workers, fleet
+validation throughput. Cluster start-up is timed apart from the work; every sample builds its own map
+(no cache hits)."""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.harness import Report
+
+FULL_SAMPLES = 1000  # issue 19: 729 candidates x 3 configurations x 10^3 samples x 2 terrains
+FULL_TERRAINS = 2
+
+
+def _path_energy(report: Report) -> None:
+    import numpy as np
+
+    from skidsteer_power.estimator.path_energy import path_energy
+    from skidsteer_power.maps import PowerMap
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    vehicle = load_vehicle('test_robot_track')
+    power_map = PowerMap.build(vehicle, load_terrain('dry_sand'))
+    pt = Powertrain.for_vehicle(vehicle)
+    s = np.linspace(0.0, 100.0, 2001)  # a 100 m nav2-like path, a pose every 5 cm, winding
+    heading = 0.8 * np.sin(s / 7.0)
+    x, y = np.cumsum(np.cos(heading)) * 0.05, np.cumsum(np.sin(heading)) * 0.05
+    best = min(_timed(lambda: path_energy(x, y, 0.3, power_map, pt)) for _ in range(5))
+    report.figure(
+        'path energy, 2001 poses there and back (robot side)',
+        best * 1e3,
+        'ms',
+        goal='< 100 ms (one plan per few s)',
+        met=best < 0.1,
+    )
+
+
+def _timed(func) -> float:  # type: ignore[no-untyped-def]
+    start = time.perf_counter()
+    func()
+    return time.perf_counter() - start
+
+
+def _samples_per_second(report: Report) -> None:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.missions.routes import patrol
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.studies.montecarlo import mission_uncertainty
+    from skidsteer_power.studies.uncertainty import default_spread
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    vehicle, terrain = load_vehicle('test_robot_track'), load_terrain('sandy_soil')
+    pt = Powertrain.for_vehicle(vehicle)
+    spread = default_spread(terrain, pt)
+    n = 24
+    rates, per_cpu = {}, {}
+    for workers in (1, 2):
+        start = time.perf_counter()
+        with Engine(workers=workers, progress=False) as engine:
+            started = time.perf_counter() - start
+            engine.map(abs, [0])  # workers warm (imports) before timing
+            cpu0 = engine.client.run(time.process_time)  # CPU seconds of each worker process
+            t0 = time.perf_counter()
+            mission_uncertainty(engine, vehicle, terrain, patrol(), pt, spread, samples=n, seed=workers)
+            wall = time.perf_counter() - t0
+            cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
+            rates[workers] = n / wall
+            per_cpu[workers] = n / cpu
+        report.figure(
+            f'mission Monte Carlo, test_robot_track patrol, {workers} worker(s)', rates[workers], 'samples/s'
+        )
+        report.figure(
+            f'CPU the {workers} worker(s) got, per worker and second of wall time',
+            cpu / (wall * workers),
+            '-',
+            note='1 = a core each; less: other jobs held the cores',
+        )
+        report.figure(f'LocalCluster start-up, {workers} worker(s)', started, 's')
+    efficiency = rates[2] / (2 * rates[1])
+    report.figure(
+        'scaling efficiency, 2 workers vs 1 (rate2 / 2 rate1)',
+        efficiency,
+        '-',
+        goal='>= 0.8',
+        met=efficiency >= 0.8,
+        note='2 cores shared with other jobs: a busy machine lowers it',
+    )
+    report.figure(
+        'samples per worker CPU second, 2 workers vs 1 (Dask overhead only)',
+        per_cpu[2] / per_cpu[1],
+        '-',
+        note=f'{per_cpu[1]:.2f} samples per CPU s on 1 worker',
+    )
+
+
+def _design(report: Report) -> None:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.studies.montecarlo import design_uncertainty
+    from skidsteer_power.studies.uncertainty import default_spread
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    terrain = load_terrain('sandy_soil')
+    spread = default_spread(terrain, Powertrain.default_test_robot())
+    n = 4
+    with Engine(workers=2, progress=False) as engine:
+        engine.map(abs, [0, 1])
+        cpu0 = engine.client.run(time.process_time)
+        t0 = time.perf_counter()
+        design_uncertainty(engine, terrain, spread, samples=n, seed=0, parts_per_sample=6)
+        wall = time.perf_counter() - t0
+        cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
+    per_sample, cpu_per_sample = wall / n, cpu / n
+    report.figure(
+        'uncertain design study, 729 candidates per sample, 2 workers (wall)', per_sample, 's/sample'
+    )
+    report.figure('uncertain design study, worker CPU per sample', cpu_per_sample, 'CPU s/sample')
+    samples = FULL_SAMPLES * FULL_TERRAINS
+    report.figure(
+        f'full study ({FULL_SAMPLES} samples x {FULL_TERRAINS} terrains x 729), this loaded 2-core machine',
+        per_sample * samples / 3600.0,
+        'h',
+        note=f'extrapolated from {n} measured samples',
+    )
+    for workers in (2, 8, 32, 128):
+        projected = cpu_per_sample * samples / workers
+        report.figure(
+            f'PROJECTION: full study on {workers} idle single-core workers',
+            projected / 60.0,
+            'min',
+            note='CPU s per sample x samples / N: assumes no contention, no scheduler overhead; not measured',
+        )
+
+
+def _fleet(report: Report) -> None:
+    from skidsteer_power.bags.fleet import plan_jobs, validate_fleet
+    from skidsteer_power.bags.synthetic import table_7_3_segments, write_drive_bag
+    from skidsteer_power.distributed.engine import Engine
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        bags = []
+        segments = table_7_3_segments(hold_s=2.0, pause_s=0.5)
+        duration = sum(s.duration_s for s in segments)
+        for k in range(6):
+            bags.append(root / f'bag{k}.mcap')
+            write_drive_bag(bags[-1], segments, rate_hz=50)
+        cache = str(root / 'maps')
+        rates = {}
+        for workers in (1, 2):
+            jobs = plan_jobs(
+                bags, root / f'out{workers}', 'test_robot_track', 'sand_bin', map_cache_dir=cache, plots=False
+            )
+            with Engine(workers=workers, progress=False) as engine:
+                validate_fleet(engine, jobs[:1], root / 'warm', plots=False)  # map built, imports done
+                t0 = time.perf_counter()
+                validate_fleet(engine, jobs, root / f'out{workers}', plots=False)
+                rates[workers] = len(jobs) / (time.perf_counter() - t0)
+            name = f'fleet validation, 6 bags of {duration:.0f} s at 50 Hz, {workers} worker(s)'
+            report.figure(name, rates[workers], 'bags/s')
+        report.figure('fleet validation scaling efficiency, 2 workers vs 1', rates[2] / (2 * rates[1]), '-')
+
+
+def run(report: Report) -> None:
+    import os
+
+    report.figure(
+        'machine load average (1 min) at start', os.getloadavg()[0], '-', note=f'{os.cpu_count()} cores'
+    )
+    _path_energy(report)
+    _samples_per_second(report)
+    _design(report)
+    _fleet(report)

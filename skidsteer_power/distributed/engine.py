@@ -1,0 +1,147 @@
+"""Where a study's tasks run: an embedded Dask LocalCluster, or an existing Dask cluster.
+
+``Engine()`` starts a LocalCluster sized to the machine (one single-threaded worker process per core,
+or ``workers``), so a laptop user needs nothing; ``Engine(scheduler='tcp://HOST:8786')`` connects to a
+cluster the user started (``dask scheduler`` and ``dask worker tcp://HOST:8786`` on each machine, with
+this package installed in the workers' Python). :meth:`Engine.map` runs a module-level function over a
+list of items and returns the results in the items' order, whatever worker ran each, so a study with a
+fixed seed gives the same numbers locally and on a cluster (the samples are drawn before submission).
+A rich progress bar on stderr follows the tasks as they finish (only on a terminal).
+
+Tasks that raise stop the study with the task's own exception (a bug shows its traceback; the
+project's errors are the user's). Studies that must survive a failing item (fleet validation) catch
+inside the task and return a failure record.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from skidsteer_power.errors import InputError
+
+CONNECT_TIMEOUT_S = 10.0
+
+
+class Engine:
+    """A Dask client on a LocalCluster (default) or on ``scheduler``; use as a context manager."""
+
+    def __init__(
+        self, scheduler: str | None = None, workers: int | None = None, progress: bool | None = None
+    ):
+        if workers is not None and workers < 1:
+            raise InputError(f'--jobs/--workers must be >= 1, not {workers}')
+        if scheduler is not None and workers is not None:
+            raise InputError('give either a scheduler address or a number of local workers, not both')
+        self.scheduler = scheduler
+        self.workers = workers or os.cpu_count() or 1
+        self.progress = sys.stderr.isatty() if progress is None else progress
+        self.cluster: Any = None
+        self.client: Any = None
+
+    def __enter__(self) -> Engine:
+        from dask.distributed import Client, LocalCluster
+
+        if self.scheduler is None:
+            self.cluster = LocalCluster(
+                n_workers=self.workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=':0',  # any free port (8787 may be another cluster's)
+                silence_logs=logging.ERROR,
+            )
+            self.client = Client(self.cluster)
+        else:
+            try:
+                self.client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+            except (OSError, TimeoutError, ValueError) as err:
+                raise InputError(f'cannot reach the Dask scheduler {self.scheduler}: {err}') from err
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+    @property
+    def n_workers(self) -> int:
+        """Workers the scheduler knows now."""
+        return len(self.client.scheduler_info(n_workers=-1)['workers'])
+
+    @property
+    def description(self) -> str:
+        where = self.scheduler or 'embedded LocalCluster'
+        return f'dask {where}, {self.n_workers} worker(s)'
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], label: str = 'tasks') -> list[Any]:
+        """``[fn(item) for item in items]``, run on the cluster; results in the items' order."""
+        from dask.distributed import as_completed
+
+        if not items:
+            return []
+        futures = self.client.map(fn, list(items), pure=False)
+        index = {f.key: k for k, f in enumerate(futures)}
+        results: list[Any] = [None] * len(futures)
+        with _progress(self.progress, label, len(futures)) as advance:
+            try:
+                for future in as_completed(futures):
+                    results[index[future.key]] = future.result()
+                    advance()
+            except BaseException:
+                self.client.cancel(futures)
+                raise
+        return results
+
+
+class _progress:
+    """A rich progress bar on stderr (or nothing), as a context manager yielding ``advance()``."""
+
+    def __init__(self, enabled: bool, label: str, total: int) -> None:
+        self.enabled, self.label, self.total = enabled, label, total
+        self.bar: Any = None
+
+    def __enter__(self) -> Callable[[], None]:
+        if not self.enabled:
+            return lambda: None
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        self.bar = Progress(
+            TextColumn('{task.description}'),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        )
+        self.bar.start()
+        task = self.bar.add_task(self.label, total=self.total)
+        return lambda: self.bar.advance(task)
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+def add_engine_args(parser: Any, jobs_flag: str | None = None) -> None:
+    """``--scheduler ADDR`` and, with ``jobs_flag`` ('--jobs'), local worker processes on ``parser``."""
+    parser.add_argument(
+        '--scheduler',
+        metavar='ADDR',
+        default=None,
+        help='run on an existing Dask cluster, e.g. tcp://HOST:8786 (default: a local cluster)',
+    )
+    if jobs_flag is None:
+        return
+    parser.add_argument(
+        jobs_flag,
+        dest='workers',
+        type=int,
+        default=None,
+        metavar='N',
+        help='local worker processes (default: one per core)',
+    )

@@ -1,0 +1,130 @@
+"""Studies on a real Dask cluster (issue 19): ``dask scheduler`` and two ``dask worker`` processes on
+localhost run a small uncertain design study and a fleet validation through ``--scheduler``; the
+design study equals the embedded LocalCluster's to the last bit for the same seed."""
+
+from __future__ import annotations
+
+import csv
+import json
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+from skidsteer_power.cli.main import main
+
+DASK = str(Path(sys.executable).with_name('dask'))
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def _stop(processes: list[subprocess.Popen]) -> None:
+    for p in processes:
+        if p.poll() is None:
+            p.terminate()
+    for p in processes:
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+@pytest.fixture(scope='module')
+def scheduler(tmp_path_factory):
+    """tcp:// address of a scheduler with two single-threaded workers (separate processes)."""
+    from dask.distributed import Client
+
+    work = tmp_path_factory.mktemp('dask')
+    port = _free_port()
+    address = f'tcp://127.0.0.1:{port}'
+    quiet = {'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL, 'cwd': work}
+    processes = [
+        subprocess.Popen(
+            [DASK, 'scheduler', '--host', '127.0.0.1', '--port', str(port), '--no-dashboard'], **quiet
+        )
+    ]
+    try:
+        for k in range(2):
+            processes.append(
+                subprocess.Popen(
+                    [
+                        DASK,
+                        'worker',
+                        address,
+                        '--nthreads',
+                        '1',
+                        '--host',
+                        '127.0.0.1',
+                        '--no-dashboard',
+                        '--local-directory',
+                        str(work / f'w{k}'),
+                        '--name',
+                        f'w{k}',
+                    ],
+                    **quiet,
+                )
+            )
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=120)
+        yield address
+    finally:
+        _stop(processes)
+
+
+def _design(capsys, *extra):
+    argv = ['design-study', '--configuration', 'track', '--samples', '3', '--seed', '7', '--json']
+    assert main([*argv, *extra]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_design_study_on_a_cluster_equals_the_local_one(scheduler, capsys):
+    remote = _design(capsys, '--scheduler', scheduler)
+    assert '2 worker' in remote['uncertainty']['engine'] and scheduler in remote['uncertainty']['engine']
+    local = _design(capsys, '--workers', '2')
+    assert 'LocalCluster' in local['uncertainty']['engine']
+    for study in (remote, local):
+        study['uncertainty'].pop('engine')
+    assert remote == local  # every merit percentile, probability and nominal value, bit for bit
+    ranked = remote['best_probability']['track']
+    assert sum(c['p_best'] for c in ranked) == pytest.approx(1.0)
+    assert all(c['merit_p05'] <= c['merit_p50'] <= c['merit_p95'] for c in ranked)
+    assert remote['n_candidates'] == 243  # 3^5 track candidates of Table 8.4
+
+
+def test_fleet_validation_on_a_cluster_reports_every_bag(scheduler, tmp_path, capsys):
+    bags = tmp_path / 'bags'
+    bags.mkdir()
+    # 2 s straight at 0.2 m/s, then 2 s at 0.1 m/s turning: 0.4 + 0.2 = 0.6 m of path (odometry)
+    for name in ('a', 'b'):
+        write_drive_bag(bags / f'{name}.mcap', [Segment(0.2, 0.0, 2.0), Segment(0.1, 0.3, 2.0)], rate_hz=20)
+    (bags / 'broken.mcap').write_bytes(b'not a bag')
+    out = tmp_path / 'fleet'
+    argv = ['validate', str(bags / '*.mcap'), '--vehicle', 'test_robot_track', '--terrain', 'dry_sand']
+    code = main([*argv, '--report', str(out), '--scheduler', scheduler, '--no-plots', '--json'])
+    assert code == 1  # one bag failed, and said so
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary['bags'], summary['ok'], summary['failed']) == (3, 2, 1)
+    rows = {Path(r['bag']).name: r for r in summary['rows']}
+    assert 'corrupt' in rows['broken.mcap']['error'] or 'not' in rows['broken.mcap']['error']
+    for name in ('a.mcap', 'b.mcap'):
+        assert rows[name]['ok'] and rows[name]['distance_source'] == 'poses'
+        assert rows[name]['distance_m'] == pytest.approx(0.6, rel=0.02)
+        assert (Path(rows[name]['report_dir']) / 'summary.json').is_file()  # the single-bag report
+    with open(out / 'fleet.csv', newline='') as stream:
+        assert len(list(csv.DictReader(stream))) == 3
+    assert 'FAILED' in (out / 'summary.md').read_text()
+
+
+def test_unreachable_scheduler_is_one_clear_error(capsys):
+    argv = ['design-study', '--configuration', 'track', '--samples', '1', '--scheduler']
+    assert main([*argv, f'tcp://127.0.0.1:{_free_port()}']) == 2
+    err = capsys.readouterr().err
+    assert 'cannot reach the Dask scheduler' in err and err.count('\n') == 1
