@@ -18,6 +18,7 @@ names carry the unit)::
     wheelbase_m: 0.45            # front axle to rear axle
     yaw_inertia_kg_m2: 1.5       # optional; default: a uniform box (see Vehicle.yaw_inertia)
     powertrain: {preset: test_robot}
+    drivetrain: {preset: test_robot}   # joint_states mapping (skidsteer_power.estimator.inputs.JointMap)
 
 Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
 """
@@ -66,6 +67,8 @@ class Vehicle:
     yaw_inertia_kg_m2 : yaw moment of inertia about the CG [kg m^2] (optional; the dynamic twin uses
         it, the steady models do not; default :attr:`yaw_inertia`)
     powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
+    drivetrain : how its joint_states map to the sides (joint names, units), interpreted by
+        :class:`skidsteer_power.estimator.inputs.JointMap` (empty: the test robot's left_motor/right_motor)
     source : where the numbers come from; flags assumed values
     """
 
@@ -84,6 +87,7 @@ class Vehicle:
     yaw_inertia_kg_m2: float | None = None
     powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
     source: str = ''
+    drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -183,6 +187,8 @@ def _validate(vehicle: Vehicle) -> None:
         _check_positive(vehicle, 'yaw_inertia_kg_m2')
     if not isinstance(vehicle.powertrain, dict):
         raise _fail(vehicle.name, f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
+    if not isinstance(vehicle.drivetrain, dict):
+        raise _fail(vehicle.name, f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
     if not isinstance(vehicle.source, str):
         raise _fail(vehicle.name, 'source must be a string')
 
@@ -205,8 +211,9 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
         if required not in data:
             raise ConfigError(f'{origin}: missing field {required!r}')
     values = dict(data)
-    if values.get('powertrain') is None:
-        values['powertrain'] = {}
+    for section in ('powertrain', 'drivetrain'):
+        if values.get(section) is None:
+            values[section] = {}
     values['name'] = str(values['name'])
     try:
         return Vehicle(**values)
@@ -249,14 +256,15 @@ def load_vehicle(path_or_name: str | os.PathLike[str] | Vehicle) -> Vehicle:
 
 
 def vehicle_fingerprint(vehicle: Vehicle) -> str:
-    """Stable hex digest of the vehicle's physical parameters and powertrain (not name or source).
+    """Stable hex digest of the vehicle's physical parameters and powertrain (not name, source or
+    the joint_states mapping, which changes no model result).
 
     Two vehicles with the same fingerprint give the same model results, so maps can be cached by it.
     """
     payload = {
         f.name: getattr(vehicle, f.name)
         for f in dataclasses.fields(vehicle)
-        if f.name not in ('name', 'source', 'yaw_inertia_kg_m2')  # steady models ignore the inertia
+        if f.name not in ('name', 'source', 'drivetrain', 'yaw_inertia_kg_m2')  # no steady-state physics
     }
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):

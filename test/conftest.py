@@ -8,11 +8,41 @@ from __future__ import annotations
 
 import os
 import random
+from pathlib import Path
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 100)))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 import pytest
+
+SHARED_DIR = Path(__file__).resolve().parents[1].parent / 'shared'
+"""``../shared`` beside the repository: the dissertation text and real recordings made by others."""
+REQUIRE_SHARED_ENV = 'SKIDSTEER_REQUIRE_SHARED'
+"""Set to 1 (CI's .ci/run does) to make a missing ``../shared`` a failure instead of a skip."""
+
+
+def shared_path(*parts: str) -> Path:
+    """``../shared/<parts>``; if it is missing, skip the test with the reason (a user's clone without
+    the shared folder), or fail it when ``SKIDSTEER_REQUIRE_SHARED=1`` (CI: never silently skipped)."""
+    path = SHARED_DIR.joinpath(*parts)
+    if not path.exists():
+        reason = f'{path} is missing (the shared folder beside the repository)'
+        if os.environ.get(REQUIRE_SHARED_ENV) == '1':
+            pytest.fail(f'{reason}; {REQUIRE_SHARED_ENV}=1 requires it', pytrace=False)
+        pytest.skip(reason)
+    return path
+
+
+@pytest.fixture
+def shared_dir() -> Path:
+    """The ``../shared`` folder (skip, or fail in CI, when missing)."""
+    return shared_path()
+
+
+@pytest.fixture
+def neato_bag() -> Path:
+    """``../shared/realbags/neato-teleop``: a real sqlite3 teleop recording (skip, or fail in CI)."""
+    return shared_path('realbags', 'neato-teleop')
 
 
 @pytest.fixture

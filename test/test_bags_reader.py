@@ -234,7 +234,7 @@ def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> Non
     assert twists_vectorized([messages[0].data[:-1]]) is None  # not a plain Twist: generic path
 
 
-real_bag = pytest.mark.skipif(not REAL_BAG.exists(), reason=f'real bag folder absent: {REAL_BAG}')
+real_bag = pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
 
 
 @real_bag

@@ -130,10 +130,13 @@ def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(tmp_path
         summary = validate(bag, _options(tmp_path), predictor)
     assert summary['has_motor_data'] is False
     assert summary['metrics']['samples_compared'] == 0
-    # Hand calculation: 50 commands 0.1 s apart; each holds its prediction until the next, the last
-    # for 0 s: 4.9 s of the predicted terminal power of both sides.
+    # Hand calculation: 50 commands 0.1 s apart, a stream; each holds its prediction until the next,
+    # the last until the recording ends (its odometry stops within the 0.5 s hold): 4.9 s plus the
+    # bag's end minus 4.9 s of the predicted terminal power of both sides.
     p = predictor.predict(0.1, 0.1)
-    assert summary['metrics']['energy_predicted_J'] == pytest.approx(sum(p.electrical_W) * 4.9, rel=1e-9)
+    held_s = 4.9 + (summary['duration_s'] - 4.9)
+    assert summary['cmd_vel_mode'] == 'stream' and summary['cmd_hold_s'] == pytest.approx(0.5)
+    assert summary['metrics']['energy_predicted_J'] == pytest.approx(sum(p.electrical_W) * held_s, rel=1e-9)
     assert summary['battery']['energy_predicted_J'] > 0
     assert summary['segments'][0]['radius_m'] == pytest.approx(1.0, rel=1e-9)
 
@@ -200,7 +203,7 @@ def test_cli_validate_json_and_clear_errors(tmp_path):
     )
 
 
-@pytest.mark.skipif(not REAL_BAG.exists(), reason=f'real bag folder absent: {REAL_BAG}')
+@pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
 def test_real_bag_validates_with_trace_analysis_from_odom(tmp_path, predictor):
     with open_bag(REAL_BAG, warn_unknown=False) as bag:
         summary = validate(bag, _options(tmp_path), predictor)

@@ -94,7 +94,7 @@ def test_plausible_commands_pass_unchanged(speed, yaw):
     ('names', 'velocity', 'effort', 'match'),
     [
         (['left_motor'], [1.0], [0.1], 'lacks right_motor'),
-        (['left_motor', 'right_motor'], [1.0], [0.1, 0.1], 'no velocity/effort for right_motor'),
+        (['left_motor', 'right_motor'], [1.0], [0.1, 0.1], 'no velocity for right_motor'),
         (['left_motor', 'right_motor'], [1.0, 2.0], [math.nan, 0.1], 'left_motor effort is NaN'),
         (['left_motor', 'right_motor'], [1.0, -math.inf], [0.1, 0.1], 'right_motor velocity is infinite'),
         (['left_motor', 'right_motor'], [1.0, 5000.0], [0.1, 0.1], 'right_motor velocity = 5000'),

@@ -22,7 +22,7 @@ SOURCE_CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 def test_source_tree_resolves_every_shipped_file():
-    for kind in ('vehicles', 'terrains', 'powertrains', 'batteries'):
+    for kind in ('vehicles', 'terrains', 'powertrains', 'batteries', 'drivetrains'):
         names = {p.stem for p in (SOURCE_CONFIG / kind).glob('*.yaml')}
         assert names and set(resources.shipped(kind)) >= names, kind
     assert resources.params_file('estimator.yaml') == SOURCE_CONFIG / 'estimator.yaml'

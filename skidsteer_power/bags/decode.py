@@ -6,6 +6,7 @@ Decoding goes through the rosbags type store, so any definition the reader knows
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -68,41 +69,71 @@ def decode_joint_states(
     ``ok`` is False where a joint or its velocity/effort is missing (those entries are NaN).
     An absent topic gives empty arrays.
     """
+    t, _, velocity, effort, present = decode_joint_arrays(bag, topic, t0_ns, names)
+    ok = present & np.all(np.isfinite(velocity), axis=1) & np.all(np.isfinite(effort), axis=1)
+    return t, np.where(ok[:, None], velocity, np.nan), np.where(ok[:, None], effort, np.nan), ok
+
+
+def decode_joint_arrays(
+    bag: BagReader, topic: str, t0_ns: int, names: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t [s], position (n, k), velocity (n, k), effort (n, k), present (n,)) for joints ``names``.
+
+    Values are in the message's units (rad, rad/s, N m or A). ``present`` is False where a joint is
+    missing from a message (its row is NaN); a missing or short position/velocity/effort array
+    (ros2_control publishes only the state interfaces a joint has) gives NaN in that column.
+    An absent topic gives empty arrays.
+    """
     k = len(names)
     if topic not in bag.topics:
-        return np.zeros(0), np.zeros((0, k)), np.zeros((0, k)), np.zeros(0, bool)
+        empty = np.zeros((0, k))
+        return np.zeros(0), empty, empty.copy(), empty.copy(), np.zeros(0, bool)
     _check_type(bag, topic, ('sensor_msgs/msg/JointState',))
-    t, velocity, effort, ok = [], [], [], []
-    nan_row = (np.nan,) * k
+    t, present = [], []
+    columns: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
+    nan_row = np.full(k, np.nan)
+    last_names: list[str] | None = None
+    rows: list[int] = []
     for message in bag.messages([topic]):
         msg = bag.deserialize(message)
         t.append(message.timestamp_ns - t0_ns)
-        index = {name: i for i, name in enumerate(msg.name)}
-        try:
-            rows = [index[name] for name in names]
-            velocity.append(tuple(msg.velocity[rows]))
-            effort.append(tuple(msg.effort[rows]))
-            ok.append(True)
-        except (KeyError, IndexError):
-            velocity.append(nan_row)
-            effort.append(nan_row)
-            ok.append(False)
+        if msg.name != last_names:  # joint order rarely changes: look the rows up once
+            index = {name: i for i, name in enumerate(msg.name)}
+            rows = [index.get(name, -1) for name in names]
+            last_names = msg.name
+        ok = min(rows) >= 0
+        present.append(ok)
+        top = max(rows)
+        for field_name, column in columns.items():
+            values = getattr(msg, field_name)
+            column.append(values[rows] if ok and len(values) > top else nan_row)
     return (
         np.array(t, dtype=float) / NS,
-        np.array(velocity, dtype=float).reshape(-1, k),
-        np.array(effort, dtype=float).reshape(-1, k),
-        np.array(ok, dtype=bool),
+        *(np.array(columns[f], dtype=float).reshape(-1, k) for f in ('position', 'velocity', 'effort')),
+        np.array(present, dtype=bool),
     )
 
 
 def decode_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], (n, 2) positions x, y [m]) of an Odometry, PoseStamped or PoseWithCovarianceStamped topic."""
+    t, xy, _ = decode_planar_poses(bag, topic, t0_ns)
+    return t, xy
+
+
+def decode_planar_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t [s], (n, 2) positions x, y [m], (n,) heading [rad]) of a pose topic (see :func:`decode_poses`).
+
+    The heading is the yaw of the orientation quaternion (REP 103: about z, + = left).
+    """
     msgtype = bag.topics[topic].msgtype
     nested = msgtype in ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/PoseWithCovarianceStamped')
-    t, xy = [], []
+    t, rows = [], []
     for message in bag.messages([topic]):
         msg = bag.deserialize(message)
-        position = (msg.pose.pose if nested else msg.pose).position
+        pose = msg.pose.pose if nested else msg.pose
+        q = pose.orientation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         t.append(message.timestamp_ns - t0_ns)
-        xy.append((position.x, position.y))
-    return np.array(t, dtype=float) / NS, np.array(xy, dtype=float).reshape(-1, 2)
+        rows.append((pose.position.x, pose.position.y, yaw))
+    table = np.array(rows, dtype=float).reshape(-1, 3)
+    return np.array(t, dtype=float) / NS, table[:, :2], table[:, 2]

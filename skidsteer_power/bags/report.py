@@ -76,10 +76,26 @@ def _thin(n: int) -> slice:
     return slice(None, None, max(1, n // _MAX_PLOT_POINTS))
 
 
+def held_steps(t: np.ndarray, y: np.ndarray, hold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample-and-hold polyline of samples ``y`` at times ``t`` [s], each held ``hold`` [s] (NaN:
+    until the next sample): a flat step per sample, a gap (NaN) where a hold ends before the next."""
+    if t.size == 0:
+        return t, y
+    following = np.append(t[1:], t[-1])
+    ends = np.where(np.isfinite(hold), np.minimum(t + np.nan_to_num(hold, posinf=0.0), following), following)
+    ends[-1] = t[-1] + (hold[-1] if np.isfinite(hold[-1]) else 0.0)
+    gap = np.append(ends[:-1] < t[1:], True)
+    x = np.column_stack([t, ends, np.where(gap, ends, np.nan)]).ravel()
+    v = np.column_stack([y, y, np.where(gap, np.nan, y)]).ravel()
+    keep = ~(np.isnan(x))
+    return x[keep], v[keep]
+
+
 def write_plots(
     directory: Path, series: RunSeries, inputs: Inputs, segments: list[TraceSegment]
 ) -> list[str]:
-    """PNG plots: torque and power per side (predicted vs measured), trace with fitted circles."""
+    """PNG plots: torque and power per side (predicted vs measured, sample-and-hold steps), and the
+    recorded path with the circles fitted to its constant-command segments."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -87,6 +103,7 @@ def write_plots(
 
     every = _thin(len(series.columns['t_s']))
     c = {name: values[every] for name, values in series.columns.items()}
+    hold = c['hold_s'] * (1 if every.step in (None, 1) else np.nan)  # thinned: hold to the next kept
     written = []
     for quantity, unit, label in (
         ('torque', 'Nm', 'motor torque [N m]'),
@@ -94,15 +111,15 @@ def write_plots(
     ):
         fig, axes = plt.subplots(2, 1, sharex=True, figsize=(9, 5.5))
         for ax, side in zip(axes, ('left', 'right'), strict=True):
-            ax.plot(c['t_s'], c[f'predicted_{quantity}_{side}_{unit}'], label='predicted', lw=1.2)
-            if np.isfinite(c[f'measured_{quantity}_{side}_{unit}']).any():
-                ax.plot(
-                    c['t_s'], c[f'measured_{quantity}_{side}_{unit}'], label='measured', lw=0.8, alpha=0.8
-                )
+            predicted = np.where(c['cmd_fresh'] > 0, c[f'predicted_{quantity}_{side}_{unit}'], np.nan)
+            ax.plot(*held_steps(c['t_s'], predicted, hold), label='predicted', lw=1.2)
+            measured = c[f'measured_{quantity}_{side}_{unit}']
+            if np.isfinite(measured).any():
+                ax.plot(*held_steps(c['t_s'], measured, hold), label='measured', lw=0.8, alpha=0.8)
             ax.set_ylabel(f'{side} {label}')
             ax.grid(alpha=0.3)
             ax.legend(loc='upper right')
-        axes[-1].set_xlabel('time from bag start [s]')
+        axes[-1].set_xlabel('time from bag start [s] (each sample held until the next or its hold ends)')
         name = f'{quantity}.png'
         fig.tight_layout()
         fig.savefig(directory / name, dpi=90)
@@ -114,20 +131,29 @@ def write_plots(
 
 
 def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
+    """The recorded path, scaled to itself, with the fitted circles clipped to the path's window."""
     fig, ax = plt.subplots(figsize=(6, 6))
     every = _thin(len(inputs.pose_t))
     x, y = inputs.pose_xy[every, 0], inputs.pose_xy[every, 1]
-    ax.plot(x, y, '.', ms=2, color='0.5', label=inputs.pose_topic)
-    angles = np.linspace(0, 2 * np.pi, 200)
-    for s in segments:
+    ax.plot(x, y, '-', lw=0.8, color='0.5', label=f'path ({inputs.pose_topic})')
+    ax.plot(x[:1], y[:1], 'o', color='0.3', ms=4, label='start')
+    angles = np.linspace(0, 2 * np.pi, 721)
+    for k, s in enumerate(segments):
         if math.isfinite(s.radius_m):
-            ax.plot(
-                s.center_x_m + s.radius_m * np.cos(angles), s.center_y_m + s.radius_m * np.sin(angles), lw=0.7
-            )
-    ax.set_aspect('equal', adjustable='datalim')
+            label = 'fitted circles (eqs. 7.8-7.10)' if k == 0 else None
+            circle_x = s.center_x_m + s.radius_m * np.cos(angles)
+            circle_y = s.center_y_m + s.radius_m * np.sin(angles)
+            ax.plot(circle_x, circle_y, lw=0.7, alpha=0.8, label=label)
+    # The window is the path's (a circle fitted to a nearly straight run can be hundreds of m wide).
+    cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
+    half = max(x.max() - x.min(), y.max() - y.min(), 0.1) / 2 * 1.15
+    ax.set_xlim(cx - half, cx + half)
+    ax.set_ylim(cy - half, cy + half)
+    ax.set_aspect('equal', adjustable='box')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
-    ax.set_title('trace and fitted circles (eqs. 7.8-7.10)')
+    ax.set_title('recorded path and fitted circles')
+    ax.legend(loc='best', fontsize='small')
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(directory / 'trace.png', dpi=90)
@@ -145,9 +171,15 @@ def _fmt(value: Any, digits: int = 4) -> str:
     return str(value)
 
 
+def _energy_words(joules: float) -> str:
+    return f'{_fmt(joules)} J ({_fmt(joules / 3600.0, 3)} Wh)'
+
+
 def markdown(summary: dict[str, Any], plots: list[str]) -> str:
-    """The report page: what was run, error metrics, battery, trace segments, plots."""
+    """The report page: what was run, how commands were read, the comparison (only where motor data
+    exist), the battery, the trace (only where poses exist), plots."""
     m = summary['metrics']
+    joints = summary.get('joints') or {}
     lines = [
         f'# Validation of `{Path(summary["bag"]).name}`',
         '',
@@ -155,49 +187,92 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
         f'- vehicle `{summary["vehicle"]}`, terrain `{summary["terrain"]}`',
         f'- predictor: {summary["predictor"]}',
         f'- messages: {summary["messages"]}; rejected: {summary["rejected"]}',
-        f'- motor data: {"yes" if summary["has_motor_data"] else "no (predictions only)"}; '
-        f'poses from: {summary["pose_topic"] or "none"}',
     ]
+    if summary['has_motor_data']:
+        lines.append(
+            f'- motor data: joints {", ".join(joints.get("left", []))} (left) and '
+            f'{", ".join(joints.get("right", []))} (right), effort as {joints.get("effort_is")} at the '
+            f'{joints.get("at")}'
+        )
+    else:
+        lines.append(
+            f'- motor data: none ({summary.get("motor_data_note") or "no joint_states"}): predictions only'
+        )
+    lines.append(f'- poses from: {summary["pose_topic"] or "none"}')
     if summary['undecodable_topics']:
         lines.append(f'- topics skipped (unknown type): {", ".join(summary["undecodable_topics"])}')
-    lines += ['', '## Predicted vs measured (motor side, fresh commands only)', '']
-    lines += ['| quantity | side | MAE | RMSE |', '| --- | --- | --- | --- |']
-    for quantity, unit in (('torque', 'Nm'), ('power', 'W')):
-        for side in ('left', 'right'):
-            e = m[f'{quantity}_{side}']
-            lines.append(
-                f'| {quantity} [{unit}] | {side} | {_fmt(e[f"mae_{unit}"])} | {_fmt(e[f"rmse_{unit}"])} |'
-            )
+    lines += ['', '## Commands', '', summary.get('cmd_timing', '')]
+    clamped_t, clamped_e = (
+        summary.get('clamped_time_fraction', 0.0),
+        summary.get('clamped_energy_fraction', 0.0),
+    )
+    if clamped_t > 0 or clamped_e > 0:
+        lines.append(
+            f'**{100 * clamped_t:.1f} % of the time and {100 * clamped_e:.1f} % of the predicted energy** '
+            'come from commands outside what the power map covers (clamped to its edge, or solved at '
+            'its tightest turn): treat those predictions with care.'
+        )
+    else:
+        lines.append('Every command lay inside the power map.')
+    if summary['has_motor_data']:
+        lines += ['', '## Predicted vs measured (at the motor, while a command is in force)', '']
+        lines += ['| quantity | side | MAE | RMSE |', '| --- | --- | --- | --- |']
+        for quantity, unit in (('torque', 'Nm'), ('power', 'W')):
+            for side in ('left', 'right'):
+                e = m[f'{quantity}_{side}']
+                lines.append(
+                    f'| {quantity} [{unit}] | {side} | {_fmt(e[f"mae_{unit}"])} | {_fmt(e[f"rmse_{unit}"])} |'
+                )
+        lines += [
+            '',
+            f'{m["samples_compared"]} samples compared. Energy at the motor terminals, both sides: '
+            f'predicted {_energy_words(m["energy_predicted_J"])}, '
+            f'measured {_energy_words(m["energy_measured_J"])}; '
+            f'the prediction is off by {_fmt(m["energy_error_pct"], 3)} %.',
+        ]
+    else:
+        lines += [
+            '',
+            '## Predicted energy',
+            '',
+            f'At the motor terminals, both sides, while commands were in force: '
+            f'{_energy_words(m["energy_predicted_J"])}.',
+        ]
+    battery = summary['battery']
+    parts = []
+    if battery['energy_measured_J']:
+        parts.append(f'{_energy_words(battery["energy_measured_J"])} from measured power')
+    if battery['energy_predicted_J']:
+        where = ' where no measurement was fresh' if battery['energy_measured_J'] else ''
+        parts.append(f'{_energy_words(battery["energy_predicted_J"])} from predicted power{where}')
+    drawn = ' and '.join(parts) if parts else 'nothing'
     lines += [
         '',
-        f'Samples compared: {m["samples_compared"]}. Energy (terminal power, both sides): predicted '
-        f'{_fmt(m["energy_predicted_J"])} J, measured {_fmt(m["energy_measured_J"])} J, '
-        f'error {_fmt(m["energy_error_pct"], 3)} %.',
+        '## Battery',
         '',
-        '## Battery (estimator run over the bag)',
-        '',
-        f'Energy drawn: measured {_fmt(summary["battery"]["energy_measured_J"])} J, predicted '
-        f'{_fmt(summary["battery"]["energy_predicted_J"])} J; remaining '
-        f'{_fmt(summary["battery"]["remaining_wh"])} Wh (state of charge {_fmt(summary["battery"]["soc"])}).',
-        '',
-        '## Trace analysis (constant-command segments; circle fit of eqs. 7.8-7.10)',
-        '',
+        f'The battery model (through the amplifiers, so a little more than at the motors) drew {drawn}; '
+        f'{_fmt(battery["remaining_wh"])} Wh remain (state of charge {_fmt(battery["soc"])}).',
     ]
-    if summary['segments']:
-        lines += [
-            '| start [s] | end [s] | V cmd [m/s] | yaw cmd [rad/s] | R cmd [m] | points | R fit [m] | '
-            'V mean [m/s] | RMS residual [m] | note |',
-            '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |',
-        ]
-        for s in summary['segments']:
-            lines.append(
-                f'| {_fmt(s["t_start_s"])} | {_fmt(s["t_end_s"])} | {_fmt(s["speed_cmd_m_s"])} | '
-                f'{_fmt(s["yaw_rate_cmd_rad_s"])} | {_fmt(s["radius_cmd_m"])} | {s["points"]} | '
-                f'{_fmt(s["radius_m"])} | {_fmt(s["speed_m_s"])} | {_fmt(s["rms_residual_m"])} | '
-                f'{s["note"]} |'
-            )
-    else:
-        lines.append('No constant-command segment long enough, or no poses.')
+    if summary['pose_topic']:
+        lines += ['', '## Trace (constant-command segments; circle fit of eqs. 7.8-7.10)', '']
+        if summary['segments']:
+            lines += [
+                '| start [s] | end [s] | V cmd [m/s] | yaw cmd [rad/s] | R cmd [m] | poses | R fit [m] | '
+                'V mean [m/s] | RMS residual [m] | note |',
+                '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |',
+            ]
+            for s in summary['segments']:
+                lines.append(
+                    f'| {_fmt(s["t_start_s"])} | {_fmt(s["t_end_s"])} | {_fmt(s["speed_cmd_m_s"])} | '
+                    f'{_fmt(s["yaw_rate_cmd_rad_s"])} | {_fmt(s["radius_cmd_m"])} | {s["points"]} | '
+                    f'{_fmt(s["radius_m"])} | {_fmt(s["speed_m_s"])} | {_fmt(s["rms_residual_m"])} | '
+                    f'{s["note"]} |'
+                )
+        else:
+            lines.append('No constant-command segment was long enough to analyse.')
+        few = summary.get('segments_with_too_few_poses', 0)
+        if few:
+            lines += ['', f'{few} more segment(s) had fewer than 2 poses after settling and are left out.']
     live = summary.get('live_comparison')
     if live:
         lines += [
@@ -208,7 +283,8 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
             f'offline prediction within 1e-6 N m (largest difference '
             f'{_fmt(live["max_abs_torque_diff_Nm"])} N m).',
         ]
-    lines += ['', '## Plots', ''] + [f'![{p}]({p})' for p in plots]
+    if plots:
+        lines += ['', '## Plots', ''] + [f'![{p}]({p})' for p in plots]
     lines += ['', 'Files: `timeseries.csv` (aligned samples), `segments.csv`, `summary.json`.', '']
     return '\n'.join(lines)
 
@@ -232,6 +308,14 @@ def one_screen(summary: dict[str, Any]) -> str:
         )
     else:
         lines.append(f'no motor data: predicted energy {_fmt(m["energy_predicted_J"])} J')
+    if 'cmd_vel_mode' in summary:
+        hold = summary['cmd_hold_s']
+        held = 'until the next command' if math.isinf(hold) else f'at most {_fmt(hold, 3)} s'
+        lines.append(f'cmd_vel published as {summary["cmd_vel_mode"]}, each held {held}')
+        lines.append(
+            f'outside the power map: {100 * summary["clamped_time_fraction"]:.1f} % of the time, '
+            f'{100 * summary["clamped_energy_fraction"]:.1f} % of the predicted energy'
+        )
     fitted = [s for s in summary['segments'] if math.isfinite(s['radius_m'])]
     lines.append(
         f'trace: {len(summary["segments"])} constant-command segments, {len(fitted)} with a fitted circle'

@@ -1,12 +1,17 @@
 """Offline validation: the estimator run over a bag, compared with what the motors measured.
 
 No ROS graph is needed. The bag's ``cmd_vel`` (Twist or TwistStamped: V [m/s], yaw rate [rad/s]) and
-``joint_states`` (``left_motor``/``right_motor``: shaft speed [rad/s], effort = Kt*I [N m]) are fed in
-receive-time order to :class:`skidsteer_power.estimator.EstimatorCore`, exactly as the live
-``power_estimator`` node feeds it, so each joint_states sample is aligned with the prediction in force
-when it arrived (zero-order hold of the last command). Compared per side at the motor: torque Kt*I
-[N m] and terminal (electrical) power [W]; metrics over samples whose command is fresh: MAE, RMSE and
-the error of the energy over the run [%].
+``joint_states`` (the vehicle's joints, mapped to the sides by its ``drivetrain:`` section, see
+:class:`skidsteer_power.estimator.inputs.JointMap`; the test robot's ``left_motor``/``right_motor``:
+shaft speed [rad/s], effort = Kt*I [N m]) are fed in receive-time order to
+:class:`skidsteer_power.estimator.EstimatorCore`, as the live ``power_estimator`` node feeds it, so
+each joint_states sample is aligned with the prediction in force when it arrived. How long a command
+stays in force depends on how it was published (a stream or only on change) and, for on-change
+commands, on whether odometry shows the robot still moving (:mod:`skidsteer_power.bags.cmd_timing`).
+Compared per side at the motor (motor-equivalent for wheel joints): torque [N m] and terminal
+(electrical) power [W]; metrics over samples whose command is in force: MAE, RMSE and the error of
+the energy over the run [%]. The share of time and energy whose prediction came from outside the
+power map (clamped or limited) is reported too.
 
 Where the bag has odometry or poses, each constant-command segment gets a trace analysis: the
 turning radius by the SVD circle fit of eqs. 7.8-7.10 and the mean forward speed
@@ -27,7 +32,13 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.analysis.trace import fit_circle, mean_speed
-from skidsteer_power.bags.decode import decode_joint_states, decode_poses, decode_twists
+from skidsteer_power.bags.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
+from skidsteer_power.bags.decode import (
+    decode_joint_arrays,
+    decode_joint_states,
+    decode_planar_poses,
+    decode_twists,
+)
 from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.errors import ConfigError, InputError
 
@@ -51,10 +62,13 @@ class ValidateOptions:
     map_cache_dir : where the power map is cached (None: the estimator's default)
     battery_window_s : battery stepped with the mean power of windows this long [s] (0: per input)
     settle_s : start of each constant-command segment left out of the trace analysis [s]
-    min_segment_s : shortest segment analysed [s]
-    segment_gap_s : a pause in commands longer than this ends a segment [s] (teleop keyboards
-        repeat a held key only after ~0.5 s, so this is longer than the estimator's staleness)
+    min_segment_s : shortest segment analysed [s] (just over settle_s: a short leg of a square counts)
+    segment_gap_s : unused (kept for callers); segments end where a command's hold ends
     plots : write PNG plots
+    cmd_hold_s : how long a command stays in force [s] (None: inferred, see bags/cmd_timing.py; inf:
+        until the next command)
+    left_joints, right_joints, effort_is, joints_at : override the vehicle file's joint_states
+        mapping ('' = the file's; joint lists comma-separated)
     kinematics : what the estimator predicts from: 'cmd' (the command, as the live node), 'odom'
         (the twist of the Odometry ``odom_topic``) or 'ground_truth' (``/ground_truth/odom``)
     """
@@ -68,9 +82,14 @@ class ValidateOptions:
     map_cache_dir: str | Path | None = None
     battery_window_s: float = 0.2
     settle_s: float = 0.5
-    min_segment_s: float = 1.0
+    min_segment_s: float = 0.6
     segment_gap_s: float = 1.0
     plots: bool = True
+    cmd_hold_s: float | None = None
+    left_joints: str = ''
+    right_joints: str = ''
+    effort_is: str = ''
+    joints_at: str = ''
     kinematics: str = 'cmd'
 
 
@@ -81,14 +100,20 @@ class Inputs:
     cmd_t: np.ndarray
     cmd: np.ndarray  # (n, 2): V [m/s], yaw rate [rad/s]
     js_t: np.ndarray
-    js_omega: np.ndarray  # (n, 2) motor shaft speed left, right [rad/s]
-    js_torque: np.ndarray  # (n, 2) Kt*I left, right [N m]
-    js_names_ok: np.ndarray  # (n,) bool: both motors present
+    js_velocity: np.ndarray  # (n, k) velocity of the mapped joints [rad/s]
+    js_effort: np.ndarray  # (n, k) effort of the mapped joints [N m or A]
+    js_names_ok: np.ndarray  # (n,) bool: every mapped joint present
     pose_t: np.ndarray
     pose_xy: np.ndarray  # (n, 2) [m]
     pose_topic: str = ''
     live_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     live_torque: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    js_position: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (n, k) [rad]
+    js_names: tuple[str, ...] = ('left_motor', 'right_motor')
+    pose_yaw: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) heading [rad]
+    cmd_end: np.ndarray | None = None  # (n,) time each command stops being in force [s]
+    end_s: float = 0.0  # last message of the bag [s]
+    joint_note: str = ''  # why joint_states give no measured power, if they do not
 
 
 @dataclass
@@ -121,7 +146,12 @@ SERIES_COLUMNS = (
     'measured_battery_W',
     'traction_margin',
     'soc',
+    'hold_s',
+    'clamped',
+    'limited',
 )
+# hold_s: how long the row's values are in force [s] (the weight of the row in energy sums);
+# clamped / limited: 1 where the prediction came from outside the power map (see MapQuery)
 
 
 def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
@@ -130,22 +160,58 @@ def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
     return next((t for t, info in bag.topics.items() if info.msgtype in types), '')
 
 
-def read_inputs(bag: BagReader, options: ValidateOptions) -> Inputs:
+def joint_map_of(options: ValidateOptions) -> Any:
+    """The joint_states mapping: the vehicle file's ``drivetrain:`` with the options' overrides."""
+    from skidsteer_power.estimator import factory
+
+    return factory.joint_map_for(
+        factory.load_vehicle_config(options.vehicle),
+        left=options.left_joints,
+        right=options.right_joints,
+        effort_is=options.effort_is,
+        location=options.joints_at,
+    )
+
+
+def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: Any = None) -> Inputs:
     """Decode commands, joint states, poses and the live node's predictions from ``bag``."""
     t0 = bag.start_ns
     cmd_topic = options.cmd_vel_topic if options.cmd_vel_topic in bag.topics else ''
     if not cmd_topic:
         raise InputError(f'{bag.path}: no {options.cmd_vel_topic} topic: nothing to predict from')
     cmd_t, cmd = decode_twists(bag, cmd_topic, t0)
-    js_t, omega, torque, ok = decode_joint_states(
-        bag, options.joint_states_topic, t0, ('left_motor', 'right_motor')
-    )
+    joint_map = joint_map or joint_map_of(options)
+    names = joint_map.joints
+    js_t, position, velocity, effort, ok = decode_joint_arrays(bag, options.joint_states_topic, t0, names)
+    note = ''
+    if js_t.size and not joint_map.has_power:
+        note = f'the drivetrain mapping gives {options.joint_states_topic} no effort or no speed'
+    elif js_t.size and not ok.any():
+        note = f'{options.joint_states_topic} never holds all of {", ".join(names)}: no measured power'
+    if note:
+        js_t, ok = np.zeros(0), np.zeros(0, bool)
+        position, velocity, effort = (np.zeros((0, len(names))) for _ in range(3))
     pose_topic = _topic_of_type(bag, options.odom_topic, POSE_TYPES)
-    pose_t, pose_xy = decode_poses(bag, pose_topic, t0) if pose_topic else (np.zeros(0), np.zeros((0, 2)))
+    if pose_topic:
+        pose_t, pose_xy, pose_yaw = decode_planar_poses(bag, pose_topic, t0)
+    else:
+        pose_t, pose_xy, pose_yaw = np.zeros(0), np.zeros((0, 2)), np.zeros(0)
     live_t, _, live_torque, _ = decode_joint_states(
         bag, LIVE_PREDICTED_TOPIC, t0, ('left_motor', 'right_motor')
     )
-    return Inputs(cmd_t, cmd, js_t, omega, torque, ok, pose_t, pose_xy, pose_topic, live_t, live_torque)
+    return Inputs(
+        cmd_t, cmd, js_t, velocity, effort, ok, pose_t, pose_xy, pose_topic, live_t, live_torque,
+        js_position=position, js_names=names, pose_yaw=pose_yaw, end_s=bag.duration_s, joint_note=note,
+    )  # fmt: skip
+
+
+def apply_command_timing(inputs: Inputs, hold_s: float | None, floor_s: float) -> CommandTiming:
+    """Classify the commands' publishing, set ``inputs.cmd_end`` (when each stops being in force)."""
+    timing = command_timing(inputs.cmd_t, inputs.cmd, hold_s, floor_s)
+    rest = at_rest(inputs.pose_t, inputs.pose_xy, inputs.pose_yaw) if inputs.pose_t.size > 1 else None
+    end = max(inputs.end_s, float(inputs.cmd_t.max()) if inputs.cmd_t.size else 0.0)
+    inputs.cmd_end = hold_ends(inputs.cmd_t, timing, end, rest)
+    return timing
 
 
 class WindowedBattery:
@@ -188,7 +254,7 @@ class WindowedBattery:
 
 def build_core(options: ValidateOptions, predictor: Any = None, battery_window_s: float = 0.2) -> Any:
     """An :class:`EstimatorCore` for the vehicle and terrain; ``predictor`` None builds the map one."""
-    from skidsteer_power.estimator import EstimatorCore, factory
+    from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, factory
 
     vehicle = factory.load_vehicle_config(options.vehicle)
     if predictor is None:
@@ -201,7 +267,8 @@ def build_core(options: ValidateOptions, predictor: Any = None, battery_window_s
     battery: Any = factory.battery_for(vehicle)
     if battery_window_s > 0:
         battery = WindowedBattery(battery, battery_window_s)
-    return EstimatorCore(predictor, battery, factory.powertrain_for(vehicle))
+    settings = EstimatorSettings(joint_map=joint_map_of(options))
+    return EstimatorCore(predictor, battery, factory.powertrain_for(vehicle), settings)
 
 
 def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
@@ -214,6 +281,7 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     from skidsteer_power.estimator.core import RejectedInput
 
     motor_data = inputs.js_t.size > 0
+    ends = inputs.cmd_end
     times = np.concatenate([inputs.cmd_t, inputs.js_t])
     kinds = np.concatenate([np.zeros(inputs.cmd_t.size, np.int8), np.ones(inputs.js_t.size, np.int8)])
     index = np.concatenate([np.arange(inputs.cmd_t.size), np.arange(inputs.js_t.size)])
@@ -223,30 +291,50 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     soc_of = (
         (lambda b: b.soc_at_last_flush) if isinstance(core.battery, WindowedBattery) else (lambda b: b.soc)
     )
-    names = ('left_motor', 'right_motor')
-    cmd_timeout = core.settings.cmd_timeout_s
+    names = inputs.js_names
+    # Python lists: per-row access to floats is several times faster than to numpy rows
+    has_positions = inputs.js_position.shape[0] == inputs.js_t.size
+    positions = inputs.js_position.tolist() if has_positions else None
+    velocities, efforts, names_ok = inputs.js_velocity.tolist(), inputs.js_effort.tolist(), inputs.js_names_ok
+    commands = inputs.cmd.tolist()
+    ends_list = None if ends is None else ends.tolist()
+    times_list, kinds_list, index_list = times.tolist(), kinds.tolist(), index.tolist()
+    row_hold: list[float] = []
     for k in order.tolist():
-        now = float(times[k])
-        i = int(index[k])
+        now = times_list[k]
+        i = index_list[k]
+        kind = kinds_list[k]
         try:
-            if kinds[k] == 0:
-                core.on_command(float(inputs.cmd[i, 0]), float(inputs.cmd[i, 1]), now)
+            if kind == 0:
+                hold = None if ends_list is None else ends_list[i] - now
+                core.on_command(commands[i][0], commands[i][1], now, hold)
                 if motor_data:
                     continue
                 comparison = None
             else:
-                if not inputs.js_names_ok[i]:
+                if not names_ok[i]:
                     rejected['joint_states'] += 1
                     continue
-                comparison = core.on_joint_state(names, inputs.js_omega[i], inputs.js_torque[i], now)
+                position = positions[i] if positions is not None else ()
+                comparison = core.on_joint_state(names, velocities[i], efforts[i], now, position)
+                if comparison is None:  # speed from positions: waits for a second sample
+                    continue
         except RejectedInput:
-            rejected['cmd_vel' if kinds[k] == 0 else 'joint_states'] += 1
+            rejected['cmd_vel' if kind == 0 else 'joint_states'] += 1
             continue
-        fresh = core.prediction is not None and core.cmd_fresh.age_s(now) <= cmd_timeout
+        fresh = core.prediction is not None and core.cmd_fresh.is_fresh(now)
+        row_hold.append(core.cmd_fresh.timeout_s if kind == 0 else math.nan)
         rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)))
-    core.tick(float(times.max()) if times.size else 0.0)
+    core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(SERIES_COLUMNS)}
+    t = columns['t_s']
+    if motor_data:  # a measurement holds until the next one, at most the joint timeout
+        columns['hold_s'] = np.minimum(
+            np.diff(t, append=t[-1] if t.size else 0.0), core.settings.joint_timeout_s
+        )
+    else:  # a command row holds as long as the command is in force
+        columns['hold_s'] = np.array(row_hold, dtype=float)
     return RunSeries(
         columns, rejected, dict(core.energy.energy_J), core.battery.remaining_wh, core.battery.soc
     )
@@ -257,30 +345,27 @@ def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[
     nan = math.nan
     if p is None:
         pred = (nan,) * 10
+        flags = (nan, nan)
     else:
         pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *p.electrical_W, *p.terrain_torque_Nm,
                 p.bus_total_W, p.traction_margin)  # fmt: skip
+        flags = (float(p.clamped), float(getattr(p, 'limited', False)))
     if comparison is None:
         meas = (nan,) * 5
     else:
         m = comparison.measured
         meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W)
     return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
-            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc)  # fmt: skip
+            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags)  # fmt: skip
 
 
-def _hold_durations(t: np.ndarray, cap_s: float) -> np.ndarray:
-    """Zero-order-hold weight of each sample: time to the next one, at most ``cap_s`` [s]."""
-    if t.size == 0:
-        return t
-    return np.minimum(np.diff(t, append=t[-1]), cap_s)
-
-
-def error_metrics(series: RunSeries, hold_cap_s: float) -> dict[str, Any]:
+def error_metrics(series: RunSeries) -> dict[str, Any]:
     """MAE and RMSE per side of torque [N m] and power [W]; energy over the run and its error [%].
 
-    Only rows with a fresh command and a measurement count. Energy is the zero-order-hold integral
-    of both sides' terminal power over those rows (each held at most ``hold_cap_s`` [s]).
+    Only rows with a command in force and a measurement count. Energy is the sample-and-hold
+    integral of both sides' terminal power over those rows, each weighted by its ``hold_s`` (a
+    measurement: until the next one, at most the joint timeout; a command without measurements:
+    as long as it is in force).
     """
     c = series.columns
     valid = (c['cmd_fresh'] > 0) & np.isfinite(c['measured_torque_left_Nm'])
@@ -295,7 +380,7 @@ def error_metrics(series: RunSeries, hold_cap_s: float) -> dict[str, Any]:
                 f'mae_{unit}': float(np.mean(np.abs(error))) if error.size else math.nan,
                 f'rmse_{unit}': float(np.sqrt(np.mean(error**2))) if error.size else math.nan,
             }
-    weights = _hold_durations(c['t_s'], hold_cap_s)
+    weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
     fresh = c['cmd_fresh'] > 0
     predicted = c['predicted_power_left_W'] + c['predicted_power_right_W']
     measured = c['measured_power_left_W'] + c['measured_power_right_W']
@@ -309,6 +394,21 @@ def error_metrics(series: RunSeries, hold_cap_s: float) -> dict[str, Any]:
     result['energy_measured_J'] = e_meas
     result['energy_error_pct'] = 100.0 * (e_pred - e_meas) / abs(e_meas) if abs(e_meas) > 1e-9 else math.nan
     return result
+
+
+def map_coverage(series: RunSeries) -> dict[str, float]:
+    """Share of the time and of the predicted energy (|terminal power| x hold) with a command in
+    force whose prediction came from outside the power map (clamped or limited) [-]."""
+    c = series.columns
+    fresh = c['cmd_fresh'] > 0
+    outside = ((c['clamped'] > 0) | (c['limited'] > 0)) & fresh
+    weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
+    energy = np.abs(np.nan_to_num(c['predicted_power_left_W'] + c['predicted_power_right_W'])) * weights
+    time_total, energy_total = float(weights[fresh].sum()), float(energy[fresh].sum())
+    return {
+        'clamped_time_fraction': float(weights[outside].sum()) / time_total if time_total > 0 else 0.0,
+        'clamped_energy_fraction': float(energy[outside].sum()) / energy_total if energy_total > 0 else 0.0,
+    }
 
 
 @dataclass(frozen=True)
@@ -330,21 +430,28 @@ class TraceSegment:
 
 
 def command_segments(
-    cmd_t: np.ndarray, cmd: np.ndarray, timeout_s: float, min_duration_s: float
+    cmd_t: np.ndarray,
+    cmd: np.ndarray,
+    timeout_s: float,
+    min_duration_s: float,
+    hold_end: np.ndarray | None = None,
 ) -> list[tuple[float, float, float, float]]:
-    """(start, end, V, yaw rate) of runs of one repeated command, split where it goes stale [s].
+    """(start, end, V, yaw rate) of runs of one repeated command, split where it stops being in force.
 
-    A run ends at its last command plus the timeout at most (the robot stops when commands stop).
-    Runs shorter than ``min_duration_s`` and standstill runs (V = yaw rate = 0) are dropped.
+    ``hold_end`` [s]: when each command stops being in force (:func:`bags.cmd_timing.hold_ends`);
+    None: at the next command, at most ``timeout_s`` later. A run ends where its last command's hold
+    ends. Runs shorter than ``min_duration_s`` and standstill runs (V = yaw rate = 0) are dropped.
     """
     if cmd_t.size == 0:
         return []
-    change = np.any(np.diff(cmd, axis=0) != 0, axis=1) | (np.diff(cmd_t) > timeout_s)
+    if hold_end is None:
+        hold_end = np.minimum(np.append(cmd_t[1:], math.inf), cmd_t + timeout_s)
+    change = np.any(np.diff(cmd, axis=0) != 0, axis=1) | (hold_end[:-1] < cmd_t[1:])
     starts = np.concatenate([[0], np.flatnonzero(change) + 1])
     ends = np.concatenate([starts[1:], [cmd_t.size]])
     segments = []
     for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-        end = min(cmd_t[b] if b < cmd_t.size else math.inf, cmd_t[b - 1] + timeout_s)
+        end = float(hold_end[b - 1])
         speed, yaw = float(cmd[a, 0]), float(cmd[a, 1])
         if end - cmd_t[a] >= min_duration_s and (speed != 0 or yaw != 0):
             segments.append((float(cmd_t[a]), float(end), speed, yaw))
@@ -354,8 +461,12 @@ def command_segments(
 def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegment]:
     """Trace analysis (eqs. 7.8-7.10) of every constant-command segment (a note says why where the
     poses are too few or collinear)."""
-    result = []
-    runs = command_segments(inputs.cmd_t, inputs.cmd, options.segment_gap_s, options.min_segment_s)
+    result: list[TraceSegment] = []
+    if inputs.pose_t.size < 3:
+        return result
+    runs = command_segments(
+        inputs.cmd_t, inputs.cmd, options.segment_gap_s, options.min_segment_s, inputs.cmd_end
+    )
     for start, end, speed, yaw in runs:
         radius_cmd = speed / yaw if yaw != 0 else math.inf
         inside = (inputs.pose_t >= start + options.settle_s) & (inputs.pose_t <= end)
@@ -368,6 +479,10 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegmen
             fit = fit_circle(xy[:, 0], xy[:, 1])
         except InputError as err:
             note = str(err)
+        if t.size == 2:
+            note = 'only 2 poses: mean speed, no circle'
+        elif t.size == 3 and fit is not None:
+            note = 'only 3 poses: the circle passes through them exactly'
         result.append(
             TraceSegment(
                 t_start_s=start,
@@ -471,17 +586,21 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     began = time.perf_counter()
     inputs = read_inputs(bag, options)
     core = build_core(options, predictor, options.battery_window_s)
+    timing = apply_command_timing(inputs, options.cmd_hold_s, core.settings.cmd_timeout_s)
     motion = motion_inputs(bag, options, inputs)
+    if motion is not None:  # a measured twist is a stream: held for the estimator's staleness
+        motion = (motion[0], replace(motion[1], cmd_end=None))
     if options.kinematics != 'cmd' and motion is None:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
     series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
-    metrics = error_metrics(series, core.settings.joint_timeout_s)
+    metrics = error_metrics(series)
     motion_summary = None
     if motion is not None and options.kinematics == 'cmd':  # ch. 7.3: also predict from the motion
         other = build_core(options, core.predictor, options.battery_window_s)
-        motion_metrics = error_metrics(run_estimator(other, motion[1]), other.settings.joint_timeout_s)
+        motion_metrics = error_metrics(run_estimator(other, motion[1]))
         motion_summary = {'kinematics': motion[0], 'metrics': motion_metrics}
     segments = trace_segments(inputs, options)
+    fitted = [s for s in segments if s.points >= 2]  # fewer: no speed, no circle: left out
     live = live_comparison(inputs, core.predictor)
     elapsed = time.perf_counter() - began
     summary = {
@@ -492,7 +611,20 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
         'terrain': options.terrain,
         'predictor': core.predictor.description,
         'has_motor_data': bool(inputs.js_t.size),
+        'motor_data_note': inputs.joint_note or None,
+        'joints': {
+            'left': list(core.settings.joint_map.left),
+            'right': list(core.settings.joint_map.right),
+            'effort_is': core.settings.joint_map.effort_is,
+            'at': core.settings.joint_map.location,
+        },
         'pose_topic': inputs.pose_topic or None,
+        'cmd_vel_mode': timing.mode,
+        'cmd_hold_s': timing.hold_s,
+        'cmd_hold_inferred': timing.inferred,
+        'cmd_period_s': timing.period_s,
+        'cmd_timing': timing.describe(),
+        **map_coverage(series),
         'messages': {
             'cmd_vel': int(inputs.cmd_t.size),
             'joint_states': int(inputs.js_t.size),
@@ -509,12 +641,11 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
             'remaining_wh': series.remaining_wh,
             'soc': series.soc,
         },
-        'segments': [s.__dict__ for s in segments],
+        'segments': [s.__dict__ for s in fitted],
+        'segments_with_too_few_poses': len(segments) - len(fitted),
         'live_comparison': live,
         'processing_s': elapsed,
         'real_time_factor': bag.duration_s / elapsed if elapsed > 0 else math.inf,
     }
-    summary['report'] = write_report(
-        Path(options.report_dir), summary, series, inputs, segments, options.plots
-    )
+    summary['report'] = write_report(Path(options.report_dir), summary, series, inputs, fitted, options.plots)
     return summary

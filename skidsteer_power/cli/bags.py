@@ -7,7 +7,14 @@ import logging
 import sys
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float, positive_float, print_json
+from skidsteer_power.cli.common import (
+    _number,
+    add_json_flag,
+    emit,
+    nonnegative_float,
+    positive_float,
+    print_json,
+)
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
@@ -123,6 +130,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         odom_topic=args.odom,
         map_cache_dir=args.map_cache,
         plots=not args.no_plots,
+        cmd_hold_s=args.cmd_hold,
+        left_joints=args.left_joints,
+        right_joints=args.right_joints,
+        effort_is=args.effort,
+        joints_at=args.joints_at,
         kinematics=args.kinematics,
     )
     with _open(args) as bag:
@@ -133,7 +145,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     else:
         print(one_screen(summary))
         motion = summary.get('motion_prediction')
-        if motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
+        if motion and not summary['has_motor_data']:  # nothing to compare with: say what it predicts
+            energy = motion['metrics']['energy_predicted_J']
+            print(f'predicted from the measured motion ({motion["kinematics"]}): energy {energy:.4g} J')
+        elif motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
             m = motion['metrics']
             print(
                 f'predicted from the measured motion ({motion["kinematics"]}): energy error '
@@ -141,6 +156,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
                 f'{m["torque_right"]["mae_Nm"]:.3f} N m'
             )
     return 0
+
+
+def _hold_float(text: str) -> float:
+    """argparse type: a command hold > 0 s, or inf."""
+    value = _number(text, allow_inf=True)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f'must be > 0 (or inf): {text!r}')
+    return value
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -224,6 +247,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default='cmd',
         help='predict from the command (default), the --odom twist, or /ground_truth/odom; with cmd, '
         'a bag with odometry also gets the prediction from the measured motion',
+    )
+    val.add_argument(
+        '--cmd-hold',
+        type=_hold_float,
+        default=None,
+        metavar='S',
+        help='hold each command at most S s ("inf": until the next one); default: inferred from the '
+        'bag (stream: its longest ordinary pause; on-change: until the next command or odometry rest)',
+    )
+    val.add_argument('--left-joints', default='', metavar='A,B', help='left joints (default: vehicle file)')
+    val.add_argument('--right-joints', default='', metavar='C,D', help='right joints (default: vehicle file)')
+    val.add_argument(
+        '--effort',
+        default='',
+        choices=('torque', 'current'),
+        help='joint_states effort is torque [N m] or current [A] (default: vehicle file)',
+    )
+    val.add_argument(
+        '--joints-at',
+        default='',
+        choices=('motor', 'wheel'),
+        help='joint values are at the motor shaft or the wheel (default: vehicle file)',
     )
     _add_bag_reading(val)
     add_json_flag(val)

@@ -27,11 +27,13 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.adaptation import AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.energy import EnergyTracker
 from skidsteer_power.estimator.inputs import (
+    TEST_ROBOT_JOINTS,
     Freshness,
     InputLimits,
+    JointMap,
+    JointReader,
     RejectCounter,
     check_command,
-    check_joint_state,
 )
 from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
 from skidsteer_power.estimator.prediction import Prediction, Predictor
@@ -58,6 +60,12 @@ def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
     }
 
 
+def outside_map(prediction: Prediction) -> bool:
+    """True if the map did not cover the command: clamped to its edge (or next to a non-converged
+    cell), or solved at the small-radius limit (``limited``, where the map has that flag)."""
+    return bool(prediction.clamped or getattr(prediction, 'limited', False))
+
+
 class RejectedInput(InputError):
     """An input message was rejected; ``warn`` says whether the throttled warning is due."""
 
@@ -74,6 +82,7 @@ class EstimatorSettings:
     traction_warning_margin : warn when the traction margin falls to this or below [-]
     power_filter_s : time constant of the power filter behind time to empty [s]
     warn_period_s : least time between two warnings about rejected inputs on one topic [s]
+    joint_map : which joint_states joints belong to each side, and their units (:class:`JointMap`)
     """
 
     cmd_timeout_s: float = 0.5
@@ -82,6 +91,7 @@ class EstimatorSettings:
     power_filter_s: float = 5.0
     warn_period_s: float = 2.0
     limits: InputLimits = field(default_factory=InputLimits)
+    joint_map: JointMap = TEST_ROBOT_JOINTS
 
     def __post_init__(self) -> None:
         for name in ('cmd_timeout_s', 'joint_timeout_s', 'warn_period_s'):
@@ -141,10 +151,17 @@ class EstimatorCore:
         self.rejects = RejectCounter(period_s=self.settings.warn_period_s)
         self.cmd_fresh = Freshness(self.settings.cmd_timeout_s)
         self.joint_fresh = Freshness(self.settings.joint_timeout_s)
+        self.joints = JointReader(
+            self.settings.joint_map,
+            powertrain.gear_ratio,
+            powertrain.motor.torque_constant_Nm_A,
+            self.settings.limits,
+        )
         self.prediction: Prediction | None = None
         self.comparison: Comparison | None = None
         self.command: tuple[float, float] | None = None
         self.clamped_count = 0
+        self.outside_map_count = 0
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
@@ -156,13 +173,20 @@ class EstimatorCore:
     def _reject(self, topic: str, err: InputError, now_s: float) -> RejectedInput:
         return RejectedInput(f'{topic}: {err}', self.rejects.reject(topic, now_s))
 
-    def on_command(self, speed_m_s: float, yaw_rate_rad_s: float, now_s: float) -> Prediction:
-        """Predict for a cmd_vel (V [m/s], yaw rate [rad/s]); raises RejectedInput for a bad one."""
+    def on_command(
+        self, speed_m_s: float, yaw_rate_rad_s: float, now_s: float, hold_s: float | None = None
+    ) -> Prediction:
+        """Predict for a cmd_vel (V [m/s], yaw rate [rad/s]); raises RejectedInput for a bad one.
+
+        The command is in force for ``hold_s`` [s] (None: ``settings.cmd_timeout_s``); offline
+        validation passes each recorded command's hold (:mod:`skidsteer_power.bags.cmd_timing`).
+        """
         try:
             speed, yaw_rate = check_command(speed_m_s, yaw_rate_rad_s, self.settings.limits)
         except InputError as err:
             raise self._reject('cmd_vel', err, now_s) from err
         self.cmd_fresh.mark(now_s)
+        self.cmd_fresh.timeout_s = self.settings.cmd_timeout_s if hold_s is None else float(hold_s)
         self.command = (speed, yaw_rate)
         self.adaptation.on_command(self.command, now_s)
         return self._update_prediction(now_s)
@@ -171,12 +195,13 @@ class EstimatorCore:
         assert self.command is not None
         self.prediction = self.predictor.predict(*self.command)
         self.clamped_count += int(self.prediction.clamped)
+        self.outside_map_count += int(outside_map(self.prediction))
         power = self.corrected_bus_W()  # the online correction feeds the battery forecast
         limit = self.power_limit_W()
         if not abs(power) <= limit:  # NaN too
             self._flag_implausible('predictions', now_s)
             power = math.copysign(limit, power) if not math.isnan(power) else 0.0
-        self.energy.set_predicted(power, now_s)
+        self.energy.set_predicted(power, now_s, self.cmd_fresh.timeout_s)
         return self.prediction
 
     def power_limit_W(self) -> float:
@@ -219,13 +244,23 @@ class EstimatorCore:
         return self._update_prediction(now_s) if self.cmd_fresh.is_fresh(now_s) else None
 
     def on_joint_state(
-        self, names: Sequence[str], velocity: Sequence[float], effort: Sequence[float], now_s: float
-    ) -> Comparison:
-        """Measure power from joint_states (motor rad/s, Kt*I N m); raises RejectedInput for a bad one."""
+        self,
+        names: Sequence[str],
+        velocity: Sequence[float],
+        effort: Sequence[float],
+        now_s: float,
+        position: Sequence[float] = (),
+    ) -> Comparison | None:
+        """Measure power from joint_states, mapped to the sides by ``settings.joint_map``; raises
+        RejectedInput for a bad one. None while a speed differentiated from positions needs a second
+        sample."""
         try:
-            omega, torque = check_joint_state(names, velocity, effort, self.settings.limits)
+            reading = self.joints.read(names, position, velocity, effort, now_s)
         except InputError as err:
             raise self._reject('joint_states', err, now_s) from err
+        if reading is None:
+            return None
+        omega, torque = reading
         pt = self.powertrain
         measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
         limit = self.power_limit_W()
@@ -287,6 +322,11 @@ class EstimatorCore:
             problems.append('joint_states stale')
         if self.traction_warning():
             problems.append('traction margin low: robot may get stuck')
+        outside = (
+            self.prediction is not None and self.cmd_fresh.is_fresh(now_s) and outside_map(self.prediction)
+        )
+        if outside:
+            problems.append('command outside the power map: prediction clamped or limited')
         correction = self.adaptation.state()
         if now_s - correction.last_change_s <= TERRAIN_CHANGE_SHOWN_S:
             problems.append('terrain changed: adaptation restarted')
@@ -303,6 +343,8 @@ class EstimatorCore:
             'rejected_cmd_vel': str(self.rejects.counts['cmd_vel']),
             'rejected_joint_states': str(self.rejects.counts['joint_states']),
             'clamped_commands': str(self.clamped_count),
+            'command_outside_map': str(outside).lower(),
+            'commands_outside_map': str(self.outside_map_count),
             'implausible_joint_states': str(self.implausible['joint_states']),
             'implausible_predictions': str(self.implausible['predictions']),
             'energy_measured_J': f'{self.energy.energy_J["measured"]:.3f}',

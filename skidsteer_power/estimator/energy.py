@@ -80,10 +80,12 @@ class EnergyTracker:
         self.advance(now_s)
         self._measured.power_W, self._measured.time_s = float(power_W), now_s
 
-    def set_predicted(self, power_W: float, now_s: float) -> None:
-        """Store a predicted battery-side power [W] for a command arriving at ``now_s`` [s]."""
+    def set_predicted(self, power_W: float, now_s: float, hold_s: float | None = None) -> None:
+        """Store a predicted battery-side power [W] for a command arriving at ``now_s`` [s], held for
+        ``hold_s`` [s] (None: ``predicted_timeout_s``)."""
         self.advance(now_s)
         self._predicted.power_W, self._predicted.time_s = float(power_W), now_s
+        self._predicted.timeout_s = self.predicted_timeout_s if hold_s is None else float(hold_s)
 
     def source(self, now_s: float) -> str:
         """Which power the battery is being stepped with at ``now_s``: one of :data:`SOURCES`."""

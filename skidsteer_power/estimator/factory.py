@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.estimator.inputs import JointMap
 from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
@@ -39,6 +40,12 @@ def state_path(configured: str, vehicle: Vehicle) -> Path:
 
 def powertrain_for(vehicle: Vehicle) -> Powertrain:
     return Powertrain.for_vehicle(vehicle)
+
+
+def joint_map_for(vehicle: Vehicle, **overrides: Any) -> JointMap:
+    """The vehicle's joint_states mapping (its ``drivetrain:`` section), with non-empty ``overrides``
+    (node parameters, CLI options: left, right, effort_is, location, gear_ratio ...) applied."""
+    return JointMap.from_config(vehicle.drivetrain or None).with_overrides(**overrides)
 
 
 def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:

@@ -9,11 +9,12 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
-from skidsteer_power.errors import InputError
+from skidsteer_power.errors import ConfigError, InputError
 
-JOINT_NAMES = ('left_motor', 'right_motor')
+JOINT_NAMES = ('left_motor', 'right_motor')  # the test robot's (TEST_ROBOT_JOINTS)
 
 
 @dataclass(frozen=True)
@@ -62,23 +63,238 @@ def check_command(speed: float, yaw_rate: float, limits: InputLimits) -> tuple[f
 def check_joint_state(
     names: Sequence[str], velocity: Sequence[float], effort: Sequence[float], limits: InputLimits
 ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Pick left/right motor shaft speed [rad/s] and torque Kt*I [N m] out of a joint_states message.
+    """Pick left/right motor shaft speed [rad/s] and torque Kt*I [N m] out of a joint_states message
+    of the test robot (``left_motor``/``right_motor``, :data:`TEST_ROBOT_JOINTS`).
 
     Returns ((omega_left, omega_right), (torque_left, torque_right)). Raises InputError when a motor
     is missing, arrays are short, or a value is NaN, infinite or beyond ``limits``.
     """
-    index = {name: i for i, name in enumerate(names)}
-    missing = [n for n in JOINT_NAMES if n not in index]
-    if missing:
-        raise InputError(f'joint_states lacks {", ".join(missing)}')
-    omegas, torques = [], []
-    for name in JOINT_NAMES:
-        i = index[name]
-        if i >= len(velocity) or i >= len(effort):
-            raise InputError(f'joint_states has no velocity/effort for {name}')
-        omegas.append(_finite_within(f'{name} velocity', velocity[i], limits.max_motor_speed_rad_s, 'rad/s'))
-        torques.append(_finite_within(f'{name} effort', effort[i], limits.max_motor_torque_Nm, 'N m'))
-    return (omegas[0], omegas[1]), (torques[0], torques[1])
+    reading = JointReader(TEST_ROBOT_JOINTS, 1.0, 1.0, limits).read(names, (), velocity, effort, 0.0)
+    assert reading is not None  # velocity is reported: never waits for a second sample
+    return reading
+
+
+EFFORT_KINDS = ('torque', 'current')
+LOCATIONS = ('motor', 'wheel')
+INTERFACES = ('position', 'velocity', 'effort')
+
+
+@dataclass(frozen=True)
+class JointMap:
+    """How a robot's ``sensor_msgs/JointState`` maps onto the two sides of a skid-steer drivetrain.
+
+    Attributes
+    ----------
+    left, right : joint names of each side (any number per side; a side's torque is the sum over
+        its joints, its speed the mean)
+    effort_is : what JointState.effort holds: 'torque' [N m] or 'current' [A]
+    location : where position, velocity and effort are measured: 'motor' (motor shaft, before the
+        reduction) or 'wheel' (the wheel / sprocket joint, as ros2_control's joint_state_broadcaster
+        reports it)
+    gear_ratio : motor turns per wheel turn [-] of this drivetrain; None: the powertrain's
+    torque_constant_Nm_A : motor torque per current [N m/A]; None: the powertrain motor's
+    interfaces : which of 'position', 'velocity', 'effort' the robot publishes (speed is taken from
+        velocity, else differentiated from position; no effort: no measured power)
+    inverted : joints whose positive direction drives the robot backwards (all three values negated)
+    source : where the mapping comes from
+    """
+
+    left: tuple[str, ...] = ('left_motor',)
+    right: tuple[str, ...] = ('right_motor',)
+    effort_is: str = 'torque'
+    location: str = 'motor'
+    gear_ratio: float | None = None
+    torque_constant_Nm_A: float | None = None
+    interfaces: tuple[str, ...] = INTERFACES
+    inverted: tuple[str, ...] = ()
+    source: str = ''
+
+    def __post_init__(self) -> None:
+        for side in ('left', 'right'):
+            joints = getattr(self, side)
+            if not joints or not all(isinstance(j, str) and j for j in joints):
+                raise ConfigError(f'drivetrain: {side} must name at least one joint, got {joints!r}')
+        both = set(self.left) & set(self.right)
+        if both or len(set(self.joints)) != len(self.joints):
+            raise ConfigError(f'drivetrain: a joint is listed twice: {sorted(both) or list(self.joints)}')
+        if self.effort_is not in EFFORT_KINDS:
+            raise ConfigError(f'drivetrain: effort_is must be one of {EFFORT_KINDS}, not {self.effort_is!r}')
+        if self.location not in LOCATIONS:
+            raise ConfigError(f'drivetrain: location must be one of {LOCATIONS}, not {self.location!r}')
+        unknown = set(self.interfaces) - set(INTERFACES)
+        if unknown:
+            raise ConfigError(f'drivetrain: unknown interfaces {sorted(unknown)}; known: {INTERFACES}')
+        for name in ('gear_ratio', 'torque_constant_Nm_A'):
+            value = getattr(self, name)
+            if value is not None and not (
+                isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+            ):
+                raise ConfigError(f'drivetrain: {name} must be a number > 0 or null, not {value!r}')
+        stray = set(self.inverted) - set(self.joints)
+        if stray:
+            raise ConfigError(f'drivetrain: inverted joints {sorted(stray)} are not in left or right')
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """Left joints, then right joints."""
+        return (*self.left, *self.right)
+
+    @property
+    def has_speed(self) -> bool:
+        return 'velocity' in self.interfaces or 'position' in self.interfaces
+
+    @property
+    def has_power(self) -> bool:
+        """True if joint_states give a measured power (an effort and a speed)."""
+        return 'effort' in self.interfaces and self.has_speed
+
+    @classmethod
+    def from_config(cls, config: Any) -> JointMap:
+        """From a vehicle's ``drivetrain:`` mapping (``preset`` expanded from config/drivetrains/).
+
+        None or an empty mapping gives the test robot's mapping; ConfigError for bad keys or values.
+        """
+        from skidsteer_power.powertrain.config import merged
+
+        if config is None:
+            return TEST_ROBOT_JOINTS
+        if not isinstance(config, dict):
+            raise ConfigError(f'drivetrain must be a mapping, not {type(config).__name__}')
+        cfg = merged('drivetrains', config)
+        cfg.pop('name', None)
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(cfg) - known)
+        if unknown:
+            raise ConfigError(
+                f'drivetrain: unknown key(s) {", ".join(unknown)}; known: {", ".join(sorted(known))}'
+            )
+        for key in ('left', 'right', 'interfaces', 'inverted'):
+            if key in cfg:
+                value = cfg[key]
+                cfg[key] = (value,) if isinstance(value, str) else tuple(value or ())
+        if 'source' in cfg:
+            cfg['source'] = str(cfg['source'])
+        return cls(**cfg)
+
+    def with_overrides(self, **overrides: Any) -> JointMap:
+        """A copy with the given non-empty overrides (node parameters, CLI options) applied;
+        comma-separated strings are accepted for the joint lists."""
+        changes = {}
+        for key, value in overrides.items():
+            if value is None or value == '' or value == ():
+                continue
+            if key in ('left', 'right', 'interfaces', 'inverted') and isinstance(value, str):
+                value = tuple(v.strip() for v in value.split(',') if v.strip())
+            changes[key] = value
+        return replace(self, **changes) if changes else self
+
+
+TEST_ROBOT_JOINTS = JointMap(
+    source='the DES driver: left_motor/right_motor at the motor shaft, effort = Kt * I'
+)
+
+
+class JointReader:
+    """Turns one joint_states message into per-side motor-equivalent speed [rad/s] and torque [N m].
+
+    "Motor-equivalent" means referred to the motor shaft of the powertrain the predictions use
+    (reduction ``powertrain_gear_ratio``), so measured and predicted values compare one to one:
+
+        wheel speed  w_w = w / G_dt (motor joint)  or  w (wheel joint)               [rad/s]
+        wheel torque T_w = T G_dt   (motor joint)  or  T (wheel joint)               [N m]
+            with T = effort (torque) or Kt * effort (current; Kt G_dt at a wheel joint)
+        side         T_side = sum of T_w,  w_side = mean of w_w
+        motor-equiv. T_m = T_side / G_pt,  w_m = w_side G_pt
+
+    G_dt and Kt default to the powertrain's. Velocity missing: differentiated from position between
+    two messages (the first one gives no reading, :meth:`read` returns None).
+    """
+
+    def __init__(
+        self,
+        joint_map: JointMap,
+        powertrain_gear_ratio: float,
+        powertrain_torque_constant_Nm_A: float,
+        limits: InputLimits,
+    ) -> None:
+        self.map = joint_map
+        self.limits = limits
+        g_pt = float(powertrain_gear_ratio)
+        g_dt = float(joint_map.gear_ratio or g_pt)
+        kt = float(joint_map.torque_constant_Nm_A or powertrain_torque_constant_Nm_A)
+        at_motor = joint_map.location == 'motor'
+        # per-joint factors to the motor-equivalent of one side (exactly 1.0 for the test robot)
+        self._omega_factor = (g_pt / g_dt) if at_motor else g_pt
+        self._torque_factor = (g_dt / g_pt) if at_motor else 1.0 / g_pt
+        if joint_map.effort_is == 'current':
+            self._torque_factor *= kt * (1.0 if at_motor else g_dt)
+        self._sign = [-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints]
+        self._n_left = len(joint_map.left)
+        self._last: tuple[float, list[float]] | None = None
+
+    def _pick(self, what: str, values: Sequence[float], rows: list[int]) -> list[float]:
+        """The mapped joints' values (sign applied); InputError for a missing, NaN or infinite one."""
+        try:
+            out = [values[i] * sign for i, sign in zip(rows, self._sign)]  # noqa: B905 (same length)
+        except IndexError:
+            out = []
+        if out and sum(out) - sum(out) == 0:  # NaN - NaN and inf - inf are NaN: every value is finite
+            return out
+        for name, i in zip(self.map.joints, rows, strict=True):  # say which one, and why
+            if i >= len(values):
+                raise InputError(f'joint_states has no {what} for {name}')
+            value = float(values[i])
+            if math.isnan(value):
+                raise InputError(f'{name} {what} is NaN')
+            if math.isinf(value):
+                raise InputError(f'{name} {what} is infinite')
+        raise AssertionError('unreachable: every value was finite')
+
+    def read(
+        self,
+        names: Sequence[str],
+        position: Sequence[float],
+        velocity: Sequence[float],
+        effort: Sequence[float],
+        now_s: float,
+    ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """((w_m left, right) [rad/s], (T_m left, right) [N m]) or None while a position-differentiated
+        speed needs a second sample. Raises InputError for a missing joint or value, NaN, infinity or
+        a value beyond ``limits``."""
+        index = {name: i for i, name in enumerate(names)}
+        try:
+            rows = [index[n] for n in self.map.joints]
+        except KeyError:
+            missing = [n for n in self.map.joints if n not in index]
+            raise InputError(f'joint_states lacks {", ".join(missing)}') from None
+        interfaces = self.map.interfaces
+        if 'effort' not in interfaces:
+            raise InputError('the drivetrain mapping declares no effort: no measured power')
+        torque = self._pick('effort', effort, rows)
+        if 'velocity' in interfaces:
+            omega = self._pick('velocity', velocity, rows)
+        elif 'position' in interfaces:
+            angle = self._pick('position', position, rows)
+            last, self._last = self._last, (now_s, angle)
+            if last is None or now_s <= last[0]:
+                return None
+            dt = now_s - last[0]
+            omega = [(a - b) / dt for a, b in zip(angle, last[1], strict=True)]
+        else:
+            raise InputError('the drivetrain mapping declares neither velocity nor position')
+        n, m = self._n_left, len(omega) - self._n_left
+        w_f, t_f = self._omega_factor, self._torque_factor
+        omega_m = (sum(omega[:n]) / n * w_f, sum(omega[n:]) / m * w_f)
+        torque_m = (sum(torque[:n]) * t_f, sum(torque[n:]) * t_f)
+        limits = self.limits
+        for k, joints in enumerate((self.map.left, self.map.right)):
+            w, t = omega_m[k], torque_m[k]
+            if abs(w) <= limits.max_motor_speed_rad_s and abs(t) <= limits.max_motor_torque_Nm:
+                continue
+            label = joints[0] if len(joints) == 1 else f'{("left", "right")[k]} side (motor-equivalent)'
+            _finite_within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
+            _finite_within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
+        return omega_m, torque_m
 
 
 @dataclass

@@ -45,6 +45,8 @@ class Prediction:
     bus_W : battery-side power through the amplifier [W]
     traction_margin : 1 - required / available thrust (<= 0: about to get stuck) [-]
     clamped : the command lay outside the map and was clamped to its edge
+    limited : the map solved the command at its small-radius limit (a spin or a turn tighter than
+        the limit radius; False where the map has no such flag)
     """
 
     speed_m_s: float
@@ -60,6 +62,7 @@ class Prediction:
     bus_W: Pair
     traction_margin: float
     clamped: bool
+    limited: bool = False
 
     @property
     def bus_total_W(self) -> float:
@@ -138,4 +141,5 @@ class MapPredictor:
             bus_W=_pair(left.electrical_power_W, right.electrical_power_W),
             traction_margin=float(np.asarray(q.traction_margin).reshape(-1)[0]),
             clamped=bool(np.asarray(q.clamped).reshape(-1)[0]),
+            limited=bool(np.asarray(getattr(q, 'limited', False)).reshape(-1)[0]),
         )

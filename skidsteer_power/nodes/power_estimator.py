@@ -8,7 +8,8 @@ subscribes (best-effort by default, so reliable AND best-effort publishers both 
     ``cmd_vel``  geometry_msgs/Twist (or TwistStamped with ``cmd_vel_stamped: true``):
                  linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
     ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
-                 velocity = motor shaft speed [rad/s], effort = Kt * I [N m]
+                 velocity = motor shaft speed [rad/s], effort = Kt * I [N m]; any other robot's
+                 joints by the vehicle file's ``drivetrain:`` section or the ``*_joints`` parameters
 publishes per cmd_vel
     ``power/predicted`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` (motor shaft: velocity
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
@@ -58,6 +59,7 @@ swapped in when ready; the old map serves until then.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from typing import Any
@@ -122,6 +124,16 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         'publishers) or reliable (matches reliable publishers only)',
     ),
     'output_qos': ('reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'),
+    # joint_states mapping: empty / 0 = the vehicle file's drivetrain section (JointMap)
+    'left_joints': ('', 'comma-separated joint names of the left side ("" = vehicle file)'),
+    'right_joints': ('', 'comma-separated joint names of the right side ("" = vehicle file)'),
+    'effort_is': ('', 'joint_states effort is "torque" [N m] or "current" [A] ("" = vehicle file)'),
+    'joints_at': ('', 'joint values are at the "motor" shaft or the "wheel" ("" = vehicle file)'),
+    'joint_gear_ratio': (0.0, 'motor turns per wheel turn of the joints [-] (0 = vehicle file)'),
+    'joint_torque_constant_Nm_A': (
+        0.0,
+        'motor torque constant for a current effort [N m/A] (0 = vehicle file)',
+    ),
     'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
     'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
     **PATH_PARAMETERS,
@@ -175,6 +187,7 @@ class PowerEstimator(Node):
         self._traction_warned = False
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
+        settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         self.terrain_name = p['terrain']
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
@@ -214,6 +227,17 @@ class PowerEstimator(Node):
             power_filter_s=p['power_filter_s'],
             warn_period_s=p['warn_period_s'],
             limits=limits,
+        )
+
+    def _joint_map(self, p: dict[str, Any]) -> Any:
+        return factory.joint_map_for(
+            self.vehicle,
+            left=p['left_joints'],
+            right=p['right_joints'],
+            effort_is=p['effort_is'],
+            location=p['joints_at'],
+            gear_ratio=p['joint_gear_ratio'] or None,
+            torque_constant_Nm_A=p['joint_torque_constant_Nm_A'] or None,
         )
 
     def _make_predictor(self, terrain: str, cache_dir: str) -> Any:
@@ -313,9 +337,11 @@ class PowerEstimator(Node):
         now = self.now_s()
         try:
             with self._lock:
-                comparison = self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now)
+                comparison = self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now, msg.position)
         except RejectedInput as err:
             self._warn_rejected(err)
+            return
+        if comparison is None:  # speed from positions: waits for a second sample
             return
         measured = JointState(header=msg.header, name=['left_motor', 'right_motor'])
         measured.velocity = list(comparison.measured.omega_rad_s)
