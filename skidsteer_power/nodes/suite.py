@@ -128,17 +128,19 @@ class Suite:
         from skidsteer_power.des.simulator import SimulatedPair
         from skidsteer_power.terramechanics import load_terrain
         from skidsteer_power.twin import Twin, load_patches
-        from skidsteer_power.twin.live import TwinCoupling, TwinLoad
+        from skidsteer_power.twin.live import TwinCoupling, TwinLoad, configure_amplifier
 
         o = self.options
         patches = load_patches(o.patches) if o.patches else None
         twin = Twin(self.vehicle, load_terrain(o.sim_terrain or o.terrain), patches=patches)
         coupling = TwinCoupling(twin)
-        self.sim = SimulatedPair().start()
+        self.sim = SimulatedPair()
         polarity = {'left': int(o.driver_params.get('left_polarity', 1))}
         polarity['right'] = int(o.driver_params.get('right_polarity', -1))
         for side, amp in (('left', self.sim.left), ('right', self.sim.right)):
+            configure_amplifier(amp.model, twin)  # the body's inertia lives in the twin only
             amp.set_load(TwinLoad(coupling, side, polarity[side]))
+        self.sim.start()
         sim_node = TerrainSim(coupling, context=self.context, namespace=o.namespace)
         self.nodes.append(sim_node)
         return self.sim.left.port, self.sim.right.port

@@ -7,10 +7,12 @@ and terrain contact (``Twin.step_with_motor_speeds``) in wall-clock time wheneve
 each side's :class:`TwinLoad` returns the twin's axle torque of that side over the gear ratio plus
 the side's internal resistance (eqs. 7.1-7.4, Table 7.1), in the amplifier's sense of rotation.
 
-Approximation of the live path (docs/TWIN.md): the amplifier model's inertia already includes half
-the robot's mass reflected through the reduction, so the body's inertia is felt twice (there and
-through the soil); the offline ``simulate`` path integrates the motors inside the twin and has not
-this double count.
+Where the inertia lives (one place each, as in the offline twin): the simulated amplifier's motor
+model (:func:`configure_amplifier`) carries the rotor and the side's drivetrain (track belt and
+sprockets, or wheels) reflected through the reduction, i.e. the twin's ``Twin.J``; the body's mass
+and yaw inertia live only in the twin's rigid body and reach each motor through the soil (the axle
+torque). The amplifier's PI gains stay those designed on the rotor + half the body (as the offline
+twin's and the real DES's: the tuning does not change because the simulation is split differently).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import threading
 
 import numpy as np
 
+from skidsteer_power.des.simulator import MotorModel
 from skidsteer_power.twin.model import FRICTION_SMOOTHING_RAD_S, Twin
 
 MAX_CATCH_UP_STEPS = 50
@@ -74,6 +77,17 @@ class TwinCoupling:
         """(true pose x, y, yaw; true hull twist v_x, v_y, yaw rate; odom x, y, yaw, V, yaw rate)."""
         with self._lock:
             return self.twin.pose.copy(), self.twin.vel.copy(), self.odom.copy()
+
+
+def configure_amplifier(model: MotorModel, twin: Twin) -> None:
+    """Make a simulated amplifier's motor model (``des/simulator.MotorModel``) the twin's drivetrain:
+    inertia rotor + drivetrain [kg m^2] (``Twin.J``, no body mass: the twin's body has it), the
+    twin's PI gains kp [A s/rad] and ki [A/rad] and its bus voltage [V] as the supply. Call before
+    the amplifier runs."""
+    model.inertia_kg_m2 = twin.J
+    model.kp_A_s = twin.kp
+    model.ki_A = twin.ki
+    model.supply_voltage_V = twin.bus_voltage_V
 
 
 class TwinLoad:

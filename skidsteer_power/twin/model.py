@@ -155,6 +155,7 @@ class Twin:
         self.v_fraction = pt.amplifier.max_output_voltage_fraction
         self.friction_b = np.array([pt.left.total.viscous_Nm_s, pt.right.total.viscous_Nm_s])
         self.friction_c = np.array([pt.left.total.coulomb_Nm, pt.right.total.coulomb_Nm])
+        self._friction_b, self._friction_c = self.friction_b.tolist(), self.friction_c.tolist()
         scale = (self.r / 0.1) ** 2
         if vehicle.is_tracked:
             axle_inertia = TRACK_ASSEMBLY_INERTIA_KG_M2 * scale
@@ -173,6 +174,7 @@ class Twin:
         regen = self.powertrain.regen_efficiency
         self._eta_regen = (amp.efficiency if amp.four_quadrant else 0.0) if regen is None else regen
         self.Iz = vehicle.yaw_inertia
+        self._tracked = vehicle.is_tracked
         self._init_contact()
         self.reset()
 
@@ -206,6 +208,10 @@ class Twin:
             trap[[0, -1]] *= 0.5
             self.xi_w = trap
             self.n_wheels = nw
+            self._wheels_per_side = nw // 2
+            self._sinkage_exponent = 1.0 / (self.field.base.n + 0.5)  # eq. 2.32: Fz ~ z^(n + 1/2)
+            if self.field.uniform:
+                self._wheel_soil()  # once (with patches: refreshed while stepping)
 
     def reset(self) -> None:
         """Rest at the origin, heading +x, shear relaxed, static sinkage, full battery."""
@@ -231,9 +237,11 @@ class Twin:
             w_wheel = v.weight_N / self.n_wheels
             z0 = float(single_wheel.bekker_wheel_sinkage(self.field.base, w_wheel, self.r, self.width))
             self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
-            self.j = np.zeros((self.n_wheels, WHEEL_NODES + 1), dtype=complex)  # j_t + i j_y [m]
+            self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
+            self._rows = np.empty((6, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
             self._soil_age = 0
         self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
+        self._kinematics: tuple[np.ndarray, ...] | None = None  # wheels: of the present velocities
         self._j_rate = np.zeros_like(self.j)
         self._damping = SHEAR_DAMPING_S / self.field.base.K  # [s/m]: c = tau_max t_d / K
 
@@ -358,16 +366,46 @@ class Twin:
         self._j_rate = (j - self.j) / dt
         self.j = j
 
+    def _wheel_soil(self) -> None:
+        """Per-wheel constants of the terrain under each wheel (uniform floor: once; with patches:
+        every ``SOIL_REFRESH_STEPS``): Wong-Reece stress factor r^n (kc / b + kphi) [Pa] and exponent
+        n (eq. 2.21), c [Pa] and tan(phi) (eq. 2.2), the angle coefficients a0, a1, b0, b1 (eqs.
+        2.20, 2.22) as (n_wheels, 1) columns, and the shear law (None: type A with K [m], else the
+        terrains per wheel for ``soil.shear_fraction``)."""
+        index = self._terrain_index(self.wheel_x, self.wheel_y)
+        self._wheel_index = index
+        field = self.field
+        terrains = [field.base] * self.n_wheels if index is None else [field.terrains[i] for i in index]
+        r, b = self.r, self.width
+
+        def column(values: list[float]) -> np.ndarray:
+            return np.array(values, dtype=float)[:, None]
+
+        self._wp_stress = column([r**t.n * (t.kc / b + t.kphi) for t in terrains])
+        self._wp_n = column([t.n for t in terrains])
+        self._wp_c = column([t.c for t in terrains])
+        self._wp_tan_phi = column([math.tan(t.phi) for t in terrains])
+        self._wp_a = (column([t.a0 for t in terrains])[:, 0], column([t.a1 for t in terrains])[:, 0])
+        self._wp_b = (column([t.b0 for t in terrains])[:, 0], column([t.b1 for t in terrains])[:, 0])
+        if all(t.shear_type == 'A' for t in terrains):
+            self._wp_inv_k: np.ndarray | None = column([-1.0 / t.K for t in terrains])
+            self._wp_terrains: list[Terrain] | None = None
+        else:
+            self._wp_inv_k, self._wp_terrains = None, terrains
+
     def _wheel_kinematics(self) -> tuple[np.ndarray, ...]:
         """Per wheel: axle ground speed forward and lateral [m/s], |omega| [rad/s], rolling direction
         (+-1), forward speed in the rolling frame [m/s] and slip (eq. 2.13) [-]."""
-        vx, vy, wz = self.vel
+        vx, vy, wz = self.vel.tolist()
         vxa = vx - wz * self.wheel_y  # axle ground speed, forward [m/s]
         vya = vy + wz * self.wheel_x  # lateral [m/s]
-        side_omega = self.omega_m / self.G
-        side_direction = [1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0) for w in side_omega]
-        direction = np.array(side_direction)[self.wheel_side]
-        om = (np.abs(side_omega))[self.wheel_side]
+        per_side = []
+        for w in self.omega_m.tolist():
+            w /= self.G
+            per_side.append((1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0), abs(w)))
+        k = self._wheels_per_side
+        direction = np.array([per_side[0][0]] * k + [per_side[1][0]] * k)
+        om = np.array([per_side[0][1]] * k + [per_side[1][1]] * k)
         vxm = direction * vxa  # mirrored so the wheel rolls forward
         rw = self.r * om
         # eq. 2.13: (r w - V) / (r w) driving, (r w - V) / V braking: one denominator, max(r w, |V|)
@@ -377,84 +415,110 @@ class Twin:
     def _wheel_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
         """Body force (F_x, F_y, M_z), axle torques per side [N m], dissipation [W], sinkage [m].
 
-        Shear displacement j = j_t + i j_y (tangential along the rim, lateral) [m], per rim node.
+        Shear displacement per rim node: j[0] tangential along the rim, j[1] lateral [m]. The
+        contact integrals are weighted sums over the nodes (trapezoid in xi, times the arc
+        r (theta_f - theta_r) and the width b), all six in one matrix product.
         """
-        _vxa, vya, om, direction, vxm, slip = self._wheel_kinematics()
-        r, b = self.r, self.width
+        if not self.field.uniform:
+            if self._soil_age <= 0:
+                self._wheel_soil()
+                self._soil_age = SOIL_REFRESH_STEPS
+            else:
+                self._soil_age -= 1
+        kin = self._kinematics if self._kinematics is not None else self._wheel_kinematics()
+        _vxa, vya, om, direction, vxm, slip = kin
+        r = self.r
         z = self.z
-        index = self._terrain_index(self.wheel_x, self.wheel_y) if self._soil_age <= 0 else self._wheel_index
-        self._wheel_index = index
-        self._soil_age = SOIL_REFRESH_STEPS if self._soil_age <= 0 else self._soil_age - 1
-        terrains = (
-            [self.field.base] * self.n_wheels if index is None else [self.field.terrains[i] for i in index]
-        )
-        if index is None:
-            tf, tm, tr = single_wheel.wheel_angles(self.field.base, z, slip, r)  # eqs. 2.19-2.22
-        else:
-            tf, tm, tr = np.array(
-                [single_wheel.wheel_angles(t, z[k], slip[k], r) for k, t in enumerate(terrains)]
-            ).T
+        a0, a1 = self._wp_a
+        b0, b1 = self._wp_b
+        tf = np.arccos(np.maximum(1.0 - z / r, -1.0))  # eq. 2.19 (z > 0)
+        tm = (a0 + a1 * slip) * tf  # eq. 2.22
+        tr = (b0 + b1 * slip) * tf  # eq. 2.20
         span = tf - tr
-        theta = tf[:, None] - self.xi[None, :] * span[:, None]
+        tf_c, span_c = tf[:, None], span[:, None]
+        u = self.xi * span_c  # theta_f - theta at the nodes [rad]
+        theta = tf_c - u
+        # Wong-Reece normal stress (eq. 2.21); behind theta_m the equivalent front angle of eq. 2.22,
+        # theta_e = theta_f - (theta - theta_r) (theta_f - theta_m) / (theta_m - theta_r), falls from
+        # theta_f to theta_m over [theta_r, theta_m] and continues below theta_m ahead of it, so the
+        # angle to use is max(theta, theta_e) everywhere on the arc
+        theta_e = tf_c - (span_c - u) * ((tf - tm) / np.maximum(tm - tr, 1e-12))[:, None]
+        depth = np.cos(np.maximum(theta, theta_e))
+        depth -= np.cos(tf_c)
+        sigma = self._wp_stress * np.maximum(depth, 0.0) ** self._wp_n
+        strength = self._wp_c + sigma * self._wp_tan_phi  # eq. 2.2
         j = self.j
-        mag = np.abs(j)
-        if index is None:
-            t = self.field.base
-            sigma = single_wheel.normal_stress(t, theta, tf[:, None], tm[:, None], tr[:, None], r, b)  # 2.21
-            strength = soil.shear_strength(t, sigma)
-            tau = strength * soil.shear_fraction(t, mag)  # eqs. 2.2-2.5
+        mag = np.hypot(j[0], j[1])
+        if self._wp_inv_k is not None:
+            fraction = -np.expm1(mag * self._wp_inv_k)  # eq. 2.3
         else:
-            sigma, tau, strength = np.zeros(theta.shape), np.zeros(theta.shape), np.zeros(theta.shape)
-            for k, t in enumerate(terrains):
-                sigma[k] = single_wheel.normal_stress(t, theta[k], tf[k], tm[k], tr[k], r, b)
-                strength[k] = soil.shear_strength(t, sigma[k])
-                tau[k] = strength[k] * soil.shear_fraction(t, mag[k])
-        safe = np.where(mag > 0, mag, 1.0)
-        # tau_t + i tau_y against the displacement (4.7, 4.8), plus the transient damping
-        shear = -(tau / safe) * j - (self._damping * strength) * self._j_rate
-        sin, cos = np.sin(theta), np.cos(theta)
-        area = (r * b) * span[:, None] * self.xi_w[None, :]
-        a_shear = area * shear
-        a_tau = a_shear.real
-        a_sigma = area * sigma
+            pairs = zip(self._wp_terrains, mag, strict=True)
+            fraction = np.array([soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
+        # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping
+        mag += 1e-300
+        gain = strength * fraction
+        gain /= mag
+        damping = self._damping * strength
+        rows = self._rows  # (6, wheels, nodes): the integrands
+        cos, sin = np.cos(theta), np.sin(theta)
+        tau, tau_y = rows[4], rows[5]
+        np.multiply(gain, j[0], out=tau)
+        tau += damping * self._j_rate[0]
+        np.negative(tau, out=tau)
+        np.multiply(gain, j[1], out=tau_y)
+        tau_y += damping * self._j_rate[1]
+        np.negative(tau_y, out=tau_y)
+        np.multiply(sigma, cos, out=rows[0])
+        np.multiply(sigma, sin, out=rows[1])
+        np.multiply(tau, cos, out=rows[2])
+        np.multiply(tau, sin, out=rows[3])
+        area = (r * self.width) * span  # the contact's arc times width per unit xi [m^2]
+        s_cos, s_sin, t_cos, t_sin, t_sum, y_sum = (rows @ self.xi_w) * area  # [N]
         # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
         # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
-        normal = (a_sigma * sin).sum(axis=1) * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
-        fx_m = (a_tau * cos).sum(axis=1) - normal  # eq. 2.27 (rolling frame)
-        fz = (a_sigma * cos + a_tau * sin).sum(axis=1)
-        fy = a_shear.imag.sum(axis=1)  # eq. 4.9, lateral
-        torque_m = r * a_tau.sum(axis=1)  # eq. 2.34: the terrain's resisting torque
-        fx, torque = direction * fx_m, direction * torque_m
-        force = np.array([fx.sum(), fy.sum(), (self.wheel_x * fy - self.wheel_y * fx).sum()])
-        slip_velocity = vxm[:, None] * cos - (r * om)[:, None] + 1j * vya[:, None]
-        dissipation = float(-(a_shear.conjugate() * slip_velocity).real.sum() + (vxm * normal).sum())
-        self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self.vehicle.wheels_per_side)
-        axle = np.array([torque[: self.n_wheels // 2].sum(), torque[self.n_wheels // 2 :].sum()])
+        normal = s_sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
+        fx = direction * (t_cos - normal)  # eq. 2.27 (rolling frame, then mirrored back)
+        fz = s_cos + t_sin
+        fy = y_sum  # eq. 4.9, lateral
+        torque = direction * (r * t_sum)  # eq. 2.34: the terrain's resisting torque
+        force = np.array([sum(fx.tolist()), sum(fy.tolist()), float(self.wheel_x @ fy - self.wheel_y @ fx)])
+        # power of the contact stresses on the slip velocity (vxm cos(theta) - r om, vya), and the rut's
+        dissipation = float(vxm @ (normal - t_cos) + (r * om) @ t_sum - vya @ y_sum)
+        self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self._wheels_per_side)
+        half = self._wheels_per_side
+        torques = torque.tolist()
+        axle = np.array([sum(torques[:half]), sum(torques[half:])])
         return force, axle, dissipation, float(z.max())
 
     def _advance_wheels(self, dt: float) -> None:
         """Transport the rim's shear displacement and relax the sinkage (see the module doc)."""
         cos, span, fz, w_wheel = self._wheel_state
-        vxa, vya, om, _direction, vxm, _ = self._wheel_kinematics()  # the new velocities
-        source = vxm[:, None] * cos - (self.r * om)[:, None] + 1j * vya[:, None]
-        courant = np.minimum(om / np.maximum(span, 1e-6) * dt * WHEEL_NODES, 1.0)[:, None]
+        kin = self._wheel_kinematics()  # the new velocities (kept for the next step's forces)
+        self._kinematics = kin
+        vxa, vya, om, _direction, vxm, _ = kin
+        # slip velocity of the rim element: (vxm cos(theta) - r om) along the rim, vya across
+        source = vxm[:, None] * cos
+        source -= (self.r * om)[:, None]
+        courant = np.minimum(om / np.maximum(span, 1e-6) * (dt * WHEEL_NODES), 1.0)[:, None]
         j = self.j
         new = j.copy()
         # node k takes the rim element from node k - 1, plus the cell-averaged slip source
-        new[:, 1:] += (0.5 * dt) * (source[:, 1:] + source[:, :-1]) + courant * (j[:, :-1] - j[:, 1:])
-        new[:, 0] += dt * source[:, 0] - courant[:, 0] * j[:, 0]
-        new[om > 0, 0] = 0.0  # touchdown: no shear yet
-        j, new = new, j  # j: the new field, new: the old one
-        self._j_rate = (j - new) / dt
-        self.j = j
+        new[:, :, 1:] += courant * (j[:, :, :-1] - j[:, :, 1:])
+        new[:, :, 0] -= courant[:, 0] * j[:, :, 0]
+        new[0, :, 1:] += (0.5 * dt) * (source[:, 1:] + source[:, :-1])
+        new[0, :, 0] += dt * source[:, 0]
+        new[1] += (dt * vya)[:, None]
+        new[:, om > 0, 0] = 0.0  # touchdown: no shear yet
+        self._j_rate = (new - j) * (1.0 / dt)
+        self.j = new
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
         # (the same time scale as the shear), plus a slow settling at rest.
-        n = self.field.base.n
         ratio = np.minimum(np.maximum(w_wheel / np.maximum(fz, 1e-9), 0.5), 2.0)
-        travel = (self.r * np.abs(om) + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
+        travel = (self.r * om + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
         fraction = np.minimum(dt * (travel + 1.0 / SINKAGE_SETTLING_S), 1.0)
-        self.z = np.minimum(np.maximum(self.z * ratio ** (fraction / (n + 0.5)), 1e-6), 0.95 * self.r)
+        z = self.z * ratio ** (fraction * self._sinkage_exponent)
+        self.z = np.minimum(np.maximum(z, 1e-6), 0.95 * self.r)
 
     # ------------------------------------------------------------------ stepping
     def kinetic_energy(self) -> float:
@@ -494,19 +558,20 @@ class Twin:
         """Body (hull frame: m (dv/dt + yaw x v) = F, Iz dyaw/dt = M), motor angles, pose and the
         contact's shear transport over one step, with the new motor speeds [rad/s]."""
         dt = self.dt
-        vx, vy, wz = (float(v) for v in self.vel)
+        vx, vy, wz = self.vel.tolist()
+        fx, fy, mz = force.tolist()
         vx, vy, wz = (
-            vx + dt * (force[0] / self.mass + wz * vy),
-            vy + dt * (force[1] / self.mass - wz * vx),
-            wz + dt * force[2] / self.Iz,
+            vx + dt * (fx / self.mass + wz * vy),
+            vy + dt * (fy / self.mass - wz * vx),
+            wz + dt * mz / self.Iz,
         )
         self.vel = np.array([vx, vy, wz])
         self.omega_m = omega_m
-        self.theta_m = self.theta_m + dt * self.omega_m
-        x, y, yaw = (float(v) for v in self.pose)
+        self.theta_m = self.theta_m + dt * omega_m
+        x, y, yaw = self.pose.tolist()
         c, s = math.cos(yaw), math.sin(yaw)
         self.pose = np.array([x + dt * (c * vx - s * vy), y + dt * (s * vx + c * vy), yaw + dt * wz])
-        if self.vehicle.is_tracked:
+        if self._tracked:
             self._advance_tracks(dt)
         else:
             self._advance_wheels(dt)
@@ -517,8 +582,9 @@ class Twin:
         torque of each side [N m]. The energy ledger then holds only the terrain work."""
         omega_m = np.asarray(omega_m, dtype=float)
         self.omega_m = omega_m
+        self._kinematics = None  # the motor speeds changed from outside
         loads = self._side_loads()
-        if self.vehicle.is_tracked:
+        if self._tracked:
             force, axle, dissipation, sinkage = self._track_forces(loads)
         else:
             force, axle, dissipation, sinkage = self._wheel_forces(loads)
@@ -531,48 +597,57 @@ class Twin:
     def _step(self) -> None:
         dt = self.dt
         loads = self._side_loads()
-        if self.vehicle.is_tracked:
+        if self._tracked:
             force, axle, dissipation, sinkage = self._track_forces(loads)
         else:
             force, axle, dissipation, sinkage = self._wheel_forces(loads)
-        self.max_sinkage_m = max(self.max_sinkage_m, sinkage)
+        if sinkage > self.max_sinkage_m:
+            self.max_sinkage_m = sinkage
         # Per side, in plain floats (two-element numpy arrays cost more than they save here).
         # Amplifier: ramped set point, PI speed loop, current and voltage limits (des/simulator).
         ramp = SETPOINT_ACCEL_RAD_S2 * dt
         v_max = self.v_fraction * self.bus_voltage_V
         kp, ki, kt, res, peak, inertia, gear = self.kp, self.ki, self.kt, self.R, self.peak_A, self.J, self.G
-        currents, omegas, mids, p_terms, p_buses = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
+        kn = self.kn
+        omegas, setpoints, integrals = self.omega_m.tolist(), self.setpoint.tolist(), self.integral_A.tolist()
+        targets, axles = self._target.tolist(), axle.tolist()
+        friction_b, friction_c = self._friction_b, self._friction_c
+        currents, p_terms, p_buses = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
         friction_power = 0.0
         eta, eta_regen = self._eta, self._eta_regen
         for k in (0, 1):
-            omega = float(self.omega_m[k])
-            set_k = float(self.setpoint[k])
-            set_k += min(ramp, max(-ramp, float(self._target[k]) - set_k))
-            self.setpoint[k] = set_k
+            omega = omegas[k]
+            set_k = setpoints[k]
+            set_k += min(ramp, max(-ramp, targets[k] - set_k))
+            setpoints[k] = set_k
             error = set_k - omega
-            integral = min(peak, max(-peak, float(self.integral_A[k]) + ki * error * dt))
-            self.integral_A[k] = integral
+            integral = min(peak, max(-peak, integrals[k] + ki * error * dt))
+            integrals[k] = integral
             wanted = kp * error + integral
-            emf = omega / self.kn
+            emf = omega / kn
             upper = min(peak, (v_max - emf) / res)
             lower = max(-peak, (-v_max - emf) / res)
             current = min(upper, max(lower, wanted))
             free = lower < wanted < upper
             # implicit in omega: the PI proportional part (where not limited) and the friction slope
             th = math.tanh(omega / FRICTION_SMOOTHING_RAD_S)
-            b, c = float(self.friction_b[k]), float(self.friction_c[k])
+            b, c = friction_b[k], friction_c[k]
             friction = b * omega + c * th
-            slope = b + c * (1.0 - th * th) / FRICTION_SMOOTHING_RAD_S + (kt * kp if free else 0.0)
-            drive = kt * current - friction - float(axle[k]) / gear
-            d_omega = dt * drive / (inertia + dt * slope)
+            slope = b + c * (1.0 - th * th) / FRICTION_SMOOTHING_RAD_S
+            drive = kt * current - friction - axles[k] / gear
             if free:
+                d_omega = dt * drive / (inertia + dt * (slope + kt * kp))
                 current -= kp * d_omega
+            else:
+                d_omega = dt * drive / (inertia + dt * slope)
             new = omega + d_omega
             mid = 0.5 * (omega + new)
-            friction_power += (friction + (slope - (kt * kp if free else 0.0)) * d_omega) * mid
+            friction_power += (friction + slope * d_omega) * mid
             p_term = kt * current * mid + res * current * current
             p_bus = p_term / eta if p_term >= 0.0 else p_term * eta_regen  # = motor.bus_power (4-Q)
-            currents[k], omegas[k], mids[k], p_terms[k], p_buses[k] = current, new, mid, p_term, p_bus
+            currents[k], omegas[k], p_terms[k], p_buses[k] = current, new, p_term, p_bus
+        self.setpoint = np.array(setpoints)
+        self.integral_A = np.array(integrals)
         self._move(force, np.array(omegas))
         # electrical side and energy ledger
         e = self.energy
