@@ -21,7 +21,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.adaptation import AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.energy import EnergyTracker
 from skidsteer_power.estimator.inputs import (
     TEST_ROBOT_JOINTS,
@@ -34,11 +37,27 @@ from skidsteer_power.estimator.inputs import (
 )
 from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
 from skidsteer_power.estimator.prediction import Prediction, Predictor
+from skidsteer_power.estimator.tte_bounds import TimeToEmptyBounds
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
 IMPLAUSIBLE_WARN_S = 10.0
 """Diagnostics stay WARN this long after the last implausible reading or prediction [s]."""
+TERRAIN_CHANGE_SHOWN_S = 10.0  # diagnostics warn "terrain changed" this long after a detection [s]
+
+
+def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
+    """Diagnostic key/values of a :class:`~skidsteer_power.estimator.adaptation.Correction`."""
+    return {
+        'adaptation': 'on' if enabled else 'off',
+        'terrain_changes': str(c.terrain_changes),
+        'terrain_changed_at_s': f'{c.last_change_s:.3f}',
+        'correction_scale_left': f'{c.scale[0]:.4f}',
+        'correction_scale_right': f'{c.scale[1]:.4f}',
+        'correction_offset_left_Nm': f'{c.offset_Nm[0]:.4f}',
+        'correction_offset_right_Nm': f'{c.offset_Nm[1]:.4f}',
+    }
 
 
 def outside_map(prediction: Prediction) -> bool:
@@ -113,8 +132,14 @@ class EstimatorCore:
         battery: Any,
         powertrain: Powertrain,
         settings: EstimatorSettings | None = None,
+        adaptation: AdaptationSettings | None = None,
     ) -> None:
         self.settings = settings or EstimatorSettings()
+        # online correction of the prediction and terrain-change detection (estimator/adaptation.py),
+        # time-to-empty bounds (estimator/tte_bounds.py)
+        self.adaptation = TorqueAdaptation(adaptation)
+        self.tte_bounds = TimeToEmptyBounds()
+        self.time_to_empty_p10_s = self.time_to_empty_p90_s = math.inf
         self.predictor = predictor
         self.powertrain = powertrain
         self.energy = EnergyTracker(
@@ -163,6 +188,7 @@ class EstimatorCore:
         self.cmd_fresh.mark(now_s)
         self.cmd_fresh.timeout_s = self.settings.cmd_timeout_s if hold_s is None else float(hold_s)
         self.command = (speed, yaw_rate)
+        self.adaptation.on_command(self.command, now_s)
         return self._update_prediction(now_s)
 
     def _update_prediction(self, now_s: float) -> Prediction:
@@ -170,7 +196,7 @@ class EstimatorCore:
         self.prediction = self.predictor.predict(*self.command)
         self.clamped_count += int(self.prediction.clamped)
         self.outside_map_count += int(outside_map(self.prediction))
-        power = self.prediction.bus_total_W
+        power = self.corrected_bus_W()  # the online correction feeds the battery forecast
         limit = self.power_limit_W()
         if not abs(power) <= limit:  # NaN too
             self._flag_implausible('predictions', now_s)
@@ -186,6 +212,28 @@ class EstimatorCore:
     def _flag_implausible(self, what: str, now_s: float) -> None:
         self.implausible[what] += 1
         self._implausible_s = now_s
+
+    def corrected_torque_Nm(self) -> tuple[float, float]:
+        """Predicted motor torques [N m] with the online correction applied (left, right)."""
+        assert self.prediction is not None
+        return self.adaptation.corrected(self.prediction.motor_torque_Nm)
+
+    def corrected_bus_W(self) -> float:
+        """Battery power [W] of the corrected prediction: the prediction's own plus the change the
+        correction makes through the motor and amplifier (exactly the prediction's when uncorrected)."""
+        p = self.prediction
+        assert p is not None
+        corrected = np.asarray(self.corrected_torque_Nm())
+        if np.array_equal(corrected, p.motor_torque_Nm):
+            return p.bus_total_W
+        pt = self.powertrain
+        omega = np.asarray(p.motor_omega_rad_s)
+
+        def bus(torque: np.ndarray) -> float:
+            terminal = terminal_power(pt.motor, torque, omega)
+            return float(np.sum(bus_power(terminal, pt.amplifier, pt.regen_efficiency)))
+
+        return p.bus_total_W + bus(corrected) - bus(np.asarray(p.motor_torque_Nm))
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""
@@ -226,6 +274,9 @@ class EstimatorCore:
         self.joint_fresh.mark(now_s)
         self.energy.set_measured(measured.bus_total_W, now_s)
         self.comparison = self._compare(measured)
+        p = self.prediction
+        if p is not None and self.cmd_fresh.is_fresh(now_s):
+            self.adaptation.update(now_s, p.motor_torque_Nm, p.motor_omega_rad_s, torque, omega)
         return self.comparison
 
     def _compare(self, measured: MeasuredPower) -> Comparison:
@@ -248,6 +299,13 @@ class EstimatorCore:
         self.energy.advance(now_s)
         self.energy.flush()
         self.time_to_empty_s = self.energy.time_to_empty_s()
+        self.tte_bounds.add(now_s, self.energy.power_W(now_s))
+        model_spread = 0.0
+        if self.energy.source(now_s) == 'predicted' and self.prediction is not None:
+            model_spread = self.adaptation.state().relative_residual(self.prediction.motor_torque_Nm)
+        self.time_to_empty_p10_s, self.time_to_empty_p90_s = self.tte_bounds.bounds(
+            self.battery, self.energy.filtered_power_W, model_spread
+        )
 
     def traction_warning(self) -> bool:
         """True when the last prediction's traction margin is at or below the warning margin."""
@@ -269,6 +327,9 @@ class EstimatorCore:
         )
         if outside:
             problems.append('command outside the power map: prediction clamped or limited')
+        correction = self.adaptation.state()
+        if now_s - correction.last_change_s <= TERRAIN_CHANGE_SHOWN_S:
+            problems.append('terrain changed: adaptation restarted')
         if self._implausible_s is not None and now_s - self._implausible_s <= IMPLAUSIBLE_WARN_S:
             problems.append('implausible power (beyond what the battery can deliver) skipped or clamped')
         level = LEVEL_WARN if problems else LEVEL_OK
@@ -293,6 +354,7 @@ class EstimatorCore:
         }
         if self.prediction is not None:
             values['traction_margin'] = f'{self.prediction.traction_margin:.4f}'
+        values.update(adaptation_values(correction, self.adaptation.settings.enabled))
         message = '; '.join(problems) if problems else f'ok, energy from {source} power'
         return level, message, values
 

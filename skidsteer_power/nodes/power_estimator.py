@@ -27,7 +27,12 @@ periodic (``publish_period_s``)
     key/values are every named figure (:data:`skidsteer_power.estimator.summary.SUMMARY_FIELDS`);
     ``battery/state`` sensor_msgs/BatteryState (V, A, Ah, fraction; NaN where unknown, status from
     the current's sign); ``energy/remaining_wh`` std_msgs/Float64 [Wh]; ``energy/time_to_empty_s``
-    std_msgs/Float64 [s] (inf when idle); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
+    std_msgs/Float64 [s] (inf when idle); ``energy/time_to_empty_p10_s``, ``energy/time_to_empty_p90_s``
+    std_msgs/Float64 [s] (bounds, :mod:`skidsteer_power.estimator.tte_bounds`); ``power/correction``
+    sensor_msgs/JointState whose names are the online correction's fields (units in the names) and
+    whose positions are their values (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`);
+    the terrain-change flag is in ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a
+    warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
     source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
     every ``diagnostics_period_s``.
 path energy (:mod:`skidsteer_power.nodes.path_hook`)
@@ -71,6 +76,7 @@ from std_srvs.srv import Trigger
 
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
+from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
@@ -128,6 +134,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         0.0,
         'motor torque constant for a current effort [N m/A] (0 = vehicle file)',
     ),
+    'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
+    'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
     **PATH_PARAMETERS,
 }
 
@@ -183,8 +191,15 @@ class PowerEstimator(Node):
         self.terrain_name = p['terrain']
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
+        adaptation = AdaptationSettings(
+            enabled=bool(p['adaptation']), memory_s=float(p['adaptation_memory_s'])
+        )
         self.core = EstimatorCore(
-            predictor, factory.battery_for(self.vehicle), factory.powertrain_for(self.vehicle), settings
+            predictor,
+            factory.battery_for(self.vehicle),
+            factory.powertrain_for(self.vehicle),
+            settings,
+            adaptation,
         )
         self.state_file = factory.state_path(p['state_file'], self.vehicle) if p['persist'] else None
         self._restore(p['initial_soc'])
@@ -279,6 +294,9 @@ class PowerEstimator(Node):
         self.pub_battery = pub(BatteryState, 'battery/state')
         self.pub_remaining = pub(Float64, 'energy/remaining_wh')
         self.pub_tte = pub(Float64, 'energy/time_to_empty_s')
+        self.pub_tte_p10 = pub(Float64, 'energy/time_to_empty_p10_s')
+        self.pub_tte_p90 = pub(Float64, 'energy/time_to_empty_p90_s')
+        self.pub_correction = pub(JointState, 'power/correction')
         self.pub_diag = pub(DiagnosticArray, 'diagnostics')
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
@@ -358,6 +376,10 @@ class PowerEstimator(Node):
             remaining = float(self.core.battery.remaining_wh)
             tte = float(self.core.time_to_empty_s)
             pairs = summary_key_values(self.core, now)
+            bounds = (self.core.time_to_empty_p10_s, self.core.time_to_empty_p90_s)
+            correction = JointState(
+                name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
+            )
         stamp = self.get_clock().now().to_msg()
         battery = battery_state_message(fields)
         battery.header.stamp = stamp
@@ -369,6 +391,10 @@ class PowerEstimator(Node):
         self.pub_summary.publish(summary)
         self.pub_remaining.publish(Float64(data=remaining))
         self.pub_tte.publish(Float64(data=tte))
+        self.pub_tte_p10.publish(Float64(data=float(bounds[0])))
+        self.pub_tte_p90.publish(Float64(data=float(bounds[1])))
+        correction.header.stamp = battery.header.stamp
+        self.pub_correction.publish(correction)
         self.path_energy.publish()  # the battery changed: the path margin too
 
     def _on_reset_energy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -143,6 +143,8 @@ _UNIT_KEYS: dict[str, tuple[str, float]] = {
 }
 _REQUIRED = ('n', 'kc', 'kphi', 'c', 'phi', 'K')
 _TEXT_KEYS = ('name', 'shear_type', 'source', 'description')
+# provenance and uncertainty written by `skidsteer-power calibrate` (skidsteer_power/calibration/io.py)
+_SKIPPED_KEYS = ('calibration',)
 
 
 def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain') -> Terrain:
@@ -154,7 +156,7 @@ def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain')
     name = str(data.get('name', default_name))
     fields: dict[str, Any] = {}
     for key, value in data.items():
-        if key in _TEXT_KEYS:
+        if key in _TEXT_KEYS or key in _SKIPPED_KEYS:
             continue
         if key not in _UNIT_KEYS:
             hint = " (give phi in degrees as 'phi_deg')" if key == 'phi' else ''

@@ -1,0 +1,68 @@
+"""Offline calibration: terrain (and drivetrain) parameters fitted to the user's own recordings.
+
+:func:`calibrate_bags` is the whole pipeline: read bags (:mod:`.segments`), fit (:mod:`.fit`); the
+CLI (``skidsteer-power calibrate``) writes the result with :mod:`.io`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from skidsteer_power.calibration.fit import DEFAULT_FIT, CalibrationResult, calibrate, parse_fit_list
+from skidsteer_power.calibration.segments import Segment, SegmentOptions, find_segments, read_recording
+from skidsteer_power.errors import InputError
+
+__all__ = [
+    'DEFAULT_FIT',
+    'CalibrationResult',
+    'Segment',
+    'SegmentOptions',
+    'calibrate',
+    'calibrate_bags',
+    'find_segments',
+    'parse_fit_list',
+    'read_recording',
+]
+
+
+def calibrate_bags(
+    bags: Sequence[str],
+    vehicle: str,
+    terrain: str,
+    *,
+    fit: str | Sequence[str] = DEFAULT_FIT,
+    holdout: float = 0.3,
+    seed: int = 0,
+    settle_s: float = 1.5,
+    min_segment_s: float = 1.0,
+    topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', ''),
+) -> tuple[CalibrationResult, list[Segment]]:
+    """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain`` (see fit.py)."""
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    names = parse_fit_list(fit) if isinstance(fit, str) else list(fit)
+    veh = factory.load_vehicle_config(vehicle)
+    start = load_terrain(terrain)
+    powertrain = factory.powertrain_for(veh)
+    options = SegmentOptions(
+        settle_s=settle_s,
+        min_s=min_segment_s,
+        cmd_vel_topic=topics[0],
+        joint_states_topic=topics[1],
+        odom_topic=topics[2],
+    )
+    segments: list[Segment] = []
+    dropped: dict[str, int] = {}
+    for bag in bags:
+        found, why = find_segments(read_recording(bag, options), options, powertrain.motor)
+        segments.extend(found)
+        for key, count in why.items():
+            dropped[key] = dropped.get(key, 0) + count
+    if len(segments) < 3:
+        raise InputError(
+            f'only {len(segments)} steady segment(s) in {len(bags)} bag(s) (dropped: {dropped}); '
+            'calibration needs constant commands held for longer than --settle-s + --min-segment-s'
+        )
+    result = calibrate(veh, start, powertrain, segments, names, holdout=holdout, seed=seed, dropped=dropped)
+    return result, segments

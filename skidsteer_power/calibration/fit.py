@@ -1,0 +1,460 @@
+"""Fit terrain (and drivetrain) parameters to steady segments of the user's own recordings.
+
+The model of a segment is FESS (chapter 6) solved directly at the segment's measured forward speed V
+[m/s] and yaw rate [rad/s], all segments in one batched Newton solve per parameter vector (no map is
+rebuilt), followed by the powertrain (eqs. 7.1-7.4: axle torque / G + internal resistance at the motor
+shaft). Residuals are predicted minus measured motor torque K_t i [N m], both sides of every fit
+segment.
+
+Method
+------
+* Parameters are searched in transformed coordinates z: ln(value) for the strictly positive moduli
+  (kphi, kc, c, K), the value itself for n, phi [deg] and the internal-resistance coefficients.
+  ``scipy.optimize.least_squares`` (trust-region reflective) with bounds, ``soft_l1`` loss (a robust
+  loss: a segment spoiled by a stall or a bump cannot dominate) and forward differences of 0.2 % in
+  z (FESS is solved to 1e-6 N, so the difference quotient is far above solver noise).
+* Identifiability: before fitting, the change of the torques under a 10 % change of every terrain
+  parameter (kc always included, so the report shows it) is computed at the starting terrain, and
+  the parameters are ranked by orthogonalization (:func:`select_identifiable`): a parameter whose
+  10 % change, after removing what the parameters ranked above it can explain, moves the torques by
+  less than ``ident_tol`` (RMS, N m) cannot be seen in the data: it is reported as non-identifiable
+  and kept fixed at its starting value. For small robots this is k_c: it enters only through
+  kc / b + kphi (eq. 2.1) with b ~ 0.1 m, so it matters ~1 % as much as kphi. For a track, kphi and
+  n act only through the compaction resistance (eq. 2.10), one number per load, so only one of them
+  is identifiable; the other is fixed.
+* Uncertainty: covariance of z = s^2 (J^T J)^-1 at the optimum (J the Jacobian of the raw residuals,
+  s^2 = sum r^2 / (m - p)); 95 % intervals z +- t(0.975, m - p) sigma_z mapped back to the parameter
+  (asymmetric for log parameters); covariance in the parameter's own units by the delta method; the
+  correlation matrix; a warning for every pair with |rho| > 0.95 (those two are seen only together).
+* Validation: the segments are split into fit and hold-out sets by segment (never by sample, so the
+  hold-out is not a neighbour of a fitted sample); the hold-out torque RMSE and energy error are
+  reported before (starting terrain) and after (fitted).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from skidsteer_power.calibration.segments import Segment
+from skidsteer_power.errors import InputError
+from skidsteer_power.models.fess import FessSolver
+from skidsteer_power.powertrain.internal import Resistance, SideResistance
+from skidsteer_power.powertrain.motor import terminal_power
+
+RHO_WARN = 0.95
+SOLVE_TOL_N = 1e-6  # FESS equilibrium tolerance during the fit [N, N m]
+DIFF_STEP = 2e-3  # forward-difference step in z (relative, scipy's diff_step)
+FAILED_RESIDUAL_NM = 1.0  # residual given to a segment where FESS has no steady state [N m]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A fittable parameter: ``field`` of Terrain (or an internal coefficient), unit, log search,
+    bounds in the parameter's own (reported) unit, and the factor from that unit to SI."""
+
+    unit: str
+    log: bool
+    bounds: tuple[float, float]
+    to_si: float = 1.0
+
+
+TERRAIN_PARAMS: dict[str, ParamSpec] = {
+    'kphi': ParamSpec('N/m^(n+2)', True, (1e3, 1e9)),
+    'kc': ParamSpec('N/m^(n+1)', True, (1.0, 1e7)),
+    'n': ParamSpec('-', False, (0.2, 2.0)),
+    'c': ParamSpec('Pa', True, (1.0, 5e4)),
+    'phi': ParamSpec('deg', False, (5.0, 50.0), math.pi / 180.0),
+    'K': ParamSpec('m', True, (1e-4, 0.2)),
+}
+INTERNAL_PARAMS: dict[str, ParamSpec] = {
+    'left_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
+    'left_c': ParamSpec('N m', False, (0.0, 3.0)),
+    'right_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
+    'right_c': ParamSpec('N m', False, (0.0, 3.0)),
+}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
+DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
+
+
+def parse_fit_list(text: str) -> list[str]:
+    """Comma-separated names; ``internal`` expands to the four per-side b, c. InputError if unknown."""
+    names: list[str] = []
+    for raw in text.split(','):
+        name = raw.strip()
+        if not name:
+            continue
+        expanded = list(INTERNAL_PARAMS) if name == 'internal' else [name]
+        for item in expanded:
+            if item not in PARAMS:
+                known = ', '.join([*TERRAIN_PARAMS, 'internal'])
+                raise InputError(f'--fit: unknown parameter {name!r} (known: {known})')
+            if item not in names:
+                names.append(item)
+    if not names:
+        raise InputError('--fit: no parameter named')
+    return names
+
+
+@dataclass
+class Model:
+    """Predicted motor torque and speed of every segment for a set of parameter values."""
+
+    vehicle: Any
+    terrain: Any
+    powertrain: Any
+    speed: np.ndarray  # (S,) [m/s]
+    yaw: np.ndarray  # (S,) [rad/s]
+    _warm: np.ndarray | None = field(default=None, init=False)
+
+    def start_value(self, name: str) -> float:
+        """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
+        if name in TERRAIN_PARAMS:
+            return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
+        side, kind = name.split('_')
+        total = getattr(self.powertrain, side).total
+        return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
+
+    def with_values(self, values: dict[str, float]) -> tuple[Any, Any]:
+        """(terrain, powertrain) with ``values`` (parameter units) substituted."""
+        terrain_fields = {k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS}
+        terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
+        powertrain = self.powertrain
+        sides = {}
+        for side in ('left', 'right'):
+            b, c = values.get(f'{side}_b'), values.get(f'{side}_c')
+            if b is not None or c is not None:
+                sides[side] = scaled_side(getattr(powertrain, side), b, c)
+        if sides:
+            powertrain = dataclasses.replace(powertrain, **sides)
+        return terrain, powertrain
+
+    def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(motor torque (S, 2) [N m], motor speed (S, 2) [rad/s], converged (S,)) for ``values``."""
+        terrain, powertrain = self.with_values(values)
+        sol = FessSolver(self.vehicle, terrain).solve_twist(
+            self.speed, self.yaw, x0=self._warm, tol=SOLVE_TOL_N
+        )
+        if np.all(sol.converged):
+            self._warm = sol.state
+        torque = np.empty_like(sol.torque)
+        omega = np.empty_like(sol.omega)
+        for i, side in enumerate(('left', 'right')):
+            point = powertrain.motor_side(side, sol.torque[:, i], sol.omega[:, i])
+            torque[:, i] = point.motor_torque_Nm
+            omega[:, i] = point.motor_omega_rad_s
+        return torque, omega, np.asarray(sol.converged)
+
+
+def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
+    """``side`` with total viscous ``b`` [N m s/rad] and Coulomb ``c`` [N m] (None: unchanged),
+    spread over the components in their original proportions (eqs. 7.3, 7.4 keep their meaning)."""
+    total = side.total
+    parts = {}
+    for name, part in side.components.items():
+        pb = _share(part.viscous_Nm_s, total.viscous_Nm_s, b, len(side.components))
+        pc = _share(part.coulomb_Nm, total.coulomb_Nm, c, len(side.components))
+        parts[name] = Resistance(pb, pc)
+    return SideResistance(parts)
+
+
+def _share(part: float, total: float, new_total: float | None, count: int) -> float:
+    if new_total is None:
+        return part
+    return new_total * (part / total if total > 0 else 1.0 / count)
+
+
+@dataclass
+class CalibrationResult:
+    """Everything ``calibrate`` reports (see :meth:`as_json`) and writes."""
+
+    names: list[str]  # fitted parameters, in order
+    values: dict[str, float]  # every reported parameter (fitted and fixed), parameter units
+    start: dict[str, float]
+    ci95: dict[str, tuple[float, float] | None]
+    sensitivity_Nm: dict[str, float]
+    identifiable: dict[str, bool]
+    covariance: np.ndarray  # (p, p) in parameter units
+    correlation: np.ndarray
+    correlations_warnings: list[str]
+    segments_fit: int
+    segments_holdout: int
+    torque_rmse_before_Nm: float
+    torque_rmse_after_Nm: float
+    holdout_energy_error_before: float
+    holdout_energy_error_after: float
+    residual_rms_Nm: float
+    seconds: float
+    terrain: Any
+    powertrain: Any
+    dropped: dict[str, int] = field(default_factory=dict)
+    converged: bool = True
+    measured_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (S, 2) per segment
+    before_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # predicted at the start
+    after_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # predicted when fitted
+    holdout_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    def as_json(self) -> dict[str, Any]:
+        parameters = {}
+        for name in self.values:
+            ci = self.ci95.get(name)
+            parameters[name] = {
+                'value': self.values[name],
+                'ci95': list(ci) if ci is not None else None,
+                'unit': PARAMS[name].unit,
+                'fitted': name in self.names,
+                'identifiable': self.identifiable.get(name, True),
+                'start': self.start[name],
+                'sensitivity_Nm': self.sensitivity_Nm.get(name),
+            }
+        return {
+            'parameters': parameters,
+            'correlations_warnings': self.correlations_warnings,
+            'segments_fit': self.segments_fit,
+            'segments_holdout': self.segments_holdout,
+            'torque_rmse_before_Nm': self.torque_rmse_before_Nm,
+            'torque_rmse_after_Nm': self.torque_rmse_after_Nm,
+            'holdout_energy_error_before': self.holdout_energy_error_before,
+            'holdout_energy_error_after': self.holdout_energy_error_after,
+            'seconds': self.seconds,
+            'residual_rms_Nm': self.residual_rms_Nm,
+            'correlation': {'parameters': self.names, 'matrix': self.correlation.tolist()},
+            'segments_dropped': self.dropped,
+            'optimizer_converged': self.converged,
+        }
+
+
+def _to_z(name: str, value: float) -> float:
+    return math.log(value) if PARAMS[name].log else value
+
+
+def _from_z(name: str, z: float) -> float:
+    return math.exp(z) if PARAMS[name].log else z
+
+
+def _values(names: Sequence[str], z: np.ndarray) -> dict[str, float]:
+    return {n: _from_z(n, float(v)) for n, v in zip(names, z, strict=True)}
+
+
+def select_identifiable(
+    columns: dict[str, np.ndarray], fit: Sequence[str], tol: float
+) -> tuple[list[str], dict[str, float]]:
+    """Which of ``fit`` the data can see, by orthogonalization (Yao et al. 2003).
+
+    ``columns`` maps every candidate to the torque change [N m] (all segments and sides) of a 10 %
+    change of it. Greedily pick the ``fit`` parameter whose change is largest after removing what the
+    already picked ones can explain (least-squares projection); stop when the largest unexplained RMS
+    is below ``tol`` [N m]. Returns (picked names in ``fit`` order, unexplained RMS of every
+    candidate against the picked set: for a picked one, against the others picked before it).
+    """
+    picked: list[str] = []
+    basis = np.zeros((next(iter(columns.values())).size, 0))
+    unexplained: dict[str, float] = {}
+
+    def rest(col: np.ndarray) -> np.ndarray:
+        if basis.shape[1] == 0:
+            return col
+        coef, *_ = np.linalg.lstsq(basis, col, rcond=None)
+        return col - basis @ coef
+
+    pool = [n for n in fit if n in columns]
+    while pool:
+        scores = {n: _rmse(rest(columns[n])) for n in pool}
+        best = max(scores, key=scores.__getitem__)
+        if scores[best] < tol:
+            break
+        unexplained[best] = scores[best]
+        picked.append(best)
+        pool.remove(best)
+        basis = np.column_stack([basis, columns[best]])
+    for name, col in columns.items():
+        unexplained.setdefault(name, _rmse(rest(col)))
+    return [n for n in fit if n in picked], unexplained
+
+
+def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (fit, hold-out) of ``count`` segments; hold-out ~ ``fraction`` of them, by segment."""
+    if not 0 <= fraction < 1:
+        raise InputError(f'--holdout must lie in [0, 1), got {fraction}')
+    order = np.random.default_rng(seed).permutation(count)
+    n_hold = round(fraction * count)
+    if fraction > 0 and count >= 3:
+        n_hold = max(1, n_hold)
+    return np.sort(order[n_hold:]), np.sort(order[:n_hold])
+
+
+def _energy_error(
+    segments: Sequence[Segment], idx: np.ndarray, torque: np.ndarray, omega: np.ndarray, motor: Any
+) -> float:
+    """Signed relative error of the summed terminal energy of segments ``idx`` [-] (predicted vs measured)."""
+    if idx.size == 0:
+        return math.nan
+    duration = np.array([segments[i].duration_s for i in idx])
+    measured = np.array([sum(segments[i].terminal_W) for i in idx]) @ duration
+    predicted = np.sum(np.asarray(terminal_power(motor, torque[idx], omega[idx])), axis=1) @ duration
+    return float((predicted - measured) / measured) if measured != 0 else math.nan
+
+
+def _rmse(err: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(err**2))) if err.size else math.nan
+
+
+def calibrate(
+    vehicle: Any,
+    terrain: Any,
+    powertrain: Any,
+    segments: Sequence[Segment],
+    fit: Sequence[str] = DEFAULT_FIT,
+    *,
+    holdout: float = 0.3,
+    seed: int = 0,
+    ident_tol_Nm: float | None = None,
+    dropped: dict[str, int] | None = None,
+) -> CalibrationResult:
+    """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method.
+
+    ``ident_tol_Nm`` : RMS torque change [N m] below which a 10 % parameter change counts as
+    invisible (None: 0.2 % of the RMS measured torque, at least 1e-3 N m).
+    """
+    started = time.perf_counter()
+    segments = list(segments)
+    fit_idx, hold_idx = split_holdout(len(segments), holdout, seed)
+    model = Model(
+        vehicle,
+        terrain,
+        powertrain,
+        np.array([s.speed_m_s for s in segments]),
+        np.array([s.yaw_rate_rad_s for s in segments]),
+    )
+    measured = np.array([s.motor_torque_Nm for s in segments])
+    candidates = list(dict.fromkeys([*fit, *[k for k in TERRAIN_PARAMS if k not in fit]]))
+    start = {n: model.start_value(n) for n in candidates}
+    for name in fit:
+        lo, hi = PARAMS[name].bounds
+        if not lo <= start[name] <= hi:
+            raise InputError(
+                f'starting {name} = {start[name]:.6g} {PARAMS[name].unit} '
+                f'is outside the fit bounds [{lo:g}, {hi:g}]'
+            )
+    # sensitivity of the torques to a 10 % change of every candidate, at the start
+    base_torque, base_omega, base_ok = model.predict({})
+    if not np.all(base_ok):
+        bad = np.flatnonzero(~base_ok)
+        raise InputError(
+            f'FESS has no steady state on the starting terrain for {bad.size} segment(s), e.g. '
+            f'V = {model.speed[bad[0]]:.3g} m/s, yaw rate {model.yaw[bad[0]]:.3g} rad/s: '
+            'choose a closer --terrain'
+        )
+    rms_measured = float(np.sqrt(np.mean(measured**2)))
+    tol = ident_tol_Nm if ident_tol_Nm is not None else max(1e-3, 0.002 * rms_measured)
+    columns: dict[str, np.ndarray] = {}
+    for name in candidates:
+        step = 0.1 * start[name] if start[name] != 0 else 0.01
+        torque, _, ok = model.predict({name: start[name] + step})
+        columns[name] = np.where(ok[:, None], torque - base_torque, 0.0).ravel()
+    sensitivity = {n: _rmse(col) for n, col in columns.items()}
+    names, unexplained = select_identifiable(columns, fit, tol)
+    identifiable = {n: bool(unexplained[n] >= tol) for n in candidates}
+    if not names:
+        raise InputError('no parameter in --fit changes the predicted torque visibly on these segments')
+    m, p = 2 * fit_idx.size, len(names)
+    if m <= p:
+        raise InputError(f'{fit_idx.size} fit segment(s) give {m} torques: too few for {p} parameters')
+
+    z0 = np.array([_to_z(n, start[n]) for n in names])
+    lower = np.array(
+        [
+            _to_z(n, PARAMS[n].bounds[0]) if PARAMS[n].bounds[0] > 0 or not PARAMS[n].log else -np.inf
+            for n in names
+        ]
+    )
+    upper = np.array([_to_z(n, PARAMS[n].bounds[1]) for n in names])
+    z0 = np.clip(z0, lower + 1e-9, upper - 1e-9)
+
+    def residuals(z: np.ndarray) -> np.ndarray:
+        torque, _, ok = model.predict(_values(names, z))
+        err = torque[fit_idx] - measured[fit_idx]
+        err[~ok[fit_idx]] = FAILED_RESIDUAL_NM
+        return err.ravel()
+
+    sol = optimize.least_squares(
+        residuals,
+        z0,
+        bounds=(lower, upper),
+        loss='soft_l1',
+        f_scale=max(tol, 0.02 * rms_measured),
+        x_scale='jac',
+        diff_step=DIFF_STEP,
+        method='trf',
+        max_nfev=60 * (p + 1),
+    )
+    fitted = _values(names, sol.x)
+    r = residuals(sol.x)
+    jac = sol.jac
+    dof = max(1, m - p)
+    s2 = float(r @ r) / dof
+    cov_z = s2 * np.linalg.pinv(jac.T @ jac)
+    sigma_z = np.sqrt(np.clip(np.diag(cov_z), 0.0, None))
+    t = float(stats.t.ppf(0.975, dof))
+    ci95: dict[str, tuple[float, float] | None] = {}
+    deriv = np.empty(p)
+    for k, name in enumerate(names):
+        lo = _from_z(name, sol.x[k] - t * sigma_z[k])
+        hi = _from_z(name, sol.x[k] + t * sigma_z[k])
+        ci95[name] = (lo, hi)
+        deriv[k] = fitted[name] if PARAMS[name].log else 1.0
+    covariance = cov_z * np.outer(deriv, deriv)  # delta method, parameter units
+    with np.errstate(invalid='ignore', divide='ignore'):
+        correlation = cov_z / np.outer(sigma_z, sigma_z)
+    correlation = np.nan_to_num(np.clip(correlation, -1.0, 1.0))
+    warnings = [
+        f'{names[i]} and {names[j]} are strongly correlated (rho = {correlation[i, j]:+.3f}): '
+        'the data fix only a combination of the two'
+        for i in range(p)
+        for j in range(i + 1, p)
+        if abs(correlation[i, j]) > RHO_WARN
+    ]
+    after_torque, after_omega, after_ok = model.predict(fitted)
+    err_idx = hold_idx if hold_idx.size else fit_idx
+    values = {n: fitted.get(n, start[n]) for n in candidates}
+    for n in candidates:
+        ci95.setdefault(n, None)
+    terrain_fit, powertrain_fit = model.with_values(fitted)
+    return CalibrationResult(
+        names=names,
+        values=values,
+        start=start,
+        ci95=ci95,
+        sensitivity_Nm=sensitivity,
+        identifiable=identifiable,
+        covariance=covariance,
+        correlation=correlation,
+        correlations_warnings=warnings,
+        segments_fit=int(fit_idx.size),
+        segments_holdout=int(hold_idx.size),
+        torque_rmse_before_Nm=_rmse(base_torque[err_idx] - measured[err_idx]),
+        torque_rmse_after_Nm=_rmse(after_torque[err_idx] - measured[err_idx]),
+        holdout_energy_error_before=_energy_error(
+            segments, hold_idx, base_torque, base_omega, powertrain.motor
+        ),
+        holdout_energy_error_after=_energy_error(
+            segments, hold_idx, after_torque, after_omega, powertrain_fit.motor
+        ),
+        residual_rms_Nm=_rmse(r),
+        seconds=time.perf_counter() - started,
+        terrain=terrain_fit,
+        powertrain=powertrain_fit,
+        dropped=dict(dropped or {}),
+        converged=bool(sol.success) and bool(np.all(after_ok)),
+        measured_Nm=measured,
+        before_Nm=base_torque,
+        after_Nm=after_torque,
+        holdout_index=hold_idx,
+    )

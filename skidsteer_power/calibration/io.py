@@ -1,0 +1,175 @@
+"""Calibrated terrain and powertrain files, and reading a calibration's covariance back.
+
+The terrain file has the format of ``config/terrains/*.yaml`` (so ``load_terrain`` reads it wherever a
+terrain is accepted: solve, map, estimator, missions), with SI keys (n, kc [N/m^(n+1)], kphi
+[N/m^(n+2)], c [Pa], phi_deg [deg], K [m]) and one extra top-level mapping, which ``load_terrain``
+skips::
+
+    calibration:
+      parameters: [n, phi, K]          # fitted Terrain fields, in this order
+      units: ['-', deg, m]             # units of values and covariance (phi in degrees, as phi_deg)
+      values: [...]                    # the fitted values (= the file's fields, in these units)
+      covariance: [[...], ...]         # 95 % CIs = value +- 1.96 sqrt(diag) approximately
+      ci95: {n: [lo, hi], ...}
+      fixed: [kphi, c, kc]             # not identifiable from the data: left at the start value
+      bags: [...]; date: ISO 8601 UTC; residual_rms_Nm: fit residual (motor torque RMS)
+      start_terrain: name of T0; segments_fit, segments_holdout
+      powertrain_parameters / powertrain_covariance: when internal resistance was fitted
+
+The covariance of a log-searched parameter is the delta-method linearization (see ``fit.py``).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from skidsteer_power.calibration.fit import INTERNAL_PARAMS, PARAMS, TERRAIN_PARAMS, CalibrationResult
+from skidsteer_power.errors import ConfigError
+from skidsteer_power.terramechanics.terrain import load_terrain
+
+
+def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], list[list[float]]]:
+    index = [result.names.index(n) for n in names]
+    cov = result.covariance[np.ix_(index, index)]
+    return [float(result.values[n]) for n in names], [[float(v) for v in row] for row in cov]
+
+
+def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name: str) -> dict[str, Any]:
+    """The ``calibration:`` mapping written into the terrain file (see module doc)."""
+    terrain_names = [n for n in result.names if n in TERRAIN_PARAMS]
+    values, cov = _block(result, terrain_names)
+    block: dict[str, Any] = {
+        'parameters': terrain_names,
+        'units': [PARAMS[n].unit for n in terrain_names],
+        'values': values,
+        'covariance': cov,
+        'ci95': {n: [float(v) for v in result.ci95[n]] for n in terrain_names if result.ci95.get(n)},
+        'fixed': [n for n in TERRAIN_PARAMS if n not in result.names],
+        'correlations_warnings': list(result.correlations_warnings),
+        'bags': [str(Path(b).resolve()) for b in bags],
+        'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
+        'residual_rms_Nm': float(result.residual_rms_Nm),
+        'start_terrain': start_name,
+        'segments_fit': result.segments_fit,
+        'segments_holdout': result.segments_holdout,
+    }
+    internal = [n for n in result.names if n in INTERNAL_PARAMS]
+    if internal:
+        block['powertrain_parameters'] = internal
+        block['powertrain_units'] = [PARAMS[n].unit for n in internal]
+        block['powertrain_values'], block['powertrain_covariance'] = _block(result, internal)
+    return block
+
+
+def terrain_mapping(terrain: Any) -> dict[str, Any]:
+    """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``)."""
+    data: dict[str, Any] = {
+        'name': terrain.name,
+        'n': float(terrain.n),
+        'kc': float(terrain.kc),
+        'kphi': float(terrain.kphi),
+        'c': float(terrain.c),
+        'phi_deg': math.degrees(terrain.phi),
+        'K': float(terrain.K),
+        'shear_type': terrain.shear_type,
+    }
+    for key in ('Kr', 'Kw'):
+        if getattr(terrain, key) is not None:
+            data[key] = float(getattr(terrain, key))
+    for key in ('a0', 'a1', 'b0', 'b1'):
+        data[key] = float(getattr(terrain, key))
+    return data
+
+
+def write_terrain(
+    path: str | Path, result: CalibrationResult, bags: Sequence[str], start_name: str, name: str
+) -> Path:
+    """Write the calibrated terrain YAML; returns the path. Re-reads it with ``load_terrain`` as a check."""
+    out = Path(path)
+    data = terrain_mapping(result.terrain)
+    data['name'] = name
+    data['source'] = (
+        f'calibrated from {len(bags)} bag(s) starting at {start_name} (skidsteer-power calibrate)'
+    )
+    data['calibration'] = calibration_block(result, bags, start_name)
+    header = '# Written by `skidsteer-power calibrate`: SI keys; see skidsteer_power/calibration/io.py.\n'
+    out.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding='utf-8')
+    load_terrain(out)
+    return out
+
+
+def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence[str]) -> Path:
+    """Write the calibrated powertrain in the format of ``config/powertrains/*.yaml``."""
+    pt = result.powertrain
+    sides = {
+        side: {
+            name: {'viscous_Nm_s': float(part.viscous_Nm_s), 'coulomb_Nm': float(part.coulomb_Nm)}
+            for name, part in getattr(pt, side).components.items()
+        }
+        for side in ('left', 'right')
+    }
+    internal = [n for n in result.names if n in INTERNAL_PARAMS]
+    data: dict[str, Any] = {
+        'name': f'{pt.name}_calibrated',
+        'source': f'{pt.name} with the internal resistance of {len(bags)} bag(s) '
+        '(skidsteer-power calibrate); '
+        'each side total spread over the components in the original proportions',
+        'motor': next(k for k, v in _motors().items() if v == pt.motor),
+        'amplifier': next(k for k, v in _amplifiers().items() if v == pt.amplifier),
+        'gear_ratio': float(pt.gear_ratio),
+        'regen_efficiency': pt.regen_efficiency,
+        'internal_resistance': sides,
+        'battery': pt.battery,
+    }
+    if internal:
+        values, cov = _block(result, internal)
+        data['calibration'] = {
+            'parameters': internal,
+            'units': [PARAMS[n].unit for n in internal],
+            'values': values,
+            'covariance': cov,
+            'bags': [str(Path(b).resolve()) for b in bags],
+            'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
+            'residual_rms_Nm': float(result.residual_rms_Nm),
+        }
+    out = Path(path)
+    out.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding='utf-8')
+    return out
+
+
+def _motors() -> dict[str, Any]:
+    from skidsteer_power.powertrain.drivetrain import MOTORS
+
+    return MOTORS
+
+
+def _amplifiers() -> dict[str, Any]:
+    from skidsteer_power.powertrain.drivetrain import AMPLIFIERS
+
+    return AMPLIFIERS
+
+
+def read_calibration(path: str | Path) -> tuple[Any, list[str], np.ndarray, np.ndarray]:
+    """(terrain, parameter names, values, covariance) of a calibrated terrain file, in the block's units.
+
+    ConfigError when the file has no usable ``calibration:`` block.
+    """
+    terrain = load_terrain(path)
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+        block = data['calibration']
+        names = [str(n) for n in block['parameters']]
+        values = np.array([float(getattr(terrain, n)) / PARAMS[n].to_si for n in names])
+        cov = np.array(block['covariance'], dtype=float).reshape(len(names), len(names))
+    except (KeyError, TypeError, ValueError) as err:
+        raise ConfigError(f'{path}: no usable calibration block ({err})') from err
+    if not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-6, atol=0):
+        raise ConfigError(f'{path}: calibration covariance must be a finite symmetric matrix')
+    return terrain, names, values, cov

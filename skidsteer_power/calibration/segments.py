@@ -1,0 +1,242 @@
+"""Steady segments of a drive recording: constant command, settled motion, averaged measurements.
+
+Calibration compares the model with the robot only where both describe the same thing: a steady
+state (chapter 3: the skid-steer models solve for steady turning). A segment is a run of identical
+``cmd_vel`` commands (no gap longer than ``gap_s``); its first ``settle_s`` seconds are dropped
+(acceleration and sinkage transients), and what is left must be at least ``min_s`` long and settled:
+the mean motor speed of each side may differ between the window's two halves by no more than
+``settle_tol`` of its value (or 2 rad/s at the motor, whichever is larger).
+
+The measured motion of a segment (see :class:`SegmentOptions` for which topic) is the mean body
+twist of ``nav_msgs/Odometry`` (linear.x [m/s], angular.z [rad/s], REP 103) over the window, or, for
+pose-only topics (PoseStamped), the path length over time and the slope of the unwrapped heading
+from the orientation quaternion. Without any pose topic the command itself is used (and the segment
+says so).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from skidsteer_power.bags.decode import decode_joint_states, decode_twists
+from skidsteer_power.bags.reader import BagReader, open_bag
+from skidsteer_power.errors import InputError
+from skidsteer_power.powertrain.motor import EC45, MotorConstants, terminal_power
+
+POSE_TYPES = (
+    'nav_msgs/msg/Odometry',
+    'geometry_msgs/msg/PoseStamped',
+    'geometry_msgs/msg/PoseWithCovarianceStamped',
+)
+JOINTS = ('left_motor', 'right_motor')
+
+
+@dataclass(frozen=True)
+class SegmentOptions:
+    """How segments are cut (times in s, tolerances relative unless stated).
+
+    settle_s : start of each constant-command run left out [s]; min_s : shortest window kept [s];
+    gap_s : a pause in commands longer than this ends a run [s]; cmd_tol : commands closer than this
+    (m/s, rad/s) are the same command; settle_tol : allowed relative drift of the mean motor speed
+    between the window's halves [-]; odom_topic : pose/odometry topic ('' = ground truth if the bag
+    has a ``*ground_truth*`` topic, else /odom, else any pose topic). Wheel odometry dead-reckons
+    from the motor speeds, so it does not see slip: the FESS would be solved at the wrong (V, R).
+    """
+
+    settle_s: float = 1.5
+    min_s: float = 1.0
+    gap_s: float = 1.0
+    cmd_tol: float = 1e-3
+    settle_tol: float = 0.05
+    cmd_vel_topic: str = '/cmd_vel'
+    joint_states_topic: str = '/joint_states'
+    odom_topic: str = ''
+
+
+@dataclass
+class Recording:
+    """Decoded inputs of one bag; times in s from the bag's start."""
+
+    source: str
+    cmd_t: np.ndarray
+    cmd: np.ndarray  # (n, 2) V [m/s], yaw rate [rad/s]
+    js_t: np.ndarray
+    omega: np.ndarray  # (n, 2) motor shaft speed [rad/s]
+    torque: np.ndarray  # (n, 2) Kt*I [N m]
+    pose_t: np.ndarray
+    pose_xy: np.ndarray  # (n, 2) [m]
+    pose_yaw: np.ndarray  # (n,) heading [rad]
+    twist: np.ndarray | None  # (n, 2) odometry body twist V [m/s], yaw rate [rad/s], or None
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One steady segment, SI units, per side (left, right) where a pair.
+
+    speed_m_s, yaw_rate_rad_s : measured motion (``motion_source`` says from what) [m/s], [rad/s]
+    command : the commanded (V, yaw rate); duration_s : window length [s]; samples : joint_states
+    count; motor_torque_Nm, motor_omega_rad_s : window means at the motor shaft [N m], [rad/s];
+    torque_std_Nm : sample standard deviation of the torque [N m]; terminal_W : mean motor
+    terminal power with copper loss [W]; source : bag path.
+    """
+
+    source: str
+    start_s: float
+    duration_s: float
+    command: tuple[float, float]
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    motion_source: str
+    samples: int
+    motor_torque_Nm: tuple[float, float]
+    motor_omega_rad_s: tuple[float, float]
+    torque_std_Nm: tuple[float, float]
+    terminal_W: tuple[float, float] = (math.nan, math.nan)
+
+
+def _pose_topic(bag: BagReader, wanted: str) -> str:
+    """``wanted`` if given; else ground truth first (it sees slip), then /odom, then any pose topic."""
+    poses = [t for t, info in bag.topics.items() if info.msgtype in POSE_TYPES]
+    if wanted:
+        if wanted not in poses:
+            raise InputError(f'{bag.path}: no odometry or pose topic {wanted} ({", ".join(POSE_TYPES)})')
+        return wanted
+    truth = [t for t in poses if 'ground_truth' in t]
+    return next(iter([*truth, *[t for t in poses if t == '/odom'], *poses]), '')
+
+
+def _quaternion_yaw(q: object) -> float:
+    x, y, z, w = (float(getattr(q, k)) for k in ('x', 'y', 'z', 'w'))
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _decode_poses(bag: BagReader, topic: str, t0: int) -> tuple[np.ndarray, ...]:
+    msgtype = bag.topics[topic].msgtype
+    odometry = msgtype == 'nav_msgs/msg/Odometry'
+    nested = odometry or msgtype == 'geometry_msgs/msg/PoseWithCovarianceStamped'
+    t, xy, yaw, twist = [], [], [], []
+    for message in bag.messages([topic]):
+        msg = bag.deserialize(message)
+        pose = msg.pose.pose if nested else msg.pose
+        t.append((message.timestamp_ns - t0) * 1e-9)
+        xy.append((pose.position.x, pose.position.y))
+        yaw.append(_quaternion_yaw(pose.orientation))
+        if odometry:
+            twist.append((msg.twist.twist.linear.x, msg.twist.twist.angular.z))
+    twist_arr = np.array(twist, dtype=float).reshape(-1, 2) if odometry else None
+    return np.array(t), np.array(xy, dtype=float).reshape(-1, 2), np.array(yaw), twist_arr
+
+
+def read_recording(path: str | Path, options: SegmentOptions | None = None) -> Recording:
+    """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if one is missing."""
+    options = options or SegmentOptions()
+    with open_bag(Path(path)) as bag:
+        t0 = bag.start_ns
+        if options.cmd_vel_topic not in bag.topics:
+            raise InputError(f'{path}: no {options.cmd_vel_topic} topic: no commands to cut segments from')
+        if options.joint_states_topic not in bag.topics:
+            raise InputError(f'{path}: no {options.joint_states_topic} topic: no motor effort to fit to')
+        cmd_t, cmd = decode_twists(bag, options.cmd_vel_topic, t0)
+        js_t, omega, torque, ok = decode_joint_states(bag, options.joint_states_topic, t0, JOINTS)
+        topic = _pose_topic(bag, options.odom_topic)
+        if topic:
+            pose_t, pose_xy, pose_yaw, twist = _decode_poses(bag, topic, t0)
+        else:
+            pose_t, pose_xy, pose_yaw, twist = np.zeros(0), np.zeros((0, 2)), np.zeros(0), None
+    good = ok & np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(torque), axis=1)
+    return Recording(
+        str(path), cmd_t, cmd, js_t[good], omega[good], torque[good], pose_t, pose_xy, pose_yaw, twist
+    )
+
+
+def command_runs(
+    cmd_t: np.ndarray, cmd: np.ndarray, options: SegmentOptions
+) -> list[tuple[float, float, int]]:
+    """(start [s], end [s], index of a command) of each run of identical commands."""
+    if cmd_t.size == 0:
+        return []
+    change = np.any(np.abs(np.diff(cmd, axis=0)) > options.cmd_tol, axis=1)
+    gap = np.diff(cmd_t) > options.gap_s
+    breaks = np.flatnonzero(change | gap) + 1
+    starts = np.r_[0, breaks]
+    ends = np.r_[breaks, cmd_t.size]
+    period = float(np.median(np.diff(cmd_t))) if cmd_t.size > 1 else 0.0
+    runs = []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        # a run lasts until the next (different) command, or one period after its last if it ends
+        # in a gap or the bag's end
+        end = cmd_t[b] if b < cmd_t.size and not gap[b - 1] else cmd_t[b - 1] + period
+        runs.append((float(cmd_t[a]), float(end), a))
+    return runs
+
+
+def _measured_motion(
+    rec: Recording, lo: float, hi: float, command: tuple[float, float]
+) -> tuple[float, float, str]:
+    sel = (rec.pose_t >= lo) & (rec.pose_t <= hi)
+    if np.count_nonzero(sel) < 3:
+        return command[0], command[1], 'command'
+    if rec.twist is not None:
+        v, w = rec.twist[sel].mean(axis=0)
+        return float(v), float(w), 'odometry twist'
+    t, xy = rec.pose_t[sel], rec.pose_xy[sel]
+    heading = np.unwrap(rec.pose_yaw[sel])
+    yaw_rate = float(np.polyfit(t - t[0], heading, 1)[0])
+    path = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+    speed = math.copysign(path / max(t[-1] - t[0], 1e-9), command[0] if command[0] != 0 else 1.0)
+    return speed, yaw_rate, 'pose'
+
+
+def find_segments(
+    rec: Recording, options: SegmentOptions | None = None, motor: MotorConstants = EC45
+) -> tuple[list[Segment], dict[str, int]]:
+    """Steady segments of ``rec`` and the count of runs dropped per reason (``motor``: for power)."""
+    options = options or SegmentOptions()
+    dropped = {'standing': 0, 'too_short': 0, 'not_settled': 0}
+    segments = []
+    for start, end, k in command_runs(rec.cmd_t, rec.cmd, options):
+        command = (float(rec.cmd[k, 0]), float(rec.cmd[k, 1]))
+        if abs(command[0]) <= options.cmd_tol and abs(command[1]) <= options.cmd_tol:
+            dropped['standing'] += 1
+            continue
+        lo, hi = start + options.settle_s, end
+        sel = (rec.js_t >= lo) & (rec.js_t < hi)
+        n = int(np.count_nonzero(sel))
+        if hi - lo < options.min_s or n < 6:
+            dropped['too_short'] += 1
+            continue
+        omega, torque = rec.omega[sel], rec.torque[sel]
+        half = n // 2
+        first, second = omega[:half].mean(axis=0), omega[half:].mean(axis=0)
+        allowed = np.maximum(options.settle_tol * np.abs(omega.mean(axis=0)), 2.0)
+        if np.any(np.abs(first - second) > allowed):
+            dropped['not_settled'] += 1
+            continue
+        speed, yaw_rate, motion = _measured_motion(rec, lo, hi, command)
+        segments.append(
+            Segment(
+                source=rec.source,
+                start_s=lo,
+                duration_s=hi - lo,
+                command=command,
+                speed_m_s=speed,
+                yaw_rate_rad_s=yaw_rate,
+                motion_source=motion,
+                samples=n,
+                motor_torque_Nm=tuple(torque.mean(axis=0).tolist()),  # type: ignore[arg-type]
+                motor_omega_rad_s=tuple(omega.mean(axis=0).tolist()),  # type: ignore[arg-type]
+                torque_std_Nm=tuple(torque.std(axis=0, ddof=1).tolist()),  # type: ignore[arg-type]
+                terminal_W=_mean_terminal_power(rec, sel, motor),
+            )
+        )
+    return segments, dropped
+
+
+def _mean_terminal_power(rec: Recording, sel: np.ndarray, motor: MotorConstants) -> tuple[float, float]:
+    """Mean motor terminal power per side over the window [W] (with copper loss, as measured.py)."""
+    mean = np.asarray(terminal_power(motor, rec.torque[sel], rec.omega[sel])).mean(axis=0)
+    return float(mean[0]), float(mean[1])

@@ -1,0 +1,131 @@
+"""``skidsteer-power calibrate BAG [BAG ...]``: fit terrain (and internal resistance) to recordings.
+
+JSON keys: parameters (name -> {value, ci95: [lo, hi] | null, unit, fitted, identifiable, start,
+sensitivity_Nm}), correlations_warnings, segments_fit, segments_holdout, torque_rmse_before_Nm,
+torque_rmse_after_Nm (hold-out segments; the fit segments when there is no hold-out),
+holdout_energy_error_before, holdout_energy_error_after (signed fractions: predicted / measured - 1
+of the hold-out segments' motor terminal energy), seconds, residual_rms_Nm, correlation,
+segments_dropped, optimizer_converged, out_terrain, out_powertrain. Method:
+:mod:`skidsteer_power.calibration.fit`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float
+from skidsteer_power.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        'calibrate',
+        help='fit terrain parameters (and internal resistance) to recorded drives; write a terrain YAML',
+        description='Find the steady segments of the bags (constant command, settled motion), solve FESS at '
+        'their measured speed and yaw rate, and fit the identifiable terrain parameters to the measured '
+        'motor torque by robust least squares, with 95 %% confidence intervals and a hold-out check.',
+    )
+    parser.add_argument('bags', nargs='+', metavar='BAG', help='rosbag2 bags (MCAP or sqlite3)')
+    parser.add_argument('--vehicle', required=True, help='vehicle name in config/vehicles/ or YAML file')
+    parser.add_argument('--terrain', required=True, help='starting terrain T0: preset name or YAML file')
+    parser.add_argument(
+        '--fit',
+        default='kphi,n,c,phi,K',
+        help='comma-separated parameters to fit (kphi, kc, n, c, phi, K, '
+        'internal = per-side internal resistance b, c); default kphi,n,c,phi,K',
+    )
+    parser.add_argument(
+        '--holdout', type=nonnegative_float, default=0.3, help='fraction of segments held out'
+    )
+    parser.add_argument('--seed', type=int, default=0, help='seed of the hold-out split')
+    parser.add_argument('--out-terrain', required=True, help='calibrated terrain YAML to write')
+    parser.add_argument(
+        '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal)'
+    )
+    parser.add_argument('--name', help='name of the calibrated terrain (default: the output file stem)')
+    parser.add_argument(
+        '--settle-s', type=nonnegative_float, default=1.5, help='start of each segment dropped [s]'
+    )
+    parser.add_argument(
+        '--min-segment-s', type=nonnegative_float, default=1.0, help='shortest segment kept [s]'
+    )
+    parser.add_argument('--cmd-vel-topic', default='/cmd_vel')
+    parser.add_argument('--joint-states-topic', default='/joint_states')
+    parser.add_argument(
+        '--odom-topic',
+        default='',
+        help='odometry or ground-truth pose topic (default: a *ground_truth* topic if any, else /odom)',
+    )
+    parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
+    add_json_flag(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from skidsteer_power.calibration import calibrate_bags, io
+
+    started = time.perf_counter()
+    for bag in args.bags:
+        if not Path(bag).exists():
+            raise InputError(f'{bag}: no such file or directory')
+    out = Path(args.out_terrain)
+    if out.suffix.lower() not in ('.yaml', '.yml'):
+        raise InputError(f'--out-terrain must be a .yaml file, not {out}')
+    if args.out_powertrain and 'internal' not in args.fit:
+        raise InputError('--out-powertrain needs internal in --fit')
+    result, segments = calibrate_bags(
+        args.bags,
+        args.vehicle,
+        args.terrain,
+        fit=args.fit,
+        holdout=args.holdout,
+        seed=args.seed,
+        settle_s=args.settle_s,
+        min_segment_s=args.min_segment_s,
+        topics=(args.cmd_vel_topic, args.joint_states_topic, args.odom_topic),
+    )
+    result.seconds = time.perf_counter() - started
+    name = args.name or out.stem
+    io.write_terrain(out, result, args.bags, str(args.terrain), name)
+    payload: dict[str, Any] = result.as_json()
+    payload['out_terrain'] = str(out)
+    payload['out_powertrain'] = None
+    if args.out_powertrain:
+        payload['out_powertrain'] = str(io.write_powertrain(args.out_powertrain, result, args.bags))
+    if args.plot:
+        from skidsteer_power.calibration.plots import plot_segments
+
+        plot_segments(args.plot, result, segments)
+    if args.json:
+        emit(payload, True)
+    else:
+        _print_human(payload)
+    return 0
+
+
+def _fmt(value: Any) -> str:
+    return f'{value:.4g}' if isinstance(value, float) else str(value)
+
+
+def _print_human(payload: dict[str, Any]) -> None:
+    print(f'{"parameter":<17}{"value":>12}  {"95 % CI":<26}{"unit":<12}status')
+    for name, p in payload['parameters'].items():
+        ci = f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}]' if p['ci95'] else '-'
+        status = 'fitted' if p['fitted'] else ('fixed' if p['identifiable'] else 'fixed: not identifiable')
+        print(f'{name:<17}{_fmt(p["value"]):>12}  {ci:<26}{p["unit"]:<12}{status}')
+    for warning in payload['correlations_warnings']:
+        print(f'warning: {warning}')
+    print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out')
+    print(
+        'hold-out torque RMSE: '
+        f'{payload["torque_rmse_before_Nm"]:.4g} -> {payload["torque_rmse_after_Nm"]:.4g} N m; energy error: '
+        f'{payload["holdout_energy_error_before"]:+.1%} -> {payload["holdout_energy_error_after"]:+.1%}'
+    )
+    print(
+        f'wrote {payload["out_terrain"]}'
+        + (f' and {payload["out_powertrain"]}' if payload['out_powertrain'] else '')
+    )
+    print(f'{payload["seconds"]:.1f} s')

@@ -1,0 +1,265 @@
+"""Online adaptation of the torque prediction, and a terrain-change detector (pure, no ROS).
+
+Correction
+----------
+Per side, the measured motor torque K_t i [N m] is modelled as a scale and an offset of the
+predicted one: ``T_meas = a T_pred + b``. (a, b) are estimated by recursive least squares with
+exponential forgetting; the forgetting is set by a memory time ``memory_s`` [s] (a sample dt seconds
+old weighs exp(-dt / memory_s)), so the estimate does not depend on the joint_states rate. Under a
+constant command the regressor (T_pred, 1) does not excite both directions and plain forgetting
+would blow the covariance up (wind-up); the covariance is therefore capped at its initial trace.
+Only settled motion is used: the command has been held ``settle_s`` [s] and the measured motor speed
+is within ``speed_tol`` of the predicted one (no acceleration, no stall). The model's error differs
+from one command to the next (a turn is not a straight run), so when a new command has settled the
+covariance is reset to its initial value (the correction re-converges in a fraction of a second)
+and the change detector waits ``warmup_s`` [s]: a new command is not a new terrain.
+
+Change detector
+---------------
+Each settled sample's innovation (measured minus corrected torque, before the update) is normalized
+by its scale sigma = max(running RMS innovation, ``sigma_rel`` |T_pred|, ``sigma_floor_Nm``) and fed
+to a two-sided CUSUM per side (Page 1954): g+ = max(0, g+ + z - k), g- = max(0, g- - z - k). When
+either side's statistic passes ``cusum_h``, the terrain is flagged as changed, and the adaptation
+restarts from (a, b) = (1, 0) with its initial covariance (and waits ``warmup_s`` again). The running
+RMS is updated only outside the warm-up and from samples with |z| < 3, so a change cannot inflate it
+and hide itself. So a change is flagged while a command is held; one that coincides with a new
+command is absorbed into that command's correction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skidsteer_power.errors import ConfigError
+
+SIDES = ('left', 'right')
+
+
+@dataclass(frozen=True)
+class AdaptationSettings:
+    """Tunables (the node declares each as a parameter).
+
+    enabled : adapt at all; memory_s : forgetting time constant [s]; settle_s : command hold before
+    samples count [s]; warmup_s : settled time after a new command or a restart before the change
+    detector runs [s]; speed_tol : allowed relative difference of measured and predicted motor
+    speed [-]; cusum_k : CUSUM drift allowance [sigma]; cusum_h : CUSUM alarm threshold [sigma];
+    sigma_rel : least residual scale relative to the predicted torque [-]; sigma_floor_Nm : least
+    residual scale [N m]; scale_limits : the scale a is kept within these [-].
+    """
+
+    enabled: bool = True
+    memory_s: float = 10.0
+    settle_s: float = 1.0
+    warmup_s: float = 1.0
+    speed_tol: float = 0.3
+    cusum_k: float = 0.5
+    cusum_h: float = 10.0
+    sigma_rel: float = 0.03
+    sigma_floor_Nm: float = 0.01
+    scale_limits: tuple[float, float] = (0.2, 5.0)
+
+    def __post_init__(self) -> None:
+        for name in ('memory_s', 'settle_s', 'speed_tol', 'cusum_h', 'sigma_floor_Nm'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f'adaptation {name} must be a finite number > 0, got {value!r}')
+        for name in ('cusum_k', 'sigma_rel'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ConfigError(f'adaptation {name} must be a finite number >= 0, got {value!r}')
+
+
+P0 = np.diag([100.0, 1.0])  # initial covariance of (a [-], b [N m]): a weak prior (+-10, +-1 N m)
+
+
+@dataclass
+class SideEstimator:
+    """RLS of (scale a [-], offset b [N m]) and the CUSUM statistics of one side."""
+
+    theta: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0]))
+    P: np.ndarray = field(default_factory=lambda: P0.copy())
+    ms_innovation: float = math.nan  # running mean square innovation [N m^2]
+    g_pos: float = 0.0
+    g_neg: float = 0.0
+    samples: int = 0
+
+    def reset(self) -> None:
+        self.theta = np.array([1.0, 0.0])
+        self.P = P0.copy()
+        self.ms_innovation = math.nan
+        self.g_pos = self.g_neg = 0.0
+        self.samples = 0
+
+    def corrected(self, predicted: float) -> float:
+        return float(self.theta[0] * predicted + self.theta[1])
+
+
+@dataclass(frozen=True)
+class Correction:
+    """The current correction (per side, left, right) and the detector's state.
+
+    scale : a [-]; offset_Nm : b [N m]; residual_rms_Nm : running RMS innovation [N m] (NaN before
+    any settled sample); cusum : larger CUSUM statistic per side [sigma]; samples : settled samples
+    since the last restart; terrain_changes : how many changes were flagged; last_change_s : time of
+    the last one [s] (NaN if none); settled : the last sample was used.
+    """
+
+    scale: tuple[float, float]
+    offset_Nm: tuple[float, float]
+    residual_rms_Nm: tuple[float, float]
+    cusum: tuple[float, float]
+    samples: int
+    terrain_changes: int
+    last_change_s: float
+    settled: bool
+
+    def relative_residual(self, predicted_Nm: tuple[float, float]) -> float:
+        """Residual RMS relative to the mean |predicted torque| [-] (NaN when unknown)."""
+        scale = float(np.mean(np.abs(predicted_Nm)))
+        rms = float(np.sqrt(np.nanmean(np.square(self.residual_rms_Nm)))) if self.samples else math.nan
+        return rms / scale if scale > 1e-9 else math.nan
+
+
+class TorqueAdaptation:
+    """Per-side RLS correction with CUSUM change detection; feed :meth:`update` per joint_states."""
+
+    def __init__(self, settings: AdaptationSettings | None = None) -> None:
+        self.settings = settings or AdaptationSettings()
+        self.sides = (SideEstimator(), SideEstimator())
+        self.terrain_changes = 0
+        self.last_change_s = math.nan
+        self._command: tuple[float, float] | None = None
+        self._command_since = math.nan
+        self._last_update_s = math.nan
+        self._settled = False
+        self._new_command = True
+        self._detect_from_s = math.inf
+
+    def on_command(self, command: tuple[float, float], now_s: float) -> None:
+        """Note a command (V [m/s], yaw rate [rad/s]); a different one restarts the settle clock."""
+        if self._command is None or any(
+            abs(a - b) > 1e-6 for a, b in zip(command, self._command, strict=True)
+        ):
+            self._command_since = now_s
+            self._new_command = True
+        self._command = command
+
+    def corrected(self, predicted_Nm: tuple[float, float]) -> tuple[float, float]:
+        """Corrected motor torques [N m] for predicted ones (unchanged when adaptation is off)."""
+        if not self.settings.enabled:
+            return predicted_Nm
+        return (self.sides[0].corrected(predicted_Nm[0]), self.sides[1].corrected(predicted_Nm[1]))
+
+    def update(
+        self,
+        now_s: float,
+        predicted_Nm: tuple[float, float],
+        predicted_omega: tuple[float, float],
+        measured_Nm: tuple[float, float],
+        measured_omega: tuple[float, float],
+    ) -> bool:
+        """One joint_states sample (motor torques [N m], motor speeds [rad/s]); True if a terrain
+        change was flagged by it."""
+        s = self.settings
+        self._settled = False
+        if not s.enabled or self._command is None or now_s - self._command_since < s.settle_s:
+            return False
+        w_pred, w_meas = np.asarray(predicted_omega), np.asarray(measured_omega)
+        if np.all(np.abs(w_pred) < 1e-6) or np.any(
+            np.abs(w_meas - w_pred) > s.speed_tol * np.abs(w_pred) + 1.0
+        ):
+            return False
+        self._settled = True
+        if self._new_command:  # the model's error is another one now: re-converge, do not detect yet
+            self._new_command = False
+            self._detect_from_s = now_s + s.warmup_s
+            for side in self.sides:
+                side.P = P0.copy()
+                side.g_pos = side.g_neg = 0.0
+        detect = now_s >= self._detect_from_s
+        dt = now_s - self._last_update_s if math.isfinite(self._last_update_s) else 0.0
+        self._last_update_s = now_s
+        lam = math.exp(-max(dt, 0.0) / s.memory_s)
+        alarm = False
+        for side, pred, meas in zip(self.sides, predicted_Nm, measured_Nm, strict=True):
+            alarm |= self._update_side(side, float(pred), float(meas), lam, detect)
+        if alarm:
+            self.terrain_changes += 1
+            self.last_change_s = now_s
+            self._detect_from_s = now_s + s.warmup_s
+            for side in self.sides:
+                side.reset()
+        return alarm
+
+    def _update_side(self, side: SideEstimator, pred: float, meas: float, lam: float, detect: bool) -> bool:
+        s = self.settings
+        phi = np.array([pred, 1.0])
+        innovation = meas - float(phi @ side.theta)
+        rms = math.sqrt(side.ms_innovation) if math.isfinite(side.ms_innovation) else 0.0
+        sigma = max(rms, s.sigma_rel * abs(pred), s.sigma_floor_Nm)
+        z = innovation / sigma
+        if detect:
+            side.g_pos = max(0.0, side.g_pos + z - s.cusum_k)
+            side.g_neg = max(0.0, side.g_neg - z - s.cusum_k)
+            if max(side.g_pos, side.g_neg) > s.cusum_h:
+                return True
+            if not math.isfinite(side.ms_innovation):
+                side.ms_innovation = innovation**2
+            elif abs(z) < 3.0:
+                side.ms_innovation = lam * side.ms_innovation + (1.0 - lam) * innovation**2
+        # RLS with forgetting factor lam (covariance capped at its initial trace: no wind-up)
+        gain = side.P @ phi / (lam + float(phi @ side.P @ phi))
+        side.theta = side.theta + gain * innovation
+        side.theta[0] = min(max(side.theta[0], s.scale_limits[0]), s.scale_limits[1])
+        side.P = (side.P - np.outer(gain, phi @ side.P)) / lam
+        side.P = 0.5 * (side.P + side.P.T)
+        cap = float(np.trace(P0))
+        if np.trace(side.P) > cap:
+            side.P *= cap / float(np.trace(side.P))
+        side.samples += 1
+        return False
+
+    def state(self) -> Correction:
+        """The current :class:`Correction`."""
+        left, right = self.sides
+        return Correction(
+            scale=(float(left.theta[0]), float(right.theta[0])),
+            offset_Nm=(float(left.theta[1]), float(right.theta[1])),
+            residual_rms_Nm=(math.sqrt(left.ms_innovation), math.sqrt(right.ms_innovation)),
+            cusum=(max(left.g_pos, left.g_neg), max(right.g_pos, right.g_neg)),
+            samples=min(left.samples, right.samples),
+            terrain_changes=self.terrain_changes,
+            last_change_s=self.last_change_s,
+            settled=self._settled,
+        )
+
+
+CORRECTION_FIELDS = (
+    'scale_left',
+    'scale_right',
+    'offset_left_Nm',
+    'offset_right_Nm',
+    'residual_rms_left_Nm',
+    'residual_rms_right_Nm',
+    'cusum_left',
+    'cusum_right',
+    'terrain_changes',
+    'enabled',
+)
+"""Names of ``power/correction`` (JointState: names = fields, position = values; units in the names)."""
+
+
+def correction_values(adaptation: TorqueAdaptation) -> list[float]:
+    """Values of :data:`CORRECTION_FIELDS` for the current state of ``adaptation``."""
+    c = adaptation.state()
+    return [
+        *c.scale,
+        *c.offset_Nm,
+        *c.residual_rms_Nm,
+        *c.cusum,
+        float(c.terrain_changes),
+        float(adaptation.settings.enabled),
+    ]

@@ -1,0 +1,224 @@
+"""Online adaptation, terrain-change detection and time-to-empty bounds (issue 15).
+
+Pure-layer tests with hand-made data (each with its closed-form answer), twin runs whose terrain the
+estimator does not see (a sand -> loam patch; a battery drain), and the node's published topics over
+real rclpy and DDS.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from skidsteer_power.bags.synthetic import Segment
+from skidsteer_power.calibration.direct import DirectFessMap, feed_trace
+from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
+from skidsteer_power.estimator.core import EstimatorCore
+from skidsteer_power.estimator.prediction import MapPredictor
+from skidsteer_power.estimator.tte_bounds import Z90, BoundSettings, TimeToEmptyBounds
+from skidsteer_power.powertrain import Battery, Powertrain
+from skidsteer_power.terramechanics.terrain import PRESETS
+from skidsteer_power.vehicle import load_vehicle
+
+VEHICLE = 'test_robot_4wheel'
+DT = 0.02  # 50 Hz joint_states, as the des_driver and the twin publish
+
+
+def feed(adapt: TorqueAdaptation, t: float, pred, meas, omega=(24.0, 24.0)) -> bool:
+    return adapt.update(t, tuple(pred), omega, tuple(meas), omega)
+
+
+# --- the RLS correction --------------------------------------------------------------------------
+def test_correction_converges_on_each_command():
+    """Measured = 1.25 x predicted + 0.03 N m on both sides, over alternating commands: within each
+    command's 3 s (1 s settle, then settled samples) the corrected prediction reaches the measured
+    torque 1.25 T + 0.03 to within the noise (sigma 2 mN m), and no command change is a terrain change."""
+    adapt = TorqueAdaptation()
+    rng = np.random.default_rng(4)
+    t = 0.0
+    for _ in range(4):
+        for command, pred in (((0.2, 0.0), (0.30, 0.32)), ((0.1, 0.2), (0.15, 0.50))):
+            adapt.on_command(command, t)
+            for _ in range(150):  # 3 s per command
+                meas = 1.25 * np.array(pred) + 0.03 + rng.normal(0.0, 0.002, 2)
+                feed(adapt, t, pred, meas)
+                t += DT
+            expected = (1.25 * pred[0] + 0.03, 1.25 * pred[1] + 0.03)
+            assert adapt.corrected(pred) == pytest.approx(expected, abs=2e-3)
+    assert adapt.state().terrain_changes == 0
+
+
+def test_no_flag_on_three_minutes_of_steady_noise_and_a_flag_on_a_step():
+    adapt = TorqueAdaptation()
+    rng = np.random.default_rng(7)
+    adapt.on_command((0.2, 0.0), 0.0)
+    t, flags = 0.0, []
+    for _ in range(int(180 / DT)):
+        flags.append(feed(adapt, t, (0.35, 0.35), 0.30 + rng.normal(0.0, 0.003, 2)))
+        t += DT
+    assert not any(flags)
+    step_at = t
+    while not feed(adapt, t, (0.35, 0.35), 0.21 + rng.normal(0.0, 0.003, 2)):  # -30 %
+        t += DT
+        assert t - step_at < 1.0, 'a 30 % step must be flagged within a second'
+    assert adapt.state().terrain_changes == 1
+    assert adapt.state().scale == (1.0, 1.0)  # restarted
+
+
+def test_adaptation_off_changes_nothing():
+    adapt = TorqueAdaptation(AdaptationSettings(enabled=False))
+    adapt.on_command((0.2, 0.0), 0.0)
+    for k in range(200):
+        assert not feed(adapt, k * DT, (0.35, 0.35), (0.1, 0.1))
+    assert adapt.corrected((0.35, 0.4)) == (0.35, 0.4)
+    assert adapt.state().scale == (1.0, 1.0) and adapt.state().samples == 0
+
+
+def test_bad_settings_are_config_errors():
+    from skidsteer_power.errors import ConfigError
+
+    with pytest.raises(ConfigError, match='memory_s'):
+        AdaptationSettings(memory_s=0.0)
+
+
+# --- the twin: a sand -> loam patch -------------------------------------------------------------
+def core_on(vehicle, terrain, battery=None) -> EstimatorCore:
+    pt = Powertrain.for_vehicle(vehicle)
+    predictor = MapPredictor(DirectFessMap(vehicle, terrain), pt)
+    return EstimatorCore(predictor, battery or Battery.from_config(pt.battery), pt)
+
+
+def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges():
+    from skidsteer_power.twin import Twin, run_commands
+    from skidsteer_power.twin.terrain_field import Patch
+
+    vehicle = load_vehicle(VEHICLE)
+    loam = Patch(PRESETS['sandy_loam'], np.array([[2.0, -5.0], [60.0, -5.0], [60.0, 5.0], [2.0, 5.0]]))
+    twin = Twin(vehicle, PRESETS['dry_sand'], patches=[loam], seed=2)
+    plan = [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 10.0)]
+    trace = run_commands(twin, plan)
+    core = core_on(vehicle, PRESETS['dry_sand'])  # the estimator believes it is on dry sand
+    flagged = feed_trace(core, trace)
+    # the front wheels reach the patch when the CG is half a wheelbase plus a wheel radius short of it
+    front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
+    onset = float(trace.t[np.argmax(front >= 2.0)])
+    assert flagged, 'the change to loam was never flagged'
+    assert all(t >= onset for t in flagged), 'flagged before the robot reached the patch'
+    assert flagged[0] - onset <= 5.0
+    # on loam, the corrected prediction matches the measured torque (the uncorrected one is far off)
+    last = trace.t >= trace.t[-1] - 2.0
+    measured = trace.joint_effort_Nm[last].mean(axis=0)
+    assert np.array(core.corrected_torque_Nm()) == pytest.approx(measured, rel=0.02)
+    assert abs(core.prediction.motor_torque_Nm[0] / measured[0] - 1) > 0.2
+
+
+# --- time-to-empty bounds -------------------------------------------------------------------------
+def test_bounds_follow_the_documented_formula():
+    """Constant power: block spread 0 and block mean = P, so with model spread s the bounds are the
+    battery's time at P (1 +- z90 s); before three blocks the default spread applies."""
+    battery = Battery.default_test_robot(soc=0.5)
+    bounds = TimeToEmptyBounds()
+    assert bounds.spread() == bounds.settings.default_spread
+    for k in range(400):  # 40 s of 0.1 s ticks at 50 W: four complete 10 s blocks
+        bounds.add(k * 0.1, 50.0)
+    assert bounds.spread() == pytest.approx(0.0, abs=1e-12)
+    p10, p90 = bounds.bounds(battery, 50.0, model_spread=0.1)
+    assert p10 == pytest.approx(battery.time_to_empty_s(50.0 * (1 + Z90 * 0.1)))
+    assert p90 == pytest.approx(battery.time_to_empty_s(50.0 * (1 - Z90 * 0.1)))
+    assert p10 < battery.time_to_empty_s(50.0) < p90
+    assert bounds.bounds(battery, 0.0) == (math.inf, math.inf)
+
+
+def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
+    """The twin drives a varied Table 7.3 pattern from a nearly empty battery until it is empty; the
+    estimator (its own battery model, measured joint_states power) gives p10/p90 once a second
+    once three 4 s blocks of power are in: the twin's actual time to empty lies between them
+    at >= 80 % of those checks (the benchmark: 219 of 227 in three longer runs)."""
+    from skidsteer_power.twin import Twin, run_commands
+
+    vehicle = load_vehicle(VEHICLE)
+    pt = Powertrain.for_vehicle(vehicle)
+    soc0 = 0.0008  # ~0.64 kJ in the 12S 5 Ah pack: about half a minute of this driving
+    twin = Twin(vehicle, PRESETS['sandy_loam'], seed=5)
+    twin.battery = Battery.from_config(pt.battery, soc=soc0)
+    pattern = [Segment(0.2, 0.0, 4.0), Segment(0.1, 0.2, 4.0), Segment(0.2, 0.3, 3.0), Segment(0.0, 0.0, 1.0)]
+    traces, empty_at = [], None
+    while empty_at is None and len(traces) < 2000:
+        for (
+            seg
+        ) in pattern:  # in 0.2 s pieces (whole 50 Hz sample periods), so the empty moment is known to 0.2 s
+            for _ in range(round(seg.duration_s / 0.2)):
+                traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, 0.2)]))
+                if twin.battery.is_empty:
+                    empty_at = twin.t
+                    break
+            if empty_at is not None:
+                break
+    assert empty_at is not None and empty_at > 20.0
+    core = core_on(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
+    core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))  # the method, on a short run
+    results = []
+    last = -math.inf
+    for trace in traces:
+        feed_trace(core, trace, after_s=last)
+        now = last = float(trace.t[-1])
+        if (
+            now >= 12.0 and empty_at - now > 2.0 and abs(now - round(now)) < 1e-6
+        ):  # once a second  # three complete 4 s blocks of power; not at the end
+            core.tick(now)
+            results.append(core.time_to_empty_p10_s <= empty_at - now <= core.time_to_empty_p90_s)
+            assert core.time_to_empty_p10_s <= core.time_to_empty_s <= core.time_to_empty_p90_s
+    print(f'p10 <= actual <= p90 at {sum(results)} of {len(results)} checks')
+    assert len(results) >= 5
+    assert sum(results) >= 0.8 * len(results)  # an 80 % band, checked at every segment's end
+
+
+def test_correction_fields_are_named_with_units():
+    assert len(CORRECTION_FIELDS) == len(set(CORRECTION_FIELDS)) == 10
+    assert 'offset_left_Nm' in CORRECTION_FIELDS and 'scale_right' in CORRECTION_FIELDS
+
+
+# --- the node ------------------------------------------------------------------------------------
+@pytest.mark.parametrize('enabled', [True, False])
+def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, enabled):
+    """power_estimator over real DDS on sim time: the predictor says 0.1 N m per motor at 12 rad/s
+    (test_estimator_core.FixedPowerPredictor); the motors measure 0.13 N m. After the 1 s settle and
+    1 s warm-up the published correction maps 0.1 to 0.13 (adaptation on), or stays 1 / 0 (off)."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+    from test_estimator_core import FixedPowerPredictor
+    from test_nodes_estimator import Rig
+
+    rig = Rig(
+        ros_context, tmp_path, FixedPowerPredictor(60.0), use_sim_time=True, persist=False, adaptation=enabled
+    )
+    try:
+        got: dict[str, list] = {'power/correction': [], 'p10': [], 'p90': []}
+        rig.probe.create_subscription(JointState, 'power/correction', got['power/correction'].append, 10)
+        rig.probe.create_subscription(Float64, 'energy/time_to_empty_p10_s', got['p10'].append, 10)
+        rig.probe.create_subscription(Float64, 'energy/time_to_empty_p90_s', got['p90'].append, 10)
+        for k in range(61):  # 3 s at 20 Hz
+            t = k * 0.05
+            rig.set_clock(t)
+            rig.command(0.2, 0.0)
+            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+            rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+        count = len(got['power/correction'])
+        rig.run_clock(3.05, lambda: len(got['power/correction']) > count and got['p90'])
+        msg = got['power/correction'][-1]
+        values = dict(zip(msg.name, msg.position, strict=True))
+        assert tuple(msg.name) == CORRECTION_FIELDS
+        if enabled:
+            corrected = values['scale_left'] * 0.1 + values['offset_left_Nm']
+            assert corrected == pytest.approx(0.13, abs=1e-3)
+            assert values['enabled'] == 1.0
+        else:
+            assert (values['scale_left'], values['offset_left_Nm'], values['enabled']) == (1.0, 0.0, 0.0)
+        assert 0.0 < got['p10'][-1].data <= got['p90'][-1].data
+        diagnostics = rig.latest_diagnostics()
+        assert diagnostics['adaptation'] == ('on' if enabled else 'off')
+        assert diagnostics['terrain_changes'] == '0'
+    finally:
+        rig.close()
