@@ -103,7 +103,7 @@ def _main(report: Report, folder: Path) -> None:
     )
     for name in result.names:
         truth = getattr(TRUTH, name) / (math.pi / 180 if name == 'phi' else 1.0)
-        lo, hi = result.ci95[name]
+        lo, hi = result.ci95[name] or (math.nan, math.nan)  # None: the parameter was held fixed
         report.figure(
             f'fitted {name}', result.values[name], '', note=f'95 % CI [{lo:.4g}, {hi:.4g}], truth {truth:.4g}'
         )
@@ -120,7 +120,7 @@ def _coverage(report: Report, folder: Path) -> None:
         twin_bag(bag, commands, seed=seed + 1)
         result, _ = calibrate_bags([str(bag)], VEHICLE, start, holdout=0.0)
         for name in result.names:
-            lo, hi = result.ci95[name]
+            lo, hi = result.ci95[name] or (math.nan, math.nan)  # None: the parameter was held fixed
             fits.setdefault(name, []).append((result.values[name], lo, hi))
     for name, rows in fits.items():
         arr = np.array(rows)
@@ -188,7 +188,7 @@ def _coverage_fess(report: Report, folder: Path) -> None:
         result, _ = calibrate_bags([str(bag)], VEHICLE, 'dry_sand', holdout=0.0)
         for name in result.names:
             value = getattr(truth, name) / (math.pi / 180 if name == 'phi' else 1.0)
-            lo, hi = result.ci95[name]
+            lo, hi = result.ci95[name] or (math.nan, math.nan)  # None: the parameter was held fixed
             hits.setdefault(name, []).append(lo <= value <= hi)
     for name, rows in hits.items():
         report.figure(
@@ -221,6 +221,7 @@ def _adaptation(report: Report) -> None:
     trace = run_commands(twin, [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 12.0)])
     core = _core(vehicle, PRESETS['dry_sand'])
     flags = feed_trace(core, trace)
+    assert vehicle.wheelbase_m is not None and vehicle.wheel_radius_m is not None  # a wheeled robot
     front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
     before = [t for t in flags if t < onset]
@@ -255,7 +256,7 @@ def _drain(report: Report) -> None:
     pt = Powertrain.for_vehicle(vehicle)
     pattern = [Segment(0.2, 0.0, 4.0), Segment(0.1, 0.2, 4.0), Segment(0.2, 0.3, 3.0), Segment(0.0, 0.0, 1.0)]
     inside = total = 0
-    widths = []
+    widths: list[float] = []
     for seed, soc0 in ((5, 0.0015), (6, 0.002), (7, 0.003)):
         twin = Twin(vehicle, PRESETS['sandy_loam'], seed=seed)
         twin.battery = Battery.from_config(pt.battery, soc=soc0)

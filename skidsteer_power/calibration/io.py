@@ -50,7 +50,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'units': [PARAMS[n].unit for n in terrain_names],
         'values': values,
         'covariance': cov,
-        'ci95': {n: [float(v) for v in result.ci95[n]] for n in terrain_names if result.ci95.get(n)},
+        'ci95': {n: [float(v) for v in ci] for n in terrain_names if (ci := result.ci95.get(n))},
         'fixed': [n for n in TERRAIN_PARAMS if n not in result.names],
         'correlations_warnings': list(result.correlations_warnings),
         'bags': [str(Path(b).resolve()) for b in bags],

@@ -114,7 +114,9 @@ def _quaternion_yaw(q: object) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def _decode_poses(bag: BagReader, topic: str, t0: int) -> tuple[np.ndarray, ...]:
+def _decode_poses(
+    bag: BagReader, topic: str, t0: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     msgtype = bag.topics[topic].msgtype
     odometry = msgtype == 'nav_msgs/msg/Odometry'
     nested = odometry or msgtype == 'geometry_msgs/msg/PoseWithCovarianceStamped'
