@@ -261,3 +261,48 @@ def test_internal_resistance_of_the_bundled_track_bag(tmp_path):
     assert 'left_c' in block['parameters'] and len(block['covariance']) == len(block['parameters'])
     terrain_block = yaml.safe_load(out.read_text())['calibration']
     assert 'left_c' in terrain_block['powertrain_parameters']
+
+
+def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(twin_bag, tmp_path):
+    """calibrate reads joint_states through the vehicle file's drivetrain mapping (issue 16), as the
+    estimator and validate do. The twin bag's two motor joints (effort Kt I at the motor, N m) are
+    re-written as a ros2_control robot's four wheel joints (config/drivetrains/ros2_control_4wheel):
+    per side two joints each carrying half the axle torque, T_w = T_m G / 2, at the axle speed
+    w_w = w_m / G (G = 12, the test robot's reduction). Mapped back (sum of T_w / G, mean of w_w x G)
+    this is the motor's own reading again, so both bags must give the same steady segments."""
+    from skidsteer_power.bags import open_bag
+    from skidsteer_power.bags.writer import BagWriter
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.estimator.inputs import InputLimits, JointReader
+
+    vehicle = factory.load_vehicle_config(VEHICLE)
+    powertrain = factory.powertrain_for(vehicle)
+    g = powertrain.gear_ratio
+    assert g == 12.0  # chapter 7: 12:1 reduction
+    wheels = factory.joint_map_for(vehicle, left='front_left_wheel_joint,rear_left_wheel_joint',
+                                   right='front_right_wheel_joint,rear_right_wheel_joint',
+                                   effort_is='torque', location='wheel')  # fmt: skip
+    rewritten = tmp_path / 'ros2_control.mcap'
+    with open_bag(twin_bag) as bag, BagWriter(rewritten) as writer:
+        out = {name: writer.add_topic(name, info.msgtype) for name, info in bag.topics.items()}
+        store = bag.typestore
+        for message in bag.messages():
+            data = message.data
+            if message.topic == '/joint_states':
+                msg = bag.deserialize(message)
+                w_m, t_m = np.asarray(msg.velocity), np.asarray(msg.effort)  # left_motor, right_motor
+                msg.name = [*wheels.left, *wheels.right]
+                msg.position = np.repeat(np.asarray(msg.position) / g, 2)
+                msg.velocity = np.repeat(w_m / g, 2)
+                msg.effort = np.repeat(t_m * g / 2.0, 2)
+                data = store.serialize_cdr(msg, message.msgtype)
+            writer.write(out[message.topic], message.timestamp_ns, data)
+    reader = JointReader(wheels, g, powertrain.motor.torque_constant_Nm_A, InputLimits())
+    options = SegmentOptions(settle_s=1.5)
+    motors, _ = find_segments(read_recording(twin_bag, options), options, powertrain.motor)
+    four, _ = find_segments(read_recording(rewritten, options, reader), options, powertrain.motor)
+    assert len(four) == len(motors) >= 6
+    for a, b in zip(motors, four, strict=True):
+        assert b.command == a.command
+        assert b.motor_torque_Nm == pytest.approx(a.motor_torque_Nm, rel=1e-9)
+        assert b.motor_omega_rad_s == pytest.approx(a.motor_omega_rad_s, rel=1e-9)

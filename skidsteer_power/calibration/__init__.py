@@ -39,6 +39,7 @@ def calibrate_bags(
 ) -> tuple[CalibrationResult, list[Segment]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain`` (see fit.py)."""
     from skidsteer_power.estimator import factory
+    from skidsteer_power.estimator.inputs import InputLimits, JointReader
     from skidsteer_power.terramechanics.terrain import load_terrain
 
     names = parse_fit_list(fit) if isinstance(fit, str) else list(fit)
@@ -55,7 +56,13 @@ def calibrate_bags(
     segments: list[Segment] = []
     dropped: dict[str, int] = {}
     for bag in bags:
-        found, why = find_segments(read_recording(bag, options), options, powertrain.motor)
+        reader = JointReader(
+            factory.joint_map_for(veh),
+            powertrain.gear_ratio,
+            powertrain.motor.torque_constant_Nm_A,
+            InputLimits(),
+        )  # one per bag: a position-differentiated speed must not span two bags
+        found, why = find_segments(read_recording(bag, options, reader), options, powertrain.motor)
         segments.extend(found)
         for key, count in why.items():
             dropped[key] = dropped.get(key, 0) + count

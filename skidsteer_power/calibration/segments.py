@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from skidsteer_power.bags.decode import decode_joint_states, decode_twists
+from skidsteer_power.bags.decode import decode_joint_arrays, decode_twists
 from skidsteer_power.bags.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
+from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
 from skidsteer_power.powertrain.motor import EC45, MotorConstants, terminal_power
 
 POSE_TYPES = (
@@ -32,7 +33,6 @@ POSE_TYPES = (
     'geometry_msgs/msg/PoseStamped',
     'geometry_msgs/msg/PoseWithCovarianceStamped',
 )
-JOINTS = ('left_motor', 'right_motor')
 
 
 @dataclass(frozen=True)
@@ -133,9 +133,41 @@ def _decode_poses(
     return np.array(t), np.array(xy, dtype=float).reshape(-1, 2), np.array(yaw), twist_arr
 
 
-def read_recording(path: str | Path, options: SegmentOptions | None = None) -> Recording:
-    """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if one is missing."""
+def side_readings(
+    reader: JointReader,
+    names: tuple[str, ...],
+    js_t: np.ndarray,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    effort: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-side motor-equivalent speed (n, 2) [rad/s] and torque (n, 2) [N m] of decoded joint_states
+    rows, through the estimator's own :class:`JointReader` (any joints per side, effort as torque or
+    current, at the motor or the wheel); ``ok`` (n,) is False where a row gives no reading."""
+    n = js_t.size
+    omega, torque, ok = np.full((n, 2), np.nan), np.full((n, 2), np.nan), np.zeros(n, bool)
+    for i in range(n):
+        try:
+            reading = reader.read(
+                names, position[i].tolist(), velocity[i].tolist(), effort[i].tolist(), js_t[i]
+            )
+        except InputError:
+            continue
+        if reading is not None:
+            omega[i], torque[i], ok[i] = reading[0], reading[1], True
+    return omega, torque, ok
+
+
+def read_recording(
+    path: str | Path, options: SegmentOptions | None = None, reader: JointReader | None = None
+) -> Recording:
+    """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if one is missing.
+
+    ``reader`` maps the joints to the sides (the vehicle file's ``drivetrain:``; default: the test
+    robot's left_motor/right_motor, effort = Kt I at the motor).
+    """
     options = options or SegmentOptions()
+    reader = reader or JointReader(TEST_ROBOT_JOINTS, 1.0, 1.0, InputLimits())
     with open_bag(Path(path)) as bag:
         t0 = bag.start_ns
         if options.cmd_vel_topic not in bag.topics:
@@ -143,7 +175,9 @@ def read_recording(path: str | Path, options: SegmentOptions | None = None) -> R
         if options.joint_states_topic not in bag.topics:
             raise InputError(f'{path}: no {options.joint_states_topic} topic: no motor effort to fit to')
         cmd_t, cmd = decode_twists(bag, options.cmd_vel_topic, t0)
-        js_t, omega, torque, ok = decode_joint_states(bag, options.joint_states_topic, t0, JOINTS)
+        names = reader.map.joints
+        js_t, position, velocity, effort, _ = decode_joint_arrays(bag, options.joint_states_topic, t0, names)
+        omega, torque, ok = side_readings(reader, names, js_t, position, velocity, effort)
         topic = _pose_topic(bag, options.odom_topic)
         if topic:
             pose_t, pose_xy, pose_yaw, twist = _decode_poses(bag, topic, t0)
