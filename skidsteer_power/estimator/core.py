@@ -61,9 +61,9 @@ def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
 
 
 def outside_map(prediction: Prediction) -> bool:
-    """True if the map did not cover the command: clamped to its edge (or next to a non-converged
-    cell), or solved at the small-radius limit (``limited``, where the map has that flag)."""
-    return bool(prediction.clamped or getattr(prediction, 'limited', False))
+    """True if the map did not cover the command: outside its envelope (``clamped``) or at a physics
+    limit (``limited``: a spin or a turn tighter than the small-radius limit, or no steady state)."""
+    return bool(prediction.clamped or prediction.limited)
 
 
 class RejectedInput(InputError):
