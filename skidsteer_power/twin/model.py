@@ -239,6 +239,8 @@ class Twin:
             self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
             self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
             self._rows = np.empty((6, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
+            self._trig = np.empty((2, self.n_wheels, WHEEL_NODES + 1))  # cos, sin of the node angles
+            self._padded = np.zeros((3, self.n_wheels, WHEEL_NODES + 2))  # (_advance_wheels)
             self._soil_age = 0
         self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
         self._kinematics: tuple[np.ndarray, ...] | None = None  # wheels: of the present velocities
@@ -450,28 +452,26 @@ class Twin:
         j = self.j
         mag = np.hypot(j[0], j[1])
         if self._wp_inv_k is not None:
-            fraction = -np.expm1(mag * self._wp_inv_k)  # eq. 2.3
+            minus_fraction = np.expm1(mag * self._wp_inv_k)  # eq. 2.3 (tau / tau_max = -this)
         else:
             pairs = zip(self._wp_terrains, mag, strict=True)
-            fraction = np.array([soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
-        # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping
+            minus_fraction = np.array([-soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
+        # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping:
+        # -(tau_max f / |j|) j - c dj/dt, both components at once (the sign folded into the gain)
         mag += 1e-300
-        gain = strength * fraction
+        gain = strength * minus_fraction
         gain /= mag
-        damping = self._damping * strength
         rows = self._rows  # (6, wheels, nodes): the integrands
-        cos, sin = np.cos(theta), np.sin(theta)
-        tau, tau_y = rows[4], rows[5]
-        np.multiply(gain, j[0], out=tau)
-        tau += damping * self._j_rate[0]
-        np.negative(tau, out=tau)
-        np.multiply(gain, j[1], out=tau_y)
-        tau_y += damping * self._j_rate[1]
-        np.negative(tau_y, out=tau_y)
-        np.multiply(sigma, cos, out=rows[0])
-        np.multiply(sigma, sin, out=rows[1])
-        np.multiply(tau, cos, out=rows[2])
-        np.multiply(tau, sin, out=rows[3])
+        trig = self._trig  # cos(theta), sin(theta)
+        np.cos(theta, out=trig[0])
+        np.sin(theta, out=trig[1])
+        shear = rows[4:]
+        np.multiply(gain, j, out=shear)
+        shear -= (self._damping * strength) * self._j_rate
+        tau = rows[4]
+        np.multiply(sigma, trig, out=rows[:2])
+        np.multiply(tau, trig, out=rows[2:4])
+        cos = trig[0]
         area = (r * self.width) * span  # the contact's arc times width per unit xi [m^2]
         s_cos, s_sin, t_cos, t_sin, t_sum, y_sum = (rows @ self.xi_w) * area  # [N]
         # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
@@ -497,19 +497,28 @@ class Twin:
         self._kinematics = kin
         vxa, vya, om, _direction, vxm, _ = kin
         # slip velocity of the rim element: (vxm cos(theta) - r om) along the rim, vya across
-        source = vxm[:, None] * cos
-        source -= (self.r * om)[:, None]
+        # (padded by one node in front: the rim element arriving at node 0 carries no displacement,
+        # and the slip source's cell average there is its value at node 0)
+        padded = self._padded  # (3, wheels, 1 + nodes): 0 then j_t, j_y; source at node 0 then all
+        source = padded[2]
+        np.multiply(vxm[:, None], cos, out=source[:, 1:])
+        source[:, 1:] -= (self.r * om)[:, None]
+        source[:, 0] = source[:, 1]
         courant = np.minimum(om / np.maximum(span, 1e-6) * (dt * WHEEL_NODES), 1.0)[:, None]
         j = self.j
-        new = j.copy()
+        padded[:2, :, 1:] = j
         # node k takes the rim element from node k - 1, plus the cell-averaged slip source
-        new[:, :, 1:] += courant * (j[:, :, :-1] - j[:, :, 1:])
-        new[:, :, 0] -= courant[:, 0] * j[:, :, 0]
-        new[0, :, 1:] += (0.5 * dt) * (source[:, 1:] + source[:, :-1])
-        new[0, :, 0] += dt * source[:, 0]
+        shift = padded[:2, :, :-1] - j
+        shift *= courant
+        new = j + shift
+        source_sum = source[:, 1:] + source[:, :-1]
+        source_sum *= 0.5 * dt
+        new[0] += source_sum
         new[1] += (dt * vya)[:, None]
-        new[:, om > 0, 0] = 0.0  # touchdown: no shear yet
-        self._j_rate = (new - j) * (1.0 / dt)
+        np.copyto(new[:, :, 0], 0.0, where=om > 0)  # touchdown: no shear yet
+        rate = new - j
+        rate *= 1.0 / dt
+        self._j_rate = rate
         self.j = new
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
