@@ -30,7 +30,8 @@ class DirectFessMap:
             torque_left_Nm=sol.torque[0, 0],
             torque_right_Nm=sol.torque[0, 1],
             traction_margin=sol.traction_margin[0],
-            clamped=not bool(sol.converged[0]),
+            clamped=False,  # a direct solve covers any command: no map envelope
+            limited=not bool(sol.converged[0]),  # no steady state: a physics limit (maps.MapQuery)
         )
 
 
