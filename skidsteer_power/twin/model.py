@@ -239,6 +239,8 @@ class Twin:
             self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
             self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
             self._rows = np.empty((6, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
+            self._trig = np.empty((2, self.n_wheels, WHEEL_NODES + 1))  # cos, sin of the node angles
+            self._padded = np.zeros((3, self.n_wheels, WHEEL_NODES + 2))  # (_advance_wheels)
             self._soil_age = 0
         self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
         self._kinematics: tuple[np.ndarray, ...] | None = None  # wheels: of the present velocities
@@ -437,53 +439,59 @@ class Twin:
         span = tf - tr
         tf_c, span_c = tf[:, None], span[:, None]
         u = self.xi * span_c  # theta_f - theta at the nodes [rad]
-        theta = tf_c - u
+        theta = np.subtract(tf_c, u)
         # Wong-Reece normal stress (eq. 2.21); behind theta_m the equivalent front angle of eq. 2.22,
         # theta_e = theta_f - (theta - theta_r) (theta_f - theta_m) / (theta_m - theta_r), falls from
         # theta_f to theta_m over [theta_r, theta_m] and continues below theta_m ahead of it, so the
         # angle to use is max(theta, theta_e) everywhere on the arc
-        theta_e = tf_c - (span_c - u) * ((tf - tm) / np.maximum(tm - tr, 1e-12))[:, None]
-        depth = np.cos(np.maximum(theta, theta_e))
+        theta_e = np.subtract(span_c, u, out=u)  # (u no longer needed)
+        theta_e *= ((tf - tm) / np.maximum(tm - tr, 1e-12))[:, None]
+        np.subtract(tf_c, theta_e, out=theta_e)
+        depth = np.maximum(theta, theta_e, out=theta_e)
+        np.cos(depth, out=depth)
         depth -= np.cos(tf_c)
-        sigma = self._wp_stress * np.maximum(depth, 0.0) ** self._wp_n
-        strength = self._wp_c + sigma * self._wp_tan_phi  # eq. 2.2
+        np.maximum(depth, 0.0, out=depth)
+        sigma = np.power(depth, self._wp_n, out=depth)
+        sigma *= self._wp_stress
+        strength = sigma * self._wp_tan_phi
+        strength += self._wp_c  # eq. 2.2
         j = self.j
         mag = np.hypot(j[0], j[1])
         if self._wp_inv_k is not None:
-            fraction = -np.expm1(mag * self._wp_inv_k)  # eq. 2.3
+            minus_fraction = np.expm1(mag * self._wp_inv_k)  # eq. 2.3 (tau / tau_max = -this)
         else:
             pairs = zip(self._wp_terrains, mag, strict=True)
-            fraction = np.array([soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
-        # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping
+            minus_fraction = np.array([-soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
+        # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping:
+        # -(tau_max f / |j|) j - c dj/dt, both components at once (the sign folded into the gain)
         mag += 1e-300
-        gain = strength * fraction
+        gain = np.multiply(strength, minus_fraction, out=minus_fraction)
         gain /= mag
-        damping = self._damping * strength
         rows = self._rows  # (6, wheels, nodes): the integrands
-        cos, sin = np.cos(theta), np.sin(theta)
-        tau, tau_y = rows[4], rows[5]
-        np.multiply(gain, j[0], out=tau)
-        tau += damping * self._j_rate[0]
-        np.negative(tau, out=tau)
-        np.multiply(gain, j[1], out=tau_y)
-        tau_y += damping * self._j_rate[1]
-        np.negative(tau_y, out=tau_y)
-        np.multiply(sigma, cos, out=rows[0])
-        np.multiply(sigma, sin, out=rows[1])
-        np.multiply(tau, cos, out=rows[2])
-        np.multiply(tau, sin, out=rows[3])
+        trig = self._trig  # cos(theta), sin(theta)
+        np.cos(theta, out=trig[0])
+        np.sin(theta, out=trig[1])
+        shear = rows[4:]
+        np.multiply(gain, j, out=shear)
+        strength *= self._damping
+        shear -= strength * self._j_rate
+        tau = rows[4]
+        np.multiply(sigma, trig, out=rows[:2])
+        np.multiply(tau, trig, out=rows[2:4])
+        cos = trig[0]
         area = (r * self.width) * span  # the contact's arc times width per unit xi [m^2]
         s_cos, s_sin, t_cos, t_sin, t_sum, y_sum = (rows @ self.xi_w) * area  # [N]
         # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
         # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
         normal = s_sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
-        fx = direction * (t_cos - normal)  # eq. 2.27 (rolling frame, then mirrored back)
+        pull = t_cos - normal
+        fx = direction * pull  # eq. 2.27 (rolling frame, then mirrored back)
         fz = s_cos + t_sin
         fy = y_sum  # eq. 4.9, lateral
         torque = direction * (r * t_sum)  # eq. 2.34: the terrain's resisting torque
         force = np.array([sum(fx.tolist()), sum(fy.tolist()), float(self.wheel_x @ fy - self.wheel_y @ fx)])
         # power of the contact stresses on the slip velocity (vxm cos(theta) - r om, vya), and the rut's
-        dissipation = float(vxm @ (normal - t_cos) + (r * om) @ t_sum - vya @ y_sum)
+        dissipation = float((r * om) @ t_sum - vxm @ pull - vya @ y_sum)
         self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self._wheels_per_side)
         half = self._wheels_per_side
         torques = torque.tolist()
@@ -497,28 +505,49 @@ class Twin:
         self._kinematics = kin
         vxa, vya, om, _direction, vxm, _ = kin
         # slip velocity of the rim element: (vxm cos(theta) - r om) along the rim, vya across
-        source = vxm[:, None] * cos
-        source -= (self.r * om)[:, None]
+        # (padded by one node in front: the rim element arriving at node 0 carries no displacement,
+        # and the slip source's cell average there is its value at node 0)
+        padded = self._padded  # (3, wheels, 1 + nodes): 0 then j_t, j_y; source at node 0 then all
+        source = padded[2]
+        np.multiply(vxm[:, None], cos, out=source[:, 1:])
+        source[:, 1:] -= (self.r * om)[:, None]
+        source[:, 0] = source[:, 1]
         courant = np.minimum(om / np.maximum(span, 1e-6) * (dt * WHEEL_NODES), 1.0)[:, None]
         j = self.j
-        new = j.copy()
+        padded[:2, :, 1:] = j
         # node k takes the rim element from node k - 1, plus the cell-averaged slip source
-        new[:, :, 1:] += courant * (j[:, :, :-1] - j[:, :, 1:])
-        new[:, :, 0] -= courant[:, 0] * j[:, :, 0]
-        new[0, :, 1:] += (0.5 * dt) * (source[:, 1:] + source[:, :-1])
-        new[0, :, 0] += dt * source[:, 0]
+        shift = padded[:2, :, :-1] - j
+        shift *= courant
+        new = j + shift
+        source_sum = source[:, 1:] + source[:, :-1]
+        source_sum *= 0.5 * dt
+        new[0] += source_sum
         new[1] += (dt * vya)[:, None]
-        new[:, om > 0, 0] = 0.0  # touchdown: no shear yet
-        self._j_rate = (new - j) * (1.0 / dt)
+        np.copyto(new[:, :, 0], 0.0, where=om > 0)  # touchdown: no shear yet
+        rate = new - j
+        rate *= 1.0 / dt
+        self._j_rate = rate
         self.j = new
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
         # (the same time scale as the shear), plus a slow settling at rest.
-        ratio = np.minimum(np.maximum(w_wheel / np.maximum(fz, 1e-9), 0.5), 2.0)
-        travel = (self.r * om + np.abs(vxa)) / np.maximum(self.r * span, 1e-6)
-        fraction = np.minimum(dt * (travel + 1.0 / SINKAGE_SETTLING_S), 1.0)
-        z = self.z * ratio ** (fraction * self._sinkage_exponent)
-        self.z = np.minimum(np.maximum(z, 1e-6), 0.95 * self.r)
+        ratio = np.maximum(fz, 1e-9, out=fz)  # (in place: these per-wheel arrays are this step's)
+        np.divide(w_wheel, ratio, out=ratio)
+        np.maximum(ratio, 0.5, out=ratio)
+        np.minimum(ratio, 2.0, out=ratio)
+        travel = self.r * om
+        travel += np.abs(vxa)
+        span *= self.r
+        travel /= np.maximum(span, 1e-6, out=span)
+        travel += 1.0 / SINKAGE_SETTLING_S
+        travel *= dt
+        fraction = np.minimum(travel, 1.0, out=travel)
+        fraction *= self._sinkage_exponent
+        np.power(ratio, fraction, out=ratio)
+        z = ratio
+        z *= self.z
+        np.maximum(z, 1e-6, out=z)
+        self.z = np.minimum(z, 0.95 * self.r, out=z)
 
     # ------------------------------------------------------------------ stepping
     def kinetic_energy(self) -> float:
