@@ -29,7 +29,7 @@ from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.calibration.direct import feed_trace
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
-from skidsteer_power.twin import Twin, run_commands, write_bag
+from skidsteer_power.twin import Twin, drive_until_empty, run_commands, write_bag
 from skidsteer_power.vehicle import load_vehicle
 
 VEHICLE = 'test_robot_4wheel'
@@ -260,18 +260,7 @@ def _drain(report: Report) -> None:
     for seed, soc0 in ((5, 0.0015), (6, 0.002), (7, 0.003)):
         twin = Twin(vehicle, PRESETS['sandy_loam'], seed=seed)
         twin.battery = Battery.from_config(pt.battery, soc=soc0)
-        traces, empty_at = [], None
-        while empty_at is None:
-            for (
-                seg
-            ) in pattern:  # 0.2 s pieces (whole 50 Hz sample periods): the empty moment is known to 0.2 s
-                for _ in range(round(seg.duration_s / 0.2)):
-                    traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, 0.2)]))
-                    if twin.battery.is_empty:
-                        empty_at = twin.t
-                        break
-                if empty_at is not None:
-                    break
+        traces, empty_at = drive_until_empty(twin, pattern)  # 0.2 s pieces: the empty moment to 0.2 s
         core = _core(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
         core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))
         last = -math.inf

@@ -57,3 +57,20 @@ def ros_context():
         yield context
     finally:
         rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def rig_factory(ros_context, tmp_path):
+    """Makes power_estimator rigs (test_nodes_estimator.Rig: the node and a probe over real DDS),
+    closed after the test."""
+    from test_nodes_estimator import Rig
+
+    rigs = []
+
+    def make(predictor=None, **params):
+        rigs.append(Rig(ros_context, tmp_path, predictor, **params))
+        return rigs[-1]
+
+    yield make
+    for rig in rigs:
+        rig.close()

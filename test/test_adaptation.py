@@ -136,7 +136,7 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     estimator (its own battery model, measured joint_states power) gives p10/p90 once a second
     once three 4 s blocks of power are in: the twin's actual time to empty lies between them
     at >= 80 % of those checks (the benchmark: 219 of 227 in three longer runs)."""
-    from skidsteer_power.twin import Twin, run_commands
+    from skidsteer_power.twin import Twin, drive_until_empty
 
     vehicle = load_vehicle(VEHICLE)
     pt = Powertrain.for_vehicle(vehicle)
@@ -144,18 +144,7 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     twin = Twin(vehicle, PRESETS['sandy_loam'], seed=5)
     twin.battery = Battery.from_config(pt.battery, soc=soc0)
     pattern = [Segment(0.2, 0.0, 4.0), Segment(0.1, 0.2, 4.0), Segment(0.2, 0.3, 3.0), Segment(0.0, 0.0, 1.0)]
-    traces, empty_at = [], None
-    while empty_at is None and len(traces) < 2000:
-        for (
-            seg
-        ) in pattern:  # in 0.2 s pieces (whole 50 Hz sample periods), so the empty moment is known to 0.2 s
-            for _ in range(round(seg.duration_s / 0.2)):
-                traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, 0.2)]))
-                if twin.battery.is_empty:
-                    empty_at = twin.t
-                    break
-            if empty_at is not None:
-                break
+    traces, empty_at = drive_until_empty(twin, pattern)  # 0.2 s pieces: the empty moment to 0.2 s
     assert empty_at is not None and empty_at > 20.0
     core = core_on(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
     core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))  # the method, on a short run

@@ -97,19 +97,7 @@ def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path)
 
 
 # --- the node, over real rclpy ----------------------------------------------------------------------
-@pytest.fixture
-def rig_factory(ros_context, tmp_path):
-    from test_nodes_estimator import Rig
-
-    rigs = []
-
-    def make(predictor=None, **params):
-        rigs.append(Rig(ros_context, tmp_path, predictor, **params))
-        return rigs[-1]
-
-    yield make
-    for rig in rigs:
-        rig.close()
+# (fixture rig_factory: test/conftest.py)
 
 
 def test_node_survives_an_impossible_reading_and_saves_on_a_short_run(rig_factory, tmp_path):

@@ -129,19 +129,6 @@ class Rig:
         return {kv.key: kv.value for kv in status.values}
 
 
-@pytest.fixture
-def rig_factory(ros_context, tmp_path):
-    rigs = []
-
-    def make(predictor=None, **params):
-        rigs.append(Rig(ros_context, tmp_path, predictor, **params))
-        return rigs[-1]
-
-    yield make
-    for rig in rigs:
-        rig.close()
-
-
 def drive_measured(rig: Rig, seconds: float, rate_hz: float = 10.0) -> None:
     """joint_states on sim time 0..seconds: both motors at 300 rad/s with Kt I = 0.228 N m."""
     for k in range(round(seconds * rate_hz) + 1):

@@ -25,6 +25,7 @@ from skidsteer_power.twin.sensors import (
     commands_from_bag,
     commands_from_csv,
     commands_from_route,
+    drive_until_empty,
     run_commands,
     write_bag,
 )
@@ -39,6 +40,7 @@ __all__ = [
     'commands_from_bag',
     'commands_from_csv',
     'commands_from_route',
+    'drive_until_empty',
     'load_patches',
     'run_commands',
     'write_bag',

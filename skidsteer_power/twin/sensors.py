@@ -162,6 +162,22 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
     return _trace(twin, rows)
 
 
+def drive_until_empty(
+    twin: Twin, pattern: Sequence[Segment], *, piece_s: float = 0.2, max_pieces: int = 2000
+) -> tuple[list[TwinTrace], float | None]:
+    """Repeat ``pattern`` until the twin's battery is empty: the traces of each ``piece_s`` [s] piece
+    (a whole number of sensor periods, so the empty moment is known to ``piece_s``) and the twin time
+    it went empty [s] (None if it had not after ``max_pieces`` pieces)."""
+    traces: list[TwinTrace] = []
+    while len(traces) < max_pieces:
+        for seg in pattern:
+            for _ in range(round(seg.duration_s / piece_s)):
+                traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, piece_s)]))
+                if twin.battery.is_empty:
+                    return traces, twin.t
+    return traces, None
+
+
 def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
     cols = list(zip(*rows, strict=True))
     arr = [np.array(c, dtype=float) for c in cols]
