@@ -261,6 +261,8 @@ def _drain(report: Report) -> None:
         twin = Twin(vehicle, PRESETS['sandy_loam'], seed=seed)
         twin.battery = Battery.from_config(pt.battery, soc=soc0)
         traces, empty_at = drive_until_empty(twin, pattern)  # 0.2 s pieces: the empty moment to 0.2 s
+        if empty_at is None:
+            raise RuntimeError(f'drain run seed {seed}: the battery did not empty')
         core = _core(vehicle, PRESETS['sandy_loam'], Battery.from_config(pt.battery, soc=soc0))
         core.tte_bounds = TimeToEmptyBounds(BoundSettings(block_s=4.0))
         last = -math.inf
