@@ -8,6 +8,7 @@ import io
 import os
 import time
 import uuid
+from collections.abc import Callable
 
 import pytest
 import rclpy
@@ -53,14 +54,21 @@ def spin_until(executor, condition, timeout_s: float = 20.0) -> None:
         executor.spin_once(timeout_sec=0.01)
 
 
-def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, ros_context):
-    namespace, estimator, executor, add = graph
+def frame_recorder() -> tuple[list[str], Callable[[object], None]]:
+    """(frames, draw): ``draw`` renders a MonitorView as plain text (110 columns) into ``frames``."""
     frames: list[str] = []
 
-    def draw(view):
+    def draw(view: object) -> None:
         console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
         console.print(render(view))
         frames.append(console.export_text())
+
+    return frames, draw
+
+
+def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, ros_context):
+    namespace, estimator, executor, add = graph
+    frames, draw = frame_recorder()
 
     profile = CaseProfile((Segment(0.2, 0.1, 1.0),))
     monitor = add(
@@ -125,12 +133,7 @@ def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tm
     """The header and the CSV show the command on cmd_vel, whoever sends it (was: always +0.00 in view
     mode); when the suite stops, what is left on screen is marked stale."""
     namespace, estimator, executor, add = graph
-    frames: list[str] = []
-
-    def draw(view):
-        console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
-        console.print(render(view))
-        frames.append(console.export_text())
+    frames, draw = frame_recorder()
 
     monitor = add(
         EnergyMonitor('view', csv_path=tmp_path / 'shown.csv', on_frame=draw, refresh_hz=20.0,
