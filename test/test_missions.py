@@ -201,6 +201,19 @@ def test_mission_cli_csv_route_with_cache(tmp_path, capsys):
     assert first['distance_m'] == pytest.approx(7.14159)
 
 
+def test_mission_cli_counts_limited_segments_apart_from_clamped(tmp_path, capsys):
+    """A turn of radius 0.5 m is tighter than the map's small-radius limit (2 x tread = 0.852 m for
+    test_robot_track): the map answers it at the limit radius and flags it ``limited``, which the
+    summary counts apart from ``clamped`` (outside the envelope; never here at 0.2 m/s)."""
+    path = tmp_path / 'r.csv'
+    path.write_text('length_m,turn_radius_m\n4,inf\n1.0,0.5\n2,inf\n1.0,-2\n')
+    argv = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', str(path),
+            '--speed', '0.2', '--no-cache', '--json']  # fmt: skip
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out['limited_segments'], out['clamped_segments']) == (1, 0)
+
+
 @pytest.mark.parametrize(
     ('argv', 'message'),
     [

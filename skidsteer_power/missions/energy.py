@@ -40,8 +40,10 @@ class MissionResult:
 
     Per-segment arrays (one entry per route segment): ``power_W`` (terrain + internal),
     ``power_terrain_W``, ``power_internal_W``, ``power_battery_W`` (DC bus), ``sinkage_m``,
-    ``traction_margin``, ``power_left_W``, ``power_right_W`` (mechanical, per side), ``clamped`` (the
-    map query left the map or touched a non-converged cell).
+    ``traction_margin``, ``power_left_W``, ``power_right_W`` (mechanical, per side), and the map's
+    flags (:class:`~skidsteer_power.maps.MapQuery`): ``clamped`` (the command lies outside the map's
+    envelope) and ``limited`` (a physics limit: a turn tighter than the map's limit radius, or a cell
+    at the traction limit or failing the map's accuracy check). A direct solve flags neither.
     """
 
     route: Route
@@ -57,6 +59,7 @@ class MissionResult:
     sinkage_m: np.ndarray
     traction_margin: np.ndarray
     clamped: np.ndarray
+    limited: np.ndarray
     drawbar_pull_by_payload: dict[float, float] = field(default_factory=dict)
     weight_by_payload: dict[float, float] = field(default_factory=dict)
 
@@ -135,6 +138,7 @@ class MissionResult:
             'drawbar_pull_ratio': self.drawbar_pull_ratio,
             'energy_battery_J': self.energy_battery_J,
             'clamped_segments': int(np.sum(self.clamped)),
+            'limited_segments': int(np.sum(self.limited)),
             'internal_fraction': self.energy_internal_J / self.energy_J,
             'distance_m': self.route.length_m,
             'duration_s': self.route.duration_s,
@@ -209,6 +213,7 @@ def run_mission(
     n = len(route.segments)
     fields_ = {k: np.zeros(n) for k in ('P', 'Pt', 'Pi', 'Pb', 'Pl', 'Pr', 'z', 'tm')}
     clamped = np.zeros(n, dtype=bool)
+    limited = np.zeros(n, dtype=bool)
     dp: dict[float, float] = {}
     weight: dict[float, float] = {}
     for payload in np.unique(a['payload_kg']):
@@ -230,6 +235,7 @@ def run_mission(
         fields_['z'][rows] = axle['sinkage'][inv]
         fields_['tm'][rows] = axle['traction_margin'][inv]
         clamped[rows] = axle['clamped'][inv]
+        limited[rows] = axle['limited'][inv]
         dp[float(payload)] = float(max_drawbar_pull([loaded], terrain)[0])
         weight[float(payload)] = float(loaded.weight_N)
     return MissionResult(
@@ -246,6 +252,7 @@ def run_mission(
         sinkage_m=fields_['z'],
         traction_margin=fields_['tm'],
         clamped=clamped,
+        limited=limited,
         drawbar_pull_by_payload=dp,
         weight_by_payload=weight,
     )
@@ -276,8 +283,9 @@ def _map_states(
 
 
 def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> dict[str, np.ndarray]:
-    """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and clamped flags
-    from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed radii [m]."""
+    """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and the clamped and
+    limited flags from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed
+    radii [m]."""
     q = power_map.query(speed, _yaw_rate(speed, radius))
     return {
         'torque_left': np.asarray(q.torque_left_Nm, dtype=float),
@@ -287,6 +295,7 @@ def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> di
         'sinkage': np.asarray(q.sinkage_m, dtype=float),
         'traction_margin': np.asarray(q.traction_margin, dtype=float),
         'clamped': np.asarray(q.clamped, dtype=bool),
+        'limited': np.asarray(q.limited, dtype=bool),
     }
 
 
@@ -313,7 +322,7 @@ def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) ->
     no payload changes): the same state grouping, map query and powertrain as :func:`run_mission`.
 
     Returns energy_J (terrain + internal), energy_terrain_J, energy_internal_J, energy_battery_J and
-    clamped_segments (segments whose map query was clamped).
+    clamped_segments and limited_segments (segments whose map query was flagged so).
     """
     a = route.arrays()
     table = np.column_stack([a['speed_m_s'], a['turn_radius_m']])
@@ -327,6 +336,7 @@ def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) ->
         'energy_internal_J': float(np.dot(powers['internal_W'], count)),
         'energy_battery_J': float(np.dot(powers['battery_W'], count)),
         'clamped_segments': int(np.sum(axle['clamped'][inverse.ravel()])),
+        'limited_segments': int(np.sum(axle['limited'][inverse.ravel()])),
     }
 
 
@@ -353,4 +363,5 @@ def _axle_states(
         'sinkage': np.asarray(state.sinkage_m, dtype=float),
         'traction_margin': np.asarray(state.traction_margin, dtype=float),
         'clamped': np.zeros(speed.shape, dtype=bool),
+        'limited': np.zeros(speed.shape, dtype=bool),
     }
