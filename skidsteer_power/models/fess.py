@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -223,15 +223,44 @@ class Problem:
             self.lateral_scale[idx],
         )
 
-    @property
+    # fixed per batch and read on every residual call: computed once (cached_property)
+    @cached_property
     def turn_radius(self) -> np.ndarray:
         """(P,) signed R = V / w_z [m] (0 when spinning in place)."""
         return self.speed / self.yaw
 
-    @property
+    @cached_property
     def side_speed(self) -> np.ndarray:
         """(P, 2) ground speed of each side's centreline along x, V - w_z y_side [m/s]."""
         return self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+
+    @cached_property
+    def rolling(self) -> np.ndarray:
+        """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
+        return self.contact.resistance * np.sign(self.side_speed)
+
+    @cached_property
+    def side_y(self) -> np.ndarray:
+        """(2,) lateral position of each side's centreline, +B/2 (left), -B/2 (right) [m]."""
+        return SIDE_Y_SIGN * self.half_tread
+
+    @cached_property
+    def centre_offset(self) -> np.ndarray:
+        """(P, 1, 2, 1, 1) lateral distance of each side's centreline from the turning centre O = (0, R)
+        [m]; R = V / w_z is finite because straight points run at STRAIGHT_YAW, 0 spinning in place."""
+        return self.side_y[None, None, :, None, None] - self.turn_radius[:, None, None, None, None]
+
+    @cached_property
+    def half_turn_rate(self) -> np.ndarray:
+        """(P, 1, 2|1, G, N) w_z xi / 2 [m rad/s]: divided by the rim speed |omega| r it is half the
+        angle an element has turned since it touched down (eqs. 6.3, 6.5)."""
+        return (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
+
+    @cached_property
+    def omega_ref(self) -> np.ndarray:
+        """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
+        (scales the Newton steps and their trust region)."""
+        return np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
 
 
 def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -245,14 +274,10 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     direction = np.where(omega >= 0, 1.0, -1.0)  # omega < 0: entry at the rear (mirrored contact)
-    t = c.xi[:, None] / np.maximum(np.abs(omega) * problem.radius, 1e-12)  # time in contact, eq. 6.5 [s]
-    yaw = problem.yaw[:, None, None, None, None]
-    # lateral distance of the side centreline from the turning centre O = (0, R) [m]; R = V / w_z is
-    # finite because straight points run at STRAIGHT_YAW, and 0 when spinning in place
-    dy = (SIDE_Y_SIGN * problem.half_tread)[None, None, :, None, None] - problem.turn_radius[
-        :, None, None, None, None
-    ]
-    half = 0.5 * yaw * t  # half the angle turned since the element touched down, eq. 6.3
+    # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
+    # contact t = xi / (|omega| r) (eq. 6.5)
+    half = problem.half_turn_rate / np.maximum(np.abs(omega) * problem.radius, 1e-12)
+    dy = problem.centre_offset
     sh, ch = np.sin(half), np.cos(half)
     sin, one_minus_cos = 2.0 * sh * ch, 2.0 * sh * sh
     xk = c.centre + direction * c.fwd[:, None] - s0  # element now, relative to the turning centre
@@ -273,8 +298,8 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
     c = problem.contact
     jx, jy, xk = element_displacement(problem, x)
     j = np.hypot(jx, jy)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        scale = np.where(j > 0, c.tau_max[:, None] * shear_fraction(problem.terrain, j) / j, 0.0)  # eq. 6.7
+    # eq. 6.7; the fraction is 0 at j = 0, so dividing by 1 there gives the zero stress
+    scale = c.tau_max[:, None] * shear_fraction(problem.terrain, j) / np.where(j > 0, j, 1.0)
     return -scale * jx, -scale * jy, xk
 
 
@@ -283,9 +308,10 @@ def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarr
     v, w = problem.speed[:, None], problem.yaw[:, None]
     mass = problem.vehicle.mass_kg
     q = np.hypot(v, w * s0)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        sin_b = np.where(q > 0, s0 * np.abs(w) / q, 0.0)  # beta = atan(s0 / R)
-        cos_b = np.where(q > 0, np.abs(v) / q, 1.0)
+    # beta = atan(s0 / R); at q = 0 (V = 0) both forces vanish whatever beta
+    safe = np.where(q > 0, q, 1.0)
+    sin_b = s0 * np.abs(w) / safe
+    cos_b = np.abs(v) / safe
     return -mass * np.abs(v * w) * sin_b, -mass * v * w * cos_b
 
 
@@ -297,18 +323,18 @@ def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     fx_side = np.sum(fx * c.wx[:, None], axis=sum_axes)  # (P, S, 2) trapezoid sums
     fy_side = np.sum(fy * c.wy[:, None], axis=sum_axes)
     mz_lat = np.sum(xk * fy * c.wy[:, None], axis=(-3, -2, -1))
-    ys = SIDE_Y_SIGN * problem.half_tread
-    rolling = (c.resistance * np.sign(problem.side_speed))[:, None, :]  # against each side's motion
+    net = fx_side - problem.rolling[:, None, :]  # rolling resistance against each side's motion
     s0 = x[..., 0]
     cfx, cfy = _centrifugal(problem, s0)
-    e1 = np.sum(fx_side - rolling, axis=-1) + cfx  # sum F_x = 0
-    e2 = np.sum(fy_side, axis=-1) + cfy  # sum F_y = 0
-    e3 = mz_lat - np.sum(ys * (fx_side - rolling), axis=-1) - s0 * cfy  # sum M_z about the turning centre
+    out = np.empty((*s0.shape, 3))
+    out[..., 0] = net.sum(axis=-1) + cfx  # sum F_x = 0
+    e2 = fy_side.sum(axis=-1) + cfy  # sum F_y = 0
+    out[..., 2] = mz_lat - net @ problem.side_y - s0 * cfy  # sum M_z about the turning centre
     # straight running has no lateral force and s0 is free; the kernel runs these points at a tiny
     # yaw rate and the lateral balance is scaled up by 1/STRAIGHT_YAW, so s0 takes its limit as
     # R -> inf (continuous across w_z = 0 in a map) while torques differ by O(STRAIGHT_YAW^2).
-    e2 = e2 * problem.lateral_scale[:, None]
-    return np.stack([e1, e2, e3], axis=-1)
+    out[..., 1] = e2 * problem.lateral_scale[:, None]
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -330,37 +356,36 @@ def initial_guess(problem: Problem) -> np.ndarray:
 
 def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
     """Finite-difference steps (P, 3) for the Jacobian of eq. 3.22."""
-    omega_ref = np.maximum(np.max(np.abs(problem.side_speed), axis=1), 1e-3) / problem.radius
-    h_s0 = np.full(len(x), 1e-7 * problem.contact.length_scale)
-    h_w = 1e-7 * np.maximum(np.abs(x[:, 1:]), omega_ref[:, None])
-    return np.column_stack([h_s0, h_w])
+    h = np.empty_like(x)
+    h[:, 0] = 1e-7 * problem.contact.length_scale
+    h[:, 1:] = 1e-7 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[:, None])
+    return h
 
 
 def _solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Solve the batched 3x3 systems a x = b by Cramer's rule; (x, ok) with ok False where singular."""
+    """Solve the batched 3x3 systems a x = b; (x, ok) with ok False (and x = 0) where a is singular
+    (|det| below 1e-14 of the product of its row norms)."""
     det = np.linalg.det(a)
-    scale = np.prod(np.linalg.norm(a, axis=2), axis=1)
-    ok = np.abs(det) > 1e-14 * scale
-    safe = np.where(ok, det, 1.0)
-    out = np.empty_like(b)
-    for i in range(3):
-        ai = a.copy()
-        ai[:, :, i] = b
-        out[:, i] = np.linalg.det(ai) / safe
-    return np.where(ok[:, None], out, 0.0), ok
+    ok = np.abs(det) > 1e-14 * np.prod(np.linalg.norm(a, axis=2), axis=1)
+    if ok.all():
+        return np.linalg.solve(a, b[..., None])[..., 0], ok
+    out = np.zeros_like(b)
+    if ok.any():
+        out[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+    return out, ok
 
 
 def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -> np.ndarray:
     """Scale each Newton step so s0 moves < 20 % of the contact span and omega < 50 % (trust region)."""
-    omega_ref = np.maximum(np.max(np.abs(problem.side_speed[idx]), axis=1), 1e-3) / problem.radius
-    caps = np.column_stack(
-        [
-            np.full(len(x), 0.2 * problem.contact.length_scale),
-            0.5 * np.maximum(np.abs(x[:, 1:]), omega_ref[:, None]),
-        ]
-    )
+    caps = np.empty_like(x)
+    caps[:, 0] = 0.2 * problem.contact.length_scale
+    caps[:, 1:] = 0.5 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[idx, None])
     ratio = np.max(np.abs(step) / caps, axis=1)
     return step / np.maximum(ratio, 1.0)[:, None]
+
+
+_UNKNOWNS = np.arange(3)
+_PERTURBED = _UNKNOWNS + 1
 
 
 def newton(
@@ -384,42 +409,50 @@ def newton(
     f = np.full_like(x, np.nan)
     iterations = np.zeros(p, dtype=int)
     for _ in range(MAX_ITERATIONS):
-        act = np.flatnonzero(~done & ~gave_up)
-        if len(act) == 0:
+        act = np.flatnonzero(~(done | gave_up))
+        if act.size == 0:
             break
         iterations[act] += 1
-        sub = problem if len(act) == p else problem.take(act)
+        whole = act.size == p  # no index bookkeeping while every point is still iterating
+        sub = problem if whole else problem.take(act)
         xa = x[act]
         h = _steps(sub, xa)
         trial = np.repeat(xa[:, None, :], 4, axis=1)
-        trial[:, 1, 0] += h[:, 0]
-        trial[:, 2, 1] += h[:, 1]
-        trial[:, 3, 2] += h[:, 2]
+        trial[:, _PERTURBED, _UNKNOWNS] += h  # state k+1 has unknown k perturbed (eq. 3.22)
         fall = residual(sub, trial)
         fa = fall[:, 0]
         f[act] = fa
-        finite = np.all(np.isfinite(fa), axis=1)
-        norm = np.where(finite, np.max(np.abs(fa), axis=1), np.inf)
+        norm = np.max(np.abs(fa), axis=1)
+        finite = norm < np.inf  # False for inf and nan
+        norm = np.where(finite, norm, np.inf)
         ok = norm < tol
-        done[act[ok]] = True
         worse = ~ok & (norm >= norm_prev[act])
-        gave_up[act[worse & (halvings[act] >= MAX_HALVINGS)]] = True
-        back = act[worse & (halvings[act] < MAX_HALVINGS)]  # backtrack: halve the last step
-        step_prev[back] *= 0.5
-        x[back] = x_prev[back] + step_prev[back]
-        halvings[back] += 1
+        if ok.any():
+            done[act[ok]] = True
+        if worse.any():
+            gave_up[act[worse & (halvings[act] >= MAX_HALVINGS)]] = True
+            back = act[worse & (halvings[act] < MAX_HALVINGS)]  # backtrack: halve the last step
+            step_prev[back] *= 0.5
+            x[back] = x_prev[back] + step_prev[back]
+            halvings[back] += 1
         good = ~ok & ~worse & finite
-        if not np.any(good):
+        if good.all():
+            idx, jac = act, (fall[:, 1:] - fa[:, None, :]).transpose(0, 2, 1) / h[:, None, :]
+            fg, ng = fa, norm
+        elif good.any():
+            idx = act[good]
+            jac = (fall[good, 1:] - fa[good, None, :]).transpose(0, 2, 1) / h[good, None, :]
+            fg, ng = fa[good], norm[good]
+        else:
             continue
-        jac = (fall[good, 1:] - fa[good, None, :]).transpose(0, 2, 1) / h[good, None, :]
-        step, _ = _solve3(jac, -fa[good])
-        idx = act[good]
-        step = _limit(problem, idx, x[idx], step)
-        x_prev[idx] = x[idx]
-        norm_prev[idx] = norm[good]
+        step, _ = _solve3(jac, -fg)
+        xi = x[idx]
+        step = _limit(problem, idx, xi, step)
+        x_prev[idx] = xi
+        norm_prev[idx] = ng
         step_prev[idx] = step
         halvings[idx] = 0
-        x[idx] = x[idx] + step
+        x[idx] = xi + step
     return NewtonResult(x, f, done, iterations)
 
 
@@ -483,7 +516,7 @@ class FessSolver:
 
     ``n`` is the number of elements per contact (eq. 6.5). Holding a solver avoids re-checking the
     vehicle on every call and keeps the single-wheel table warm; :meth:`solve_point` is the lean
-    single-point path for on-board use (about 0.5 ms for a track, benchmarks/bench_fess.py).
+    single-point path for on-board use (under 1 ms for a track: benchmarks/bench_fess.py).
     """
 
     def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
