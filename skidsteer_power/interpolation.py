@@ -76,8 +76,10 @@ class BilinearGrid:
         self.rows = [row.tolist() for row in self.flat]  # scalar path: Python lists are fastest
         self.n1 = n1
 
-    def __call__(self, x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Interpolated fields (P, F) and clamped flags (P,) at points (x0, x1) of shape (P,)."""
+    def __call__(self, x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolated fields (P, F), clamped flags (P,) and cell numbers (P,) at points (x0, x1) of
+        shape (P,); cell (i, j), between nodes i, i+1 of axis 0 and j, j+1 of axis 1, is number
+        i (N1 - 1) + j."""
         i, a, c0 = self.axis0.locate(x0)
         j, b, c1 = self.axis1.locate(x1)
         k = i * self.n1 + j
@@ -85,10 +87,10 @@ class BilinearGrid:
         a, b = a[:, None], b[:, None]
         low = v[k] + b * (v[k + 1] - v[k])
         high = v[k + self.n1] + b * (v[k + self.n1 + 1] - v[k + self.n1])
-        return low + a * (high - low), c0 | c1
+        return low + a * (high - low), c0 | c1, k - i
 
-    def scalar(self, x0: float, x1: float) -> tuple[list[float], bool]:
-        """One point, in plain Python: fields (list of F floats) and the clamped flag."""
+    def scalar(self, x0: float, x1: float) -> tuple[list[float], bool, int]:
+        """One point, in plain Python: fields (list of F floats), the clamped flag and the cell number."""
         i, a, c0 = self.axis0.locate_scalar(x0)
         j, b, c1 = self.axis1.locate_scalar(x1)
         k = i * self.n1 + j
@@ -101,4 +103,4 @@ class BilinearGrid:
         wa, wb = 1.0 - a, 1.0 - b
         w00, w01, w10, w11 = wa * wb, wa * b, a * wb, a * b
         out = [w00 * p + w01 * q + w10 * r + w11 * s for p, q, r, s in zip(r00, r01, r10, r11, strict=True)]
-        return out, c0 or c1
+        return out, c0 or c1, k - i

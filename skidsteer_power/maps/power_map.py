@@ -48,6 +48,17 @@ reported (never silently dropped). Those, and nodes whose slip ratio reaches :da
 traction limit: slip -> 1, where speed and power change too steeply for any interpolation), mark
 their cells: a query touching one is flagged ``limited``.
 
+Build-time accuracy check: after the nodes, FESS is solved at the centre of every cell a query could
+answer unflagged (left turns; right turns mirrored), and the map's total power there is compared
+with it (``cell_error``, relative to the sum of |side powers|). A cell off by more than
+:data:`CELL_ERROR_LIMIT` (0.5 %, half the 1 % accuracy goal: for a smooth solution the centre is
+where bilinear interpolation errs most, and the margin covers the rest of the cell) is flagged:
+every query in it is ``limited``. Those are the fast turns approaching the traction limit, where the
+outer side's slip climbs steeply with speed (centrifugal load transfer) and speed and power grow
+towards an asymptote; finer uniform grids converged there too slowly to be an answer (16 x 101:
+83 %, 31 x 101: 10.8 %). The check costs up to as many solves again as the nodes (fewer: cells
+flagged anyway are skipped). Measured per vehicle x terrain: README ("Map accuracy").
+
 Right turns are the mirror image of left turns (every vehicle here is laterally symmetric): only
 psi >= 0 is solved, so mirrored commands give mirrored answers exactly.
 """
@@ -92,6 +103,7 @@ FIELDS = (  # stored on the grid and interpolated
     'suspect',  # 1 at nodes past the traction limit (module doc); a query touching one is ``limited``
 )
 SLIP_LIMIT = 0.7  # slip ratio from which a node counts as at the traction limit (module doc) [-]
+CELL_ERROR_LIMIT = 0.005  # build-time check: a cell whose centre is off by more is flagged (module doc)
 QUERY_FIELDS = (  # what a query answers
     'torque_left_Nm',
     'torque_right_Nm',
@@ -124,7 +136,9 @@ class MapQuery:
         max_yaw_rate, or not finite); it was answered at the edge of the grid.
     limited : a physics limit: the turn is tighter than the small-radius limit (|V| < min_radius
         |w_z|, spinning in place included; solved at the limit radius, module doc), or the point
-        touches a cell where no steady state was found (the traction limit).
+        touches a node at the traction limit (no steady state, or slip ratio >= SLIP_LIMIT), or it
+        lies in a cell the build-time check found off FESS by more than CELL_ERROR_LIMIT (the
+        steep approach to the traction limit; module doc).
     """
 
     torque_left_Nm: Any
@@ -200,12 +214,19 @@ class PowerMap:
     limited: np.ndarray  # (Ns, Npsi) bool: solved at the small-radius limit
     meta: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    # (Ns - 1, Npsi - 1) build-time check per cell: relative power error at the cell centre [-]; nan
+    # where not checked (cells every query flags anyway), inf where FESS found no steady state there
+    cell_error: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self._axis_s = Axis(self.radial, 'command magnitude')
         self._axis_psi = Axis(_angle_coordinate(self.angles), 'turn angle')
         stacked = np.stack([self.values[name] for name in FIELDS], axis=-1)
         self._grid = BilinearGrid(self._axis_s, self._axis_psi, stacked)
+        if self.cell_error is None:
+            self.cell_error = np.full((len(self.radial) - 1, len(self.angles) - 1), np.nan)
+        self._cell_flag = (self.cell_error > CELL_ERROR_LIMIT).ravel()  # nan: False
+        self._cell_flag_list = self._cell_flag.tolist()
         self._radius = float(self.meta['drive_radius_m'])
         self._half_tread = 0.5 * float(self.meta['tread_m'])
         self._r_min = float(self.meta['min_radius_m'])
@@ -309,7 +330,12 @@ class PowerMap:
             'tread_m': float(vehicle.tread_m),
             'failed_points': int(np.sum(~converged)),
         }
-        return cls(radial, angles, float(length), values, converged, limited, meta)
+        out = cls(radial, angles, float(length), values, converged, limited, meta)
+        out.cell_error = _check_cells(out, solver, r_min)
+        out.meta['inaccurate_cells'] = int(np.sum(out.cell_error > CELL_ERROR_LIMIT))
+        out.meta['checked_cells'] = int(np.sum(~np.isnan(out.cell_error)))
+        out.__post_init__()
+        return out
 
     # ---------------------------------------------------------------- storage
     def save(self, path: str | os.PathLike[str]) -> Path:
@@ -325,6 +351,7 @@ class PowerMap:
             length_m=np.array(self.length_m),
             converged=self.converged,
             limited=self.limited,
+            cell_error=self.cell_error,  # type: ignore[arg-type]
             meta=np.array(json.dumps(self.meta)),
             **arrays,  # type: ignore[arg-type]
         )
@@ -344,7 +371,8 @@ class PowerMap:
                 meta = json.loads(str(data['meta']))
                 values = {name: np.array(data[f'value_{name}']) for name in FIELDS}
                 arrays: dict[str, np.ndarray] = {
-                    k: np.array(data[k]) for k in ('radial', 'angles', 'length_m', 'converged', 'limited')
+                    k: np.array(data[k])
+                    for k in ('radial', 'angles', 'length_m', 'converged', 'limited', 'cell_error')
                 }
         except FileNotFoundError:
             raise ConfigError(f'map file not found: {source}') from None
@@ -359,6 +387,7 @@ class PowerMap:
             arrays['converged'].astype(bool),
             arrays['limited'].astype(bool),
             meta,
+            cell_error=arrays['cell_error'],
         )
         out.path = source
         return out
@@ -379,7 +408,7 @@ class PowerMap:
         reverse = v < 0
         va = np.abs(v)
         lw = self.length_m * w
-        out, off_grid = self._grid(np.hypot(v, lw), _angle_coordinate(np.arctan2(lw, va)))
+        out, off_grid, cell = self._grid(np.hypot(v, lw), _angle_coordinate(np.arctan2(lw, va)))
         bad = ~np.isfinite(v) | ~np.isfinite(w)
         rest = (v == 0) & (w == 0)
         grid = {name: out[:, k] for k, name in enumerate(FIELDS)}
@@ -403,7 +432,7 @@ class PowerMap:
             for name, col in columns.items()
         }
         clamped = off_grid | bad | (va > self._v_max) | (np.abs(w) > self._w_max)
-        limited = (grid['suspect'] > 0) | (va < self._r_min * np.abs(w))
+        limited = (grid['suspect'] > 0) | self._cell_flag[cell] | (va < self._r_min * np.abs(w))
         return MapQuery(**fields, clamped=clamped.reshape(shape), limited=(limited & ~bad).reshape(shape))
 
     def _query_scalar(self, v: float, w: float) -> MapQuery:
@@ -411,10 +440,12 @@ class PowerMap:
             return MapQuery(**dict.fromkeys(QUERY_FIELDS, float('nan')), clamped=True, limited=False)
         va = abs(v)
         lw = self.length_m * w
-        vals, off_grid = self._grid.scalar(math.hypot(v, lw), _angle_coordinate_scalar(math.atan2(lw, va)))
+        vals, off_grid, cell = self._grid.scalar(
+            math.hypot(v, lw), _angle_coordinate_scalar(math.atan2(lw, va))
+        )
         tl, tr, sl, sr, s0, sinkage, margin, suspect = vals
         clamped = off_grid or va > self._v_max or abs(w) > self._w_max
-        limited = suspect > 0 or va < self._r_min * abs(w)
+        limited = suspect > 0 or self._cell_flag_list[cell] or va < self._r_min * abs(w)
         if v == 0 and w == 0:
             return MapQuery(**_REST, clamped=False, limited=False)
         ol = (va - w * self._half_tread + sl) / self._radius
@@ -438,6 +469,8 @@ class PowerMap:
             'converged_points': int(np.sum(self.converged)),
             'total_points': int(self.converged.size),
             'limited_points': int(np.sum(self.limited)),
+            'inaccurate_cells': int(np.sum(self._cell_flag)),
+            'total_cells': int(self._cell_flag.size),
             'max_power_W': float(np.nanmax(self._node_power())),
             'min_traction_margin': float(np.min(self.values['traction_margin'])),
         }
@@ -565,6 +598,43 @@ def _solve_row(
         'state': np.where(sol.converged[:, None], sol.state, np.nan),
         'v_eff': v_eff,
     }
+
+
+def _check_cells(power_map: PowerMap, solver: Any, r_min: float) -> np.ndarray:
+    """The build-time accuracy check (module doc): the relative total-power error [-] of the map at
+    the centre of every cell a query could answer unflagged, against FESS solved there (with the
+    small-radius limit, as the nodes). (Ns - 1, Npsi - 1); nan for cells every query flags anyway
+    (wholly tighter than the limit radius or outside the envelope, or with a corner at the traction
+    limit), inf where FESS finds no steady state at the centre. Left turns are checked, right turns
+    mirrored."""
+    m = power_map
+    u = _angle_coordinate(m.angles)
+    psi_c = _angle_from_coordinate(0.5 * (u[1:] + u[:-1]))  # centre in the grid coordinate
+    s_c = 0.5 * (m.radial[1:] + m.radial[:-1])
+    suspect = m.values['suspect'] > 0
+    corner = suspect[:-1, :-1] | suspect[1:, :-1] | suspect[:-1, 1:] | suspect[1:, 1:]
+    tight = m.angles[:-1] >= math.atan2(m.length_m, r_min)  # the whole cell has R <= min_radius
+    # the whole cell is outside the envelope (clamped): its smallest V or L w_z beyond the edge
+    v_max = float(m.meta['max_speed_m_s'])
+    outside = (m.radial[:-1, None] * np.cos(m.angles[None, 1:]) > v_max) | (
+        m.radial[:-1, None] * np.sin(m.angles[None, :-1]) > v_max  # L w_max = v_max
+    )
+    check = (psi_c > 0)[None, :] & ~tight[None, :] & ~corner & ~outside
+    out = np.full(check.shape, np.nan)
+    for k, s in enumerate(s_c):  # ring by ring: bounded memory, neighbours for FESS's retries
+        cols = np.flatnonzero(check[k])
+        if cols.size == 0:
+            continue
+        v, w = s * np.cos(psi_c[cols]), s * np.sin(psi_c[cols]) / m.length_m
+        row = _solve_row(solver, v, w, r_min, None)
+        side = row['torque'] * row['omega']  # FESS side powers [W]
+        q = m.query(v, w)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            err = np.abs(q.total_power_W - side.sum(axis=1)) / np.abs(side).sum(axis=1)
+        out[k, cols] = np.where(row['converged'] & np.isfinite(err), err, np.inf)
+    mirrored = psi_c < 0  # the right turn at -psi is the left turn at psi (cells are symmetric)
+    out[:, mirrored] = out[:, ::-1][:, mirrored]
+    return out
 
 
 def _mirror(row: dict[str, Any], n_psi: int) -> dict[str, Any]:

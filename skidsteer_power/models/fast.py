@@ -63,7 +63,7 @@ class TurningTables:
             Axis(self.curvatures, 'curvature'),
             np.stack([self.mu_t, self.s0], axis=-1),
         )
-        values, clamped = grid(np.abs(speed), np.abs(curvature))
+        values, clamped, _cell = grid(np.abs(speed), np.abs(curvature))
         return values[:, 0], values[:, 1], clamped
 
 
