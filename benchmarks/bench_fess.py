@@ -138,6 +138,20 @@ def _wheels(report: Report) -> None:
             '%',
             note=f'flat-contact assumption (section 6.4); {failed}/{total} points not solved by both',
         )
+    # convergence of both sides of the dry-sand comparison (issue 18): FESS elements per contact and
+    # the chapter 4 model's integration resolution, each well past its default
+    ref_fine = wong_wheel.solve(wheeled, dry, V, r_big, raise_on_failure=False, resolution=(48, 24))
+    for n in (40, 320):
+        err = _side_error(fess.solve(wheeled, dry, V, r_big, n=n), ref_fine)
+        converged = n == 320
+        report.figure(
+            f'wheel torque vs ch. 4 (resolution 48 x 24), R >= 2 m, dry sand, FESS n = {n}',
+            err * 100,
+            '%',
+            goal='< 10 %' if converged else '',
+            met=err < 0.1 if converged else None,
+            note='converged comparison' if converged else 'default elements',
+        )
     exact = fess.solve(wheeled, dry, np.linspace(0.2, 1.5, 8), 2.0)
     ref = wong_wheel.solve(wheeled, dry, np.linspace(0.2, 1.5, 8), 2.0, raise_on_failure=False)
     report.figure('wheel torque vs ch. 4 at exactly R = 2 m, dry sand', _side_error(exact, ref) * 100, '%')
