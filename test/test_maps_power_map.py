@@ -133,7 +133,7 @@ def test_load_or_build_caches_and_rebuilds_stale_maps(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(pm, 'DEFAULT_SHAPE', (4, 9))
     first, built = load_or_build(TRACK, PRESETS['clay'], progress=lambda d, t: calls.append((d, t)))
-    assert built and calls[-1] == (4, 4)
+    assert built and calls[-1] == (7, 7)  # 4 rings solved, then 3 rings of cells checked
     assert first.path == cache_path(TRACK, PRESETS['clay']) and first.path.parent == tmp_path
     _, built = load_or_build(TRACK, PRESETS['clay'])
     assert not built

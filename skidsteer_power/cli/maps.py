@@ -96,7 +96,7 @@ def _progress_bar(enabled: bool) -> Any:
         TextColumn('building map'),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn('rings'),
+        TextColumn('steps (rings, then the cell check)'),
         TimeElapsedColumn(),
         console=Console(stderr=True),
         transient=True,

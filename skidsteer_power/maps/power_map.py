@@ -273,9 +273,10 @@ class PowerMap:
         Options default per :func:`build_options` (max_speed [m/s] and max_yaw_rate [rad/s]: the
         vehicle's command envelope; shape = (rings, angles); ``n`` FESS elements per contact;
         ``min_radius`` [m] the small-radius limit). ``progress(done, total)`` is called after each
-        ring. ``speeds`` [m/s] and ``yaw_rates`` [rad/s] (the interface of docs/INTERFACES.md) are
-        accepted for compatibility: they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates|
-        and shape = (their lengths); the grid itself stays polar (module doc).
+        ring, then after each ring of the cell check (total = 2 rings - 1). ``speeds`` [m/s] and
+        ``yaw_rates`` [rad/s] (the interface of docs/INTERFACES.md) are accepted for
+        compatibility: they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates| and
+        shape = (their lengths); the grid itself stays polar (module doc).
         """
         if speeds is not None:
             max_speed = float(np.max(np.abs(_axis(speeds, 'speeds'))))
@@ -311,7 +312,7 @@ class PowerMap:
             w = ring * np.sin(angles[left]) / length
             rows.append(_mirror(_solve_row(solver, v, w, r_min, None), n_psi))
             if progress is not None:
-                progress(k + 1, n_s)
+                progress(k + 1, 2 * n_s - 1)
         values, converged, limited = _assemble(rows)
         meta = {
             'vehicle': vehicle.name,
@@ -331,7 +332,8 @@ class PowerMap:
             'failed_points': int(np.sum(~converged)),
         }
         out = cls(radial, angles, float(length), values, converged, limited, meta)
-        out.cell_error = _check_cells(out, solver, r_min)
+        ring_done = None if progress is None else (lambda k: progress(n_s + k + 1, 2 * n_s - 1))
+        out.cell_error = _check_cells(out, solver, r_min, ring_done)
         out.meta['inaccurate_cells'] = int(np.sum(out.cell_error > CELL_ERROR_LIMIT))
         out.meta['checked_cells'] = int(np.sum(~np.isnan(out.cell_error)))
         out.__post_init__()
@@ -600,13 +602,15 @@ def _solve_row(
     }
 
 
-def _check_cells(power_map: PowerMap, solver: Any, r_min: float) -> np.ndarray:
+def _check_cells(
+    power_map: PowerMap, solver: Any, r_min: float, ring_done: Callable[[int], None] | None = None
+) -> np.ndarray:
     """The build-time accuracy check (module doc): the relative total-power error [-] of the map at
     the centre of every cell a query could answer unflagged, against FESS solved there (with the
     small-radius limit, as the nodes). (Ns - 1, Npsi - 1); nan for cells every query flags anyway
     (wholly tighter than the limit radius or outside the envelope, or with a corner at the traction
     limit), inf where FESS finds no steady state at the centre. Left turns are checked, right turns
-    mirrored."""
+    mirrored. ``ring_done(k)`` is called after the cells of ring k (0-based)."""
     m = power_map
     u = _angle_coordinate(m.angles)
     psi_c = _angle_from_coordinate(0.5 * (u[1:] + u[:-1]))  # centre in the grid coordinate
@@ -623,15 +627,16 @@ def _check_cells(power_map: PowerMap, solver: Any, r_min: float) -> np.ndarray:
     out = np.full(check.shape, np.nan)
     for k, s in enumerate(s_c):  # ring by ring: bounded memory, neighbours for FESS's retries
         cols = np.flatnonzero(check[k])
-        if cols.size == 0:
-            continue
-        v, w = s * np.cos(psi_c[cols]), s * np.sin(psi_c[cols]) / m.length_m
-        row = _solve_row(solver, v, w, r_min, None)
-        side = row['torque'] * row['omega']  # FESS side powers [W]
-        q = m.query(v, w)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            err = np.abs(q.total_power_W - side.sum(axis=1)) / np.abs(side).sum(axis=1)
-        out[k, cols] = np.where(row['converged'] & np.isfinite(err), err, np.inf)
+        if cols.size:
+            v, w = s * np.cos(psi_c[cols]), s * np.sin(psi_c[cols]) / m.length_m
+            row = _solve_row(solver, v, w, r_min, None)
+            side = row['torque'] * row['omega']  # FESS side powers [W]
+            q = m.query(v, w)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                err = np.abs(q.total_power_W - side.sum(axis=1)) / np.abs(side).sum(axis=1)
+            out[k, cols] = np.where(row['converged'] & np.isfinite(err), err, np.inf)
+        if ring_done is not None:
+            ring_done(k)
     mirrored = psi_c < 0  # the right turn at -psi is the left turn at psi (cells are symmetric)
     out[:, mirrored] = out[:, ::-1][:, mirrored]
     return out
