@@ -35,7 +35,10 @@ def _build(report: Report) -> PowerMap:
             f'build default {DEFAULT_SHAPE[0]}x{DEFAULT_SHAPE[1]} map, {name}, dry sand',
             elapsed,
             's',
-            note=f'{int(m.converged.sum())}/{m.converged.size} converged, {int(m.limited.sum())} limited',
+            note=(
+                f'{int(m.converged.sum())}/{m.converged.size} converged, {int(m.limited.sum())} limited, '
+                f'{m.meta["inaccurate_cells"]}/{m.meta["checked_cells"]} checked cells flagged'
+            ),
         )
     return maps['chapter3_track']
 
