@@ -93,6 +93,37 @@ undamped spring between body and soil (a real soil unloads along a stiffer, diss
 the 30 kg body surges at ~1.7 Hz; see docs/TWIN.md."""
 SINKAGE_SETTLING_S = 0.5
 """Time constant of a standing wheel's sinkage towards the vertical balance [s] (ASSUMED)."""
+SOIL_UNIT_WEIGHT_N_M3 = 15.7e3
+"""ASSUMED unit weight of the soil gamma [N/m^3] in the bulldozing resistance, for every terrain
+(the presets carry none): dry sand of 1600 kg/m^3, inside the 14-18 kN/m^3 that soil-mechanics
+texts give for loose to dense dry sand. At the test robot's sinkages the cohesion term dominates
+(dry sand, wheel sinkage 23 mm: c h = 23 N/m against 0.5 D2 gamma h^2 = 14 N/m)."""
+
+
+def slip_sinkage_factor(slip: np.ndarray) -> np.ndarray:
+    """Lyasko's slip-sinkage coefficient K_j = (1 + i) / (1 - 0.5 i) [-] at slip i (eq. 2.13):
+    total sinkage = K_j x static sinkage (M. Lyasko, "Slip sinkage effect in soil-vehicle
+    mechanics", J. Terramechanics 47 (2010) 21-31), for a driven wheel (i >= 0; 1 when braking)."""
+    i = np.clip(slip, 0.0, 1.0)
+    return (1.0 + i) / (1.0 - 0.5 * i)
+
+
+def bulldozing_coefficients(terrain: Terrain) -> tuple[float, float]:
+    """(A [N/m^2], B [N/m^3]) of the bulldozing resistance per unit length of a contact's side wall,
+    R_b(h) = A h + B h^2 [N/m] at depth h [m] below the surface (Hegedus 1960, as Ishigami et al.
+    2007 apply it to the side of a wheel under side slip: J. Field Robotics 24(3), 233-250):
+
+        R_b = D1 (c h + D2 gamma h^2 / 2),  D1 = cot X_c + tan(X_c + phi),
+        D2 = cot X_c + cot^2 X_c / cot phi,  X_c = 45 deg - phi / 2
+
+    with the terrain's c [Pa] and phi (eq. 2.2) and gamma = ``SOIL_UNIT_WEIGHT_N_M3``. The
+    dissertation names bulldozing (ch. 2.3, "especially significant when sinkage is large") and
+    neglects it for SUGVs; the twin applies it to the lateral sliding of wheels and track sides."""
+    xc = 0.25 * math.pi - 0.5 * terrain.phi
+    cot = 1.0 / math.tan(xc)
+    d1 = cot + math.tan(xc + terrain.phi)
+    d2 = cot + cot * cot * math.tan(terrain.phi)
+    return d1 * terrain.c, 0.5 * d1 * d2 * SOIL_UNIT_WEIGHT_N_M3
 
 
 @dataclass
@@ -134,6 +165,7 @@ class Twin:
         patches: list[Patch] | None = None,
         seed: int = 0,
         dt: float = DEFAULT_DT_S,
+        bulldozing: bool = True,
     ) -> None:
         if not (0 < dt <= DEFAULT_DT_S):
             raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
@@ -143,6 +175,7 @@ class Twin:
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
         self.dt = dt
+        self.bulldozing = bulldozing  # False: the steady models' contact (no side-wall resistance)
         pt, motor = self.powertrain, self.powertrain.motor
         self.G = pt.gear_ratio
         self.r = vehicle.drive_radius_m
@@ -195,6 +228,7 @@ class Twin:
             self.node_w = np.broadcast_to(trap[:, None] * (0.5 * b * w)[None, :], self.node_x.shape).copy()
             self.node_p = self.node_x + 1j * self.node_y  # hull positions as x + i y [m]
             self.node_dx = dx
+            self.track_x, self.track_dx = x, trap  # positions [m] and trapezoid weights [m] along
             self.track_length, self.width = length, b
         else:
             nw = int(v.n_wheels)  # type: ignore[arg-type]
@@ -237,13 +271,16 @@ class Twin:
             w_wheel = v.weight_N / self.n_wheels
             z0 = float(single_wheel.bekker_wheel_sinkage(self.field.base, w_wheel, self.r, self.width))
             self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
+            self.dz = np.zeros(self.n_wheels)  # slip-sinkage: rut excavated below the wheel [m]
+            self._direction = np.ones(self.n_wheels)  # rolling sense of each wheel (+-1)
             self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
-            self._rows = np.empty((6, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
+            self._rows = np.empty((7, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
             self._trig = np.empty((2, self.n_wheels, WHEEL_NODES + 1))  # cos, sin of the node angles
             self._padded = np.zeros((3, self.n_wheels, WHEEL_NODES + 2))  # (_advance_wheels)
             self._soil_age = 0
         self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
         self._kinematics: tuple[np.ndarray, ...] | None = None  # wheels: of the present velocities
+        self._body_damping = (0.0, 0.0, 0.0, 0.0, 0.0)  # (_move)
         self._j_rate = np.zeros_like(self.j)
         self._damping = SHEAR_DAMPING_S / self.field.base.K  # [s/m]: c = tau_max t_d / K
 
@@ -283,18 +320,26 @@ class Twin:
             t = self.field.base
             self._tau_max_w = soil.shear_strength(t, pressure)[:, None, None] * self.node_w  # eq. 2.2
             self._rc = single_track.compaction_resistance(t, loads, b, length)  # eq. 2.10
-            self._sinkage = float(np.max(single_track.track_sinkage(t, loads, b, length)))  # eq. 2.6
+            sinkage = single_track.track_sinkage(t, loads, b, length)  # eq. 2.6
+            self._sinkage = float(np.max(sinkage))
+            bull_a, bull_b = bulldozing_coefficients(t)
+            side_wall = (bull_a + bull_b * sinkage) * sinkage  # R_b [N/m] per side
+            self._bull_w = side_wall[:, None] * self.track_dx * (1.0 if self.bulldozing else 0.0)
             return
         p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
         strength = np.zeros(p.shape)
         rc = np.zeros(p.shape)
         sink = np.zeros(p.shape)
+        side_wall = np.zeros(p.shape)
         for i in np.unique(index):
             mask = index == i
             t = self.field.terrains[i]
             strength[mask] = soil.shear_strength(t, p[mask])
             rc[mask] = single_track.compaction_resistance(t, p[mask] * b * length, b, length)
             sink[mask] = soil.sinkage_for_pressure(t, p[mask], b)
+            bull_a, bull_b = bulldozing_coefficients(t)
+            side_wall[mask] = (bull_a + bull_b * sink[mask]) * sink[mask]
+        self._bull_w = side_wall.mean(axis=2) * self.track_dx * (1.0 if self.bulldozing else 0.0)
         share = self.node_w / (b * length)  # each node's share of the rut
         self._tau_max_w = strength * self.node_w
         self._rc = (rc * share).sum(axis=(1, 2))
@@ -331,16 +376,27 @@ class Twin:
         fc = -self._rc * np.tanh(side_speed / DIRECTION_SMOOTHING_M_S)  # eq. 2.10, against travel
         f_side = f.sum(axis=(1, 2))
         total = f_side.sum()
+        # bulldozing on the track's side walls (Ishigami et al. 2007) against the lateral motion
+        lateral = vy + wz * self.track_x  # [m/s] along the track
+        th = np.tanh(lateral * (1.0 / DIRECTION_SMOOTHING_M_S))
+        fb = -self._bull_w * th  # (side, along) [N]
+        c_y = (self._bull_w * (1.0 - th * th)).sum(axis=0)  # slope for the implicit body step (_move)
+        x = self.track_x
+        self._body_damping = (0.0, 0.0, float(c_y.sum()), float(c_y @ x), float(c_y @ (x * x)))
         force = np.array(
             [
                 total.real + fc.sum(),
-                total.imag,
-                float((self.node_p.conjugate() * f).imag.sum()) - float((self.y_side * fc).sum()),
+                total.imag + fb.sum(),
+                float((self.node_p.conjugate() * f).imag.sum())
+                - float((self.y_side * fc).sum())
+                + float((fb @ self.track_x).sum()),
             ]
         )
         axle = self.r * f_side.real  # the ground's pull on the belt resists the sprocket
         slip = (vx + 1j * vy) + 1j * wz * self.node_p - belt[:, None, None]
-        dissipation = float(-(f.conjugate() * slip).real.sum() - (fc * side_speed).sum())
+        dissipation = float(
+            -(f.conjugate() * slip).real.sum() - (fc * side_speed).sum() - (fb @ lateral).sum()
+        )
         return force, axle, dissipation, self._sinkage
 
     def _advance_tracks(self, dt: float) -> None:
@@ -389,6 +445,9 @@ class Twin:
         self._wp_tan_phi = column([math.tan(t.phi) for t in terrains])
         self._wp_a = (column([t.a0 for t in terrains])[:, 0], column([t.a1 for t in terrains])[:, 0])
         self._wp_b = (column([t.b0 for t in terrains])[:, 0], column([t.b1 for t in terrains])[:, 0])
+        on = 1.0 if self.bulldozing else 0.0
+        bull = [bulldozing_coefficients(t) for t in terrains]
+        self._wp_bull = (column([on * a for a, _ in bull]), column([on * b_ for _, b_ in bull]))
         if all(t.shear_type == 'A' for t in terrains):
             self._wp_inv_k: np.ndarray | None = column([-1.0 / t.K for t in terrains])
             self._wp_terrains: list[Terrain] | None = None
@@ -407,6 +466,15 @@ class Twin:
             per_side.append((1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0), abs(w)))
         k = self._wheels_per_side
         direction = np.array([per_side[0][0]] * k + [per_side[1][0]] * k)
+        flipped = direction != self._direction
+        if flipped.any():
+            # a wheel that reverses keeps its soil: the rim nodes' order (entry <-> exit) and the
+            # tangential displacement in the rolling frame mirror, so the stress on the rim does not
+            # jump (without this a standing wheel chatters between the two senses every step)
+            self.j[:, flipped] = self.j[:, flipped, ::-1]
+            self.j[0, flipped] *= -1.0
+            self._j_rate[:, flipped] = 0.0
+            self._direction = direction
         om = np.array([per_side[0][1]] * k + [per_side[1][1]] * k)
         vxm = direction * vxa  # mirrored so the wheel rolls forward
         rw = self.r * om
@@ -428,7 +496,7 @@ class Twin:
             else:
                 self._soil_age -= 1
         kin = self._kinematics if self._kinematics is not None else self._wheel_kinematics()
-        _vxa, vya, om, direction, vxm, slip = kin
+        vxa, vya, om, direction, vxm, slip = kin
         r = self.r
         z = self.z
         a0, a1 = self._wp_a
@@ -471,7 +539,7 @@ class Twin:
         trig = self._trig  # cos(theta), sin(theta)
         np.cos(theta, out=trig[0])
         np.sin(theta, out=trig[1])
-        shear = rows[4:]
+        shear = rows[4:6]
         np.multiply(gain, j, out=shear)
         strength *= self._damping
         shear -= strength * self._j_rate
@@ -479,24 +547,57 @@ class Twin:
         np.multiply(sigma, trig, out=rows[:2])
         np.multiply(tau, trig, out=rows[2:4])
         cos = trig[0]
+        # bulldozing on the side wall (Ishigami et al. 2007): R_b(h) per unit length along x = r sin(theta)
+        # at the rim's depth below the surface h = r (cos(theta) - cos(theta_f)) + the excavated dz,
+        # dx = r cos(theta) d(theta)
+        h = rows[6]
+        np.subtract(cos, np.cos(tf_c), out=h)
+        h *= r
+        np.maximum(h, 0.0, out=h)
+        dz = self.dz[:, None]
+        h += dz
+        bull_a, bull_b = self._wp_bull
+        rb = bull_b * h
+        rb += bull_a
+        np.multiply(rb, h, out=h)
+        h *= cos
         area = (r * self.width) * span  # the contact's arc times width per unit xi [m^2]
-        s_cos, s_sin, t_cos, t_sin, t_sum, y_sum = (rows @ self.xi_w) * area  # [N]
+        s_cos, s_sin, t_cos, t_sin, t_sum, y_sum, bull = (rows @ self.xi_w) * area  # [N] (bull: [N m / m^2])
         # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
         # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
         normal = s_sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
         pull = t_cos - normal
-        fx = direction * pull  # eq. 2.27 (rolling frame, then mirrored back)
+        # the face of the excavated step (depth dz, width b) bulldozes against the axle's travel
+        dz = self.dz
+        face = self.width * (bull_a[:, 0] + bull_b[:, 0] * dz) * dz  # [N]
+        th_x = np.tanh(vxa * (1.0 / DIRECTION_SMOOTHING_M_S))
+        front = face * th_x
+        fx = direction * pull - front  # eq. 2.27 (rolling frame, then mirrored back)
         fz = s_cos + t_sin
-        fy = y_sum  # eq. 4.9, lateral
+        # eq. 4.9, lateral shear; the side wall's bulldozing against the axle's lateral motion
+        side = bull / self.width  # [N]
+        th_y = np.tanh(vya * (1.0 / DIRECTION_SMOOTHING_M_S))
+        fy = y_sum - side * th_y
+        # the bulldozing's slope in the body velocities, for the implicit body step (_move)
+        c_x = face * (1.0 - th_x * th_x)
+        c_y = side * (1.0 - th_y * th_y)
+        x, y = self.wheel_x, self.wheel_y
+        self._body_damping = (
+            float(c_x.sum()),
+            -float(c_x @ y),
+            float(c_y.sum()),
+            float(c_y @ x),
+            float(c_x @ (y * y) + c_y @ (x * x)),
+        )
         torque = direction * (r * t_sum)  # eq. 2.34: the terrain's resisting torque
         force = np.array([sum(fx.tolist()), sum(fy.tolist()), float(self.wheel_x @ fy - self.wheel_y @ fx)])
         # power of the contact stresses on the slip velocity (vxm cos(theta) - r om, vya), and the rut's
-        dissipation = float((r * om) @ t_sum - vxm @ pull - vya @ y_sum)
+        dissipation = float((r * om) @ t_sum - vxm @ pull - vya @ fy + vxa @ front)
         self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self._wheels_per_side)
         half = self._wheels_per_side
         torques = torque.tolist()
         axle = np.array([sum(torques[:half]), sum(torques[half:])])
-        return force, axle, dissipation, float(z.max())
+        return force, axle, dissipation, float((z + dz).max())
 
     def _advance_wheels(self, dt: float) -> None:
         """Transport the rim's shear displacement and relax the sinkage (see the module doc)."""
@@ -539,6 +640,17 @@ class Twin:
         travel += np.abs(vxa)
         span *= self.r
         travel /= np.maximum(span, 1e-6, out=span)
+        if self.bulldozing:  # slip-sinkage (Lyasko 2010): the excavation relaxes like the sinkage
+            # at the slip the soil has felt: the steady slip whose displacement at the exit (eq. 2.25:
+            # j_r = r [(theta_f - theta_r) - (1 - i)(sin(theta_f) - sin(theta_r))]) is the rim's j there
+            # (= i in steady running; a wheel spinning up from rest has not yet sheared the soil);
+            # span is r (theta_f - theta_r) [m] here
+            sin = self._trig[1]
+            # (the twin's j_t is -j_r of eq. 2.25: the rim slides backwards over the soil when driving)
+            felt = 1.0 - (span + j[0, :, -1]) / (self.r * np.maximum(sin[:, 0] - sin[:, -1], 1e-9))
+            target = (slip_sinkage_factor(felt) - 1.0) * self.z
+            dig = np.minimum(travel * dt, 1.0)  # (only a moving wheel excavates: no settling term)
+            self.dz = np.minimum(self.dz + dig * (target - self.dz), 0.95 * self.r - self.z)
         travel += 1.0 / SINKAGE_SETTLING_S
         travel *= dt
         fraction = np.minimum(travel, 1.0, out=travel)
@@ -583,17 +695,24 @@ class Twin:
         for _ in range(n_steps):
             self._step()
 
-    def _move(self, force: np.ndarray, omega_m: np.ndarray) -> None:
+    def _move(self, force: np.ndarray, omega_m: np.ndarray) -> float:
         """Body (hull frame: m (dv/dt + yaw x v) = F, Iz dyaw/dt = M), motor angles, pose and the
-        contact's shear transport over one step, with the new motor speeds [rad/s]."""
+        contact's shear transport over one step, with the new motor speeds [rad/s]. The bulldozing
+        (stiff where the body nearly stands) is implicit: (M + dt D) dv = dt (F + m v x yaw) with D
+        its slope in (v_x, v_y, yaw rate) (``_body_damping``). Returns the power its implicit part
+        adds to the dissipation [W] (-dF . v, dF = -D dv)."""
         dt = self.dt
+        m = self.mass
         vx, vy, wz = self.vel.tolist()
         fx, fy, mz = force.tolist()
-        vx, vy, wz = (
-            vx + dt * (fx / self.mass + wz * vy),
-            vy + dt * (fy / self.mass - wz * vx),
-            wz + dt * mz / self.Iz,
-        )
+        dxx, dxw, dyy, dyw, dww = self._body_damping
+        rx, ry, rw = dt * (fx + m * wz * vy), dt * (fy - m * wz * vx), dt * mz
+        a, b, c, p, q = m + dt * dxx, m + dt * dyy, self.Iz + dt * dww, dt * dxw, dt * dyw
+        d_w = (rw - p * rx / a - q * ry / b) / (c - p * p / a - q * q / b)
+        d_x, d_y = (rx - p * d_w) / a, (ry - q * d_w) / b
+        extra = (dxx * d_x + dxw * d_w) * vx + (dyy * d_y + dyw * d_w) * vy
+        extra += (dxw * d_x + dyw * d_y + dww * d_w) * wz
+        vx, vy, wz = vx + d_x, vy + d_y, wz + d_w
         self.vel = np.array([vx, vy, wz])
         self.omega_m = omega_m
         self.theta_m = self.theta_m + dt * omega_m
@@ -604,6 +723,7 @@ class Twin:
             self._advance_tracks(dt)
         else:
             self._advance_wheels(dt)
+        return extra
 
     def step_with_motor_speeds(self, omega_m: np.ndarray) -> np.ndarray:
         """One step with the motor speeds [rad/s, forward positive] imposed from outside (the live
@@ -618,7 +738,7 @@ class Twin:
         else:
             force, axle, dissipation, sinkage = self._wheel_forces(loads)
         self.max_sinkage_m = max(self.max_sinkage_m, sinkage)
-        self._move(force, omega_m)
+        dissipation += self._move(force, omega_m)
         self.energy.terrain_J += dissipation * self.dt
         self.t += self.dt
         return axle
@@ -677,7 +797,7 @@ class Twin:
             currents[k], omegas[k], p_terms[k], p_buses[k] = current, new, p_term, p_bus
         self.setpoint = np.array(setpoints)
         self.integral_A = np.array(integrals)
-        self._move(force, np.array(omegas))
+        dissipation += self._move(force, np.array(omegas))
         # electrical side and energy ledger
         e = self.energy
         total = p_buses[0] + p_buses[1]
