@@ -181,6 +181,7 @@ class Twin:
         self.r = vehicle.drive_radius_m
         self.half_tread = 0.5 * vehicle.tread_m
         self.y_side = np.array([self.half_tread, -self.half_tread])
+        self._side_y = (self.half_tread, -self.half_tread)  # (floats)
         self.kt = motor.torque_constant_Nm_A
         self.R = motor.terminal_resistance_ohm
         self.kn = motor.speed_constant_rad_s_V
@@ -241,8 +242,14 @@ class Twin:
             trap = np.full(WHEEL_NODES + 1, 1.0 / WHEEL_NODES)
             trap[[0, -1]] *= 0.5
             self.xi_w = trap
+            self._xi_pair = np.stack([self.xi, 1.0 - self.xi])  # (_wheel_forces)
             self.n_wheels = nw
             self._wheels_per_side = nw // 2
+            # sums over the wheels (_wheel_forces): all, x-weighted, x^2-weighted, left side, right side
+            left = (self.wheel_side == 0).astype(float)
+            self._wheel_weights = np.stack(
+                [np.ones(nw), self.wheel_x, self.wheel_x**2, left, 1.0 - left], axis=1
+            )
             self._sinkage_exponent = 1.0 / (self.field.base.n + 0.5)  # eq. 2.32: Fz ~ z^(n + 1/2)
             if self.field.uniform:
                 self._wheel_soil()  # once (with patches: refreshed while stepping)
@@ -267,22 +274,47 @@ class Twin:
         if v.is_tracked:
             self.j = np.zeros(self.node_x.shape, dtype=complex)  # j_x + i j_y [m] (side, along, across)
             self._soil_age = 0
+            self._th = np.empty((2, TRACK_NODES + 1))  # (_track_forces)
+            self._side_column = np.zeros((2, 1, 1), dtype=complex)  # (_advance_tracks)
+            self._courant = np.zeros((2, 1, 1))
         else:
             w_wheel = v.weight_N / self.n_wheels
             z0 = float(single_wheel.bekker_wheel_sinkage(self.field.base, w_wheel, self.r, self.width))
             self.z = np.full(self.n_wheels, min(z0, 0.5 * self.r))
             self.dz = np.zeros(self.n_wheels)  # slip-sinkage: rut excavated below the wheel [m]
-            self._direction = np.ones(self.n_wheels)  # rolling sense of each wheel (+-1)
+            self._deepest = float(self.z.max())  # deepest z + dz [m]
+            self._sense = [1.0, 1.0]  # rolling sense of each side's wheels (+-1)
             self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
-            self._rows = np.empty((7, self.n_wheels, WHEEL_NODES + 1))  # integrands (_wheel_forces)
-            self._trig = np.empty((2, self.n_wheels, WHEEL_NODES + 1))  # cos, sin of the node angles
-            self._padded = np.zeros((3, self.n_wheels, WHEEL_NODES + 2))  # (_advance_wheels)
+            nodes = (self.n_wheels, WHEEL_NODES + 1)
+            self._rows = np.empty((6, *nodes))  # integrands (_wheel_forces)
+            self._angles = np.zeros((3, *nodes))  # (_wheel_forces)
+            self._trig = self._angles[:2]  # cos, sin of the node angles
+            self._depth = np.empty(nodes)
+            self._u_pair = np.empty((2, *nodes))
+            self._outer = np.zeros((2 * self.n_wheels, 2))
+            self._per_wheel = np.zeros((8, self.n_wheels))  # contact integrals, bulldozing (_wheel_forces)
+            self._cell, self._change = np.empty(nodes), np.empty((2, *nodes))  # (_advance_wheels)
+            self._damped = np.empty((2, *nodes))  # (_wheel_forces)
             self._soil_age = 0
-        self.last = StepOutput(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), 0.0)
-        self._kinematics: tuple[np.ndarray, ...] | None = None  # wheels: of the present velocities
+            zeros = np.zeros(self.n_wheels)
+            self._wheel_state = (zeros, np.zeros(2), zeros.tolist())  # span [rad] (also as floats), loads [N]
+            self._wheel_geometry()
+            self._side, self._face_sides = zeros, (0.0, 0.0)  # bulldozing [N] (_wheel_contact)
+            self._contact_age = 1
+        self.current_A = [0.0, 0.0]  # motor currents of the last step [A] (left, right)
+        self._last: tuple = (np.zeros(2), [0.0, 0.0], [0.0, 0.0], 0.0)  # (last)
+        self._kinematics: tuple | None = None  # wheels: of the present velocities
         self._body_damping = (0.0, 0.0, 0.0, 0.0, 0.0)  # (_move)
         self._j_rate = np.zeros_like(self.j)
         self._damping = SHEAR_DAMPING_S / self.field.base.K  # [s/m]: c = tau_max t_d / K
+
+    @property
+    def last(self) -> StepOutput:
+        """The last step's per-side quantities (built when asked: the step keeps plain floats)."""
+        axle, p_buses, p_terms, sinkage = self._last
+        return StepOutput(
+            np.array(self.current_A), np.array(axle), np.array(p_buses), np.array(p_terms), sinkage
+        )
 
     # ------------------------------------------------------------------ terrain
     def _side_loads(self) -> np.ndarray:
@@ -325,6 +357,7 @@ class Twin:
             bull_a, bull_b = bulldozing_coefficients(t)
             side_wall = (bull_a + bull_b * sinkage) * sinkage  # R_b [N/m] per side
             self._bull_w = side_wall[:, None] * self.track_dx * (1.0 if self.bulldozing else 0.0)
+            self._track_moments()
             return
         p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
         strength = np.zeros(p.shape)
@@ -344,6 +377,16 @@ class Twin:
         self._tau_max_w = strength * self.node_w
         self._rc = (rc * share).sum(axis=(1, 2))
         self._sinkage = float(sink.max())
+        self._track_moments()
+
+    def _track_moments(self) -> None:
+        """After a soil refresh: the transient damping's c tau_max per node [N s/m] and the side walls'
+        bulldozing moments along the track, bw x^k (k = 0, 1, 2) per node and their sums."""
+        self._tau_damping = self._damping * self._tau_max_w
+        bw = self._bull_w.sum(axis=0)  # both sides [N]
+        x = self.track_x
+        self._bull_moments = np.stack([bw, bw * x, bw * x * x])
+        self._bull_sums = self._bull_moments.sum(axis=1).tolist()
 
     def _shear_fraction(self, magnitude: np.ndarray, index: np.ndarray | None) -> np.ndarray:
         """tau / tau_max at |j| [m] per node (eqs. 2.3-2.5), by the node's terrain."""
@@ -355,7 +398,9 @@ class Twin:
             out[mask] = soil.shear_fraction(self.field.terrains[i], magnitude[mask])
         return out
 
-    def _track_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def _track_forces(
+        self, loads: np.ndarray
+    ) -> tuple[tuple[float, float, float], list[float], float, float]:
         """Body force (F_x, F_y, M_z) [N, N, N m], axle torques [N m], dissipation [W], sinkage [m].
 
         Vectors in the hull plane are complex numbers x + i y (j, forces, velocities).
@@ -364,65 +409,101 @@ class Twin:
             self._track_soil(loads)
             self._soil_age = SOIL_REFRESH_STEPS
         self._soil_age -= 1
-        vx, vy, wz = self.vel
+        vx, vy, wz = self.vel.tolist()
         j = self.j
         mag = np.abs(j)
-        tau_w = self._tau_max_w * self._shear_fraction(mag, self._track_index)  # eq. 3.12
-        safe = np.where(mag > 0, mag, 1.0)
-        f = -tau_w * j / safe  # eqs. 3.13-3.15: against the displacement
-        f -= self._damping * self._tau_max_w * self._j_rate  # transient damping, 0 in steady state
-        belt = self.r * self.omega_m / self.G  # belt speed relative to the hull [m/s]
-        side_speed = vx - wz * self.y_side
-        fc = -self._rc * np.tanh(side_speed / DIRECTION_SMOOTHING_M_S)  # eq. 2.10, against travel
-        f_side = f.sum(axis=(1, 2))
-        total = f_side.sum()
+        if self._track_index is None and self.field.base.shear_type == 'A':
+            minus_fraction = np.multiply(mag, -1.0 / self.field.base.K)
+            np.expm1(minus_fraction, out=minus_fraction)  # eq. 2.3 (tau / tau_max = -this)
+        else:
+            minus_fraction = -self._shear_fraction(mag, self._track_index)  # eqs. 2.3-2.5
+        # eqs. 3.12-3.15: tau_max f against the displacement, plus the transient damping (0 in steady
+        # state): -(tau_max f / |j|) j - c tau_max dj/dt
+        gain = np.multiply(minus_fraction, self._tau_max_w, out=minus_fraction)
+        mag += 1e-300
+        gain /= mag
+        f = gain * j
+        f -= self._tau_damping * self._j_rate
+        f_side = f.sum(axis=(1, 2)).tolist()  # [N] per side (complex)
+        moment = np.vdot(self.node_p, f).imag  # sum of x f_y - y f_x [N m]
+        axle = [self.r * f_side[0].real, self.r * f_side[1].real]  # the belt's pull resists the sprocket
+        total = f_side[0] + f_side[1]
+        fx, fy, mz = total.real, total.imag, moment
+        # the soil takes the power of the shear stresses on the slip velocity v + yaw e_z x p - belt:
+        # what the belts put in minus what the body receives
+        belts = (self.omega_m * (self.r / self.G)).tolist()  # belt speed relative to the hull [m/s]
+        dissipation = belts[0] * f_side[0].real + belts[1] * f_side[1].real - (fx * vx + fy * vy + mz * wz)
+        # compaction resistance (eq. 2.10) against each side's travel
+        for rc, y in zip(self._rc.tolist(), self._side_y, strict=True):
+            speed = vx - wz * y
+            fc = -rc * math.tanh(speed / DIRECTION_SMOOTHING_M_S)
+            fx += fc
+            mz -= y * fc
+            dissipation -= fc * speed
         # bulldozing on the track's side walls (Ishigami et al. 2007) against the lateral motion
-        lateral = vy + wz * self.track_x  # [m/s] along the track
-        th = np.tanh(lateral * (1.0 / DIRECTION_SMOOTHING_M_S))
-        fb = -self._bull_w * th  # (side, along) [N]
-        c_y = (self._bull_w * (1.0 - th * th)).sum(axis=0)  # slope for the implicit body step (_move)
-        x = self.track_x
-        self._body_damping = (0.0, 0.0, float(c_y.sum()), float(c_y @ x), float(c_y @ (x * x)))
-        force = np.array(
-            [
-                total.real + fc.sum(),
-                total.imag + fb.sum(),
-                float((self.node_p.conjugate() * f).imag.sum())
-                - float((self.y_side * fc).sum())
-                + float((fb @ self.track_x).sum()),
-            ]
-        )
-        axle = self.r * f_side.real  # the ground's pull on the belt resists the sprocket
-        slip = (vx + 1j * vy) + 1j * wz * self.node_p - belt[:, None, None]
-        dissipation = float(
-            -(f.conjugate() * slip).real.sum() - (fc * side_speed).sum() - (fb @ lateral).sum()
-        )
-        return force, axle, dissipation, self._sinkage
+        # vy + yaw x: sums of bw th, bw x th, bw x^2 th and of th^2 (bw the side walls' resistance
+        # per node along, _track_soil) in one product
+        th = self._th
+        np.multiply(self.track_x, wz / DIRECTION_SMOOTHING_M_S, out=th[0])
+        th[0] += vy / DIRECTION_SMOOTHING_M_S
+        np.tanh(th[0], out=th[0])
+        np.multiply(th[0], th[0], out=th[1])
+        (b_th, b_th2), (bx_th, bx_th2), (_, bxx_th2) = self._bull_moments.dot(th.T).tolist()
+        s0, s1, s2 = self._bull_sums
+        fy -= b_th
+        mz -= bx_th
+        dissipation += vy * b_th + wz * bx_th
+        # slopes in (vy, yaw rate) for the implicit body step (_move): d/dv of bw tanh(v / s)
+        inv = 1.0 / DIRECTION_SMOOTHING_M_S
+        self._body_damping = (0.0, 0.0, (s0 - b_th2) * inv, (s1 - bx_th2) * inv, (s2 - bxx_th2) * inv)
+        return (fx, fy, mz), axle, dissipation, self._sinkage
 
     def _advance_tracks(self, dt: float) -> None:
         """Transport the shear displacement with the belt and add the slip (see the module doc)."""
-        vx, vy, wz = self.vel
+        vx, vy, wz = self.vel.tolist()
         j = self.j
-        belt = self.r * self.omega_m / self.G
-        source = (vx + 1j * vy) + 1j * wz * (self.node_p - j) - belt[:, None, None]  # - yaw e_z x j
-        courant = np.minimum(np.abs(belt) * dt / self.node_dx, 1.0)
+        belts = (self.omega_m * (self.r / self.G)).tolist()
+        # slip velocity of the belt element at each node, - yaw e_z x j (rotating frame)
+        source = np.subtract(self.node_p, j)
+        source *= 1j * wz
+        source += self._velocity_offset((vx + 1j * vy) - belts[0], (vx + 1j * vy) - belts[1])
+        courant = [min(abs(b) * dt / self.node_dx, 1.0) for b in belts]
         new = j.copy()
         half = 0.5 * dt
-        for side in (0, 1):
-            c, jj, ss, nn = float(courant[side]), j[side], source[side], new[side]
-            if belt[side] >= 0:  # touchdown at the front (node 0): node k takes the belt from k - 1
-                nn[1:] += half * (ss[1:] + ss[:-1]) + c * (jj[:-1] - jj[1:])
-                nn[0] += dt * ss[0] - c * jj[0]
-                if belt[side] > 0:
-                    nn[0] = 0.0
-            else:  # reversing: touchdown at the rear
-                nn[:-1] += half * (ss[:-1] + ss[1:]) + c * (jj[1:] - jj[:-1])
-                nn[-1] = 0.0
+        if belts[0] > 0 and belts[1] > 0:  # both sides forward (the usual case): in one go
+            c = self._courant_column(courant)
+            new[:, 1:] += half * (source[:, 1:] + source[:, :-1]) + c * (j[:, :-1] - j[:, 1:])
+            new[:, 0] = 0.0  # touchdown at the front
+        else:
+            for side in (0, 1):
+                c, jj, ss, nn = courant[side], j[side], source[side], new[side]
+                if belts[side] >= 0:  # touchdown at the front (node 0): node k takes the belt from k - 1
+                    nn[1:] += half * (ss[1:] + ss[:-1]) + c * (jj[:-1] - jj[1:])
+                    nn[0] += dt * ss[0] - c * jj[0]
+                    if belts[side] > 0:
+                        nn[0] = 0.0
+                else:  # reversing: touchdown at the rear
+                    nn[:-1] += half * (ss[:-1] + ss[1:]) + c * (jj[1:] - jj[:-1])
+                    nn[-1] = 0.0
         # (the slip source is averaged over each cell, trapezoid: the steady state integrates the
         # slip velocity along the patch to second order)
-        j = new
-        self._j_rate = (j - self.j) / dt
-        self.j = j
+        rate = new - j
+        rate *= 1.0 / dt
+        self._j_rate = rate
+        self.j = new
+
+    def _velocity_offset(self, left: complex, right: complex) -> np.ndarray:
+        """(side, 1, 1) column of the two sides' values (complex)."""
+        column = self._side_column
+        column[0, 0, 0] = left
+        column[1, 0, 0] = right
+        return column
+
+    def _courant_column(self, courant: list[float]) -> np.ndarray:
+        """(side, 1, 1) column of the two sides' Courant numbers."""
+        column = self._courant
+        column[0, 0, 0], column[1, 0, 0] = courant
+        return column
 
     def _wheel_soil(self) -> None:
         """Per-wheel constants of the terrain under each wheel (uniform floor: once; with patches:
@@ -439,55 +520,76 @@ class Twin:
         def column(values: list[float]) -> np.ndarray:
             return np.array(values, dtype=float)[:, None]
 
-        self._wp_stress = column([r**t.n * (t.kc / b + t.kphi) for t in terrains])
-        self._wp_n = column([t.n for t in terrains])
-        self._wp_c = column([t.c for t in terrains])
-        self._wp_tan_phi = column([math.tan(t.phi) for t in terrains])
-        self._wp_a = (column([t.a0 for t in terrains])[:, 0], column([t.a1 for t in terrains])[:, 0])
-        self._wp_b = (column([t.b0 for t in terrains])[:, 0], column([t.b1 for t in terrains])[:, 0])
+        def spread(values: list[float]) -> np.ndarray:  # over the rim nodes (see _wheel_geometry)
+            return np.repeat(column(values), WHEEL_NODES + 1, axis=1)
+
+        self._wp_stress = spread([r**t.n * (t.kc / b + t.kphi) for t in terrains])
+        exponents = {t.n for t in terrains}
+        self._wp_n: float | np.ndarray = (
+            exponents.pop() if len(exponents) == 1 else spread([t.n for t in terrains])
+        )
+        self._wp_c = spread([t.c for t in terrains])
+        self._wp_tan_phi = spread([math.tan(t.phi) for t in terrains])
+        self._wp_angles = [(t.a0, t.a1, t.b0, t.b1) for t in terrains]
         on = 1.0 if self.bulldozing else 0.0
         bull = [bulldozing_coefficients(t) for t in terrains]
         self._wp_bull = (column([on * a for a, _ in bull]), column([on * b_ for _, b_ in bull]))
         if all(t.shear_type == 'A' for t in terrains):
-            self._wp_inv_k: np.ndarray | None = column([-1.0 / t.K for t in terrains])
+            self._wp_inv_k: np.ndarray | None = spread([-1.0 / t.K for t in terrains])
             self._wp_terrains: list[Terrain] | None = None
         else:
             self._wp_inv_k, self._wp_terrains = None, terrains
 
-    def _wheel_kinematics(self) -> tuple[np.ndarray, ...]:
-        """Per wheel: axle ground speed forward and lateral [m/s], |omega| [rad/s], rolling direction
-        (+-1), forward speed in the rolling frame [m/s] and slip (eq. 2.13) [-]."""
+    def _wheel_kinematics(self) -> tuple[list[tuple[float, ...]], np.ndarray]:
+        """Per side (floats: the wheels of a side share them): axle ground speed forward [m/s],
+        the same in the rolling frame [m/s], |omega| [rad/s], rolling direction (+-1), slip (eq.
+        2.13) [-]; per wheel: lateral ground speed [m/s]. A side whose rolling sense changed
+        mirrors its wheels' rim displacement first."""
         vx, vy, wz = self.vel.tolist()
-        vxa = vx - wz * self.wheel_y  # axle ground speed, forward [m/s]
-        vya = vy + wz * self.wheel_x  # lateral [m/s]
-        per_side = []
-        for w in self.omega_m.tolist():
-            w /= self.G
-            per_side.append((1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0), abs(w)))
         k = self._wheels_per_side
-        direction = np.array([per_side[0][0]] * k + [per_side[1][0]] * k)
-        flipped = direction != self._direction
-        if flipped.any():
-            # a wheel that reverses keeps its soil: the rim nodes' order (entry <-> exit) and the
-            # tangential displacement in the rolling frame mirror, so the stress on the rim does not
-            # jump (without this a standing wheel chatters between the two senses every step)
-            self.j[:, flipped] = self.j[:, flipped, ::-1]
-            self.j[0, flipped] *= -1.0
-            self._j_rate[:, flipped] = 0.0
-            self._direction = direction
-        om = np.array([per_side[0][1]] * k + [per_side[1][1]] * k)
-        vxm = direction * vxa  # mirrored so the wheel rolls forward
-        rw = self.r * om
-        # eq. 2.13: (r w - V) / (r w) driving, (r w - V) / V braking: one denominator, max(r w, |V|)
-        slip = (rw - vxm) / np.maximum(np.maximum(rw, np.abs(vxm)), 1e-12)
-        return vxa, vya, om, direction, vxm, np.minimum(np.maximum(slip, -1.0), 1.0)
+        r = self.r
+        sides = []
+        for side, w in enumerate(self.omega_m.tolist()):
+            w /= self.G
+            sense = 1.0 if w > 0 else (-1.0 if w < 0 or vx < 0 else 1.0)
+            if sense != self._sense[side]:
+                # a wheel that reverses keeps its soil: the rim nodes' order (entry <-> exit) and the
+                # tangential displacement in the rolling frame mirror, so the stress on the rim does
+                # not jump (without this a standing wheel chatters between the two senses every step)
+                wheels = slice(side * k, (side + 1) * k)
+                self.j[:, wheels] = self.j[:, wheels, ::-1]
+                self.j[0, wheels] *= -1.0
+                self._j_rate[:, wheels] = 0.0
+                self._sense[side] = sense
+            vxa = vx - wz * self.half_tread * (1.0 - 2.0 * side)  # axle ground speed, forward
+            vxm = sense * vxa  # mirrored so the wheel rolls forward
+            om = abs(w)
+            rw = r * om
+            # eq. 2.13: (r w - V) / (r w) driving, (r w - V) / V braking: one denominator, max(r w, |V|)
+            slip = min(1.0, max(-1.0, (rw - vxm) / max(rw, abs(vxm), 1e-12)))
+            sides.append((vxa, vxm, om, sense, slip))
+        return sides, vy + wz * self.wheel_x  # lateral [m/s]
 
-    def _wheel_forces(self, loads: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def _wheel_geometry(self) -> None:
+        """Entry angle theta_f = arccos(1 - z / r) (eq. 2.19) of each wheel at its sinkage, as the
+        pair (theta_f, theta_f - pi / 2) (one cosine call gives cos and sin of the node angles) and
+        cos(theta_f), spread over the rim nodes (whole arrays: numpy is slower at broadcasting a
+        column than at the arithmetic); with the sinkage, refreshed every ``SOIL_REFRESH_STEPS``."""
+        tf = np.arccos(np.maximum(1.0 - self.z / self.r, -1.0))
+        self._tf = tf.tolist()
+        nodes = self._u_pair.shape[1:]
+        self._tf_pair = np.broadcast_to(np.stack([tf, tf - 0.5 * math.pi])[:, :, None], (2, *nodes)).copy()
+        self._cos_tf = np.broadcast_to(np.cos(tf)[:, None], nodes).copy()
+
+    def _wheel_forces(
+        self, loads: np.ndarray
+    ) -> tuple[tuple[float, float, float], list[float], float, float]:
         """Body force (F_x, F_y, M_z), axle torques per side [N m], dissipation [W], sinkage [m].
 
         Shear displacement per rim node: j[0] tangential along the rim, j[1] lateral [m]. The
         contact integrals are weighted sums over the nodes (trapezoid in xi, times the arc
-        r (theta_f - theta_r) and the width b), all six in one matrix product.
+        r (theta_f - theta_r) and the width b), all six in one matrix product; their sums over the
+        wheels (per side, and weighted by the wheels' positions) in a second one.
         """
         if not self.field.uniform:
             if self._soil_age <= 0:
@@ -496,31 +598,40 @@ class Twin:
             else:
                 self._soil_age -= 1
         kin = self._kinematics if self._kinematics is not None else self._wheel_kinematics()
-        vxa, vya, om, direction, vxm, slip = kin
+        sides, vya = kin
         r = self.r
-        z = self.z
-        a0, a1 = self._wp_a
-        b0, b1 = self._wp_b
-        tf = np.arccos(np.maximum(1.0 - z / r, -1.0))  # eq. 2.19 (z > 0)
-        tm = (a0 + a1 * slip) * tf  # eq. 2.22
-        tr = (b0 + b1 * slip) * tf  # eq. 2.20
-        span = tf - tr
-        tf_c, span_c = tf[:, None], span[:, None]
-        u = self.xi * span_c  # theta_f - theta at the nodes [rad]
-        theta = np.subtract(tf_c, u)
-        # Wong-Reece normal stress (eq. 2.21); behind theta_m the equivalent front angle of eq. 2.22,
-        # theta_e = theta_f - (theta - theta_r) (theta_f - theta_m) / (theta_m - theta_r), falls from
-        # theta_f to theta_m over [theta_r, theta_m] and continues below theta_m ahead of it, so the
-        # angle to use is max(theta, theta_e) everywhere on the arc
-        theta_e = np.subtract(span_c, u, out=u)  # (u no longer needed)
-        theta_e *= ((tf - tm) / np.maximum(tm - tr, 1e-12))[:, None]
-        np.subtract(tf_c, theta_e, out=theta_e)
-        depth = np.maximum(theta, theta_e, out=theta_e)
-        np.cos(depth, out=depth)
-        depth -= np.cos(tf_c)
+        # Wong-Reece angles (eqs. 2.20, 2.22) at the side's slip i, as fractions of theta_f:
+        # theta_r = (b0 + b1 i) theta_f, theta_m = (a0 + a1 i) theta_f. The arc spans theta_f - theta_r;
+        # behind theta_m the equivalent front angle of eq. 2.22,
+        # theta_e = theta_f - (theta_f - theta_m) (theta - theta_r) / (theta_m - theta_r)
+        #         = theta_f - k (span - u) (u = theta_f - theta), falls from theta_f to theta_m over
+        # [theta_r, theta_m] and continues below theta_m ahead of it, so the angle to use in eq. 2.21
+        # is max(theta, theta_e) = theta_f - min(u, k (span - u)) everywhere on the arc, with
+        # u = span xi and k (span - u) = k span (1 - xi): both in one matrix product.
+        k_side = self._wheels_per_side
+        spans, slopes = [], []
+        for wheel, (tf, (a0, a1, b0, b1)) in enumerate(zip(self._tf, self._wp_angles, strict=True)):
+            i = sides[wheel // k_side][4]
+            spans.append(tf * (1.0 - b0 - b1 * i))  # theta_f - theta_r
+            slopes.append((1.0 - a0 - a1 * i) / max(a0 - b0 + (a1 - b1) * i, 1e-12))  # k
+        n = self.n_wheels
+        outer = self._outer  # (2 n, 2): [span, 0] and [0, k span] rows
+        outer[:n, 0] = spans
+        span = outer[:n, 0]
+        outer[n:, 1] = slopes
+        outer[n:, 1] *= span
+        u_pair = np.dot(outer, self._xi_pair, out=self._u_pair.reshape(2 * n, -1)).reshape(2, n, -1)
+        # u = theta_f - theta at the nodes, k (span - u) [rad]
+        angles = self._angles  # theta, theta - pi / 2, max(theta, theta_e)
+        np.subtract(self._tf_pair, u_pair[0], out=angles[:2])
+        depth = np.minimum(u_pair[0], u_pair[1], out=angles[2])
+        np.subtract(self._tf_pair[0], depth, out=depth)
+        np.cos(angles, out=angles)  # cos(theta), sin(theta), cos(max(theta, theta_e))
+        trig = angles[:2]
+        depth -= self._cos_tf
         np.maximum(depth, 0.0, out=depth)
-        sigma = np.power(depth, self._wp_n, out=depth)
-        sigma *= self._wp_stress
+        sigma = np.power(depth, self._wp_n, out=self._depth)
+        sigma *= self._wp_stress  # eq. 2.21
         strength = sigma * self._wp_tan_phi
         strength += self._wp_c  # eq. 2.2
         j = self.j
@@ -536,130 +647,170 @@ class Twin:
         gain = np.multiply(strength, minus_fraction, out=minus_fraction)
         gain /= mag
         rows = self._rows  # (6, wheels, nodes): the integrands
-        trig = self._trig  # cos(theta), sin(theta)
-        np.cos(theta, out=trig[0])
-        np.sin(theta, out=trig[1])
-        shear = rows[4:6]
+        shear = rows[4:]
         np.multiply(gain, j, out=shear)
         strength *= self._damping
-        shear -= strength * self._j_rate
-        tau = rows[4]
+        shear -= np.multiply(strength, self._j_rate, out=self._damped)
         np.multiply(sigma, trig, out=rows[:2])
-        np.multiply(tau, trig, out=rows[2:4])
-        cos = trig[0]
-        # bulldozing on the side wall (Ishigami et al. 2007): R_b(h) per unit length along x = r sin(theta)
-        # at the rim's depth below the surface h = r (cos(theta) - cos(theta_f)) + the excavated dz,
-        # dx = r cos(theta) d(theta)
-        h = rows[6]
-        np.subtract(cos, np.cos(tf_c), out=h)
-        h *= r
-        np.maximum(h, 0.0, out=h)
-        dz = self.dz[:, None]
-        h += dz
-        bull_a, bull_b = self._wp_bull
-        rb = bull_b * h
-        rb += bull_a
-        np.multiply(rb, h, out=h)
-        h *= cos
-        area = (r * self.width) * span  # the contact's arc times width per unit xi [m^2]
-        s_cos, s_sin, t_cos, t_sin, t_sum, y_sum, bull = (rows @ self.xi_w) * area  # [N] (bull: [N m / m^2])
-        # the rut's resistance (-sigma sin(theta) of eq. 2.27) acts against travel; at rest the
-        # stress is symmetric and it vanishes (smoothed like the track's compaction resistance)
-        normal = s_sin * np.tanh(vxm / DIRECTION_SMOOTHING_M_S)
-        pull = t_cos - normal
-        # the face of the excavated step (depth dz, width b) bulldozes against the axle's travel
-        dz = self.dz
-        face = self.width * (bull_a[:, 0] + bull_b[:, 0] * dz) * dz  # [N]
-        th_x = np.tanh(vxa * (1.0 / DIRECTION_SMOOTHING_M_S))
-        front = face * th_x
-        fx = direction * pull - front  # eq. 2.27 (rolling frame, then mirrored back)
-        fz = s_cos + t_sin
-        # eq. 4.9, lateral shear; the side wall's bulldozing against the axle's lateral motion
-        side = bull / self.width  # [N]
-        th_y = np.tanh(vya * (1.0 / DIRECTION_SMOOTHING_M_S))
-        fy = y_sum - side * th_y
-        # the bulldozing's slope in the body velocities, for the implicit body step (_move)
-        c_x = face * (1.0 - th_x * th_x)
-        c_y = side * (1.0 - th_y * th_y)
-        x, y = self.wheel_x, self.wheel_y
-        self._body_damping = (
-            float(c_x.sum()),
-            -float(c_x @ y),
-            float(c_y.sum()),
-            float(c_y @ x),
-            float(c_x @ (y * y) + c_y @ (x * x)),
-        )
-        torque = direction * (r * t_sum)  # eq. 2.34: the terrain's resisting torque
-        force = np.array([sum(fx.tolist()), sum(fy.tolist()), float(self.wheel_x @ fy - self.wheel_y @ fx)])
-        # power of the contact stresses on the slip velocity (vxm cos(theta) - r om, vya), and the rut's
-        dissipation = float((r * om) @ t_sum - vxm @ pull - vya @ fy + vxa @ front)
-        self._wheel_state = (cos, span, fz, loads[self.wheel_side] / self._wheels_per_side)
-        half = self._wheels_per_side
-        torques = torque.tolist()
-        axle = np.array([sum(torques[:half]), sum(torques[half:])])
-        return force, axle, dissipation, float((z + dz).max())
+        np.multiply(rows[4], trig, out=rows[2:4])
+        # per wheel [N]: s_cos, s_sin, t_cos, t_sin, t_sum, y_sum (arc x width per unit xi [m^2]),
+        # then the side wall's bulldozing against the axle's lateral motion (magnitude from
+        # _wheel_contact) and its slope in that motion (for the implicit step, _move)
+        per_wheel = self._per_wheel
+        integrals = rows.reshape(6 * n, -1).dot(self.xi_w).reshape(6, n)
+        np.multiply(integrals, (r * self.width) * span, out=per_wheel[:6])
+        th = np.multiply(vya, 1.0 / DIRECTION_SMOOTHING_M_S, out=per_wheel[6])
+        np.tanh(th, out=th)
+        slope = np.multiply(th, th, out=per_wheel[7])
+        th *= self._side
+        np.subtract(self._side, slope * self._side, out=slope)
+        slope *= 1.0 / DIRECTION_SMOOTHING_M_S
+        # sums over the wheels: all, x-weighted, per side (_wheel_weights)
+        (
+            _,
+            (_, _, _, s_sin_l, s_sin_r),
+            (_, _, _, t_cos_l, t_cos_r),
+            _,
+            (_, _, _, t_sum_l, t_sum_r),
+            (y_sum, y_sum_x, _, _, _),
+            (bull_y, bull_y_x, _, _, _),
+            (c_y, c_y_x, c_y_xx, _, _),
+        ) = per_wheel.dot(self._wheel_weights).tolist()
+        # Per side (floats): the rut's resistance (-sigma sin(theta) of eq. 2.27) against travel (at
+        # rest the stress is symmetric and it vanishes; smoothed like the track's compaction
+        # resistance); the excavated step's face bulldozing against the axle's travel, its slope.
+        fx = mz = c_x = c_x_y = c_x_yy = power = 0.0
+        axle = []
+        faces = self._face_sides
+        for (vxa, vxm, om, sense, _slip), s_sin, t_cos, t_sum, face, y in zip(
+            sides,
+            (s_sin_l, s_sin_r),
+            (t_cos_l, t_cos_r),
+            (t_sum_l, t_sum_r),
+            faces,
+            self._side_y,
+            strict=True,
+        ):
+            th_x = math.tanh(vxm / DIRECTION_SMOOTHING_M_S)
+            pull = t_cos - s_sin * th_x
+            th_a = math.tanh(vxa / DIRECTION_SMOOTHING_M_S)
+            f = sense * pull - face * th_a  # eq. 2.27 (rolling frame, then mirrored back)
+            fx += f
+            mz -= y * f
+            slope_x = face * (1.0 - th_a * th_a) / DIRECTION_SMOOTHING_M_S
+            c_x += slope_x
+            c_x_y += slope_x * y
+            c_x_yy += slope_x * y * y
+            torque = sense * r * t_sum  # eq. 2.34: the terrain's resisting torque
+            axle.append(torque)
+            power += sense * om * torque  # the axle's power into the contact
+        fy = y_sum - bull_y  # eq. 4.9 and the side wall
+        mz += y_sum_x - bull_y_x
+        self._body_damping = (c_x, -c_x_y, c_y, c_y_x, c_x_yy + c_y_xx)
+        # dissipation = power of the contact stresses on the slip velocities = what the axles put in
+        # minus what the body receives (F . v + M_z yaw rate)
+        vx, vy, wz = self.vel.tolist()
+        dissipation = power - (fx * vx + fy * vy + mz * wz)
+        self._wheel_state = (span, loads, spans)
+        return (fx, fy, mz), axle, dissipation, self._deepest
 
     def _advance_wheels(self, dt: float) -> None:
-        """Transport the rim's shear displacement and relax the sinkage (see the module doc)."""
-        cos, span, fz, w_wheel = self._wheel_state
+        """Transport the rim's shear displacement; every ``SOIL_REFRESH_STEPS`` also relax the sinkage
+        and the excavation (see the module doc)."""
+        span, _loads, spans = self._wheel_state
+        cos = self._trig[0]
         kin = self._wheel_kinematics()  # the new velocities (kept for the next step's forces)
         self._kinematics = kin
-        vxa, vya, om, _direction, vxm, _ = kin
-        # slip velocity of the rim element: (vxm cos(theta) - r om) along the rim, vya across
-        # (padded by one node in front: the rim element arriving at node 0 carries no displacement,
-        # and the slip source's cell average there is its value at node 0)
-        padded = self._padded  # (3, wheels, 1 + nodes): 0 then j_t, j_y; source at node 0 then all
-        source = padded[2]
-        np.multiply(vxm[:, None], cos, out=source[:, 1:])
-        source[:, 1:] -= (self.r * om)[:, None]
-        source[:, 0] = source[:, 1]
-        courant = np.minimum(om / np.maximum(span, 1e-6) * (dt * WHEEL_NODES), 1.0)[:, None]
+        sides, vya = kin
+        k = self._wheels_per_side
+        # per wheel: 0.5 dt x the rim's forward speed in the rolling frame, dt r omega, Courant number
+        halves, rims, courants = [], [], []
+        for wheel, arc in enumerate(spans):
+            _vxa, vxm, om, _sense, _slip = sides[wheel // k]
+            halves.append(0.5 * dt * vxm)
+            rims.append(dt * self.r * om)
+            courants.append(min(om * (dt * WHEEL_NODES) / max(arc, 1e-6), 1.0))
+        columns = np.array([halves, rims, courants])[:, :, None]
+        # the rim element's slip velocity is (vxm cos(theta) - r om) along the rim and vya across; its
+        # cell average (trapezoid) times dt, at node 0 the node's own value
+        cell = self._cell
+        np.add(cos[:, 1:], cos[:, :-1], out=cell[:, 1:])
+        np.multiply(cos[:, :1], 2.0, out=cell[:, :1])
+        cell *= columns[0]
+        cell -= columns[1]
+        # node k takes the rim element from node k - 1 (upwind; the element arriving at node 0
+        # carries no displacement), plus the slip
         j = self.j
-        padded[:2, :, 1:] = j
-        # node k takes the rim element from node k - 1, plus the cell-averaged slip source
-        shift = padded[:2, :, :-1] - j
-        shift *= courant
-        new = j + shift
-        source_sum = source[:, 1:] + source[:, :-1]
-        source_sum *= 0.5 * dt
-        new[0] += source_sum
-        new[1] += (dt * vya)[:, None]
-        np.copyto(new[:, :, 0], 0.0, where=om > 0)  # touchdown: no shear yet
-        rate = new - j
-        rate *= 1.0 / dt
-        self._j_rate = rate
-        self.j = new
+        change = self._change
+        np.subtract(j[:, :, :-1], j[:, :, 1:], out=change[:, :, 1:])
+        np.negative(j[:, :, 0], out=change[:, :, 0])
+        change *= columns[2]
+        change[0] += cell
+        change[1] += (dt * vya)[:, None]
+        for side, (_vxa, _vxm, om, _sense, _slip) in enumerate(sides):
+            if om > 0:  # touchdown: no shear yet
+                np.negative(j[:, side * k : (side + 1) * k, 0], out=change[:, side * k : (side + 1) * k, 0])
+        self.j = j + change
+        self._j_rate = change * (1.0 / dt)
+        self._contact_age -= 1
+        if self._contact_age <= 0:
+            self._contact_age = SOIL_REFRESH_STEPS
+            ground = np.array([abs(sides[0][0])] * k + [abs(sides[1][0])] * k)  # |axle speed| [m/s]
+            om = np.array([sides[0][2]] * k + [sides[1][2]] * k)  # [rad/s]
+            self._relax_sinkage(SOIL_REFRESH_STEPS * dt, span, j[0, :, -1], ground, om)
+            self._wheel_contact()
+
+    def _relax_sinkage(
+        self, dt: float, span: np.ndarray, exit_j: np.ndarray, ground: np.ndarray, om: np.ndarray
+    ) -> None:
+        """Relax each wheel's sinkage z and excavation dz over dt [s] (every ``SOIL_REFRESH_STEPS``):
+        span theta_f - theta_r [rad], exit_j the rim's tangential displacement at the exit [m],
+        ground the axle's ground speed [m/s], om the wheel speed [rad/s]."""
+        r = self.r
+        loads = self._wheel_state[1]  # [N] per side
+        per_wheel = self._per_wheel
+        fz = per_wheel[0] + per_wheel[3]  # s_cos + t_sin of eq. 2.29 [N]
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
         # shallows only as soil passes under the wheel: relax over the rim's transit of the contact
         # (the same time scale as the shear), plus a slow settling at rest.
-        ratio = np.maximum(fz, 1e-9, out=fz)  # (in place: these per-wheel arrays are this step's)
-        np.divide(w_wheel, ratio, out=ratio)
-        np.maximum(ratio, 0.5, out=ratio)
-        np.minimum(ratio, 2.0, out=ratio)
-        travel = self.r * om
-        travel += np.abs(vxa)
-        span *= self.r
-        travel /= np.maximum(span, 1e-6, out=span)
+        ratio = (loads[self.wheel_side] / self._wheels_per_side) / np.maximum(fz, 1e-9)
+        ratio = np.minimum(np.maximum(ratio, 0.5), 2.0)
+        arc = np.maximum(r * span, 1e-6)  # [m]
+        transits = (r * om + ground) / arc  # [1/s]
         if self.bulldozing:  # slip-sinkage (Lyasko 2010): the excavation relaxes like the sinkage
             # at the slip the soil has felt: the steady slip whose displacement at the exit (eq. 2.25:
             # j_r = r [(theta_f - theta_r) - (1 - i)(sin(theta_f) - sin(theta_r))]) is the rim's j there
-            # (= i in steady running; a wheel spinning up from rest has not yet sheared the soil);
-            # span is r (theta_f - theta_r) [m] here
+            # (= i in steady running; a wheel spinning up from rest has not yet sheared the soil; the
+            # twin's j_t is -j_r: the rim slides backwards over the soil when driving)
             sin = self._trig[1]
-            # (the twin's j_t is -j_r of eq. 2.25: the rim slides backwards over the soil when driving)
-            felt = 1.0 - (span + j[0, :, -1]) / (self.r * np.maximum(sin[:, 0] - sin[:, -1], 1e-9))
+            felt = 1.0 - (arc + exit_j) / (r * np.maximum(sin[:, 0] - sin[:, -1], 1e-9))
             target = (slip_sinkage_factor(felt) - 1.0) * self.z
-            dig = np.minimum(travel * dt, 1.0)  # (only a moving wheel excavates: no settling term)
-            self.dz = np.minimum(self.dz + dig * (target - self.dz), 0.95 * self.r - self.z)
-        travel += 1.0 / SINKAGE_SETTLING_S
-        travel *= dt
-        fraction = np.minimum(travel, 1.0, out=travel)
-        fraction *= self._sinkage_exponent
-        np.power(ratio, fraction, out=ratio)
-        z = ratio
-        z *= self.z
-        np.maximum(z, 1e-6, out=z)
-        self.z = np.minimum(z, 0.95 * self.r, out=z)
+            dig = np.minimum(transits * dt, 1.0)  # (only a moving wheel excavates: no settling term)
+            self.dz = np.minimum(self.dz + dig * (target - self.dz), 0.95 * r - self.z)
+        fraction = np.minimum((transits + 1.0 / SINKAGE_SETTLING_S) * dt, 1.0)
+        z = self.z * ratio ** (fraction * self._sinkage_exponent)
+        self.z = np.minimum(np.maximum(z, 1e-6), 0.95 * r)
+        self._deepest = float((self.z + self.dz).max())
+
+    def _wheel_contact(self) -> None:
+        """The slow contact terms, every ``SOIL_REFRESH_STEPS``: the geometry at the sinkage
+        (_wheel_geometry) and the bulldozing magnitudes [N] (Ishigami et al. 2007) of each wheel's
+        side wall, int R_b(h) dx over the contact at the rim's depth below the surface
+        h = r (cos(theta) - cos(theta_f)) + dz, dx = r cos(theta) d(theta) (trapezoid over the rim
+        nodes of the last step), and of the excavated step's face, b R_b(dz), summed per side."""
+        self._wheel_geometry()
+        bull_a, bull_b = self._wp_bull
+        cos = self._trig[0]
+        h = cos - self._cos_tf
+        h *= self.r
+        np.maximum(h, 0.0, out=h)
+        h += self.dz[:, None]
+        integrand = (bull_a + bull_b * h) * h * cos
+        self._side = (integrand @ self.xi_w) * (self.r * self._wheel_state[0])
+        dz = self.dz
+        face = (self.width * (bull_a[:, 0] + bull_b[:, 0] * dz) * dz).tolist()
+        k = self._wheels_per_side
+        self._face_sides = (sum(face[:k]), sum(face[k:]))
 
     # ------------------------------------------------------------------ stepping
     def kinetic_energy(self) -> float:
@@ -695,7 +846,7 @@ class Twin:
         for _ in range(n_steps):
             self._step()
 
-    def _move(self, force: np.ndarray, omega_m: np.ndarray) -> float:
+    def _move(self, force: tuple[float, float, float], omega_m: np.ndarray) -> float:
         """Body (hull frame: m (dv/dt + yaw x v) = F, Iz dyaw/dt = M), motor angles, pose and the
         contact's shear transport over one step, with the new motor speeds [rad/s]. The bulldozing
         (stiff where the body nearly stands) is implicit: (M + dt D) dv = dt (F + m v x yaw) with D
@@ -704,7 +855,7 @@ class Twin:
         dt = self.dt
         m = self.mass
         vx, vy, wz = self.vel.tolist()
-        fx, fy, mz = force.tolist()
+        fx, fy, mz = force
         dxx, dxw, dyy, dyw, dww = self._body_damping
         rx, ry, rw = dt * (fx + m * wz * vy), dt * (fy - m * wz * vx), dt * mz
         a, b, c, p, q = m + dt * dxx, m + dt * dyy, self.Iz + dt * dww, dt * dxw, dt * dyw
@@ -741,7 +892,7 @@ class Twin:
         dissipation += self._move(force, omega_m)
         self.energy.terrain_J += dissipation * self.dt
         self.t += self.dt
-        return axle
+        return np.array(axle)
 
     def _step(self) -> None:
         dt = self.dt
@@ -759,7 +910,7 @@ class Twin:
         kp, ki, kt, res, peak, inertia, gear = self.kp, self.ki, self.kt, self.R, self.peak_A, self.J, self.G
         kn = self.kn
         omegas, setpoints, integrals = self.omega_m.tolist(), self.setpoint.tolist(), self.integral_A.tolist()
-        targets, axles = self._target.tolist(), axle.tolist()
+        targets, axles = self._target.tolist(), axle
         friction_b, friction_c = self._friction_b, self._friction_c
         currents, p_terms, p_buses = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
         friction_power = 0.0
@@ -815,4 +966,5 @@ class Twin:
             self.bus_voltage_V = self.battery.state.voltage_V
             pending[0] = pending[1] = 0.0
         self.t += dt
-        self.last = StepOutput(np.array(currents), axle, np.array(p_buses), np.array(p_terms), sinkage)
+        self.current_A = currents
+        self._last = (axle, p_buses, p_terms, sinkage)
