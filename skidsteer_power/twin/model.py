@@ -104,7 +104,7 @@ def slip_sinkage_factor(slip: np.ndarray) -> np.ndarray:
     """Lyasko's slip-sinkage coefficient K_j = (1 + i) / (1 - 0.5 i) [-] at slip i (eq. 2.13):
     total sinkage = K_j x static sinkage (M. Lyasko, "Slip sinkage effect in soil-vehicle
     mechanics", J. Terramechanics 47 (2010) 21-31), for a driven wheel (i >= 0; 1 when braking)."""
-    i = np.clip(slip, 0.0, 1.0)
+    i = np.minimum(np.maximum(slip, 0.0), 1.0)
     return (1.0 + i) / (1.0 - 0.5 * i)
 
 
