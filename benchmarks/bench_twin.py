@@ -61,7 +61,7 @@ def run(report: Report) -> None:
                       met=simulated / wall >= GOAL)  # fmt: skip
         report.figure(f'{label}: CPU-time speed', simulated / cpu, 'x real', goal=f'>= {CPU_GOAL:g}x',
                       met=simulated / cpu >= CPU_GOAL)  # fmt: skip
-        _, plain = _times(lambda v=vehicle: Twin(v, terrain, bulldozing=False), commands, 1)
+        _, plain = _times(lambda v=vehicle: Twin(v, terrain, bulldozing=False), commands, REPEATS)
         report.ratio(f'{name}: CPU time, full twin / without slip-sinkage and bulldozing', cpu, plain)
         _, fine = _times(lambda v=vehicle: Twin(v, terrain, dt=1e-3), commands, 1)
         report.ratio(f'{name}: CPU time, dt = 1 ms / dt = 2 ms', fine, cpu)

@@ -171,6 +171,7 @@ class Twin:
             raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
         self.vehicle = vehicle
         self.field = TerrainField(terrain, patches or ())
+        self._patched = not self.field.uniform
         self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
@@ -591,7 +592,7 @@ class Twin:
         r (theta_f - theta_r) and the width b), all six in one matrix product; their sums over the
         wheels (per side, and weighted by the wheels' positions) in a second one.
         """
-        if not self.field.uniform:
+        if self._patched:
             if self._soil_age <= 0:
                 self._wheel_soil()
                 self._soil_age = SOIL_REFRESH_STEPS
