@@ -288,10 +288,14 @@ class Twin:
             self.j = np.zeros((2, self.n_wheels, WHEEL_NODES + 1))  # j_t, j_y [m] (wheel, rim node)
             nodes = (self.n_wheels, WHEEL_NODES + 1)
             self._rows = np.empty((6, *nodes))  # integrands (_wheel_forces)
+            self._rows_flat = self._rows.reshape(6 * self.n_wheels, -1)  # (views of the same memory)
+            self._integrals = np.empty((6, self.n_wheels))
+            self._integrals_flat = self._integrals.reshape(-1)
             self._angles = np.zeros((3, *nodes))  # (_wheel_forces)
             self._trig = self._angles[:2]  # cos, sin of the node angles
             self._depth = np.empty(nodes)
             self._u_pair = np.empty((2, *nodes))
+            self._u_pair_flat = self._u_pair.reshape(2 * self.n_wheels, -1)
             self._outer = np.zeros((2 * self.n_wheels, 2))
             self._per_wheel = np.zeros((8, self.n_wheels))  # contact integrals, bulldozing (_wheel_forces)
             self._cell, self._change = np.empty(nodes), np.empty((2, *nodes))  # (_advance_wheels)
@@ -306,7 +310,7 @@ class Twin:
         self._last: tuple = (np.zeros(2), [0.0, 0.0], [0.0, 0.0], 0.0)  # (last)
         self._kinematics: tuple | None = None  # wheels: of the present velocities
         self._body_damping = (0.0, 0.0, 0.0, 0.0, 0.0)  # (_move)
-        self._j_rate = np.zeros_like(self.j)
+        self._damped_rate = np.zeros_like(self.j)  # t_d / K dj/dt [-]: the damping stress / tau_max
         self._damping = SHEAR_DAMPING_S / self.field.base.K  # [s/m]: c = tau_max t_d / K
 
     @property
@@ -381,9 +385,8 @@ class Twin:
         self._track_moments()
 
     def _track_moments(self) -> None:
-        """After a soil refresh: the transient damping's c tau_max per node [N s/m] and the side walls'
-        bulldozing moments along the track, bw x^k (k = 0, 1, 2) per node and their sums."""
-        self._tau_damping = self._damping * self._tau_max_w
+        """After a soil refresh: the side walls' bulldozing moments along the track, bw x^k (k = 0, 1,
+        2) per node, and their sums."""
         bw = self._bull_w.sum(axis=0)  # both sides [N]
         x = self.track_x
         self._bull_moments = np.stack([bw, bw * x, bw * x * x])
@@ -424,7 +427,7 @@ class Twin:
         mag += 1e-300
         gain /= mag
         f = gain * j
-        f -= self._tau_damping * self._j_rate
+        f -= self._tau_max_w * self._damped_rate
         f_side = f.sum(axis=(1, 2)).tolist()  # [N] per side (complex)
         moment = np.vdot(self.node_p, f).imag  # sum of x f_y - y f_x [N m]
         axle = [self.r * f_side[0].real, self.r * f_side[1].real]  # the belt's pull resists the sprocket
@@ -489,8 +492,8 @@ class Twin:
         # (the slip source is averaged over each cell, trapezoid: the steady state integrates the
         # slip velocity along the patch to second order)
         rate = new - j
-        rate *= 1.0 / dt
-        self._j_rate = rate
+        rate *= self._damping / dt
+        self._damped_rate = rate
         self.j = new
 
     def _velocity_offset(self, left: complex, right: complex) -> np.ndarray:
@@ -560,7 +563,7 @@ class Twin:
                 wheels = slice(side * k, (side + 1) * k)
                 self.j[:, wheels] = self.j[:, wheels, ::-1]
                 self.j[0, wheels] *= -1.0
-                self._j_rate[:, wheels] = 0.0
+                self._damped_rate[:, wheels] = 0.0
                 self._sense[side] = sense
             vxa = vx - wz * self.half_tread * (1.0 - 2.0 * side)  # axle ground speed, forward
             vxm = sense * vxa  # mirrored so the wheel rolls forward
@@ -621,7 +624,8 @@ class Twin:
         span = outer[:n, 0]
         outer[n:, 1] = slopes
         outer[n:, 1] *= span
-        u_pair = np.dot(outer, self._xi_pair, out=self._u_pair.reshape(2 * n, -1)).reshape(2, n, -1)
+        np.dot(outer, self._xi_pair, out=self._u_pair_flat)
+        u_pair = self._u_pair
         # u = theta_f - theta at the nodes, k (span - u) [rad]
         angles = self._angles  # theta, theta - pi / 2, max(theta, theta_e)
         np.subtract(self._tf_pair, u_pair[0], out=angles[:2])
@@ -650,15 +654,15 @@ class Twin:
         rows = self._rows  # (6, wheels, nodes): the integrands
         shear = rows[4:]
         np.multiply(gain, j, out=shear)
-        strength *= self._damping
-        shear -= np.multiply(strength, self._j_rate, out=self._damped)
+        shear -= np.multiply(strength, self._damped_rate, out=self._damped)
         np.multiply(sigma, trig, out=rows[:2])
         np.multiply(rows[4], trig, out=rows[2:4])
         # per wheel [N]: s_cos, s_sin, t_cos, t_sin, t_sum, y_sum (arc x width per unit xi [m^2]),
         # then the side wall's bulldozing against the axle's lateral motion (magnitude from
         # _wheel_contact) and its slope in that motion (for the implicit step, _move)
         per_wheel = self._per_wheel
-        integrals = rows.reshape(6 * n, -1).dot(self.xi_w).reshape(6, n)
+        np.dot(self._rows_flat, self.xi_w, out=self._integrals_flat)
+        integrals = self._integrals
         np.multiply(integrals, (r * self.width) * span, out=per_wheel[:6])
         th = np.multiply(vya, 1.0 / DIRECTION_SMOOTHING_M_S, out=per_wheel[6])
         np.tanh(th, out=th)
@@ -752,7 +756,7 @@ class Twin:
             if om > 0:  # touchdown: no shear yet
                 np.negative(j[:, side * k : (side + 1) * k, 0], out=change[:, side * k : (side + 1) * k, 0])
         self.j = j + change
-        self._j_rate = change * (1.0 / dt)
+        self._damped_rate = change * (self._damping / dt)
         self._contact_age -= 1
         if self._contact_age <= 0:
             self._contact_age = SOIL_REFRESH_STEPS
@@ -835,6 +839,7 @@ class Twin:
             max_rpm=MAX_MOTOR_RPM,
         )
         self._target = np.array(rpm) * RPM
+        self._targets = self._target.tolist()
 
     def step(
         self, cmd_speed: float | None = None, cmd_yaw_rate: float | None = None, n_steps: int = 1
@@ -911,7 +916,7 @@ class Twin:
         kp, ki, kt, res, peak, inertia, gear = self.kp, self.ki, self.kt, self.R, self.peak_A, self.J, self.G
         kn = self.kn
         omegas, setpoints, integrals = self.omega_m.tolist(), self.setpoint.tolist(), self.integral_A.tolist()
-        targets, axles = self._target.tolist(), axle
+        targets, axles = self._targets, axle
         friction_b, friction_c = self._friction_b, self._friction_c
         currents, p_terms, p_buses = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
         friction_power = 0.0
