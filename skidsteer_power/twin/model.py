@@ -297,14 +297,16 @@ class Twin:
             self._u_pair = np.empty((2, *nodes))
             self._u_pair_flat = self._u_pair.reshape(2 * self.n_wheels, -1)
             self._outer = np.zeros((2 * self.n_wheels, 2))
+            self._spans, self._slope_spans = [0.0] * self.n_wheels, [0.0] * self.n_wheels
             self._per_wheel = np.zeros((8, self.n_wheels))  # contact integrals, bulldozing (_wheel_forces)
-            self._cell, self._change = np.empty(nodes), np.empty((2, *nodes))  # (_advance_wheels)
+            self._cell, self._change = np.zeros(nodes), np.empty((2, *nodes))  # (_advance_wheels)
             self._damped = np.empty((2, *nodes))  # (_wheel_forces)
             self._soil_age = 0
             zeros = np.zeros(self.n_wheels)
             self._wheel_state = (zeros, np.zeros(2), zeros.tolist())  # span [rad] (also as floats), loads [N]
             self._wheel_geometry()
             self._side, self._face_sides = zeros, (0.0, 0.0)  # bulldozing [N] (_wheel_contact)
+            self._side_slope = zeros
             self._contact_age = 1
         self.current_A = [0.0, 0.0]  # motor currents of the last step [A] (left, right)
         self._last: tuple = (np.zeros(2), [0.0, 0.0], [0.0, 0.0], 0.0)  # (last)
@@ -534,7 +536,11 @@ class Twin:
         )
         self._wp_c = spread([t.c for t in terrains])
         self._wp_tan_phi = spread([math.tan(t.phi) for t in terrains])
-        self._wp_angles = [(t.a0, t.a1, t.b0, t.b1) for t in terrains]
+        angles = [(t.a0, t.a1, t.b0, t.b1) for t in terrains]
+        groups: dict[tuple[int, tuple[float, ...]], list[int]] = {}
+        for wheel, coefficients in enumerate(angles):
+            groups.setdefault((int(self.wheel_side[wheel]), coefficients), []).append(wheel)
+        self._wp_groups = [(side, coefficients, wheels) for (side, coefficients), wheels in groups.items()]
         on = 1.0 if self.bulldozing else 0.0
         bull = [bulldozing_coefficients(t) for t in terrains]
         self._wp_bull = (column([on * a for a, _ in bull]), column([on * b_ for _, b_ in bull]))
@@ -612,18 +618,20 @@ class Twin:
         # [theta_r, theta_m] and continues below theta_m ahead of it, so the angle to use in eq. 2.21
         # is max(theta, theta_e) = theta_f - min(u, k (span - u)) everywhere on the arc, with
         # u = span xi and k (span - u) = k span (1 - xi): both in one matrix product.
-        k_side = self._wheels_per_side
-        spans, slopes = [], []
-        for wheel, (tf, (a0, a1, b0, b1)) in enumerate(zip(self._tf, self._wp_angles, strict=True)):
-            i = sides[wheel // k_side][4]
-            spans.append(tf * (1.0 - b0 - b1 * i))  # theta_f - theta_r
-            slopes.append((1.0 - a0 - a1 * i) / max(a0 - b0 + (a1 - b1) * i, 1e-12))  # k
+        tfs = self._tf
+        spans, slope_spans = self._spans, self._slope_spans  # theta_f - theta_r and k (theta_f - theta_r)
+        for side, (a0, a1, b0, b1), wheels in self._wp_groups:  # wheels sharing a side and a soil
+            i = sides[side][4]
+            rear = 1.0 - b0 - b1 * i  # (theta_f - theta_r) / theta_f
+            k = (1.0 - a0 - a1 * i) / max(a0 - b0 + (a1 - b1) * i, 1e-12)
+            for wheel in wheels:
+                spans[wheel] = arc = tfs[wheel] * rear
+                slope_spans[wheel] = k * arc
         n = self.n_wheels
         outer = self._outer  # (2 n, 2): [span, 0] and [0, k span] rows
         outer[:n, 0] = spans
         span = outer[:n, 0]
-        outer[n:, 1] = slopes
-        outer[n:, 1] *= span
+        outer[n:, 1] = slope_spans
         np.dot(outer, self._xi_pair, out=self._u_pair_flat)
         u_pair = self._u_pair
         # u = theta_f - theta at the nodes, k (span - u) [rad]
@@ -668,8 +676,8 @@ class Twin:
         np.tanh(th, out=th)
         slope = np.multiply(th, th, out=per_wheel[7])
         th *= self._side
-        np.subtract(self._side, slope * self._side, out=slope)
-        slope *= 1.0 / DIRECTION_SMOOTHING_M_S
+        slope *= self._side_slope
+        np.subtract(self._side_slope, slope, out=slope)  # side / s (1 - th^2)
         # sums over the wheels: all, x-weighted, per side (_wheel_weights)
         (
             _,
@@ -716,7 +724,7 @@ class Twin:
         # minus what the body receives (F . v + M_z yaw rate)
         vx, vy, wz = self.vel.tolist()
         dissipation = power - (fx * vx + fy * vy + mz * wz)
-        self._wheel_state = (span, loads, spans)
+        self._wheel_state = (span, loads, list(spans))
         return (fx, fy, mz), axle, dissipation, self._deepest
 
     def _advance_wheels(self, dt: float) -> None:
@@ -729,32 +737,43 @@ class Twin:
         sides, vya = kin
         k = self._wheels_per_side
         # per wheel: 0.5 dt x the rim's forward speed in the rolling frame, dt r omega, Courant number
-        halves, rims, courants = [], [], []
-        for wheel, arc in enumerate(spans):
-            _vxa, vxm, om, _sense, _slip = sides[wheel // k]
-            halves.append(0.5 * dt * vxm)
-            rims.append(dt * self.r * om)
-            courants.append(min(om * (dt * WHEEL_NODES) / max(arc, 1e-6), 1.0))
-        columns = np.array([halves, rims, courants])[:, :, None]
+        # (the wheels of a side share the first two)
+        (_, vxm_left, om_left, _, _), (_, vxm_right, om_right, _, _) = sides
+        scale = dt * WHEEL_NODES
+        columns = np.array(
+            [
+                [0.5 * dt * vxm_left] * k + [0.5 * dt * vxm_right] * k,
+                [dt * self.r * om_left] * k + [dt * self.r * om_right] * k,
+                [min(om_left * scale / max(arc, 1e-6), 1.0) for arc in spans[:k]]
+                + [min(om_right * scale / max(arc, 1e-6), 1.0) for arc in spans[k:]],
+            ]
+        )[:, :, None]
         # the rim element's slip velocity is (vxm cos(theta) - r om) along the rim and vya across; its
-        # cell average (trapezoid) times dt, at node 0 the node's own value
+        # cell average (trapezoid) times dt (at node 0 the node's own value, needed only where the
+        # wheel stands: a turning wheel's node 0 is a touchdown, below)
         cell = self._cell
         np.add(cos[:, 1:], cos[:, :-1], out=cell[:, 1:])
-        np.multiply(cos[:, :1], 2.0, out=cell[:, :1])
+        if om_left <= 0.0 or om_right <= 0.0:
+            np.multiply(cos[:, :1], 2.0, out=cell[:, :1])
         cell *= columns[0]
         cell -= columns[1]
-        # node k takes the rim element from node k - 1 (upwind; the element arriving at node 0
-        # carries no displacement), plus the slip
+        # node k takes the rim element from node k - 1 (upwind), plus the slip; node 0 of a turning
+        # wheel is where the rim touches down, carrying no displacement (no shear yet)
         j = self.j
         change = self._change
         np.subtract(j[:, :, :-1], j[:, :, 1:], out=change[:, :, 1:])
-        np.negative(j[:, :, 0], out=change[:, :, 0])
-        change *= columns[2]
+        change[:, :, 1:] *= columns[2]
+        change[:, :, 0] = 0.0
         change[0] += cell
         change[1] += (dt * vya)[:, None]
-        for side, (_vxa, _vxm, om, _sense, _slip) in enumerate(sides):
-            if om > 0:  # touchdown: no shear yet
-                np.negative(j[:, side * k : (side + 1) * k, 0], out=change[:, side * k : (side + 1) * k, 0])
+        if om_left > 0.0 and om_right > 0.0:
+            np.negative(j[:, :, 0], out=change[:, :, 0])
+        else:
+            for side, om in enumerate((om_left, om_right)):
+                if om > 0.0:
+                    np.negative(
+                        j[:, side * k : (side + 1) * k, 0], out=change[:, side * k : (side + 1) * k, 0]
+                    )
         self.j = j + change
         self._damped_rate = change * (self._damping / dt)
         self._contact_age -= 1
@@ -812,6 +831,7 @@ class Twin:
         h += self.dz[:, None]
         integrand = (bull_a + bull_b * h) * h * cos
         self._side = (integrand @ self.xi_w) * (self.r * self._wheel_state[0])
+        self._side_slope = self._side * (1.0 / DIRECTION_SMOOTHING_M_S)
         dz = self.dz
         face = (self.width * (bull_a[:, 0] + bull_b[:, 0] * dz) * dz).tolist()
         k = self._wheels_per_side
