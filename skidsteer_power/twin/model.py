@@ -26,8 +26,13 @@ Terrain contact (see docs/TWIN.md for where this agrees with and departs from th
   (theta_f - theta_r) and slips at u = (V_x cos(theta) - r omega, V_y) (eq. 4.3 without the
   r sin(theta) yaw term): the same transport equation, whose steady state is eq. 2.25 (and 4.4
   without yaw during contact). Wong-Reece normal stress (eq. 2.21), forces eq. 2.27 plus the
-  lateral integral of eq. 4.9, axle torque eq. 2.34. The sinkage is a state relaxed each step
-  towards the vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer.
+  lateral integral of eq. 4.9, axle torque eq. 2.34. The sinkage is a state relaxed towards the
+  vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer, every
+  ``SOIL_REFRESH_STEPS``.
+* beyond the steady models (``bulldozing=False`` switches both off): slip-sinkage, an excavated
+  rut under each wheel (Lyasko 2010, :func:`slip_sinkage_factor`), and bulldozing of the contacts'
+  side walls against their lateral motion and of the excavated step against travel (Hegedus, as
+  Ishigami et al. 2007 apply it, :func:`bulldozing_coefficients`).
 
 Drivetrain, per side (``powertrain``: Table 7.1 internal resistance, left/right asymmetric):
 J dw_m/dt = K_t i - (b w_m + c tanh(w_m / 1 rad/s)) - T_axle / G, the current from the DES speed
