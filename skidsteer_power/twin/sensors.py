@@ -124,37 +124,40 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
     """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz]."""
     every = max(1, round(1.0 / (rate_hz * twin.dt)))
     rows: list[tuple] = []
-    current_sum = np.zeros(2)
+    current_sum = [0.0, 0.0]
     bus_sum = 0.0
     count = 0
 
     def sample() -> None:
         nonlocal current_sum, bus_sum, count
         k = max(count, 1)
+        last = twin.last
         rows.append(
             (
                 twin.t,
                 twin.command,
                 twin.pose.copy(),
                 twin.vel.copy(),
-                current_sum / k,
-                twin.last.axle_torque_Nm.copy(),
+                (current_sum[0] / k, current_sum[1] / k),
+                last.axle_torque_Nm.copy(),
                 twin.omega_m.copy(),
                 twin.theta_m.copy(),
                 twin.bus_voltage_V,
                 bus_sum / k,
                 twin.energy.bus_J,
-                twin.last.sinkage_m,
+                last.sinkage_m,
             )
         )
-        current_sum, bus_sum, count = np.zeros(2), 0.0, 0
+        current_sum, bus_sum, count = [0.0, 0.0], 0.0, 0
 
     sample()
     for segment in commands:
         twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
         for _ in range(round(segment.duration_s / twin.dt)):
             twin._step()
-            current_sum = current_sum + twin.last.current_A
+            left, right = twin.current_A
+            current_sum[0] += left
+            current_sum[1] += right
             bus_sum += twin.bus_current_A
             count += 1
             if count >= every:
