@@ -22,10 +22,11 @@ ratio k [-] of the measured to the predicted *terrain* torque at the motor (the 
 powertrain's internal resistance, eqs. 7.1-7.4: measured K_t i minus the predicted internal torque,
 against the predicted axle torque / G). It is the least-squares slope through the origin over the
 settled samples of both sides and all commands, with exponential forgetting of time constant
-``terrain_memory_s`` [s]: k = S_xy / S_xx, S_xy = sum w x y, S_xx = sum w x^2, w = exp(-age /
-terrain_memory_s). Large torques weigh most, as they do in energy. It is used (else 1) once the
-settled time behind it, sum w dt, reaches ``terrain_min_s`` [s], kept within ``scale_limits``, and
-restarted with the rest when a terrain change is flagged. The path energy
+``terrain_memory_s`` [s]: k = S_xy / S_xx, S_xy = sum w dt x y, S_xx = sum w dt x^2 (dt: the
+sample's interval, at most MAX_SAMPLE_S), w = exp(-age / terrain_memory_s). Large torques weigh
+most, as they do in energy. It is used (else 1) once the settled time behind it, sum w dt, reaches
+``terrain_min_s`` [s], kept within ``scale_limits``, and restarted with the rest when a terrain
+change is flagged. The path energy
 (:mod:`skidsteer_power.estimator.path_energy`) multiplies the map's axle torques by k. k also absorbs
 what the map gets wrong about the motion (a wheeled robot turning at less than the commanded yaw rate
 needs less torque than the commanded turn): the path is predicted from commands too.
