@@ -202,8 +202,8 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     commands go through the estimator core, whose terrain scale carries over between commands. Then
     the twin drives ROUTE_CSV at 0.2 m/s from its commands (``simulate --route``): its bus energy is
     the truth. The path energy of that route (a pose every 0.25 m) with the learned scale is much
-    closer to it than without (measured: +145 % -> +18 %; the rest is mostly the start-up, the final
-    stop and turns the twin drives wider than commanded; README "Path energy")."""
+    closer to it than without (measured: +145 % -> +18 %; the start-up, the final stop and the twin's
+    wider-than-commanded turns are not in the steady path model; README "Path energy")."""
     from skidsteer_power.bags.synthetic import table_7_3_segments
     from skidsteer_power.calibration.direct import feed_trace
     from skidsteer_power.estimator.core import EstimatorCore
