@@ -16,10 +16,14 @@ FULL_TERRAINS = 2
 
 
 def _path_energy(report: Report) -> None:
+    """A new plan (geometry + energies) and a speed change on the same plan (energies only), each
+    evaluation at a fresh speed and terrain scale (no cache hit); the reference is the former cost
+    of a speed change, the route rebuilt from the poses (Segment objects) there and back."""
     import numpy as np
 
-    from skidsteer_power.estimator.path_energy import path_energy
+    from skidsteer_power.estimator.path_energy import PathTracker, route_from_polyline
     from skidsteer_power.maps import PowerMap
+    from skidsteer_power.missions.energy import route_energy_on_map
     from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.vehicle import load_vehicle
@@ -30,13 +34,40 @@ def _path_energy(report: Report) -> None:
     s = np.linspace(0.0, 100.0, 2001)  # a 100 m nav2-like path, a pose every 5 cm, winding
     heading = 0.8 * np.sin(s / 7.0)
     x, y = np.cumsum(np.cos(heading)) * 0.05, np.cumsum(np.sin(heading)) * 0.05
-    best = min(_timed(lambda: path_energy(x, y, 0.3, power_map, pt)) for _ in range(5))
+    speeds = iter(np.linspace(0.2, 0.5, 1000))  # every evaluation at a new speed
+
+    def rebuilt() -> None:
+        v = next(speeds)
+        route_energy_on_map(route_from_polyline(x, y, v), power_map, pt)
+        route_energy_on_map(route_from_polyline(x[::-1], y[::-1], v), power_map, pt)
+
+    tracker = PathTracker()
+
+    def new_plan() -> None:
+        tracker.set_path(x, y)
+        tracker.evaluate(next(speeds), power_map, pt, 1.0)
+
+    def new_speed() -> None:
+        tracker.evaluate(next(speeds), power_map, pt, 1.0 + 1e-3 * next(speeds))
+
+    before = min(_timed(rebuilt) for _ in range(7))
+    plan = min(_timed(new_plan) for _ in range(7))
+    speed = min(_timed(new_speed) for _ in range(7))
     report.figure(
-        'path energy, 2001 poses there and back (robot side)',
-        best * 1e3,
+        'path energy, 2001 poses there and back, a new plan (robot side)',
+        plan * 1e3,
         'ms',
         goal='< 100 ms (one plan per few s)',
-        met=best < 0.1,
+        met=plan < 0.1,
+    )
+    report.figure(
+        'path energy, same plan at a new commanded speed and terrain scale',
+        speed * 1e3,
+        'ms',
+        goal='< 5 ms (5 Hz battery timer: < 2.5 % of a core)',
+        met=speed < 0.005,
+        note=f'before (route rebuilt from the poses each time), same run: {before * 1e3:.1f} ms, '
+        f'{before / speed:.0f}x',
     )
 
 
@@ -99,6 +130,37 @@ def _samples_per_second(report: Report) -> None:
     )
 
 
+def _free_wheel_tables(report: Report) -> None:
+    """The FESS free-wheel tables one design-study sample needs (54: every wheel x load of Table 8.4),
+    batched Newton over each table's 25 loads vs the per-load scalar solve it replaced, same run."""
+    import numpy as np
+
+    from skidsteer_power.missions.design import MASSES_KG, RADII_M, WIDTHS_M
+    from skidsteer_power.models.fess import _free_wheel_table
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.terramechanics.wheel import solve_wheel
+
+    terrain = load_terrain('sandy_soil')
+    wheels = [
+        (r, b, m * 9.81 / (2 * per)) for r in RADII_M for b in WIDTHS_M for m in MASSES_KG for per in (2, 3)
+    ]
+    _free_wheel_table.cache_clear()
+    batched = _timed(lambda: [_free_wheel_table(terrain, r, b, w) for r, b, w in wheels])
+    _free_wheel_table.cache_clear()
+    scalar = _timed(
+        lambda: [
+            [solve_wheel(terrain, float(load), 0.0, r, b) for load in w * np.geomspace(0.02, 2.0, 25)]
+            for r, b, w in wheels
+        ]
+    )
+    report.figure(
+        f'FESS free-wheel tables of one design sample ({len(wheels)} x 25 loads), batched Newton',
+        batched,
+        's',
+        note=f'per-load scalar solve (before), same run: {scalar:.2f} s, {scalar / batched:.1f}x',
+    )
+
+
 def _design(report: Report) -> None:
     from skidsteer_power.distributed.engine import Engine
     from skidsteer_power.powertrain import Powertrain
@@ -108,12 +170,12 @@ def _design(report: Report) -> None:
 
     terrain = load_terrain('sandy_soil')
     spread = default_spread(terrain, Powertrain.default_test_robot())
-    n = 4
+    n = 8
     with Engine(workers=2, progress=False) as engine:
         engine.map(abs, [0, 1])
         cpu0 = engine.client.run(time.process_time)
         t0 = time.perf_counter()
-        design_uncertainty(engine, terrain, spread, samples=n, seed=0, parts_per_sample=6)
+        design_uncertainty(engine, terrain, spread, samples=n, seed=0)
         wall = time.perf_counter() - t0
         cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
     per_sample, cpu_per_sample = wall / n, cpu / n
@@ -123,10 +185,10 @@ def _design(report: Report) -> None:
     report.figure('uncertain design study, worker CPU per sample', cpu_per_sample, 'CPU s/sample')
     samples = FULL_SAMPLES * FULL_TERRAINS
     report.figure(
-        f'full study ({FULL_SAMPLES} samples x {FULL_TERRAINS} terrains x 729), this loaded 2-core machine',
+        f'full study ({FULL_SAMPLES} samples x {FULL_TERRAINS} terrains x 729), this machine now, 2 workers',
         per_sample * samples / 3600.0,
         'h',
-        note=f'extrapolated from {n} measured samples',
+        note=f'extrapolated from {n} measured samples (load average in the first line)',
     )
     for workers in (2, 8, 32, 128):
         projected = cpu_per_sample * samples / workers
@@ -177,5 +239,6 @@ def run(report: Report) -> None:
     )
     _path_energy(report)
     _samples_per_second(report)
+    _free_wheel_tables(report)
     _design(report)
     _fleet(report)

@@ -165,7 +165,7 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
 
 
 def test_correction_fields_are_named_with_units():
-    assert len(CORRECTION_FIELDS) == len(set(CORRECTION_FIELDS)) == 10
+    assert len(CORRECTION_FIELDS) == len(set(CORRECTION_FIELDS)) == 12
     assert 'offset_left_Nm' in CORRECTION_FIELDS and 'scale_right' in CORRECTION_FIELDS
 
 
@@ -211,3 +211,43 @@ def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, ena
         assert diagnostics['terrain_changes'] == '0'
     finally:
         rig.close()
+
+
+# --- the terrain scale: carries over between commands --------------------------------------------
+def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrain_change():
+    """Hand-made data: the internal torque is 0.05 N m, the terrain needs 1.6 x the predicted terrain
+    torque, on two alternating commands. The per-side correction restarts on each new command, the
+    terrain scale k = S_xy / S_xx = 1.6 exactly (noise-free, through the origin) and holds across
+    them; before terrain_min_s (2 s) of settled time it is 1; a flagged terrain change restarts it."""
+    adapt = TorqueAdaptation()
+    internal = 0.05
+    t = 0.0
+    ks = []
+    for command, terrain in (((0.2, 0.0), (0.25, 0.27)), ((0.1, 0.2), (0.10, 0.45))) * 2:
+        adapt.on_command(command, t)
+        for _ in range(150):  # 3 s per command, the first 1 s unsettled
+            pred = (internal + terrain[0], internal + terrain[1])
+            meas = (internal + 1.6 * terrain[0], internal + 1.6 * terrain[1])
+            adapt.update(t, pred, (24.0, 24.0), meas, (24.0, 24.0), terrain)
+            ks.append(adapt.terrain_scale())
+            t += DT
+    # the first command's 2 s settled (less its forgetting) are not yet 2 s: k is used from the second
+    assert ks[:150] == [1.0] * 150
+    assert ks[200:] == pytest.approx([1.6] * (len(ks) - 200), rel=1e-12)  # from the second settled
+    state = adapt.state()
+    assert state.terrain_scale == pytest.approx(1.6, rel=1e-12)
+    assert 2.0 < state.terrain_scale_evidence_s < 8.0  # 4 x 2 s settled, forgetting over 12 s
+    rng = np.random.default_rng(3)
+    while not adapt.update(
+        t, pred, (24.0, 24.0), 0.3 * np.array(meas) + rng.normal(0, 1e-3, 2), (24.0, 24.0), terrain
+    ):
+        t += DT
+    assert adapt.terrain_scale() == 1.0 and adapt.state().terrain_scale_evidence_s == 0.0
+
+
+def test_terrain_scale_is_off_with_the_adaptation():
+    adapt = TorqueAdaptation(AdaptationSettings(enabled=False))
+    adapt.on_command((0.2, 0.0), 0.0)
+    for k in range(200):
+        adapt.update(k * DT, (0.3, 0.3), (24.0, 24.0), (0.6, 0.6), (24.0, 24.0), (0.25, 0.25))
+    assert adapt.terrain_scale() == 1.0

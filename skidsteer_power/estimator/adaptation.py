@@ -14,6 +14,23 @@ from one command to the next (a turn is not a straight run), so when a new comma
 covariance is reset to its initial value (the correction re-converges in a fraction of a second)
 and the change detector waits ``warmup_s`` [s]: a new command is not a new terrain.
 
+Terrain scale
+-------------
+The per-side correction is the model's error for one command and restarts with the next, so it says
+nothing about a path of other commands. Beside it, one number carries over between commands: the
+ratio k [-] of the measured to the predicted *terrain* torque at the motor (the torque beyond the
+powertrain's internal resistance, eqs. 7.1-7.4: measured K_t i minus the predicted internal torque,
+against the predicted axle torque / G). It is the least-squares slope through the origin over the
+settled samples of both sides and all commands, with exponential forgetting of time constant
+``terrain_memory_s`` [s]: k = S_xy / S_xx, S_xy = sum w dt x y, S_xx = sum w dt x^2 (dt: the
+sample's interval, at most MAX_SAMPLE_S), w = exp(-age / terrain_memory_s). Large torques weigh
+most, as they do in energy. It is used (else 1) once the settled time behind it, sum w dt, reaches
+``terrain_min_s`` [s], kept within ``scale_limits``, and restarted with the rest when a terrain
+change is flagged. The path energy
+(:mod:`skidsteer_power.estimator.path_energy`) multiplies the map's axle torques by k. k also absorbs
+what the map gets wrong about the motion (a wheeled robot turning at less than the commanded yaw rate
+needs less torque than the commanded turn): the path is predicted from commands too.
+
 Change detector
 ---------------
 Each settled sample's innovation (measured minus corrected torque, before the update) is normalized
@@ -60,17 +77,23 @@ class AdaptationSettings:
     sigma_rel: float = 0.03
     sigma_floor_Nm: float = 0.01
     scale_limits: tuple[float, float] = (0.2, 5.0)
+    terrain_memory_s: float = 60.0
+    terrain_min_s: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ('memory_s', 'settle_s', 'speed_tol', 'cusum_h', 'sigma_floor_Nm'):
+        for name in ('memory_s', 'settle_s', 'speed_tol', 'cusum_h', 'sigma_floor_Nm', 'terrain_memory_s'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f'adaptation {name} must be a finite number > 0, got {value!r}')
-        for name in ('cusum_k', 'sigma_rel'):
+        for name in ('cusum_k', 'sigma_rel', 'terrain_min_s'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f'adaptation {name} must be a finite number >= 0, got {value!r}')
 
+
+MAX_SAMPLE_S = 0.2
+"""A settled sample counts for at most this long in the terrain scale [s]: the gap between two settled
+runs (a command change) is no settled time."""
 
 P0 = np.diag([100.0, 1.0])  # initial covariance of (a [-], b [N m]): a weak prior (+-10, +-1 N m)
 
@@ -104,7 +127,9 @@ class Correction:
     scale : a [-]; offset_Nm : b [N m]; residual_rms_Nm : running RMS innovation [N m] (NaN before
     any settled sample); cusum : larger CUSUM statistic per side [sigma]; samples : settled samples
     since the last restart; terrain_changes : how many changes were flagged; last_change_s : time of
-    the last one [s] (NaN if none); settled : the last sample was used.
+    the last one [s] (NaN if none); settled : the last sample was used; terrain_scale : k, measured /
+    predicted terrain torque over all commands [-] (1 until known); terrain_scale_evidence_s :
+    forgetting-weighted settled time behind k [s] (module doc, "Terrain scale").
     """
 
     scale: tuple[float, float]
@@ -115,6 +140,8 @@ class Correction:
     terrain_changes: int
     last_change_s: float
     settled: bool
+    terrain_scale: float = 1.0
+    terrain_scale_evidence_s: float = 0.0
 
     def relative_residual(self, predicted_Nm: tuple[float, float]) -> float:
         """Residual RMS relative to the mean |predicted torque| [-] (NaN when unknown)."""
@@ -123,12 +150,35 @@ class Correction:
         return rms / scale if scale > 1e-9 else math.nan
 
 
+@dataclass
+class TerrainScale:
+    """Forgetting least-squares slope k of measured on predicted terrain torque (module doc)."""
+
+    s_xy: float = 0.0  # [N m^2 s]
+    s_xx: float = 0.0  # [N m^2 s]
+    evidence_s: float = 0.0  # forgetting-weighted settled time [s]
+
+    def add(self, predicted_Nm: np.ndarray, measured_Nm: np.ndarray, dt_s: float, lam: float) -> None:
+        """One settled sample of both sides: terrain torques at the motor [N m], held ``dt_s`` [s],
+        after the older ones are weighted by ``lam`` [-]."""
+        self.s_xy = lam * self.s_xy + dt_s * float(np.dot(predicted_Nm, measured_Nm))
+        self.s_xx = lam * self.s_xx + dt_s * float(np.dot(predicted_Nm, predicted_Nm))
+        self.evidence_s = lam * self.evidence_s + dt_s
+
+    def value(self, min_s: float, limits: tuple[float, float]) -> float:
+        """k [-], or 1 while less than ``min_s`` [s] of settled time (or no terrain torque) is behind it."""
+        if self.evidence_s < min_s or self.s_xx <= 0.0:
+            return 1.0
+        return min(max(self.s_xy / self.s_xx, limits[0]), limits[1])
+
+
 class TorqueAdaptation:
     """Per-side RLS correction with CUSUM change detection; feed :meth:`update` per joint_states."""
 
     def __init__(self, settings: AdaptationSettings | None = None) -> None:
         self.settings = settings or AdaptationSettings()
         self.sides = (SideEstimator(), SideEstimator())
+        self.terrain = TerrainScale()
         self.terrain_changes = 0
         self.last_change_s = math.nan
         self._command: tuple[float, float] | None = None
@@ -160,9 +210,11 @@ class TorqueAdaptation:
         predicted_omega: tuple[float, float],
         measured_Nm: tuple[float, float],
         measured_omega: tuple[float, float],
+        predicted_terrain_Nm: tuple[float, float] | None = None,
     ) -> bool:
         """One joint_states sample (motor torques [N m], motor speeds [rad/s]); True if a terrain
-        change was flagged by it."""
+        change was flagged by it. ``predicted_terrain_Nm``, the part of ``predicted_Nm`` the terrain
+        needs (axle torque / G) [N m], feeds the terrain scale (none given: it is not updated)."""
         s = self.settings
         self._settled = False
         if not s.enabled or self._command is None or now_s - self._command_since < s.settle_s:
@@ -192,7 +244,20 @@ class TorqueAdaptation:
             self._detect_from_s = now_s + s.warmup_s
             for side in self.sides:
                 side.reset()
+            self.terrain = TerrainScale()
+        elif predicted_terrain_Nm is not None:
+            terrain = np.asarray(predicted_terrain_Nm, dtype=float)
+            internal = np.asarray(predicted_Nm, dtype=float) - terrain  # eqs. 7.1-7.4 at the motor
+            lam_terrain = math.exp(-max(dt, 0.0) / s.terrain_memory_s)
+            measured = np.asarray(measured_Nm, dtype=float) - internal
+            self.terrain.add(terrain, measured, min(max(dt, 0.0), MAX_SAMPLE_S), lam_terrain)
         return alarm
+
+    def terrain_scale(self) -> float:
+        """k, measured / predicted terrain torque over all commands [-] (module doc); 1 when off."""
+        if not self.settings.enabled:
+            return 1.0
+        return self.terrain.value(self.settings.terrain_min_s, self.settings.scale_limits)
 
     def _update_side(self, side: SideEstimator, pred: float, meas: float, lam: float, detect: bool) -> bool:
         s = self.settings
@@ -234,6 +299,8 @@ class TorqueAdaptation:
             terrain_changes=self.terrain_changes,
             last_change_s=self.last_change_s,
             settled=self._settled,
+            terrain_scale=self.terrain_scale(),
+            terrain_scale_evidence_s=self.terrain.evidence_s,
         )
 
 
@@ -248,6 +315,8 @@ CORRECTION_FIELDS = (
     'cusum_right',
     'terrain_changes',
     'enabled',
+    'terrain_scale',
+    'terrain_scale_evidence_s',
 )
 """Names of ``power/correction`` (JointState: names = fields, position = values; units in the names)."""
 
@@ -262,4 +331,6 @@ def correction_values(adaptation: TorqueAdaptation) -> list[float]:
         *c.cusum,
         float(c.terrain_changes),
         float(adaptation.settings.enabled),
+        c.terrain_scale,
+        c.terrain_scale_evidence_s,
     ]

@@ -57,6 +57,7 @@ def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
         'correction_scale_right': f'{c.scale[1]:.4f}',
         'correction_offset_left_Nm': f'{c.offset_Nm[0]:.4f}',
         'correction_offset_right_Nm': f'{c.offset_Nm[1]:.4f}',
+        'terrain_scale': f'{c.terrain_scale:.4f}',
     }
 
 
@@ -276,7 +277,8 @@ class EstimatorCore:
         self.comparison = self._compare(measured)
         p = self.prediction
         if p is not None and self.cmd_fresh.is_fresh(now_s):
-            self.adaptation.update(now_s, p.motor_torque_Nm, p.motor_omega_rad_s, torque, omega)
+            terrain = (p.terrain_torque_Nm[0] / pt.gear_ratio, p.terrain_torque_Nm[1] / pt.gear_ratio)
+            self.adaptation.update(now_s, p.motor_torque_Nm, p.motor_omega_rad_s, torque, omega, terrain)
         return self.comparison
 
     def _compare(self, measured: MeasuredPower) -> Comparison:

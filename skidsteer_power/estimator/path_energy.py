@@ -20,7 +20,14 @@ Duplicate poses (zero-length chords) are dropped. Sign convention REP 103: a lef
 
 Margin (issue 19): remaining battery energy - energy of the path - energy back to the path's start
 along the reversed path - a reserve [Wh]. Path energies are the battery (DC bus) energy of the
-missions (motor and amplifier losses included), at a constant speed.
+missions (motor and amplifier losses included), at a constant speed, with the map's axle torques
+multiplied by the online terrain scale k (:mod:`skidsteer_power.estimator.adaptation`, "Terrain
+scale"; 1 = the map as built).
+
+Cost: the path's geometry (piece lengths and radii, there and back) is computed once per path as
+arrays (:class:`PathGeometry`); a new speed or terrain scale only re-queries the map at the path's
+unique (V, R) states (:func:`skidsteer_power.missions.energy.energy_on_map`), about a millisecond for
+a 2001-pose path, so following the commanded speed costs little (benchmarks/bench_scale.py).
 """
 
 from __future__ import annotations
@@ -32,11 +39,63 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.missions.energy import route_energy_on_map
+from skidsteer_power.missions.energy import energy_on_map
 from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route, Segment
 
 JOULES_PER_WH = 3600.0
 MIN_CHORD_M = 1e-6  # [m] shorter chords are duplicate poses
+
+
+@dataclass(frozen=True)
+class PathGeometry:
+    """A polyline as constant-radius pieces (module doc): ``length_m`` [m] and signed
+    ``turn_radius_m`` [m] (inf: straight) per piece, and the distinct points ``xy`` [m]."""
+
+    length_m: np.ndarray
+    turn_radius_m: np.ndarray
+    xy: np.ndarray
+
+    @classmethod
+    def from_polyline(cls, x: Any, y: Any) -> PathGeometry:
+        """InputError when the points are not finite or fewer than two are distinct."""
+        xy = np.column_stack([np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()])
+        if not np.all(np.isfinite(xy)):
+            raise InputError('path points must be finite')
+        chords = np.diff(xy, axis=0)
+        length = np.hypot(chords[:, 0], chords[:, 1])
+        keep = length > MIN_CHORD_M
+        chords, length = chords[keep], length[keep]
+        if length.size == 0:
+            raise InputError('a path needs at least two distinct points')
+        heading = np.arctan2(chords[:, 1], chords[:, 0])
+        turn = np.angle(np.exp(1j * np.diff(heading)))  # wrapped to (-pi, pi] [rad]
+        share = 0.5 * (length[:-1] + length[1:])  # [m] owned by each interior vertex
+        curvature = turn / share
+        radius = np.where(
+            np.abs(curvature) < STRAIGHT_CURVATURE, np.inf, 1.0 / np.where(curvature == 0, 1, curvature)
+        )
+        pieces = np.r_[0.5 * length[0], share, 0.5 * length[-1]]
+        radii = np.r_[np.inf, radius, np.inf]
+        return cls(pieces, radii, xy[np.r_[True, keep]])
+
+    @property
+    def total_length_m(self) -> float:
+        return float(np.sum(self.length_m))
+
+    def energy(
+        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+    ) -> dict[str, float]:
+        """:func:`~skidsteer_power.missions.energy.energy_on_map` of the pieces at ``speed_m_s`` [m/s]."""
+        _check_speed(speed_m_s)
+        speed = np.full(self.length_m.shape, float(speed_m_s))
+        return energy_on_map(
+            speed, self.turn_radius_m, self.length_m / speed_m_s, power_map, powertrain, terrain_scale
+        )
+
+
+def _check_speed(speed_m_s: float) -> None:
+    if not (math.isfinite(speed_m_s) and speed_m_s > 0):
+        raise InputError(f'path speed must be finite and > 0 m/s, got {speed_m_s}')
 
 
 def route_from_polyline(x: Any, y: Any, speed_m_s: float, name: str = 'path') -> Route:
@@ -44,39 +103,26 @@ def route_from_polyline(x: Any, y: Any, speed_m_s: float, name: str = 'path') ->
 
     InputError when the path has fewer than two distinct points or the speed is not > 0.
     """
-    if not (math.isfinite(speed_m_s) and speed_m_s > 0):
-        raise InputError(f'path speed must be finite and > 0 m/s, got {speed_m_s}')
-    xy = np.column_stack([np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()])
-    if not np.all(np.isfinite(xy)):
-        raise InputError('path points must be finite')
-    chords = np.diff(xy, axis=0)
-    length = np.hypot(chords[:, 0], chords[:, 1])
-    keep = length > MIN_CHORD_M
-    chords, length = chords[keep], length[keep]
-    if length.size == 0:
-        raise InputError('a path needs at least two distinct points')
-    heading = np.arctan2(chords[:, 1], chords[:, 0])
-    turn = np.angle(np.exp(1j * np.diff(heading)))  # wrapped to (-pi, pi] [rad]
-    share = 0.5 * (length[:-1] + length[1:])  # [m] owned by each interior vertex
-    curvature = turn / share
-    radius = np.where(
-        np.abs(curvature) < STRAIGHT_CURVATURE, np.inf, 1.0 / np.where(curvature == 0, 1, curvature)
+    _check_speed(speed_m_s)
+    g = PathGeometry.from_polyline(x, y)
+    segments = tuple(
+        Segment.along(speed_m_s, float(r), length_m=float(s))
+        for s, r in zip(g.length_m.tolist(), g.turn_radius_m.tolist(), strict=True)
     )
-    pieces = [(0.5 * length[0], math.inf), *zip(share.tolist(), radius.tolist(), strict=True)]
-    pieces.append((0.5 * length[-1], math.inf))
-    segments = tuple(Segment.along(speed_m_s, float(r), length_m=float(s)) for s, r in pieces)
-    return Route(name, segments, f'polyline of {len(length) + 1} points', xy=xy[np.r_[True, keep]])
+    return Route(name, segments, f'polyline of {len(g.xy)} points', xy=g.xy)
 
 
 @dataclass(frozen=True)
 class PathEnergy:
-    """Energies of a path [J] at ``speed_m_s`` [m/s]: there (``required_J``) and back (``return_J``)."""
+    """Energies of a path [J] at ``speed_m_s`` [m/s]: there (``required_J``) and back (``return_J``),
+    with the map's axle torques multiplied by ``terrain_scale`` [-]."""
 
     length_m: float
     speed_m_s: float
     required_J: float
     return_J: float
     clamped_segments: int
+    terrain_scale: float = 1.0
 
     @property
     def required_wh(self) -> float:
@@ -91,45 +137,64 @@ class PathEnergy:
         return remaining_wh - self.required_wh - self.return_wh - reserve_wh
 
 
-def path_energy(x: Any, y: Any, speed_m_s: float, power_map: Any, powertrain: Any) -> PathEnergy:
+class PlannedPath:
+    """A planned path's geometry there and back along it (reversed, driven forward), built once."""
+
+    def __init__(self, x: Any, y: Any) -> None:
+        xs, ys = np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
+        self.there = PathGeometry.from_polyline(xs, ys)
+        self.back = PathGeometry.from_polyline(xs[::-1], ys[::-1])
+
+    def energy(
+        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+    ) -> PathEnergy:
+        """Battery energy there and back at ``speed_m_s`` [m/s] with the loads of ``power_map`` and
+        ``powertrain``, axle torques times ``terrain_scale`` [-]."""
+        speed = abs(float(speed_m_s))
+        there = self.there.energy(speed, power_map, powertrain, terrain_scale)
+        back = self.back.energy(speed, power_map, powertrain, terrain_scale)
+        return PathEnergy(
+            length_m=self.there.total_length_m,
+            speed_m_s=speed,
+            required_J=there['energy_battery_J'],
+            return_J=back['energy_battery_J'],
+            clamped_segments=int(there['clamped_segments'] + back['clamped_segments']),
+            terrain_scale=float(terrain_scale),
+        )
+
+
+def path_energy(
+    x: Any, y: Any, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+) -> PathEnergy:
     """Battery energy to drive the polyline (x, y) [m] at ``speed_m_s`` [m/s] and back along it
-    (reversed path, driven forward), with the loads of ``power_map`` and ``powertrain``."""
-    xs, ys = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    there = route_from_polyline(xs, ys, abs(speed_m_s))
-    back = route_from_polyline(xs[::-1], ys[::-1], abs(speed_m_s), name='return')
-    e_there = route_energy_on_map(there, power_map, powertrain)
-    e_back = route_energy_on_map(back, power_map, powertrain)
-    return PathEnergy(
-        length_m=there.length_m,
-        speed_m_s=abs(speed_m_s),
-        required_J=e_there['energy_battery_J'],
-        return_J=e_back['energy_battery_J'],
-        clamped_segments=int(e_there['clamped_segments'] + e_back['clamped_segments']),
-    )
+    (reversed path, driven forward), with the loads of ``power_map`` and ``powertrain`` and the axle
+    torques times ``terrain_scale`` [-]."""
+    return PlannedPath(x, y).energy(speed_m_s, power_map, powertrain, terrain_scale)
 
 
 class PathTracker:
-    """The last planned path and its energies, recomputed only when the path, the speed or the
-    predictor (terrain) changes; the node asks it for (required, margin) [Wh] whenever it publishes."""
+    """The last planned path (geometry built once) and its energies, recomputed only when the path,
+    the speed, the predictor (terrain) or the terrain scale changes."""
 
     def __init__(self) -> None:
-        self.xy: tuple[np.ndarray, np.ndarray] | None = None
+        self.path: PlannedPath | None = None
         self._key: tuple[Any, ...] | None = None
         self.energy: PathEnergy | None = None
 
     def set_path(self, x: Any, y: Any) -> None:
-        """A new plan [m]; an empty path clears it."""
-        xs, ys = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        self.xy = (xs, ys) if xs.size else None
-        self._key = None
-        self.energy = None
+        """A new plan [m]; an empty path clears it; InputError (and no path) for a bad one."""
+        self.path, self._key, self.energy = None, None, None
+        if np.asarray(x).size:
+            self.path = PlannedPath(x, y)
 
-    def evaluate(self, speed_m_s: float, power_map: Any, powertrain: Any) -> PathEnergy | None:
+    def evaluate(
+        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+    ) -> PathEnergy | None:
         """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, or speed 0)."""
-        if self.xy is None or power_map is None or not speed_m_s:
+        if self.path is None or power_map is None or not speed_m_s:
             return None
-        key = (abs(float(speed_m_s)), id(power_map), id(powertrain))
+        key = (abs(float(speed_m_s)), id(power_map), id(powertrain), float(terrain_scale))
         if key != self._key:
-            self.energy = path_energy(self.xy[0], self.xy[1], abs(speed_m_s), power_map, powertrain)
+            self.energy = self.path.energy(speed_m_s, power_map, powertrain, terrain_scale)
             self._key = key
         return self.energy

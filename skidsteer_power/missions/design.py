@@ -18,8 +18,8 @@ both manoeuvres and have a positive drawbar pull are eligible.
 Candidates run in parallel processes (concurrent.futures.ProcessPoolExecutor), each process solving
 one contiguous part of the grid; the result order is the grid order, so the study is deterministic.
 The parts are contiguous because FESS prepares a single-wheel table per (wheel, load) once per process
-(about 70 ms, cached): the 9 candidates that differ only in length and tread share it. The split
-balances an estimated cost per candidate (wheel tables dominate), measured on this machine.
+(about 3 ms, one batched Newton over 25 loads; cached): the 9 candidates that differ only in length
+and tread share it. The split balances an estimated cost per candidate, measured on this machine.
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ def _preload(model: str) -> None:
     importlib.import_module(MODELS[model])
 
 
-_TRACK_COST, _WHEEL_COST, _WHEEL_TABLE_COST = 1.5, 2.0, 70.0  # ms, measured (see module doc)
+_TRACK_COST, _WHEEL_COST, _WHEEL_TABLE_COST = 1.6, 2.5, 3.0  # ms, measured (see module doc)
 
 
 def _balanced_parts(rows: list[dict[str, Any]], parts: int) -> list[list[dict[str, Any]]]:

@@ -9,7 +9,9 @@ centre, straight running):
 * wheels: n rigid wheels of load W/n, F_d(s) = F_x(s) of the Wong-Reece wheel (eqs. 2.27-2.28),
   maximized over s in [0, 0.99].
 
-Each is one vectorized array call over (candidate, slip).
+Each is one vectorized array call over (distinct running gear, slip): candidates that differ only
+in what the pull does not depend on (tread; a wheeled vehicle's wheelbase, a track's sprocket
+radius) share one row, so the 729 Table 8.4 candidates need 27 track and 54 wheel rows.
 """
 
 from __future__ import annotations
@@ -34,17 +36,21 @@ def max_drawbar_pull(vehicles: Sequence, terrain: Terrain) -> np.ndarray:
     wheeled = [k for k, v in enumerate(vehicles) if not v.is_tracked]
     if tracked:
         v = [vehicles[k] for k in tracked]
-        load = np.array([x.weight_N / 2.0 for x in v])[:, None]
-        width = np.array([x.track_width_m for x in v])[:, None]
-        length = np.array([x.track_length_m for x in v])[:, None]
+        rows, inverse = _distinct([[x.weight_N / 2.0, x.track_width_m, x.track_length_m] for x in v])
+        load, width, length = (rows[:, k : k + 1] for k in range(3))
         dp = track_drawbar_pull(terrain, load, width, length, TRACK_SLIPS[None, :])
-        out[tracked] = 2.0 * dp.max(axis=1)
+        out[tracked] = 2.0 * dp.max(axis=1)[inverse]
     if wheeled:
         v = [vehicles[k] for k in wheeled]
         n = np.array([x.n_wheels for x in v], dtype=float)
-        load = (np.array([x.weight_N for x in v]) / n)[:, None]
-        radius = np.array([x.wheel_radius_m for x in v])[:, None]
-        width = np.array([x.wheel_width_m for x in v])[:, None]
+        rows, inverse = _distinct([[x.weight_N / x.n_wheels, x.wheel_radius_m, x.wheel_width_m] for x in v])
+        load, radius, width = (rows[:, k : k + 1] for k in range(3))
         state = wheel_at_slip(terrain, load, WHEEL_SLIPS[None, :], radius, width)
-        out[wheeled] = n * np.asarray(state.Fx_N).max(axis=1)
+        out[wheeled] = n * np.asarray(state.Fx_N).max(axis=1)[inverse]
     return out
+
+
+def _distinct(rows: list[list[float]]) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows (m, k) of a table and each row's index among them."""
+    table, inverse = np.unique(np.asarray(rows, dtype=float), axis=0, return_inverse=True)
+    return table, inverse.ravel()

@@ -44,10 +44,16 @@ import numpy as np
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.loads import OperatingPoints, side_loads
-from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
 from skidsteer_power.terramechanics.soil import shear_fraction
 from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
-from skidsteer_power.terramechanics.wheel import quadratic_stress_coefficients, solve_wheel, wheel_angles
+from skidsteer_power.terramechanics.wheel import (
+    bekker_wheel_sinkage,
+    quadratic_stress_coefficients,
+    solve_wheel,
+    wheel_angles,
+    wheel_forces,
+)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -136,6 +142,11 @@ def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
     )
 
 
+FREE_WHEEL_TOL_N = 1e-7
+"""Balance tolerance of the free-wheel table [N]: far inside eq. 2.29's 0.001 N, so the table is the
+scalar solve's (:func:`~skidsteer_power.terramechanics.wheel.solve_wheel`) to about 1e-8."""
+
+
 @lru_cache(maxsize=32)
 def _free_wheel_table(
     terrain: Terrain, radius: float, width: float, nominal_load: float
@@ -143,17 +154,34 @@ def _free_wheel_table(
     """Sinkage and slip of a self-propelled wheel (F_x = 0, eq. 2.28) over a range of wheel loads.
 
     Section 6.3 decouples slip and sinkage: each wheel's contact geometry comes from the single-wheel
-    model at its load (eq. 2.28 with zero drawbar pull). The scalar (z, s) solve is done once per
+    model at its load (eq. 2.28 with zero drawbar pull). The (z, s) solve is done once per
     (terrain, wheel) at 25 loads from 2 % to 200 % of the nominal wheel load and interpolated in
-    log(load): a batch of operating points then needs no per-point Newton solve.
+    log(load): a batch of operating points then needs no per-point Newton solve. The 25 loads are
+    one batched Newton (:func:`~skidsteer_power.models.newton.newton_solve`, eqs. 2.29-2.33) from
+    solve_wheel's first guess and in its unknowns (theta_f through a logistic, s = tanh u); a load it
+    does not converge falls back to :func:`~skidsteer_power.terramechanics.wheel.solve_wheel`.
     """
     loads = nominal_load * np.geomspace(0.02, 2.0, 25)
-    sink, slip = [], []
-    for w in loads:
-        state = solve_wheel(terrain, float(w), 0.0, radius, width)
-        sink.append(float(state.sinkage_m))
-        slip.append(float(state.slip))
-    return np.log(loads), np.array(sink), np.array(slip)
+    r = radius
+    z0 = np.minimum(bekker_wheel_sinkage(terrain, loads, r, width), 0.9 * r)  # eq. 2.32
+    theta0 = np.arccos(1.0 - z0 / r)
+    x0 = np.column_stack([-np.log(0.5 * math.pi / theta0 - 1.0), np.full(loads.size, math.atanh(0.2))])
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        theta_f = 0.5 * math.pi / (1.0 + np.exp(-np.clip(x[:, 0], -50.0, 50.0)))
+        return r * (1.0 - np.cos(theta_f)), np.tanh(np.clip(x[:, 1], -20.0, 20.0))
+
+    def balance(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        z, s = unpack(x)
+        state = wheel_forces(terrain, z, s, r, width)
+        return np.column_stack([state.Fx_N, state.Fz_N - loads[idx]])  # eq. 2.29, F_d = 0
+
+    result = newton_solve(balance, x0, steps=np.array([1e-7, 1e-7]), tol=FREE_WHEEL_TOL_N)
+    sink, slip = unpack(result.x)
+    for k in np.flatnonzero(~result.converged):
+        state = solve_wheel(terrain, float(loads[k]), 0.0, radius, width)
+        sink[k], slip[k] = float(state.sinkage_m), float(state.slip)
+    return np.log(loads), sink, slip
 
 
 def wheel_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:

@@ -6,7 +6,8 @@ subscribes ``plan`` nav_msgs/Path (nav2's name; remappable): poses' x, y [m] (fr
     lengths and heading changes matter)
 publishes (at once on a new path, then with the node's battery topics, every ``publish_period_s``)
     ``energy/path_required_wh`` std_msgs/Float64 [Wh]: battery energy to drive the path at
-        ``path_speed_m_s`` (0: the last commanded |V|) with the current map and powertrain
+        ``path_speed_m_s`` (0: the last commanded |V|) with the current map and powertrain, the map's
+        axle torques times the online terrain scale (``terrain_scale`` in ``power/correction``)
     ``energy/path_margin_wh`` std_msgs/Float64 [Wh]: remaining - path - back to the path's start along
         the reversed path - ``path_reserve_wh``
     ``diagnostics``: status ``<node>: path energy``, WARN while the margin is negative (every
@@ -17,7 +18,7 @@ the diagnostic says which.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Path
@@ -32,6 +33,20 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
+class PathInputs(NamedTuple):
+    """The node's state the path energy reads (one consistent snapshot: the node's ``path_inputs()``).
+
+    predictor : the estimator's predictor (its ``power_map`` and ``powertrain``); command : last
+    (V [m/s], yaw rate [rad/s]) or None; remaining_wh : battery energy left [Wh]; terrain_scale : the
+    online terrain scale k [-] (estimator/adaptation.py).
+    """
+
+    predictor: Any
+    command: tuple[float, float] | None
+    remaining_wh: float
+    terrain_scale: float
+
+
 class PathEnergyHook:
     """Subscribes ``plan`` on ``node`` and publishes the path energies (module doc)."""
 
@@ -44,7 +59,8 @@ class PathEnergyHook:
         self.reserve_wh = float(p['path_reserve_wh'])
         self.tracker = PathTracker()
         self.status = 'no path received'
-        self.last: tuple[float, float] | None = None
+        self.received = False
+        self.last: tuple[PathEnergy, float] | None = None  # energies and margin [Wh] last published
         node.create_subscription(Path, 'plan', self._on_path, qos)
         self.pub_required = node.create_publisher(Float64, 'energy/path_required_wh', 10)
         self.pub_margin = node.create_publisher(Float64, 'energy/path_margin_wh', 10)
@@ -55,19 +71,21 @@ class PathEnergyHook:
     def _on_path(self, msg: Path) -> None:
         x = [pose.pose.position.x for pose in msg.poses]
         y = [pose.pose.position.y for pose in msg.poses]
-        self.tracker.set_path(x, y)
+        self.received = True
+        try:
+            self.tracker.set_path(x, y)
+        except SkidsteerError as err:
+            self.status = f'path rejected: {err}'
+            self.last = None
+            return
         self.status = f'path of {len(x)} poses'
         self.publish()
 
     def _evaluate(self) -> tuple[PathEnergy | None, float]:
-        node = self.node
-        with node._lock:
-            predictor = node.core.predictor
-            command = node.core.command
-            remaining = float(node.core.battery.remaining_wh)
+        predictor, command, remaining, terrain_scale = self.node.path_inputs()
         speed = self.speed_m_s or (abs(command[0]) if command else 0.0)
         power_map = getattr(predictor, 'power_map', None)
-        if self.tracker.xy is None:
+        if self.tracker.path is None:
             return None, remaining
         if not speed:
             self.status = 'no speed: path_speed_m_s is 0 and no command yet'
@@ -76,7 +94,8 @@ class PathEnergyHook:
             self.status = 'the predictor has no power map'
             return None, remaining
         try:
-            energy = self.tracker.evaluate(speed, power_map, getattr(predictor, 'powertrain', None))
+            powertrain = getattr(predictor, 'powertrain', None)
+            energy = self.tracker.evaluate(speed, power_map, powertrain, terrain_scale)
         except SkidsteerError as err:
             self.status = f'path rejected: {err}'
             self.tracker.set_path([], [])
@@ -90,19 +109,25 @@ class PathEnergyHook:
             self.last = None
             return
         margin = energy.margin_wh(remaining, self.reserve_wh)
-        self.last = (energy.required_wh, margin)
-        self.status = f'{energy.length_m:.1f} m at {energy.speed_m_s:.2f} m/s'
+        self.last = (energy, margin)
+        self.status = (
+            f'{energy.length_m:.1f} m at {energy.speed_m_s:.2f} m/s, terrain scale {energy.terrain_scale:.3f}'
+        )
         self.pub_required.publish(Float64(data=energy.required_wh))
         self.pub_margin.publish(Float64(data=margin))
 
     def publish_diagnostics(self) -> None:
-        if self.tracker.xy is None and self.status == 'no path received':
+        if not self.received:
             return
         level, message = DiagnosticStatus.OK, self.status
         values = {'status': self.status}
         if self.last is not None:
-            required, margin = self.last
-            values |= {'path_required_wh': f'{required:.3f}', 'path_margin_wh': f'{margin:.3f}'}
+            energy, margin = self.last
+            values |= {
+                'path_required_wh': f'{energy.required_wh:.3f}',
+                'path_margin_wh': f'{margin:.3f}',
+                'terrain_scale': f'{energy.terrain_scale:.4f}',
+            }
             if margin < 0:
                 level = DiagnosticStatus.WARN
                 message = f'not enough energy for the path and back: margin {margin:.2f} Wh'

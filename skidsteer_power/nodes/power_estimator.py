@@ -89,7 +89,7 @@ from skidsteer_power.estimator.summary import (
     summary_key_values,
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
-from skidsteer_power.nodes.path_hook import PathEnergyHook
+from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.spin import spin_node
 
 NODE_NAME = 'power_estimator'
@@ -136,6 +136,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
     'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
+    'adaptation_terrain_memory_s': (
+        60.0,
+        'memory of the terrain scale that carries over between commands (path energy) [s]',
+    ),
     **PATH_PARAMETERS,
 }
 
@@ -192,7 +196,9 @@ class PowerEstimator(Node):
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
         adaptation = AdaptationSettings(
-            enabled=bool(p['adaptation']), memory_s=float(p['adaptation_memory_s'])
+            enabled=bool(p['adaptation']),
+            memory_s=float(p['adaptation_memory_s']),
+            terrain_memory_s=float(p['adaptation_terrain_memory_s']),
         )
         self.core = EstimatorCore(
             predictor,
@@ -356,6 +362,17 @@ class PowerEstimator(Node):
         if err.warn:
             counts = self.core.rejects.counts
             self.get_logger().warning(f'rejected {err} (rejected so far: {dict(counts)})')
+
+    def path_inputs(self) -> PathInputs:
+        """What the path energy needs, read together under the node's lock (nodes/path_hook.py)."""
+        with self._lock:
+            core = self.core
+            return PathInputs(
+                core.predictor,
+                core.command,
+                float(core.battery.remaining_wh),
+                core.adaptation.terrain_scale(),
+            )
 
     # --- outputs ------------------------------------------------------------------------------
     def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
