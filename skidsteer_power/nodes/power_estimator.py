@@ -15,13 +15,15 @@ publishes per cmd_vel
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
                  terrain needs [N m]); stamp = the TwistStamped's, else receive time
-    ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
-    ``power/predicted_battery_w`` (both sides at the battery [W]), ``power/terrain_w``,
-    ``power/internal_w`` [W], ``power/traction_margin`` [-]: std_msgs/Float64
 publishes per joint_states
     ``power/measured`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` as measured (velocity
                  [rad/s], effort = Kt * I [N m]) after the side mapping; stamp = the joint_states'
-    ``power/measured_left_w``, ``power/measured_right_w``, ``power/measured_battery_w`` [W]: Float64
+figures for plots, std_msgs/Float64, the latest value every ``figure_period_s`` (20 Hz) while new
+cmd_vel / joint_states come (not per message: 9 publishes per input pair cost more than the physics)
+    ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
+    ``power/predicted_battery_w`` (both sides at the battery [W]), ``power/terrain_w``,
+    ``power/internal_w`` [W], ``power/traction_margin`` [-];
+    ``power/measured_left_w``, ``power/measured_right_w``, ``power/measured_battery_w`` [W]
 periodic (``publish_period_s``)
     ``power/summary`` diagnostic_msgs/DiagnosticArray, one status named 'power summary' whose
     key/values are every named figure (:data:`skidsteer_power.estimator.summary.SUMMARY_FIELDS`);
@@ -116,6 +118,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'max_motor_speed_rad_s': (1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
     'max_motor_torque_Nm': (5.0, 'joint_states |effort| above this is rejected [N m]'),
     'publish_period_s': (0.2, 'period of battery and energy topics [s]'),
+    'figure_period_s': (0.05, 'least period of the Float64 figure topics (latest value) [s]'),
     'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
     'save_period_s': (10.0, 'period of energy-state saves [s]'),
     'qos_depth': (100, 'queue depth of the subscriptions and the per-message outputs'),
@@ -186,6 +189,7 @@ class PowerEstimator(Node):
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
         self._traction_warned = False
+        self._figures_due = [False, False]  # a new prediction / measurement since the figures' tick
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
@@ -219,7 +223,8 @@ class PowerEstimator(Node):
     # --- set-up -------------------------------------------------------------------------------
     @staticmethod
     def _settings(p: dict[str, Any]) -> EstimatorSettings:
-        for name in ('publish_period_s', 'diagnostics_period_s', 'save_period_s', 'qos_depth'):
+        periods = ('publish_period_s', 'figure_period_s', 'diagnostics_period_s', 'save_period_s')
+        for name in (*periods, 'qos_depth'):
             if not p[name] > 0:
                 raise ConfigError(f'{name} must be > 0, got {p[name]!r}')
         if p['input_reliability'] not in INPUT_RELIABILITY:
@@ -310,6 +315,7 @@ class PowerEstimator(Node):
         self.pub_diag = pub(DiagnosticArray, 'diagnostics')
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
+        self.create_timer(float(p['figure_period_s']), self._publish_figures)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
@@ -330,8 +336,7 @@ class PowerEstimator(Node):
             self._warn_rejected(err)
             return
         self._publish_predicted(prediction, msg)
-        for publisher, value in zip(self.pub_command_figures, prediction_figures(prediction), strict=True):
-            publisher.publish(Float64(data=value))
+        self._figures_due[0] = True
         self._log_traction_change()
 
     def _log_traction_change(self) -> None:
@@ -358,9 +363,7 @@ class PowerEstimator(Node):
         measured.velocity = list(comparison.measured.omega_rad_s)
         measured.effort = list(comparison.measured.torque_Nm)
         self.pub_measured.publish(measured)
-        figures = measurement_figures(comparison)
-        for publisher, value in zip(self.pub_measurement_figures, figures, strict=True):
-            publisher.publish(Float64(data=value))
+        self._figures_due[1] = True
 
     def _warn_rejected(self, err: RejectedInput) -> None:
         if err.warn:
@@ -377,6 +380,24 @@ class PowerEstimator(Node):
         msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
+
+    def _publish_figures(self) -> None:
+        """The Float64 figure topics, from a timer (``figure_period_s``): the latest prediction's
+        and measurement's, each only if a new one came since the last tick. They are for plots; per
+        message they cost 9 publishes per cmd_vel + joint_states pair."""
+        command_due, measurement_due = self._figures_due
+        if not (command_due or measurement_due):
+            return
+        self._figures_due[:] = [False, False]
+        with self._lock:
+            prediction, comparison = self.core.prediction, self.core.comparison
+        figures = []
+        if command_due:
+            figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
+        if measurement_due:
+            figures += zip(self.pub_measurement_figures, measurement_figures(comparison), strict=True)
+        for publisher, value in figures:
+            publisher.publish(Float64(data=value))
 
     def _on_publish_timer(self) -> None:
         now = self.now_s()
