@@ -320,6 +320,7 @@ class PowerEstimator(Node):
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
         self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
+        self._measured_msg = JointState(name=['left_motor', 'right_motor'])
         self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
@@ -328,14 +329,15 @@ class PowerEstimator(Node):
 
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        now = self.now_s()
+        received = self.get_clock().now()
+        now = received.nanoseconds * 1e-9
         try:
             with self._lock:
                 prediction = self.core.on_command(twist.linear.x, twist.angular.z, now)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        self._publish_predicted(prediction, msg)
+        self._publish_predicted(prediction, msg, received)
         self._figures_due[0] = True
         self._log_traction_change()
 
@@ -359,9 +361,10 @@ class PowerEstimator(Node):
             return
         if comparison is None:  # speed from positions: waits for a second sample
             return
-        measured = JointState(header=msg.header, name=['left_motor', 'right_motor'])
-        measured.velocity = list(comparison.measured.omega_rad_s)
-        measured.effort = list(comparison.measured.torque_Nm)
+        measured = self._measured_msg  # preallocated, as power/predicted
+        measured.header = msg.header
+        measured.velocity = comparison.measured.omega_rad_s
+        measured.effort = comparison.measured.torque_Nm
         self.pub_measured.publish(measured)
         self._figures_due[1] = True
 
@@ -371,12 +374,12 @@ class PowerEstimator(Node):
             self.get_logger().warning(f'rejected {err} (rejected so far: {dict(counts)})')
 
     # --- outputs ------------------------------------------------------------------------------
-    def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
+    def _publish_predicted(self, prediction: Any, source_msg: Any, received: Any) -> None:
         msg = self._predicted_msg  # preallocated: only the stamp and the numbers change
         if isinstance(source_msg, TwistStamped):
             msg.header.stamp = source_msg.header.stamp
         else:
-            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.stamp = received.to_msg()
         msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
