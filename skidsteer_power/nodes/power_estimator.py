@@ -93,7 +93,7 @@ from skidsteer_power.estimator.summary import (
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook
-from skidsteer_power.nodes.spin import spin_node
+from skidsteer_power.nodes.spin import LeanExecutor, spin_node
 
 NODE_NAME = 'power_estimator'
 
@@ -525,7 +525,7 @@ class PowerEstimator(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    spin_node(PowerEstimator, NODE_NAME, args)
+    spin_node(PowerEstimator, NODE_NAME, args, executor=LeanExecutor)
 
 
 if __name__ == '__main__':
