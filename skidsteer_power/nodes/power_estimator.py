@@ -190,6 +190,7 @@ class PowerEstimator(Node):
         self.pending_terrain = ''
         self._traction_warned = False
         self._figures_due = [False, False]  # a new prediction / measurement since the figures' tick
+        self._figure_timer_idle = False  # cancelled after a tick with nothing new (no idle wake-ups)
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
@@ -315,7 +316,7 @@ class PowerEstimator(Node):
         self.pub_diag = pub(DiagnosticArray, 'diagnostics')
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
-        self.create_timer(float(p['figure_period_s']), self._publish_figures)
+        self._figure_timer = self.create_timer(float(p['figure_period_s']), self._publish_figures)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
@@ -338,7 +339,7 @@ class PowerEstimator(Node):
             self._warn_rejected(err)
             return
         self._publish_predicted(prediction, msg, received)
-        self._figures_due[0] = True
+        self._figure_due(0)
         self._log_traction_change()
 
     def _log_traction_change(self) -> None:
@@ -366,7 +367,7 @@ class PowerEstimator(Node):
         measured.velocity = comparison.measured.omega_rad_s
         measured.effort = comparison.measured.torque_Nm
         self.pub_measured.publish(measured)
-        self._figures_due[1] = True
+        self._figure_due(1)
 
     def _warn_rejected(self, err: RejectedInput) -> None:
         if err.warn:
@@ -384,12 +385,22 @@ class PowerEstimator(Node):
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
 
+    def _figure_due(self, which: int) -> None:
+        """A new prediction (0) or measurement (1) for the figure timer; restarts it if idle."""
+        self._figures_due[which] = True
+        if self._figure_timer_idle:
+            self._figure_timer_idle = False
+            self._figure_timer.reset()
+
     def _publish_figures(self) -> None:
         """The Float64 figure topics, from a timer (``figure_period_s``): the latest prediction's
         and measurement's, each only if a new one came since the last tick. They are for plots; per
-        message they cost 9 publishes per cmd_vel + joint_states pair."""
+        message they cost 9 publishes per cmd_vel + joint_states pair. A tick with nothing new
+        cancels the timer until the next input, so an idle node does not wake up 20 times a second."""
         command_due, measurement_due = self._figures_due
         if not (command_due or measurement_due):
+            self._figure_timer.cancel()
+            self._figure_timer_idle = True
             return
         self._figures_due[:] = [False, False]
         with self._lock:
