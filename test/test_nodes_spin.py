@@ -1,6 +1,7 @@
 """nodes/spin.py over real rclpy and DDS: LeanExecutor runs every callback, timer and service once and
-does not wake itself after each callback; power_estimator's own main (which spins with it) answers
-commands and exits cleanly on SIGTERM and SIGINT."""
+does not wake itself after each callback; Batched takes a backlog in batches, every message once and in
+order; power_estimator's own main (which spins with both) answers and exits cleanly on SIGTERM and
+SIGINT."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from skidsteer_power.nodes.spin import LeanExecutor
+from skidsteer_power.nodes.spin import Batched, LeanExecutor
 
 N_MESSAGES = 50
 
@@ -85,6 +86,40 @@ def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
     received, _, _, _, triggers = _exercise(ros_context, SingleThreadedExecutor)
     assert received == [float(i) for i in range(N_MESSAGES)]
     assert triggers >= 2 * N_MESSAGES
+
+
+def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):
+    ns = f'batch_{uuid.uuid4().hex[:8]}'
+    node = rclpy.create_node('batched', namespace=ns, context=ros_context)
+    received: list[float] = []
+    dispatched = [0]  # how often the executor called the subscription's callback
+
+    def counted(msg: Float64) -> None:
+        dispatched[0] += 1
+        batched(msg)
+
+    batched = Batched(lambda m: received.append(m.data), batch=8)
+    batched.subscription = node.create_subscription(Float64, 'x', counted, 100)
+    pub = node.create_publisher(Float64, 'x', 100)
+    executor = LeanExecutor(context=ros_context)
+    executor.add_node(node)
+    try:
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        for i in range(N_MESSAGES):  # a backlog: nothing is taken while they are published
+            pub.publish(Float64(data=float(i)))
+        time.sleep(0.2)  # all of them in the subscription's queue (same process, loopback)
+        _spin_until(executor, lambda: len(received) >= N_MESSAGES)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.005)
+        assert received == [float(i) for i in range(N_MESSAGES)]
+        assert dispatched[0] <= N_MESSAGES // 4  # batches of up to 8: about 7 dispatches, not 50
+        # no backlog: one message, one dispatch, nothing else taken
+        pub.publish(Float64(data=-1.0))
+        _spin_until(executor, lambda: len(received) == N_MESSAGES + 1)
+        assert received[-1] == -1.0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
 
 
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])

@@ -60,7 +60,9 @@ swapped in when ready; the old map serves until then.
 
 CPU (issue 18): ``main`` spins with :class:`skidsteer_power.nodes.spin.LeanExecutor`; publishers
 carry no QoS-event handlers (:meth:`PowerEstimator.create_publisher`); the figure topics come from
-a timer. ``benchmarks/bench_estimator.py`` measures latency, loss and CPU per message.
+a timer; a backlog of cmd_vel or joint_states is taken in batches
+(:class:`~skidsteer_power.nodes.spin.Batched`). ``benchmarks/bench_estimator.py`` measures latency,
+loss and CPU per message.
 """
 
 from __future__ import annotations
@@ -97,7 +99,7 @@ from skidsteer_power.estimator.summary import (
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook
-from skidsteer_power.nodes.spin import LeanExecutor, spin_node
+from skidsteer_power.nodes.spin import Batched, LeanExecutor, spin_node
 
 NODE_NAME = 'power_estimator'
 
@@ -299,7 +301,10 @@ class PowerEstimator(Node):
         qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
 
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
-            self.create_subscription(msg_type, topic, callback, qos_in, qos_overriding_options=overrides)
+            batched = Batched(callback)  # a backlog is handled in batches (nodes/spin.py)
+            batched.subscription = self.create_subscription(
+                msg_type, topic, batched, qos_in, qos_overriding_options=overrides
+            )
 
         def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
             return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)

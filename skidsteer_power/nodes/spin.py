@@ -50,6 +50,34 @@ class LeanExecutor(SingleThreadedExecutor):
         return task
 
 
+class Batched:
+    """A subscription callback that, after its message, also takes up to ``batch - 1`` messages
+    already queued on the same subscription and handles them at once, in order.
+
+    Each message the executor dispatches costs a wait-set build in Python (about as much as the
+    estimator's own work per message); when inputs come faster than they are handled, a backlog
+    builds up and every message pays it again. Taking the queued ones here keeps every message and its
+    order but pays once per batch (issue 18: CPU per message at 1 kHz under load 0.72x). Without a
+    backlog nothing changes (the first take finds the queue empty). ``batch`` bounds how long the other
+    inputs wait. Set ``subscription`` to the subscription created with this callback.
+    """
+
+    def __init__(self, callback: Callable[[Any], None], batch: int = 8) -> None:
+        self.callback = callback
+        self.batch = batch
+        self.subscription: Any = None
+
+    def __call__(self, msg: Any) -> None:
+        self.callback(msg)
+        sub = self.subscription
+        for _ in range(self.batch - 1):
+            with sub.handle:  # what rclpy's executor does to take one (pinned rclpy 7.1.6)
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                return
+            self.callback(taken[0])
+
+
 def spin_node(
     make_node: Callable[[], Node],
     name: str,
