@@ -1,29 +1,33 @@
 """power_estimator under load: a fresh command on every message, plus joint_states at the same rate.
 
 The node runs in its own process (as on the robot: ``python -m skidsteer_power.nodes.power_estimator``
-with the real FESS map of the test robot on dry sand); this process publishes the inputs from its
-main thread and receives the outputs on the same node, spun in a second thread. Each input carries
-its identity, so every output is matched to its input:
-
-* cmd_vel is TwistStamped (``cmd_vel_stamped``) whose stamp is the send time; power/predicted copies
-  the stamp, so latency = receive time - stamp;
-* joint_states carry a sequence number in the left motor speed (k x 0.1 rad/s); power/measured
-  echoes it as its ``left_motor`` velocity.
+with the real FESS map of the test robot on dry sand, spun by its own ``main``); this process
+publishes the inputs from its main thread and receives the outputs on the same node, spun in a second
+thread. Every input's header stamp is its send time and both outputs copy it (power/predicted the
+TwistStamped's, power/measured the joint_states'), so each output is matched to its input and its
+latency is receive time - stamp. The receiver takes the outputs raw and reads only the stamp out of
+the CDR bytes, with the lean executor, so its own Python cost stays small next to the node's.
 
 Commands are a random-walk joystick (V in 0...0.4 m/s, yaw rate in -0.6...0.6 rad/s, a new value on
 every message), so the predictor's cache never answers: the realistic worst case. The cache-hit
-case (two alternating commands, what the first version of this benchmark measured) is reported
-separately and labelled so.
+case (two alternating commands) is reported separately and labelled so.
 
-"Lost" counts inputs with no matching output (loss anywhere on the way counts). Latency includes
-DDS both ways and the receiver's Python path, so it is an upper bound for the node alone. CPU: the
-node process's user + system time per second of wall time over each run, and per input message.
-On this shared 2-core machine the figures depend on what else runs; the load average is noted.
+"Lost" counts inputs with no output within 3 s after the last send (loss anywhere on the way counts).
+Latency includes DDS both ways and the receiver's Python path, so it is an upper bound for the node
+alone. CPU: the node process's user + system time from the first send until its last output arrived,
+over that wall time (so idle time after the work is not averaged in), and per input message; the
+node's idle CPU (timers only) is reported before the runs. On this shared 2-core machine the figures
+depend on what else runs: the 1-minute load average is noted with each run.
+
+Same-run before/after: with ``ESTIMATOR_BASELINE_SRC=/path/to/other/checkout`` the same runs are made
+against that checkout's node first (``python -m`` from that directory), and the ratios current /
+baseline of CPU per message and p99 latency are reported.
 """
 
 from __future__ import annotations
 
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -37,13 +41,18 @@ from benchmarks.harness import Report
 
 RATES_HZ = (50.0, 100.0, 200.0, 1000.0)
 SECONDS = 5.0
+DRAIN_S = 3.0  # after the last send, how long outputs may still arrive [s]
 GOALS = {  # rate [Hz] -> (p99 latency [ms], CPU [cores], lost messages allowed or None)
     100.0: (2.0, 0.05, None),
     1000.0: (5.0, 0.5, 0),
 }
+OUTPUTS = ('power/predicted', 'power/measured')
+INPUT_OF = {'power/predicted': 'cmd_vel', 'power/measured': 'joint_states'}
 
 
-def _start_node(namespace: str, cache_dir: str, env: dict[str, str]) -> subprocess.Popen:
+def _start_node(
+    namespace: str, cache_dir: str, env: dict[str, str], cwd: str | None = None
+) -> subprocess.Popen:
     params = {
         'map_cache_dir': cache_dir,
         'persist': 'false',
@@ -60,13 +69,29 @@ def _start_node(namespace: str, cache_dir: str, env: dict[str, str]) -> subproce
     ]
     for key, value in params.items():
         argv += ['-p', f'{key}:={value}']
-    return subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
 
 
 def _cpu_seconds(pid: int) -> float:
     with open(f'/proc/{pid}/stat', encoding='ascii') as handle:
         fields = handle.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def cdr_stamp_s(data: bytes) -> float:
+    """The header stamp [s] of a serialized message that starts with std_msgs/Header (JointState,
+    TwistStamped): after the 4-byte CDR encapsulation header, int32 sec and uint32 nanosec."""
+    little = data[1] & 1  # encapsulation kind: CDR_BE 0, CDR_LE 1
+    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, 4)
+    return sec + 1e-9 * nanosec
+
+
+def _stamp_now(header) -> float:
+    now = time.time()
+    header.stamp.sec, header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+    return header.stamp.sec + 1e-9 * header.stamp.nanosec
 
 
 class Load:
@@ -76,9 +101,10 @@ class Load:
         import rclpy
         from geometry_msgs.msg import TwistStamped
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from sensor_msgs.msg import JointState
+
+        from skidsteer_power.nodes.spin import LeanExecutor
 
         self.context = Context()
         rclpy.init(context=self.context)
@@ -86,24 +112,27 @@ class Load:
         qos = QoSProfile(depth=1000)
         self.pub_cmd = self.node.create_publisher(TwistStamped, 'cmd_vel', qos)
         self.pub_joint = self.node.create_publisher(JointState, 'joint_states', qos)
-        self.predicted_latency: list[float] = []
-        self.joint_received: dict[int, float] = {}
-        self.joint_sent: dict[int, float] = {}
-        self.executor = SingleThreadedExecutor(context=self.context)
+        # output topic -> [(input stamp [s], receive time [s])]
+        self.received: dict[str, list[tuple[float, float]]] = {topic: [] for topic in OUTPUTS}
+        self.sent: dict[str, set[float]] = {'cmd_vel': set(), 'joint_states': set()}  # input stamps [s]
+        self.executor = LeanExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.subs = []
         if receive:
-            self.subs = [
-                self.node.create_subscription(JointState, 'power/predicted', self._on_predicted, qos),
-                self.node.create_subscription(JointState, 'power/measured', self._on_measured, qos),
-            ]
+            for topic in OUTPUTS:
+                self.subs.append(
+                    self.node.create_subscription(
+                        JointState, topic, self._receiver(self.received[topic]), qos, raw=True
+                    )
+                )
         self._msg_types = (TwistStamped, JointState)
 
-    def _on_predicted(self, msg) -> None:
-        sent = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        self.predicted_latency.append(time.time() - sent)
+    @staticmethod
+    def _receiver(into: list[tuple[float, float]]):
+        def on_output(data: bytes) -> None:
+            into.append((cdr_stamp_s(data), time.time()))
 
-    def _on_measured(self, msg) -> None:
-        self.joint_received.setdefault(round(msg.velocity[0] / 0.1), time.time())
+        return on_output
 
     def wait_connected(self, subscribers: int, timeout_s: float = 30.0) -> bool:
         """Wait until the node (and the receiver) subscribe to the inputs."""
@@ -117,48 +146,51 @@ class Load:
             time.sleep(0.05)
         return False
 
-    def receive_for(self, seconds: float) -> dict:
-        """Spin for ``seconds``; what arrived, as JSON-able data."""
-        from rclpy.task import Future
+    def receive_until(self, done: threading.Event, expected: int, drain_s: float) -> None:
+        """Spin until ``done`` is set (the sender finished) and then every output topic has
+        ``expected`` messages, or ``drain_s`` [s] passed since ``done``."""
+        deadline = None
+        while True:
+            self.executor.spin_once(timeout_sec=0.05)
+            if done.is_set():
+                deadline = deadline or time.monotonic() + drain_s
+                complete = min(len(v) for v in self.received.values()) >= expected
+                if complete or time.monotonic() > deadline:
+                    return
 
-        self.executor.spin_until_future_complete(Future(), timeout_sec=seconds)
-        return {'predicted_latency': self.predicted_latency, 'joint_received': self.joint_received}
-
-    def drive(
-        self, rate_hz: float, seconds: float, start_k: int, *, fresh: bool = True, seed: int = 0
-    ) -> tuple[int, int]:
-        """Publish both inputs at ``rate_hz`` for ``seconds``; returns (number sent of each, next k).
+    def drive(self, rate_hz: float, seconds: float, *, fresh: bool = True, seed: int = 0) -> int:
+        """Publish both inputs at ``rate_hz`` for ``seconds``; returns the number sent of each.
 
         ``fresh``: a random-walk joystick, a new command on every message; otherwise two alternating
-        commands (every prediction after the first two is a cache hit)."""
+        commands (every prediction after the first two is a cache hit). Each input's stamp is its
+        send time (unique: the outputs are matched by it)."""
         twist_type, joint_type = self._msg_types
         period = 1.0 / rate_hz
         n = round(rate_hz * seconds)
         rng = np.random.default_rng(seed)
         steps = rng.normal(0.0, 1.0, (n, 2)) * (0.004, 0.006)
         speed, yaw = 0.2, 0.0
+        cmd = twist_type()
+        joint = joint_type(name=['left_motor', 'right_motor'], velocity=[300.0, 300.0], effort=[0.2, 0.2])
+        for stamps in self.sent.values():
+            stamps.clear()
         t0 = time.monotonic()
         for i in range(n):
             target = t0 + i * period
             delay = target - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            cmd = twist_type()
             if fresh:  # reflect at the joystick's limits
                 speed = 0.4 - abs(0.4 - abs(speed + steps[i, 0]))
                 yaw = 0.6 - abs(0.6 - abs(yaw + steps[i, 1] + 0.6)) - 0.6
                 cmd.twist.linear.x, cmd.twist.angular.z = float(speed), float(yaw)
             else:
                 cmd.twist.linear.x, cmd.twist.angular.z = 0.2, 0.1 if i % 2 else 0.05
-            now = time.time()
-            cmd.header.stamp.sec, cmd.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+            self.sent['cmd_vel'].add(_stamp_now(cmd.header))
             self.pub_cmd.publish(cmd)
-            k = start_k + i
-            joint = joint_type(name=['left_motor', 'right_motor'], velocity=[k % 10000 * 0.1, 300.0])
-            joint.effort = [0.2, 0.2]
-            self.joint_sent[k] = time.time()
+            self.sent['joint_states'].add(_stamp_now(joint.header))
             self.pub_joint.publish(joint)
-        return n, start_k + n
+        return n
 
     def close(self) -> None:
         import rclpy
@@ -181,24 +213,45 @@ def run(report: Report) -> None:
     from skidsteer_power.estimator.factory import map_predictor
     from skidsteer_power.vehicle import load_vehicle
 
-    namespace = f'bench_{uuid.uuid4().hex[:8]}'
     env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    baseline = os.environ.get('ESTIMATOR_BASELINE_SRC')
+    variants = ([('baseline', baseline)] if baseline else []) + [('', None)]
+    results: dict[str, dict[str, dict[str, float]]] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
         map_predictor(load_vehicle('test_robot_track'), 'dry_sand', cache_dir)  # build once, outside timing
-        node = _start_node(namespace, cache_dir, env)
-        load = Load(namespace, receive=True)
-        try:
-            if not load.wait_connected(subscribers=1):
-                raise RuntimeError('power_estimator did not come up')
-            time.sleep(1.0)
-            _wait_outputs(load)
-            k = 1
-            for rate in RATES_HZ:
-                k = _sustained(report, load, node, rate, k, fresh=True)
-            _sustained(report, load, node, 1000.0, k, fresh=False)
-        finally:
-            load.close()
-            _stop(node)
+        for name, src in variants:
+            namespace = f'bench_{uuid.uuid4().hex[:8]}'
+            node = _start_node(namespace, cache_dir, env, cwd=src)
+            load = Load(namespace, receive=True)
+            try:
+                if not load.wait_connected(subscribers=1):
+                    error = node.stderr.read() if node.poll() is not None and node.stderr else ''
+                    raise RuntimeError(f'power_estimator did not come up: {error}')
+                _wait_outputs(load)
+                time.sleep(1.0)
+                prefix = f'BASELINE {baseline}: ' if name else ''
+                cpu0, wall0 = _cpu_seconds(node.pid), time.monotonic()
+                time.sleep(3.0)
+                idle = (_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - wall0)
+                report.figure(f'{prefix}node CPU idle (timers only)', idle, 'cores')
+                results[name] = {}
+                for rate in RATES_HZ:
+                    results[name][f'{rate:g}'] = _sustained(
+                        report, load, node, rate, fresh=True, prefix=prefix
+                    )
+                results[name]['cache'] = _sustained(report, load, node, 1000.0, fresh=False, prefix=prefix)
+            finally:
+                load.close()
+                _stop(node)
+    if baseline:
+        for key, now in results[''].items():
+            before = results['baseline'][key]
+            label = '1000 Hz, CACHE HIT' if key == 'cache' else f'{key} Hz'
+            for figure in ('CPU per message', 'p99 cmd_vel', 'p99 joint_states'):
+                if before.get(figure) and now.get(figure):
+                    report.ratio(
+                        f'{label}: {figure}, this / baseline (same run)', now[figure], before[figure]
+                    )
 
 
 def _wait_outputs(load: Load) -> None:
@@ -207,59 +260,69 @@ def _wait_outputs(load: Load) -> None:
         time.sleep(0.05)  # discovery of the node's outputs
 
 
-def _sustained(report: Report, load: Load, node: subprocess.Popen, rate: float, k: int, fresh: bool) -> int:
-    """One run at ``rate`` [Hz] of both inputs; figures: loss, p50/p99 latency, CPU. Returns the next k."""
+def _sustained(
+    report: Report, load: Load, node: subprocess.Popen, rate: float, fresh: bool, prefix: str = ''
+) -> dict[str, float]:
+    """One run at ``rate`` [Hz] of both inputs; figures: loss, p50/p99 latency, CPU. Returns them."""
     busy = os.getloadavg()[0]
-    load.predicted_latency.clear()
-    load.joint_received.clear()
-    load.joint_sent.clear()
-    received: dict = {}
-    thread = threading.Thread(target=lambda: received.update(load.receive_for(SECONDS + 3.0)), daemon=True)
+    for values in load.received.values():
+        values.clear()
+    done = threading.Event()
+    n_expected = round(rate * SECONDS)
+    thread = threading.Thread(target=load.receive_until, args=(done, n_expected, DRAIN_S), daemon=True)
     thread.start()
     time.sleep(0.5)
-    cpu0, wall0 = _cpu_seconds(node.pid), time.monotonic()
-    n, k_next = load.drive(rate, SECONDS, start_k=k, fresh=fresh, seed=int(rate))
+    cpu0, wall0, start = _cpu_seconds(node.pid), time.monotonic(), time.time()
+    n = load.drive(rate, SECONDS, fresh=fresh, seed=int(rate))
+    sending_s = time.monotonic() - wall0
+    done.set()
     thread.join()
-    cpu1, wall1 = _cpu_seconds(node.pid), time.monotonic()
-    cores = (cpu1 - cpu0) / (wall1 - wall0)  # includes the 2.5 s drain after sending
+    cpu1 = _cpu_seconds(node.pid)
+    last = max((t for values in load.received.values() for _, t in values), default=time.time())
+    busy_wall = max(last - start, sending_s)  # the node's work: first send to last output [s]
+    cores = (cpu1 - cpu0) / busy_wall
     per_msg_us = (cpu1 - cpu0) / (2 * n) * 1e6
-    predicted = received['predicted_latency']
-    joint = [t - load.joint_sent[kk] for kk, t in received['joint_received'].items() if kk in load.joint_sent]
-    lost_cmd, lost_joint = n - len(predicted), n - len(joint)
-    label = f'{rate:g} Hz' + ('' if fresh else ', CACHE HIT (2 alternating commands)')
-    p99_goal, cpu_goal, lost_goal = GOALS.get(rate, (None, None, None)) if fresh else (None, None, None)
-    lost = lost_cmd + lost_joint
+    label = prefix + f'{rate:g} Hz' + ('' if fresh else ', CACHE HIT (2 alternating commands)')
+    p99_goal, cpu_goal, lost_goal = (
+        GOALS.get(rate, (None, None, None)) if fresh and not prefix else (None,) * 3
+    )
+    latencies = {
+        topic: [t - stamp for stamp, t in values if stamp in load.sent[INPUT_OF[topic]]]
+        for topic, values in load.received.items()
+    }
+    lost = {topic: n - len(values) for topic, values in latencies.items()}
+    total_lost = sum(lost.values())
     report.figure(
         f'{label}: inputs lost (cmd_vel + joint_states)',
-        lost,
+        total_lost,
         'msgs',
         goal='' if lost_goal is None else f'{lost_goal}',
-        met=None if lost_goal is None else lost <= lost_goal,
-        note=f'{lost_cmd} cmd_vel + {lost_joint} joint_states of {n} each',
+        met=None if lost_goal is None else total_lost <= lost_goal,
+        note=f'{lost["power/predicted"]} cmd_vel + {lost["power/measured"]} joint_states of {n} each',
     )
-    worst = 0.0
-    for name, values in (
-        ('cmd_vel -> power/predicted', predicted),
-        ('joint_states -> power/measured', joint),
-    ):
-        if values:
-            p50, p99 = (float(np.percentile(values, q)) * 1e3 for q in (50, 99))
-            worst = max(worst, p99)
-            report.figure(f'{label}: {name} p50 latency', p50, 'ms')
-            report.figure(
-                f'{label}: {name} p99 latency',
-                p99,
-                'ms',
-                goal='' if p99_goal is None else f'< {p99_goal:g} ms',
-                met=None if p99_goal is None else p99 < p99_goal,
-                note=f'1-min load average before the run {busy:.2f} on {os.cpu_count()} cores',
-            )
+    figures = {'CPU per message': per_msg_us, 'cores': cores}
+    for topic, delays in latencies.items():
+        name = f'{INPUT_OF[topic]} -> {topic}'
+        if not delays:
+            continue
+        p50, p99 = (float(np.percentile(delays, q)) * 1e3 for q in (50, 99))
+        figures[f'p99 {INPUT_OF[topic]}'] = p99
+        report.figure(f'{label}: {name} p50 latency', p50, 'ms')
+        report.figure(
+            f'{label}: {name} p99 latency',
+            p99,
+            'ms',
+            goal='' if p99_goal is None else f'< {p99_goal:g} ms',
+            met=None if p99_goal is None else p99 < p99_goal,
+            note=f'1-min load average before the run {busy:.2f} on {os.cpu_count()} cores',
+        )
     report.figure(
         f'{label}: node CPU',
         cores,
         'cores',
         goal='' if cpu_goal is None else f'< {cpu_goal:g} core',
         met=None if cpu_goal is None else cores < cpu_goal,
+        note=f'over {busy_wall:.2f} s from the first send to the last output',
     )
     report.figure(f'{label}: node CPU per input message', per_msg_us, 'us')
-    return k_next
+    return figures

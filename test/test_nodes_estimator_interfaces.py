@@ -1,5 +1,6 @@
 """power_estimator's ROS interface over real rclpy and DDS: ~/reset_energy, QoS (best-effort and
-reliable joint_states publishers, qos_overrides), the named figures and BatteryState conventions."""
+reliable joint_states publishers, qos_overrides), the named figures (and their timer) and BatteryState
+conventions."""
 
 from __future__ import annotations
 
@@ -139,6 +140,31 @@ def test_named_figures_per_message_and_summary_by_key(rigs):
     assert tuple(summary) == SUMMARY_FIELDS
     assert summary['speed_cmd_m_s'] == 0.2
     assert summary['measured_left_W'] == figures['power/measured_left_w'][-1]  # repr: exact
+
+
+def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs):
+    # sim time: the figure timer (figure_period_s = 1 s) fires only when the test moves the clock
+    rig = rigs(FixedPowerPredictor(80.0), persist=False, use_sim_time=True, figure_period_s=1.0)
+    figures: list[float] = []
+    rig.probe.create_subscription(Float64, 'power/predicted_battery_w', lambda m: figures.append(m.data), 100)
+    rig.set_clock(0.0)
+    for i in range(20):
+        rig.command(0.01 * (i + 1), 0.0)
+    rig.spin_until(lambda: len(rig.received['power/predicted']) == 20)  # per message, as before
+    assert figures == []  # no tick yet: nothing, however many commands
+    rig.set_clock(1.0)
+    rig.spin_until(lambda: figures)
+    for _ in range(20):
+        rig.executor.spin_once(timeout_sec=0.005)
+    assert figures == [80.0]  # one tick: the latest value once (FixedPowerPredictor: 80 W)
+    rig.set_clock(2.0)
+    for _ in range(20):
+        rig.executor.spin_once(timeout_sec=0.005)
+    assert figures == [80.0]  # no new command since: nothing new
+    rig.command(0.3, 0.0)
+    rig.spin_until(lambda: len(rig.received['power/predicted']) == 21)
+    rig.set_clock(3.0)
+    rig.spin_until(lambda: len(figures) == 2)
 
 
 def test_battery_state_follows_the_message_conventions(rigs):

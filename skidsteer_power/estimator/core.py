@@ -166,6 +166,7 @@ class EstimatorCore:
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
+        self._power_limit: tuple[Any, float] = (None, math.inf)  # (battery, its limit [W])
 
     @property
     def battery(self) -> Any:
@@ -206,9 +207,16 @@ class EstimatorCore:
         return self.prediction
 
     def power_limit_W(self) -> float:
-        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say)."""
-        limit = getattr(self.battery, 'max_power_W', None)
-        return float(limit()) if callable(limit) else math.inf
+        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say).
+
+        A property of the battery's configuration (its lowest OCV and R), so computed once per battery
+        object (a swap or a restore brings a new one), not on every message.
+        """
+        battery = self.battery
+        if self._power_limit[0] is not battery:
+            limit = getattr(battery, 'max_power_W', None)
+            self._power_limit = (battery, float(limit()) if callable(limit) else math.inf)
+        return self._power_limit[1]
 
     def _flag_implausible(self, what: str, now_s: float) -> None:
         self.implausible[what] += 1
@@ -224,9 +232,10 @@ class EstimatorCore:
         correction makes through the motor and amplifier (exactly the prediction's when uncorrected)."""
         p = self.prediction
         assert p is not None
-        corrected = np.asarray(self.corrected_torque_Nm())
-        if np.array_equal(corrected, p.motor_torque_Nm):
+        corrected_Nm = self.corrected_torque_Nm()
+        if corrected_Nm == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
             return p.bus_total_W
+        corrected = np.asarray(corrected_Nm)
         pt = self.powertrain
         omega = np.asarray(p.motor_omega_rad_s)
 

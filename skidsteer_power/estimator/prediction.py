@@ -91,8 +91,16 @@ class Predictor(Protocol):
     def predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction: ...
 
 
+def _scalar(value: Any) -> float:
+    """A Python float from a number, a 0-d array or the first element of a 1-d one (per message:
+    the plain ``float`` path first, as most values here are floats or 0-d arrays)."""
+    if isinstance(value, np.ndarray) and value.ndim:
+        return float(value.reshape(-1)[0])
+    return float(value)
+
+
 def _pair(left: Any, right: Any) -> Pair:
-    return float(np.asarray(left).reshape(-1)[0]), float(np.asarray(right).reshape(-1)[0])
+    return _scalar(left), _scalar(right)
 
 
 class MapPredictor:
@@ -138,7 +146,7 @@ class MapPredictor:
             current_A=_pair(left.current_A, right.current_A),
             electrical_W=_pair(left.terminal_power_W, right.terminal_power_W),
             bus_W=_pair(left.electrical_power_W, right.electrical_power_W),
-            traction_margin=float(np.asarray(q.traction_margin).reshape(-1)[0]),
-            clamped=bool(np.asarray(q.clamped).reshape(-1)[0]),
-            limited=bool(np.asarray(q.limited).reshape(-1)[0]),
+            traction_margin=_scalar(q.traction_margin),
+            clamped=bool(_scalar(q.clamped)),
+            limited=bool(_scalar(q.limited)),
         )

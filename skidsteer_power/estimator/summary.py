@@ -1,8 +1,9 @@
 """The estimator's named figures: SI units in the names, NaN where unknown.
 
 Published two ways (docs/INTERFACES.md says why): the key figures as one ``std_msgs/Float64`` topic
-each, per input message (:data:`COMMAND_FIGURES` per cmd_vel, :data:`MEASUREMENT_FIGURES` per
-joint_states), so every plotting tool finds them by topic name; and all of :data:`SUMMARY_FIELDS`
+each, the latest value at the node's ``figure_period_s`` (:data:`COMMAND_FIGURES` after a new cmd_vel,
+:data:`MEASUREMENT_FIGURES` after new joint_states), so every plotting tool finds them by topic name;
+and all of :data:`SUMMARY_FIELDS`
 as the key/value pairs of ``power/summary`` (diagnostic_msgs/DiagnosticArray, one status), read
 back with :func:`summary_from_key_values`.
 
@@ -71,14 +72,14 @@ COMMAND_FIGURES: tuple[tuple[str, str], ...] = (
     ('power/internal_w', 'internal_W'),
     ('power/traction_margin', 'traction_margin'),
 )
-"""(topic, summary field) published as std_msgs/Float64 on every accepted cmd_vel."""
+"""(topic, summary field) published as std_msgs/Float64 after accepted cmd_vel (``figure_period_s``)."""
 
 MEASUREMENT_FIGURES: tuple[tuple[str, str], ...] = (
     ('power/measured_left_w', 'measured_left_W'),
     ('power/measured_right_w', 'measured_right_W'),
     ('power/measured_battery_w', 'measured_battery_W'),
 )
-"""(topic, summary field) published as std_msgs/Float64 on every accepted joint_states."""
+"""(topic, summary field) published as std_msgs/Float64 after accepted joint_states (``figure_period_s``)."""
 
 
 def _prediction_values(p: Any) -> dict[str, float]:

@@ -15,13 +15,15 @@ publishes per cmd_vel
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
                  terrain needs [N m]); stamp = the TwistStamped's, else receive time
-    ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
-    ``power/predicted_battery_w`` (both sides at the battery [W]), ``power/terrain_w``,
-    ``power/internal_w`` [W], ``power/traction_margin`` [-]: std_msgs/Float64
 publishes per joint_states
     ``power/measured`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` as measured (velocity
                  [rad/s], effort = Kt * I [N m]) after the side mapping; stamp = the joint_states'
-    ``power/measured_left_w``, ``power/measured_right_w``, ``power/measured_battery_w`` [W]: Float64
+figures for plots, std_msgs/Float64, the latest value every ``figure_period_s`` (20 Hz) while new
+cmd_vel / joint_states come (not per message: 9 publishes per input pair cost more than the physics)
+    ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
+    ``power/predicted_battery_w`` (both sides at the battery [W]), ``power/terrain_w``,
+    ``power/internal_w`` [W], ``power/traction_margin`` [-];
+    ``power/measured_left_w``, ``power/measured_right_w``, ``power/measured_battery_w`` [W]
 periodic (``publish_period_s``)
     ``power/summary`` diagnostic_msgs/DiagnosticArray, one status named 'power summary' whose
     key/values are every named figure (:data:`skidsteer_power.estimator.summary.SUMMARY_FIELDS`);
@@ -55,6 +57,12 @@ The energy state is saved atomically to ``state_file`` every ``save_period_s`` a
 restored on start; an unusable file is moved aside to ``<file>.corrupt-<UTC time>`` with one
 warning. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker thread and
 swapped in when ready; the old map serves until then.
+
+CPU (issue 18): ``main`` spins with :class:`skidsteer_power.nodes.spin.LeanExecutor`; publishers
+carry no QoS-event handlers (:meth:`PowerEstimator.create_publisher`); the figure topics come from
+a timer; a backlog of cmd_vel or joint_states is taken in batches
+(:class:`~skidsteer_power.nodes.spin.Batched`). ``benchmarks/bench_estimator.py`` measures latency,
+loss and CPU per message.
 """
 
 from __future__ import annotations
@@ -67,6 +75,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -90,7 +99,7 @@ from skidsteer_power.estimator.summary import (
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
-from skidsteer_power.nodes.spin import spin_node
+from skidsteer_power.nodes.spin import Batched, LeanExecutor, spin_node
 
 NODE_NAME = 'power_estimator'
 
@@ -115,6 +124,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     'max_motor_speed_rad_s': (1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
     'max_motor_torque_Nm': (5.0, 'joint_states |effort| above this is rejected [N m]'),
     'publish_period_s': (0.2, 'period of battery and energy topics [s]'),
+    'figure_period_s': (0.05, 'least period of the Float64 figure topics (latest value) [s]'),
     'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
     'save_period_s': (10.0, 'period of energy-state saves [s]'),
     'qos_depth': (100, 'queue depth of the subscriptions and the per-message outputs'),
@@ -189,6 +199,8 @@ class PowerEstimator(Node):
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
         self._traction_warned = False
+        self._figures_due = [False, False]  # a new prediction / measurement since the figures' tick
+        self._figure_timer_idle = False  # cancelled after a tick with nothing new (no idle wake-ups)
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
@@ -212,10 +224,20 @@ class PowerEstimator(Node):
         self._make_interfaces(p)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
+    def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
+        """Every publisher of this node (the path hook's and rclpy's parameter events too) without
+        rclpy's default QoS-event handlers: each is a waitable the executor walks in Python on every
+        spin (two per publisher: 46 of the node's 52 waitables; without them the node's CPU per input
+        message fell by about a quarter, issue 18). A subscriber with an incompatible QoS still reports
+        it on its side; the node's subscriptions keep theirs."""
+        quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
+        return super().create_publisher(*args, event_callbacks=quiet, **kwargs)
+
     # --- set-up -------------------------------------------------------------------------------
     @staticmethod
     def _settings(p: dict[str, Any]) -> EstimatorSettings:
-        for name in ('publish_period_s', 'diagnostics_period_s', 'save_period_s', 'qos_depth'):
+        periods = ('publish_period_s', 'figure_period_s', 'diagnostics_period_s', 'save_period_s')
+        for name in (*periods, 'qos_depth'):
             if not p[name] > 0:
                 raise ConfigError(f'{name} must be > 0, got {p[name]!r}')
         if p['input_reliability'] not in INPUT_RELIABILITY:
@@ -285,7 +307,10 @@ class PowerEstimator(Node):
         qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
 
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
-            self.create_subscription(msg_type, topic, callback, qos_in, qos_overriding_options=overrides)
+            batched = Batched(callback)  # a backlog is handled in batches (nodes/spin.py)
+            batched.subscription = self.create_subscription(
+                msg_type, topic, batched, qos_in, qos_overriding_options=overrides
+            )
 
         def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
             return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)
@@ -306,10 +331,12 @@ class PowerEstimator(Node):
         self.pub_diag = pub(DiagnosticArray, 'diagnostics')
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
+        self._figure_timer = self.create_timer(float(p['figure_period_s']), self._publish_figures)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
         self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
+        self._measured_msg = JointState(name=['left_motor', 'right_motor'])
         self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
@@ -318,16 +345,16 @@ class PowerEstimator(Node):
 
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
-        now = self.now_s()
+        received = self.get_clock().now()
+        now = received.nanoseconds * 1e-9
         try:
             with self._lock:
                 prediction = self.core.on_command(twist.linear.x, twist.angular.z, now)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        self._publish_predicted(prediction, msg)
-        for publisher, value in zip(self.pub_command_figures, prediction_figures(prediction), strict=True):
-            publisher.publish(Float64(data=value))
+        self._publish_predicted(prediction, msg, received)
+        self._figure_due(0)
         self._log_traction_change()
 
     def _log_traction_change(self) -> None:
@@ -350,13 +377,12 @@ class PowerEstimator(Node):
             return
         if comparison is None:  # speed from positions: waits for a second sample
             return
-        measured = JointState(header=msg.header, name=['left_motor', 'right_motor'])
-        measured.velocity = list(comparison.measured.omega_rad_s)
-        measured.effort = list(comparison.measured.torque_Nm)
+        measured = self._measured_msg  # preallocated, as power/predicted
+        measured.header = msg.header
+        measured.velocity = comparison.measured.omega_rad_s
+        measured.effort = comparison.measured.torque_Nm
         self.pub_measured.publish(measured)
-        figures = measurement_figures(comparison)
-        for publisher, value in zip(self.pub_measurement_figures, figures, strict=True):
-            publisher.publish(Float64(data=value))
+        self._figure_due(1)
 
     def _warn_rejected(self, err: RejectedInput) -> None:
         if err.warn:
@@ -375,15 +401,43 @@ class PowerEstimator(Node):
             )
 
     # --- outputs ------------------------------------------------------------------------------
-    def _publish_predicted(self, prediction: Any, source_msg: Any) -> None:
+    def _publish_predicted(self, prediction: Any, source_msg: Any, received: Any) -> None:
         msg = self._predicted_msg  # preallocated: only the stamp and the numbers change
         if isinstance(source_msg, TwistStamped):
             msg.header.stamp = source_msg.header.stamp
         else:
-            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.stamp = received.to_msg()
         msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
         msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
         self.pub_predicted.publish(msg)
+
+    def _figure_due(self, which: int) -> None:
+        """A new prediction (0) or measurement (1) for the figure timer; restarts it if idle."""
+        self._figures_due[which] = True
+        if self._figure_timer_idle:
+            self._figure_timer_idle = False
+            self._figure_timer.reset()
+
+    def _publish_figures(self) -> None:
+        """The Float64 figure topics, from a timer (``figure_period_s``): the latest prediction's
+        and measurement's, each only if a new one came since the last tick. They are for plots; per
+        message they cost 9 publishes per cmd_vel + joint_states pair. A tick with nothing new
+        cancels the timer until the next input, so an idle node does not wake up 20 times a second."""
+        command_due, measurement_due = self._figures_due
+        if not (command_due or measurement_due):
+            self._figure_timer.cancel()
+            self._figure_timer_idle = True
+            return
+        self._figures_due[:] = [False, False]
+        with self._lock:
+            prediction, comparison = self.core.prediction, self.core.comparison
+        figures = []
+        if command_due:
+            figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
+        if measurement_due:
+            figures += zip(self.pub_measurement_figures, measurement_figures(comparison), strict=True)
+        for publisher, value in figures:
+            publisher.publish(Float64(data=value))
 
     def _on_publish_timer(self) -> None:
         now = self.now_s()
@@ -508,7 +562,7 @@ class PowerEstimator(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    spin_node(PowerEstimator, NODE_NAME, args)
+    spin_node(PowerEstimator, NODE_NAME, args, executor=LeanExecutor)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,169 @@
+"""nodes/spin.py over real rclpy and DDS: LeanExecutor runs every callback, timer and service once and
+does not wake itself after each callback; Batched takes a backlog in batches, every message once and in
+order; power_estimator's own main (which spins with both) answers and exits cleanly on SIGTERM and
+SIGINT."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from skidsteer_power.nodes.spin import Batched, LeanExecutor
+
+N_MESSAGES = 50
+
+
+def _spin_until(executor, condition, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, 'condition not met within the time limit'
+        executor.spin_once(timeout_sec=0.01)
+
+
+def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]:
+    """Publish N_MESSAGES, run a timer and a service on ``executor_type``; returns (received values,
+    timer ticks, service calls, the response's success, the executor's guard triggers while the
+    messages and timer ticks were handled)."""
+    ns = f'spin_{uuid.uuid4().hex[:8]}'
+    node = rclpy.create_node('lean', namespace=ns, context=context)
+    received: list[float] = []
+    ticks = [0]
+    calls = [0]
+
+    def on_trigger(request, response):
+        calls[0] += 1
+        response.success = True
+        return response
+
+    node.create_subscription(Float64, 'x', lambda m: received.append(m.data), 100)
+    node.create_timer(0.01, lambda: ticks.__setitem__(0, ticks[0] + 1))
+    node.create_service(Trigger, 'go', on_trigger)
+    pub = node.create_publisher(Float64, 'x', 100)
+    client = node.create_client(Trigger, 'go')
+    executor = executor_type(context=context)
+    executor.add_node(node)
+    try:
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0 and client.service_is_ready())
+        triggers = [0]
+        trigger = executor._guard.trigger  # count the executor's self wake-ups from here on
+
+        def counted() -> None:
+            triggers[0] += 1
+            trigger()
+
+        executor._guard.trigger = counted
+        for i in range(N_MESSAGES):
+            pub.publish(Float64(data=float(i)))
+        _spin_until(executor, lambda: len(received) >= N_MESSAGES and ticks[0] >= 3)
+        wakeups = triggers[0]  # the service's future may wake the executor: not counted
+        future = client.call_async(Trigger.Request())
+        _spin_until(executor, future.done)
+        for _ in range(20):  # anything still queued would show up as a duplicate now
+            executor.spin_once(timeout_sec=0.005)
+        return received, ticks[0], calls[0], future.result().success, wakeups
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
+def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
+    received, ticks, calls, success, triggers = _exercise(ros_context, LeanExecutor)
+    assert received == [float(i) for i in range(N_MESSAGES)]  # each once, in order
+    assert ticks >= 3 and calls == 1 and success
+    assert triggers == 0
+    # the control: rclpy's own executor wakes itself around every callback (what LeanExecutor saves)
+    received, _, _, _, triggers = _exercise(ros_context, SingleThreadedExecutor)
+    assert received == [float(i) for i in range(N_MESSAGES)]
+    assert triggers >= 2 * N_MESSAGES
+
+
+def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):
+    ns = f'batch_{uuid.uuid4().hex[:8]}'
+    node = rclpy.create_node('batched', namespace=ns, context=ros_context)
+    received: list[float] = []
+    dispatched = [0]  # how often the executor called the subscription's callback
+
+    def counted(msg: Float64) -> None:
+        dispatched[0] += 1
+        batched(msg)
+
+    batched = Batched(lambda m: received.append(m.data), batch=8)
+    batched.subscription = node.create_subscription(Float64, 'x', counted, 100)
+    pub = node.create_publisher(Float64, 'x', 100)
+    executor = LeanExecutor(context=ros_context)
+    executor.add_node(node)
+    try:
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        for i in range(N_MESSAGES):  # a backlog: nothing is taken while they are published
+            pub.publish(Float64(data=float(i)))
+        time.sleep(0.2)  # all of them in the subscription's queue (same process, loopback)
+        _spin_until(executor, lambda: len(received) >= N_MESSAGES)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.005)
+        assert received == [float(i) for i in range(N_MESSAGES)]
+        assert dispatched[0] <= N_MESSAGES // 4  # batches of up to 8: about 7 dispatches, not 50
+        # no backlog: one message, one dispatch, nothing else taken
+        pub.publish(Float64(data=-1.0))
+        _spin_until(executor, lambda: len(received) == N_MESSAGES + 1)
+        assert received[-1] == -1.0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
+def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, stop):
+    ns = f'main_{uuid.uuid4().hex[:8]}'
+    argv = [
+        sys.executable,
+        '-m',
+        'skidsteer_power.nodes.power_estimator',
+        '--ros-args',
+        '-r',
+        f'__ns:=/{ns}',
+        '-p',
+        f'map_cache_dir:={tmp_path}',
+        '-p',
+        'persist:=false',
+        '-p',
+        'vehicle:=test_robot_track',
+    ]
+    proc = subprocess.Popen(
+        argv, env=os.environ, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    probe = rclpy.create_node('probe', namespace=ns, context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe)
+    try:
+        measured: list[JointState] = []
+        probe.create_subscription(JointState, 'power/measured', measured.append, 10)
+        pub = probe.create_publisher(JointState, 'joint_states', 10)
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0, timeout_s=60.0)
+        joint = JointState(name=['left_motor', 'right_motor'], velocity=[300.0, 300.0], effort=[0.2, 0.2])
+
+        def answered() -> bool:
+            pub.publish(joint)
+            return bool(measured)
+
+        _spin_until(executor, answered)
+        assert list(measured[-1].velocity) == [300.0, 300.0]  # echoed after the side mapping
+        proc.send_signal(stop)
+        assert proc.wait(timeout=15) == 0, proc.stderr.read()
+        assert 'Traceback' not in proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        executor.shutdown()
+        probe.destroy_node()
