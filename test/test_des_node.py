@@ -193,10 +193,11 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
         msg = Twist()
         msg.linear.x = 0.2
         deadline = time.monotonic() + 30
-        while pair.left.speed_setpoint_rpm == 0 and time.monotonic() < deadline:
+        # each side has its own poller thread: wait for both set points, not just the left one
+        while not (pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0):
+            assert time.monotonic() < deadline, 'the driver never drove both sides'
             pub.publish(msg)
             executor.spin_once(timeout_sec=0.05)
-        assert pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0
         proc.send_signal(signum)
         assert proc.wait(timeout=15) == 0
         for sim in (pair.left, pair.right):
