@@ -266,7 +266,9 @@ def damage(raw: bytes, case: str) -> bytes:
 
     from mcap.reader import make_reader
 
-    index = make_reader(BytesIO(raw)).get_summary().chunk_indexes[0]
+    summary = make_reader(BytesIO(raw)).get_summary()
+    assert summary is not None, 'the MCAP file has no summary section'  # our writer always writes one
+    index = summary.chunk_indexes[0]
     start, length = index.chunk_start_offset, index.chunk_length
     records = start + length - index.compressed_size
     out = bytearray(raw)

@@ -51,6 +51,7 @@ def measure(baud: int, emulate: bool) -> tuple[float, float, int]:
     proc = subprocess.Popen(
         [*argv, *([] if emulate else ['--no-baud-emulation'])], stdout=subprocess.PIPE, text=True
     )
+    assert proc.stdout is not None  # stdout=PIPE
     try:
         lines: list[str] = []
         while not lines or lines[-1] != '}\n':
@@ -174,7 +175,7 @@ def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], l
                             raise ZeroDivisionError('injected')
                         return _real(*args, **kwargs)
 
-                    amp.read_current = broken
+                    amp.read_current = broken  # type: ignore[method-assign]  # deliberate fault injection
                     _wait(lambda _s=started: bool(_s))
                     t0 = started[0]
                 elif kind == 'silent':
