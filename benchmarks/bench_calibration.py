@@ -146,7 +146,7 @@ def _coverage(report: Report, folder: Path) -> None:
 def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
     """A bag whose torques are FESS at ``truth`` plus white current noise (0.02 N m per sample): the
     model the fit uses, so its intervals can be checked without model error."""
-    from skidsteer_power.bags.synthetic import write_drive_bag
+    from skidsteer_power.bags.synthetic import DriveSamples, MotorArrays, write_drive_bag
     from skidsteer_power.models.fess import FessSolver
     from skidsteer_power.powertrain import Powertrain
 
@@ -154,8 +154,8 @@ def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
     pt = Powertrain.for_vehicle(vehicle)
     rng = np.random.default_rng(seed)
 
-    def motors(samples):
-        key = np.round(np.c_[samples.speed, samples.yaw_rate], 9)
+    def motors(samples: DriveSamples) -> MotorArrays:
+        key = np.round(np.column_stack([samples.speed, samples.yaw_rate]), 9)
         unique, inverse = np.unique(key, axis=0, return_inverse=True)
         sol = FessSolver(vehicle, truth).solve_twist(unique[:, 0], unique[:, 1])
         omega, torque = np.zeros((key.shape[0], 2)), np.zeros((key.shape[0], 2))
