@@ -140,7 +140,9 @@ def read_bag(path: str | os.PathLike[str], topic: str = '/joint_states', stage: 
     return samples
 
 
-def _add_joint_state(samples: Samples, names: Iterable[str], velocity, effort, stage: str) -> None:
+def _add_joint_state(
+    samples: Samples, names: Iterable[str], velocity: Iterable[float], effort: Iterable[float], stage: str
+) -> None:
     velocity, effort = list(velocity), list(effort)
     for index, name in enumerate(names):
         side = JOINT_SIDES.get(name)
