@@ -16,10 +16,18 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from benchmarks.harness import Report
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+
+    from skidsteer_power.bags.replay import ReplayResult
+
+Stored = list[tuple[str, int, bytes]]  # (topic, receive time [ns], CDR bytes) of each message
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(101, 200)))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -69,7 +77,9 @@ def _record_subprocess(out: Path, topics: list[str]) -> subprocess.Popen:
     )
 
 
-def _replay_against_recorder(bag_path: Path, out: Path, topics: list[str], context) -> tuple:
+def _replay_against_recorder(
+    bag_path: Path, out: Path, topics: list[str], context: Context
+) -> tuple[ReplayResult, Stored, Stored]:
     import rclpy
 
     from skidsteer_power.bags import open_bag
@@ -266,7 +276,9 @@ def damage(raw: bytes, case: str) -> bytes:
 
     from mcap.reader import make_reader
 
-    index = make_reader(BytesIO(raw)).get_summary().chunk_indexes[0]
+    summary = make_reader(BytesIO(raw)).get_summary()
+    assert summary is not None, 'the MCAP file has no summary section'  # our writer always writes one
+    index = summary.chunk_indexes[0]
     start, length = index.chunk_start_offset, index.chunk_length
     records = start + length - index.compressed_size
     out = bytearray(raw)

@@ -21,6 +21,7 @@ import math
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,7 +31,11 @@ from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.calibration.direct import feed_trace
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, drive_until_empty, run_commands, write_bag
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import Vehicle, load_vehicle
+
+if TYPE_CHECKING:
+    from skidsteer_power.estimator.core import EstimatorCore
+    from skidsteer_power.powertrain import Battery
 
 VEHICLE = 'test_robot_4wheel'
 TRUTH = dataclasses.replace(
@@ -146,7 +151,7 @@ def _coverage(report: Report, folder: Path) -> None:
 def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
     """A bag whose torques are FESS at ``truth`` plus white current noise (0.02 N m per sample): the
     model the fit uses, so its intervals can be checked without model error."""
-    from skidsteer_power.bags.synthetic import write_drive_bag
+    from skidsteer_power.bags.synthetic import DriveSamples, MotorArrays, write_drive_bag
     from skidsteer_power.models.fess import FessSolver
     from skidsteer_power.powertrain import Powertrain
 
@@ -154,8 +159,8 @@ def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
     pt = Powertrain.for_vehicle(vehicle)
     rng = np.random.default_rng(seed)
 
-    def motors(samples):
-        key = np.round(np.c_[samples.speed, samples.yaw_rate], 9)
+    def motors(samples: DriveSamples) -> MotorArrays:
+        key = np.round(np.column_stack([samples.speed, samples.yaw_rate]), 9)
         unique, inverse = np.unique(key, axis=0, return_inverse=True)
         sol = FessSolver(vehicle, truth).solve_twist(unique[:, 0], unique[:, 1])
         omega, torque = np.zeros((key.shape[0], 2)), np.zeros((key.shape[0], 2))
@@ -199,7 +204,7 @@ def _coverage_fess(report: Report, folder: Path) -> None:
         )
 
 
-def _core(vehicle, terrain, battery=None):
+def _core(vehicle: Vehicle, terrain: Terrain, battery: Battery | None = None) -> EstimatorCore:
     from skidsteer_power.calibration.direct import DirectFessMap
     from skidsteer_power.estimator.core import EstimatorCore
     from skidsteer_power.estimator.prediction import MapPredictor
@@ -237,6 +242,7 @@ def _adaptation(report: Report) -> None:
     last = trace.t >= trace.t[-1] - 2.0
     measured = trace.joint_effort_Nm[last].mean(axis=0)
     corrected = np.array(core.corrected_torque_Nm())
+    assert core.prediction is not None  # the trace's commands were fed
     raw = np.array(core.prediction.motor_torque_Nm)
     report.figure(
         'motor torque error on loam, corrected',

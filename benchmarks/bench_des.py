@@ -24,11 +24,16 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from benchmarks.harness import Report
 from skidsteer_power.des.poller import AmplifierPoller, DriveCommand
 from skidsteer_power.des.protocol import DesConfig, OpCode, command_bytes
 from skidsteer_power.des.transport import LinkTiming
+
+if TYPE_CHECKING:
+    from skidsteer_power.des.simulator import SimulatedDes, SimulatedPair
 
 STATUS_EVERY = 5
 NODE_RATE_HZ = 50.0
@@ -51,6 +56,7 @@ def measure(baud: int, emulate: bool) -> tuple[float, float, int]:
     proc = subprocess.Popen(
         [*argv, *([] if emulate else ['--no-baud-emulation'])], stdout=subprocess.PIPE, text=True
     )
+    assert proc.stdout is not None  # stdout=PIPE
     try:
         lines: list[str] = []
         while not lines or lines[-1] != '}\n':
@@ -115,7 +121,7 @@ FAULT_TRIALS = 7
 DRIVE_RPM = 1000
 
 
-def _wait(predicate, timeout_s: float = 5.0) -> bool:
+def _wait(predicate: Callable[..., bool], timeout_s: float = 5.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
@@ -124,11 +130,11 @@ def _wait(predicate, timeout_s: float = 5.0) -> bool:
     return predicate()
 
 
-def _driving(pair) -> bool:
+def _driving(pair: SimulatedPair) -> bool:
     return (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (DRIVE_RPM, -DRIVE_RPM)
 
 
-def _zeroed_at(sim, after: float) -> float:
+def _zeroed_at(sim: SimulatedDes, after: float) -> float:
     """Arrival time (simulator clock, time.monotonic) of the first zero set point after ``after``."""
     for record in list(sim.commands):
         if record.time_s >= after and record.opcode == OpCode.SET_VELOCITY and record.words == (0,):
@@ -168,13 +174,18 @@ def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], l
                     real = amp.read_current
                     started: list[float] = []
 
-                    def broken(*args, _real=real, _started=started, **kwargs):
+                    def broken(
+                        *args: Any,
+                        _real: Callable[..., Any] = real,
+                        _started: list[float] = started,
+                        **kwargs: Any,
+                    ) -> Any:
                         if not _started:
                             _started.append(time.monotonic())
                             raise ZeroDivisionError('injected')
                         return _real(*args, **kwargs)
 
-                    amp.read_current = broken
+                    amp.read_current = broken  # type: ignore[method-assign]  # deliberate fault injection
                     _wait(lambda _s=started: bool(_s))
                     t0 = started[0]
                 elif kind == 'silent':

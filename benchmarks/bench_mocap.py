@@ -18,7 +18,7 @@ from benchmarks.harness import Report, best_time
 from skidsteer_power.mocap import synthetic as syn
 from skidsteer_power.mocap.calibration import CameraCalibration
 from skidsteer_power.mocap.plane import GroundPlane
-from skidsteer_power.mocap.target import TargetConfig, detect_target
+from skidsteer_power.mocap.target import TargetConfig, TargetDetection, detect_target
 from skidsteer_power.mocap.tracking import target_on_plane, track
 
 SIZE = (1920, 1080)
@@ -47,7 +47,9 @@ def run(report: Report) -> None:
     config = TargetConfig()
 
     def one_frame() -> None:
-        target_on_plane(detect_target(frame, config), calibration, plane)
+        detection = detect_target(frame, config)
+        assert isinstance(detection, TargetDetection), detection  # the synthetic disc is in view
+        target_on_plane(detection, calibration, plane)
 
     per_frame = best_time(one_frame, repeat=5, number=5)
     report.figure(
@@ -60,7 +62,7 @@ def run(report: Report) -> None:
 
     with tempfile.TemporaryDirectory() as folder:
         video = Path(folder) / 'run.avi'
-        writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), FPS, SIZE)
+        writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*'MJPG'), FPS, SIZE)
         n_frames = int(SECONDS * FPS)
         for index in range(n_frames):
             writer.write(syn.render_disc_frame(background, camera, rvec, tvec, sand, _disc_at(index / FPS),

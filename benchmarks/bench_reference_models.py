@@ -19,9 +19,11 @@ import time
 import numpy as np
 
 from benchmarks.harness import Report, best_time
-from skidsteer_power.models import solve, wong_track, wong_wheel
-from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.models import SteadyState, solve, wong_track, wong_wheel
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
+from skidsteer_power.vehicle import Vehicle, load_vehicle
+
+Resolution = tuple[int, int]  # integration nodes of a model (see DEFAULT_RESOLUTION of each)
 
 SPEEDS = np.linspace(0.1, 1.5, 8)[:, None]
 RADII = np.logspace(0.0, np.log10(500.0), 16)[None, :]
@@ -37,14 +39,21 @@ DEFAULT_RESOLUTION = {
 }
 
 
-def _torque_error(state, ref) -> float:
+def _torque_error(state: SteadyState, ref: SteadyState) -> float:
     scale = np.maximum(np.abs(ref.torque_outer_Nm), np.abs(ref.torque_inner_Nm))
     err_o = np.abs(state.torque_outer_Nm - ref.torque_outer_Nm) / scale
     err_i = np.abs(state.torque_inner_Nm - ref.torque_inner_Nm) / scale
     return float(np.max(np.maximum(err_o, err_i)))
 
 
-def _study(report: Report, label: str, vehicle, terrain, study, reference) -> tuple[int, int]:
+def _study(
+    report: Report,
+    label: str,
+    vehicle: Vehicle,
+    terrain: Terrain,
+    study: list[Resolution],
+    reference: Resolution,
+) -> Resolution:
     ref = solve(vehicle, terrain, SPEEDS, RADII, model='wong', resolution=reference)
     converged = f'{int(ref.converged.sum())}/{ref.converged.size}'
     print(f'   {label}: reference resolution {reference}, converged {converged}')
@@ -72,10 +81,17 @@ def _study(report: Report, label: str, vehicle, terrain, study, reference) -> tu
         note='the resolution models.solve uses when none is given',
     )
     return chosen or study[-1]
-    return chosen
 
 
-def _time_map(report: Report, label: str, vehicle, terrain, resolution, goal_s: float, text_s: float) -> None:
+def _time_map(
+    report: Report,
+    label: str,
+    vehicle: Vehicle,
+    terrain: Terrain,
+    resolution: Resolution,
+    goal_s: float,
+    text_s: float,
+) -> None:
     start = time.perf_counter()
     state = solve(vehicle, terrain, SPEEDS, RADII, model='wong', resolution=resolution)
     first = time.perf_counter() - start

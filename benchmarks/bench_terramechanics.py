@@ -10,7 +10,7 @@ import numpy as np
 from scipy.integrate import quad
 
 from benchmarks.harness import Report, best_time
-from skidsteer_power.terramechanics import PRESETS
+from skidsteer_power.terramechanics import PRESETS, Terrain
 from skidsteer_power.terramechanics.soil import shear_stress
 from skidsteer_power.terramechanics.track import single_track
 from skidsteer_power.terramechanics.wheel import (
@@ -25,7 +25,7 @@ from skidsteer_power.terramechanics.wheel import (
 R, B, W = 0.1, 0.07, 100.0  # wheel of Figure 2.13
 
 
-def _quad_forces(terrain, z: float, s: float) -> tuple[float, float]:
+def _quad_forces(terrain: Terrain, z: float, s: float) -> tuple[float, float]:
     tf, tm, tr = (float(a) for a in wheel_angles(terrain, z, s, R))
 
     def sigma(th: float) -> float:

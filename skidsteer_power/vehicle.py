@@ -189,8 +189,9 @@ def _validate(vehicle: Vehicle) -> None:
             f'tread_m ({vehicle.tread_m}) must exceed the track/wheel width ({vehicle.contact_width_m})',
         )
     if not vehicle.is_tracked:
-        spacing = float(vehicle.wheelbase_m) / (vehicle.wheels_per_side - 1)  # type: ignore[arg-type]
-        if spacing <= 2.0 * float(vehicle.wheel_radius_m):  # type: ignore[arg-type]
+        assert vehicle.wheelbase_m is not None and vehicle.wheel_radius_m is not None  # checked above
+        spacing = float(vehicle.wheelbase_m) / (vehicle.wheels_per_side - 1)
+        if spacing <= 2.0 * float(vehicle.wheel_radius_m):
             raise _fail(vehicle.name, f'wheelbase_m ({vehicle.wheelbase_m}) is too short: the wheels overlap')
     if vehicle.yaw_inertia_kg_m2 is not None:
         _check_positive(vehicle, 'yaw_inertia_kg_m2')

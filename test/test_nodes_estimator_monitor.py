@@ -160,3 +160,30 @@ def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tm
     with (tmp_path / 'shown.csv').open() as handle:
         rows = list(csv.DictReader(handle))
     assert any(r['speed_cmd_m_s'] == '0.2' for r in rows)
+
+
+def test_view_mode_takes_the_path_energy_topics(ros_context):
+    """energy/path_required_wh and energy/path_margin_wh (nodes/path_hook.py) land in the view as sent."""
+    from std_msgs.msg import Float64
+
+    namespace = f'mon_{uuid.uuid4().hex[:8]}'
+    monitor = EnergyMonitor('view', namespace=namespace, context=ros_context)
+    sender = rclpy.create_node('path_hook_probe', namespace=namespace, context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    for node in (monitor, sender):
+        executor.add_node(node)
+    sent = {'path_required_wh': 3.25, 'path_margin_wh': -1.5}  # arbitrary, distinct values [Wh]
+    pubs = {k: sender.create_publisher(Float64, f'energy/{k}', 10) for k in sent}
+
+    def received() -> bool:
+        for key, pub in pubs.items():
+            pub.publish(Float64(data=sent[key]))
+        return all(getattr(monitor.view, key) == value for key, value in sent.items())
+
+    try:
+        spin_until(executor, received)
+    finally:
+        executor.shutdown()
+        monitor.close()
+        for node in (monitor, sender):
+            node.destroy_node()

@@ -52,13 +52,14 @@ def decode_twists(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndarray, n
         if fast is not None:
             t = np.array([m.timestamp_ns - t0_ns for m in messages], dtype=float) / NS
             return t, fast
-    t, values = [], []
+    stamps_ns: list[int] = []
+    values: list[tuple[float, float]] = []
     for message in bag.messages([topic]):
         msg = bag.deserialize(message)
         twist = msg.twist if stamped else msg
-        t.append(message.timestamp_ns - t0_ns)
+        stamps_ns.append(message.timestamp_ns - t0_ns)
         values.append((twist.linear.x, twist.angular.z))
-    return np.array(t, dtype=float) / NS, np.array(values, dtype=float).reshape(-1, 2)
+    return np.array(stamps_ns, dtype=float) / NS, np.array(values, dtype=float).reshape(-1, 2)
 
 
 def decode_joint_states(
@@ -107,11 +108,8 @@ def decode_joint_arrays(
         for field_name, column in columns.items():
             values = getattr(msg, field_name)
             column.append(values[rows] if ok and len(values) > top else nan_row)
-    return (
-        np.array(t, dtype=float) / NS,
-        *(np.array(columns[f], dtype=float).reshape(-1, k) for f in ('position', 'velocity', 'effort')),
-        np.array(present, dtype=bool),
-    )
+    position, velocity, effort = (np.array(columns[f], dtype=float).reshape(-1, k) for f in columns)
+    return np.array(t, dtype=float) / NS, position, velocity, effort, np.array(present, dtype=bool)
 
 
 def decode_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndarray, np.ndarray]:

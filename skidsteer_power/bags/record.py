@@ -96,7 +96,8 @@ class Recorder:
             stamp = info.get('received_timestamp', 0) if isinstance(info, dict) else 0
             self.writer.write(connection, stamp or time.time_ns(), data)
 
-        subscription = self.node.create_subscription(cls, name, on_message, qos, raw=True)
+        # rclpy types the callback as (msg) only, but also calls one taking (msg, message info)
+        subscription = self.node.create_subscription(cls, name, on_message, qos, raw=True)  # type: ignore[arg-type]
         self.recorded[name] = _Topic(name, msgtype, connection, subscription)
         LOG.info('recording %s (%s)', name, msgtype)
 
@@ -154,7 +155,7 @@ def record(
     stop = stop or StopFlag()
     writer = BagWriter(output)  # a bad output path fails here, before any ROS set-up
     own_context = context is None
-    if own_context:
+    if context is None:
         context = Context()
         rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node(node_name, context=context)

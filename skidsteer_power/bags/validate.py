@@ -544,7 +544,7 @@ def live_comparison(inputs: Inputs, predictor: Any) -> dict[str, Any] | None:
 
 def _next_position(sorted_positions: list[np.ndarray], start: int) -> int | None:
     """Smallest entry >= ``start`` over several sorted index arrays, or None."""
-    found = None
+    found: int | None = None
     for positions in sorted_positions:
         i = int(np.searchsorted(positions, start))
         if i < positions.size and (found is None or positions[i] < found):

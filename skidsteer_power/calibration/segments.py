@@ -263,9 +263,9 @@ def find_segments(
                 yaw_rate_rad_s=yaw_rate,
                 motion_source=motion,
                 samples=n,
-                motor_torque_Nm=tuple(torque.mean(axis=0).tolist()),  # type: ignore[arg-type]
-                motor_omega_rad_s=tuple(omega.mean(axis=0).tolist()),  # type: ignore[arg-type]
-                torque_std_Nm=tuple(torque.std(axis=0, ddof=1).tolist()),  # type: ignore[arg-type]
+                motor_torque_Nm=tuple(torque.mean(axis=0).tolist()),
+                motor_omega_rad_s=tuple(omega.mean(axis=0).tolist()),
+                torque_std_Nm=tuple(torque.std(axis=0, ddof=1).tolist()),
                 terminal_W=_mean_terminal_power(rec, sel, motor),
             )
         )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 
 from skidsteer_power.cli.common import add_json_flag, emit, positive_float
 from skidsteer_power.des.client import DesAmplifier
@@ -43,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.set_defaults(func=run_sim)
 
 
-def _usage(parser: argparse.ArgumentParser):
+def _usage(parser: argparse.ArgumentParser) -> Callable[[argparse.Namespace], int]:
     def show(args: argparse.Namespace) -> int:
         parser.print_help(sys.stderr)
         return 2

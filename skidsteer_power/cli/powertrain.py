@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
         emit(payload, True)
     else:
         for side, stages in fits.items():
-            for stage, fit in stages.items():
-                coefficients = f'b = {fit["viscous_Nm_s"]:.4g} N m s/rad   c = {fit["coulomb_Nm"]:.4g} N m'
-                quality = f'(rms {fit["rms_residual_Nm"]:.2g} N m, n = {fit["n_samples"]})'
+            for stage, row in stages.items():
+                coefficients = f'b = {row["viscous_Nm_s"]:.4g} N m s/rad   c = {row["coulomb_Nm"]:.4g} N m'
+                quality = f'(rms {row["rms_residual_Nm"]:.2g} N m, n = {row["n_samples"]})'
                 print(f'{side:<6} {stage:<13} {coefficients}   {quality}')
     return 0
 

@@ -150,7 +150,7 @@ def wheel_speed(speed: float, slip: float, radius: float) -> float:
 
 
 def run_terrains(args: argparse.Namespace) -> int:
-    payload = {}
+    payload: dict[str, dict[str, Any]] = {}  # preset name -> {values, source}
     for name, terrain in PRESETS.items():
         values = {k: v for k, v in dataclasses.asdict(terrain).items() if k != 'name' and v is not None}
         values['phi_deg'] = terrain.phi_deg

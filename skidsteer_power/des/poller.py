@@ -8,6 +8,7 @@ here, away from the executor.
 from __future__ import annotations
 
 import atexit
+import builtins
 import contextlib
 import logging
 import math
@@ -174,7 +175,7 @@ class DriveCommand:
             self._halted_by.add(side)
 
     @property
-    def halted_by(self) -> set[str]:
+    def halted_by(self) -> builtins.set[str]:  # in the class body `set` is the method above
         with self._lock:
             return set(self._halted_by)
 

@@ -36,6 +36,7 @@ import time
 import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
 from skidsteer_power.des.protocol import (
@@ -751,9 +752,10 @@ class SimulatedDes:
 class SimulatedPair:
     """Two virtual amplifiers, ``left`` and ``right`` (one per side, as on the robot)."""
 
-    def __init__(self, baudrate: int = 38400, **kwargs: object) -> None:
-        self.left = SimulatedDes(baudrate, name='des_left', **kwargs)  # type: ignore[arg-type]
-        self.right = SimulatedDes(baudrate, name='des_right', **kwargs)  # type: ignore[arg-type]
+    def __init__(self, baudrate: int = 38400, **kwargs: Any) -> None:
+        """``kwargs``: the keyword arguments of :class:`SimulatedDes` but ``name``, for both sides."""
+        self.left = SimulatedDes(baudrate, name='des_left', **kwargs)
+        self.right = SimulatedDes(baudrate, name='des_right', **kwargs)
 
     def start(self) -> SimulatedPair:
         self.left.start()

@@ -122,7 +122,7 @@ class MapPredictor:
         self.power_map = power_map
         self.powertrain = powertrain
         self.description = description or 'power map'
-        self.predict = lru_cache(maxsize=cache_size)(self._predict)  # type: ignore[method-assign]
+        self.predict = lru_cache(maxsize=cache_size)(self._predict)
 
     def _predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction:
         q = self.power_map.query(speed_m_s, yaw_rate_rad_s)

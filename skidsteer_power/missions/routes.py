@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -194,7 +195,7 @@ def _trace(route: Route) -> np.ndarray:
     return np.column_stack([np.r_[0.0, np.cumsum(dx)], np.r_[0.0, np.cumsum(dy)]])
 
 
-BUILTIN = {'patrol': patrol, 'search-retrieve': search_retrieve}
+BUILTIN: dict[str, Callable[..., Route]] = {'patrol': patrol, 'search-retrieve': search_retrieve}
 
 
 def builtin_route(name: str, speed_m_s: float | None = None) -> Route:

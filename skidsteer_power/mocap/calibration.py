@@ -141,6 +141,7 @@ def calibrate_camera(
             f'checkerboard with {cols}x{rows} inner corners found in {len(used)} of {len(images)} images; '
             f'calibration needs at least {MIN_CALIBRATION_IMAGES} (check --pattern)'
         )
+    assert size is not None  # set by the first of the (non-empty) images
     flags = cv2.CALIB_ZERO_TANGENT_DIST | (0 if use_k3 else cv2.CALIB_FIX_K3)
     rms, matrix, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None, flags=flags)
     dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=float).ravel()

@@ -132,10 +132,8 @@ class EnergyMonitor(Node):
         self.create_subscription(BatteryState, 'battery/state', self._on_battery, qos)
         self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, qos)
         self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, qos)
-        for topic in ('path_required_wh', 'path_margin_wh'):  # power_estimator's path energy [Wh]
-            self.create_subscription(
-                Float64, f'energy/{topic}', lambda msg, k=topic: setattr(self.view, k, msg.data), qos
-            )
+        self.create_subscription(Float64, 'energy/path_required_wh', self._on_path_required, qos)
+        self.create_subscription(Float64, 'energy/path_margin_wh', self._on_path_margin, qos)
         if mode != 'view':
             self.pub_cmd = self.create_publisher(TwistStamped if stamped else Twist, 'cmd_vel', 10)
             self.create_timer(1.0 / rate_hz, self._on_drive_timer)
@@ -181,6 +179,14 @@ class EnergyMonitor(Node):
     def _on_tte(self, msg: Float64) -> None:
         self.view.time_to_empty_s = msg.data
         self._heard('battery')
+
+    def _on_path_required(self, msg: Float64) -> None:
+        """Energy to drive the planned path [Wh] (power_estimator's path energy)."""
+        self.view.path_required_wh = msg.data
+
+    def _on_path_margin(self, msg: Float64) -> None:
+        """Energy left after the planned path and the way back [Wh] (power_estimator's path energy)."""
+        self.view.path_margin_wh = msg.data
 
     # --- driving ------------------------------------------------------------------------------
     def _on_drive_timer(self) -> None:

@@ -20,13 +20,16 @@ import math
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from skidsteer_power.estimator import factory
+
+if TYPE_CHECKING:
+    from skidsteer_power.des.simulator import SimulatedPair
 
 SMOOTHING_RAD_S = 1.0
 """Motor speed over which the Coulomb terms change sign (tanh), so the explicit motor model does not
@@ -91,7 +94,7 @@ class Suite:
         self.options = options
         self.context = context
         self.vehicle = factory.load_vehicle_config(options.vehicle)
-        self.sim = None
+        self.sim: SimulatedPair | None = None
         self.nodes: list[Node] = []
         self._executors: list[SingleThreadedExecutor] = []
         self._threads: list[threading.Thread] = []

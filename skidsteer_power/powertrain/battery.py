@@ -16,11 +16,12 @@ Remaining energy is the open-circuit energy Q integral V_oc dSOC (what a lossles
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.integrate import quad
 
 from skidsteer_power.errors import ConfigError, InputError
@@ -74,8 +75,11 @@ class BatteryConfig:
         """Internal resistance of the whole battery [ohm]."""
         return self.cell_resistance_ohm * self.cells_in_series / self.packs_in_parallel
 
-    def ocv(self, soc: np.ndarray | float) -> np.ndarray:
-        """Open-circuit voltage of the battery [V] at state of charge ``soc`` [-] (linear in the table)."""
+    def ocv(self, soc: float | Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64] | np.float64:
+        """Open-circuit voltage of the battery [V] at state of charge ``soc`` [-] (linear in the table).
+
+        A scalar ``soc`` gives a scalar, an array an array of its shape.
+        """
         return self.cells_in_series * np.interp(soc, self.soc_points, self.cell_ocv_V)
 
     def as_dict(self) -> dict[str, Any]:

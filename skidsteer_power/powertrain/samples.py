@@ -22,6 +22,7 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -128,7 +129,7 @@ def read_bag(path: str | os.PathLike[str], topic: str = '/joint_states', stage: 
             if not connections:
                 raise InputError(f'{path}: no topic {topic} in the bag')
             for connection, _, raw in reader.messages(connections=connections):
-                msg = reader.deserialize(raw, connection.msgtype)
+                msg: Any = reader.deserialize(raw, connection.msgtype)  # rosbags returns `object`
                 _add_joint_state(samples, msg.name, msg.velocity, msg.effort, stage)
     except InputError:
         raise
@@ -139,7 +140,9 @@ def read_bag(path: str | os.PathLike[str], topic: str = '/joint_states', stage: 
     return samples
 
 
-def _add_joint_state(samples: Samples, names: Iterable[str], velocity, effort, stage: str) -> None:
+def _add_joint_state(
+    samples: Samples, names: Iterable[str], velocity: Iterable[float], effort: Iterable[float], stage: str
+) -> None:
     velocity, effort = list(velocity), list(effort)
     for index, name in enumerate(names):
         side = JOINT_SIDES.get(name)

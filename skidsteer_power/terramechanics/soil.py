@@ -57,6 +57,7 @@ def shear_fraction(terrain: Terrain, j: ArrayLike) -> FloatArray:
         with np.errstate(invalid='ignore', over='ignore'):
             frac = np.where(np.isinf(x), 0.0, x * np.exp(1.0 - x))  # eq. 2.4
     else:
+        assert terrain.Kr is not None and terrain.Kw is not None  # type C: both validated by Terrain
         frac = _type_c_fraction(a, terrain.Kr, terrain.Kw)
     return np.sign(j) * frac
 

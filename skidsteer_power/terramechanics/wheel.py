@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -207,8 +208,9 @@ def sinkage_at_slip(
     return z
 
 
-def _check_root(terrain: Terrain, res: object, args: tuple[FloatArray, ...]) -> None:
-    bad = ~np.asarray(res.success) | ~(np.abs(np.asarray(res.f_x)) < BALANCE_TOL_N)  # type: ignore[attr-defined]
+def _check_root(terrain: Terrain, res: Any, args: tuple[FloatArray, ...]) -> None:
+    """``res``: the result of scipy's ``elementwise.find_root`` (untyped)."""
+    bad = ~np.asarray(res.success) | ~(np.abs(np.asarray(res.f_x)) < BALANCE_TOL_N)
     if np.any(bad):
         i = np.flatnonzero(bad)[0]
         w, s, r, b = (a[i] for a in args)

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rich.console import Group
+from rich.console import Group, RenderableType
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
@@ -298,7 +298,13 @@ def render(view: MonitorView) -> Group:
     )
     if 'summary' in view.stale:
         split.stylize('dim')
-    parts = [header, _motor_table(view), split, _traction_text(view), _battery_panel(view)]
+    parts: list[RenderableType] = [
+        header,
+        _motor_table(view),
+        split,
+        _traction_text(view),
+        _battery_panel(view),
+    ]
     if view.stale >= {'joint_states', 'summary', 'battery'}:
         parts.append(
             Text('no data from the robot: values shown are the last received (stale)', style='bold yellow')
