@@ -34,6 +34,8 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -88,7 +90,7 @@ def cdr_stamp_s(data: bytes) -> float:
     return sec + 1e-9 * nanosec
 
 
-def _stamp_now(header) -> float:
+def _stamp_now(header: Any) -> float:
     now = time.time()
     header.stamp.sec, header.stamp.nanosec = int(now), int((now % 1) * 1e9)
     return header.stamp.sec + 1e-9 * header.stamp.nanosec
@@ -128,7 +130,7 @@ class Load:
         self._msg_types = (TwistStamped, JointState)
 
     @staticmethod
-    def _receiver(into: list[tuple[float, float]]):
+    def _receiver(into: list[tuple[float, float]]) -> Callable[[bytes], None]:
         def on_output(data: bytes) -> None:
             into.append((cdr_stamp_s(data), time.time()))
 

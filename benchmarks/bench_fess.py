@@ -15,15 +15,16 @@ import numpy as np
 
 from benchmarks.harness import Report, best_time
 from skidsteer_power.models import fess, wong_track, wong_wheel
-from skidsteer_power.terramechanics.terrain import PRESETS
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.models.base import SteadyState
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 V = np.linspace(0.2, 1.5, 8)[:, None]
 R = np.geomspace(1.0, 500.0, 16)[None, :]
 SOILS = ('dry_sand', 'sandy_loam', 'clay')
 
 
-def _side_error(got, ref, mask=None) -> float:
+def _side_error(got: SteadyState, ref: SteadyState, mask: np.ndarray | None = None) -> float:
     """Largest |torque difference| over both sides / larger side torque of the reference."""
     scale = np.maximum(np.abs(ref.torque_outer_Nm), np.abs(ref.torque_inner_Nm))
     err = np.maximum(
@@ -74,7 +75,7 @@ def _tracks(report: Report) -> None:
     _map_vs_direct(report, track, dry, solver)
 
 
-def _map_vs_direct(report: Report, track, dry, solver) -> None:
+def _map_vs_direct(report: Report, track: Vehicle, dry: Terrain, solver: fess.FessSolver) -> None:
     """One map query vs one direct FESS solve of a fresh command, same run (the robot's choice)."""
     from skidsteer_power.maps import PowerMap
 

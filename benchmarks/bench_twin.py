@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
+from functools import partial
 
 from benchmarks.harness import Report
 from skidsteer_power.bags.synthetic import table_7_3_segments
@@ -36,7 +38,7 @@ def _commands(seconds: float) -> list[Segment]:
     return out
 
 
-def _times(make, commands: list[Segment], repeats: int) -> tuple[float, float]:
+def _times(make: Callable[[], Twin], commands: list[Segment], repeats: int) -> tuple[float, float]:
     """Best wall-clock and best CPU time [s] of ``repeats`` runs of a fresh twin."""
     walls, cpus = [], []
     for _ in range(repeats):
@@ -55,14 +57,14 @@ def run(report: Report) -> None:
     report.figure('1-minute load average at the start', os.getloadavg()[0], '', note='2 cores')
     for name in ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'):
         vehicle = load_vehicle(name)
-        wall, cpu = _times(lambda v=vehicle: Twin(v, terrain), commands, REPEATS)
+        wall, cpu = _times(partial(Twin, vehicle, terrain), commands, REPEATS)
         label = f'{name}, dt = 2 ms, {simulated:g} s simulated, best of {REPEATS}'
         report.figure(f'{label}: wall-clock speed', simulated / wall, 'x real', goal=f'>= {GOAL:g}x',
                       met=simulated / wall >= GOAL)  # fmt: skip
         report.figure(f'{label}: CPU-time speed', simulated / cpu, 'x real', goal=f'>= {CPU_GOAL:g}x',
                       met=simulated / cpu >= CPU_GOAL)  # fmt: skip
-        _, plain = _times(lambda v=vehicle: Twin(v, terrain, bulldozing=False), commands, REPEATS)
+        _, plain = _times(partial(Twin, vehicle, terrain, bulldozing=False), commands, REPEATS)
         report.ratio(f'{name}: CPU time, full twin / without slip-sinkage and bulldozing', cpu, plain)
-        _, fine = _times(lambda v=vehicle: Twin(v, terrain, dt=1e-3), commands, 1)
+        _, fine = _times(partial(Twin, vehicle, terrain, dt=1e-3), commands, 1)
         report.ratio(f'{name}: CPU time, dt = 1 ms / dt = 2 ms', fine, cpu)
     report.figure('1-minute load average at the end', os.getloadavg()[0], '', note='2 cores')

@@ -107,12 +107,11 @@ def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
             raise_on_failure=False,
         )
         pt = powertrains[vehicle.running_gear]
-        power = 0.0
-        parts = []
-        for side in ('left', 'right'):
-            mp = pt.motor_side(side, state.side('torque', side), state.side('omega', side))
-            parts.append(mp)
-            power = power + mp.mechanical_power_W
+        parts = [
+            pt.motor_side(side, state.side('torque', side), state.side('omega', side))
+            for side in ('left', 'right')
+        ]
+        power = parts[0].mechanical_power_W + parts[1].mechanical_power_W
         internal = parts[0].internal_power_W + parts[1].internal_power_W
         converged = bool(np.all(state.converged))
         out.append(

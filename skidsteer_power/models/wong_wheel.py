@@ -249,7 +249,7 @@ def initial_guess(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoi
     """x0 of eq. 4.12 from the straight single-wheel solution (see module doc)."""
     r, b = vehicle.drive_radius_m, vehicle.contact_width_m
     try:
-        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), 0.0, r, b)  # type: ignore[arg-type]
+        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), 0.0, r, b)
         z0, s_0 = float(single.sinkage_m), float(single.slip)
     except ConvergenceError:
         z0 = min(
@@ -259,7 +259,7 @@ def initial_guess(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoi
                 )
             ),
             0.5 * r,
-        )  # type: ignore[arg-type]
+        )
         s_0 = 0.2  # eqs. 2.31, 2.32
     v_o, v_i = points.side_speeds(vehicle.tread_m)
     n = points.speed.size

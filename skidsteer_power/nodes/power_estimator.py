@@ -359,11 +359,11 @@ class PowerEstimator(Node):
 
     def _log_traction_change(self) -> None:
         warning = self.core.traction_warning()
-        if warning and not self._traction_warned:
-            margin = self.core.prediction.traction_margin
+        prediction, command = self.core.prediction, self.core.command
+        if warning and not self._traction_warned and prediction is not None and command is not None:
             self.get_logger().warning(
-                f'traction margin {margin:.2f} at V {self.core.command[0]:.2f} m/s, yaw rate '
-                f'{self.core.command[1]:.2f} rad/s: the robot may get stuck (chapter 7.3.4)'
+                f'traction margin {prediction.traction_margin:.2f} at V {command[0]:.2f} m/s, '
+                f'yaw rate {command[1]:.2f} rad/s: the robot may get stuck (chapter 7.3.4)'
             )
         self._traction_warned = warning
 
@@ -431,7 +431,7 @@ class PowerEstimator(Node):
         self._figures_due[:] = [False, False]
         with self._lock:
             prediction, comparison = self.core.prediction, self.core.comparison
-        figures = []
+        figures: list[tuple[Any, float]] = []
         if command_due:
             figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
         if measurement_due:

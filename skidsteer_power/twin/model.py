@@ -43,6 +43,7 @@ with the PI and friction terms implicit so the stiff zero-speed friction stays s
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -343,7 +344,9 @@ class Twin:
         c, s = math.cos(yaw), math.sin(yaw)
         return self.field.index_at(x + c * hx - s * hy, y + s * hx + c * hy)
 
-    def _by_terrain(self, index: np.ndarray | None, shape: tuple[int, ...], fn) -> np.ndarray:
+    def _by_terrain(
+        self, index: np.ndarray | None, shape: tuple[int, ...], fn: Callable[..., np.ndarray]
+    ) -> np.ndarray:
         """Evaluate ``fn(terrain, mask)`` per terrain present; mask None = everywhere."""
         if index is None:
             return fn(self.field.base, None)
@@ -555,7 +558,7 @@ class Twin:
         else:
             self._wp_inv_k, self._wp_terrains = None, terrains
 
-    def _wheel_kinematics(self) -> tuple[list[tuple[float, ...]], np.ndarray]:
+    def _wheel_kinematics(self) -> tuple[list[tuple[float, float, float, float, float]], np.ndarray]:
         """Per side (floats: the wheels of a side share them): axle ground speed forward [m/s],
         the same in the rolling frame [m/s], |omega| [rad/s], rolling direction (+-1), slip (eq.
         2.13) [-]; per wheel: lateral ground speed [m/s]. A side whose rolling sense changed
@@ -657,6 +660,7 @@ class Twin:
         if self._wp_inv_k is not None:
             minus_fraction = np.expm1(mag * self._wp_inv_k)  # eq. 2.3 (tau / tau_max = -this)
         else:
+            assert self._wp_terrains is not None  # set whenever _wp_inv_k is None
             pairs = zip(self._wp_terrains, mag, strict=True)
             minus_fraction = np.array([-soil.shear_fraction(t, m) for t, m in pairs])  # eqs. 2.4-2.5
         # tau_t, tau_y against the displacement (4.7, 4.8), plus the transient damping:
@@ -784,9 +788,9 @@ class Twin:
         self._contact_age -= 1
         if self._contact_age <= 0:
             self._contact_age = SOIL_REFRESH_STEPS
-            ground = np.array([abs(sides[0][0])] * k + [abs(sides[1][0])] * k)  # |axle speed| [m/s]
-            om = np.array([sides[0][2]] * k + [sides[1][2]] * k)  # [rad/s]
-            self._relax_sinkage(SOIL_REFRESH_STEPS * dt, span, j[0, :, -1], ground, om)
+            axle_speed = np.array([abs(sides[0][0])] * k + [abs(sides[1][0])] * k)  # [m/s]
+            wheel_omega = np.array([sides[0][2]] * k + [sides[1][2]] * k)  # [rad/s]
+            self._relax_sinkage(SOIL_REFRESH_STEPS * dt, span, j[0, :, -1], axle_speed, wheel_omega)
             self._wheel_contact()
 
     def _relax_sinkage(

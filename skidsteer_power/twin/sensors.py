@@ -22,6 +22,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
@@ -335,7 +336,7 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
     stamps = start_ns + np.round(trace.t * NS).astype(np.int64)
     every_cmd, every_odom, every_bat = _every()
     vec, twist_t = T['geometry_msgs/msg/Vector3'], T['geometry_msgs/msg/Twist']
-    with BagWriter(path) as writer:
+    with BagWriter(Path(path)) as writer:
         cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
         js = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
         odom = writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
@@ -374,7 +375,7 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
     return Path(path)
 
 
-def _header(types: dict, stamp_ns: int, frame: str) -> object:
+def _header(types: dict, stamp_ns: int, frame: str) -> Any:
     sec, nsec = divmod(int(stamp_ns), NS)
     return types['std_msgs/msg/Header'](types['builtin_interfaces/msg/Time'](sec, nsec), frame)
 
