@@ -80,6 +80,20 @@ def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
     assert energy.return_J == pytest.approx(straight, rel=1e-12)
 
 
+def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map):
+    """Maps flag turns tighter than 2 x tread as ``limited`` (maps module doc): a half circle of
+    R = 0.3 m (< 2 x 0.426 m for the test robot's track) is counted there and back; a straight
+    path has no flagged segment."""
+    power_map, powertrain, vehicle = track_map
+    assert 2 * vehicle.tread_m > 0.3
+    angle = np.radians(np.arange(0, 181, 10))
+    x, y = 0.3 * np.sin(angle), 0.3 * (1.0 - np.cos(angle))
+    tight = path_energy(x, y, SPEED, power_map, powertrain)
+    assert tight.limited_segments >= 2 * 17 and tight.clamped_segments == 0  # 17 turning chords
+    straight = path_energy(np.array([0.0, 5.0]), np.zeros(2), SPEED, power_map, powertrain)
+    assert (straight.limited_segments, straight.clamped_segments) == (0, 0)
+
+
 @pytest.mark.parametrize(
     ('x', 'y', 'speed'), [([0.0], [0.0], 0.3), ([0, 0], [0, 0], 0.3), ([0, 1], [0, 0], 0.0)]
 )

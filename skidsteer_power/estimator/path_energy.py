@@ -123,6 +123,7 @@ class PathEnergy:
     return_J: float
     clamped_segments: int
     terrain_scale: float = 1.0
+    limited_segments: int = 0  # segments the map flagged limited (physics limit, cell check)
 
     @property
     def required_wh(self) -> float:
@@ -160,6 +161,7 @@ class PlannedPath:
             return_J=back['energy_battery_J'],
             clamped_segments=int(there['clamped_segments'] + back['clamped_segments']),
             terrain_scale=float(terrain_scale),
+            limited_segments=int(there['limited_segments'] + back['limited_segments']),
         )
 
 

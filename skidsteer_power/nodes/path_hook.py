@@ -127,12 +127,17 @@ class PathEnergyHook:
                 'path_required_wh': f'{energy.required_wh:.3f}',
                 'path_margin_wh': f'{margin:.3f}',
                 'terrain_scale': f'{energy.terrain_scale:.4f}',
+                'clamped_segments': str(energy.clamped_segments),
+                'limited_segments': str(energy.limited_segments),
             }
             if margin < 0:
                 level = DiagnosticStatus.WARN
                 message = f'not enough energy for the path and back: margin {margin:.2f} Wh'
             else:
                 message = f'path and back leave {margin:.2f} Wh'
+            flagged = energy.clamped_segments + energy.limited_segments
+            if flagged:
+                message += f" ({flagged} segments outside the map's validity: clamped or limited)"
         status = DiagnosticStatus(level=level, name=f'{self.node.get_name()}: path energy', message=message)
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         array = DiagnosticArray(status=[status])

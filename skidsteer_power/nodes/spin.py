@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import inspect
 import sys
 from collections.abc import Callable
 from typing import Any
 
 import rclpy
+import rclpy.logging
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -28,7 +30,25 @@ class LeanExecutor(SingleThreadedExecutor):
     is only for nodes whose callbacks are plain functions that never await.
     """
 
+    _PRIVATE = ('_tasks', '_tasks_lock', '_work_tracker', '_is_shutdown')
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        base = getattr(SingleThreadedExecutor, '_make_handler', None)
+        expected = ['self', 'entity', 'node', 'take_from_wait_list']
+        self.lean = (
+            base is not None
+            and list(inspect.signature(base).parameters) == expected
+            and all(hasattr(self, name) for name in self._PRIVATE)
+        )
+        if not self.lean:  # another rclpy: its own executor, unchanged (correct, only slower)
+            rclpy.logging.get_logger('spin').warning(
+                "LeanExecutor: this rclpy's executor internals differ from 7.1.6; using it unchanged"
+            )
+
     def _make_handler(self, entity: Any, node: Any, take_from_wait_list: Callable[[Any], Any]) -> Task:
+        if not self.lean:
+            return super()._make_handler(entity, node, take_from_wait_list)
         entity._executor_event = True  # not back in the wait set until taken, as in rclpy
 
         async def handler(entity: Any, is_shutdown: bool, work_tracker: Any) -> None:
@@ -101,6 +121,11 @@ def spin_node(
     except (SkidsteerError, ParameterException) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         exit_code = 2
+    except Exception:
+        # SIGINT/SIGTERM shut the context down from rclpy's signal handler, possibly while a callback
+        # was publishing ("publisher's context is invalid"): that is the shutdown, not a failure
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

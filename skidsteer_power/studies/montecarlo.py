@@ -39,7 +39,7 @@ def _mission_task(job: tuple[Any, Any, Route, Any, str, str]) -> dict[str, float
     vehicle, terrain, route, powertrain, source, model = job
     result = run_mission(vehicle, terrain, route, source=source, model=model, powertrain=powertrain)
     summary = result.summary()
-    return {k: float(summary[k]) for k in (*MISSION_KEYS, 'clamped_segments')}
+    return {k: float(summary[k]) for k in (*MISSION_KEYS, 'clamped_segments', 'limited_segments')}
 
 
 def mission_uncertainty(
@@ -60,7 +60,7 @@ def mission_uncertainty(
 
     Returns energy_J_p05/p50/p95 (terrain + internal, the mission's ``energy_J``),
     energy_battery_J_p05/p50/p95 and an ``uncertainty`` block (samples, seed, method, source of the
-    spread, sigmas, samples whose map query was clamped).
+    spread, sigmas, samples with a map query flagged clamped or limited).
     """
     sets = draw(spread, terrain, powertrain, samples, seed, method)
     jobs = [
@@ -78,6 +78,7 @@ def mission_uncertainty(
         'spread': spread.source,
         'sigma_SI': spread.sigma,
         'samples_clamped': int(sum(r['clamped_segments'] > 0 for r in results)),
+        'samples_limited': int(sum(r['limited_segments'] > 0 for r in results)),
         'energy_J_mean': float(np.mean([r['energy_J'] for r in results])),
         'energy_J_std': float(np.std([r['energy_J'] for r in results], ddof=1)) if samples > 1 else 0.0,
         'engine': engine.description,
