@@ -56,6 +56,36 @@ def test_time_to_empty_hand_check_against_ideal_source():
     assert Battery.default_test_robot().time_to_empty_s(100.0) < bat.time_to_empty_s(100.0)
 
 
+@pytest.mark.parametrize('soc', [1.0, 0.8, 0.37, 0.06])
+@pytest.mark.parametrize('power', [5.0, 150.0, 900.0])
+def test_closed_form_time_to_empty_equals_numerical_quadrature(soc, power):
+    """The closed form (module doc) against scipy's adaptive quadrature of the same integral,
+    t = integral_{SOC_empty}^{SOC} Q / i(P, SOC') dSOC' with i from the equivalent circuit."""
+    from scipy.integrate import quad
+
+    bat = Battery.default_test_robot(soc=soc)
+    cfg = bat.config
+    breaks = [p for p in cfg.soc_points if cfg.soc_empty < p < soc]
+    expected, _ = quad(
+        lambda s: cfg.capacity_C / bat.current_for_power(power, s),
+        cfg.soc_empty,
+        soc,
+        points=breaks or None,
+        limit=200,
+        epsabs=1e-9,
+        epsrel=1e-11,
+    )
+    assert bat.time_to_empty_s(power) == pytest.approx(expected, rel=1e-9)
+
+
+def test_time_to_empty_refuses_a_power_the_pack_cannot_deliver():
+    bat = Battery.default_test_robot(soc=0.5)
+    v_empty = float(bat.config.ocv(bat.config.soc_empty))
+    too_much = 1.01 * v_empty**2 / (4 * bat.config.resistance_ohm)  # beyond max power at empty
+    with pytest.raises(InputError, match='cannot deliver'):
+        bat.time_to_empty_s(too_much)
+
+
 def test_regeneration_charges_but_not_above_full():
     bat = Battery.default_test_robot(soc=0.5)
     bat.step(-50.0, 60.0)

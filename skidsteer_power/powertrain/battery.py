@@ -7,8 +7,12 @@ Equivalent circuit (one lumped cell string, SI units)::
     dSOC/dt = -i / Q                                       (coulomb counting; Q = capacity [C])
 
 At constant power the discharge is the ODE above; its time to empty is
-t = integral_{SOC_empty}^{SOC} Q / i(P, SOC') dSOC' (scipy ``quad``), and :meth:`Battery.step` integrates
-the same ODE (RK4 sub-steps), so a battery drained at constant power empties at the computed time.
+t = integral_{SOC_empty}^{SOC} Q / i(P, SOC') dSOC', in closed form: Q / i = Q (V_oc + sqrt(V_oc^2 - 4 R P))
+/ (2 P) and V_oc is linear in SOC between table points, so each piece integrates exactly
+(integral sqrt(u^2 - c) du = u sqrt(u^2 - c) / 2 - c ln(u + sqrt(u^2 - c)) / 2). It replaced scipy
+``quad`` (the estimator evaluates it at 5 Hz, three times a tick: ~0.5 ms per call with ``quad``;
+the test compares both). :meth:`Battery.step` integrates the same ODE (RK4 sub-steps), so a battery
+drained at constant power empties at the computed time.
 Remaining energy is the open-circuit energy Q integral V_oc dSOC (what a lossless load could draw);
 :meth:`Battery.remaining_wh_at` subtracts the internal-resistance loss at a given load.
 """
@@ -22,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import quad
 
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.powertrain.config import merged
@@ -241,18 +244,21 @@ class Battery:
             raise InputError(f'power must be finite, not {power_W}')
         if power_W <= 0 or self.is_empty:
             return math.inf if power_W <= 0 else 0.0
-        q = self.config.capacity_C
-        breaks = [p for p in self.config.soc_points if self.config.soc_empty < p < self.state.soc]
-        value, _ = quad(
-            lambda s: q / self.current_for_power(power_W, s),
-            self.config.soc_empty,
-            self.state.soc,
-            points=breaks or None,
-            limit=200,
-            epsabs=1e-9,
-            epsrel=1e-10,
-        )
-        return float(value)
+        cfg = self.config
+        low, high = cfg.soc_empty, self.state.soc
+        soc = np.unique(np.clip(np.r_[low, high, cfg.soc_points], low, high))  # the linear pieces
+        v = np.asarray(cfg.ocv(soc), dtype=float)
+        c = 4.0 * cfg.resistance_ohm * power_W
+        if float(np.min(v)) ** 2 < c:
+            self.current_for_power(power_W, float(soc[np.argmin(v)]))  # raises: cannot deliver
+        root = np.sqrt(v * v - c)
+        antiderivative = 0.5 * (v * root - c * np.log(v + root))  # of sqrt(u^2 - c) du
+        dv, ds = np.diff(v), np.diff(soc)
+        flat = np.abs(dv) <= 1e-12 * v[1:]  # a constant piece: sqrt(v^2 - c) ds
+        slope = np.where(flat, 1.0, dv / np.where(ds > 0, ds, 1.0))
+        sqrt_part = np.where(flat, root[1:] * ds, np.diff(antiderivative) / slope)
+        v_part = 0.5 * (v[1:] + v[:-1]) * ds
+        return float(cfg.capacity_C * np.sum(v_part + sqrt_part) / (2.0 * power_W))
 
     def distance_to_empty_m(self, power_W: float, speed_m_s: float) -> float:
         """Distance [m] until empty driving at ``speed_m_s`` [m/s] with constant power [W]."""
