@@ -131,3 +131,27 @@ def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
     # eq. 2.6 above: sinkage falls with kphi, about -0.90 % per % (central difference)
     assert derivs['kphi']['max_sinkage_m']['status'] == 'ok'
     assert derivs['kphi']['max_sinkage_m']['derivative'] == pytest.approx(-0.9, abs=0.02)
+
+
+def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_study():
+    """A sampled soil can be too weak for a small wheel to roll free: on sandy_soil with phi = 20 deg
+    and c = 200 Pa no slip in [-1, 1] gives a 0.08 m x 0.05 m wheel zero drawbar pull (eq. 2.29 has no
+    root; FESS's free-wheel load table, models/fess.py, cannot be built). The candidate is reported
+    unsolved for that soil; the other candidates of the chunk are still solved."""
+    import dataclasses
+    import math
+
+    from skidsteer_power.errors import ConvergenceError
+    from skidsteer_power.missions.design import _evaluate_chunk
+    from skidsteer_power.terramechanics.wheel import solve_wheel
+
+    weak = dataclasses.replace(load_terrain('sandy_soil'), phi=math.radians(20.0), c=200.0)
+    with pytest.raises(ConvergenceError):
+        solve_wheel(weak, 50.0, 0.0, 0.08, 0.05)
+    small = next(
+        c for c in grid() if c['configuration'] == '4-wheel' and (c['radius_m'], c['width_m']) == (0.08, 0.05)
+    )
+    track = next(c for c in grid() if c['configuration'] == 'track')
+    out = _evaluate_chunk(([small, track], weak, 'fess'))
+    assert out[0]['converged'] is False and out[0]['power_straight_W'] is None
+    assert out[1]['index'] == track['index'] and 'power_straight_W' in out[1]
