@@ -106,3 +106,22 @@ def test_four_and_six_wheels_of_equal_weight_have_equal_capacity_and_drive_table
         assert np.all(sol.traction_margin > 0), name
         caps.append(np.abs(sol.thrust[0, 0]) / (1.0 - sol.traction_margin[0]))
     assert caps[1] == pytest.approx(caps[0], rel=0.05)
+
+
+def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises():
+    """On sandy_soil with phi = 20 deg and c = 200 Pa no slip in [-1, 1] gives a 0.08 m x 0.05 m wheel
+    zero drawbar pull (eq. 2.29 has no root), so FESS's free-wheel table cannot be built: a batch
+    marks every point unsolved (NaN, converged False), a single point raises."""
+    import dataclasses
+    import math
+
+    from skidsteer_power.errors import ConvergenceError
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    weak = dataclasses.replace(load_terrain('sandy_soil'), phi=math.radians(20.0), c=200.0)
+    small = dataclasses.replace(load_vehicle('test_robot_4wheel'), wheel_radius_m=0.08, wheel_width_m=0.05)
+    state = fess.solve(small, weak, [0.2, 0.2], [math.inf, 2.0])
+    assert not state.converged.any() and np.isnan(state.torque_outer_Nm).all()
+    assert state.speed_m_s.tolist() == [0.2, 0.2] and state.turn_radius_m.tolist() == [math.inf, 2.0]
+    with pytest.raises(ConvergenceError):
+        fess.solve(small, weak, 0.2, math.inf)

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.errors import InputError
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
 
@@ -85,15 +85,6 @@ def candidate_vehicle(c: dict[str, Any]) -> Any:
     )
 
 
-UNSOLVED_FIELDS = (
-    'power_straight_W',
-    'power_turning_W',
-    'internal_straight_W',
-    'internal_turning_W',
-    'sinkage_m',
-)
-
-
 def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
     """Solve (candidates, terrain, model[, powertrain sample]) (see skidsteer_power.studies)."""
     from skidsteer_power.models import solve
@@ -107,18 +98,14 @@ def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
     out = []
     for c in candidates:
         vehicle = candidate_vehicle(c)
-        try:
-            state = solve(
-                vehicle,
-                terrain,
-                SPEED_M_S,
-                np.array([np.inf, TURN_RADIUS_M]),
-                model=model,
-                raise_on_failure=False,
-            )
-        except ConvergenceError:  # e.g. a wheel that cannot roll free on this soil (FESS's load table)
-            out.append(c | dict.fromkeys(UNSOLVED_FIELDS) | {'converged': False})
-            continue
+        state = solve(
+            vehicle,
+            terrain,
+            SPEED_M_S,
+            np.array([np.inf, TURN_RADIUS_M]),
+            model=model,
+            raise_on_failure=False,
+        )
         pt = powertrains[vehicle.running_gear]
         parts = [
             pt.motor_side(side, state.side('torque', side), state.side('omega', side))

@@ -9,6 +9,7 @@ equal). Every field is a numpy array broadcast over the operating points.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -53,6 +54,20 @@ class SteadyState:
     converged: np.ndarray
     model: str = ''
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @classmethod
+    def unsolved(cls, speed: np.ndarray, turn_radius: np.ndarray, model: str) -> SteadyState:
+        """Every point not converged (NaN results): a batch the model could not even set up."""
+        fixed = ('speed_m_s', 'turn_radius_m', 'converged', 'model', 'extra')
+        shape = np.shape(speed)
+        results: dict[str, Any] = {f.name: np.full(shape, np.nan) for f in fields(cls) if f.name not in fixed}
+        return cls(
+            speed_m_s=np.asarray(speed, dtype=float),
+            turn_radius_m=np.asarray(turn_radius, dtype=float),
+            converged=np.zeros(shape, dtype=bool),
+            model=model,
+            **results,
+        )
 
     @property
     def yaw_rate_rad_s(self) -> np.ndarray:

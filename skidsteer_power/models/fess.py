@@ -781,7 +781,9 @@ def solve(
 
     Arrays broadcast; the whole batch is one Newton solve. A scalar call raises ConvergenceError
     naming (V, R) if it fails; a batch marks failures ``converged=False`` unless
-    ``raise_on_failure=True``. ``n`` is the number of contact elements per track or wheel.
+    ``raise_on_failure=True`` - also when the contact cannot be set up at all (e.g. a wheel that
+    cannot roll free on the soil: no root of eq. 2.29 for the free-wheel table). ``n`` is the
+    number of contact elements per track or wheel.
     """
     if options:
         raise InputError(f'unknown FESS option(s): {", ".join(sorted(options))}')
@@ -791,12 +793,17 @@ def solve(
     if np.any(~np.isfinite(v)) or np.any(np.isnan(r)) or np.any(r == 0):
         raise InputError('speed must be finite and the turning radius non-zero (inf = straight)')
     yaw = np.where(np.isinf(r), 0.0, v / np.where(np.isinf(r), 1.0, r))
-    start = time.perf_counter()
-    sol = FessSolver(vehicle, terrain, n).solve_twist(v, yaw, tol=tol)
-    elapsed = time.perf_counter() - start
-    state = to_steady_state(sol, r, elapsed)
     if raise_on_failure is None:
         raise_on_failure = shape == ()
+    start = time.perf_counter()
+    try:
+        sol = FessSolver(vehicle, terrain, n).solve_twist(v, yaw, tol=tol)
+    except ConvergenceError:
+        if raise_on_failure:
+            raise
+        return _reshape(SteadyState.unsolved(v, r, 'fess'), shape)
+    elapsed = time.perf_counter() - start
+    state = to_steady_state(sol, r, elapsed)
     if raise_on_failure and not np.all(state.converged):
         k = int(np.flatnonzero(~state.converged)[0])
         raise ConvergenceError(
