@@ -30,6 +30,8 @@ TRACTION_WARNING_MARGIN = 0.1  # power_estimator's traction_warning_margin defau
 
 PREDICTED = '#1f77b4'
 MEASURED = '#d62728'
+ALARM = '#d62728'
+OK = '#2ca02c'
 
 
 def _series(fl: Any, topic: str, label: str, color: str, dashed: bool = False) -> Any:
@@ -40,6 +42,25 @@ def _series(fl: Any, topic: str, label: str, color: str, dashed: bool = False) -
         enabled=True,
         timestamp_method='receiveTime',
         line_style='dashed' if dashed else 'solid',
+    )
+
+
+def _indicator(
+    fl: Any, title: str, topic: str, alarm: tuple[str, str], alarm_label: str, ok_label: str
+) -> Any:
+    """A red/green indicator of ``topic``'s Float64: red with ``alarm_label`` while ``data <op> value``
+    for ``alarm`` = (op, value), else green with ``ok_label``."""
+    operator, value = alarm
+    return fl.IndicatorPanel(
+        title=title,
+        config=fl.IndicatorConfig(
+            path=f'{topic}.data',
+            style='background',
+            font_size=28,
+            rules=[fl.IndicatorRule(operator=operator, raw_value=value, color=ALARM, label=alarm_label)],
+            fallback_color=OK,
+            fallback_label=ok_label,
+        ),
     )
 
 
@@ -84,23 +105,13 @@ def operator_layout() -> Any:
             show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=600.0,
         ),
     )  # fmt: skip
-    time_to_empty = fl.IndicatorPanel(
-        title='time to empty [s]',
-        config=fl.IndicatorConfig(
-            path='/energy/time_to_empty_s.data', style='background', font_size=28,
-            rules=[fl.IndicatorRule(operator='<', raw_value=str(LOW_TIME_TO_EMPTY_S), color='#d62728',
-                                    label='battery low: under 10 min')],
-            fallback_color='#2ca02c', fallback_label='time to empty',
-        ),
+    time_to_empty = _indicator(
+        fl, 'time to empty [s]', '/energy/time_to_empty_s', ('<', str(LOW_TIME_TO_EMPTY_S)),
+        'battery low: under 10 min', 'time to empty',
     )  # fmt: skip
-    traction = fl.IndicatorPanel(
-        title='traction margin [-]',
-        config=fl.IndicatorConfig(
-            path='/power/traction_margin.data', style='background', font_size=28,
-            rules=[fl.IndicatorRule(operator='<=', raw_value=str(TRACTION_WARNING_MARGIN), color='#d62728',
-                                    label='TRACTION WARNING: the robot may get stuck')],
-            fallback_color='#2ca02c', fallback_label='traction ok',
-        ),
+    traction = _indicator(
+        fl, 'traction margin [-]', '/power/traction_margin', ('<=', str(TRACTION_WARNING_MARGIN)),
+        'TRACTION WARNING: the robot may get stuck', 'traction ok',
     )  # fmt: skip
     traction_plot = fl.PlotPanel(
         title='traction margin [-] and time to empty [s]',
@@ -113,14 +124,9 @@ def operator_layout() -> Any:
             show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=120.0,
         ),
     )  # fmt: skip
-    path_margin = fl.IndicatorPanel(
-        title='path margin [Wh]',
-        config=fl.IndicatorConfig(
-            path='/energy/path_margin_wh.data', style='background', font_size=28,
-            rules=[fl.IndicatorRule(operator='<', raw_value='0', color='#d62728',
-                                    label='CANNOT drive the path and return')],
-            fallback_color='#2ca02c', fallback_label='path and return ok',
-        ),
+    path_margin = _indicator(
+        fl, 'path margin [Wh]', '/energy/path_margin_wh', ('<', '0'),
+        'CANNOT drive the path and return', 'path and return ok',
     )  # fmt: skip
     path_energy = fl.PlotPanel(
         title='planned path: energy required and margin [Wh]',
