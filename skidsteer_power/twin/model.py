@@ -29,7 +29,7 @@ Terrain contact (see docs/TWIN.md for where this agrees with and departs from th
   lateral integral of eq. 4.9, axle torque eq. 2.34. The sinkage is a state relaxed towards the
   vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer, every
   ``SOIL_REFRESH_STEPS``.
-* beyond the steady models (``bulldozing=False`` switches both off): slip-sinkage, an excavated
+* beyond the steady models (``dig_and_bulldoze=False`` switches both off): slip-sinkage, an excavated
   rut under each wheel (Lyasko 2010, :func:`slip_sinkage_factor`), and bulldozing of the contacts'
   side walls against their lateral motion and of the excavated step against travel (Hegedus, as
   Ishigami et al. 2007 apply it, :func:`bulldozing_coefficients`).
@@ -171,7 +171,7 @@ class Twin:
         patches: list[Patch] | None = None,
         seed: int = 0,
         dt: float = DEFAULT_DT_S,
-        bulldozing: bool = True,
+        dig_and_bulldoze: bool = True,
     ) -> None:
         if not (0 < dt <= DEFAULT_DT_S):
             raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
@@ -182,7 +182,8 @@ class Twin:
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
         self.dt = dt
-        self.bulldozing = bulldozing  # False: the steady models' contact (no side-wall resistance)
+        # False: the steady models' contact (no slip-sinkage, no side-wall or step-face bulldozing)
+        self.dig_and_bulldoze = dig_and_bulldoze
         pt, motor = self.powertrain, self.powertrain.motor
         self.G = pt.gear_ratio
         self.r = vehicle.drive_radius_m
@@ -371,7 +372,7 @@ class Twin:
             self._sinkage = float(np.max(sinkage))
             bull_a, bull_b = bulldozing_coefficients(t)
             side_wall = (bull_a + bull_b * sinkage) * sinkage  # R_b [N/m] per side
-            self._bull_w = side_wall[:, None] * self.track_dx * (1.0 if self.bulldozing else 0.0)
+            self._bull_w = side_wall[:, None] * self.track_dx * (1.0 if self.dig_and_bulldoze else 0.0)
             self._track_moments()
             return
         p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
@@ -387,7 +388,7 @@ class Twin:
             sink[mask] = soil.sinkage_for_pressure(t, p[mask], b)
             bull_a, bull_b = bulldozing_coefficients(t)
             side_wall[mask] = (bull_a + bull_b * sink[mask]) * sink[mask]
-        self._bull_w = side_wall.mean(axis=2) * self.track_dx * (1.0 if self.bulldozing else 0.0)
+        self._bull_w = side_wall.mean(axis=2) * self.track_dx * (1.0 if self.dig_and_bulldoze else 0.0)
         share = self.node_w / (b * length)  # each node's share of the rut
         self._tau_max_w = strength * self.node_w
         self._rc = (rc * share).sum(axis=(1, 2))
@@ -549,7 +550,7 @@ class Twin:
         for wheel, coefficients in enumerate(angles):
             groups.setdefault((int(self.wheel_side[wheel]), coefficients), []).append(wheel)
         self._wp_groups = [(side, coefficients, wheels) for (side, coefficients), wheels in groups.items()]
-        on = 1.0 if self.bulldozing else 0.0
+        on = 1.0 if self.dig_and_bulldoze else 0.0
         bull = [bulldozing_coefficients(t) for t in terrains]
         self._wp_bull = (column([on * a for a, _ in bull]), column([on * b_ for _, b_ in bull]))
         if all(t.shear_type == 'A' for t in terrains):
@@ -810,7 +811,7 @@ class Twin:
         ratio = np.minimum(np.maximum(ratio, 0.5), 2.0)
         arc = np.maximum(r * span, 1e-6)  # [m]
         transits = (r * om + ground) / arc  # [1/s]
-        if self.bulldozing:  # slip-sinkage (Lyasko 2010): the excavation relaxes like the sinkage
+        if self.dig_and_bulldoze:  # slip-sinkage (Lyasko 2010): the excavation relaxes like the sinkage
             # at the slip the soil has felt: the steady slip whose displacement at the exit (eq. 2.25:
             # j_r = r [(theta_f - theta_r) - (1 - i)(sin(theta_f) - sin(theta_r))]) is the rim's j there
             # (= i in steady running; a wheel spinning up from rest has not yet sheared the soil; the
