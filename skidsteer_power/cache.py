@@ -10,12 +10,15 @@ files miss the cache and get rebuilt; no version tag is bumped by hand.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
 import os
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 CACHE_ENV = 'SKIDSTEER_POWER_CACHE'
 _PACKAGE = Path(__file__).resolve().parent
@@ -27,6 +30,26 @@ def default_cache_dir() -> Path:
     """$SKIDSTEER_POWER_CACHE, else ~/.cache/skidsteer_power."""
     env = os.environ.get(CACHE_ENV)
     return Path(env).expanduser() if env else Path.home() / '.cache' / 'skidsteer_power'
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
+    """A binary file to write ``path`` through: a uniquely named temporary file beside it, flushed to
+    disk and renamed onto ``path`` when the block ends, deleted if it raises. Readers never see half
+    a file, and processes writing the same path at once (Dask workers building one map) each rename
+    a whole file of their own."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp', dir=target.parent)
+    try:
+        with os.fdopen(fd, 'wb') as tmp:
+            yield tmp
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.replace(tmp_name, target)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
 
 
 def physics_files() -> list[Path]:

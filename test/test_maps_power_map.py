@@ -262,3 +262,24 @@ def test_cache_key_holds_the_options_and_the_physics_code(tmp_path):
     assert cache_path(PACKBOT, DRY, tmp_path, min_radius=0.5) != default
     names = {p.name for p in physics_files()}
     assert {'vehicle.py', 'terrain.py', 'base.py', 'fess.py', 'power_map.py', 'interpolation.py'} <= names
+
+
+def test_writers_of_one_cache_file_at_once_each_rename_a_whole_file(tmp_path):
+    """Two Dask workers can build and save the same map at the same moment: each writes its own
+    temporary file, so the target is always one writer's whole file and no temporary file is left
+    (a shared temporary name let the first rename take the second writer's file from under it)."""
+    from skidsteer_power.cache import atomic_file
+
+    target = tmp_path / 'map.npz'
+    with atomic_file(target) as first:
+        first.write(b'first, ')
+        with atomic_file(target) as second:
+            second.write(b'second writer, whole')
+        assert target.read_bytes() == b'second writer, whole'
+        first.write(b'whole')
+    assert target.read_bytes() == b'first, whole'
+    with pytest.raises(RuntimeError), atomic_file(target) as failing:
+        failing.write(b'half')
+        raise RuntimeError('the build failed')
+    assert target.read_bytes() == b'first, whole'
+    assert [p.name for p in tmp_path.iterdir()] == ['map.npz']

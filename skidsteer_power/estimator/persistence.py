@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.cache import atomic_file
 from skidsteer_power.errors import ConfigError
 
 FORMAT_VERSION = 1
@@ -26,19 +26,9 @@ FORMAT_VERSION = 1
 
 def save_state(path: str | os.PathLike, state: dict[str, Any]) -> None:
     """Atomically write ``state`` (JSON-serializable) to ``path``, creating parent directories."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
     payload = json.dumps({'format_version': FORMAT_VERSION, **state}, indent=1, sort_keys=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp', dir=target.parent)
-    try:
-        with os.fdopen(fd, 'w', encoding='utf-8') as tmp:
-            tmp.write(payload)
-            tmp.flush()
-            os.fsync(tmp.fileno())
-        os.replace(tmp_name, target)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as tmp:
+        tmp.write(payload.encode('utf-8'))
 
 
 def load_state(path: str | os.PathLike) -> dict[str, Any] | None:

@@ -75,7 +75,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from skidsteer_power.cache import default_cache_dir, options_digest, physics_digest
+from skidsteer_power.cache import atomic_file, default_cache_dir, options_digest, physics_digest
 from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.terramechanics.terrain import terrain_fingerprint
@@ -343,21 +343,19 @@ class PowerMap:
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the map to ``path`` (.npz, with vehicle, terrain and model version inside)."""
         target = Path(path)
-        target.parent.mkdir(parents=True, exist_ok=True)
         arrays = {f'value_{k}': v for k, v in self.values.items()}
-        tmp = target.with_name(target.name + '.tmp.npz')
-        np.savez_compressed(
-            tmp,
-            radial=self.radial,
-            angles=self.angles,
-            length_m=np.array(self.length_m),
-            converged=self.converged,
-            limited=self.limited,
-            cell_error=self.cell_error,  # type: ignore[arg-type]
-            meta=np.array(json.dumps(self.meta)),
-            **arrays,  # type: ignore[arg-type]
-        )
-        os.replace(tmp, target)  # atomic: a reader never sees half a map
+        with atomic_file(target) as tmp:  # a reader never sees half a map
+            np.savez_compressed(
+                tmp,
+                radial=self.radial,
+                angles=self.angles,
+                length_m=np.array(self.length_m),
+                converged=self.converged,
+                limited=self.limited,
+                cell_error=self.cell_error,  # type: ignore[arg-type]
+                meta=np.array(json.dumps(self.meta)),
+                **arrays,  # type: ignore[arg-type]
+            )
         self.path = target
         return target
 

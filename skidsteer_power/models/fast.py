@@ -18,7 +18,6 @@ Eq. 5.2 typo: A2 is printed with (R_to + R_ti) B/2; eq. 5.1 (and straight runnin
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass
 from functools import lru_cache
@@ -28,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.optimize import elementwise
 
+from skidsteer_power.cache import atomic_file
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.loads import omega_for_slip, operating_points, side_loads, sideslip_angle
@@ -134,10 +134,8 @@ def turning_tables(vehicle: Vehicle, terrain: Terrain, source: str = 'wong') -> 
 
 def _save(path: Path, tables: TurningTables) -> None:
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + '.tmp.npz')
-        np.savez(tmp, speeds=tables.speeds, curvatures=tables.curvatures, mu_t=tables.mu_t, s0=tables.s0)
-        os.replace(tmp, path)
+        with atomic_file(path) as tmp:
+            np.savez(tmp, speeds=tables.speeds, curvatures=tables.curvatures, mu_t=tables.mu_t, s0=tables.s0)
     except OSError:
         pass  # a read-only cache only costs a regeneration next time
 
