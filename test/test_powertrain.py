@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -91,6 +92,19 @@ def test_motor_side_power_balance():
     np.testing.assert_allclose(mp.electrical_power_W, mp.terminal_power_W / DES_70_10.efficiency)
     np.testing.assert_allclose(mp.current_A * EC45.torque_constant_Nm_A, mp.motor_torque_Nm)
     np.testing.assert_allclose(mp.motor_omega_rad_s, 12 * omega)
+
+
+def test_motor_sides_is_motor_side_of_each_side():
+    """Both sides at once (the estimator's per-message path) = one side at a time. Table 7.1's two
+    sides differ (Motor 2), and one side brakes, so each side's own resistance and quadrant count."""
+    pt = Powertrain.default_test_robot('track')
+    torque, omega = np.array([[4.0, -2.5], [0.0, 1.0]]), np.array([[1.5, 2.0], [-0.5, 0.0]])
+    both = pt.motor_sides(torque, omega)
+    for i, side in enumerate(('left', 'right')):
+        one = pt.motor_side(side, torque[:, i], omega[:, i])
+        for field in dataclasses.fields(one):
+            np.testing.assert_array_equal(getattr(both, field.name)[:, i], getattr(one, field.name))
+    assert pt.right.total != pt.left.total
 
 
 def test_regeneration_never_creates_energy():

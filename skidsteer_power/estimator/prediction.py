@@ -103,6 +103,12 @@ def _pair(left: Any, right: Any) -> Pair:
     return _scalar(left), _scalar(right)
 
 
+def _sides(values: np.ndarray) -> Pair:
+    """(left, right) floats from an array of shape (2,)."""
+    left, right = values.tolist()
+    return left, right
+
+
 class MapPredictor:
     """Prediction from a :class:`skidsteer_power.maps.PowerMap` and a powertrain.
 
@@ -133,19 +139,19 @@ class MapPredictor:
     def _with_powertrain(
         self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: Any
     ) -> Prediction:
-        left, right = (self.powertrain.motor_side(side, torque[i], omega[i]) for i, side in enumerate(SIDES))
+        point = self.powertrain.motor_sides(torque, omega)  # both sides in one call
         return Prediction(
             speed_m_s=speed,
             yaw_rate_rad_s=yaw_rate,
             axle_omega_rad_s=omega,
             terrain_torque_Nm=torque,
-            terrain_W=_pair(left.terrain_power_W, right.terrain_power_W),
-            internal_W=_pair(left.internal_power_W, right.internal_power_W),
-            motor_omega_rad_s=_pair(left.motor_omega_rad_s, right.motor_omega_rad_s),
-            motor_torque_Nm=_pair(left.motor_torque_Nm, right.motor_torque_Nm),
-            current_A=_pair(left.current_A, right.current_A),
-            electrical_W=_pair(left.terminal_power_W, right.terminal_power_W),
-            bus_W=_pair(left.electrical_power_W, right.electrical_power_W),
+            terrain_W=_sides(point.terrain_power_W),
+            internal_W=_sides(point.internal_power_W),
+            motor_omega_rad_s=_sides(point.motor_omega_rad_s),
+            motor_torque_Nm=_sides(point.motor_torque_Nm),
+            current_A=_sides(point.current_A),
+            electrical_W=_sides(point.terminal_power_W),
+            bus_W=_sides(point.electrical_power_W),
             traction_margin=_scalar(q.traction_margin),
             clamped=bool(_scalar(q.clamped)),
             limited=bool(_scalar(q.limited)),

@@ -16,7 +16,8 @@ top and are reported separately.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.powertrain.config import merged
-from skidsteer_power.powertrain.internal import SideResistance, side_from_config
+from skidsteer_power.powertrain.internal import Resistance, SideResistance, side_from_config
 from skidsteer_power.powertrain.motor import (
     DES_70_10,
     EC45,
@@ -154,10 +155,30 @@ class Powertrain:
         All four quadrants: a negative torque * speed (braking) makes the motor generate and the
         bus power negative, never larger in magnitude than the braking power the axle delivers.
         """
+        return self._motor_point(self.resistance(side).total, axle_torque_Nm, axle_omega_rad_s)
+
+    def motor_sides(
+        self, axle_torque_Nm: np.ndarray | Sequence[float], axle_omega_rad_s: np.ndarray | Sequence[float]
+    ) -> MotorPoint:
+        """:meth:`motor_side` of both sides at once: inputs and outputs have (left, right) on their
+        last axis [N m, rad/s] (one call per prediction instead of two, issue 18)."""
+        return self._motor_point(self._both_sides, axle_torque_Nm, axle_omega_rad_s)
+
+    @functools.cached_property
+    def _both_sides(self) -> Resistance:
+        """Left and right total resistance as one :class:`Resistance` whose coefficients are (left,
+        right) arrays; its ``torque`` broadcasts them over the last axis."""
+        left, right = self.left.total, self.right.total
+        return Resistance(
+            np.array([left.viscous_Nm_s, right.viscous_Nm_s]),  # type: ignore[arg-type]
+            np.array([left.coulomb_Nm, right.coulomb_Nm]),  # type: ignore[arg-type]
+        )
+
+    def _motor_point(self, resistance: Resistance, axle_torque_Nm: Any, axle_omega_rad_s: Any) -> MotorPoint:
         torque_a = np.asarray(axle_torque_Nm, dtype=float)
         omega_a = np.asarray(axle_omega_rad_s, dtype=float)
         omega_m = self.gear_ratio * omega_a
-        internal_m = self.resistance(side).torque(omega_m)
+        internal_m = resistance.torque(omega_m)  # eq. 7.1, at the motor shaft
         torque_m = torque_a / self.gear_ratio + internal_m
         p_terminal = terminal_power(self.motor, torque_m, omega_m)
         return MotorPoint(

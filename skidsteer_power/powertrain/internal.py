@@ -33,6 +33,7 @@ components ``viscous_A_s``/``coulomb_A`` instead of ``viscous_Nm_s``/``coulomb_N
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -86,9 +87,9 @@ class SideResistance:
 
     components: Mapping[str, Resistance] = field(default_factory=dict)
 
-    @property
+    @functools.cached_property
     def total(self) -> Resistance:
-        """Sum of all components (eq. 7.4's left-hand side)."""
+        """Sum of all components (eq. 7.4's left-hand side); computed once (per message otherwise)."""
         total = Resistance(0.0, 0.0)
         for part in self.components.values():
             total = total + part
