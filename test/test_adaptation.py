@@ -115,6 +115,19 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
 
 
 # --- time-to-empty bounds -------------------------------------------------------------------------
+def test_block_means_by_hand():
+    """Samples every 1 s from t = 3 s, power = t [W], 10 s blocks from the first sample: blocks
+    3-12 s and 13-22 s are complete, 23-25 s is still filling. Means by hand: (3 + ... + 12) / 10 =
+    7.5 W and (13 + ... + 22) / 10 = 17.5 W. The window (300 s) drops nothing here."""
+    bounds = TimeToEmptyBounds()
+    for t in range(3, 26):
+        bounds.add(float(t), float(t))
+    np.testing.assert_allclose(bounds.block_means(), [7.5, 17.5])
+    # a clock stepping back lands in an earlier block of its own, never in the wrong mean
+    bounds.add(1.0, 100.0)
+    assert len(bounds.block_means()) == 3
+
+
 def test_bounds_follow_the_documented_formula():
     """Constant power: block spread 0 and block mean = P, so with model spread s the bounds are the
     battery's time at P (1 +- z90 s); before three blocks the default spread applies."""

@@ -56,27 +56,38 @@ class TimeToEmptyBounds:
 
     def __init__(self, settings: BoundSettings | None = None) -> None:
         self.settings = settings or BoundSettings()
-        self._samples: deque[tuple[float, float]] = deque()
+        self._time_s: deque[float] = deque()
+        self._power_W: deque[float] = deque()
 
     def add(self, now_s: float, power_W: float) -> None:
         """One sample of the drive power in use at ``now_s`` [s] (0 when idle) [W]."""
-        self._samples.append((now_s, power_W))
-        while self._samples and self._samples[0][0] < now_s - self.settings.window_s:
-            self._samples.popleft()
+        self._time_s.append(now_s)
+        self._power_W.append(power_W)
+        while self._time_s and self._time_s[0] < now_s - self.settings.window_s:
+            self._time_s.popleft()
+            self._power_W.popleft()
 
     def block_means(self) -> np.ndarray:
-        """Mean power of every complete block in the window [W] (the last block is still filling)."""
-        if len(self._samples) < 2:
-            return np.zeros(0)
-        t = np.array([a for a, _ in self._samples])
-        p = np.array([b for _, b in self._samples])
-        block = np.floor((t - t[0]) / self.settings.block_s).astype(int)
-        done = np.unique(block[block < block.max()])
-        return np.array([p[block == k].mean() for k in done])
+        """Mean power of every complete block in the window [W] (the last block is still filling).
 
-    def spread(self) -> float:
-        """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data)."""
-        means = self.block_means()
+        Called on every estimator tick over up to 1500 samples: grouped with ``np.bincount``, not a
+        mask per block (0.3 ms of the tick's 0.7 ms before, issue 18)."""
+        n = len(self._time_s)
+        if n < 2:
+            return np.zeros(0)
+        t = np.fromiter(self._time_s, float, n)
+        p = np.fromiter(self._power_W, float, n)
+        block = np.floor((t - t[0]) / self.settings.block_s).astype(np.intp)
+        block -= block.min()  # a clock stepping back gives negative blocks: same groups, shifted
+        counts = np.bincount(block)
+        sums = np.bincount(block, weights=p)
+        done = (counts > 0) & (np.arange(counts.size) < block.max())
+        return sums[done] / counts[done]
+
+    def spread(self, means: np.ndarray | None = None) -> float:
+        """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data);
+        ``means``: :meth:`block_means` if already at hand."""
+        means = self.block_means() if means is None else means
         if means.size < self.settings.min_blocks or means.mean() <= 1e-9:
             return self.settings.default_spread
         return float(means.std(ddof=1) / means.mean())
@@ -89,8 +100,8 @@ class TimeToEmptyBounds:
         if power_W <= 1e-9:
             return math.inf, math.inf
         ms = model_spread if math.isfinite(model_spread) else 0.0
-        s = math.hypot(self.spread(), ms)
         means = self.block_means()
+        s = math.hypot(self.spread(means), ms)
         centre = float(means.mean()) if means.size >= self.settings.min_blocks else power_W
         high = max(centre * (1.0 + Z90 * s), power_W)
         low = min(centre * max(1.0 - Z90 * s, self.settings.min_fraction), power_W)
