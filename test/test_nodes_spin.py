@@ -1,7 +1,8 @@
-"""nodes/spin.py over real rclpy and DDS: LeanExecutor runs every callback, timer and service once and
-does not wake itself after each callback; Batched takes a backlog in batches, every message once and in
-order; power_estimator's own main (which spins with both) answers and exits cleanly on SIGTERM and
-SIGINT."""
+"""nodes/spin.py over real rclpy and DDS: LeanExecutor runs every callback, timer, service, client
+response and QoS event once, does not wake itself after each callback, keeps its wait set until an
+entity comes or goes, raises a callback's exception as rclpy does and hands coroutine callbacks to
+rclpy's own executor; Batched takes a backlog in batches, every message once and in order;
+power_estimator's own main (which spins with both) answers and exits cleanly on SIGTERM and SIGINT."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ import uuid
 
 import pytest
 import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
@@ -86,6 +89,97 @@ def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
     received, _, _, _, triggers = _exercise(ros_context, SingleThreadedExecutor)
     assert received == [float(i) for i in range(N_MESSAGES)]
     assert triggers >= 2 * N_MESSAGES
+
+
+def _lean_node(context, name: str):
+    node = rclpy.create_node(name, namespace=f'{name}_{uuid.uuid4().hex[:8]}', context=context)
+    executor = LeanExecutor(context=context)
+    executor.add_node(node)
+    return node, executor
+
+
+def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context):
+    node, executor = _lean_node(ros_context, 'plan')
+    pub = node.create_publisher(Float64, 'x', 10)
+    first: list[float] = []
+    try:
+        sub = node.create_subscription(Float64, 'x', lambda m: first.append(m.data), 10)
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        pub.publish(Float64(data=1.0))
+        _spin_until(executor, lambda: first == [1.0])
+        # the guard fired by create_subscription may cost one more plan; from then on it stays
+        _spin_until(executor, lambda: executor._plan is not None)
+        plan = executor._plan
+        for value in (2.0, 3.0):
+            pub.publish(Float64(data=value))
+            _spin_until(executor, lambda v=value: first[-1] == v)
+            assert executor._plan is plan  # the same wait set served every message
+        # a new entity while spinning: planned in and served
+        second: list[float] = []
+        node.create_subscription(Float64, 'x', lambda m: second.append(m.data), 10)
+        _spin_until(executor, lambda: pub.get_subscription_count() == 2)
+        pub.publish(Float64(data=4.0))
+        _spin_until(executor, lambda: first[-1] == 4.0 and second == [4.0])  # both served
+        _spin_until(executor, lambda: executor._plan is not None)
+        assert len(executor._plan.by_pointer['subscription']) == 2
+        # an entity gone: planned out, its handle released (destroyed), the rest still served
+        node.destroy_subscription(sub)
+        _spin_until(executor, lambda: pub.get_subscription_count() == 1)
+        pub.publish(Float64(data=5.0))
+        _spin_until(executor, lambda: second == [4.0, 5.0])
+        assert first[-1] == 4.0
+        _spin_until(executor, lambda: executor._plan is not None)
+        assert len(executor._plan.by_pointer['subscription']) == 1
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
+def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context):
+    node, executor = _lean_node(ros_context, 'events')
+    incompatible: list[object] = []
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+    callbacks = SubscriptionEventCallbacks(incompatible_qos=incompatible.append)
+
+    def fail(msg: Float64) -> None:
+        raise RuntimeError(f'callback failed on {msg.data}')
+
+    try:
+        # a reliable reader and a best-effort writer do not match: the reader's QoS event (a
+        # waitable) reports it
+        node.create_subscription(Float64, 'x', lambda m: None, reliable, event_callbacks=callbacks)
+        node.create_publisher(Float64, 'x', best_effort)
+        _spin_until(executor, lambda: bool(incompatible))
+        assert incompatible[0].total_count >= 1
+        node.create_subscription(Float64, 'y', fail, 10)
+        pub = node.create_publisher(Float64, 'y', 10)
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        pub.publish(Float64(data=7.0))
+        with pytest.raises(RuntimeError, match=r'callback failed on 7\.0'):
+            _spin_until(executor, lambda: False)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
+def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
+    node, executor = _lean_node(ros_context, 'coro')
+    received: list[float] = []
+
+    async def on_message(msg: Float64) -> None:
+        received.append(msg.data)
+
+    try:
+        node.create_subscription(Float64, 'x', on_message, 10)
+        pub = node.create_publisher(Float64, 'x', 10)
+        _spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        pub.publish(Float64(data=1.5))
+        _spin_until(executor, lambda: received == [1.5])
+        assert executor._plan is None  # rclpy's executor served it
+    finally:
+        executor.shutdown()
+        node.destroy_node()
 
 
 def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):

@@ -1,7 +1,11 @@
-"""The one ``main`` every node shares (ros2/demos style): init, spin, clean shutdown, one error line."""
+"""How the nodes spin: the one ``main`` every node shares (ros2/demos style: init, spin, clean
+shutdown, one error line), and for the per-message nodes a lean executor (:class:`LeanExecutor`),
+publishers without QoS-event handlers (:class:`QuietNode`) and backlogs taken in batches
+(:class:`Batched`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import sys
 from collections.abc import Callable
@@ -9,65 +13,272 @@ from typing import Any
 
 import rclpy
 import rclpy.logging
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import InvalidHandle, ParameterException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.task import Task
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
+from rclpy.utilities import timeout_sec_to_nsec
+from rclpy.waitable import NumberOfEntities, Waitable
 
 from skidsteer_power.errors import SkidsteerError
 
 
 class LeanExecutor(SingleThreadedExecutor):
-    """rclpy's SingleThreadedExecutor without its two guard-condition wake-ups per callback.
+    """A single-threaded executor that keeps its wait set from one wait to the next.
 
-    rclpy (7.1.x) triggers the executor's guard condition twice around every callback, so that a
-    wait set being built in another thread re-reads the entity; in a single thread no wait is in
-    progress while a callback runs, so each trigger only makes the next wait return at once with
-    nothing to do, and the whole wait set (every subscription, timer, service and waitable, built in
-    Python) is rebuilt once more: about half of the executor's CPU per message (issue 18). This is
-    rclpy's own ``_make_handler`` minus the triggers. It relies on that private method (pinned rclpy
-    7.1.6; ``test/test_nodes_spin.py`` checks callbacks, timers, services and shutdown run with it) and
-    is only for nodes whose callbacks are plain functions that never await.
+    rclpy's executor (7.1.x) rebuilds its wait set in Python before every wait: it walks every
+    node's entities, filters them by callback group, enters each handle, allocates a new wait set,
+    wraps each ready callback in a coroutine Task and wakes itself twice around it. For a node whose
+    own work per message is ~100 us, that bookkeeping was most of its CPU (issue 18). This executor
+    builds the entity lists and the wait set once, and again only after its guard condition fired
+    (rclpy fires it whenever a node or an entity is added or removed). Before each wait it re-adds the
+    same handles (a few C calls); after it, it calls the ready callbacks directly, in rclpy's order:
+    timers, subscriptions, services, clients, then waitables (QoS events) by their own ``execute``.
+
+    It relies on rclpy internals pinned at 7.1.6 (``_rclpy.WaitSet``, the entities' ``handle``, the
+    executor's ``_guard``, ``_sigint_gc``, ``_tasks``, ``_cb_iter`` and ``_work_tracker``);
+    ``test/test_nodes_spin.py`` exercises every kind of entity over real DDS. It is for nodes whose
+    callbacks are plain functions: while a node has a coroutine callback or a guard condition, or a
+    Task is pending (a future's done-callback), it spins with rclpy's own code; with another rclpy it
+    is rclpy's executor unchanged.
     """
-
-    _PRIVATE = ('_tasks', '_tasks_lock', '_work_tracker', '_is_shutdown')
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        base = getattr(SingleThreadedExecutor, '_make_handler', None)
-        expected = ['self', 'entity', 'node', 'take_from_wait_list']
-        self.lean = (
-            base is not None
-            and list(inspect.signature(base).parameters) == expected
-            and all(hasattr(self, name) for name in self._PRIVATE)
-        )
+        self.lean = hasattr(_rclpy, 'WaitSet') and all(hasattr(self, name) for name in _PRIVATE)
         if not self.lean:  # another rclpy: its own executor, unchanged (correct, only slower)
             rclpy.logging.get_logger('spin').warning(
                 "LeanExecutor: this rclpy's executor internals differ from 7.1.6; using it unchanged"
             )
+        self._plan: _WaitPlan | None = None
 
-    def _make_handler(self, entity: Any, node: Any, take_from_wait_list: Callable[[Any], Any]) -> Task:
-        if not self.lean:
-            return super()._make_handler(entity, node, take_from_wait_list)
-        entity._executor_event = True  # not back in the wait set until taken, as in rclpy
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        if self._is_shutdown:
+            return
+        if not self.lean or self._tasks:
+            super().spin_once(timeout_sec)
+            return
+        if self._plan is None:
+            self._plan = _WaitPlan.build(self.get_nodes(), (self._guard, self._sigint_gc), self._context)
+        if self._plan.wait_set is None:  # something only rclpy's own executor runs
+            self._plan = None
+            super().spin_once(timeout_sec)
+            return
+        generator: Any = self._cb_iter
+        if generator is not None:  # rclpy's, from a spin it served: it may hold entities' handles
+            generator.close()
+            self._cb_iter = None
+        ready = self._plan.wait(timeout_sec_to_nsec(timeout_sec))
+        if self._shut_down():  # by another thread, during the wait
+            return
+        if not self._context.ok():
+            raise ExternalShutdownException()
+        if ready.rebuild:  # a node or an entity came or went, or a handle is gone
+            self._plan = None
+        with self._work_tracker:  # what shutdown(timeout_sec) waits for, as in rclpy
+            ready.run(self)
 
-        async def handler(entity: Any, is_shutdown: bool, work_tracker: Any) -> None:
-            if is_shutdown or not entity.callback_group.beginning_execution(entity):
-                entity._executor_event = False
-                return
-            with work_tracker:
-                call_coroutine = take_from_wait_list(entity)
-                entity._executor_event = False
-                try:
-                    if call_coroutine is not None:
-                        await call_coroutine()
-                finally:
-                    entity.callback_group.ending_execution(entity)
+    def _shut_down(self) -> bool:
+        return self._is_shutdown
 
-        task = Task(handler, (entity, self._is_shutdown, self._work_tracker), executor=self)
-        with self._tasks_lock:
-            self._tasks.append((task, entity, node))
-        return task
+
+_PRIVATE = ('_guard', '_sigint_gc', '_tasks', '_context', '_is_shutdown', '_cb_iter', '_work_tracker')
+
+
+@dataclasses.dataclass
+class _Ready:
+    """What one wait found ready; taken and run after the wait set's handles were released."""
+
+    rebuild: bool = False
+    timers: list[Timer] = dataclasses.field(default_factory=list)
+    subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
+    services: list[Any] = dataclasses.field(default_factory=list)  # rclpy.service.Service
+    clients: list[Any] = dataclasses.field(default_factory=list)  # rclpy.client.Client
+    waitables: list[Waitable] = dataclasses.field(default_factory=list)
+
+    def run(self, executor: Executor) -> None:
+        """Take each ready entity's data and call its callback (what rclpy's ``_take_*`` do)."""
+        for timer in self.timers:
+            if _taken(timer, _call_timer, False):
+                timer.callback()
+        for sub in self.subscriptions:
+            info = _taken(sub, _take_message, None)
+            if info is not None:
+                message_only = sub._callback_type is Subscription.CallbackType.MessageOnly
+                sub.callback(*(info[:1] if message_only else info))
+        for srv in self.services:
+            request, header = _taken(srv, _take_request, (None, None))
+            if header is not None:
+                srv.send_response(srv.callback(request, srv.srv_type.Response()), header)
+        for client in self.clients:
+            header, response = _taken(client, _take_response, (None, None))
+            if header is None:
+                continue
+            try:
+                future = client.get_pending_request(header.request_id.sequence_number)
+            except KeyError:  # the request was cancelled
+                continue
+            future._set_executor(executor)
+            future.set_result(response)
+        for waitable in self.waitables:
+            data = waitable.take_data()
+            for future in waitable._futures:
+                future._set_executor(executor)
+            _run_to_end(waitable.execute(data))
+
+
+def _taken(entity: Any, take: Callable[[Any, Any], Any], gone: Any) -> Any:
+    """``take(handle, entity)`` with the entity's handle held; ``gone`` if it was destroyed."""
+    try:
+        with entity.handle:
+            return take(entity.handle, entity)
+    except InvalidHandle:
+        return gone
+
+
+def _call_timer(handle: Any, timer: Timer) -> bool:
+    """Mark a ready timer as called; False if it is not ready after all (cancelled, as in rclpy)."""
+    if not handle.is_timer_ready():
+        return False
+    handle.call_timer()
+    return True
+
+
+def _take_message(handle: Any, sub: Subscription) -> Any:
+    return handle.take_message(sub.msg_type, sub.raw)
+
+
+def _take_request(handle: Any, srv: Any) -> Any:
+    return handle.service_take_request(srv.srv_type.Request)
+
+
+def _take_response(handle: Any, client: Any) -> Any:
+    return handle.take_response(client.srv_type.Response)
+
+
+def _run_to_end(coroutine: Any) -> None:
+    """Run a coroutine that never suspends (a waitable's ``execute`` with a plain callback)."""
+    try:
+        coroutine.send(None)
+    except StopIteration:
+        return
+    coroutine.close()
+    raise RuntimeError("LeanExecutor: a waitable awaited something; it needs rclpy's own executor")
+
+
+@dataclasses.dataclass
+class _WaitPlan:
+    """The entities a LeanExecutor waits on and the wait set that holds them, built once.
+
+    ``wait_set`` is None when a node has something the plan does not run (a coroutine callback, a
+    guard condition of its own): rclpy's executor spins then."""
+
+    wait_set: Any
+    handles: list[Any]  # entered around each wait, the context's last
+    adders: list[tuple[Callable[[Any], None], Any]]  # (wait_set.add_*, handle), once per wait
+    waitables: list[Waitable]
+    by_pointer: dict[str, dict[int, Any]]  # entity kind -> handle pointer -> entity
+    guard_pointer: int
+
+    KINDS = ('timer', 'subscription', 'service', 'client')
+
+    @classmethod
+    def build(cls, nodes: list[Node], guards: tuple[Any, Any], context: Any) -> _WaitPlan:
+        entities: dict[str, list[Any]] = {kind: [] for kind in cls.KINDS}
+        waitables: list[Waitable] = []
+        unsupported = False
+        for node in nodes:
+            entities['timer'] += node.timers
+            entities['subscription'] += node.subscriptions
+            entities['service'] += node.services
+            entities['client'] += node.clients
+            waitables += node.waitables
+            unsupported |= bool(list(node.guards))
+        callbacks = [e.callback for kind in ('timer', 'subscription', 'service') for e in entities[kind]]
+        unsupported |= any(inspect.iscoroutinefunction(cb) for cb in callbacks)
+        empty = cls(None, [], [], [], {}, 0)
+        if unsupported:
+            return empty
+        try:
+            count = NumberOfEntities(
+                len(entities['subscription']),
+                len(guards),
+                len(entities['timer']),
+                len(entities['client']),
+                len(entities['service']),
+            )
+            for waitable in waitables:
+                with waitable:
+                    count += waitable.get_num_entities()
+            wait_set = _rclpy.WaitSet(
+                count.num_subscriptions,
+                count.num_guard_conditions,
+                count.num_timers,
+                count.num_clients,
+                count.num_services,
+                count.num_events,
+                context.handle,
+            )
+            adders: list[tuple[Callable[[Any], None], Any]] = []
+            by_pointer: dict[str, dict[int, Any]] = {}
+            for kind in cls.KINDS:
+                add = getattr(wait_set, f'add_{kind}')
+                adders += [(add, e.handle) for e in entities[kind]]
+                by_pointer[kind] = {e.handle.pointer: e for e in entities[kind]}
+            adders += [(wait_set.add_guard_condition, gc.handle) for gc in guards]
+            handles = [handle for _, handle in adders] + [context.handle]
+            return cls(wait_set, handles, adders, waitables, by_pointer, guards[0].handle.pointer)
+        except InvalidHandle:  # destroyed while being planned: plan again on the next spin
+            return empty
+
+    def wait(self, timeout_nsec: int) -> _Ready:
+        """Wait up to ``timeout_nsec`` [ns] (-1: forever) and return what is ready."""
+        wait_set = self.wait_set
+        entered: list[Any] = []
+        try:
+            for handle in (*self.handles, *self.waitables):
+                handle.__enter__()
+                entered.append(handle)
+            wait_set.clear_entities()
+            for add, handle in self.adders:
+                add(handle)
+            for waitable in self.waitables:
+                waitable.add_to_wait_set(wait_set)
+            wait_set.wait(timeout_nsec)
+            ready = {kind: wait_set.get_ready_entities(kind) for kind in self.KINDS}
+            guards_ready = wait_set.get_ready_entities('guard_condition')
+            waitables = [w for w in self.waitables if w.is_ready(wait_set)]
+        except InvalidHandle:
+            return _Ready(rebuild=True)
+        finally:
+            for handle in reversed(entered):
+                handle.__exit__(None, None, None)
+        entities = {kind: [self.by_pointer[kind][p] for p in ready[kind]] for kind in self.KINDS}
+        return _Ready(
+            self.guard_pointer in guards_ready,
+            entities['timer'],
+            entities['subscription'],
+            entities['service'],
+            entities['client'],
+            waitables,
+        )
+
+
+class QuietNode(Node):
+    """A node whose publishers (rclpy's parameter-events one too) carry no QoS-event handlers.
+
+    rclpy gives every publisher two default handlers (incompatible QoS, incompatible type); each is a
+    waitable the executor walks in Python on every wait (46 of power_estimator's 52 waitables; without
+    them its CPU per input message fell by about a quarter, issue 18). A subscriber with an
+    incompatible QoS or type still reports it on its side, and subscriptions keep their handlers.
+    """
+
+    def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
+        quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
+        return super().create_publisher(*args, event_callbacks=quiet, **kwargs)
 
 
 class Batched:
