@@ -18,6 +18,7 @@ publishes per cmd_vel
 publishes per joint_states
     ``power/measured`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` as measured (velocity
                  [rad/s], effort = Kt * I [N m]) after the side mapping; stamp = the joint_states'
+                 (both with an empty frame_id)
 figures for plots, std_msgs/Float64, the latest value every ``figure_period_s`` (20 Hz) while new
 cmd_vel / joint_states come (not per message: 9 publishes per input pair cost more than the physics)
     ``power/predicted_left_w``, ``power/predicted_right_w`` (motor terminal power [W]),
@@ -58,11 +59,13 @@ restored on start; an unusable file is moved aside to ``<file>.corrupt-<UTC time
 warning. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker thread and
 swapped in when ready; the old map serves until then.
 
-CPU (issue 18): ``main`` spins with :class:`skidsteer_power.nodes.spin.LeanExecutor`; publishers
-carry no QoS-event handlers (:meth:`PowerEstimator.create_publisher`); the figure topics come from
-a timer; a backlog of cmd_vel or joint_states is taken in batches
+CPU (issue 18): ``main`` spins with :class:`skidsteer_power.nodes.spin.LeanExecutor` (the wait set
+is kept between waits); publishers carry no QoS-event handlers (:class:`~skidsteer_power.nodes.spin
+.QuietNode`); cmd_vel and joint_states are taken raw and decoded by rosbags, and power/predicted and
+power/measured are kept serialized, only stamp and numbers patched (:mod:`skidsteer_power.nodes.wire`);
+the figure topics come from a timer; a backlog of cmd_vel or joint_states is taken in batches
 (:class:`~skidsteer_power.nodes.spin.Batched`). ``benchmarks/bench_estimator.py`` measures latency,
-loss and CPU per message.
+loss and CPU per message, and the floor under them (the same node shell with no estimator).
 """
 
 from __future__ import annotations
@@ -75,8 +78,6 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import BatteryState, JointState
@@ -99,7 +100,8 @@ from skidsteer_power.estimator.summary import (
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
-from skidsteer_power.nodes.spin import Batched, LeanExecutor, spin_node
+from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
+from skidsteer_power.nodes.wire import PackedJointState, decoder
 
 NODE_NAME = 'power_estimator'
 
@@ -185,7 +187,7 @@ def battery_state_message(fields: dict[str, Any]) -> BatteryState:
     return msg
 
 
-class PowerEstimator(Node):
+class PowerEstimator(QuietNode):
     """Predicts per-side power from cmd_vel, measures it from joint_states, tracks the battery."""
 
     def __init__(self, predictor: Any = None, **node_kwargs: Any) -> None:
@@ -212,6 +214,7 @@ class PowerEstimator(Node):
             memory_s=float(p['adaptation_memory_s']),
             terrain_memory_s=float(p['adaptation_terrain_memory_s']),
         )
+        self._cmd_vel_stamped = bool(p['cmd_vel_stamped'])
         self.core = EstimatorCore(
             predictor,
             factory.battery_for(self.vehicle),
@@ -223,15 +226,6 @@ class PowerEstimator(Node):
         self._restore(p['initial_soc'])
         self._make_interfaces(p)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-
-    def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
-        """Every publisher of this node (the path hook's and rclpy's parameter events too) without
-        rclpy's default QoS-event handlers: each is a waitable the executor walks in Python on every
-        spin (two per publisher: 46 of the node's 52 waitables; without them the node's CPU per input
-        message fell by about a quarter, issue 18). A subscriber with an incompatible QoS still reports
-        it on its side; the node's subscriptions keep theirs."""
-        quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
-        return super().create_publisher(*args, event_callbacks=quiet, **kwargs)
 
     # --- set-up -------------------------------------------------------------------------------
     @staticmethod
@@ -307,9 +301,10 @@ class PowerEstimator(Node):
         qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
 
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
-            batched = Batched(callback)  # a backlog is handled in batches (nodes/spin.py)
+            decode = decoder(msg_type)  # raw bytes in, decoded by rosbags (nodes/wire.py)
+            batched = Batched(lambda data: callback(decode(data)))  # a backlog in batches (spin.py)
             batched.subscription = self.create_subscription(
-                msg_type, topic, batched, qos_in, qos_overriding_options=overrides
+                msg_type, topic, batched, qos_in, qos_overriding_options=overrides, raw=True
             )
 
         def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
@@ -335,16 +330,19 @@ class PowerEstimator(Node):
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
-        self._predicted_msg = JointState(name=['left_motor', 'right_motor', 'left_axle', 'right_axle'])
-        self._measured_msg = JointState(name=['left_motor', 'right_motor'])
+        # serialized once; each message patches its stamp and numbers (nodes/packed.py)
+        axles = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
+        self._predicted_wire = PackedJointState(axles, ('velocity', 'effort'))
+        self._measured_wire = PackedJointState(['left_motor', 'right_motor'], ('velocity', 'effort'))
         self.path_energy = PathEnergyHook(self, p, qos_in)
 
     # --- inputs -------------------------------------------------------------------------------
     def now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
-        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+    def _on_cmd_vel(self, msg: Any) -> None:
+        """A decoded (rosbags) geometry_msgs/Twist, or TwistStamped with ``cmd_vel_stamped``."""
+        twist = msg.twist if self._cmd_vel_stamped else msg
         received = self.get_clock().now()
         now = received.nanoseconds * 1e-9
         try:
@@ -353,7 +351,8 @@ class PowerEstimator(Node):
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        self._publish_predicted(prediction, msg, received)
+        stamp = msg.header.stamp if self._cmd_vel_stamped else received.to_msg()
+        self._publish_predicted(prediction, stamp.sec, stamp.nanosec)
         self._figure_due(0)
         self._log_traction_change()
 
@@ -367,21 +366,23 @@ class PowerEstimator(Node):
             )
         self._traction_warned = warning
 
-    def _on_joint_states(self, msg: JointState) -> None:
+    def _on_joint_states(self, msg: Any) -> None:
+        """A decoded (rosbags) sensor_msgs/JointState: number sequences are numpy arrays."""
         now = self.now_s()
+        velocity, effort, position = msg.velocity.tolist(), msg.effort.tolist(), msg.position.tolist()
         try:
             with self._lock:
-                comparison = self.core.on_joint_state(msg.name, msg.velocity, msg.effort, now, msg.position)
+                comparison = self.core.on_joint_state(msg.name, velocity, effort, now, position)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
         if comparison is None:  # speed from positions: waits for a second sample
             return
-        measured = self._measured_msg  # preallocated, as power/predicted
-        measured.header = msg.header
-        measured.velocity = comparison.measured.omega_rad_s
-        measured.effort = comparison.measured.torque_Nm
-        self.pub_measured.publish(measured)
+        stamp = msg.header.stamp
+        measured = comparison.measured
+        self.pub_measured.publish(
+            self._measured_wire.pack(stamp.sec, stamp.nanosec, measured.omega_rad_s, measured.torque_Nm)
+        )
         self._figure_due(1)
 
     def _warn_rejected(self, err: RejectedInput) -> None:
@@ -401,15 +402,10 @@ class PowerEstimator(Node):
             )
 
     # --- outputs ------------------------------------------------------------------------------
-    def _publish_predicted(self, prediction: Any, source_msg: Any, received: Any) -> None:
-        msg = self._predicted_msg  # preallocated: only the stamp and the numbers change
-        if isinstance(source_msg, TwistStamped):
-            msg.header.stamp = source_msg.header.stamp
-        else:
-            msg.header.stamp = received.to_msg()
-        msg.velocity = [*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s]
-        msg.effort = [*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm]
-        self.pub_predicted.publish(msg)
+    def _publish_predicted(self, prediction: Any, sec: int, nanosec: int) -> None:
+        velocity = (*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s)
+        effort = (*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm)
+        self.pub_predicted.publish(self._predicted_wire.pack(sec, nanosec, velocity, effort))
 
     def _figure_due(self, which: int) -> None:
         """A new prediction (0) or measurement (1) for the figure timer; restarts it if idle."""
