@@ -19,6 +19,11 @@ over that wall time (so idle time after the work is not averaged in), and per in
 node's idle CPU (timers only) is reported before the runs. On this shared 2-core machine the figures
 depend on what else runs: the 1-minute load average is noted with each run.
 
+The floor: the same runs are first made against benchmarks/echo_node.py, a node with the estimator's
+inputs, outputs and executor and no work between them, and the ratio power_estimator / floor of the
+node CPU is reported per rate. What the floor costs is rclpy and Fast DDS on this machine: a goal
+below it cannot be met by any estimator code.
+
 Same-run before/after: with ``ESTIMATOR_BASELINE_SRC=/path/to/other/checkout`` the same runs are made
 against that checkout's node first (``python -m`` from that directory), and the ratios current /
 baseline of CPU per message and p99 latency are reported.
@@ -49,7 +54,18 @@ GOALS = {  # rate [Hz] -> (p99 latency [ms], CPU [cores], lost messages allowed 
     1000.0: (5.0, 0.5, 0),
 }
 OUTPUTS = ('power/predicted', 'power/measured')
+FLOOR = 'FLOOR (echo node: same inputs, outputs, executor; no estimator)'
+BASELINE = 'baseline'
 INPUT_OF = {'power/predicted': 'cmd_vel', 'power/measured': 'joint_states'}
+
+
+def _start_echo(namespace: str, env: dict[str, str]) -> subprocess.Popen:
+    """benchmarks/echo_node.py: the same inputs, outputs and executor with no estimator (the floor)."""
+    argv = [sys.executable, '-m', 'benchmarks.echo_node', '--ros-args', '-r', f'__ns:=/{namespace}']
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    return subprocess.Popen(
+        argv, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
 
 
 def _start_node(
@@ -217,21 +233,23 @@ def run(report: Report) -> None:
 
     env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
     baseline = os.environ.get('ESTIMATOR_BASELINE_SRC')
-    variants = ([('baseline', baseline)] if baseline else []) + [('', None)]
+    variants = [(FLOOR, None)] + ([(BASELINE, baseline)] if baseline else []) + [('', None)]
     results: dict[str, dict[str, dict[str, float]]] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
         map_predictor(load_vehicle('test_robot_track'), 'dry_sand', cache_dir)  # build once, outside timing
         for name, src in variants:
             namespace = f'bench_{uuid.uuid4().hex[:8]}'
-            node = _start_node(namespace, cache_dir, env, cwd=src)
+            node = (
+                _start_echo(namespace, env) if name == FLOOR else _start_node(namespace, cache_dir, env, src)
+            )
             load = Load(namespace, receive=True)
             try:
                 if not load.wait_connected(subscribers=1):
                     error = node.stderr.read() if node.poll() is not None and node.stderr else ''
-                    raise RuntimeError(f'power_estimator did not come up: {error}')
+                    raise RuntimeError(f'{name or "power_estimator"} did not come up: {error}')
                 _wait_outputs(load)
                 time.sleep(1.0)
-                prefix = f'BASELINE {baseline}: ' if name else ''
+                prefix = {FLOOR: f'{FLOOR}: ', BASELINE: f'BASELINE {baseline}: '}.get(name, '')
                 cpu0, wall0 = _cpu_seconds(node.pid), time.monotonic()
                 time.sleep(3.0)
                 idle = (_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - wall0)
@@ -241,13 +259,23 @@ def run(report: Report) -> None:
                     results[name][f'{rate:g}'] = _sustained(
                         report, load, node, rate, fresh=True, prefix=prefix
                     )
-                results[name]['cache'] = _sustained(report, load, node, 1000.0, fresh=False, prefix=prefix)
+                if name != FLOOR:
+                    results[name]['cache'] = _sustained(
+                        report, load, node, 1000.0, fresh=False, prefix=prefix
+                    )
             finally:
                 load.close()
                 _stop(node)
+    for rate in RATES_HZ:
+        key = f'{rate:g}'
+        report.ratio(
+            f'{key} Hz: node CPU, power_estimator / floor (same run)',
+            results[''][key]['cores'],
+            results[FLOOR][key]['cores'],
+        )
     if baseline:
         for key, now in results[''].items():
-            before = results['baseline'][key]
+            before = results[BASELINE][key]
             label = '1000 Hz, CACHE HIT' if key == 'cache' else f'{key} Hz'
             for figure in ('CPU per message', 'p99 cmd_vel', 'p99 joint_states'):
                 if before.get(figure) and now.get(figure):
