@@ -19,7 +19,6 @@ from skidsteer_power.errors import InputError
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 String = STORE.types['std_msgs/msg/String']
-REAL_BAG = Path(__file__).resolve().parents[1].parent / 'shared' / 'realbags' / 'neato-teleop'
 
 
 def _strings(n: int, size: int = 200) -> list[bytes]:
@@ -234,12 +233,10 @@ def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> Non
     assert twists_vectorized([messages[0].data[:-1]]) is None  # not a plain Twist: generic path
 
 
-real_bag = pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
-
-
-@real_bag
-def test_real_sqlite3_bag_reads_with_unknown_types_skipped(caplog: pytest.LogCaptureFixture) -> None:
-    with caplog.at_level(logging.WARNING), open_bag(REAL_BAG) as bag:
+def test_real_sqlite3_bag_reads_with_unknown_types_skipped(
+    neato_bag, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING), open_bag(neato_bag) as bag:
         # Counts from ../shared/realbags/README.md.
         assert bag.storage == 'sqlite3'
         assert bag.message_count == 2306
@@ -252,13 +249,14 @@ def test_real_sqlite3_bag_reads_with_unknown_types_skipped(caplog: pytest.LogCap
     assert 'neato2_interfaces/msg/Accel' in caplog.text
 
 
-@real_bag
-def test_real_bag_unknown_types_decode_with_definitions_from_the_readme(tmp_path: Path) -> None:
+def test_real_bag_unknown_types_decode_with_definitions_from_the_readme(
+    neato_bag: Path, tmp_path: Path
+) -> None:
     pkg = tmp_path / 'neato2_interfaces' / 'msg'
     pkg.mkdir(parents=True)
     (pkg / 'Accel.msg').write_text(ACCEL_MSG)
     (pkg / 'Bump.msg').write_text('uint8 left_front\nuint8 left_side\nuint8 right_front\nuint8 right_side\n')
-    with open_bag(REAL_BAG, extra_types=load_msg_definitions([tmp_path])) as bag:
+    with open_bag(neato_bag, extra_types=load_msg_definitions([tmp_path])) as bag:
         assert bag.undecodable_topics == []
         accel = [bag.deserialize(m) for m in bag.messages(['/accel'])]
         bumps = [bag.deserialize(m) for m in bag.messages(['/bump'])]

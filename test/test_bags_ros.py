@@ -25,9 +25,6 @@ from skidsteer_power.stop_signals import StopFlag
 
 pytestmark = pytest.mark.ros
 
-REAL_BAG = Path(__file__).resolve().parents[1].parent / 'shared' / 'realbags' / 'neato-teleop'
-real_bag = pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
-
 
 def _unique(name: str) -> str:
     return f'/bagtest_{uuid.uuid4().hex[:8]}_{name}'
@@ -258,8 +255,7 @@ def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp
     assert not (tmp_path / 'sig.mcap.partial').exists()
 
 
-@real_bag
-def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
+def test_real_bag_replays_through_the_cli_byte_for_byte(neato_bag, ros_context, tmp_path):
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
@@ -275,7 +271,7 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     # 14.8-16.9 s of the bag holds the (0.3 m/s, -1 rad/s) command: teleop traffic on both topics.
-    args = ['replay', str(REAL_BAG), '--topics', *received, '--start', '14.5', '--duration', '2.5']
+    args = ['replay', str(neato_bag), '--topics', *received, '--start', '14.5', '--duration', '2.5']
     run = subprocess.run(
         _cli(*args, '--rate', '2', '--wait-for-subscribers', '20', '--json'),
         capture_output=True,
@@ -288,7 +284,7 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
     spinner.join(5)
     listener.destroy_node()
     assert run.returncode == 0, run.stderr
-    with open_bag(REAL_BAG, warn_unknown=False) as bag:
+    with open_bag(neato_bag, warn_unknown=False) as bag:
         start = bag.start_ns + 14_500_000_000
         expected = {
             t: [m.data for m in bag.messages([t], start_ns=start, stop_ns=start + 2_500_000_000)]
@@ -300,12 +296,11 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(ros_context, tmp_path):
     assert received == expected
 
 
-@real_bag
-def test_real_bag_replay_skips_types_without_python_support_with_a_warning(ros_context):
+def test_real_bag_replay_skips_types_without_python_support_with_a_warning(neato_bag, ros_context):
     import rclpy
 
     node = rclpy.create_node('bag_real_skipper', context=ros_context)
-    with open_bag(REAL_BAG, warn_unknown=False) as bag:
+    with open_bag(neato_bag, warn_unknown=False) as bag:
         replayer = Replayer(bag, node, ReplayOptions())
     node.destroy_node()
     assert {'/accel', '/bump'} <= set(replayer.skipped)

@@ -28,7 +28,6 @@ from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
 
 VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
-REAL_BAG = Path(__file__).resolve().parents[1].parent / 'shared' / 'realbags' / 'neato-teleop'
 # Table 7.3 style commands: V = 0.1 m/s straight, then yaw rates 0.1 and 0.2 rad/s (R = 1 m, 0.5 m).
 RUNS = [Segment(0.1, 0.0, 3.0), Segment(0.1, 0.1, 3.0), Segment(0.1, 0.2, 3.0)]
 
@@ -203,9 +202,8 @@ def test_cli_validate_json_and_clear_errors(tmp_path):
     )
 
 
-@pytest.mark.usefixtures('neato_bag')  # skips, or fails in CI, without ../shared
-def test_real_bag_validates_with_trace_analysis_from_odom(tmp_path, predictor):
-    with open_bag(REAL_BAG, warn_unknown=False) as bag:
+def test_real_bag_validates_with_trace_analysis_from_odom(neato_bag, tmp_path, predictor):
+    with open_bag(neato_bag, warn_unknown=False) as bag:
         summary = validate(bag, _options(tmp_path), predictor)
     assert summary['has_motor_data'] is False and summary['pose_topic'] == '/odom'
     assert summary['messages'] == {'cmd_vel': 739, 'joint_states': 0, 'poses': 181}  # realbags/README.md
