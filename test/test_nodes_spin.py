@@ -6,6 +6,7 @@ power_estimator's own main (which spins with both) answers and exits cleanly on 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -91,18 +92,23 @@ def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
     assert triggers >= 2 * N_MESSAGES
 
 
+@contextlib.contextmanager
 def _lean_node(context, name: str):
+    """A node spun by a LeanExecutor of its own; both shut down afterwards."""
     node = rclpy.create_node(name, namespace=f'{name}_{uuid.uuid4().hex[:8]}', context=context)
     executor = LeanExecutor(context=context)
     executor.add_node(node)
-    return node, executor
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
 
 
 def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context):
-    node, executor = _lean_node(ros_context, 'plan')
-    pub = node.create_publisher(Float64, 'x', 10)
-    first: list[float] = []
-    try:
+    with _lean_node(ros_context, 'plan') as (node, executor):
+        pub = node.create_publisher(Float64, 'x', 10)
+        first: list[float] = []
         sub = node.create_subscription(Float64, 'x', lambda m: first.append(m.data), 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.0))
@@ -130,22 +136,18 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         assert first[-1] == 4.0
         _spin_until(executor, lambda: executor._plan is not None)
         assert len(executor._plan.by_pointer['subscription']) == 1
-    finally:
-        executor.shutdown()
-        node.destroy_node()
 
 
 def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context):
-    node, executor = _lean_node(ros_context, 'events')
-    incompatible: list[object] = []
-    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-    callbacks = SubscriptionEventCallbacks(incompatible_qos=incompatible.append)
+    with _lean_node(ros_context, 'events') as (node, executor):
+        incompatible: list[object] = []
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        callbacks = SubscriptionEventCallbacks(incompatible_qos=incompatible.append)
 
-    def fail(msg: Float64) -> None:
-        raise RuntimeError(f'callback failed on {msg.data}')
+        def fail(msg: Float64) -> None:
+            raise RuntimeError(f'callback failed on {msg.data}')
 
-    try:
         # a reliable reader and a best-effort writer do not match: the reader's QoS event (a
         # waitable) reports it
         node.create_subscription(Float64, 'x', lambda m: None, reliable, event_callbacks=callbacks)
@@ -158,46 +160,35 @@ def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros
         pub.publish(Float64(data=7.0))
         with pytest.raises(RuntimeError, match=r'callback failed on 7\.0'):
             _spin_until(executor, lambda: False)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
 
 
 def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
-    node, executor = _lean_node(ros_context, 'coro')
-    received: list[float] = []
+    with _lean_node(ros_context, 'coro') as (node, executor):
+        received: list[float] = []
 
-    async def on_message(msg: Float64) -> None:
-        received.append(msg.data)
+        async def on_message(msg: Float64) -> None:
+            received.append(msg.data)
 
-    try:
         node.create_subscription(Float64, 'x', on_message, 10)
         pub = node.create_publisher(Float64, 'x', 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.5))
         _spin_until(executor, lambda: received == [1.5])
         assert executor._plan is None  # rclpy's executor served it
-    finally:
-        executor.shutdown()
-        node.destroy_node()
 
 
 def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):
-    ns = f'batch_{uuid.uuid4().hex[:8]}'
-    node = rclpy.create_node('batched', namespace=ns, context=ros_context)
     received: list[float] = []
     dispatched = [0]  # how often the executor called the subscription's callback
+    batched = Batched(lambda m: received.append(m.data), batch=8)
 
     def counted(msg: Float64) -> None:
         dispatched[0] += 1
         batched(msg)
 
-    batched = Batched(lambda m: received.append(m.data), batch=8)
-    batched.subscription = node.create_subscription(Float64, 'x', counted, 100)
-    pub = node.create_publisher(Float64, 'x', 100)
-    executor = LeanExecutor(context=ros_context)
-    executor.add_node(node)
-    try:
+    with _lean_node(ros_context, 'batched') as (node, executor):
+        batched.subscription = node.create_subscription(Float64, 'x', counted, 100)
+        pub = node.create_publisher(Float64, 'x', 100)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         for i in range(N_MESSAGES):  # a backlog: nothing is taken while they are published
             pub.publish(Float64(data=float(i)))
@@ -211,9 +202,6 @@ def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_cont
         pub.publish(Float64(data=-1.0))
         _spin_until(executor, lambda: len(received) == N_MESSAGES + 1)
         assert received[-1] == -1.0
-    finally:
-        executor.shutdown()
-        node.destroy_node()
 
 
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
