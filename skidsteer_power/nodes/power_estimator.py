@@ -330,7 +330,7 @@ class PowerEstimator(QuietNode):
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
         if self.state_file is not None:
             self.create_timer(float(p['save_period_s']), self.save)
-        # serialized once; each message patches its stamp and numbers (nodes/packed.py)
+        # serialized once; each message patches its stamp and numbers (nodes/wire.py)
         axles = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
         self._predicted_wire = PackedJointState(axles, ('velocity', 'effort'))
         self._measured_wire = PackedJointState(['left_motor', 'right_motor'], ('velocity', 'effort'))
