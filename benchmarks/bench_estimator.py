@@ -322,12 +322,12 @@ def _sustained(
     }
     lost = {topic: n - len(values) for topic, values in latencies.items()}
     total_lost = sum(lost.values())
-    report.figure(
+    report.under(
         f'{label}: inputs lost (cmd_vel + joint_states)',
         total_lost,
         'msgs',
-        goal='' if lost_goal is None else f'{lost_goal}',
-        met=None if lost_goal is None else total_lost <= lost_goal,
+        lost_goal,
+        inclusive=True,
         note=f'{lost["power/predicted"]} cmd_vel + {lost["power/measured"]} joint_states of {n} each',
     )
     figures = {'CPU per message': per_msg_us, 'cores': cores}
@@ -338,20 +338,18 @@ def _sustained(
         p50, p99 = (float(np.percentile(delays, q)) * 1e3 for q in (50, 99))
         figures[f'p99 {INPUT_OF[topic]}'] = p99
         report.figure(f'{label}: {name} p50 latency', p50, 'ms')
-        report.figure(
+        report.under(
             f'{label}: {name} p99 latency',
             p99,
             'ms',
-            goal='' if p99_goal is None else f'< {p99_goal:g} ms',
-            met=None if p99_goal is None else p99 < p99_goal,
+            p99_goal,
             note=f'1-min load average before the run {busy:.2f} on {os.cpu_count()} cores',
         )
-    report.figure(
+    report.under(
         f'{label}: node CPU',
         cores,
         'cores',
-        goal='' if cpu_goal is None else f'< {cpu_goal:g} core',
-        met=None if cpu_goal is None else cores < cpu_goal,
+        cpu_goal,
         note=f'over {busy_wall:.2f} s from the first send to the last output',
     )
     report.figure(f'{label}: node CPU per input message', per_msg_us, 'us')

@@ -34,6 +34,22 @@ class Report:
         print(format_figure(fig), flush=True)
         return fig
 
+    def under(
+        self,
+        name: str,
+        value: float,
+        unit: str,
+        limit: float | None,
+        *,
+        inclusive: bool = False,
+        note: str = '',
+    ) -> Figure:
+        """``value`` with the goal ``value < limit`` (``<=`` if ``inclusive``); none if ``limit`` is None."""
+        if limit is None:
+            return self.figure(name, value, unit, note=note)
+        sign, met = ('<=', value <= limit) if inclusive else ('<', value < limit)
+        return self.figure(name, value, unit, goal=f'{sign} {limit:g} {unit}', met=met, note=note)
+
     def ratio(
         self,
         name: str,
