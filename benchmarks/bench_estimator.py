@@ -34,7 +34,6 @@ from __future__ import annotations
 import os
 import struct
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -61,32 +60,26 @@ INPUT_OF = {'power/predicted': 'cmd_vel', 'power/measured': 'joint_states'}
 
 def _start_echo(namespace: str, env: dict[str, str]) -> subprocess.Popen:
     """benchmarks/echo_node.py: the same inputs, outputs and executor with no estimator (the floor)."""
-    argv = [sys.executable, '-m', 'benchmarks.echo_node', '--ros-args', '-r', f'__ns:=/{namespace}']
+    from skidsteer_power.nodes.spin import node_command
+
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     return subprocess.Popen(
-        argv, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+        node_command('benchmarks.echo_node', namespace),
+        env=env,
+        cwd=root,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
 
 
 def _start_node(
     namespace: str, cache_dir: str, env: dict[str, str], cwd: str | None = None
 ) -> subprocess.Popen:
-    params = {
-        'map_cache_dir': cache_dir,
-        'persist': 'false',
-        'cmd_vel_stamped': 'true',
-        'qos_depth': '1000',
-    }
-    argv = [
-        sys.executable,
-        '-m',
-        'skidsteer_power.nodes.power_estimator',
-        '--ros-args',
-        '-r',
-        f'__ns:=/{namespace}',
-    ]
-    for key, value in params.items():
-        argv += ['-p', f'{key}:={value}']
+    from skidsteer_power.nodes.spin import node_command
+
+    params = {'map_cache_dir': cache_dir, 'persist': 'false', 'cmd_vel_stamped': 'true', 'qos_depth': 1000}
+    argv = node_command('skidsteer_power.nodes.power_estimator', namespace, params)
     return subprocess.Popen(
         argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
     )

@@ -6,7 +6,6 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import time
 import uuid
 
@@ -15,6 +14,7 @@ from des_harness import Harness
 
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
 from skidsteer_power.des.simulator import Fault, SimulatedPair
+from skidsteer_power.nodes.spin import node_command
 
 pytestmark = pytest.mark.ros
 
@@ -177,14 +177,16 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
     from rclpy.node import Node
 
     ns = f'/t{uuid.uuid4().hex[:8]}'
+    params = {
+        'left_port': pair.left.port,
+        'right_port': pair.right.port,
+        'ack_timeout_s': 0.3,
+        'cmd_timeout_s': 5.0,
+        'autostart': 'true',
+    }
     proc = subprocess.Popen(
-        [
-            sys.executable, '-m', 'skidsteer_power.nodes.des_driver', '--ros-args', '-r', f'__ns:={ns}',
-            '-p', f'left_port:={pair.left.port}', '-p', f'right_port:={pair.right.port}',
-            '-p', 'ack_timeout_s:=0.3', '-p', 'cmd_timeout_s:=5.0', '-p', 'autostart:=true',
-        ],
-        env=os.environ.copy(),
-    )  # fmt: skip
+        node_command('skidsteer_power.nodes.des_driver', ns, params), env=os.environ.copy()
+    )
     node = Node('des_sigterm_test', namespace=ns, context=ros_context)
     pub = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
     executor = SingleThreadedExecutor(context=ros_context)

@@ -10,7 +10,6 @@ import contextlib
 import os
 import signal
 import subprocess
-import sys
 import time
 import uuid
 
@@ -23,7 +22,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from skidsteer_power.nodes.spin import Batched, LeanExecutor
+from skidsteer_power.nodes.spin import Batched, LeanExecutor, node_command
 
 N_MESSAGES = 50
 
@@ -207,20 +206,8 @@ def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_cont
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
 def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, stop):
     ns = f'main_{uuid.uuid4().hex[:8]}'
-    argv = [
-        sys.executable,
-        '-m',
-        'skidsteer_power.nodes.power_estimator',
-        '--ros-args',
-        '-r',
-        f'__ns:=/{ns}',
-        '-p',
-        f'map_cache_dir:={tmp_path}',
-        '-p',
-        'persist:=false',
-        '-p',
-        'vehicle:=test_robot_track',
-    ]
+    params = {'map_cache_dir': tmp_path, 'persist': 'false', 'vehicle': 'test_robot_track'}
+    argv = node_command('skidsteer_power.nodes.power_estimator', ns, params)
     proc = subprocess.Popen(
         argv, env=os.environ, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
     )

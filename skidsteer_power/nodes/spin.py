@@ -309,6 +309,15 @@ class Batched:
             self.callback(taken[0])
 
 
+def node_command(module: str, namespace: str, params: dict[str, Any] | None = None) -> list[str]:
+    """The command line that runs a node module's ``main`` in a process of its own, as ``ros2 run``
+    would: ``python -m module --ros-args -r __ns:=/namespace -p name:=value ...``."""
+    argv = [sys.executable, '-m', module, '--ros-args', '-r', f'__ns:=/{namespace.lstrip("/")}']
+    for name, value in (params or {}).items():
+        argv += ['-p', f'{name}:={value}']
+    return argv
+
+
 def spin_node(
     make_node: Callable[[], Node],
     name: str,
