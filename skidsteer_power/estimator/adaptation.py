@@ -52,8 +52,6 @@ import numpy as np
 
 from skidsteer_power.errors import ConfigError
 
-SIDES = ('left', 'right')
-
 
 @dataclass(frozen=True)
 class AdaptationSettings:

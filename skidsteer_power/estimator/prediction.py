@@ -27,7 +27,6 @@ from typing import Any, Protocol
 import numpy as np
 
 Pair = tuple[float, float]
-SIDES = ('left', 'right')
 
 
 @dataclass(frozen=True)

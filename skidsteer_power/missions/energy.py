@@ -30,8 +30,7 @@ from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.missions.routes import Route
 from skidsteer_power.powertrain import Powertrain
-
-SIDES = ('left', 'right')
+from skidsteer_power.powertrain.drivetrain import SIDES
 
 
 @dataclass

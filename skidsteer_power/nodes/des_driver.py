@@ -78,11 +78,11 @@ from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.motor import EC45
 from skidsteer_power.vehicle import load_vehicle
 
 NODE_NAME = 'des_driver'
-SIDES = ('left', 'right')
 _WARN_PERIOD_S = 5.0
 
 
