@@ -3,6 +3,8 @@ this project's chapter 4 wheel model for turning radii R >= 2 m."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -125,3 +127,16 @@ def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises()
     assert state.speed_m_s.tolist() == [0.2, 0.2] and state.turn_radius_m.tolist() == [math.inf, 2.0]
     with pytest.raises(ConvergenceError):
         fess.solve(small, weak, 0.2, math.inf)
+
+
+def test_free_wheel_table_on_a_soil_with_sinkage_exponent_3_or_more():
+    """Eq. 2.32's first guess needs n < 3; on a stiffer-exponent soil (a user's terrain: validation
+    allows any n > 0) the table comes from the bracketed solve, as solve_wheel does, and agrees
+    with solve_wheel at every load; a FESS wheel solve there runs instead of raising."""
+    terrain = dataclasses.replace(PRESETS['dry_sand'], n=3.2, kphi=1e10)
+    log_w, sink, slip = fess._free_wheel_table(terrain, 0.1, 0.08, 200.0)
+    for k in (0, 12, 24):
+        state = solve_wheel(terrain, float(np.exp(log_w[k])), 0.0, 0.1, 0.08)
+        assert sink[k] == pytest.approx(float(state.sinkage_m), rel=1e-4)
+        assert slip[k] == pytest.approx(float(state.slip), abs=1e-5)
+    fess.FessSolver(WHEELED, terrain, n=30).solve_twist(0.3, 0.2)  # no InputError

@@ -51,6 +51,7 @@ from skidsteer_power.terramechanics.wheel import (
     bekker_wheel_sinkage,
     quadratic_stress_coefficients,
     solve_wheel,
+    solve_wheel_bracketed,
     wheel_angles,
     wheel_forces,
 )
@@ -162,6 +163,9 @@ def _free_wheel_table(
     does not converge falls back to :func:`~skidsteer_power.terramechanics.wheel.solve_wheel`.
     """
     loads = nominal_load * np.geomspace(0.02, 2.0, 25)
+    if terrain.n >= 3:  # no eq. 2.32 first guess: solve_wheel's own fallback, the bracketed solve
+        state = solve_wheel_bracketed(terrain, loads, 0.0, radius, width)
+        return np.log(loads), np.asarray(state.sinkage_m, dtype=float), np.asarray(state.slip, dtype=float)
     r = radius
     z0 = np.minimum(bekker_wheel_sinkage(terrain, loads, r, width), 0.9 * r)  # eq. 2.32
     theta0 = np.arccos(1.0 - z0 / r)
