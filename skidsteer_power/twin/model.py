@@ -265,6 +265,9 @@ class Twin:
     def reset(self) -> None:
         """Rest at the origin, heading +x, shear relaxed, static sinkage, full battery."""
         self.t = 0.0
+        # sensor noise (twin/sensors.py): one stream per run from rest, so a drive split into pieces
+        # gets fresh noise in every piece, not the same draws again
+        self.sensor_rng = np.random.default_rng(self.seed)
         self.pose = np.zeros(3)  # x, y [m], yaw [rad] (world)
         self.vel = np.zeros(3)  # v_x, v_y [m/s] (hull), yaw rate [rad/s]
         self.omega_m = np.zeros(2)  # motor speeds, forward positive [rad/s]

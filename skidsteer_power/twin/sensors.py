@@ -186,7 +186,7 @@ def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
     cols = list(zip(*rows, strict=True))
     arr = [np.array(c, dtype=float) for c in cols]
     t, cmd, pose, twist, current, axle, omega, theta, volt, bus, energy, sinkage = arr
-    rng = np.random.default_rng(twin.seed)
+    rng = twin.sensor_rng
     motor = twin.powertrain.motor
     counts_per_rad = motor.encoder_counts_per_turn * QUADRATURE / (2.0 * math.pi)
     position = np.floor(theta * counts_per_rad) / counts_per_rad
