@@ -33,8 +33,10 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.missions.energy import state_powers
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.drivetrain import SIDES
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -107,12 +109,9 @@ def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
             raise_on_failure=False,
         )
         pt = powertrains[vehicle.running_gear]
-        parts = [
-            pt.motor_side(side, state.side('torque', side), state.side('omega', side))
-            for side in ('left', 'right')
-        ]
-        power = parts[0].mechanical_power_W + parts[1].mechanical_power_W
-        internal = parts[0].internal_power_W + parts[1].internal_power_W
+        axle = {f'{q}_{side}': state.side(q, side) for q in ('torque', 'omega') for side in SIDES}
+        powers = state_powers(pt, axle)
+        power, internal = powers['mechanical_W'], powers['internal_W']
         converged = bool(np.all(state.converged))
         out.append(
             c

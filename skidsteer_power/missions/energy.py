@@ -218,15 +218,13 @@ def run_mission(
     for payload in np.unique(a['payload_kg']):
         in_group = a['payload_kg'] == payload
         loaded = with_payload(vehicle, float(payload))
-        table = np.column_stack([a['speed_m_s'][in_group], a['turn_radius_m'][in_group]])
-        states, inverse = np.unique(table, axis=0, return_inverse=True)
+        states, inv = unique_states(a['speed_m_s'][in_group], a['turn_radius_m'][in_group])
         if source == 'map':
             axle = _map_states(loaded, terrain, states[:, 0], states[:, 1], cache_dir)
         else:
             axle = _axle_states(loaded, terrain, states[:, 0], states[:, 1], model)
         powers = state_powers(pt, axle)
         rows = np.flatnonzero(in_group)
-        inv = inverse.ravel()
         for key, name in (('Pl', 'left_W'), ('Pr', 'right_W'), ('P', 'mechanical_W')):
             fields_[key][rows] = powers[name][inv]
         for key, name in (('Pt', 'terrain_W'), ('Pi', 'internal_W'), ('Pb', 'battery_W')):
@@ -316,9 +314,7 @@ def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[st
     }
 
 
-def route_energy_on_map(
-    route: Route, power_map: Any, powertrain: Powertrain, terrain_scale: float = 1.0
-) -> dict[str, float]:
+def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) -> dict[str, float]:
     """Energies [J] of driving ``route`` with the loads a ready ``power_map`` holds (the robot's own,
     no payload changes): the same state grouping, map query and powertrain as :func:`run_mission`.
 
@@ -327,9 +323,7 @@ def route_energy_on_map(
     :func:`energy_on_map`.
     """
     a = route.arrays()
-    return energy_on_map(
-        a['speed_m_s'], a['turn_radius_m'], a['duration_s'], power_map, powertrain, terrain_scale
-    )
+    return energy_on_map(a['speed_m_s'], a['turn_radius_m'], a['duration_s'], power_map, powertrain)
 
 
 def energy_on_map(

@@ -43,7 +43,6 @@ with the PI and friction terms implicit so the stiff zero-speed friction stays s
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -347,18 +346,6 @@ class Twin:
         x, y, yaw = self.pose
         c, s = math.cos(yaw), math.sin(yaw)
         return self.field.index_at(x + c * hx - s * hy, y + s * hx + c * hy)
-
-    def _by_terrain(
-        self, index: np.ndarray | None, shape: tuple[int, ...], fn: Callable[..., np.ndarray]
-    ) -> np.ndarray:
-        """Evaluate ``fn(terrain, mask)`` per terrain present; mask None = everywhere."""
-        if index is None:
-            return fn(self.field.base, None)
-        out = np.zeros(shape)
-        for i in np.unique(index):
-            mask = index == i
-            out[mask] = fn(self.field.terrains[i], mask)
-        return out
 
     def _track_soil(self, loads: np.ndarray) -> None:
         """Per-node shear strength [Pa x m^2], per-side compaction resistance [N] and sinkage [m]
