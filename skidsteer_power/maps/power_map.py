@@ -310,7 +310,7 @@ class PowerMap:
             ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
             v = ring * np.cos(angles[left])
             w = ring * np.sin(angles[left]) / length
-            rows.append(_mirror(_solve_row(solver, v, w, r_min, None), n_psi))
+            rows.append(_mirror(_solve_row(solver, v, w, r_min), n_psi))
             if progress is not None:
                 progress(k + 1, 2 * n_s - 1)
         values, converged, limited = _assemble(rows)
@@ -563,21 +563,14 @@ def _check_meta(source: Path, meta: dict[str, Any], vehicle: Vehicle | None, ter
 # -------------------------------------------------------------------- row solves
 
 
-def _solve_row(
-    solver: Any, v: np.ndarray, w: np.ndarray, r_min: float, prev: dict[str, Any] | None
-) -> dict[str, Any]:
+def _solve_row(solver: Any, v: np.ndarray, w: np.ndarray, r_min: float) -> dict[str, Any]:
     """One ring of points (V, w_z): FESS at (V_eff, w_z), V_eff = max(V, r_min |w_z|) (the
-    small-radius limit), warm-started from the previous ring with each side's speed shifted by the
-    change of V_eff."""
+    small-radius limit), each from FESS's own first guess (:meth:`PowerMap.build` re-solves failures)."""
     veh = solver.vehicle
     r = veh.drive_radius_m
     v_eff = np.maximum(v, r_min * np.abs(w))
     limited = v_eff > v
-    x0 = None
-    if prev is not None:
-        x0 = prev['state'].copy()
-        x0[:, 1:] += ((v_eff - prev['v_eff']) / r)[:, None]
-    sol = solver.solve_twist(v_eff, w, x0=x0)
+    sol = solver.solve_twist(v_eff, w)
     half = 0.5 * veh.tread_m
     ys = np.array([half, -half])
     side_v = v[:, None] - w[:, None] * ys  # actual ground speed of each side [m/s]
@@ -595,8 +588,6 @@ def _solve_row(
         ),
         'converged': sol.converged,
         'limited': limited,
-        'state': np.where(sol.converged[:, None], sol.state, np.nan),
-        'v_eff': v_eff,
     }
 
 
@@ -627,7 +618,7 @@ def _check_cells(
         cols = np.flatnonzero(check[k])
         if cols.size:
             v, w = s * np.cos(psi_c[cols]), s * np.sin(psi_c[cols]) / m.length_m
-            row = _solve_row(solver, v, w, r_min, None)
+            row = _solve_row(solver, v, w, r_min)
             side = row['torque'] * row['omega']  # FESS side powers [W]
             q = m.query(v, w)
             with np.errstate(invalid='ignore', divide='ignore'):
