@@ -156,11 +156,12 @@ class TerrainScale:
     s_xx: float = 0.0  # [N m^2 s]
     evidence_s: float = 0.0  # forgetting-weighted settled time [s]
 
-    def add(self, predicted_Nm: np.ndarray, measured_Nm: np.ndarray, dt_s: float, lam: float) -> None:
-        """One settled sample of both sides: terrain torques at the motor [N m], held ``dt_s`` [s],
-        after the older ones are weighted by ``lam`` [-]."""
-        self.s_xy = lam * self.s_xy + dt_s * float(np.dot(predicted_Nm, measured_Nm))
-        self.s_xx = lam * self.s_xx + dt_s * float(np.dot(predicted_Nm, predicted_Nm))
+    def add(self, xy: float, xx: float, dt_s: float, lam: float) -> None:
+        """One settled sample of both sides, as the sums over the sides of predicted x measured and
+        predicted x predicted terrain torque at the motor [N m^2], held ``dt_s`` [s], after the older
+        ones are weighted by ``lam`` [-] (plain floats: this runs on every joint_states)."""
+        self.s_xy = lam * self.s_xy + dt_s * xy
+        self.s_xx = lam * self.s_xx + dt_s * xx
         self.evidence_s = lam * self.evidence_s + dt_s
 
     def value(self, min_s: float, limits: tuple[float, float]) -> float:
@@ -244,11 +245,14 @@ class TorqueAdaptation:
                 side.reset()
             self.terrain = TerrainScale()
         elif predicted_terrain_Nm is not None:
-            terrain = np.asarray(predicted_terrain_Nm, dtype=float)
-            internal = np.asarray(predicted_Nm, dtype=float) - terrain  # eqs. 7.1-7.4 at the motor
-            lam_terrain = math.exp(-max(dt, 0.0) / s.terrain_memory_s)
-            measured = np.asarray(measured_Nm, dtype=float) - internal
-            self.terrain.add(terrain, measured, min(max(dt, 0.0), MAX_SAMPLE_S), lam_terrain)
+            # measured terrain torque = measured - internal, internal = predicted - predicted terrain
+            # (eqs. 7.1-7.4 at the motor)
+            xy = xx = 0.0
+            for x, pred, meas in zip(predicted_terrain_Nm, predicted_Nm, measured_Nm, strict=True):
+                xy += x * (meas - (pred - x))
+                xx += x * x
+            dt = max(dt, 0.0)
+            self.terrain.add(xy, xx, min(dt, MAX_SAMPLE_S), math.exp(-dt / s.terrain_memory_s))
         return alarm
 
     def terrain_scale(self) -> float:
