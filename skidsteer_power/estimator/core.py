@@ -166,7 +166,6 @@ class EstimatorCore:
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
-        self._power_limit: tuple[Any, float] = (None, math.inf)  # (battery, its limit [W])
 
     @property
     def battery(self) -> Any:
@@ -207,16 +206,10 @@ class EstimatorCore:
         return self.prediction
 
     def power_limit_W(self) -> float:
-        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say).
-
-        A property of the battery's configuration (its lowest OCV and R), so computed once per battery
-        object (a swap or a restore brings a new one), not on every message.
-        """
-        battery = self.battery
-        if self._power_limit[0] is not battery:
-            limit = getattr(battery, 'max_power_W', None)
-            self._power_limit = (battery, float(limit()) if callable(limit) else math.inf)
-        return self._power_limit[1]
+        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say;
+        the battery's configuration computes it once)."""
+        limit = getattr(self.battery, 'max_power_W', None)
+        return float(limit()) if callable(limit) else math.inf
 
     def _flag_implausible(self, what: str, now_s: float) -> None:
         self.implausible[what] += 1

@@ -19,6 +19,7 @@ Remaining energy is the open-circuit energy Q integral V_oc dSOC (what a lossles
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -77,6 +78,18 @@ class BatteryConfig:
     def resistance_ohm(self) -> float:
         """Internal resistance of the whole battery [ohm]."""
         return self.cell_resistance_ohm * self.cells_in_series / self.packs_in_parallel
+
+    @functools.cached_property
+    def max_power_W(self) -> float:
+        """Largest terminal power [W] the pack can deliver at ANY state of charge; computed once.
+
+        Maximum power transfer from an OCV source behind resistance R is OCV^2 / (4 R); the lowest
+        OCV of the curve gives the bound valid at every state of charge, so a power within it never
+        makes :meth:`Battery.current_for_power`, :meth:`Battery.step` or
+        :meth:`Battery.time_to_empty_s` fail.
+        """
+        v_min = float(np.min(self.ocv(self.soc_points)))
+        return v_min * v_min / (4.0 * self.resistance_ohm)
 
     def ocv(self, soc: float | Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64] | np.float64:
         """Open-circuit voltage of the battery [V] at state of charge ``soc`` [-] (linear in the table).
@@ -158,14 +171,9 @@ class Battery:
         return self.state.soc <= self.config.soc_empty + 1e-12
 
     def max_power_W(self) -> float:
-        """Largest terminal power [W] the battery can deliver at ANY state of charge.
-
-        Maximum power transfer from an OCV source behind resistance R is OCV^2 / (4 R); the lowest
-        OCV of the curve gives the bound valid at every state of charge, so a power within it never
-        makes :meth:`current_for_power`, :meth:`step` or :meth:`time_to_empty_s` fail.
-        """
-        v_min = float(np.min(self.config.ocv(self.config.soc_points)))
-        return v_min * v_min / (4.0 * self.config.resistance_ohm)
+        """Largest terminal power [W] the battery can deliver at ANY state of charge
+        (:attr:`BatteryConfig.max_power_W`)."""
+        return self.config.max_power_W
 
     def current_for_power(self, power_W: float, soc: float | None = None) -> float:
         """Battery current [A] delivering terminal power ``power_W`` [W] at ``soc`` (default: now)."""
