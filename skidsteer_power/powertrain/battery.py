@@ -91,6 +91,11 @@ class BatteryConfig:
         v_min = float(np.min(self.ocv(self.soc_points)))
         return v_min * v_min / (4.0 * self.resistance_ohm)
 
+    def pieces(self, soc_low: float, soc_high: float) -> np.ndarray:
+        """The states of charge [-] from ``soc_low`` to ``soc_high`` where the piecewise-linear OCV
+        curve bends, both ends included, strictly increasing."""
+        return np.unique(np.clip(np.r_[soc_low, soc_high, self.soc_points], soc_low, soc_high))
+
     def ocv(self, soc: float | Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64] | np.float64:
         """Open-circuit voltage of the battery [V] at state of charge ``soc`` [-] (linear in the table).
 
@@ -240,7 +245,7 @@ class Battery:
     def _ocv_energy_J(self, soc_low: float, soc_high: float) -> float:
         if soc_high <= soc_low:
             return 0.0
-        grid = np.unique(np.clip(np.r_[soc_low, soc_high, self.config.soc_points], soc_low, soc_high))
+        grid = self.config.pieces(soc_low, soc_high)
         return float(
             np.trapezoid(self.config.ocv(grid), grid) * self.config.capacity_C
         )  # exact: OCV is piecewise linear
@@ -254,7 +259,7 @@ class Battery:
             return math.inf if power_W <= 0 else 0.0
         cfg = self.config
         low, high = cfg.soc_empty, self.state.soc
-        soc = np.unique(np.clip(np.r_[low, high, cfg.soc_points], low, high))  # the linear pieces
+        soc = cfg.pieces(low, high)
         v = np.asarray(cfg.ocv(soc), dtype=float)
         c = 4.0 * cfg.resistance_ohm * power_W
         if float(np.min(v)) ** 2 < c:
@@ -263,7 +268,7 @@ class Battery:
         antiderivative = 0.5 * (v * root - c * np.log(v + root))  # of sqrt(u^2 - c) du
         dv, ds = np.diff(v), np.diff(soc)
         flat = np.abs(dv) <= 1e-12 * v[1:]  # a constant piece: sqrt(v^2 - c) ds
-        slope = np.where(flat, 1.0, dv / np.where(ds > 0, ds, 1.0))
+        slope = np.where(flat, 1.0, dv / ds)  # ds > 0: pieces() is strictly increasing
         sqrt_part = np.where(flat, root[1:] * ds, np.diff(antiderivative) / slope)
         v_part = 0.5 * (v[1:] + v[:-1]) * ds
         return float(cfg.capacity_C * np.sum(v_part + sqrt_part) / (2.0 * power_W))
