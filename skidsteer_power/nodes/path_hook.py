@@ -75,18 +75,23 @@ class PathEnergyHook:
         try:
             self.tracker.set_path(x, y)
         except SkidsteerError as err:
-            self.status = f'path rejected: {err}'
-            self.last = None
+            self._reject(err)
             return
         self.status = f'path of {len(x)} poses'
         self.publish()
 
+    def _reject(self, err: SkidsteerError) -> None:
+        """A path that cannot be evaluated: say why and hold no path (set_path already cleared it)."""
+        self.status = f'path rejected: {err}'
+        self.tracker.path = None
+        self.last = None
+
     def _evaluate(self) -> tuple[PathEnergy | None, float]:
+        if self.tracker.path is None:  # before reading the node's state under its lock
+            return None, float('nan')
         predictor, command, remaining, terrain_scale = self.node.path_inputs()
         speed = self.speed_m_s or (abs(command[0]) if command else 0.0)
         power_map = getattr(predictor, 'power_map', None)
-        if self.tracker.path is None:
-            return None, remaining
         if not speed:
             self.status = 'no speed: path_speed_m_s is 0 and no command yet'
             return None, remaining
@@ -97,8 +102,7 @@ class PathEnergyHook:
             powertrain = getattr(predictor, 'powertrain', None)
             energy = self.tracker.evaluate(speed, power_map, powertrain, terrain_scale)
         except SkidsteerError as err:
-            self.status = f'path rejected: {err}'
-            self.tracker.set_path([], [])
+            self._reject(err)
             return None, remaining
         return energy, remaining
 
