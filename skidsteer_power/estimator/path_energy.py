@@ -1,9 +1,10 @@
 """Energy to drive a planned path (a nav_msgs/Path polyline) and the margin left to come home.
 
-Pure (no ROS). A path of poses (x_k, y_k) [m] becomes a route of constant-radius segments
-(:class:`~skidsteer_power.missions.routes.Route`) and goes through the missions' route-energy code
-(:func:`skidsteer_power.missions.energy.route_energy_on_map`): one implementation for
-``mission --route FILE.csv`` and the robot's ``energy/path_required_wh``.
+Pure (no ROS). A path of poses (x_k, y_k) [m] becomes constant-radius segments (lengths and signed
+radii as arrays, :class:`PathGeometry`) and goes through the missions' energy code
+(:func:`skidsteer_power.missions.energy.energy_on_map`, which ``mission --route FILE.csv`` reaches
+through :func:`~skidsteer_power.missions.energy.route_energy_on_map`): one implementation for both and
+for the robot's ``energy/path_required_wh``.
 
 Curvature of a polyline: the heading of chord k is theta_k = atan2(dy_k, dx_k); at interior vertex k
 the path turns by dtheta_k = wrap(theta_k - theta_{k-1}). Each vertex owns half of each chord next
