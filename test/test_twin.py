@@ -22,6 +22,7 @@ from skidsteer_power.twin import (
     Segment,
     Twin,
     commands_from_csv,
+    drive_until_empty,
     load_patches,
     run_commands,
     write_bag,
@@ -379,3 +380,12 @@ def test_bulldozing_and_slip_sinkage_laws_by_hand():
     assert b == pytest.approx(0.5 * 12.0 * SOIL_UNIT_WEIGHT_N_M3)
     # Lyasko: K_j = (1 + i) / (1 - 0.5 i): 2 at i = 0.5, 4 at i = 1; no excavation when braking
     assert slip_sinkage_factor(np.array([0.0, 0.5, 1.0, -0.3])) == pytest.approx([1.0, 2.0, 4.0, 1.0])
+
+
+def test_drive_until_empty_refuses_a_segment_that_is_not_whole_pieces():
+    """0.1 s would round to no 0.2 s piece at all, 0.3 s to 0.4 s: both said, not driven."""
+    twin = Twin(load_vehicle('test_robot_track'), SAND_BIN)
+    for seconds in (0.1, 0.3):
+        with pytest.raises(InputError, match='whole number'):
+            drive_until_empty(twin, [Segment(0.2, 0.0, 1.0), Segment(0.2, 0.0, seconds)])
+    assert twin.t == 0.0  # refused before driving

@@ -171,14 +171,19 @@ def drive_until_empty(
 ) -> tuple[list[TwinTrace], float | None]:
     """Repeat ``pattern`` until the twin's battery is empty: the traces of each ``piece_s`` [s] piece
     (a whole number of sensor periods, so the empty moment is known to ``piece_s``) and the twin time
-    it went empty [s] (None if it had not after ``max_pieces`` pieces)."""
+    it went empty [s] (None if it had not after ``max_pieces`` pieces). InputError for a segment that
+    is not a whole number of pieces."""
+    pieces = []
+    for seg in pattern:
+        count = round(seg.duration_s / piece_s)
+        if count < 1 or abs(count * piece_s - seg.duration_s) > 1e-9:
+            raise InputError(f'segment of {seg.duration_s} s is not a whole number of {piece_s} s pieces')
+        pieces += [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, piece_s)] * count
     traces: list[TwinTrace] = []
     while len(traces) < max_pieces:
-        for seg in pattern:
-            for _ in range(round(seg.duration_s / piece_s)):
-                traces.append(run_commands(twin, [Segment(seg.speed_m_s, seg.yaw_rate_rad_s, piece_s)]))
-                if twin.battery.is_empty:
-                    return traces, twin.t
+        traces.append(run_commands(twin, [pieces[len(traces) % len(pieces)]]))
+        if twin.battery.is_empty:
+            return traces, twin.t
     return traces, None
 
 
