@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
-
 from skidsteer_power.commands import Segment
 from skidsteer_power.terramechanics import load_terrain
 from skidsteer_power.twin.model import Twin
@@ -30,17 +28,14 @@ def stuck_grid() -> None:
     print('configuration, V | ' + ' | '.join(f'{w:g}' for w in YAW_RATES) + ' rad/s')
     for name in VEHICLES:
         vehicle = load_vehicle(name)
-        half = 0.5 * vehicle.tread_m
         for speed in (0.1, 0.2):
             cells = []
             for yaw_rate in YAW_RATES:
                 trace = run_commands(Twin(vehicle, dry_sand), [Segment(speed, yaw_rate, 6.0)])
                 stuck = trace.stuck(vehicle.tread_m)
                 last = trace.t >= trace.t[-1] - 2.0
-                motion = (
-                    np.hypot(trace.twist[last, 0], trace.twist[last, 1]) + np.abs(trace.twist[last, 2]) * half
-                )
-                progress = motion.mean() / (speed + yaw_rate * half)
+                wanted, actual = trace.motion(vehicle.tread_m)
+                progress = actual[last].mean() / wanted[last].mean()
                 mark = 'S' if stuck else f'{progress:.2f}'
                 cells.append(f'{mark}, {1e3 * trace.sinkage_m.max():.0f}')
             print(f'{name}, {speed:g} m/s | ' + ' | '.join(cells), flush=True)

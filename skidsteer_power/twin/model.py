@@ -471,12 +471,15 @@ class Twin:
         # slip velocity of the belt element at each node, - yaw e_z x j (rotating frame)
         source = np.subtract(self.node_p, j)
         source *= 1j * wz
-        source += self._velocity_offset((vx + 1j * vy) - belts[0], (vx + 1j * vy) - belts[1])
+        offset = self._side_column  # (side, 1, 1): each side's slip velocity offset (complex)
+        offset[:, 0, 0] = ((vx + 1j * vy) - belts[0], (vx + 1j * vy) - belts[1])
+        source += offset
         courant = [min(abs(b) * dt / self.node_dx, 1.0) for b in belts]
         new = j.copy()
         half = 0.5 * dt
         if belts[0] > 0 and belts[1] > 0:  # both sides forward (the usual case): in one go
-            c = self._courant_column(courant)
+            c = self._courant  # (side, 1, 1)
+            c[:, 0, 0] = courant
             new[:, 1:] += half * (source[:, 1:] + source[:, :-1]) + c * (j[:, :-1] - j[:, 1:])
             new[:, 0] = 0.0  # touchdown at the front
         else:
@@ -496,19 +499,6 @@ class Twin:
         rate *= self._damping / dt
         self._damped_rate = rate
         self.j = new
-
-    def _velocity_offset(self, left: complex, right: complex) -> np.ndarray:
-        """(side, 1, 1) column of the two sides' values (complex)."""
-        column = self._side_column
-        column[0, 0, 0] = left
-        column[1, 0, 0] = right
-        return column
-
-    def _courant_column(self, courant: list[float]) -> np.ndarray:
-        """(side, 1, 1) column of the two sides' Courant numbers."""
-        column = self._courant
-        column[0, 0, 0], column[1, 0, 0] = courant
-        return column
 
     def _wheel_soil(self) -> None:
         """Per-wheel constants of the terrain under each wheel (uniform floor: once; with patches:

@@ -96,14 +96,20 @@ class TwinTrace:
         """True path length travelled [m]."""
         return float(np.hypot(*np.diff(self.pose[:, :2], axis=0).T).sum()) if self.t.size > 1 else 0.0
 
+    def motion(self, tread_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Commanded and actual motion per sample [m/s]: |V| + |yaw rate| B / 2 of the command, and
+        |v| + |yaw rate| B / 2 of the robot (B = ``tread_m`` [m])."""
+        wanted = np.abs(self.cmd[:, 0]) + np.abs(self.cmd[:, 1]) * 0.5 * tread_m
+        actual = np.hypot(self.twist[:, 0], self.twist[:, 1]) + np.abs(self.twist[:, 2]) * 0.5 * tread_m
+        return wanted, actual
+
     def stuck(self, tread_m: float) -> bool:
         """True if, over some ``STUCK_WINDOW_S`` window with a non-zero command throughout, the robot's
         motion (|v| + |yaw rate| B / 2) stayed below ``STUCK_PROGRESS`` of the commanded motion."""
         n = max(1, round(STUCK_WINDOW_S * SENSOR_RATE_HZ))
         if self.t.size < n:
             return False
-        wanted = np.abs(self.cmd[:, 0]) + np.abs(self.cmd[:, 1]) * 0.5 * tread_m
-        actual = np.hypot(self.twist[:, 0], self.twist[:, 1]) + np.abs(self.twist[:, 2]) * 0.5 * tread_m
+        wanted, actual = self.motion(tread_m)
         kernel = np.ones(n)
         commanded = np.convolve(wanted > 1e-6, kernel, 'valid') == n
         ratio = np.convolve(actual, kernel, 'valid') / np.maximum(np.convolve(wanted, kernel, 'valid'), 1e-12)
@@ -140,7 +146,7 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
                 twin.pose.copy(),
                 twin.vel.copy(),
                 (current_sum[0] / k, current_sum[1] / k),
-                last.axle_torque_Nm.copy(),
+                last.axle_torque_Nm,  # a new array per call of Twin.last
                 twin.omega_m.copy(),
                 twin.theta_m.copy(),
                 twin.bus_voltage_V,
