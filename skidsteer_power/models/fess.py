@@ -394,17 +394,17 @@ def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
     return h
 
 
-def _solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Solve the batched 3x3 systems a x = b; (x, ok) with ok False (and x = 0) where a is singular
-    (|det| below 1e-14 of the product of its row norms)."""
+def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve the batched 3x3 systems a x = b; x = 0 where a is singular (|det| below 1e-14 of the
+    product of its row norms)."""
     det = np.linalg.det(a)
     ok = np.abs(det) > 1e-14 * np.prod(np.linalg.norm(a, axis=2), axis=1)
     if ok.all():
-        return np.linalg.solve(a, b[..., None])[..., 0], ok
+        return np.linalg.solve(a, b[..., None])[..., 0]
     out = np.zeros_like(b)
     if ok.any():
         out[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
-    return out, ok
+    return out
 
 
 def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -468,16 +468,12 @@ def newton(
             x[back] = x_prev[back] + step_prev[back]
             halvings[back] += 1
         good = ~ok & ~worse & finite
-        if good.all():
-            idx, jac = act, (fall[:, 1:] - fa[:, None, :]).transpose(0, 2, 1) / h[:, None, :]
-            fg, ng = fa, norm
-        elif good.any():
-            idx = act[good]
-            jac = (fall[good, 1:] - fa[good, None, :]).transpose(0, 2, 1) / h[good, None, :]
-            fg, ng = fa[good], norm[good]
-        else:
+        if not good.any():
             continue
-        step, _ = _solve3(jac, -fg)
+        sel = slice(None) if good.all() else good  # all: views, no copies (the common case)
+        idx, fg, ng = act[sel], fa[sel], norm[sel]
+        jac = (fall[sel, 1:] - fa[sel, None, :]).transpose(0, 2, 1) / h[sel, None, :]
+        step = _solve3(jac, -fg)
         xi = x[idx]
         step = _limit(problem, idx, xi, step)
         x_prev[idx] = xi
