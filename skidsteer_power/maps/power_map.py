@@ -223,10 +223,8 @@ class PowerMap:
         self._axis_psi = Axis(_angle_coordinate(self.angles), 'turn angle')
         stacked = np.stack([self.values[name] for name in FIELDS], axis=-1)
         self._grid = BilinearGrid(self._axis_s, self._axis_psi, stacked)
-        if self.cell_error is None:
-            self.cell_error = np.full((len(self.radial) - 1, len(self.angles) - 1), np.nan)
-        self._cell_flag = (self.cell_error > CELL_ERROR_LIMIT).ravel()  # nan: False
-        self._cell_flag_list = self._cell_flag.tolist()
+        unchecked = np.full((len(self.radial) - 1, len(self.angles) - 1), np.nan)
+        self.set_cell_error(unchecked if self.cell_error is None else self.cell_error)
         self._radius = float(self.meta['drive_radius_m'])
         self._half_tread = 0.5 * float(self.meta['tread_m'])
         self._r_min = float(self.meta['min_radius_m'])
@@ -333,11 +331,17 @@ class PowerMap:
         }
         out = cls(radial, angles, float(length), values, converged, limited, meta)
         ring_done = None if progress is None else (lambda k: progress(n_s + k + 1, 2 * n_s - 1))
-        out.cell_error = _check_cells(out, solver, r_min, ring_done)
-        out.meta['inaccurate_cells'] = int(np.sum(out.cell_error > CELL_ERROR_LIMIT))
-        out.meta['checked_cells'] = int(np.sum(~np.isnan(out.cell_error)))
-        out.__post_init__()
+        cell_error = _check_cells(out, solver, r_min, ring_done)
+        out.set_cell_error(cell_error)
+        out.meta['inaccurate_cells'] = int(np.sum(out._cell_flag))
+        out.meta['checked_cells'] = int(np.sum(~np.isnan(cell_error)))
         return out
+
+    def set_cell_error(self, cell_error: np.ndarray) -> None:
+        """The build-time check's power error per cell (see ``cell_error``) and the flags it sets."""
+        self.cell_error = cell_error
+        self._cell_flag = (cell_error > CELL_ERROR_LIMIT).ravel()  # nan: False
+        self._cell_flag_list = self._cell_flag.tolist()
 
     # ---------------------------------------------------------------- storage
     def save(self, path: str | os.PathLike[str]) -> Path:
