@@ -48,8 +48,9 @@ from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResul
 from skidsteer_power.terramechanics.soil import shear_fraction
 from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
 from skidsteer_power.terramechanics.wheel import (
-    bekker_wheel_sinkage,
+    first_guess_unknowns,
     quadratic_stress_coefficients,
+    sinkage_slip_from_unknowns,
     solve_wheel,
     solve_wheel_bracketed,
     wheel_angles,
@@ -166,22 +167,15 @@ def _free_wheel_table(
     if terrain.n >= 3:  # no eq. 2.32 first guess: solve_wheel's own fallback, the bracketed solve
         state = solve_wheel_bracketed(terrain, loads, 0.0, radius, width)
         return np.log(loads), np.asarray(state.sinkage_m, dtype=float), np.asarray(state.slip, dtype=float)
-    r = radius
-    z0 = np.minimum(bekker_wheel_sinkage(terrain, loads, r, width), 0.9 * r)  # eq. 2.32
-    theta0 = np.arccos(1.0 - z0 / r)
-    x0 = np.column_stack([-np.log(0.5 * math.pi / theta0 - 1.0), np.full(loads.size, math.atanh(0.2))])
-
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        theta_f = 0.5 * math.pi / (1.0 + np.exp(-np.clip(x[:, 0], -50.0, 50.0)))
-        return r * (1.0 - np.cos(theta_f)), np.tanh(np.clip(x[:, 1], -20.0, 20.0))
+    x0 = first_guess_unknowns(terrain, loads, radius, width)
 
     def balance(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        z, s = unpack(x)
-        state = wheel_forces(terrain, z, s, r, width)
+        z, s = sinkage_slip_from_unknowns(x, radius)
+        state = wheel_forces(terrain, z, s, radius, width)
         return np.column_stack([state.Fx_N, state.Fz_N - loads[idx]])  # eq. 2.29, F_d = 0
 
     result = newton_solve(balance, x0, steps=np.array([1e-7, 1e-7]), tol=FREE_WHEEL_TOL_N)
-    sink, slip = unpack(result.x)
+    sink, slip = sinkage_slip_from_unknowns(result.x, radius)
     for k in np.flatnonzero(~result.converged):
         state = solve_wheel(terrain, float(loads[k]), 0.0, radius, width)
         sink[k], slip[k] = float(state.sinkage_m), float(state.slip)

@@ -276,24 +276,34 @@ def solve_wheel(
 def _solve_hybr(terrain: Terrain, w: float, fd: float, r: float, b: float) -> WheelState | None:
     if terrain.n >= 3:  # no eq. 2.32 first guess
         return None
-    z0 = min(float(bekker_wheel_sinkage(terrain, w, r, b)), 0.9 * r)
-
-    def unpack(x: np.ndarray) -> tuple[float, float]:
-        theta_f = 0.5 * math.pi / (1.0 + math.exp(-float(np.clip(x[0], -50.0, 50.0))))
-        return r * (1.0 - math.cos(theta_f)), math.tanh(float(np.clip(x[1], -20.0, 20.0)))
 
     def residual(x: np.ndarray) -> np.ndarray:
-        z, s = unpack(x)
+        z, s = sinkage_slip_from_unknowns(x, r)
         state = wheel_forces(terrain, z, s, r, b)
         return np.array([float(state.Fx_N) - fd, float(state.Fz_N) - w])  # eq. 2.29
 
-    theta0 = math.acos(1.0 - z0 / r)
-    x0 = np.array([-math.log(0.5 * math.pi / theta0 - 1.0), math.atanh(0.2)])  # eq. 2.31
+    x0 = first_guess_unknowns(terrain, w, r, b)
     sol = root(residual, x0, method='hybr', options={'xtol': 1e-13})
     if not np.all(np.abs(residual(sol.x)) < BALANCE_TOL_N):
         return None
-    z, s = unpack(sol.x)
+    z, s = sinkage_slip_from_unknowns(sol.x, r)
     return wheel_forces(terrain, z, s, r, b)
+
+
+def sinkage_slip_from_unknowns(x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sinkage z [m] and slip s [-] from :func:`solve_wheel`'s unknowns x (..., 2): z = r (1 - cos
+    theta_f) with theta_f = (pi / 2) logistic(x_0) in (0, pi/2), and s = tanh(x_1), so no iterate
+    leaves the physical range."""
+    theta_f = 0.5 * math.pi / (1.0 + np.exp(-np.clip(x[..., 0], -50.0, 50.0)))
+    return radius * (1.0 - np.cos(theta_f)), np.tanh(np.clip(x[..., 1], -20.0, 20.0))
+
+
+def first_guess_unknowns(terrain: Terrain, load: ArrayLike, radius: float, width: float) -> np.ndarray:
+    """:func:`solve_wheel`'s first guess in its unknowns (..., 2): Bekker's sinkage z0 (eq. 2.32, at
+    most 0.9 r; needs n < 3) and s = 0.2 (eq. 2.31)."""
+    z0 = np.minimum(bekker_wheel_sinkage(terrain, load, radius, width), 0.9 * radius)
+    theta0 = np.arccos(1.0 - z0 / radius)
+    return np.stack([-np.log(0.5 * math.pi / theta0 - 1.0), np.full_like(theta0, math.atanh(0.2))], axis=-1)
 
 
 SLIP_SCAN = np.linspace(-1.0, 1.0, 41)
