@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.special import roots_legendre
@@ -129,6 +130,12 @@ def bulldozing_coefficients(terrain: Terrain) -> tuple[float, float]:
     d1 = cot + math.tan(xc + terrain.phi)
     d2 = cot + cot * cot * math.tan(terrain.phi)
     return d1 * terrain.c, 0.5 * d1 * d2 * SOIL_UNIT_WEIGHT_N_M3
+
+
+def bulldozing_resistance(a: Any, b: Any, depth_m: Any) -> Any:
+    """R_b = (A + B h) h [N/m] per unit length of side wall at depth h [m], from
+    :func:`bulldozing_coefficients` (floats or arrays, broadcast)."""
+    return (a + b * depth_m) * depth_m
 
 
 @dataclass
@@ -339,6 +346,10 @@ class Twin:
         half = self._half_weight
         return np.array([max(half - transfer, 0.0), max(half + transfer, 0.0)])
 
+    def _bulldozing(self, terrain: Terrain) -> tuple[float, float]:
+        """:func:`bulldozing_coefficients` of ``terrain``, (0, 0) with ``dig_and_bulldoze`` off."""
+        return bulldozing_coefficients(terrain) if self.dig_and_bulldoze else (0.0, 0.0)
+
     def _terrain_index(self, hx: np.ndarray, hy: np.ndarray) -> np.ndarray | None:
         """Terrain index of hull points (hx, hy) [m]; None if the floor is uniform."""
         if self.field.uniform:
@@ -360,9 +371,8 @@ class Twin:
             self._rc = single_track.compaction_resistance(t, loads, b, length)  # eq. 2.10
             sinkage = single_track.track_sinkage(t, loads, b, length)  # eq. 2.6
             self._sinkage = float(np.max(sinkage))
-            bull_a, bull_b = bulldozing_coefficients(t)
-            side_wall = (bull_a + bull_b * sinkage) * sinkage  # R_b [N/m] per side
-            self._bull_w = side_wall[:, None] * self.track_dx * (1.0 if self.dig_and_bulldoze else 0.0)
+            side_wall = bulldozing_resistance(*self._bulldozing(t), sinkage)  # [N/m] per side
+            self._bull_w = side_wall[:, None] * self.track_dx
             self._track_moments()
             return
         p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
@@ -376,9 +386,8 @@ class Twin:
             strength[mask] = soil.shear_strength(t, p[mask])
             rc[mask] = single_track.compaction_resistance(t, p[mask] * b * length, b, length)
             sink[mask] = soil.sinkage_for_pressure(t, p[mask], b)
-            bull_a, bull_b = bulldozing_coefficients(t)
-            side_wall[mask] = (bull_a + bull_b * sink[mask]) * sink[mask]
-        self._bull_w = side_wall.mean(axis=2) * self.track_dx * (1.0 if self.dig_and_bulldoze else 0.0)
+            side_wall[mask] = bulldozing_resistance(*self._bulldozing(t), sink[mask])
+        self._bull_w = side_wall.mean(axis=2) * self.track_dx
         share = self.node_w / (b * length)  # each node's share of the rut
         self._tau_max_w = strength * self.node_w
         self._rc = (rc * share).sum(axis=(1, 2))
@@ -530,9 +539,8 @@ class Twin:
         for wheel, coefficients in enumerate(angles):
             groups.setdefault((int(self.wheel_side[wheel]), coefficients), []).append(wheel)
         self._wp_groups = [(side, coefficients, wheels) for (side, coefficients), wheels in groups.items()]
-        on = 1.0 if self.dig_and_bulldoze else 0.0
-        bull = [bulldozing_coefficients(t) for t in terrains]
-        self._wp_bull = (column([on * a for a, _ in bull]), column([on * b_ for _, b_ in bull]))
+        bull = [self._bulldozing(t) for t in terrains]
+        self._wp_bull = (column([a for a, _ in bull]), column([b_ for _, b_ in bull]))
         if all(t.shear_type == 'A' for t in terrains):
             self._wp_inv_k: np.ndarray | None = spread([-1.0 / t.K for t in terrains])
             self._wp_terrains: list[Terrain] | None = None
@@ -819,11 +827,11 @@ class Twin:
         h *= self.r
         np.maximum(h, 0.0, out=h)
         h += self.dz[:, None]
-        integrand = (bull_a + bull_b * h) * h * cos
+        integrand = bulldozing_resistance(bull_a, bull_b, h) * cos
         self._side = (integrand @ self.xi_w) * (self.r * self._wheel_state[0])
         self._side_slope = self._side * (1.0 / DIRECTION_SMOOTHING_M_S)
         dz = self.dz
-        face = (self.width * (bull_a[:, 0] + bull_b[:, 0] * dz) * dz).tolist()
+        face = (self.width * bulldozing_resistance(bull_a[:, 0], bull_b[:, 0], dz)).tolist()
         k = self._wheels_per_side
         self._face_sides = (sum(face[:k]), sum(face[k:]))
 
