@@ -319,7 +319,7 @@ class Twin:
             self._damped = np.empty((2, *nodes))  # (_wheel_forces)
             self._soil_age = 0
             zeros = np.zeros(self.n_wheels)
-            self._wheel_state = (zeros, np.zeros(2), zeros.tolist())  # span [rad] (also as floats), loads [N]
+            self._loads = np.zeros(2)  # side loads of the last force step [N] (_relax_sinkage)
             self._wheel_geometry()
             self._side, self._face_sides = zeros, (0.0, 0.0)  # bulldozing [N] (_wheel_contact)
             self._side_slope = zeros
@@ -722,13 +722,14 @@ class Twin:
         # minus what the body receives (F . v + M_z yaw rate)
         vx, vy, wz = self.vel.tolist()
         dissipation = power - (fx * vx + fy * vy + mz * wz)
-        self._wheel_state = (span, loads, list(spans))
+        self._loads = loads
         return (fx, fy, mz), axle, dissipation, self._deepest
 
     def _advance_wheels(self, dt: float) -> None:
         """Transport the rim's shear displacement; every ``SOIL_REFRESH_STEPS`` also relax the sinkage
         and the excavation (see the module doc)."""
-        span, _loads, spans = self._wheel_state
+        spans = self._spans  # theta_f - theta_r per wheel [rad], as the last force step set them
+        span = self._outer[: self.n_wheels, 0]  # the same as an array
         cos = self._trig[0]
         kin = self._wheel_kinematics()  # the new velocities (kept for the next step's forces)
         self._kinematics = kin
@@ -789,7 +790,7 @@ class Twin:
         span theta_f - theta_r [rad], exit_j the rim's tangential displacement at the exit [m],
         ground the axle's ground speed [m/s], om the wheel speed [rad/s]."""
         r = self.r
-        loads = self._wheel_state[1]  # [N] per side
+        loads = self._loads  # [N] per side
         per_wheel = self._per_wheel
         fz = per_wheel[0] + per_wheel[3]  # s_cos + t_sin of eq. 2.29 [N]
         # vertical balance Fz = W (eq. 2.29), Fz ~ z^(n + 1/2) (eq. 2.32). The rut deepens or
@@ -828,7 +829,7 @@ class Twin:
         np.maximum(h, 0.0, out=h)
         h += self.dz[:, None]
         integrand = bulldozing_resistance(bull_a, bull_b, h) * cos
-        self._side = (integrand @ self.xi_w) * (self.r * self._wheel_state[0])
+        self._side = (integrand @ self.xi_w) * (self.r * self._outer[: self.n_wheels, 0])
         self._side_slope = self._side * (1.0 / DIRECTION_SMOOTHING_M_S)
         dz = self.dz
         face = (self.width * bulldozing_resistance(bull_a[:, 0], bull_b[:, 0], dz)).tolist()
