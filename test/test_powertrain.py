@@ -94,16 +94,21 @@ def test_motor_side_power_balance():
     np.testing.assert_allclose(mp.motor_omega_rad_s, 12 * omega)
 
 
-def test_motor_sides_is_motor_side_of_each_side():
-    """Both sides at once (the estimator's per-message path) = one side at a time. Table 7.1's two
-    sides differ (Motor 2), and one side brakes, so each side's own resistance and quadrant count."""
+def test_motor_side_on_floats_is_motor_side_on_arrays():
+    """Floats in, floats out (the estimator's per-message path, skidsteer_power.numeric), with the
+    same numbers to the last bit as the array path: one formula, two types. Table 7.1's two sides
+    differ (Motor 2), and the points cover braking (generating), standstill and reverse, so both
+    branches of the amplifier and of the Coulomb sign are taken."""
     pt = Powertrain.default_test_robot('track')
-    torque, omega = np.array([[4.0, -2.5], [0.0, 1.0]]), np.array([[1.5, 2.0], [-0.5, 0.0]])
-    both = pt.motor_sides(torque, omega)
-    for i, side in enumerate(('left', 'right')):
-        one = pt.motor_side(side, torque[:, i], omega[:, i])
-        for field in dataclasses.fields(one):
-            np.testing.assert_array_equal(getattr(both, field.name)[:, i], getattr(one, field.name))
+    torque, omega = np.array([4.0, -2.5, 0.0, 1.0, -3.0]), np.array([1.5, 2.0, -0.5, 0.0, -1.0])
+    for side in ('left', 'right'):
+        batch = pt.motor_side(side, torque, omega)
+        for i in range(torque.size):
+            one = pt.motor_side(side, float(torque[i]), float(omega[i]))
+            for field in dataclasses.fields(one):
+                value = getattr(one, field.name)
+                assert type(value) is float, field.name
+                assert value == getattr(batch, field.name)[i], (side, i, field.name)
     assert pt.right.total != pt.left.total
 
 

@@ -21,8 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.adaptation import AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.energy import EnergyTracker
@@ -228,15 +226,16 @@ class EstimatorCore:
         corrected_Nm = self.corrected_torque_Nm()
         if corrected_Nm == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
             return p.bus_total_W
-        corrected = np.asarray(corrected_Nm)
         pt = self.powertrain
-        omega = np.asarray(p.motor_omega_rad_s)
 
-        def bus(torque: np.ndarray) -> float:
-            terminal = terminal_power(pt.motor, torque, omega)
-            return float(np.sum(bus_power(terminal, pt.amplifier, pt.regen_efficiency)))
+        def bus(torque: Sequence[float]) -> float:
+            left, right = (
+                bus_power(terminal_power(pt.motor, t, w), pt.amplifier, pt.regen_efficiency)
+                for t, w in zip(torque, p.motor_omega_rad_s, strict=True)
+            )
+            return left + right
 
-        return p.bus_total_W + bus(corrected) - bus(np.asarray(p.motor_torque_Nm))
+        return p.bus_total_W + bus(corrected_Nm) - bus(p.motor_torque_Nm)
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""

@@ -17,13 +17,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from skidsteer_power.powertrain.motor import (
     DES_70_10,
     AmplifierConstants,
     MotorConstants,
     bus_power,
+    motor_current,
     terminal_power,
 )
 
@@ -56,10 +55,6 @@ class MeasuredPower:
         return self.electrical_W[0] + self.electrical_W[1]
 
 
-def _pair(values: np.ndarray) -> Pair:
-    return float(values[0]), float(values[1])
-
-
 def measure_motor_power(
     omega_rad_s: Pair,
     torque_Nm: Pair,
@@ -70,16 +65,20 @@ def measure_motor_power(
     """Per-side measured power from motor shaft speed [rad/s] and Kt*I [N m] (see module docstring).
 
     ``regen_efficiency`` is the amplifier's bus/terminal power ratio when generating (None: its
-    efficiency), as in :func:`skidsteer_power.powertrain.motor.bus_power`.
+    efficiency), as in :func:`skidsteer_power.powertrain.motor.bus_power`. Computed in floats, one
+    side at a time (per message: :mod:`skidsteer_power.numeric`).
     """
-    omega = np.asarray(omega_rad_s, dtype=float)
-    torque = np.asarray(torque_Nm, dtype=float)
-    electrical = terminal_power(motor, torque, omega)
+    wl, wr = float(omega_rad_s[0]), float(omega_rad_s[1])
+    tl, tr = float(torque_Nm[0]), float(torque_Nm[1])
+    electrical = terminal_power(motor, tl, wl), terminal_power(motor, tr, wr)
     return MeasuredPower(
-        omega_rad_s=_pair(omega),
-        torque_Nm=_pair(torque),
-        current_A=_pair(torque / motor.torque_constant_Nm_A),
-        mechanical_W=_pair(torque * omega),
-        electrical_W=_pair(electrical),
-        bus_W=_pair(bus_power(electrical, amplifier, regen_efficiency)),
+        omega_rad_s=(wl, wr),
+        torque_Nm=(tl, tr),
+        current_A=(motor_current(motor, tl), motor_current(motor, tr)),
+        mechanical_W=(tl * wl, tr * wr),
+        electrical_W=electrical,
+        bus_W=(
+            bus_power(electrical[0], amplifier, regen_efficiency),
+            bus_power(electrical[1], amplifier, regen_efficiency),
+        ),
     )

@@ -102,12 +102,6 @@ def _pair(left: Any, right: Any) -> Pair:
     return _scalar(left), _scalar(right)
 
 
-def _sides(values: np.ndarray) -> Pair:
-    """(left, right) floats from an array of shape (2,)."""
-    left, right = values.tolist()
-    return left, right
-
-
 class MapPredictor:
     """Prediction from a :class:`skidsteer_power.maps.PowerMap` and a powertrain.
 
@@ -138,19 +132,21 @@ class MapPredictor:
     def _with_powertrain(
         self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: Any
     ) -> Prediction:
-        point = self.powertrain.motor_sides(torque, omega)  # both sides in one call
+        # floats, one side at a time: ~20x faster than numpy on two values (skidsteer_power.numeric)
+        left = self.powertrain.motor_side('left', torque[0], omega[0])
+        right = self.powertrain.motor_side('right', torque[1], omega[1])
         return Prediction(
             speed_m_s=speed,
             yaw_rate_rad_s=yaw_rate,
             axle_omega_rad_s=omega,
             terrain_torque_Nm=torque,
-            terrain_W=_sides(point.terrain_power_W),
-            internal_W=_sides(point.internal_power_W),
-            motor_omega_rad_s=_sides(point.motor_omega_rad_s),
-            motor_torque_Nm=_sides(point.motor_torque_Nm),
-            current_A=_sides(point.current_A),
-            electrical_W=_sides(point.terminal_power_W),
-            bus_W=_sides(point.electrical_power_W),
+            terrain_W=(left.terrain_power_W, right.terrain_power_W),
+            internal_W=(left.internal_power_W, right.internal_power_W),
+            motor_omega_rad_s=(left.motor_omega_rad_s, right.motor_omega_rad_s),
+            motor_torque_Nm=(left.motor_torque_Nm, right.motor_torque_Nm),
+            current_A=(left.current_A, right.current_A),
+            electrical_W=(left.terminal_power_W, right.terminal_power_W),
+            bus_W=(left.electrical_power_W, right.electrical_power_W),
             traction_margin=_scalar(q.traction_margin),
             clamped=bool(_scalar(q.clamped)),
             limited=bool(_scalar(q.limited)),

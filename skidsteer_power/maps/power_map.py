@@ -397,13 +397,15 @@ class PowerMap:
         return out
 
     # ---------------------------------------------------------------- queries
-    def query(self, speed: ArrayLike, yaw_rate: ArrayLike) -> MapQuery:
+    def query(self, speed: float | ArrayLike, yaw_rate: float | ArrayLike) -> MapQuery:
         """Interpolated values at (V [m/s], w_z [rad/s]); broadcast arrays or scalars.
 
         Torques, slip speeds, s0, sinkage and margin are interpolated; each side's axle speed is
         (its exact ground speed V -/+ w_z B/2 + its slip speed) / r and its power torque x speed.
         V < 0 is answered by the 180-degree symmetry (module doc). Flags: see :class:`MapQuery`.
         """
+        if isinstance(speed, float) and isinstance(yaw_rate, float):  # per message: no numpy at all
+            return self._query_scalar(speed, yaw_rate)
         if np.ndim(speed) == 0 and np.ndim(yaw_rate) == 0:
             return self._query_scalar(float(speed), float(yaw_rate))  # type: ignore[arg-type]
         v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))

@@ -16,16 +16,16 @@ top and are reported separately.
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic
 
 import numpy as np
 
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.numeric import Real, real
 from skidsteer_power.powertrain.config import merged
-from skidsteer_power.powertrain.internal import Resistance, SideResistance, side_from_config
+from skidsteer_power.powertrain.internal import SideResistance, side_from_config
 from skidsteer_power.powertrain.motor import (
     DES_70_10,
     EC45,
@@ -33,6 +33,7 @@ from skidsteer_power.powertrain.motor import (
     AmplifierConstants,
     MotorConstants,
     bus_power,
+    motor_current,
     terminal_power,
 )
 
@@ -42,8 +43,9 @@ SIDES = ('left', 'right')
 
 
 @dataclass(frozen=True)
-class MotorPoint:
-    """Operating point of one side's motor and amplifier (arrays broadcast over the inputs).
+class MotorPoint(Generic[Real]):
+    """Operating point of one side's motor and amplifier: floats for float inputs, arrays broadcast
+    over array inputs (:mod:`skidsteer_power.numeric`).
 
     Attributes
     ----------
@@ -57,14 +59,14 @@ class MotorPoint:
     terminal_power_W : electrical power at the motor terminals [W]
     """
 
-    motor_torque_Nm: np.ndarray
-    motor_omega_rad_s: np.ndarray
-    current_A: np.ndarray
-    electrical_power_W: np.ndarray
-    internal_power_W: np.ndarray
-    terrain_power_W: np.ndarray
-    mechanical_power_W: np.ndarray
-    terminal_power_W: np.ndarray
+    motor_torque_Nm: Real
+    motor_omega_rad_s: Real
+    current_A: Real
+    electrical_power_W: Real
+    internal_power_W: Real
+    terrain_power_W: Real
+    mechanical_power_W: Real
+    terminal_power_W: Real
 
 
 @dataclass(frozen=True)
@@ -142,49 +144,27 @@ class Powertrain:
             raise InputError(f"side must be 'left' or 'right', not {side!r}")
         return self.left if side == 'left' else self.right
 
-    def internal_torque(self, side: str, axle_omega: np.ndarray | float) -> np.ndarray:
+    def internal_torque(self, side: str, axle_omega: Real) -> Real:
         """Internal resistance referred to the axle [N m] at axle speed [rad/s]: G T_int(G w_a)."""
-        omega_m = self.gear_ratio * np.asarray(axle_omega, dtype=float)
+        omega_m = self.gear_ratio * real(axle_omega)
         return self.gear_ratio * self.resistance(side).torque(omega_m)
 
-    def motor_side(
-        self, side: str, axle_torque_Nm: np.ndarray | float, axle_omega_rad_s: np.ndarray | float
-    ) -> MotorPoint:
-        """Motor and amplifier operating point of one side for axle torque [N m] and speed [rad/s].
+    def motor_side(self, side: str, axle_torque_Nm: Real, axle_omega_rad_s: Real) -> MotorPoint[Real]:
+        """Motor and amplifier operating point of one side for axle torque [N m] and speed [rad/s]:
+        floats (one command, the estimator's per-message path) or arrays (broadcast).
 
         All four quadrants: a negative torque * speed (braking) makes the motor generate and the
         bus power negative, never larger in magnitude than the braking power the axle delivers.
         """
-        return self._motor_point(self.resistance(side).total, axle_torque_Nm, axle_omega_rad_s)
-
-    def motor_sides(
-        self, axle_torque_Nm: np.ndarray | Sequence[float], axle_omega_rad_s: np.ndarray | Sequence[float]
-    ) -> MotorPoint:
-        """:meth:`motor_side` of both sides at once: inputs and outputs have (left, right) on their
-        last axis [N m, rad/s] (one call per prediction instead of two, issue 18)."""
-        return self._motor_point(self._both_sides, axle_torque_Nm, axle_omega_rad_s)
-
-    @functools.cached_property
-    def _both_sides(self) -> Resistance:
-        """Left and right total resistance as one :class:`Resistance` whose coefficients are (left,
-        right) arrays; its ``torque`` broadcasts them over the last axis."""
-        left, right = self.left.total, self.right.total
-        return Resistance(
-            np.array([left.viscous_Nm_s, right.viscous_Nm_s]),  # type: ignore[arg-type]
-            np.array([left.coulomb_Nm, right.coulomb_Nm]),  # type: ignore[arg-type]
-        )
-
-    def _motor_point(self, resistance: Resistance, axle_torque_Nm: Any, axle_omega_rad_s: Any) -> MotorPoint:
-        torque_a = np.asarray(axle_torque_Nm, dtype=float)
-        omega_a = np.asarray(axle_omega_rad_s, dtype=float)
+        torque_a, omega_a = real(axle_torque_Nm), real(axle_omega_rad_s)
         omega_m = self.gear_ratio * omega_a
-        internal_m = resistance.torque(omega_m)  # eq. 7.1, at the motor shaft
+        internal_m = self.resistance(side).torque(omega_m)  # eq. 7.1, at the motor shaft
         torque_m = torque_a / self.gear_ratio + internal_m
         p_terminal = terminal_power(self.motor, torque_m, omega_m)
         return MotorPoint(
             motor_torque_Nm=torque_m,
             motor_omega_rad_s=omega_m,
-            current_A=torque_m / self.motor.torque_constant_Nm_A,
+            current_A=motor_current(self.motor, torque_m),
             electrical_power_W=bus_power(p_terminal, self.amplifier, self.regen_efficiency),
             internal_power_W=internal_m * omega_m,
             terrain_power_W=torque_a * omega_a,
@@ -192,12 +172,9 @@ class Powertrain:
             terminal_power_W=p_terminal,
         )
 
-    def axle_from_motor(
-        self, side: str, motor_torque_Nm: np.ndarray | float, motor_omega_rad_s: np.ndarray | float
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def axle_from_motor(self, side: str, motor_torque_Nm: Real, motor_omega_rad_s: Real) -> tuple[Real, Real]:
         """Invert :meth:`motor_side`: axle torque [N m] and speed [rad/s] from measured K_t i and w_m."""
-        omega_m = np.asarray(motor_omega_rad_s, dtype=float)
-        torque_m = np.asarray(motor_torque_Nm, dtype=float)
+        omega_m, torque_m = real(motor_omega_rad_s), real(motor_torque_Nm)
         torque_a = self.gear_ratio * (torque_m - self.resistance(side).torque(omega_m))
         return torque_a, omega_m / self.gear_ratio
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.numeric import Real, real, sign
 
 COMPONENTS = ('motor', 'gear_train', 'roller_chain', 'track')
 """Drivetrain components in assembly order (ch. 7.2.1-7.2.3)."""
@@ -64,14 +65,15 @@ class Resistance:
     viscous_Nm_s: float
     coulomb_Nm: float
 
-    def torque(self, motor_omega_rad_s: np.ndarray | float) -> np.ndarray:
-        """Resisting torque b omega + c sign(omega) [N m] at motor speed omega [rad/s] (eq. 7.1)."""
-        omega = np.asarray(motor_omega_rad_s, dtype=float)
-        return self.viscous_Nm_s * omega + self.coulomb_Nm * np.sign(omega)
+    def torque(self, motor_omega_rad_s: Real) -> Real:
+        """Resisting torque b omega + c sign(omega) [N m] at motor speed omega [rad/s] (eq. 7.1); a
+        float or an array (:mod:`skidsteer_power.numeric`)."""
+        omega = real(motor_omega_rad_s)
+        return self.viscous_Nm_s * omega + self.coulomb_Nm * sign(omega)
 
-    def power(self, motor_omega_rad_s: np.ndarray | float) -> np.ndarray:
+    def power(self, motor_omega_rad_s: Real) -> Real:
         """Dissipated power b omega^2 + c |omega| [W] (eq. 7.2); never negative for b, c >= 0."""
-        omega = np.asarray(motor_omega_rad_s, dtype=float)
+        omega = real(motor_omega_rad_s)
         return self.torque(omega) * omega
 
     def __add__(self, other: Resistance) -> Resistance:
@@ -95,15 +97,15 @@ class SideResistance:
             total = total + part
         return total
 
-    def torque(self, motor_omega_rad_s: np.ndarray | float) -> np.ndarray:
+    def torque(self, motor_omega_rad_s: Real) -> Real:
         """Total resisting torque at the motor shaft [N m] for motor speed [rad/s]."""
         return self.total.torque(motor_omega_rad_s)
 
-    def power(self, motor_omega_rad_s: np.ndarray | float) -> np.ndarray:
+    def power(self, motor_omega_rad_s: Real) -> Real:
         """Total dissipated power [W] for motor speed [rad/s] (sum of eq. 7.2 over components)."""
         return self.total.power(motor_omega_rad_s)
 
-    def component_power(self, motor_omega_rad_s: np.ndarray | float) -> dict[str, np.ndarray]:
+    def component_power(self, motor_omega_rad_s: Real) -> dict[str, Real]:
         """Dissipated power of each component [W] (Figure 7.14's breakdown)."""
         return {name: part.power(motor_omega_rad_s) for name, part in self.components.items()}
 

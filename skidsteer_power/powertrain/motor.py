@@ -16,9 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from skidsteer_power.errors import ConfigError
+from skidsteer_power.numeric import Real, by_sign, real
 
 RPM = 2.0 * math.pi / 60.0
 """One revolution per minute in rad/s."""
@@ -148,41 +147,40 @@ DES_70_10 = AmplifierConstants(
 """The test robot's amplifier, one per motor (ch. 7.1.2, Appendix A)."""
 
 
-def motor_current(motor: MotorConstants, motor_torque_Nm: np.ndarray | float) -> np.ndarray:
-    """Motor current i = T / Kt [A] for the total electromagnetic torque T [N m] (eq. 7.1: Kt i)."""
-    return np.asarray(motor_torque_Nm, dtype=float) / motor.torque_constant_Nm_A
+def motor_current(motor: MotorConstants, motor_torque_Nm: Real) -> Real:
+    """Motor current i = T / Kt [A] for the total electromagnetic torque T [N m] (eq. 7.1: Kt i);
+    a float or an array (:mod:`skidsteer_power.numeric`)."""
+    return real(motor_torque_Nm) / motor.torque_constant_Nm_A
 
 
-def terminal_power(
-    motor: MotorConstants, motor_torque_Nm: np.ndarray | float, motor_omega_rad_s: np.ndarray | float
-) -> np.ndarray:
+def terminal_power(motor: MotorConstants, motor_torque_Nm: Real, motor_omega_rad_s: Real) -> Real:
     """Electrical power at the motor terminals [W]: T omega + R i^2 (negative = generating).
 
     ``motor_torque_Nm`` is the electromagnetic torque Kt i [N m] (load plus internal resistance),
-    ``motor_omega_rad_s`` the shaft speed [rad/s]. R is the phase-to-phase terminal resistance, the
-    datasheet's convention (starting current 67.6 A = 48 V / 0.710 ohm).
+    ``motor_omega_rad_s`` the shaft speed [rad/s]; floats or arrays (:mod:`skidsteer_power.numeric`).
+    R is the phase-to-phase terminal resistance, the datasheet's convention (starting current
+    67.6 A = 48 V / 0.710 ohm).
     """
-    torque = np.asarray(motor_torque_Nm, dtype=float)
-    omega = np.asarray(motor_omega_rad_s, dtype=float)
+    torque = real(motor_torque_Nm)
     current = torque / motor.torque_constant_Nm_A
-    return torque * omega + motor.terminal_resistance_ohm * current**2
+    return torque * real(motor_omega_rad_s) + motor.terminal_resistance_ohm * (current * current)
 
 
 def bus_power(
-    terminal_power_W: np.ndarray | float,
+    terminal_power_W: Real,
     amplifier: AmplifierConstants = DES_70_10,
     regen_efficiency: float | None = None,
-) -> np.ndarray:
+) -> Real:
     """DC bus (battery-side) power of one amplifier [W], 4-quadrant.
 
     Motoring (terminal power > 0): P_bus = P_term / eta. Generating (< 0): P_bus = P_term * eta_regen,
     with eta_regen = ``regen_efficiency`` (default: the amplifier efficiency; 0 = no regeneration,
     e.g. a 2-quadrant amplifier or a full battery). |P_bus| <= |P_term| when generating, so braking
-    never returns more than the motor gives back.
+    never returns more than the motor gives back. A float or an array (:mod:`skidsteer_power.numeric`).
     """
     eta = amplifier.efficiency
     eta_regen = (eta if amplifier.four_quadrant else 0.0) if regen_efficiency is None else regen_efficiency
     if not (0.0 < eta <= 1.0) or not (0.0 <= eta_regen <= 1.0):
         raise ConfigError(f'amplifier efficiencies must be in (0, 1]: {eta}, {eta_regen}')
-    p = np.asarray(terminal_power_W, dtype=float)
-    return np.where(p >= 0.0, p / eta, p * eta_regen)
+    p = real(terminal_power_W)
+    return by_sign(p, p / eta, p * eta_regen)
