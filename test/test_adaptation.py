@@ -231,11 +231,16 @@ def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrai
     """Hand-made data: the internal torque is 0.05 N m, the terrain needs 1.6 x the predicted terrain
     torque, on two alternating commands. The per-side correction restarts on each new command, the
     terrain scale k = S_xy / S_xx = 1.6 exactly (noise-free, through the origin) and holds across
-    them; before terrain_min_s (2 s) of settled time it is 1; a flagged terrain change restarts it."""
+    them; before terrain_min_s (2 s) of settled time it is 1; a flagged terrain change restarts it.
+
+    The settled time behind k, by hand (module doc, "Terrain scale"): every settled sample counts for
+    its interval since the previous joint_states, DT, the first one after a command change too (it
+    once counted for the whole unsettled gap, capped at 0.2 s: 10 samples' worth), weighted by
+    exp(-age / 60 s)."""
     adapt = TorqueAdaptation()
     internal = 0.05
     t = 0.0
-    ks = []
+    ks, evidence, settled_at = [], [], []
     for command, terrain in (((0.2, 0.0), (0.25, 0.27)), ((0.1, 0.2), (0.10, 0.45))) * 2:
         adapt.on_command(command, t)
         for _ in range(150):  # 3 s per command, the first 1 s unsettled
@@ -243,13 +248,21 @@ def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrai
             meas = (internal + 1.6 * terrain[0], internal + 1.6 * terrain[1])
             adapt.update(t, pred, (24.0, 24.0), meas, (24.0, 24.0), terrain)
             ks.append(adapt.terrain_scale())
+            state = adapt.state()
+            evidence.append(state.terrain_scale_evidence_s)
+            if state.settled:
+                settled_at.append(t)
             t += DT
-    # the first command's 2 s settled (less its forgetting) are not yet 2 s: k is used from the second
-    assert ks[:150] == [1.0] * 150
-    assert ks[200:] == pytest.approx([1.6] * (len(ks) - 200), rel=1e-12)  # from the second settled
-    state = adapt.state()
-    assert state.terrain_scale == pytest.approx(1.6, rel=1e-12)
-    assert 2.0 < state.terrain_scale_evidence_s < 8.0  # 4 x 2 s settled, forgetting over 12 s
+    assert 4 * 99 <= len(settled_at) <= 4 * 100  # 2 s of 3 per command (t adds up DT in floats)
+    last = settled_at[-1]
+    by_hand = sum(DT * math.exp(-(last - ts) / 60.0) for ts in settled_at)
+    assert evidence[-1] == pytest.approx(by_hand, rel=1e-9)
+    # k is used exactly from the sample whose settled time reaches 2 s: in the second command
+    first_used = next(i for i, e in enumerate(evidence) if e >= 2.0)
+    assert 200 < first_used < 300
+    assert ks[:first_used] == [1.0] * first_used
+    assert ks[first_used:] == pytest.approx([1.6] * (len(ks) - first_used), rel=1e-12)
+    assert adapt.state().terrain_scale == pytest.approx(1.6, rel=1e-12)
     rng = np.random.default_rng(3)
     while not adapt.update(
         t, pred, (24.0, 24.0), 0.3 * np.array(meas) + rng.normal(0, 1e-3, 2), (24.0, 24.0), terrain

@@ -23,13 +23,14 @@ powertrain's internal resistance, eqs. 7.1-7.4: measured K_t i minus the predict
 against the predicted axle torque / G). It is the least-squares slope through the origin over the
 settled samples of both sides and all commands, with exponential forgetting of time constant
 ``terrain_memory_s`` [s]: k = S_xy / S_xx, S_xy = sum w dt x y, S_xx = sum w dt x^2 (dt: the
-sample's interval, at most MAX_SAMPLE_S), w = exp(-age / terrain_memory_s). Large torques weigh
-most, as they do in energy. It is used (else 1) once the settled time behind it, sum w dt, reaches
-``terrain_min_s`` [s], kept within ``scale_limits``, and restarted with the rest when a terrain
-change is flagged. The path energy
-(:mod:`skidsteer_power.estimator.path_energy`) multiplies the map's axle torques by k. k also absorbs
-what the map gets wrong about the motion (a wheeled robot turning at less than the commanded yaw rate
-needs less torque than the commanded turn): the path is predicted from commands too.
+sample's interval, the time since the previous joint_states, at most MAX_SAMPLE_S; so the first
+settled sample after a command change counts as much as any other), w = exp(-age /
+terrain_memory_s). Large torques weigh most, as they do in energy. It is used (else 1) once the
+settled time behind it, sum w dt, reaches ``terrain_min_s`` [s], kept within ``scale_limits``, and
+restarted with the rest when a terrain change is flagged. The path energy
+(:mod:`skidsteer_power.estimator.path_energy`) multiplies the map's axle torques by k. k also
+absorbs what the map gets wrong about the motion (a wheeled robot turning at less than the commanded
+yaw rate needs less torque than the commanded turn): the path is predicted from commands too.
 
 Change detector
 ---------------
@@ -90,8 +91,8 @@ class AdaptationSettings:
 
 
 MAX_SAMPLE_S = 0.2
-"""A settled sample counts for at most this long in the terrain scale [s]: the gap between two settled
-runs (a command change) is no settled time."""
+"""A settled sample counts in the terrain scale for the time since the previous joint_states, and at
+most this long [s]: a pause in joint_states is no settled time."""
 
 P0 = np.diag([100.0, 1.0])  # initial covariance of (a [-], b [N m]): a weak prior (+-10, +-1 N m)
 
@@ -182,7 +183,8 @@ class TorqueAdaptation:
         self.last_change_s = math.nan
         self._command: tuple[float, float] | None = None
         self._command_since = math.nan
-        self._last_update_s = math.nan
+        self._last_update_s = math.nan  # of the last settled sample [s]
+        self._last_sample_s = math.nan  # of the last joint_states, settled or not [s]
         self._settled = False
         self._new_command = True
         self._detect_from_s = math.inf
@@ -216,6 +218,8 @@ class TorqueAdaptation:
         needs (axle torque / G) [N m], feeds the terrain scale (none given: it is not updated)."""
         s = self.settings
         self._settled = False
+        held_s = now_s - self._last_sample_s if math.isfinite(self._last_sample_s) else 0.0
+        self._last_sample_s = now_s
         if not s.enabled or self._command is None or now_s - self._command_since < s.settle_s:
             return False
         w_pred, w_meas = np.asarray(predicted_omega), np.asarray(measured_omega)
@@ -251,8 +255,8 @@ class TorqueAdaptation:
             for x, pred, meas in zip(predicted_terrain_Nm, predicted_Nm, measured_Nm, strict=True):
                 xy += x * (meas - (pred - x))
                 xx += x * x
-            dt = max(dt, 0.0)
-            self.terrain.add(xy, xx, min(dt, MAX_SAMPLE_S), math.exp(-dt / s.terrain_memory_s))
+            held_s = min(max(held_s, 0.0), MAX_SAMPLE_S)
+            self.terrain.add(xy, xx, held_s, math.exp(-max(dt, 0.0) / s.terrain_memory_s))
         return alarm
 
     def terrain_scale(self) -> float:
