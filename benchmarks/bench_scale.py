@@ -16,9 +16,10 @@ FULL_TERRAINS = 2
 
 
 def _path_energy(report: Report) -> None:
-    """A new plan (geometry + energies) and a speed change on the same plan (energies only), each
-    evaluation at a fresh speed and terrain scale (no cache hit); the reference is the former cost
-    of a speed change, the route rebuilt from the poses (Segment objects) there and back."""
+    """A new plan (geometry + energies), a speed change on the same plan (energies only) and a terrain
+    scale change alone (powertrain only), each evaluation at a fresh speed or terrain scale (no cache
+    hit); the reference is the former cost of a speed change, the route rebuilt from the poses
+    (Segment objects) there and back."""
     import numpy as np
 
     from skidsteer_power.estimator.path_energy import PathTracker, route_from_polyline
@@ -50,9 +51,15 @@ def _path_energy(report: Report) -> None:
     def new_speed() -> None:
         tracker.evaluate(next(speeds), power_map, pt, 1.0 + 1e-3 * next(speeds))
 
+    scales = iter(np.linspace(0.5, 1.5, 1000))
+
+    def new_scale() -> None:  # the adaptation learning: a new k on every 5 Hz tick, same speed
+        tracker.evaluate(0.3, power_map, pt, next(scales))
+
     before = min(_timed(rebuilt) for _ in range(7))
     plan = min(_timed(new_plan) for _ in range(7))
     speed = min(_timed(new_speed) for _ in range(7))
+    scale = min(_timed(new_scale) for _ in range(7))
     report.figure(
         'path energy, 2001 poses there and back, a new plan (robot side)',
         plan * 1e3,
@@ -68,6 +75,12 @@ def _path_energy(report: Report) -> None:
         met=speed < 0.005,
         note=f'before (route rebuilt from the poses each time), same run: {before * 1e3:.1f} ms, '
         f'{before / speed:.0f}x',
+    )
+    report.figure(
+        'path energy, same plan and speed, a new terrain scale (the map is not queried again)',
+        scale * 1e3,
+        'ms',
+        note=f'{speed / scale:.1f}x faster than a new speed, same run',
     )
 
 

@@ -16,7 +16,7 @@ from test_nodes_estimator import Rig
 
 from skidsteer_power.cli.main import main
 from skidsteer_power.errors import InputError
-from skidsteer_power.estimator.path_energy import path_energy, route_from_polyline
+from skidsteer_power.estimator.path_energy import PathTracker, path_energy, route_from_polyline
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route, Segment, _trace, read_route_csv
@@ -92,6 +92,34 @@ def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map)
     assert tight.limited_segments >= 2 * 17 and tight.clamped_segments == 0  # 17 turning chords
     straight = path_energy(np.array([0.0, 5.0]), np.zeros(2), SPEED, power_map, powertrain)
     assert (straight.limited_segments, straight.clamped_segments) == (0, 0)
+
+
+class CountingMap:
+    """The real map, answering every query, and counting them."""
+
+    def __init__(self, power_map: PowerMap) -> None:
+        self.power_map, self.queries = power_map, 0
+
+    def query(self, speed, yaw_rate):
+        self.queries += 1
+        return self.power_map.query(speed, yaw_rate)
+
+
+def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(tmp_path, track_map):
+    """While the adaptation learns, the terrain scale moves on every estimator tick: the tracker keeps
+    the map's loads and reruns only the powertrain, with the same energies as a fresh computation."""
+    power_map, powertrain, _ = track_map
+    csv = tmp_path / 'route.csv'
+    csv.write_text(ROUTE_CSV)
+    xy = _poses(read_route_csv(csv, SPEED), 0.25)
+    tracker = PathTracker()
+    tracker.set_path(xy[:, 0], xy[:, 1])
+    counting = CountingMap(power_map)
+    for speed, scale, queries in ((SPEED, 1.0, 2), (SPEED, 1.3, 2), (SPEED, 0.7, 2), (0.2, 0.7, 4)):
+        got = tracker.evaluate(speed, counting, powertrain, scale)
+        assert counting.queries == queries  # there and back
+        assert got == path_energy(xy[:, 0], xy[:, 1], speed, power_map, powertrain, scale)
+    assert got is not None and got.terrain_scale == 0.7
 
 
 @pytest.mark.parametrize(

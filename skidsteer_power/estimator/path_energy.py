@@ -2,7 +2,7 @@
 
 Pure (no ROS). A path of poses (x_k, y_k) [m] becomes constant-radius segments (lengths and signed
 radii as arrays, :class:`PathGeometry`) and goes through the missions' energy code
-(:func:`skidsteer_power.missions.energy.energy_on_map`, which ``mission --route FILE.csv`` reaches
+(:class:`skidsteer_power.missions.energy.MapLoads`, which ``mission --route FILE.csv`` reaches
 through :func:`~skidsteer_power.missions.energy.route_energy_on_map`): one implementation for both and
 for the robot's ``energy/path_required_wh``.
 
@@ -26,9 +26,10 @@ multiplied by the online terrain scale k (:mod:`skidsteer_power.estimator.adapta
 scale"; 1 = the map as built).
 
 Cost: the path's geometry (piece lengths and radii, there and back) is computed once per path as
-arrays (:class:`PathGeometry`); a new speed or terrain scale only re-queries the map at the path's
-unique (V, R) states (:func:`skidsteer_power.missions.energy.energy_on_map`), about a millisecond for
-a 2001-pose path, so following the commanded speed costs little (benchmarks/bench_scale.py).
+arrays (:class:`PathGeometry`); a new speed only re-queries the map at the path's unique (V, R)
+states (:class:`skidsteer_power.missions.energy.MapLoads`), about a millisecond for a 2001-pose path,
+so following the commanded speed costs little (benchmarks/bench_scale.py); a new terrain scale only
+reruns the powertrain on those loads (:class:`PathTracker`).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.missions.energy import energy_on_map
+from skidsteer_power.missions.energy import MapLoads
 from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route, Segment
 
 JOULES_PER_WH = 3600.0
@@ -83,15 +84,12 @@ class PathGeometry:
     def total_length_m(self) -> float:
         return float(np.sum(self.length_m))
 
-    def energy(
-        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
-    ) -> dict[str, float]:
-        """:func:`~skidsteer_power.missions.energy.energy_on_map` of the pieces at ``speed_m_s`` [m/s]."""
+    def loads(self, speed_m_s: float, power_map: Any) -> MapLoads:
+        """The map's loads on the pieces driven at ``speed_m_s`` [m/s]
+        (:class:`~skidsteer_power.missions.energy.MapLoads`: the missions' energy code)."""
         _check_speed(speed_m_s)
         speed = np.full(self.length_m.shape, float(speed_m_s))
-        return energy_on_map(
-            speed, self.turn_radius_m, self.length_m / speed_m_s, power_map, powertrain, terrain_scale
-        )
+        return MapLoads.of(speed, self.turn_radius_m, self.length_m / speed_m_s, power_map)
 
 
 def _check_speed(speed_m_s: float) -> None:
@@ -139,25 +137,46 @@ class PathEnergy:
         return remaining_wh - self.required_wh - self.return_wh - reserve_wh
 
 
+@dataclass(frozen=True)
+class PathLoads:
+    """The map's loads on a path there and back at ``speed_m_s`` [m/s]: all of the path energy that
+    neither the powertrain nor the terrain scale changes."""
+
+    speed_m_s: float
+    there: MapLoads
+    back: MapLoads
+
+
 class PlannedPath:
-    """A planned path's geometry there and back along it (reversed, driven forward), built once."""
+    """A planned path's geometry there and back along it (reversed, driven forward), built once.
+
+    The return is built from the reversed points by the same code, not derived from the forward
+    pieces (reversed, radii negated): a derived one would differ where a turn is exactly pi."""
 
     def __init__(self, x: Any, y: Any) -> None:
         xs, ys = np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
         self.there = PathGeometry.from_polyline(xs, ys)
         self.back = PathGeometry.from_polyline(xs[::-1], ys[::-1])
 
+    def loads(self, speed_m_s: float, power_map: Any) -> PathLoads:
+        """The map's loads there and back at ``speed_m_s`` [m/s] (|speed| is driven both ways)."""
+        speed = abs(float(speed_m_s))
+        return PathLoads(speed, self.there.loads(speed, power_map), self.back.loads(speed, power_map))
+
     def energy(
         self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
     ) -> PathEnergy:
         """Battery energy there and back at ``speed_m_s`` [m/s] with the loads of ``power_map`` and
         ``powertrain``, axle torques times ``terrain_scale`` [-]."""
-        speed = abs(float(speed_m_s))
-        there = self.there.energy(speed, power_map, powertrain, terrain_scale)
-        back = self.back.energy(speed, power_map, powertrain, terrain_scale)
+        return self.energy_from(self.loads(speed_m_s, power_map), powertrain, terrain_scale)
+
+    def energy_from(self, loads: PathLoads, powertrain: Any, terrain_scale: float = 1.0) -> PathEnergy:
+        """:meth:`energy` from what :meth:`loads` gave (the map is not queried again)."""
+        there = loads.there.energy(powertrain, terrain_scale)
+        back = loads.back.energy(powertrain, terrain_scale)
         return PathEnergy(
             length_m=self.there.total_length_m,
-            speed_m_s=speed,
+            speed_m_s=loads.speed_m_s,
             required_J=there['energy_battery_J'],
             return_J=back['energy_battery_J'],
             clamped_segments=int(there['clamped_segments'] + back['clamped_segments']),
@@ -176,17 +195,20 @@ def path_energy(
 
 
 class PathTracker:
-    """The last planned path (geometry built once) and its energies, recomputed only when the path,
-    the speed, the predictor (terrain) or the terrain scale changes."""
+    """The last planned path (geometry built once) and its energies. The map is queried again only
+    when the path, the speed or the predictor (terrain) changes; a new terrain scale, which moves on
+    every estimator tick while the adaptation learns, only reruns the powertrain on the kept loads."""
 
     def __init__(self) -> None:
         self.path: PlannedPath | None = None
+        self._loads_key: tuple[Any, ...] | None = None
+        self._loads: PathLoads | None = None
         self._key: tuple[Any, ...] | None = None
         self.energy: PathEnergy | None = None
 
     def set_path(self, x: Any, y: Any) -> None:
         """A new plan [m]; an empty path clears it; InputError (and no path) for a bad one."""
-        self.path, self._key, self.energy = None, None, None
+        self.path, self._loads_key, self._loads, self._key, self.energy = None, None, None, None, None
         if np.asarray(x).size:
             self.path = PlannedPath(x, y)
 
@@ -196,8 +218,12 @@ class PathTracker:
         """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, or speed 0)."""
         if self.path is None or power_map is None or not speed_m_s:
             return None
-        key = (abs(float(speed_m_s)), id(power_map), id(powertrain), float(terrain_scale))
+        loads_key = (abs(float(speed_m_s)), id(power_map))
+        if loads_key != self._loads_key or self._loads is None:
+            self._loads = self.path.loads(speed_m_s, power_map)
+            self._loads_key = loads_key
+        key = (*loads_key, id(powertrain), float(terrain_scale))
         if key != self._key:
-            self.energy = self.path.energy(speed_m_s, power_map, powertrain, terrain_scale)
+            self.energy = self.path.energy_from(self._loads, powertrain, terrain_scale)
             self._key = key
         return self.energy

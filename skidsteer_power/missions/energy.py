@@ -337,23 +337,52 @@ def energy_on_map(
     """:func:`route_energy_on_map` of segments given as arrays: forward speed [m/s], signed turn radius
     [m] (inf: straight) and duration [s] each. ``terrain_scale`` [-] multiplies the map's axle torques
     before the powertrain (the estimator's online terrain correction; 1: the map as built)."""
-    states, inverse = unique_states(
-        np.asarray(speed_m_s, dtype=float), np.asarray(turn_radius_m, dtype=float)
-    )
-    axle = map_axle_states(power_map, states[:, 0], states[:, 1])
-    if terrain_scale != 1.0:
-        axle['torque_left'] = axle['torque_left'] * terrain_scale
-        axle['torque_right'] = axle['torque_right'] * terrain_scale
-    powers = state_powers(powertrain, axle)
-    count = np.bincount(inverse, weights=duration_s, minlength=len(states))  # s per state
-    return {
-        'energy_J': float(np.dot(powers['mechanical_W'], count)),
-        'energy_terrain_J': float(np.dot(powers['terrain_W'], count)),
-        'energy_internal_J': float(np.dot(powers['internal_W'], count)),
-        'energy_battery_J': float(np.dot(powers['battery_W'], count)),
-        'clamped_segments': int(np.sum(axle['clamped'][inverse])),
-        'limited_segments': int(np.sum(axle['limited'][inverse])),
-    }
+    return MapLoads.of(speed_m_s, turn_radius_m, duration_s, power_map).energy(powertrain, terrain_scale)
+
+
+@dataclass(frozen=True)
+class MapLoads:
+    """What a map says about a set of segments, ready for any powertrain and terrain scale: the axle
+    states (:func:`map_axle_states`) at their distinct (V, R) states, the time spent in each
+    (``seconds`` [s]) and the segments the map flagged clamped or limited. The robot's path energy
+    keeps these while only the online terrain scale moves (estimator/path_energy.py)."""
+
+    axle: dict[str, np.ndarray]
+    seconds: np.ndarray
+    clamped_segments: int
+    limited_segments: int
+
+    @classmethod
+    def of(
+        cls, speed_m_s: np.ndarray, turn_radius_m: np.ndarray, duration_s: np.ndarray, power_map: Any
+    ) -> MapLoads:
+        """Segments as arrays: forward speed [m/s], signed turn radius [m] (inf: straight), duration [s]."""
+        states, inverse = unique_states(
+            np.asarray(speed_m_s, dtype=float), np.asarray(turn_radius_m, dtype=float)
+        )
+        axle = map_axle_states(power_map, states[:, 0], states[:, 1])
+        return cls(
+            axle,
+            np.bincount(inverse, weights=duration_s, minlength=len(states)),
+            int(np.sum(axle['clamped'][inverse])),
+            int(np.sum(axle['limited'][inverse])),
+        )
+
+    def energy(self, powertrain: Powertrain, terrain_scale: float = 1.0) -> dict[str, float]:
+        """Energies [J] (:func:`route_energy_on_map`) with the axle torques times ``terrain_scale`` [-]."""
+        axle = self.axle
+        if terrain_scale != 1.0:
+            scaled = {f'torque_{s}': axle[f'torque_{s}'] * terrain_scale for s in SIDES}
+            axle = {**axle, **scaled}
+        powers = state_powers(powertrain, axle)
+        return {
+            'energy_J': float(np.dot(powers['mechanical_W'], self.seconds)),
+            'energy_terrain_J': float(np.dot(powers['terrain_W'], self.seconds)),
+            'energy_internal_J': float(np.dot(powers['internal_W'], self.seconds)),
+            'energy_battery_J': float(np.dot(powers['battery_W'], self.seconds)),
+            'clamped_segments': self.clamped_segments,
+            'limited_segments': self.limited_segments,
+        }
 
 
 def unique_states(speed_m_s: np.ndarray, turn_radius_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
