@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.terramechanics.track import drawbar_pull as track_drawbar_pull
 from skidsteer_power.terramechanics.wheel import wheel_at_slip
@@ -36,21 +37,19 @@ def max_drawbar_pull(vehicles: Sequence, terrain: Terrain) -> np.ndarray:
     wheeled = [k for k, v in enumerate(vehicles) if not v.is_tracked]
     if tracked:
         v = [vehicles[k] for k in tracked]
-        rows, inverse = _distinct([[x.weight_N / 2.0, x.track_width_m, x.track_length_m] for x in v])
+        rows, inverse = distinct_rows(
+            np.array([[x.weight_N / 2.0, x.track_width_m, x.track_length_m] for x in v])
+        )
         load, width, length = (rows[:, k : k + 1] for k in range(3))
         dp = track_drawbar_pull(terrain, load, width, length, TRACK_SLIPS[None, :])
         out[tracked] = 2.0 * dp.max(axis=1)[inverse]
     if wheeled:
         v = [vehicles[k] for k in wheeled]
         n = np.array([x.n_wheels for x in v], dtype=float)
-        rows, inverse = _distinct([[x.weight_N / x.n_wheels, x.wheel_radius_m, x.wheel_width_m] for x in v])
+        rows, inverse = distinct_rows(
+            np.array([[x.weight_N / x.n_wheels, x.wheel_radius_m, x.wheel_width_m] for x in v])
+        )
         load, radius, width = (rows[:, k : k + 1] for k in range(3))
         state = wheel_at_slip(terrain, load, WHEEL_SLIPS[None, :], radius, width)
         out[wheeled] = n * np.asarray(state.Fx_N).max(axis=1)[inverse]
     return out
-
-
-def _distinct(rows: list[list[float]]) -> tuple[np.ndarray, np.ndarray]:
-    """The distinct rows (m, k) of a table and each row's index among them."""
-    table, inverse = np.unique(np.asarray(rows, dtype=float), axis=0, return_inverse=True)
-    return table, inverse.ravel()
