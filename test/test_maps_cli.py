@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_models_solve_cli import KEYS as SOLVE_KEYS
 
 from skidsteer_power.cli.main import main
 from skidsteer_power.maps import PowerMap
@@ -101,17 +102,7 @@ def test_solve_fess_and_fast_keep_the_contract(
     capsys: pytest.CaptureFixture[str], tmp_path, monkeypatch
 ) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))
-    keys = {
-        's0_m',
-        'omega_outer_rad_s',
-        'omega_inner_rad_s',
-        'torque_outer_Nm',
-        'torque_inner_Nm',
-        'power_outer_W',
-        'power_inner_W',
-        'converged',
-        'solve_time_s',
-    }
+    keys = set(SOLVE_KEYS)  # DESIGN.md's solve --json contract
     base = [
         'solve',
         '--vehicle',
