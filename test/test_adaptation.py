@@ -114,6 +114,32 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     assert abs(core.prediction.motor_torque_Nm[0] / measured[0] - 1) > 0.2
 
 
+def test_corrected_battery_power_by_hand():
+    """The correction reaches the battery forecast through the motor and amplifier: per side, the
+    corrected torque T = a T_pred + b at the predicted motor speed w gives the terminal power
+    T w + R (T / K_t)^2 (EC-45, Appendix B: K_t = 0.114 N m/A, R = 0.710 ohm, the powertrain file's
+    values) and the bus power terminal / 0.92 when motoring, terminal x 0.92 when generating (DES
+    70/10, Appendix A). The left side is made to generate (a = 0.2, b = -0.5 N m)."""
+    vehicle = load_vehicle(VEHICLE)
+    core = core_on(vehicle, PRESETS['dry_sand'])
+    prediction = core.on_command(0.2, 0.1, 0.0)
+    assert core.corrected_bus_W() == prediction.bus_total_W  # no correction yet
+    left, right = core.adaptation.sides
+    left.a, left.b, right.a, right.b = 0.2, -0.5, 1.3, 0.05
+    expected = 0.0
+    for (a, b), torque, omega in zip(
+        ((0.2, -0.5), (1.3, 0.05)), prediction.motor_torque_Nm, prediction.motor_omega_rad_s, strict=True
+    ):
+        corrected = a * torque + b
+        terminal = corrected * omega + 0.710 * (corrected / 0.114) ** 2
+        expected += terminal / 0.92 if terminal >= 0 else terminal * 0.92
+    assert omega > 0 and 0.2 * prediction.motor_torque_Nm[0] - 0.5 < 0  # the left side brakes
+    assert core.corrected_bus_W() == pytest.approx(expected, rel=1e-12)
+    assert core.corrected_torque_Nm() == pytest.approx(
+        (0.2 * prediction.motor_torque_Nm[0] - 0.5, 1.3 * prediction.motor_torque_Nm[1] + 0.05)
+    )
+
+
 # --- time-to-empty bounds -------------------------------------------------------------------------
 def test_block_means_by_hand():
     """Samples every 1 s from t = 3 s, power = t [W], 10 s blocks from the first sample: blocks

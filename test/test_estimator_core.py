@@ -21,7 +21,7 @@ from skidsteer_power.estimator import (
     measure_motor_power,
 )
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
-from skidsteer_power.estimator.inputs import check_command, check_joint_state
+from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, JointReader, check_command, check_joint_state
 from skidsteer_power.estimator.persistence import load_state, save_state
 from skidsteer_power.estimator.prediction import Prediction
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_dict, summary_values
@@ -111,6 +111,26 @@ def test_joint_state_is_read_by_name_not_position():
         ['right_motor', 'x', 'left_motor'], [2.0, 9.0, 1.0], [0.2, 0.0, 0.1], LIMITS
     )
     assert omega == (1.0, 2.0) and torque == (0.1, 0.2)
+
+
+def test_one_reader_follows_the_joint_names_of_every_message():
+    """The reader keeps where the joints were while the names stay the same; a message with another
+    order, or without a joint, is read by its own names."""
+    reader = JointReader(TEST_ROBOT_JOINTS, 1.0, 1.0, LIMITS)
+    assert reader.read(('left_motor', 'right_motor'), (), [1.0, 2.0], [0.1, 0.2], 0.0) == (
+        (1.0, 2.0),
+        (0.1, 0.2),
+    )
+    names = ['right_motor', 'left_motor']
+    assert reader.read(names, (), [1.0, 2.0], [0.1, 0.2], 0.0) == ((2.0, 1.0), (0.2, 0.1))
+    names[:] = ['left_motor', 'right_motor']  # the same list, changed by its owner
+    assert reader.read(names, (), [1.0, 2.0], [0.1, 0.2], 0.0) == ((1.0, 2.0), (0.1, 0.2))
+    with pytest.raises(InputError, match='lacks right_motor'):
+        reader.read(['left_motor', 'x'], (), [1.0, 2.0], [0.1, 0.2], 0.0)
+    assert reader.read(['x', 'right_motor', 'left_motor'], (), [9, 2.0, 1.0], [0, 0.2, 0.1], 0.0) == (
+        (1.0, 2.0),
+        (0.1, 0.2),
+    )
 
 
 def test_limits_must_be_positive():

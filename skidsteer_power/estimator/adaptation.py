@@ -47,7 +47,7 @@ command is absorbed into that command's correction.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -94,29 +94,39 @@ MAX_SAMPLE_S = 0.2
 """A settled sample counts in the terrain scale for the time since the previous joint_states, and at
 most this long [s]: a pause in joint_states is no settled time."""
 
-P0 = np.diag([100.0, 1.0])  # initial covariance of (a [-], b [N m]): a weak prior (+-10, +-1 N m)
+P0 = (100.0, 0.0, 1.0)  # initial covariance of (a [-], b [N m]) as (aa, ab, bb): a weak prior (+-10, +-1 N m)
+P0_TRACE = P0[0] + P0[2]
 
 
 @dataclass
 class SideEstimator:
-    """RLS of (scale a [-], offset b [N m]) and the CUSUM statistics of one side."""
+    """RLS of (scale a [-], offset b [N m]) and the CUSUM statistics of one side. The covariance of
+    (a, b) is kept as its three distinct entries ``p_aa``, ``p_ab``, ``p_bb``: the update runs on every
+    settled joint_states: one update of both sides took 42 us in 2 x 2 numpy algebra, 5 us in floats
+    (measured; issue 18)."""
 
-    theta: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0]))
-    P: np.ndarray = field(default_factory=lambda: P0.copy())
+    a: float = 1.0
+    b: float = 0.0
+    p_aa: float = P0[0]
+    p_ab: float = P0[1]
+    p_bb: float = P0[2]
     ms_innovation: float = math.nan  # running mean square innovation [N m^2]
     g_pos: float = 0.0
     g_neg: float = 0.0
     samples: int = 0
 
     def reset(self) -> None:
-        self.theta = np.array([1.0, 0.0])
-        self.P = P0.copy()
+        self.a, self.b = 1.0, 0.0
+        self.restart_covariance()
         self.ms_innovation = math.nan
         self.g_pos = self.g_neg = 0.0
         self.samples = 0
 
     def corrected(self, predicted: float) -> float:
-        return float(self.theta[0] * predicted + self.theta[1])
+        return self.a * predicted + self.b
+
+    def restart_covariance(self) -> None:
+        self.p_aa, self.p_ab, self.p_bb = P0
 
 
 @dataclass(frozen=True)
@@ -222,9 +232,12 @@ class TorqueAdaptation:
         self._last_sample_s = now_s
         if not s.enabled or self._command is None or now_s - self._command_since < s.settle_s:
             return False
-        w_pred, w_meas = np.asarray(predicted_omega), np.asarray(measured_omega)
-        if np.all(np.abs(w_pred) < 1e-6) or np.any(
-            np.abs(w_meas - w_pred) > s.speed_tol * np.abs(w_pred) + 1.0
+        (wp_l, wp_r), (wm_l, wm_r) = predicted_omega, measured_omega
+        standing = abs(wp_l) < 1e-6 and abs(wp_r) < 1e-6
+        if (
+            standing
+            or abs(wm_l - wp_l) > s.speed_tol * abs(wp_l) + 1.0
+            or (abs(wm_r - wp_r) > s.speed_tol * abs(wp_r) + 1.0)
         ):
             return False
         self._settled = True
@@ -232,7 +245,7 @@ class TorqueAdaptation:
             self._new_command = False
             self._detect_from_s = now_s + s.warmup_s
             for side in self.sides:
-                side.P = P0.copy()
+                side.restart_covariance()
                 side.g_pos = side.g_neg = 0.0
         detect = now_s >= self._detect_from_s
         dt = now_s - self._last_update_s if math.isfinite(self._last_update_s) else 0.0
@@ -267,8 +280,7 @@ class TorqueAdaptation:
 
     def _update_side(self, side: SideEstimator, pred: float, meas: float, lam: float, detect: bool) -> bool:
         s = self.settings
-        phi = np.array([pred, 1.0])
-        innovation = meas - float(phi @ side.theta)
+        innovation = meas - side.corrected(pred)  # regressor phi = (pred, 1)
         rms = math.sqrt(side.ms_innovation) if math.isfinite(side.ms_innovation) else 0.0
         sigma = max(rms, s.sigma_rel * abs(pred), s.sigma_floor_Nm)
         z = innovation / sigma
@@ -282,14 +294,20 @@ class TorqueAdaptation:
             elif abs(z) < 3.0:
                 side.ms_innovation = lam * side.ms_innovation + (1.0 - lam) * innovation**2
         # RLS with forgetting factor lam (covariance capped at its initial trace: no wind-up)
-        gain = side.P @ phi / (lam + float(phi @ side.P @ phi))
-        side.theta = side.theta + gain * innovation
-        side.theta[0] = min(max(side.theta[0], s.scale_limits[0]), s.scale_limits[1])
-        side.P = (side.P - np.outer(gain, phi @ side.P)) / lam
-        side.P = 0.5 * (side.P + side.P.T)
-        cap = float(np.trace(P0))
-        if np.trace(side.P) > cap:
-            side.P *= cap / float(np.trace(side.P))
+        # (P phi = phi' P for a symmetric P), gain = P phi / (lam + phi' P phi),
+        # P <- (P - gain phi' P) / lam, kept symmetric
+        pa, pb = side.p_aa * pred + side.p_ab, side.p_ab * pred + side.p_bb
+        denominator = lam + pred * pa + pb
+        ga, gb = pa / denominator, pb / denominator
+        side.a = min(max(side.a + ga * innovation, s.scale_limits[0]), s.scale_limits[1])
+        side.b += gb * innovation
+        side.p_aa = (side.p_aa - ga * pa) / lam
+        side.p_ab = (side.p_ab - 0.5 * (ga * pb + gb * pa)) / lam
+        side.p_bb = (side.p_bb - gb * pb) / lam
+        trace = side.p_aa + side.p_bb
+        if trace > P0_TRACE:
+            shrink = P0_TRACE / trace
+            side.p_aa, side.p_ab, side.p_bb = side.p_aa * shrink, side.p_ab * shrink, side.p_bb * shrink
         side.samples += 1
         return False
 
@@ -297,8 +315,8 @@ class TorqueAdaptation:
         """The current :class:`Correction`."""
         left, right = self.sides
         return Correction(
-            scale=(float(left.theta[0]), float(right.theta[0])),
-            offset_Nm=(float(left.theta[1]), float(right.theta[1])),
+            scale=(left.a, right.a),
+            offset_Nm=(left.b, right.b),
             residual_rms_Nm=(math.sqrt(left.ms_innovation), math.sqrt(right.ms_innovation)),
             cusum=(max(left.g_pos, left.g_neg), max(right.g_pos, right.g_neg)),
             samples=min(left.samples, right.samples),

@@ -164,6 +164,8 @@ class EstimatorCore:
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
+        self._limit_of: Any = None  # the battery whose power limit is in _limit_W [W]
+        self._limit_W = math.inf
 
     @property
     def battery(self) -> Any:
@@ -204,10 +206,14 @@ class EstimatorCore:
         return self.prediction
 
     def power_limit_W(self) -> float:
-        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say;
-        the battery's configuration computes it once)."""
-        limit = getattr(self.battery, 'max_power_W', None)
-        return float(limit()) if callable(limit) else math.inf
+        """Largest battery-side power [W] the battery can deliver (inf if the battery does not say);
+        asked of each battery once (twice per input pair otherwise)."""
+        battery = self.battery
+        if battery is not self._limit_of:
+            limit = getattr(battery, 'max_power_W', None)
+            self._limit_W = float(limit()) if callable(limit) else math.inf
+            self._limit_of = battery
+        return self._limit_W
 
     def _flag_implausible(self, what: str, now_s: float) -> None:
         self.implausible[what] += 1
@@ -219,23 +225,19 @@ class EstimatorCore:
         return self.adaptation.corrected(self.prediction.motor_torque_Nm)
 
     def corrected_bus_W(self) -> float:
-        """Battery power [W] of the corrected prediction: the prediction's own plus the change the
-        correction makes through the motor and amplifier (exactly the prediction's when uncorrected)."""
+        """Battery power [W] of the corrected prediction: the corrected motor torques at the predicted
+        motor speeds through the motor and amplifier, as the prediction's own ``bus_W`` is computed
+        from its torques (exactly the prediction's when uncorrected)."""
         p = self.prediction
         assert p is not None
-        corrected_Nm = self.corrected_torque_Nm()
-        if corrected_Nm == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
+        corrected = self.corrected_torque_Nm()
+        if corrected == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
             return p.bus_total_W
         pt = self.powertrain
-
-        def bus(torque: Sequence[float]) -> float:
-            left, right = (
-                bus_power(terminal_power(pt.motor, t, w), pt.amplifier, pt.regen_efficiency)
-                for t, w in zip(torque, p.motor_omega_rad_s, strict=True)
-            )
-            return left + right
-
-        return p.bus_total_W + bus(corrected_Nm) - bus(p.motor_torque_Nm)
+        return sum(
+            bus_power(terminal_power(pt.motor, torque, omega), pt.amplifier, pt.regen_efficiency)
+            for torque, omega in zip(corrected, p.motor_omega_rad_s, strict=True)
+        )
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""

@@ -231,6 +231,8 @@ class JointReader:
         self._sign = [-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints]
         self._n_left = len(joint_map.left)
         self._last: tuple[float, list[float]] | None = None
+        self._names: tuple[str, ...] | None = None  # the joint names of the last reading, and
+        self._rows: list[int] = []  # where the mapped joints were in them
 
     def _pick(self, what: str, values: Sequence[float], rows: list[int]) -> list[float]:
         """The mapped joints' values (sign applied); InputError for a missing, NaN or infinite one."""
@@ -250,6 +252,20 @@ class JointReader:
                 raise InputError(f'{name} {what} is infinite')
         raise AssertionError('unreachable: every value was finite')
 
+    def _rows_of(self, names: Sequence[str]) -> list[int]:
+        """Where the mapped joints are in ``names``; kept while a driver sends the same names (per
+        message otherwise). InputError for a missing joint."""
+        key = tuple(names)
+        if key != self._names:
+            index = {name: i for i, name in enumerate(key)}
+            try:
+                self._rows = [index[n] for n in self.map.joints]
+            except KeyError:
+                missing = [n for n in self.map.joints if n not in index]
+                raise InputError(f'joint_states lacks {", ".join(missing)}') from None
+            self._names = key
+        return self._rows
+
     def read(
         self,
         names: Sequence[str],
@@ -261,12 +277,7 @@ class JointReader:
         """((w_m left, right) [rad/s], (T_m left, right) [N m]) or None while a position-differentiated
         speed needs a second sample. Raises InputError for a missing joint or value, NaN, infinity or
         a value beyond ``limits``."""
-        index = {name: i for i, name in enumerate(names)}
-        try:
-            rows = [index[n] for n in self.map.joints]
-        except KeyError:
-            missing = [n for n in self.map.joints if n not in index]
-            raise InputError(f'joint_states lacks {", ".join(missing)}') from None
+        rows = self._rows_of(names)
         interfaces = self.map.interfaces
         if 'effort' not in interfaces:
             raise InputError('the drivetrain mapping declares no effort: no measured power')
