@@ -9,8 +9,11 @@ latency is receive time - stamp. The receiver takes the outputs raw and reads on
 the CDR bytes, with the lean executor, so its own Python cost stays small next to the node's.
 
 Commands are a random-walk joystick (V in 0...0.4 m/s, yaw rate in -0.6...0.6 rad/s, a new value on
-every message), so the predictor's cache never answers: the realistic worst case. The cache-hit
-case (two alternating commands) is reported separately and labelled so.
+every message), so the predictor's cache never answers: the realistic worst case while commands
+change. The cache-hit case (two alternating commands) is reported separately and labelled so, and
+so is the held case at 1 kHz: two Table 7.3-like commands held 2.5 s each, joint_states at their
+predicted motor speeds and 1.2 x their predicted torques, so the online adaptation settles and runs
+on every joint_states (the correction scale it learned is reported, to show that it did).
 
 "Lost" counts inputs with no output within 3 s after the last send (loss anywhere on the way counts).
 Latency includes DDS both ways and the receiver's Python path, so it is an upper bound for the node
@@ -31,6 +34,7 @@ baseline of CPU per message and p99 latency are reported.
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 import subprocess
@@ -38,7 +42,7 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -56,6 +60,11 @@ OUTPUTS = ('power/predicted', 'power/measured')
 FLOOR = 'FLOOR (echo node: same inputs, outputs, executor; no estimator)'
 BASELINE = 'baseline'
 INPUT_OF = {'power/predicted': 'cmd_vel', 'power/measured': 'joint_states'}
+FRESH, CACHE, HELD = 'fresh', 'cache', 'held'
+LABEL = {FRESH: '', CACHE: ', CACHE HIT (2 alternating commands)', HELD: ', HELD (2 commands, 2.5 s each)'}
+HELD_COMMANDS = ((0.2, 0.0), (0.15, 0.1))  # [m/s], [rad/s]: Table 7.3-like, no flag on the test robot
+Held = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+"""A held command (V [m/s], yaw rate [rad/s]), its predicted motor speeds [rad/s] and torques [N m]."""
 
 
 def _start_echo(namespace: str, env: dict[str, str]) -> subprocess.Popen:
@@ -129,7 +138,11 @@ class Load:
         self.executor = LeanExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.subs = []
+        self.correction: dict[str, float] = {}  # the last power/correction (names: values)
         if receive:
+            self.correction_sub = self.node.create_subscription(  # not in subs: the echo node has none
+                JointState, 'power/correction', self._on_correction, QoSProfile(depth=10)
+            )
             for topic in OUTPUTS:
                 self.subs.append(
                     self.node.create_subscription(
@@ -137,6 +150,9 @@ class Load:
                     )
                 )
         self._msg_types = (TwistStamped, JointState)
+
+    def _on_correction(self, msg: Any) -> None:
+        self.correction = dict(zip(msg.name, msg.position, strict=True))
 
     @staticmethod
     def _receiver(into: list[tuple[float, float]]) -> Callable[[bytes], None]:
@@ -169,11 +185,15 @@ class Load:
                 if complete or time.monotonic() > deadline:
                     return
 
-    def drive(self, rate_hz: float, seconds: float, *, fresh: bool = True, seed: int = 0) -> int:
+    def drive(
+        self, rate_hz: float, seconds: float, *, mode: str = FRESH, held: Sequence[Held] = (), seed: int = 0
+    ) -> int:
         """Publish both inputs at ``rate_hz`` for ``seconds``; returns the number sent of each.
 
-        ``fresh``: a random-walk joystick, a new command on every message; otherwise two alternating
-        commands (every prediction after the first two is a cache hit). Each input's stamp is its
+        ``mode`` FRESH: a random-walk joystick, a new command on every message; CACHE: two alternating
+        commands (every prediction after the first two is a cache hit); HELD: the ``held`` commands,
+        each for an equal share of ``seconds``, with joint_states at their predicted motor speeds and
+        1.2 x their predicted torques (the adaptation settles and learns). Each input's stamp is its
         send time (unique: the outputs are matched by it)."""
         twist_type, joint_type = self._msg_types
         period = 1.0 / rate_hz
@@ -191,12 +211,15 @@ class Load:
             delay = target - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            if fresh:  # reflect at the joystick's limits
+            if mode == FRESH:  # reflect at the joystick's limits
                 speed = 0.4 - abs(0.4 - abs(speed + steps[i, 0]))
                 yaw = 0.6 - abs(0.6 - abs(yaw + steps[i, 1] + 0.6)) - 0.6
                 cmd.twist.linear.x, cmd.twist.angular.z = float(speed), float(yaw)
-            else:
+            elif mode == CACHE:
                 cmd.twist.linear.x, cmd.twist.angular.z = 0.2, 0.1 if i % 2 else 0.05
+            else:
+                (cmd.twist.linear.x, cmd.twist.angular.z), omega, torque = held[i * len(held) // n]
+                joint.velocity, joint.effort = list(omega), [1.2 * t for t in torque]
             self.sent['cmd_vel'].add(_stamp_now(cmd.header))
             self.pub_cmd.publish(cmd)
             self.sent['joint_states'].add(_stamp_now(joint.header))
@@ -229,7 +252,12 @@ def run(report: Report) -> None:
     variants = [(FLOOR, None)] + ([(BASELINE, baseline)] if baseline else []) + [('', None)]
     results: dict[str, dict[str, dict[str, float]]] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
-        map_predictor(load_vehicle('test_robot_track'), 'dry_sand', cache_dir)  # build once, outside timing
+        predictor = map_predictor(load_vehicle('test_robot_track'), 'dry_sand', cache_dir)[0]  # not timed
+        held = [
+            (c, p.motor_omega_rad_s, p.motor_torque_Nm)
+            for c in HELD_COMMANDS
+            for p in [predictor.predict(*c)]
+        ]
         for name, src in variants:
             namespace = f'bench_{uuid.uuid4().hex[:8]}'
             node = (
@@ -249,12 +277,11 @@ def run(report: Report) -> None:
                 report.figure(f'{prefix}node CPU idle (timers only)', idle, 'cores')
                 results[name] = {}
                 for rate in RATES_HZ:
-                    results[name][f'{rate:g}'] = _sustained(
-                        report, load, node, rate, fresh=True, prefix=prefix
-                    )
+                    results[name][f'{rate:g}'] = _sustained(report, load, node, rate, FRESH, prefix=prefix)
                 if name != FLOOR:
-                    results[name]['cache'] = _sustained(
-                        report, load, node, 1000.0, fresh=False, prefix=prefix
+                    results[name][CACHE] = _sustained(report, load, node, 1000.0, CACHE, prefix=prefix)
+                    results[name][HELD] = _sustained(
+                        report, load, node, 1000.0, HELD, prefix=prefix, held=held
                     )
             finally:
                 load.close()
@@ -269,7 +296,7 @@ def run(report: Report) -> None:
     if baseline:
         for key, now in results[''].items():
             before = results[BASELINE][key]
-            label = '1000 Hz, CACHE HIT' if key == 'cache' else f'{key} Hz'
+            label = {CACHE: '1000 Hz, CACHE HIT', HELD: '1000 Hz, HELD'}.get(key, f'{key} Hz')
             for figure in ('CPU per message', 'p99 cmd_vel', 'p99 joint_states'):
                 if before.get(figure) and now.get(figure):
                     report.ratio(
@@ -284,9 +311,16 @@ def _wait_outputs(load: Load) -> None:
 
 
 def _sustained(
-    report: Report, load: Load, node: subprocess.Popen, rate: float, fresh: bool, prefix: str = ''
+    report: Report,
+    load: Load,
+    node: subprocess.Popen,
+    rate: float,
+    mode: str,
+    prefix: str = '',
+    held: Sequence[Held] = (),
 ) -> dict[str, float]:
-    """One run at ``rate`` [Hz] of both inputs; figures: loss, p50/p99 latency, CPU. Returns them."""
+    """One run at ``rate`` [Hz] of both inputs (``mode``, :meth:`Load.drive`); figures: loss, p50/p99
+    latency, CPU. Returns them."""
     busy = os.getloadavg()[0]
     for values in load.received.values():
         values.clear()
@@ -296,7 +330,7 @@ def _sustained(
     thread.start()
     time.sleep(0.5)
     cpu0, wall0, start = _cpu_seconds(node.pid), time.monotonic(), time.time()
-    n = load.drive(rate, SECONDS, fresh=fresh, seed=int(rate))
+    n = load.drive(rate, SECONDS, mode=mode, held=held, seed=int(rate))
     sending_s = time.monotonic() - wall0
     done.set()
     thread.join()
@@ -305,9 +339,9 @@ def _sustained(
     busy_wall = max(last - start, sending_s)  # the node's work: first send to last output [s]
     cores = (cpu1 - cpu0) / busy_wall
     per_msg_us = (cpu1 - cpu0) / (2 * n) * 1e6
-    label = prefix + f'{rate:g} Hz' + ('' if fresh else ', CACHE HIT (2 alternating commands)')
+    label = prefix + f'{rate:g} Hz' + LABEL[mode]
     p99_goal, cpu_goal, lost_goal = (
-        GOALS.get(rate, (None, None, None)) if fresh and not prefix else (None,) * 3
+        GOALS.get(rate, (None, None, None)) if mode == FRESH and not prefix else (None,) * 3
     )
     latencies = {
         topic: [t - stamp for stamp, t in values if stamp in load.sent[INPUT_OF[topic]]]
@@ -346,4 +380,13 @@ def _sustained(
         note=f'over {busy_wall:.2f} s from the first send to the last output',
     )
     report.figure(f'{label}: node CPU per input message', per_msg_us, 'us')
+    if mode == HELD and not prefix.startswith(FLOOR):
+        time.sleep(0.5)  # one more 5 Hz power/correction
+        scales = [load.correction.get(f'scale_{side}', math.nan) for side in ('left', 'right')]
+        report.figure(
+            f'{label}: correction scale learned (left, right mean; 1.2 = measured / predicted torque)',
+            float(np.mean(scales)),
+            '-',
+            note=f'left {scales[0]:.3f}, right {scales[1]:.3f}: the adaptation settled and ran',
+        )
     return figures
