@@ -32,6 +32,15 @@ def test_remaining_energy_is_ocv_integral():
     assert 200 < bat.remaining_wh < 260  # ~ 12 cells x 3.8 V x 5 Ah = 228 Wh
 
 
+def test_curve_pieces_are_the_table_points_inside_the_range():
+    """config/batteries/test_robot.yaml's OCV table bends at SoC 0, 0.05, 0.1, 0.2, ..., 0.9, 1."""
+    cfg = Battery.default_test_robot().config
+    assert cfg.pieces(0.0, 0.73).tolist() == [0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.73]
+    assert cfg.pieces(0.05, 0.2).tolist() == [0.05, 0.1, 0.2]  # ends on table points: no repeats
+    assert cfg.pieces(0.31, 0.32).tolist() == [0.31, 0.32]
+    assert cfg.pieces(0.4, 0.4).tolist() == [0.4]
+
+
 def test_constant_power_drain_empties_at_computed_time():
     bat = Battery.default_test_robot(soc=0.8)
     power = 150.0
