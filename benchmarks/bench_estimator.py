@@ -25,7 +25,9 @@ depend on what else runs: the 1-minute load average is noted with each run.
 The floor: the same runs are first made against benchmarks/echo_node.py, a node with the estimator's
 inputs, outputs and executor and no work between them, and the ratio power_estimator / floor of the
 node CPU is reported per rate. What the floor costs is rclpy and Fast DDS on this machine: a goal
-below it cannot be met by any estimator code.
+below it cannot be met by any estimator code. For reference, the same echo written as plain rclpy
+code (rclpy messages, rclpy's executor: ``echo_node --stock``) is measured too, with the ratio
+power_estimator / stock echo.
 
 Same-run before/after: with ``ESTIMATOR_BASELINE_SRC=/path/to/other/checkout`` the same runs are made
 against that checkout's node first (``python -m`` from that directory), and the ratios current /
@@ -58,6 +60,7 @@ GOALS = {  # rate [Hz] -> (p99 latency [ms], CPU [cores], lost messages allowed 
 }
 OUTPUTS = ('power/predicted', 'power/measured')
 FLOOR = 'FLOOR (echo node: same inputs, outputs, executor; no estimator)'
+STOCK = 'STOCK rclpy echo node (rclpy messages and executor; no estimator)'
 BASELINE = 'baseline'
 INPUT_OF = {'power/predicted': 'cmd_vel', 'power/measured': 'joint_states'}
 FRESH, CACHE, HELD = 'fresh', 'cache', 'held'
@@ -67,13 +70,14 @@ Held = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 """A held command (V [m/s], yaw rate [rad/s]), its predicted motor speeds [rad/s] and torques [N m]."""
 
 
-def _start_echo(namespace: str, env: dict[str, str]) -> subprocess.Popen:
-    """benchmarks/echo_node.py: the same inputs, outputs and executor with no estimator (the floor)."""
+def _start_echo(namespace: str, env: dict[str, str], stock: bool = False) -> subprocess.Popen:
+    """benchmarks/echo_node.py: the same inputs, outputs and executor with no estimator (the floor);
+    ``stock``: the same echo in plain rclpy (rclpy messages and executor)."""
     from skidsteer_power.nodes.spin import node_command
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     return subprocess.Popen(
-        node_command('benchmarks.echo_node', namespace),
+        node_command('benchmarks.echo_node', namespace) + (['--stock'] if stock else []),
         env=env,
         cwd=root,
         stdout=subprocess.DEVNULL,
@@ -249,7 +253,7 @@ def run(report: Report) -> None:
 
     env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
     baseline = os.environ.get('ESTIMATOR_BASELINE_SRC')
-    variants = [(FLOOR, None)] + ([(BASELINE, baseline)] if baseline else []) + [('', None)]
+    variants = [(FLOOR, None), (STOCK, None)] + ([(BASELINE, baseline)] if baseline else []) + [('', None)]
     results: dict[str, dict[str, dict[str, float]]] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
         predictor = map_predictor(load_vehicle('test_robot_track'), 'dry_sand', cache_dir)[0]  # not timed
@@ -261,7 +265,9 @@ def run(report: Report) -> None:
         for name, src in variants:
             namespace = f'bench_{uuid.uuid4().hex[:8]}'
             node = (
-                _start_echo(namespace, env) if name == FLOOR else _start_node(namespace, cache_dir, env, src)
+                _start_echo(namespace, env, stock=name == STOCK)
+                if name in (FLOOR, STOCK)
+                else _start_node(namespace, cache_dir, env, src)
             )
             load = Load(namespace, receive=True)
             try:
@@ -270,7 +276,9 @@ def run(report: Report) -> None:
                     raise RuntimeError(f'{name or "power_estimator"} did not come up: {error}')
                 _wait_outputs(load)
                 time.sleep(1.0)
-                prefix = {FLOOR: f'{FLOOR}: ', BASELINE: f'BASELINE {baseline}: '}.get(name, '')
+                prefix = {FLOOR: f'{FLOOR}: ', STOCK: f'{STOCK}: ', BASELINE: f'BASELINE {baseline}: '}.get(
+                    name, ''
+                )
                 cpu0, wall0 = _cpu_seconds(node.pid), time.monotonic()
                 time.sleep(3.0)
                 idle = (_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - wall0)
@@ -278,7 +286,7 @@ def run(report: Report) -> None:
                 results[name] = {}
                 for rate in RATES_HZ:
                     results[name][f'{rate:g}'] = _sustained(report, load, node, rate, FRESH, prefix=prefix)
-                if name != FLOOR:
+                if name not in (FLOOR, STOCK):
                     results[name][CACHE] = _sustained(report, load, node, 1000.0, CACHE, prefix=prefix)
                     results[name][HELD] = _sustained(
                         report, load, node, 1000.0, HELD, prefix=prefix, held=held
@@ -292,6 +300,11 @@ def run(report: Report) -> None:
             f'{key} Hz: node CPU, power_estimator / floor (same run)',
             results[''][key]['cores'],
             results[FLOOR][key]['cores'],
+        )
+        report.ratio(
+            f'{key} Hz: node CPU, power_estimator / stock rclpy echo node (same run)',
+            results[''][key]['cores'],
+            results[STOCK][key]['cores'],
         )
     if baseline:
         for key, now in results[''].items():

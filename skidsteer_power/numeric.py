@@ -21,8 +21,9 @@ Real = TypeVar('Real', float, np.ndarray)
 
 
 def real(value: Real) -> Real:
-    """``value`` as the formulas want it: a Python float as it is, anything else as a float array
-    (an int or an int array is converted, so a formula never computes in integers)."""
+    """``value`` as the formulas want it: a Python float (or a float subclass such as np.float64) as
+    it is, anything else as a float array; an int becomes a 0-d float array, so a formula never
+    computes in integers."""
     return value if isinstance(value, float) else np.asarray(value, dtype=float)
 
 
@@ -30,7 +31,11 @@ def sign(x: Real) -> Real:
     """-1, 0 or 1 by the sign of ``x``, NaN for NaN (``np.sign`` of an array)."""
     if isinstance(x, np.ndarray):
         return np.sign(x)
-    return 1.0 if x > 0.0 else -1.0 if x < 0.0 else x * 0.0  # x * 0.0: 0 stays 0, NaN stays NaN
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return x if x != x else 0.0  # NaN stays NaN; -0.0 gives +0.0, as np.sign does
 
 
 def by_sign(x: Real, nonnegative: Real, negative: Real) -> Real:
@@ -45,6 +50,8 @@ def distinct_rows(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     them: what ``np.unique(table, axis=0, return_inverse=True)`` gives, through a lexsort of the
     columns (``np.unique`` over rows sorts a structured view, 10x slower for a few thousand rows).
     inf equals inf, so straights (turn radius inf) group together."""
+    if len(table) == 0:
+        return table[:0], np.zeros(0, dtype=np.intp)
     order = np.lexsort(table.T[::-1])  # np.lexsort's last key is the primary one
     ordered = table[order]
     new = np.r_[True, np.any(ordered[1:] != ordered[:-1], axis=1)]

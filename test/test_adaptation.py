@@ -133,7 +133,8 @@ def test_corrected_battery_power_by_hand():
         corrected = a * torque + b
         terminal = corrected * omega + 0.710 * (corrected / 0.114) ** 2
         expected += terminal / 0.92 if terminal >= 0 else terminal * 0.92
-    assert omega > 0 and 0.2 * prediction.motor_torque_Nm[0] - 0.5 < 0  # the left side brakes
+    # the left side brakes: it turns forward against a negative corrected torque (generating)
+    assert prediction.motor_omega_rad_s[0] > 0 and 0.2 * prediction.motor_torque_Nm[0] - 0.5 < 0
     assert core.corrected_bus_W() == pytest.approx(expected, rel=1e-12)
     assert core.corrected_torque_Nm() == pytest.approx(
         (0.2 * prediction.motor_torque_Nm[0] - 0.5, 1.3 * prediction.motor_torque_Nm[1] + 0.05)

@@ -18,10 +18,11 @@ def test_floats_stay_floats_and_agree_with_numpy():
     for i, v in enumerate(values):
         for got, want in (
             (sign(v), np.sign(array)[i]),
-            (by_sign(v, 1.0, -1.0), np.where(array >= 0, 1, -1)[i]),
+            (by_sign(v, 1.0, -1.0), np.where(array >= 0, 1.0, -1.0)[i]),
         ):
             assert type(got) is float
             assert got == want or (math.isnan(got) and math.isnan(want)), (v, got, want)
+            assert math.copysign(1.0, got) == math.copysign(1.0, want), (v, got, want)  # -0.0 too
 
 
 def test_distinct_rows_is_numpy_unique_over_rows():
@@ -40,6 +41,8 @@ def test_distinct_rows_is_numpy_unique_over_rows():
 
 @pytest.mark.parametrize('columns', [1, 3])
 def test_distinct_rows_of_any_width(columns):
+    rows, inverse = distinct_rows(np.zeros((0, columns)))
+    assert rows.shape == (0, columns) and inverse.size == 0
     table = np.repeat(np.arange(4.0 * columns).reshape(4, columns), 3, axis=0)[::-1]
     rows, inverse = distinct_rows(table)
     assert rows.shape == (4, columns)

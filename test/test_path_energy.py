@@ -120,6 +120,9 @@ def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_sc
         assert counting.queries == queries  # there and back
         assert got == path_energy(xy[:, 0], xy[:, 1], speed, power_map, powertrain, scale)
     assert got is not None and got.terrain_scale == 0.7
+    other = CountingMap(power_map)  # another map object (a terrain change): asked, however alike
+    tracker.evaluate(0.2, other, powertrain, 0.7)
+    assert other.queries == 2 and counting.queries == 4
 
 
 @pytest.mark.parametrize(

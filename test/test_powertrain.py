@@ -100,7 +100,8 @@ def test_motor_side_on_floats_is_motor_side_on_arrays():
     differ (Motor 2), and the points cover braking (generating), standstill and reverse, so both
     branches of the amplifier and of the Coulomb sign are taken."""
     pt = Powertrain.default_test_robot('track')
-    torque, omega = np.array([4.0, -2.5, 0.0, 1.0, -3.0]), np.array([1.5, 2.0, -0.5, 0.0, -1.0])
+    torque = np.array([4.0, -2.5, 0.0, 1.0, -3.0, -0.0, 0.0])
+    omega = np.array([1.5, 2.0, -0.5, 0.0, -1.0, -0.0, -0.0])
     for side in ('left', 'right'):
         batch = pt.motor_side(side, torque, omega)
         for i in range(torque.size):
@@ -108,7 +109,8 @@ def test_motor_side_on_floats_is_motor_side_on_arrays():
             for field in dataclasses.fields(one):
                 value = getattr(one, field.name)
                 assert type(value) is float, field.name
-                assert value == getattr(batch, field.name)[i], (side, i, field.name)
+                array_value = getattr(batch, field.name)[i]
+                assert value == array_value and np.signbit(value) == np.signbit(array_value), (side, i)
     assert pt.right.total != pt.left.total
 
 

@@ -23,8 +23,9 @@ powertrain's internal resistance, eqs. 7.1-7.4: measured K_t i minus the predict
 against the predicted axle torque / G). It is the least-squares slope through the origin over the
 settled samples of both sides and all commands, with exponential forgetting of time constant
 ``terrain_memory_s`` [s]: k = S_xy / S_xx, S_xy = sum w dt x y, S_xx = sum w dt x^2 (dt: the
-sample's interval, the time since the previous joint_states, at most MAX_SAMPLE_S; so the first
-settled sample after a command change counts as much as any other), w = exp(-age /
+sample's interval, the time since the previous reading the adaptation was given (every accepted
+joint_states while a command is fresh), at most MAX_SAMPLE_S; so the first settled sample after a
+command change counts as much as any other), w = exp(-age /
 terrain_memory_s). Large torques weigh most, as they do in energy. It is used (else 1) once the
 settled time behind it, sum w dt, reaches ``terrain_min_s`` [s], kept within ``scale_limits``, and
 restarted with the rest when a terrain change is flagged. The path energy
@@ -91,8 +92,8 @@ class AdaptationSettings:
 
 
 MAX_SAMPLE_S = 0.2
-"""A settled sample counts in the terrain scale for the time since the previous joint_states, and at
-most this long [s]: a pause in joint_states is no settled time."""
+"""A settled sample counts in the terrain scale for the time since the previous reading given to the
+adaptation, and at most this long [s]: a pause in the readings is no settled time."""
 
 P0 = (100.0, 0.0, 1.0)  # initial covariance of (a [-], b [N m]) as (aa, ab, bb): a weak prior (+-10, +-1 N m)
 P0_TRACE = P0[0] + P0[2]
@@ -194,7 +195,7 @@ class TorqueAdaptation:
         self._command: tuple[float, float] | None = None
         self._command_since = math.nan
         self._last_update_s = math.nan  # of the last settled sample [s]
-        self._last_sample_s = math.nan  # of the last joint_states, settled or not [s]
+        self._last_sample_s = math.nan  # of the last reading given, settled or not [s]
         self._settled = False
         self._new_command = True
         self._detect_from_s = math.inf

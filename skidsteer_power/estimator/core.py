@@ -225,19 +225,23 @@ class EstimatorCore:
         return self.adaptation.corrected(self.prediction.motor_torque_Nm)
 
     def corrected_bus_W(self) -> float:
-        """Battery power [W] of the corrected prediction: the corrected motor torques at the predicted
-        motor speeds through the motor and amplifier, as the prediction's own ``bus_W`` is computed
-        from its torques (exactly the prediction's when uncorrected)."""
+        """Battery power [W] of the corrected prediction: the prediction's own plus the change the
+        correction makes through the motor and amplifier at the predicted motor speeds (exactly the
+        prediction's when uncorrected, whatever the predictor put in ``bus_W``)."""
         p = self.prediction
         assert p is not None
         corrected = self.corrected_torque_Nm()
         if corrected == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
             return p.bus_total_W
         pt = self.powertrain
-        return sum(
-            bus_power(terminal_power(pt.motor, torque, omega), pt.amplifier, pt.regen_efficiency)
-            for torque, omega in zip(corrected, p.motor_omega_rad_s, strict=True)
-        )
+
+        def bus(torques: tuple[float, float]) -> float:
+            return sum(
+                bus_power(terminal_power(pt.motor, torque, omega), pt.amplifier, pt.regen_efficiency)
+                for torque, omega in zip(torques, p.motor_omega_rad_s, strict=True)
+            )
+
+        return p.bus_total_W + bus(corrected) - bus(p.motor_torque_Nm)
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""

@@ -218,12 +218,19 @@ class PathTracker:
         """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, or speed 0)."""
         if self.path is None or power_map is None or not speed_m_s:
             return None
-        loads_key = (abs(float(speed_m_s)), id(power_map))
-        if loads_key != self._loads_key or self._loads is None:
+        loads_key = (abs(float(speed_m_s)), power_map)  # the objects, not their id(): no reuse mix-up
+        if self._loads is None or not _same(loads_key, self._loads_key):
             self._loads = self.path.loads(speed_m_s, power_map)
             self._loads_key = loads_key
-        key = (*loads_key, id(powertrain), float(terrain_scale))
-        if key != self._key:
+        key = (*loads_key, powertrain, float(terrain_scale))
+        if not _same(key, self._key):
             self.energy = self.path.energy_from(self._loads, powertrain, terrain_scale)
             self._key = key
         return self.energy
+
+
+def _same(key: tuple[Any, ...], kept: tuple[Any, ...] | None) -> bool:
+    """Cache keys of numbers and objects: numbers equal, objects the same ones."""
+    return kept is not None and all(
+        a == b if isinstance(a, float) else a is b for a, b in zip(key, kept, strict=True)
+    )

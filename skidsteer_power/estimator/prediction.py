@@ -41,8 +41,7 @@ class Prediction:
     motor_omega_rad_s, motor_torque_Nm : at the motor shaft (comparable with joint_states) [rad/s], [N m]
     current_A : motor current [A]
     electrical_W : motor terminal power with winding loss [W]
-    bus_W : battery-side power through the amplifier [W], of motor_torque_Nm at motor_omega_rad_s (the
-        estimator computes a corrected torque's the same way)
+    bus_W : battery-side power through the amplifier [W]
     traction_margin : 1 - required / available thrust (<= 0: about to get stuck) [-]
     clamped : the command lay outside the map's command envelope and was answered at its edge
     limited : a physics limit (a turn tighter than the map's small-radius limit, or no steady state)
