@@ -337,6 +337,7 @@ def _sustained(
     busy = os.getloadavg()[0]
     for values in load.received.values():
         values.clear()
+    load.correction = {}
     done = threading.Event()
     n_expected = round(rate * SECONDS)
     thread = threading.Thread(target=load.receive_until, args=(done, n_expected, DRAIN_S), daemon=True)
@@ -393,8 +394,7 @@ def _sustained(
         note=f'over {busy_wall:.2f} s from the first send to the last output',
     )
     report.figure(f'{label}: node CPU per input message', per_msg_us, 'us')
-    if mode == HELD and not prefix.startswith(FLOOR):
-        time.sleep(0.5)  # one more 5 Hz power/correction
+    if mode == HELD and not prefix.startswith(FLOOR):  # the last power/correction of this run
         scales = [load.correction.get(f'scale_{side}', math.nan) for side in ('left', 'right')]
         report.figure(
             f'{label}: correction scale learned (left, right mean; 1.2 = measured / predicted torque)',
