@@ -394,7 +394,7 @@ def _sustained(
         note=f'over {busy_wall:.2f} s from the first send to the last output',
     )
     report.figure(f'{label}: node CPU per input message', per_msg_us, 'us')
-    if mode == HELD and not prefix.startswith(FLOOR):  # the last power/correction of this run
+    if mode == HELD:  # (the echo nodes never run it) the last power/correction of this run
         scales = [load.correction.get(f'scale_{side}', math.nan) for side in ('left', 'right')]
         report.figure(
             f'{label}: correction scale learned (left, right mean; 1.2 = measured / predicted torque)',
