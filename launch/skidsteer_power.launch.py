@@ -2,7 +2,8 @@
 skidsteer_power.launch.py``). Without ROS launch, use ``skidsteer-power run`` (same nodes).
 
 Arguments: vehicle, terrain (estimator parameters), left_port, right_port (DES 70/10 amplifiers),
-monitor (true: also open energy_monitor in view mode in this terminal).
+monitor (true: also open energy_monitor in view mode in this terminal). Every other parameter comes
+from the installed ``config/estimator.yaml`` and ``config/des_driver.yaml``.
 
 des_driver is a managed (lifecycle) node: this file configures it once its process is up, activates
 it once it is inactive, and on shutdown deactivates it (zero speed, power stages off) and cleans it
@@ -31,6 +32,7 @@ from launch import LaunchDescription
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('skidsteer_power')
     estimator_defaults = os.path.join(share, 'config', 'estimator.yaml')
+    driver_defaults = os.path.join(share, 'config', 'des_driver.yaml')
     vehicle = LaunchConfiguration('vehicle')
     driver = LifecycleNode(
         package='skidsteer_power',
@@ -38,11 +40,12 @@ def generate_launch_description() -> LaunchDescription:
         name='des_driver',
         namespace='',
         parameters=[
+            driver_defaults,
             {
                 'vehicle': vehicle,
                 'left_port': LaunchConfiguration('left_port'),
                 'right_port': LaunchConfiguration('right_port'),
-            }
+            },
         ],
         output='screen',
     )

@@ -28,7 +28,7 @@ class Harness:
 
         from skidsteer_power.nodes.des_driver import DesDriver
 
-        ns = f'/t{uuid.uuid4().hex[:8]}'
+        ns = overrides.pop('namespace', None) or f'/t{uuid.uuid4().hex[:8]}'
         params = {
             'left_port': pair.left.port,
             'right_port': pair.right.port,

@@ -8,6 +8,11 @@ that venv's Python, as ``colcon build`` on a robot uses the distribution's. The 
 copied (not symlinked: colcon would then install a symlink back into this checkout, and the
 resolver would find ``config/`` next to the code instead of the installed share directory).
 
+The workspace holds a Python venv the way the README's recipe makes one (``VENV_RECIPE``): a venv
+inside a colcon workspace breaks ``colcon build`` once the ROS wheels are in it (colcon crawls
+``venv/share/<pkg>/package.xml`` and finds every ROS package twice), so the recipe writes
+``COLCON_IGNORE`` into it. The wheels' ``share/`` tree is copied from this test venv, where pip put it.
+
 TODO(lead): des_driver becomes a managed (lifecycle) node on the driver branch. The test already
 handles both: :func:`activate_if_managed` calls configure and activate through
 ``/des_driver/change_state`` when that service exists; a plain node publishes without it.
@@ -38,6 +43,8 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ('package.xml', 'setup.py', 'setup.cfg', 'resource', 'config', 'launch', 'skidsteer_power')
 COLCON = Path(sys.executable).with_name('colcon')
+VENV_RECIPE = 'python3 -m venv --system-site-packages venv && touch venv/COLCON_IGNORE'
+"""The README's line (section "Building on the robot with colcon"), run in the workspace root."""
 
 
 def _colcon() -> Path:
@@ -63,12 +70,48 @@ def workspace(tmp_path_factory) -> Path:
         else:
             shutil.copy2(path, src / name)
     env = {**os.environ, 'PATH': f'{COLCON.parent}{os.pathsep}{os.environ["PATH"]}'}
+    subprocess.run(['bash', '-c', VENV_RECIPE], cwd=ws, env=env, check=True, timeout=120)
+    add_ros_wheels_share(ws / 'venv')
     build = subprocess.run(
         [str(colcon), 'build', '--event-handlers', 'console_cohesion+'],
         cwd=ws, env=env, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     return ws
+
+
+def add_ros_wheels_share(venv: Path) -> None:
+    """The ``share/<pkg>/package.xml`` files pip installs with the ROS wheels (copied from this
+    test venv, which has them), so that colcon would find them in ``venv``."""
+    found = list(Path(sys.prefix, 'share').glob('*/package.xml'))
+    if not found:
+        pytest.skip(f'no ROS wheels with share/<pkg>/package.xml in {sys.prefix}')
+    for xml in found:
+        (venv / 'share' / xml.parent.name).mkdir(parents=True, exist_ok=True)
+        shutil.copy2(xml, venv / 'share' / xml.parent.name / 'package.xml')
+
+
+def test_readme_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path):
+    """The README's colcon recipe makes its venv the way this test does; with the ROS wheels in that
+    venv, colcon sees only this package there, and without COLCON_IGNORE it would see them all."""
+    colcon = _colcon()
+    readme = (ROOT / 'README.md').read_text()
+    recipe = readme.split('### Building on the robot with colcon', 1)[1].split('```', 2)[1]
+    assert VENV_RECIPE in recipe
+    shutil.copytree(ROOT / 'resource', tmp_path / 'src' / 'skidsteer_power' / 'resource')
+    shutil.copy2(ROOT / 'package.xml', tmp_path / 'src' / 'skidsteer_power' / 'package.xml')
+    shutil.copy2(ROOT / 'setup.py', tmp_path / 'src' / 'skidsteer_power' / 'setup.py')
+    subprocess.run(['bash', '-c', VENV_RECIPE], cwd=tmp_path, check=True, timeout=120)
+    add_ros_wheels_share(tmp_path / 'venv')
+
+    def listed() -> list[str]:
+        out = subprocess.run([str(colcon), 'list', '--names-only'], cwd=tmp_path, capture_output=True,
+                             text=True, timeout=120, check=True)  # fmt: skip
+        return out.stdout.split()
+
+    assert listed() == ['skidsteer_power']
+    (tmp_path / 'venv' / 'COLCON_IGNORE').unlink()
+    assert len(listed()) > 1  # what breaks `colcon build` (duplicate and foreign packages)
 
 
 def installed(ws: Path, *parts: str) -> Path:

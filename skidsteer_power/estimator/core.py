@@ -161,6 +161,7 @@ class EstimatorCore:
         self.command: tuple[float, float] | None = None
         self.clamped_count = 0
         self.outside_map_count = 0
+        self.no_data_count = 0  # joint_states saying "no fresh data" (NaN): neither used nor rejected
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
@@ -261,10 +262,14 @@ class EstimatorCore:
     ) -> Comparison | None:
         """Measure power from joint_states, mapped to the sides by ``settings.joint_map``; raises
         RejectedInput for a bad one. None while a speed differentiated from positions needs a second
-        sample."""
+        sample, and for a message saying "no fresh data" (NaN in every field of a joint; counted in
+        ``no_data_count``)."""
         try:
             reading = self.joints.read(names, position, velocity, effort, now_s)
         except InputError as err:
+            if self.joints.no_data(names, position, velocity, effort):  # checked only on this path
+                self.no_data_count += 1
+                return None
             raise self._reject('joint_states', err, now_s) from err
         if reading is None:
             return None
@@ -351,6 +356,7 @@ class EstimatorCore:
             'joint_states_stale': str(not self.joint_fresh.is_fresh(now_s)).lower(),
             'rejected_cmd_vel': str(self.rejects.counts['cmd_vel']),
             'rejected_joint_states': str(self.rejects.counts['joint_states']),
+            'joint_states_no_data': str(self.no_data_count),
             'clamped_commands': str(self.clamped_count),
             'command_outside_map': str(outside).lower(),
             'commands_outside_map': str(self.outside_map_count),

@@ -307,6 +307,31 @@ class JointReader:
             _finite_within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
         return omega_m, torque_m
 
+    def no_data(
+        self,
+        names: Sequence[str],
+        position: Sequence[float],
+        velocity: Sequence[float],
+        effort: Sequence[float],
+    ) -> bool:
+        """True when a mapped joint reads NaN in every number field the mapping uses: the driver's
+        "no fresh data for this side" (des_driver's convention, README "ROS 2 interface"), which is
+        no reading, not a bad one. A NaN beside a finite value in another field stays bad input."""
+        try:
+            rows = self._rows_of(names)
+        except InputError:
+            return False
+        used = [
+            v
+            for v, f in ((position, 'position'), (velocity, 'velocity'), (effort, 'effort'))
+            if f in self.map.interfaces
+        ]
+        for i in rows:
+            values = [float(v[i]) for v in used if i < len(v)]
+            if values and all(math.isnan(x) for x in values):
+                return True
+        return False
+
 
 @dataclass
 class RejectCounter:

@@ -17,19 +17,21 @@ Lifecycle (rclpy.lifecycle; ``~/change_state``, ``~/get_state`` as usual):
 ``autostart:=true`` configures and activates at start, for use without a lifecycle manager.
 
 Subscribes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with ``twist_stamped:=true``; m/s and
-rad/s, REP 103). Every number is checked where it enters: a message with any non-finite field is
-rejected and counted; V and yaw rate are clamped to ``max_speed_m_s`` / ``max_yaw_rate_rad_s`` (a
-throttled warning, counted) and their changes to ``max_accel_m_s2`` / ``max_yaw_accel_rad_s2``; the
+rad/s, REP 103), best effort by default so that reliable and best-effort publishers both match
+(:func:`cmd_vel_qos`; ``qos_overrides./cmd_vel.subscription.<policy>`` parameters are honoured).
+Every number is checked where it enters: a message with any non-finite field is rejected and
+counted; V and yaw rate are clamped to ``max_speed_m_s`` / ``max_yaw_rate_rad_s`` (a throttled
+warning, counted) and their changes to ``max_accel_m_s2`` / ``max_yaw_accel_rad_s2``; the
 motor set points never exceed ``max_motor_rpm`` (itself at most the motor's 10 000 rpm).
 Service ``~/clear_faults`` (std_srvs/Trigger): clear latched amplifier errors, re-enable; the answer
 says whether every side came back.
 Publishes ``joint_states`` (sensor_msgs/JointState, joints ``left_motor`` and ``right_motor``:
 position [rad], velocity [rad/s] at the motor shaft, effort = Kt * current [N m]; forward motion of
 the robot is positive on both sides, the per-side ``polarity`` maps to the amplifier's sense; a
-side with no fresh data reads NaN) and ``diagnostics`` (diagnostic_msgs/DiagnosticArray, one status
-per amplifier: connection, power stage, status and error words, raw current [mA] and speed [rpm],
-link counters, poller faults; one for the command: lifecycle state, why the motors hold zero,
-rejected / clamped counts).
+side with no fresh data reads NaN in all three fields: "no data", which power_estimator skips)
+and ``diagnostics`` (diagnostic_msgs/DiagnosticArray, one status per amplifier: connection, power
+stage, status and error words, raw current [mA] and speed [rpm], link counters, poller faults;
+one for the command: lifecycle state, why the motors hold zero, rejected / clamped counts).
 
 Safety: no valid cmd_vel for ``cmd_timeout_s`` -> zero speed; an amplifier error -> both motors
 stopped, reported, cleared only by ``~/clear_faults``; a failed exchange or a lost port on one side
@@ -67,6 +69,8 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle.node import LifecycleNodeMixin
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -84,6 +88,14 @@ from skidsteer_power.vehicle import load_vehicle
 
 NODE_NAME = 'des_driver'
 _WARN_PERIOD_S = 5.0
+
+
+def cmd_vel_qos() -> QoSProfile:
+    """cmd_vel's QoS: a best-effort reader matches reliable and best-effort writers (many teleop
+    and joystick nodes publish best effort); a lost command is what the watchdog is for.
+    ``qos_overrides./cmd_vel.subscription.reliability: reliable`` (or any other policy) overrides
+    it. A new profile each call: rclpy writes the overrides into the profile it is given."""
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 @dataclass(frozen=True)
@@ -256,8 +268,8 @@ class DesDriver(LifecycleNode):
         return p
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
-        if self.state_label == 'unconfigured':
-            return SetParametersResult(successful=True)
+        if self.state_label == 'unconfigured' or all(p.name.startswith('qos_overrides.') for p in params):
+            return SetParametersResult(successful=True)  # QoS overrides: declared (read-only) at configure
         return SetParametersResult(
             successful=False, reason='des_driver parameters take effect at configure: clean up first'
         )
@@ -285,7 +297,13 @@ class DesDriver(LifecycleNode):
             raise
         msg_type = TwistStamped if p['twist_stamped'] else Twist
         self._runtime = [
-            self.create_subscription(msg_type, 'cmd_vel', self._on_cmd_vel, 10),
+            self.create_subscription(
+                msg_type,
+                'cmd_vel',
+                self._on_cmd_vel,
+                cmd_vel_qos(),
+                qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            ),
             self.create_timer(1.0 / p['poll_rate_hz'], self._publish_joint_states),
             self.create_timer(1.0 / p['diagnostics_rate_hz'], self._publish_diagnostics),
         ]
