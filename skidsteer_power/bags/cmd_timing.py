@@ -35,6 +35,7 @@ STREAM_REPEAT_FRACTION = 0.5  # at least this share of consecutive messages repe
 REST_SPEED_M_S = 0.01  # slower than this [m/s] ...
 REST_YAW_RATE_RAD_S = 0.02  # ... and turning slower than this [rad/s]: the robot is at rest
 MOVING_GRACE_S = 0.5  # a new command gets this long [s] to set the robot moving before rest ends it
+SAME_INSTANT_S = 0.01  # on change: messages closer than this [s] are one command (the last wins)
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,8 @@ class CommandTiming:
 
     mode : 'stream' or 'on_change'
     hold_s : a command's longest hold [s] (inf: until the next command)
-    period_s : median interval between commands [s] (nan with fewer than two)
+    period_s : stream: median interval between messages; on change: median interval between
+        distinct commands (:func:`distinct_command_period`) [s] (nan with fewer than two)
     repeat_fraction : share of consecutive commands equal to the one before [-]
     inferred : True if ``hold_s`` was inferred from the recording (not given by the user)
     """
@@ -80,6 +82,8 @@ def command_timing(
     intervals = np.diff(cmd_t)
     period = float(np.median(intervals)) if n > 1 else math.nan
     mode = 'stream' if repeats >= STREAM_REPEAT_FRACTION else 'on_change'
+    if mode == 'on_change':
+        period = distinct_command_period(cmd_t, cmd)
     if hold_s is None:
         if mode == 'stream':
             hold_s = max(floor_s, 3.0 * period, 1.05 * float(np.percentile(intervals, 99)))
@@ -89,6 +93,19 @@ def command_timing(
     else:
         inferred = False
     return CommandTiming(mode, float(hold_s), period, repeats, inferred)
+
+
+def distinct_command_period(cmd_t: np.ndarray, cmd: np.ndarray) -> float:
+    """Median interval [s] between distinct commands of an on-change publisher: messages closer
+    than :data:`SAME_INSTANT_S` are one command (a stop and the new command sent together: the new
+    one), and a command equal to the one before is no new command. nan with fewer than two."""
+    if cmd_t.size < 2:
+        return math.nan
+    last_of_burst = np.append(np.diff(cmd_t) >= SAME_INSTANT_S, True)
+    t, values = cmd_t[last_of_burst], cmd[last_of_burst]
+    changed = np.append(True, np.any(np.diff(values, axis=0) != 0, axis=1))
+    t = t[changed]
+    return float(np.median(np.diff(t))) if t.size > 1 else math.nan
 
 
 def at_rest(pose_t: np.ndarray, xy: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -367,9 +367,12 @@ def open_bag(
             bag = _open_intact(bag_path, extra_types)
             bag.salvage = salvage
     except _DAMAGE_ERRORS as err:
-        if not salvage:
+        if _FOREIGN_PROFILE in str(err) and bag_path.is_file():
+            bag = _open_foreign_profile(bag_path, extra_types, salvage)
+        elif not salvage:
             raise InputError(_damage_text(bag_path, err) + _SALVAGE_HINT) from err
-        bag = _open_salvage(bag_path, extra_types, err)
+        else:
+            bag = _open_salvage(bag_path, extra_types, err)
     except FileNotFoundError as err:
         raise InputError(f'{bag_path}: {err}') from err
     if warn_unknown and bag.undecodable_topics:
@@ -378,6 +381,49 @@ def open_bag(
             bag_path,
             ', '.join(f'{t} ({bag.topics[t].msgtype})' for t in bag.undecodable_topics),
         )
+    return bag
+
+
+_FOREIGN_PROFILE = 'Profile is not ros2'  # rosbags' ReaderError for any other MCAP header profile
+_ROS2_SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
+
+
+def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, salvage: bool) -> BagReader:
+    """An MCAP file whose header profile is not 'ros2' (several writers leave it empty) but whose
+    schemas are ROS 2 message definitions and messages CDR: read with the MCAP scanner of
+    :mod:`skidsteer_power.bags.salvage` (the whole file in memory), with a warning about the
+    profile. Other encodings are refused with one clear InputError; so is damage without ``salvage``."""
+    from mcap.reader import make_reader
+
+    try:
+        with path.open('rb') as stream:
+            reader = make_reader(stream)
+            profile = reader.get_header().profile
+            summary = reader.get_summary()
+    except Exception as err:  # the mcap library's own errors; damage is the scanner's to describe
+        summary, profile = None, '?'
+        if not salvage:
+            raise InputError(_damage_text(path, err) + _SALVAGE_HINT) from err
+    if summary is not None:
+        foreign = sorted(
+            {f'message encoding {c.message_encoding}' for c in summary.channels.values()}
+            - {'message encoding cdr'}
+        ) + sorted(
+            {f'schema encoding {s.encoding}' for s in summary.schemas.values()}
+            - {f'schema encoding {e}' for e in _ROS2_SCHEMA_ENCODINGS}
+        )
+        if foreign:
+            raise InputError(f'{path}: not a ROS 2 bag (MCAP profile {profile!r}; {", ".join(foreign)})')
+    bag = _open_salvage(path, extra_types, None)
+    if bag.damage and not salvage:
+        raise InputError(f'{path}: bag is truncated or corrupt ({bag.damage})' + _SALVAGE_HINT)
+    bag.salvage = salvage
+    LOG.warning(
+        '%s: MCAP header profile is %r, not "ros2"; its schemas are ROS 2 definitions and its messages '
+        'CDR: read as a ROS 2 bag',
+        path,
+        profile,
+    )
     return bag
 
 

@@ -91,6 +91,35 @@ def held_steps(t: np.ndarray, y: np.ndarray, hold: np.ndarray) -> tuple[np.ndarr
     return x[keep], v[keep]
 
 
+MIN_TURN_RAD = 0.2
+"""A fitted circle is drawn only if the segment's path sweeps at least this angle of it [rad] (about
+11 degrees; a 0.3 m run on the 1 m circle of Table 7.3 sweeps 0.3 rad): a circle fitted to a nearly
+straight run (radius hundreds of m) says nothing a reader could see and is left out of the plot."""
+
+
+def is_turn(segment: TraceSegment) -> bool:
+    """True if the segment's fitted circle describes a turn: finite radius and the arc driven
+    (measured speed [m/s] x duration [s]) sweeps at least :data:`MIN_TURN_RAD` of it."""
+    if not (math.isfinite(segment.radius_m) and segment.radius_m > 0 and math.isfinite(segment.speed_m_s)):
+        return False
+    arc_m = abs(segment.speed_m_s) * (segment.t_end_s - segment.t_start_s)
+    return arc_m / segment.radius_m >= MIN_TURN_RAD
+
+
+def flagged_spans(t: np.ndarray, flag: np.ndarray, hold: np.ndarray) -> list[tuple[float, float]]:
+    """(start, end) [s] of the time the rows with ``flag`` set are in force (each row from its time
+    ``t`` for ``hold`` [s], NaN: until the next row), adjacent spans merged."""
+    following = np.append(t[1:], t[-1]) if t.size else t
+    ends = np.where(np.isfinite(hold), t + np.nan_to_num(hold, posinf=0.0), following)
+    spans: list[tuple[float, float]] = []
+    for start, end in zip(t[flag].tolist(), ends[flag].tolist(), strict=True):
+        if spans and start <= spans[-1][1] + 1e-9:
+            spans[-1] = (spans[-1][0], max(spans[-1][1], end))
+        else:
+            spans.append((start, end))
+    return spans
+
+
 def write_plots(
     directory: Path, series: RunSeries, inputs: Inputs, segments: list[TraceSegment]
 ) -> list[str]:
@@ -104,6 +133,11 @@ def write_plots(
     every = _thin(len(series.columns['t_s']))
     c = {name: values[every] for name, values in series.columns.items()}
     hold = c['hold_s'] * (1 if every.step in (None, 1) else np.nan)  # thinned: hold to the next kept
+    outside = flagged_spans(
+        series.columns['t_s'],
+        (series.columns['clamped'] > 0) | (series.columns['limited'] > 0),
+        series.columns['hold_s'],
+    )
     written = []
     for quantity, unit, label in (
         ('torque', 'Nm', 'motor torque [N m]'),
@@ -116,6 +150,9 @@ def write_plots(
             measured = c[f'measured_{quantity}_{side}_{unit}']
             if np.isfinite(measured).any():
                 ax.plot(*held_steps(c['t_s'], measured, hold), label='measured', lw=0.8, alpha=0.8)
+            for k, (start, end) in enumerate(outside):
+                label_span = 'outside the power map (clamped or limited)' if k == 0 else None
+                ax.axvspan(start, end, color='tab:red', alpha=0.12, lw=0, label=label_span)
             ax.set_ylabel(f'{side} {label}')
             ax.grid(alpha=0.3)
             ax.legend(loc='upper right')
@@ -138,12 +175,11 @@ def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceS
     ax.plot(x, y, '-', lw=0.8, color='0.5', label=f'path ({inputs.pose_topic})')
     ax.plot(x[:1], y[:1], 'o', color='0.3', ms=4, label='start')
     angles = np.linspace(0, 2 * np.pi, 721)
-    for k, s in enumerate(segments):
-        if math.isfinite(s.radius_m):
-            label = 'fitted circles (eqs. 7.8-7.10)' if k == 0 else None
-            circle_x = s.center_x_m + s.radius_m * np.cos(angles)
-            circle_y = s.center_y_m + s.radius_m * np.sin(angles)
-            ax.plot(circle_x, circle_y, lw=0.7, alpha=0.8, label=label)
+    for k, s in enumerate(s for s in segments if is_turn(s)):
+        label = 'fitted circles of turns (eqs. 7.8-7.10)' if k == 0 else None
+        circle_x = s.center_x_m + s.radius_m * np.cos(angles)
+        circle_y = s.center_y_m + s.radius_m * np.sin(angles)
+        ax.plot(circle_x, circle_y, lw=0.7, alpha=0.8, label=label)
     # The window is the path's (a circle fitted to a nearly straight run can be hundreds of m wide).
     cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
     half = max(x.max() - x.min(), y.max() - y.min(), 0.1) / 2 * 1.15

@@ -323,7 +323,10 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
             rejected['cmd_vel' if kind == 0 else 'joint_states'] += 1
             continue
         fresh = core.prediction is not None and core.cmd_fresh.is_fresh(now)
-        row_hold.append(core.cmd_fresh.timeout_s if kind == 0 else math.nan)
+        if kind == 0:  # until the command's hold ends (holds never overlap), else the staleness
+            row_hold.append(core.cmd_fresh.timeout_s if ends_list is None else ends_list[i] - now)
+        else:
+            row_hold.append(math.nan)
         rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)))
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
@@ -552,6 +555,13 @@ def _next_position(sorted_positions: list[np.ndarray], start: int) -> int | None
     return found
 
 
+def stream_hold_ends(t: np.ndarray, cap_s: float) -> np.ndarray:
+    """When each row of a stream sampled at times ``t`` [s] stops being in force: at the next row,
+    at most ``cap_s`` [s] after it (a 5 Hz odometry held for a 0.5 s command hold would overlap the
+    next four rows and count their energy 2.5 times)."""
+    return np.minimum(np.append(t[1:], math.inf), t + cap_s)
+
+
 KINEMATICS = ('cmd', 'odom', 'ground_truth')
 GROUND_TRUTH_TOPIC = '/ground_truth/odom'
 
@@ -588,8 +598,9 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     core = build_core(options, predictor, options.battery_window_s)
     timing = apply_command_timing(inputs, options.cmd_hold_s, core.settings.cmd_timeout_s)
     motion = motion_inputs(bag, options, inputs)
-    if motion is not None:  # a measured twist is a stream: held for the estimator's staleness
-        motion = (motion[0], replace(motion[1], cmd_end=None))
+    if motion is not None:  # a measured twist is a stream: each row holds until the next one
+        ends = stream_hold_ends(motion[1].cmd_t, core.settings.cmd_timeout_s)
+        motion = (motion[0], replace(motion[1], cmd_end=ends))
     if options.kinematics != 'cmd' and motion is None:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
     series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
