@@ -236,8 +236,11 @@ def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(
         joint_map = node.core.settings.joint_map
         assert (joint_map.left, joint_map.right) == (('fl', 'rl'), ('fr', 'rr'))
         assert (joint_map.effort_is, joint_map.gear_ratio, joint_map.location) == ('current', 20.0, 'wheel')
-        assert joint_map.interfaces == ('position', 'velocity')  # husky_a200.yaml: no effort exported
-        with pytest.raises(RejectedInput, match='declares no effort'):
+        # husky_a200.yaml: no effort in joint_states; the effort is the side currents of its status
+        # topics (test_side_currents.py), so joint_states alone carry no effort
+        assert joint_map.interfaces == ('position', 'velocity', 'effort')
+        assert [s.topic for s in joint_map.side_currents] == ['status', 'platform/mcu/status/power']
+        with pytest.raises(RejectedInput, match='no effort'):
             node.core.on_joint_state(['fl', 'rl', 'fr', 'rr'], [1.0] * 4, [], 0.0, [0.0] * 4)
     finally:
         node.destroy_node()

@@ -41,6 +41,7 @@ from skidsteer_power.bags.decode import (
 )
 from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
 
 LOG = logging.getLogger(__name__)
 
@@ -114,6 +115,7 @@ class Inputs:
     cmd_end: np.ndarray | None = None  # (n,) time each command stops being in force [s]
     end_s: float = 0.0  # last message of the bag [s]
     joint_note: str = ''  # why joint_states give no measured power, if they do not
+    currents_note: str = ''  # where the motor currents come from, if a vendor topic (side_currents)
 
 
 @dataclass
@@ -183,8 +185,13 @@ def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: Any = None)
     joint_map = joint_map or joint_map_of(options)
     names = joint_map.joints
     js_t, position, velocity, effort, ok = decode_joint_arrays(bag, options.joint_states_topic, t0, names)
+    (position, velocity, effort), ok, currents_note = apply_to_joint_arrays(
+        bag, joint_map, t0, js_t, (position, velocity, effort), ok
+    )
     note = ''
-    if js_t.size and not joint_map.has_power:
+    if js_t.size and joint_map.side_currents and not ok.any():
+        note = currents_note
+    elif js_t.size and not joint_map.has_power:
         note = f'the drivetrain mapping gives {options.joint_states_topic} no effort or no speed'
     elif js_t.size and not ok.any():
         note = f'{options.joint_states_topic} never holds all of {", ".join(names)}: no measured power'
@@ -202,6 +209,7 @@ def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: Any = None)
     return Inputs(
         cmd_t, cmd, js_t, velocity, effort, ok, pose_t, pose_xy, pose_topic, live_t, live_torque,
         js_position=position, js_names=names, pose_yaw=pose_yaw, end_s=bag.duration_s, joint_note=note,
+        currents_note='' if note else currents_note,
     )  # fmt: skip
 
 
@@ -623,6 +631,7 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
         'predictor': core.predictor.description,
         'has_motor_data': bool(inputs.js_t.size),
         'motor_data_note': inputs.joint_note or None,
+        'motor_currents_from': inputs.currents_note or None,
         'joints': {
             'left': list(core.settings.joint_map.left),
             'right': list(core.settings.joint_map.right),

@@ -26,6 +26,7 @@ from skidsteer_power.bags.decode import decode_joint_arrays, decode_twists
 from skidsteer_power.bags.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
+from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
 from skidsteer_power.powertrain.motor import EC45, MotorConstants, terminal_power
 
 POSE_TYPES = (
@@ -176,7 +177,12 @@ def read_recording(
             raise InputError(f'{path}: no {options.joint_states_topic} topic: no motor effort to fit to')
         cmd_t, cmd = decode_twists(bag, options.cmd_vel_topic, t0)
         names = reader.map.joints
-        js_t, position, velocity, effort, _ = decode_joint_arrays(bag, options.joint_states_topic, t0, names)
+        js_t, position, velocity, effort, present = decode_joint_arrays(
+            bag, options.joint_states_topic, t0, names
+        )
+        (position, velocity, effort), _, _ = apply_to_joint_arrays(
+            bag, reader.map, t0, js_t, (position, velocity, effort), present
+        )
         omega, torque, ok = side_readings(reader, names, js_t, position, velocity, effort)
         topic = _pose_topic(bag, options.odom_topic)
         if topic:

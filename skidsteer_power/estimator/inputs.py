@@ -97,6 +97,9 @@ class JointMap:
         velocity, else differentiated from position; no effort: no measured power)
     inverted : joints whose positive direction drives the robot backwards (all three values negated)
     source : where the mapping comes from
+    side_currents : vendor topics whose per-side motor currents [A] are the effort (a
+        :class:`~skidsteer_power.estimator.side_currents.SideCurrentSource` each; the first present
+        is used), with ``effort_is: current``; empty: effort from joint_states
     """
 
     left: tuple[str, ...] = ('left_motor',)
@@ -108,6 +111,7 @@ class JointMap:
     interfaces: tuple[str, ...] = INTERFACES
     inverted: tuple[str, ...] = ()
     source: str = ''
+    side_currents: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         for side in ('left', 'right'):
@@ -174,6 +178,12 @@ class JointMap:
                 cfg[key] = (value,) if isinstance(value, str) else tuple(value or ())
         if 'source' in cfg:
             cfg['source'] = str(cfg['source'])
+        if 'side_currents' in cfg:
+            from skidsteer_power.estimator.side_currents import parse_sources
+
+            cfg['side_currents'] = parse_sources(cfg['side_currents'])
+            if cfg['side_currents'] and cfg.get('effort_is', 'torque') != 'current':
+                raise ConfigError('drivetrain: side_currents needs effort_is: current')
         return cls(**cfg)
 
     def with_overrides(self, **overrides: Any) -> JointMap:

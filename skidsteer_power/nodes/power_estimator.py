@@ -100,6 +100,7 @@ from skidsteer_power.estimator.summary import (
 )
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
+from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
 from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
 from skidsteer_power.nodes.wire import PackedJointState, decoder
 
@@ -312,6 +313,8 @@ class PowerEstimator(QuietNode):
 
         sub(TwistStamped if p['cmd_vel_stamped'] else Twist, 'cmd_vel', self._on_cmd_vel)
         sub(JointState, 'joint_states', self._on_joint_states)
+        joint_map = self.core.settings.joint_map
+        self.side_currents = SideCurrentFeed(self, joint_map, qos_in) if joint_map.side_currents else None
         self.pub_predicted = pub(JointState, 'power/predicted', qos_out)
         self.pub_measured = pub(JointState, 'power/measured', qos_out)
         self.pub_command_figures = [pub(Float64, topic, qos_out) for topic, _ in COMMAND_FIGURES]
@@ -370,9 +373,13 @@ class PowerEstimator(QuietNode):
         """A decoded (rosbags) sensor_msgs/JointState: number sequences are numpy arrays."""
         now = self.now_s()
         velocity, effort, position = msg.velocity.tolist(), msg.effort.tolist(), msg.position.tolist()
+        names = msg.name
+        feed = self.side_currents  # effort from a vendor topic (nodes/side_current_feed.py)
+        if feed is not None:
+            names, position, velocity, effort = feed.joint_values(names, position, velocity, now)
         try:
             with self._lock:
-                comparison = self.core.on_joint_state(msg.name, velocity, effort, now, position)
+                comparison = self.core.on_joint_state(names, velocity, effort, now, position)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
