@@ -35,6 +35,7 @@ setup(
         'rich',
         'matplotlib',
         'foxglove-sdk',
+        'websockets>=13',
         'dask[distributed]',
         'SALib',
     ],

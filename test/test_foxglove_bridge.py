@@ -30,13 +30,13 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from test_estimator_core import FixedPowerPredictor
-from websockets.sync import client as websockets_sync  # requirements-dev.txt
+from websockets.sync import client as websockets_sync  # requirements.txt
 
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 
 MESSAGE_DATA = struct.Struct('<BIQ')  # opcode 0x01, subscription id, log time [ns]
-# What the Foxglove app offers. foxglove-sdk 0.30.3 accepts only the first (its name for protocol v1:
-# same frames); the older name is refused with HTTP 400 when offered alone.
+# What the Foxglove app offers; the bridge picks the first (foxglove-sdk's name for protocol v1) and
+# also serves clients offering only the second (test_foxglove_security.py).
 SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']
 
 

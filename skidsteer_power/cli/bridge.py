@@ -1,10 +1,15 @@
 """``skidsteer-power bridge``: a Foxglove WebSocket server forwarding the suite's topics.
 
-    skidsteer-power bridge [--host 0.0.0.0] [--port 8765] [--topics T ...] [--duration S] [--json]
+    skidsteer-power bridge [--host 127.0.0.1] [--port 8765] [--topics T ...] [--allow-origin URL ...]
+                           [--allow-publish cmd_vel] [--duration S] [--json]
 
-For robots without ``foxglove_bridge``: the Foxglove app connects to ``ws://ROBOT:8765`` and gets
+For robots without ``foxglove_bridge``: the Foxglove app connects to ``ws://HOST:8765`` and gets
 every topic (or only ``--topics``) as ros2msg schemas with CDR payloads
-(:mod:`skidsteer_power.nodes.foxglove_bridge`). Open ``config/foxglove/operator_layout.json`` in
+(:mod:`skidsteer_power.nodes.foxglove_bridge`). It listens on 127.0.0.1 (reach it through an SSH
+tunnel, README); ``--host 0.0.0.0`` serves every network the robot is on, with a warning: there is
+no authentication. Web pages are refused unless served from localhost or named by
+``--allow-origin``. ``--allow-publish cmd_vel`` lets clients publish there (Foxglove's Teleop
+panel); des_driver's checks apply to it as to any cmd_vel. Open ``config/foxglove/operator_layout.json`` in
 the app for the operator's view. Prints ``serving ws://HOST:PORT`` when ready; runs until SIGINT /
 SIGTERM (or ``--duration``), then prints what it forwarded (``--json``: url, topics: {topic:
 messages}, skipped: {topic: reason}).
@@ -32,15 +37,44 @@ def _port(text: str) -> int:
     return value
 
 
+def _loopback(host: str) -> bool:
+    import ipaddress
+
+    if host == 'localhost':
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     from skidsteer_power.nodes.foxglove_bridge import DEFAULT_PORT
 
     parser = subparsers.add_parser(
         'bridge', help='Foxglove WebSocket server forwarding ROS topics (ros2msg schemas, CDR)'
     )
-    parser.add_argument('--host', default='0.0.0.0', help='address to listen on (default: all)')
+    parser.add_argument(
+        '--host',
+        default='127.0.0.1',
+        help='address to listen on (default 127.0.0.1; 0.0.0.0: every network, no authentication)',
+    )
     parser.add_argument('--port', type=_port, default=DEFAULT_PORT, help='TCP port (0 = any free one)')
     parser.add_argument('--topics', nargs='+', default=[], help='only these topics (default: all)')
+    parser.add_argument(
+        '--allow-origin',
+        nargs='+',
+        default=[],
+        metavar='URL',
+        help='web origins accepted besides localhost, e.g. https://app.foxglove.dev (default: none)',
+    )
+    parser.add_argument(
+        '--allow-publish',
+        nargs='+',
+        default=[],
+        metavar='TOPIC',
+        help='topics clients may publish to, e.g. cmd_vel for the Teleop panel (default: none)',
+    )
     parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
     add_json_flag(parser)
     parser.set_defaults(func=run)
@@ -57,6 +91,15 @@ def run(args: argparse.Namespace) -> int:
         import foxglove  # noqa: F401
     except ImportError as err:
         raise InputError(f'the Foxglove bridge needs the foxglove-sdk package ({err})') from err
+    if not _loopback(args.host):
+        print(
+            f'warning: serving Foxglove on {args.host}: no authentication, anyone who can reach port '
+            f'{args.port} reads every bridged topic'
+            + (f' and publishes to {", ".join(args.allow_publish)}' if args.allow_publish else '')
+            + '; prefer --host 127.0.0.1 and an SSH tunnel (README, "Watching the robot in Foxglove")',
+            file=sys.stderr,
+            flush=True,
+        )
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('foxglove_bridge', context=context)
@@ -64,7 +107,14 @@ def run(args: argparse.Namespace) -> int:
     executor.add_node(node)
     bridge = None
     try:
-        bridge = FoxgloveBridge(node, host=args.host, port=args.port, topics=args.topics)
+        bridge = FoxgloveBridge(
+            node,
+            host=args.host,
+            port=args.port,
+            topics=args.topics,
+            allowed_origins=args.allow_origin,
+            allow_publish=args.allow_publish,
+        )
         url = f'ws://{args.host}:{bridge.port}'
         print(f'serving {url}', file=sys.stderr if args.json else sys.stdout, flush=True)
         duration = args.duration if args.duration is not None else math.inf
@@ -74,11 +124,14 @@ def run(args: argparse.Namespace) -> int:
                 executor.spin_once(timeout_sec=0.1)
         topics = {t: f.messages for t, f in sorted(bridge.forwarded.items())}
         skipped = dict(bridge.skipped)
+        published = dict(bridge.client_publish.published) if bridge.client_publish else {}
+        refused = {'origins': bridge.front.refused}
     finally:
         if bridge is not None:
             bridge.close()
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-    emit({'url': url, 'topics': topics, 'skipped': skipped}, args.json)
+    summary = {'url': url, 'topics': topics, 'skipped': skipped, 'published': published, 'refused': refused}
+    emit(summary, args.json)
     return 0

@@ -3,10 +3,17 @@
 Each ROS topic becomes one Foxglove channel: schema encoding ``ros2msg`` (the .msg definition text
 with its dependencies, as rosbag2 stores it in MCAP; :func:`skidsteer_power.bags.writer.message_definition`),
 message encoding ``cdr`` (the serialized message exactly as DDS delivered it: a raw subscription,
-no decoding on the robot). The Foxglove app connects to ``ws://ROBOT:8765`` (protocol
-``foxglove.websocket.v1``) and decodes the messages itself. The server is the ``foxglove-sdk``
-package's (:func:`foxglove.start_server`); it sends a channel's messages only to clients that
-subscribed to it.
+no decoding on the robot). The Foxglove app connects to ``ws://HOST:8765`` (protocol v1, named
+``foxglove.sdk.v1`` or ``foxglove.websocket.v1``) and decodes the messages itself. The server is
+the ``foxglove-sdk`` package's (:func:`foxglove.start_server`, on loopback), which sends a channel's
+messages only to clients that subscribed to it, behind :class:`~skidsteer_power.nodes.
+foxglove_front.FrontDoor` (Origin check, both subprotocol names).
+
+Security: it listens on 127.0.0.1 unless told otherwise; there is no authentication, so anyone who
+can reach the port reads every bridged topic (README: expose it through an SSH tunnel). With
+``allow_publish`` (off by default), clients may publish to those topics only (Foxglove's Teleop
+panel on ``cmd_vel``): the CDR bytes go to ROS as they are, and des_driver checks them like any
+other cmd_vel (finite, clamped, slew-limited, watchdog).
 
 Subscriptions are best effort, so every publisher matches (reliable or not), and a slow viewer
 never slows the robot down; a topic whose publishers are all transient-local (latched: ``tf_static``,
@@ -58,34 +65,60 @@ def _forwarder(entry: Forwarded) -> Any:
     return on_message
 
 
+def _absolute(topic: str) -> str:
+    return topic if topic.startswith('/') else f'/{topic}'
+
+
 class FoxgloveBridge:
     """Serve the ROS graph seen by ``node`` on a Foxglove WebSocket server at ``host``:``port``.
 
     ``topics``: only these (absolute names; '' prefix '/' added), else every topic but
-    :data:`EXCLUDED`. ``port=0`` picks a free port (see :attr:`port`).
+    :data:`EXCLUDED`. ``port=0`` picks a free port (see :attr:`port`). ``allowed_origins``: web
+    origins accepted besides none and localhost (:mod:`~skidsteer_power.nodes.foxglove_front`).
+    ``allow_publish``: topics clients may publish to (CDR of the type they advertise).
     """
 
     def __init__(
         self,
         node: Node,
         *,
-        host: str = '0.0.0.0',
+        host: str = '127.0.0.1',
         port: int = DEFAULT_PORT,
         topics: Sequence[str] = (),
         discover_period_s: float = 0.5,
         name: str = 'skidsteer_power',
+        allowed_origins: Sequence[str] = (),
+        allow_publish: Sequence[str] = (),
     ) -> None:
         import foxglove
+        from foxglove.websocket import Capability
+
+        from skidsteer_power.nodes.foxglove_front import FrontDoor
 
         self._foxglove = foxglove
         self.node = node
-        self.topics = {t if t.startswith('/') else f'/{t}' for t in topics}
+        self.topics = {_absolute(t) for t in topics}
         self.forwarded: dict[str, Forwarded] = {}
         self.skipped: dict[str, str] = {}
         self.context = foxglove.Context()
+        self.client_publish = ClientPublish(node, allow_publish) if allow_publish else None
+        publish: dict[str, Any] = {}
+        if self.client_publish is not None:
+            publish = {
+                'capabilities': [Capability.ClientPublish],
+                'supported_encodings': [MESSAGE_ENCODING],
+                'server_listener': self.client_publish,
+            }
         try:
-            self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context)
+            self.server = foxglove.start_server(
+                name=name, host='127.0.0.1', port=0, context=self.context, **publish
+            )
         except (OSError, RuntimeError) as err:
+            raise InputError(f'cannot start the Foxglove server on loopback: {err}') from err
+        try:
+            self.front = FrontDoor(host, port, f'ws://127.0.0.1:{self.server.port}', allowed_origins)
+        except OSError as err:
+            self.server.stop()
             raise InputError(f'cannot serve Foxglove on {host}:{port}: {err}') from err
         self.discover()
         self._timer = node.create_timer(discover_period_s, self.discover)
@@ -93,7 +126,7 @@ class FoxgloveBridge:
     @property
     def port(self) -> int:
         """The TCP port the server listens on."""
-        return int(self.server.port)
+        return self.front.port
 
     def _wanted(self, topic: str) -> bool:
         return topic in self.topics if self.topics else topic not in EXCLUDED
@@ -144,7 +177,54 @@ class FoxgloveBridge:
     def close(self) -> None:
         """Stop the server and the subscriptions."""
         self._timer.cancel()
+        self.front.close()
         for entry in self.forwarded.values():
             self.node.destroy_subscription(entry.subscription)
             entry.channel.close()
         self.server.stop()
+
+
+class ClientPublish:
+    """The SDK server listener for client publishing: a client channel on an allowed topic, CDR
+    encoded, of an installed message type, gets an rclpy publisher; its messages are published as
+    the serialized bytes they are. Anything else is refused with a warning and never published."""
+
+    def __init__(self, node: Node, topics: Sequence[str]) -> None:
+        self.node = node
+        self.topics = {_absolute(t) for t in topics}
+        self.publishers: dict[tuple[int, int], Any] = {}  # (client id, client channel id) -> publisher
+        self.published: dict[str, int] = dict.fromkeys(sorted(self.topics), 0)
+        self.refused = 0
+
+    def on_client_advertise(self, client: Any, channel: Any) -> None:
+        topic = _absolute(channel.topic)
+        reason = ''
+        if topic not in self.topics:
+            reason = f'publishing is allowed on {", ".join(sorted(self.topics))} only'
+        elif channel.encoding != MESSAGE_ENCODING:
+            reason = f'encoding {channel.encoding!r} (only {MESSAGE_ENCODING})'
+        else:
+            try:
+                cls = message_class(channel.schema_name)
+            except InputError as err:
+                reason = str(err)
+        if reason:
+            self.refused += 1
+            LOG.warning('refused a client channel on %s (%s): %s', topic, channel.schema_name, reason)
+            return
+        publisher = self.node.create_publisher(cls, topic, 10)
+        self.publishers[(client.id, channel.id)] = (topic, publisher)
+        LOG.info('client %d publishes %s (%s)', client.id, topic, channel.schema_name)
+
+    def on_client_unadvertise(self, client: Any, client_channel_id: int) -> None:
+        entry = self.publishers.pop((client.id, client_channel_id), None)
+        if entry is not None:
+            self.node.destroy_publisher(entry[1])
+
+    def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
+        entry = self.publishers.get((client.id, client_channel_id))
+        if entry is None:
+            return
+        topic, publisher = entry
+        publisher.publish(bytes(data))
+        self.published[topic] += 1
