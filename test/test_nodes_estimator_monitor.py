@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 import time
 import uuid
@@ -187,3 +188,37 @@ def test_view_mode_takes_the_path_energy_topics(ros_context):
         monitor.close()
         for node in (monitor, sender):
             node.destroy_node()
+
+
+def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(graph, ros_context):
+    """energy/time_to_empty_p10_s and _p90_s of a real power_estimator reach the battery panel
+    ("time to empty H:MM:SS (p10 H:MM:SS - p90 H:MM:SS)", the values the estimator published); when
+    the estimator stops, the terrain / internal power line is marked stale, not only dimmed."""
+    from skidsteer_power.ui.monitor import format_duration
+
+    namespace, estimator, executor, add = graph
+    frames, draw = frame_recorder()
+    monitor = add(
+        EnergyMonitor('view', on_frame=draw, refresh_hz=20.0, namespace=namespace, context=ros_context)
+    )
+    teleop = add(rclpy.create_node('teleop_band', namespace=namespace, context=ros_context))
+    pub = teleop.create_publisher(Twist, 'cmd_vel', 10)
+    twist = Twist()
+    twist.linear.x = 0.2
+    view = monitor.view
+
+    def band_shown() -> bool:
+        pub.publish(twist)
+        p10, p90 = view.time_to_empty_p10_s, view.time_to_empty_p90_s
+        if not (math.isfinite(p10) and math.isfinite(p90)) or not frames:
+            return False
+        return f'(p10 {format_duration(p10)} - p90 {format_duration(p90)})' in frames[-1]
+
+    spin_until(executor, band_shown)
+    assert view.time_to_empty_p10_s <= view.time_to_empty_p90_s  # p10 is the pessimistic bound
+    assert 'terrain' in frames[-1] and 'internal' in frames[-1]
+    executor.remove_node(estimator)
+    spin_until(executor, lambda: 'summary' in view.stale and frames and 'Battery (stale)' in frames[-1])
+    terrain_line = next(line for line in frames[-1].splitlines() if line.startswith('terrain '))
+    assert terrain_line.rstrip().endswith('(stale)')
+    monitor.close()

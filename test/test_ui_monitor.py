@@ -179,3 +179,12 @@ def test_render_marks_stale_sources_but_keeps_their_last_values():
     assert 'no data from the robot' in text
     fresh = screen(full_view())
     assert 'stale' not in fresh
+
+
+def test_render_shows_the_time_to_empty_band_and_a_stale_terrain_line():
+    # 7322 s = 2:02:02; p10 5400 s = 1:30:00; p90 9000 s = 2:30:00
+    text = screen(full_view(time_to_empty_p10_s=5400.0, time_to_empty_p90_s=9000.0))
+    assert 'time to empty 2:02:02 (p10 1:30:00 - p90 2:30:00)' in text
+    assert 'p10' not in screen(full_view())  # nothing arrived yet: no band
+    stale = screen(full_view(stale=frozenset({'summary'})))
+    assert 'terrain 30.0 W, internal 10.0 W (terrain share 75 %) (stale)' in stale

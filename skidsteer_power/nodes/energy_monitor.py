@@ -11,10 +11,11 @@ Modes
 
 Subscribes ``cmd_vel`` (the command shown is the one on the topic, whoever sends it),
 ``power/summary`` (diagnostic_msgs/DiagnosticArray, figures by name), ``joint_states``,
-``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s``, ``energy/path_required_wh``,
-``energy/path_margin_wh`` (all best effort, so they match any publisher); publishes ``cmd_vel``
-(Twist, or TwistStamped with ``--stamped``) at ``--rate`` Hz in free and case mode. A source silent
-for :data:`~skidsteer_power.ui.monitor.STALE_AFTER_S` is greyed and marked stale. Every frame shown
+``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s`` and its ``_p10_s`` /
+``_p90_s`` bounds, ``energy/path_required_wh``, ``energy/path_margin_wh`` (all best effort, so they
+match any publisher); publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at
+``--rate`` Hz in free and case mode. A source silent for
+:data:`~skidsteer_power.ui.monitor.STALE_AFTER_S` is greyed and marked stale. Every frame shown
 is appended to ``--csv`` (default ``energy_monitor_<UTC time>.csv``). The drawing is
 :func:`skidsteer_power.ui.monitor.render`.
 """
@@ -132,6 +133,8 @@ class EnergyMonitor(Node):
         self.create_subscription(BatteryState, 'battery/state', self._on_battery, qos)
         self.create_subscription(Float64, 'energy/remaining_wh', self._on_remaining, qos)
         self.create_subscription(Float64, 'energy/time_to_empty_s', self._on_tte, qos)
+        self.create_subscription(Float64, 'energy/time_to_empty_p10_s', self._on_tte_p10, qos)
+        self.create_subscription(Float64, 'energy/time_to_empty_p90_s', self._on_tte_p90, qos)
         self.create_subscription(Float64, 'energy/path_required_wh', self._on_path_required, qos)
         self.create_subscription(Float64, 'energy/path_margin_wh', self._on_path_margin, qos)
         if mode != 'view':
@@ -178,6 +181,16 @@ class EnergyMonitor(Node):
 
     def _on_tte(self, msg: Float64) -> None:
         self.view.time_to_empty_s = msg.data
+        self._heard('battery')
+
+    def _on_tte_p10(self, msg: Float64) -> None:
+        """The time to empty that 10 % of the spread falls below [s] (estimator/tte_bounds.py)."""
+        self.view.time_to_empty_p10_s = msg.data
+        self._heard('battery')
+
+    def _on_tte_p90(self, msg: Float64) -> None:
+        """The time to empty that 90 % of the spread falls below [s]."""
+        self.view.time_to_empty_p90_s = msg.data
         self._heard('battery')
 
     def _on_path_required(self, msg: Float64) -> None:

@@ -182,6 +182,8 @@ class MonitorView:
     voltage_V: float = math.nan
     remaining_wh: float = math.nan
     time_to_empty_s: float = math.nan
+    time_to_empty_p10_s: float = math.nan  # energy/time_to_empty_p10_s [s] (power_estimator)
+    time_to_empty_p90_s: float = math.nan  # energy/time_to_empty_p90_s [s]
     path_required_wh: float = math.nan  # energy/path_required_wh [Wh]
     path_margin_wh: float = math.nan  # energy/path_margin_wh [Wh]
     status: str = ''
@@ -238,6 +240,14 @@ def _motor_table(view: MonitorView) -> Table:
     return table
 
 
+def _tte_band(view: MonitorView) -> str:
+    """' (p10 h:mm:ss - p90 h:mm:ss)' of the time to empty, '' until both have arrived."""
+    if math.isnan(view.time_to_empty_p10_s) or math.isnan(view.time_to_empty_p90_s):
+        return ''
+    low, high = format_duration(view.time_to_empty_p10_s), format_duration(view.time_to_empty_p90_s)
+    return f' (p10 {low} - p90 {high})'
+
+
 def _battery_panel(view: MonitorView) -> Panel:
     soc = view.soc
     colour = 'red' if soc < 0.2 else 'yellow' if soc < 0.4 else 'green'
@@ -248,7 +258,7 @@ def _battery_panel(view: MonitorView) -> Panel:
     lines = Text.assemble(
         f'charge {_num(100.0 * soc, ".1f")} %   {_num(view.remaining_wh, ".1f")} Wh   ',
         f'{_num(view.voltage_V, ".1f")} V\n',
-        f'time to empty {format_duration(view.time_to_empty_s)}   ',
+        f'time to empty {format_duration(view.time_to_empty_s)}{_tte_band(view)}   ',
         f'battery power: predicted {_num(view.get("predicted_battery_W"), ".1f")} W, ',
         f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})',
     )
@@ -297,6 +307,7 @@ def render(view: MonitorView) -> Group:
         f'(terrain share {_num(100.0 * share, ".0f")} %)'
     )
     if 'summary' in view.stale:
+        split.append(' (stale)')
         split.stylize('dim')
     parts: list[RenderableType] = [
         header,
@@ -323,6 +334,7 @@ CSV_COLUMNS = (
     'predicted_left_W', 'predicted_right_W', 'measured_left_W', 'measured_right_W',
     'predicted_battery_W', 'measured_battery_W', 'terrain_W', 'internal_W',
     'traction_margin', 'traction_warning', 'soc', 'remaining_wh', 'time_to_empty_s', 'energy_source',
+    'time_to_empty_p10_s', 'time_to_empty_p90_s',
 )  # fmt: skip
 
 
@@ -336,6 +348,7 @@ def csv_row(view: MonitorView, time_s: float) -> list[str]:
                                 'predicted_battery_W', 'measured_battery_W', 'terrain_W', 'internal_W',
                                 'traction_margin', 'traction_warning')),
         view.soc, view.remaining_wh, view.time_to_empty_s, view.get('energy_source'),
+        view.time_to_empty_p10_s, view.time_to_empty_p90_s,
     ]  # fmt: skip
     return [f'{v:.6g}' if isinstance(v, float) else str(v) for v in values]
 
