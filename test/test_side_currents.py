@@ -136,6 +136,9 @@ def test_validate_measures_power_from_the_vendor_currents(tmp_path, predictor, v
     # status for 5 s, then stale after 1.5 s more: rows after 6.5 s are no data, not bad input
     t = series['t_s'][np.isfinite(series['measured_torque_left_Nm'])]
     assert 6.0 < t.max() <= 6.6
+    # the last status at 4.90 s (+0.5 us); joint_states every 20 ms (+1 us) older than 1.5 s after
+    # it: 6.40 s to 9.98 s, (9.98 - 6.40) / 0.02 + 1 = 180 messages without fresh currents
+    assert summary['joint_states_no_data'] == 180
 
 
 def test_validate_without_the_vendor_topic_says_so(tmp_path, predictor):

@@ -127,6 +127,7 @@ class RunSeries:
     energy_J: dict[str, float]
     remaining_wh: float
     soc: float
+    no_data: int = 0  # joint_states saying "no fresh data" (NaN in every field): skipped, not rejected
 
 
 SERIES_COLUMNS = (
@@ -347,7 +348,12 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     else:  # a command row holds as long as the command is in force
         columns['hold_s'] = np.array(row_hold, dtype=float)
     return RunSeries(
-        columns, rejected, dict(core.energy.energy_J), core.battery.remaining_wh, core.battery.soc
+        columns,
+        rejected,
+        dict(core.energy.energy_J),
+        core.battery.remaining_wh,
+        core.battery.soc,
+        core.no_data_count,
     )
 
 
@@ -651,6 +657,7 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
             'poses': int(inputs.pose_t.size),
         },
         'rejected': series.rejected,
+        'joint_states_no_data': series.no_data,
         'undecodable_topics': bag.undecodable_topics,
         'kinematics': options.kinematics,
         'metrics': metrics,
