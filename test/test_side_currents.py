@@ -41,9 +41,12 @@ JOINTS = (
 START_NS = 1_700_000_000 * 10**9
 
 
-def write_husky_bag(path: Path, vendor: str | None, status_s: float = 10.0, duration_s: float = 10.0) -> None:
+def write_husky_bag(
+    path: Path, vendor: str | None, status_s: float = 10.0, duration_s: float = 10.0, definition: bool = True
+) -> None:
     """cmd_vel 0.5 m/s straight at 20 Hz; joint_states (4 wheels, position and velocity, no effort, as
-    the Husky's ros2_control exports them) at 50 Hz; the vendor topic at 10 Hz for ``status_s``."""
+    the Husky's ros2_control exports them) at 50 Hz; the vendor topic at 10 Hz for ``status_s``, its
+    definition stored in the bag unless ``definition`` is False (as some recorders leave it)."""
     store = build_typestore(extra=load_msg_definitions([MSG_DIR]))
     types = store.types
     omega = SPEED_M_S / WHEEL_RADIUS_M
@@ -54,6 +57,8 @@ def write_husky_bag(path: Path, vendor: str | None, status_s: float = 10.0, dura
         if vendor is not None:
             topic = '/status' if vendor == HUSKY else '/platform/mcu/status/power'
             msgdef = (store.generate_msgdef(vendor, ros_version=2)[0], store.hash_rihs01(vendor))
+            if not definition:
+                msgdef = ('', msgdef[1])
             vendor_conn = writer.add_topic(topic, vendor, msgdef=msgdef)
         vec = types['geometry_msgs/msg/Vector3']
         for k in range(int(duration_s * 100)):
@@ -224,3 +229,23 @@ def test_power_estimator_node_takes_effort_from_a_current_topic(rig_factory, tmp
         rig.spin_until(lambda: core.no_data_count >= 5)
         assert core.comparison is None
     assert core.rejects.counts['joint_states'] == 0
+
+
+def test_a_bag_without_the_definition_needs_msg(tmp_path, predictor):
+    path = tmp_path / 'husky.mcap'
+    write_husky_bag(path, HUSKY, definition=False)
+    options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
+    with open_bag(path) as bag:
+        summary = validate(bag, options, predictor)
+    assert not summary['has_motor_data'] and '--msg' in summary['motor_data_note']
+    extra = load_msg_definitions([MSG_DIR])
+    with open_bag(path, extra_types=extra) as bag:
+        summary = validate(bag, options, predictor)
+    assert summary['has_motor_data'] and summary['motor_currents_from'].startswith(
+        'motor currents from status'
+    )
+    pt = factory.powertrain_for(factory.load_vehicle_config(VEHICLE))
+    joint_map = factory.joint_map_for(factory.load_vehicle_config(VEHICLE))
+    reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, InputLimits())
+    recording = read_recording(path, SegmentOptions(extra_types=extra), reader)
+    assert np.allclose(recording.torque, [expected_side(i)[0] for i in CURRENT_A], rtol=1e-5)

@@ -6,7 +6,7 @@ CLI (``skidsteer-power calibrate``) writes the result with :mod:`.io`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from skidsteer_power.calibration.fit import DEFAULT_FIT, CalibrationResult, calibrate, parse_fit_list
 from skidsteer_power.calibration.segments import Segment, SegmentOptions, find_segments, read_recording
@@ -36,6 +36,7 @@ def calibrate_bags(
     settle_s: float = 1.5,
     min_segment_s: float = 1.0,
     topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', ''),
+    extra_types: Mapping[str, str] | None = None,
 ) -> tuple[CalibrationResult, list[Segment]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain`` (see fit.py)."""
     from skidsteer_power.estimator import factory
@@ -52,6 +53,7 @@ def calibrate_bags(
         cmd_vel_topic=topics[0],
         joint_states_topic=topics[1],
         odom_topic=topics[2],
+        extra_types=extra_types,
     )
     segments: list[Segment] = []
     dropped: dict[str, int] = {}

@@ -17,6 +17,7 @@ says so).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,6 +57,7 @@ class SegmentOptions:
     cmd_vel_topic: str = '/cmd_vel'
     joint_states_topic: str = '/joint_states'
     odom_topic: str = ''
+    extra_types: Mapping[str, str] | None = None  # .msg texts by type name (--msg): types the bag lacks
 
 
 @dataclass
@@ -169,7 +171,7 @@ def read_recording(
     """
     options = options or SegmentOptions()
     reader = reader or JointReader(TEST_ROBOT_JOINTS, 1.0, 1.0, InputLimits())
-    with open_bag(Path(path)) as bag:
+    with open_bag(Path(path), extra_types=options.extra_types) as bag:
         t0 = bag.start_ns
         if options.cmd_vel_topic not in bag.topics:
             raise InputError(f'{path}: no {options.cmd_vel_topic} topic: no commands to cut segments from')

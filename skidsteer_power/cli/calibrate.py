@@ -60,11 +60,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help='odometry or ground-truth pose topic (default: a *ground_truth* topic if any, else /odom)',
     )
     parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
+    parser.add_argument(
+        '--msg',
+        action='append',
+        default=[],
+        metavar='PATH',
+        help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
+    )
     add_json_flag(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from skidsteer_power.bags.reader import load_msg_definitions
     from skidsteer_power.calibration import calibrate_bags, io
 
     started = time.perf_counter()
@@ -86,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         settle_s=args.settle_s,
         min_segment_s=args.min_segment_s,
         topics=(args.cmd_vel_topic, args.joint_states_topic, args.odom_topic),
+        extra_types=load_msg_definitions(args.msg),
     )
     result.seconds = time.perf_counter() - started
     name = args.name or out.stem

@@ -153,10 +153,23 @@ def decode_side_currents(bag: Any, source: SideCurrentSource, t0_ns: int) -> tup
     return np.array(t, dtype=float), np.array(currents, dtype=float).reshape(-1, 2)
 
 
-def source_in(bag: Any, sources: Sequence[SideCurrentSource]) -> SideCurrentSource | None:
-    """The first of ``sources`` whose topic the bag holds with the declared type."""
-    held = {name.lstrip('/'): info.msgtype for name, info in bag.topics.items()}
-    return next((s for s in sources if held.get(s.topic) == s.msgtype), None)
+def source_in(bag: Any, sources: Sequence[SideCurrentSource]) -> tuple[SideCurrentSource | None, str]:
+    """(the first of ``sources`` whose topic the bag holds with the declared type and can decode,
+    why none if none)."""
+    held = {name.lstrip('/'): info for name, info in bag.topics.items()}
+    undecodable = []
+    for source in sources:
+        info = held.get(source.topic)
+        if info is None or info.msgtype != source.msgtype:
+            continue
+        if not info.decodable:
+            undecodable.append(f'{source.topic} ({source.msgtype})')
+            continue
+        return source, ''
+    if undecodable:
+        return None, f'no definition of {", ".join(undecodable)} in the bag: pass it with --msg'
+    wanted = ', '.join(f'{s.topic} ({s.msgtype})' for s in sources)
+    return None, f'no side-current topic in the bag (wanted {wanted})'
 
 
 def apply_to_joint_arrays(
@@ -173,10 +186,9 @@ def apply_to_joint_arrays(
     sources = getattr(joint_map, 'side_currents', ())
     if not sources:
         return arrays, present, ''
-    source = source_in(bag, sources)
+    source, why = source_in(bag, sources)
     if source is None:
-        wanted = ', '.join(f'{s.topic} ({s.msgtype})' for s in sources)
-        return arrays, np.zeros_like(present), f'no side-current topic in the bag (wanted {wanted})'
+        return arrays, np.zeros_like(present), why
     current_t, currents = decode_side_currents(bag, source, t0_ns)
     n_left = len(joint_map.left)
     effort, fresh = efforts_at(js_t, current_t, currents, n_left, len(joint_map.joints), source.max_age_s)
