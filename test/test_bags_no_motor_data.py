@@ -135,3 +135,5 @@ def test_clamped_time_spans():
     hold = np.array([1.0, 1.0, 0.5, 1.0, np.nan])
     # rows 1 (1..2 s) and 2 (2..2.5 s) merge; row 4 holds until the next row: none, so to itself
     assert flagged_spans(t, flag, hold) == [(1.0, 2.5), (4.0, 4.0)]
+    # a 1.5 s gap (2.5 .. 4.0 s) is merged when gaps up to 2 s are to be drawn as one span
+    assert flagged_spans(t, flag, hold, min_gap_s=2.0) == [(1.0, 4.0)]

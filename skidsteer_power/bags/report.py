@@ -106,14 +106,17 @@ def is_turn(segment: TraceSegment) -> bool:
     return arc_m / segment.radius_m >= MIN_TURN_RAD
 
 
-def flagged_spans(t: np.ndarray, flag: np.ndarray, hold: np.ndarray) -> list[tuple[float, float]]:
+def flagged_spans(
+    t: np.ndarray, flag: np.ndarray, hold: np.ndarray, min_gap_s: float = 0.0
+) -> list[tuple[float, float]]:
     """(start, end) [s] of the time the rows with ``flag`` set are in force (each row from its time
-    ``t`` for ``hold`` [s], NaN: until the next row), adjacent spans merged."""
+    ``t`` for ``hold`` [s], NaN: until the next row), spans less than ``min_gap_s`` apart merged (a
+    plot cannot show a gap narrower than a pixel, and thousands of patches cost seconds)."""
     following = np.append(t[1:], t[-1]) if t.size else t
     ends = np.where(np.isfinite(hold), t + np.nan_to_num(hold, posinf=0.0), following)
     spans: list[tuple[float, float]] = []
     for start, end in zip(t[flag].tolist(), ends[flag].tolist(), strict=True):
-        if spans and start <= spans[-1][1] + 1e-9:
+        if spans and start <= spans[-1][1] + max(min_gap_s, 1e-9):
             spans[-1] = (spans[-1][0], max(spans[-1][1], end))
         else:
             spans.append((start, end))
@@ -133,10 +136,12 @@ def write_plots(
     every = _thin(len(series.columns['t_s']))
     c = {name: values[every] for name, values in series.columns.items()}
     hold = c['hold_s'] * (1 if every.step in (None, 1) else np.nan)  # thinned: hold to the next kept
+    t_all = series.columns['t_s']
     outside = flagged_spans(
-        series.columns['t_s'],
+        t_all,
         (series.columns['clamped'] > 0) | (series.columns['limited'] > 0),
         series.columns['hold_s'],
+        min_gap_s=(float(t_all[-1] - t_all[0]) / 2000.0) if t_all.size else 0.0,  # ~1/2 pixel at 9 in
     )
     written = []
     for quantity, unit, label in (
