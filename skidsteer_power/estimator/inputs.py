@@ -137,6 +137,8 @@ class JointMap:
         stray = set(self.inverted) - set(self.joints)
         if stray:
             raise ConfigError(f'drivetrain: inverted joints {sorted(stray)} are not in left or right')
+        if self.side_currents and (self.effort_is != 'current' or 'effort' not in self.interfaces):
+            raise ConfigError('drivetrain: side_currents needs effort_is: current and effort in interfaces')
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -182,8 +184,6 @@ class JointMap:
             from skidsteer_power.estimator.side_currents import parse_sources
 
             cfg['side_currents'] = parse_sources(cfg['side_currents'])
-            if cfg['side_currents'] and cfg.get('effort_is', 'torque') != 'current':
-                raise ConfigError('drivetrain: side_currents needs effort_is: current')
         return cls(**cfg)
 
     def with_overrides(self, **overrides: Any) -> JointMap:
