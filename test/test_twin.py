@@ -121,7 +121,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     assert twin_slip == pytest.approx(float(ref.slip), rel=0.02)
     per_wheel = trace.axle_torque_Nm[-1] / v.wheels_per_side
     assert per_wheel == pytest.approx([float(ref.drive_torque_Nm)] * 2, rel=0.02)
-    assert twin.z == pytest.approx(float(ref.sinkage_m), rel=0.02)
+    assert twin.contact.z == pytest.approx(float(ref.sinkage_m), rel=0.02)
 
 
 @pytest.mark.parametrize(
@@ -158,7 +158,8 @@ def test_tight_turn_on_dry_sand_gets_the_wheeled_robot_stuck(vehicle):
     tread = load_vehicle(vehicle).tread_m
     twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand)  # an empty cell
     assert trace.summary(tread)['stuck'] is True
-    assert twin.dz.max() > twin.z.max()  # dug in: the excavated rut is deeper than the compaction
+    # dug in: the excavated rut is deeper than the compaction
+    assert twin.contact.dz.max() > twin.contact.z.max()
     for speed, yaw_rate in [(0.1, 0.2), (0.2, 0.35)]:  # completed cells
         _twin, trace = _settled(vehicle, speed, yaw_rate, seconds=5.0, terrain=dry_sand)
         assert trace.summary(tread)['stuck'] is False, (speed, yaw_rate)
@@ -371,7 +372,11 @@ def test_live_path_counts_the_body_inertia_once():
 
 
 def test_bulldozing_and_slip_sinkage_laws_by_hand():
-    from skidsteer_power.twin.model import SOIL_UNIT_WEIGHT_N_M3, bulldozing_coefficients, slip_sinkage_factor
+    from skidsteer_power.twin.contact import (
+        SOIL_UNIT_WEIGHT_N_M3,
+        bulldozing_coefficients,
+        slip_sinkage_factor,
+    )
 
     # dry sand (Table 2.1): phi = 30 deg, c = 1000 Pa. X_c = 45 - 15 = 30 deg; cot X_c = sqrt(3);
     # D1 = sqrt(3) + tan(60 deg) = 2 sqrt(3); D2 = sqrt(3) + 3 / sqrt(3) = 2 sqrt(3) (Hegedus)
