@@ -6,7 +6,7 @@ Each figure runs a fresh twin (no caches exist) through 20 s of the Table 7.3 ex
 the goal, and for the CPU-time factor (process time: what the twin itself needs; goal 25x, the
 margin that keeps the wall-clock goal on a machine with a core to spare). The 1-minute load
 average is printed beside them. Same-run ratios: the cost of the slip-sinkage and bulldozing terms
-(``Twin(dig_and_bulldoze=False)`` over the full twin) and of a 1 ms step.
+(``Twin(contact='classic')`` over the full twin) and of a 1 ms step.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def run(report: Report) -> None:
                       met=simulated / wall >= GOAL)  # fmt: skip
         report.figure(f'{label}: CPU-time speed', simulated / cpu, 'x real', goal=f'>= {CPU_GOAL:g}x',
                       met=simulated / cpu >= CPU_GOAL)  # fmt: skip
-        _, plain = _times(partial(Twin, vehicle, terrain, dig_and_bulldoze=False), commands, REPEATS)
+        _, plain = _times(partial(Twin, vehicle, terrain, contact='classic'), commands, REPEATS)
         report.ratio(f'{name}: CPU time, full twin / without slip-sinkage and bulldozing', cpu, plain)
         _, fine = _times(partial(Twin, vehicle, terrain, dt=1e-3), commands, 1)
         report.ratio(f'{name}: CPU time, dt = 1 ms / dt = 2 ms', fine, cpu)

@@ -94,12 +94,12 @@ def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle)
 
 # --------------------------------------------------------------------------- steady states
 # The steady models (chapters 2-4) have no bulldozing and no slip-sinkage excavation: the twin is
-# compared with them with those terms switched off (dig_and_bulldoze=False; docs/TWIN.md).
+# compared with them with those terms switched off (contact='classic'; docs/TWIN.md).
 
 
 def test_straight_track_agrees_with_the_single_track_equations():
     # steady straight running: each track's drawbar pull F_s - R_c = 0 (eq. 2.18) at load W/2
-    twin, trace = _settled('test_robot_track', 0.2, 0.0, dig_and_bulldoze=False)
+    twin, trace = _settled('test_robot_track', 0.2, 0.0, contact='classic')
     v = twin.vehicle
     load, b, length = v.weight_N / 2, v.track_width_m, v.track_length_m
     rc = float(single_track.compaction_resistance(SAND_BIN, load, b, length))  # eq. 2.10
@@ -113,7 +113,7 @@ def test_straight_track_agrees_with_the_single_track_equations():
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
 def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     # steady straight running: every wheel has zero drawbar pull at load W / n (eqs. 2.28-2.29)
-    twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, dig_and_bulldoze=False)
+    twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, contact='classic')
     v = twin.vehicle
     ref = solve_wheel(SAND_BIN, v.weight_N / v.n_wheels, 0.0, v.wheel_radius_m, v.wheel_width_m)
     sprocket = twin.omega_m.mean() / twin.G
@@ -134,7 +134,7 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
     # Tolerance 1 %: the twin discretizes the patches differently (32 trapezoid intervals along a
     # track, 24 along a wheel's arc, vs Gauss-Legendre) and omits the r sin(theta) yaw term of eq.
     # 4.3 and the hull's turn during a wheel's contact; measured differences are <= 0.1 %.
-    twin, trace = _settled(vehicle, 0.2, 0.2, seconds=6.0, dig_and_bulldoze=False)
+    twin, trace = _settled(vehicle, 0.2, 0.2, seconds=6.0, contact='classic')
     speed, yaw = twin.vel[0], twin.vel[2]
     assert 0.0 < yaw < 0.2  # a left turn, wider than commanded
     state = model.solve(twin.vehicle, SAND_BIN, speed, speed / yaw)
@@ -164,7 +164,7 @@ def test_tight_turn_on_dry_sand_gets_the_wheeled_robot_stuck(vehicle):
         _twin, trace = _settled(vehicle, speed, yaw_rate, seconds=5.0, terrain=dry_sand)
         assert trace.summary(tread)['stuck'] is False, (speed, yaw_rate)
     # without the two terms (the steady models' contact) the same empty cell keeps moving
-    _twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand, dig_and_bulldoze=False)
+    _twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand, contact='classic')
     assert trace.summary(tread)['stuck'] is False
 
 
@@ -217,7 +217,16 @@ def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, cap
     argv = ['simulate', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--commands', str(csv)]
     assert main([*argv, '--seed', '3', '-o', str(out), '--json']) == 0
     payload = json.loads(capsys.readouterr().out)
-    assert set(payload) == {'duration_s', 'messages', 'energy_J', 'distance_m', 'max_sinkage_m', 'stuck'}
+    assert set(payload) == {
+        'duration_s',
+        'messages',
+        'energy_J',
+        'distance_m',
+        'max_sinkage_m',
+        'stuck',
+        'contact',
+    }
+    assert payload['contact'] == 'extended'  # the default
     assert payload['duration_s'] == pytest.approx(3.0, abs=0.01)  # 1 s lead-in + 2 s
     assert 0.2 < payload['distance_m'] < 0.4 and payload['stuck'] is False
     with open_bag(out) as bag:
@@ -231,6 +240,14 @@ def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, cap
                  '-o', str(tmp_path / 'x.mcap')]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert err.count('\n') == 2 and 'Traceback' not in err
+    classic = tmp_path / 'classic.mcap'
+    assert main([*argv, '--contact', 'classic', '-o', str(classic), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['contact'] == 'classic'
+
+
+def test_twin_refuses_unknown_contact_laws():
+    with pytest.raises(InputError, match='classic, extended'):
+        Twin(load_vehicle('test_robot_4wheel'), SAND_BIN, contact='lyasko')
 
 
 def test_write_bag_needs_a_new_path(tmp_path):

@@ -3,7 +3,7 @@
 stuck: the Table 7.3 grid on dry sand (ch. 7.3.4): each cell a 6 s hold from rest; ``S`` if the
 twin got stuck, else the motion over the last 2 s as a fraction of the commanded one; then the
 deepest sinkage plus excavation [mm].
-terms: what the slip-sinkage and bulldozing terms change against ``dig_and_bulldoze=False`` (the steady
+terms: what the slip-sinkage and bulldozing terms change against ``contact='classic'`` (the steady
 models' contact) on sand_bin at 0.2 m/s, straight and at 0.2 rad/s commanded.
 """
 
@@ -49,8 +49,8 @@ def terms() -> None:
         per_side = 1 if vehicle.is_tracked else vehicle.wheels_per_side
         for yaw_rate in (0.0, 0.2):
             row = []
-            for dig_and_bulldoze in (False, True):
-                twin = Twin(vehicle, sand_bin, dig_and_bulldoze=dig_and_bulldoze)
+            for laws in ('classic', 'extended'):
+                twin = Twin(vehicle, sand_bin, contact=laws)
                 trace = run_commands(twin, [Segment(0.2, yaw_rate, 7.0)])
                 slip = 1.0 - twin.vel[0] / (twin.r * twin.omega_m.mean() / twin.G)
                 torque = trace.axle_torque_Nm[-1] / per_side

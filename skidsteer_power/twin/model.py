@@ -29,10 +29,11 @@ Terrain contact (see docs/TWIN.md for where this agrees with and departs from th
   lateral integral of eq. 4.9, axle torque eq. 2.34. The sinkage is a state relaxed towards the
   vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer, every
   ``SOIL_REFRESH_STEPS``.
-* beyond the steady models (``dig_and_bulldoze=False`` switches both off): slip-sinkage, an excavated
-  rut under each wheel (Lyasko 2010, ``contact.slip_sinkage_factor``), and bulldozing of the contacts'
-  side walls against their lateral motion and of the excavated step against travel (Hegedus, as
-  Ishigami et al. 2007 apply it, ``contact.bulldozing_coefficients``).
+* beyond the steady models (``contact='extended'``, the default; ``'classic'`` switches them off):
+  slip-sinkage, an excavated rut under each wheel (Lyasko 2010, ``contact.slip_sinkage_factor``),
+  and bulldozing of the contacts' side walls against their lateral motion and of the excavated
+  step against travel (Hegedus, as Ishigami et al. 2007 apply it,
+  ``contact.bulldozing_coefficients``).
 
 The contacts are strategies (``track_contact.TrackContact``, ``wheel_contact.WheelContact``, their
 shared part in ``contact.py``); the drivetrain is ``drivetrain.Drivetrain``.
@@ -53,7 +54,7 @@ from skidsteer_power.des.kinematics import RPM, twist_to_motor_rpm
 from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
-from skidsteer_power.twin.contact import Contact
+from skidsteer_power.twin.contact import CONTACT_LAWS, Contact
 from skidsteer_power.twin.drivetrain import MAX_MOTOR_RPM, Drivetrain
 from skidsteer_power.twin.terrain_field import Patch, TerrainField
 from skidsteer_power.twin.track_contact import TrackContact
@@ -95,7 +96,8 @@ class Twin:
     """Dynamic twin of a skid-steered robot on its own terrain (see the module doc).
 
     vehicle, terrain (the truth), powertrain (default: the vehicle's), ``patches`` (other terrains
-    in polygons), ``seed`` (sensor noise, used by :mod:`skidsteer_power.twin.sensors`), ``dt`` [s].
+    in polygons), ``seed`` (sensor noise, used by :mod:`skidsteer_power.twin.sensors`), ``dt`` [s],
+    ``contact``: ``'classic'`` (the chapter 2-4 laws only) or ``'extended'`` (docs/TWIN.md).
     """
 
     def __init__(
@@ -107,18 +109,20 @@ class Twin:
         patches: list[Patch] | None = None,
         seed: int = 0,
         dt: float = DEFAULT_DT_S,
-        dig_and_bulldoze: bool = True,
+        contact: str = 'extended',
     ) -> None:
         if not (0 < dt <= DEFAULT_DT_S):
             raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
+        if contact not in CONTACT_LAWS:
+            raise InputError(f'contact must be one of {", ".join(CONTACT_LAWS)}, got {contact!r}')
         self.vehicle = vehicle
         self.field = TerrainField(terrain, patches or ())
         self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
         self.dt = dt
-        # False: the steady models' contact (no slip-sinkage, no side-wall or step-face bulldozing)
-        self.dig_and_bulldoze = dig_and_bulldoze
+        # 'classic': the chapter 2-4 laws only (no slip-sinkage, no side-wall or step-face bulldozing)
+        self.contact_laws = contact
         self.drivetrain = Drivetrain(vehicle, self.powertrain)
         d = self.drivetrain
         self.G, self.kt, self.R, self.peak_A, self.J, self.kp, self.ki = (
@@ -137,7 +141,7 @@ class Twin:
         self._half_weight = 0.5 * vehicle.weight_N
         self.Iz = vehicle.yaw_inertia
         gear: type[TrackContact] | type[WheelContact] = TrackContact if vehicle.is_tracked else WheelContact
-        self.contact: Contact = gear(vehicle, self.field, self.G, extended=dig_and_bulldoze)
+        self.contact: Contact = gear(vehicle, self.field, self.G, extended=contact == 'extended')
         self.reset()
 
     def reset(self) -> None:
