@@ -149,23 +149,58 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_tight_turn_on_dry_sand_gets_the_wheeled_robot_stuck(vehicle):
-    # ch. 7.3.4, Table 7.3: on dry sand the test robot completed 0.1 m/s up to 0.2 rad/s and 0.2 m/s
-    # up to 0.35 rad/s, and got stuck "because of the large sinkage" at 0.1 m/s, 0.25-0.35 rad/s
-    # (the empty cells). Nothing in the twin is fitted to the table: the slip-sinkage (Lyasko 2010)
-    # and the bulldozing (Hegedus / Ishigami et al. 2007) are published laws (docs/TWIN.md).
-    dry_sand = load_terrain('dry_sand')
-    tread = load_vehicle(vehicle).tread_m
-    twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand)  # an empty cell
-    assert trace.summary(tread)['stuck'] is True
-    # dug in: the excavated rut is deeper than the compaction
-    assert twin.contact.dz.max() > twin.contact.z.max()
-    for speed, yaw_rate in [(0.1, 0.2), (0.2, 0.35)]:  # completed cells
-        _twin, trace = _settled(vehicle, speed, yaw_rate, seconds=5.0, terrain=dry_sand)
-        assert trace.summary(tread)['stuck'] is False, (speed, yaw_rate)
-    # without the two terms (the steady models' contact) the same empty cell keeps moving
-    _twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand, contact='classic')
-    assert trace.summary(tread)['stuck'] is False
+def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle):
+    # ch. 7.3.4, Table 7.3 (skidsteer_power.real_robot): the test robot completed 0.1 m/s up to
+    # 0.2 rad/s and 0.2 m/s up to 0.35 rad/s, and got stuck "because of the large sinkage" at
+    # 0.1 m/s, 0.25-0.35 rad/s (the empty cells). A bounded subset; all 66 cells are in
+    # benchmarks/bench_twin_motion.py. Nothing is fitted to the grid (docs/TWIN.md).
+    from skidsteer_power.real_robot import table_7_3_completed
+    from skidsteer_power.twin.motion import twin_completes
+
+    for speed, yaw_rate in [(0.1, 0.3), (0.2, 0.35)]:
+        assert twin_completes(vehicle, speed, yaw_rate) is table_7_3_completed(speed, yaw_rate), (
+            speed,
+            yaw_rate,
+        )
+    # stuck by digging in: without slip-sinkage and the step's bulldozing the empty cell keeps moving
+    assert twin_completes(vehicle, 0.1, 0.3, contact='classic') is True
+
+
+@pytest.mark.parametrize(
+    ('vehicle', 'speed', 'yaw_rate', 'radius_real'),
+    [('test_robot_track', 0.2, 0.02, 17.48), ('test_robot_6wheel', 0.2, 0.25, 1.62)],
+)
+def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(vehicle, speed, yaw_rate, radius_real):
+    # Appendix D (skidsteer_power.real_robot.APPENDIX_D_RADII); the track's lateral shear modulus
+    # was fitted to the track's 0.1 m/s cells only, so these two are a check. Goal of issue 26:
+    # max |R_twin / R_real - 1| <= 30 % (all 14 cells: benchmarks/bench_twin_motion.py).
+    from skidsteer_power.twin.motion import twin_turn
+
+    radius, _speed = twin_turn(vehicle, speed, yaw_rate)
+    assert abs(radius / radius_real - 1.0) <= 0.30
+    # the classic laws turn the track far tighter than the real one (Appendix D: 1.75x commanded)
+    if vehicle == 'test_robot_track':
+        classic, _speed = twin_turn(vehicle, speed, yaw_rate, contact='classic')
+        assert classic < 0.75 * radius_real
+
+
+def test_track_sinks_deeper_with_slip_in_the_extended_laws():
+    # Lyasko's slip-sinkage (contact.slip_sinkage_factor) under a track as under a wheel: a slipping
+    # outer track in a tight turn sinks deeper than the static eq. 2.6 sinkage the classic laws keep
+    twin, trace = _settled('test_robot_track', 0.1, 0.3, seconds=3.0)
+    _plain, classic = _settled('test_robot_track', 0.1, 0.3, seconds=3.0, contact='classic')
+    static = float(single_track.track_sinkage(SAND_BIN, 0.5 * twin.vehicle.weight_N, 0.074, 0.45))
+    assert classic.sinkage_m.max() == pytest.approx(static, rel=0.1)  # (lateral load transfer: < 10 %)
+    assert trace.sinkage_m.max() > 1.05 * classic.sinkage_m.max()
+
+
+def test_the_real_robots_observations_are_the_dissertations():
+    from skidsteer_power.real_robot import APPENDIX_D_RADII, table_7_3_cells
+
+    cells = table_7_3_cells()
+    assert len(cells) == 66 and sum(not done for *_, done in cells) == 9  # 3 empty cells x 3 configurations
+    assert len(APPENDIX_D_RADII) == 14
+    assert sum(c[0] == 'test_robot_track' for c in APPENDIX_D_RADII) == 9
 
 
 # --------------------------------------------------------------------------- sensors, patches, CLI

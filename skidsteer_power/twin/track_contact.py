@@ -15,7 +15,7 @@ from skidsteer_power.twin.contact import (
     SOIL_REFRESH_STEPS,
     Contact,
     Force,
-    bulldozing_resistance,
+    slip_sinkage_factor,
 )
 from skidsteer_power.twin.terrain_field import TerrainField
 from skidsteer_power.vehicle import Vehicle
@@ -24,6 +24,12 @@ TRACK_NODES = 32
 """Intervals along each track patch [-] (nodes every l / 32; 1.4 cm on the test robot)."""
 TRACK_ROWS = 2
 """Gauss-Legendre rows across each track [-]."""
+TRACK_LATERAL_STIFFNESS = 4.0
+"""K / K_y [-] of a track (extended contact): its lateral shear displacement modulus K_y is K / 4.
+Chapter 3 holds two lateral laws for a track: Steeds' Coulomb lateral resistance (eqs. 3.3-3.6, the
+full mu_t p at any lateral sliding: K_y -> 0) and Wong's isotropic Janosi-Hanamoto shear (eqs.
+3.12-3.15: K_y = K); the test robot's track lies between. FITTED to the track's seven 0.1 m/s
+Appendix D radii (docs/TWIN.md); the track's 0.2 m/s radii and the 6-wheel radii are the check."""
 
 
 class TrackContact(Contact):
@@ -33,6 +39,8 @@ class TrackContact(Contact):
 
     def __init__(self, vehicle: Vehicle, field: TerrainField, gear_ratio: float, *, extended: bool) -> None:
         super().__init__(field, vehicle.drive_radius_m, gear_ratio, 0.5 * vehicle.tread_m, extended=extended)
+        if extended:
+            self.lateral_stiffness = TRACK_LATERAL_STIFFNESS
         length, b = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
         n = TRACK_NODES
         dx = length / n
@@ -52,14 +60,32 @@ class TrackContact(Contact):
     def reset(self) -> None:
         self.j = np.zeros(self.node_x.shape, dtype=complex)  # j_x + i j_y [m] (side, along, across)
         self._soil_age = 0
-        self._th = np.empty((2, TRACK_NODES + 1))  # (forces)
         self._side_column = np.zeros((2, 1, 1), dtype=complex)  # (advance)
         self._courant = np.zeros((2, 1, 1))
+        self._dig = np.ones(2)  # slip-sinkage factor of each side (Lyasko 2010) [-]
+        self._step_s = 0.0  # the last step [s] (advance)
         super().reset()
 
-    def _soil(self, loads: np.ndarray, pose: np.ndarray) -> None:
+    def _slip_sinkage(self, vel: np.ndarray, omega_m: np.ndarray) -> np.ndarray:
+        """Each side's slip-sinkage factor K_j (Lyasko 2010, as under a wheel) at the side's slip
+        (eq. 2.13), relaxed over the belt's transit of the patch; 1 with the classic laws [-]."""
+        if not self.extended:
+            return self._dig
+        belts = omega_m * (self.r / self.G)  # [m/s]
+        ground = vel[0] - vel[2] * self.y_side  # each side's ground speed forward [m/s]
+        slip = np.clip(
+            (belts - ground) / np.maximum(np.maximum(np.abs(belts), np.abs(ground)), 1e-12), -1.0, 1.0
+        )
+        dt = SOIL_REFRESH_STEPS * self._step_s
+        transits = np.minimum((np.abs(belts) + np.abs(ground)) / self.track_length * dt, 1.0)
+        self._dig = self._dig + transits * (slip_sinkage_factor(slip) - self._dig)
+        return self._dig
+
+    def _soil(self, loads: np.ndarray, pose: np.ndarray, dig: np.ndarray) -> None:
         """Per-node shear strength [Pa x m^2], per-side compaction resistance [N] and sinkage [m]
-        at the side loads [N] (eqs. 2.2, 2.6, 2.10, 3.17); refreshed every ``SOIL_REFRESH_STEPS``."""
+        at the side loads [N] (eqs. 2.2, 2.6, 2.10, 3.17) and each side's slip-sinkage factor dig
+        (sinkage x dig, compaction resistance x dig^(n + 1) by eq. 2.10); refreshed every
+        ``SOIL_REFRESH_STEPS``."""
         b, length = self.width, self.track_length
         pressure = loads / (b * length)  # eq. 3.17
         index = self._terrain_index(self.node_x, self.node_y, pose)
@@ -67,49 +93,41 @@ class TrackContact(Contact):
         if index is None:
             t = self.field.base
             self._tau_max_w = soil.shear_strength(t, pressure)[:, None, None] * self.node_w  # eq. 2.2
-            self._rc = single_track.compaction_resistance(t, loads, b, length)  # eq. 2.10
-            sinkage = single_track.track_sinkage(t, loads, b, length)  # eq. 2.6
+            self._rc = single_track.compaction_resistance(t, loads, b, length) * dig ** (
+                t.n + 1.0
+            )  # eq. 2.10
+            sinkage = single_track.track_sinkage(t, loads, b, length) * dig  # eq. 2.6
             self._sinkage = float(np.max(sinkage))
-            side_wall = bulldozing_resistance(*self._bulldozing(t), sinkage)  # [N/m] per side
-            self._bull_w = side_wall[:, None] * self.track_dx
-            self._moments()
             return
         p = np.broadcast_to(pressure[:, None, None], self.node_x.shape)
         strength = np.zeros(p.shape)
         rc = np.zeros(p.shape)
         sink = np.zeros(p.shape)
-        side_wall = np.zeros(p.shape)
+        deeper = np.broadcast_to(dig[:, None, None], p.shape)
         for i in np.unique(index):
             mask = index == i
             t = self.field.terrains[i]
             strength[mask] = soil.shear_strength(t, p[mask])
-            rc[mask] = single_track.compaction_resistance(t, p[mask] * b * length, b, length)
-            sink[mask] = soil.sinkage_for_pressure(t, p[mask], b)
-            side_wall[mask] = bulldozing_resistance(*self._bulldozing(t), sink[mask])
-        self._bull_w = side_wall.mean(axis=2) * self.track_dx
+            rc[mask] = single_track.compaction_resistance(t, p[mask] * b * length, b, length) * deeper[
+                mask
+            ] ** (t.n + 1.0)
+            sink[mask] = soil.sinkage_for_pressure(t, p[mask], b) * deeper[mask]
         share = self.node_w / (b * length)  # each node's share of the rut
         self._tau_max_w = strength * self.node_w
         self._rc = (rc * share).sum(axis=(1, 2))
         self._sinkage = float(sink.max())
-        self._moments()
-
-    def _moments(self) -> None:
-        """After a soil refresh: the side walls' bulldozing moments along the track, bw x^k (k = 0, 1,
-        2) per node, and their sums."""
-        bw = self._bull_w.sum(axis=0)  # both sides [N]
-        x = self.track_x
-        self._bull_moments = np.stack([bw, bw * x, bw * x * x])
-        self._bull_sums = self._bull_moments.sum(axis=1).tolist()
 
     def forces(self, loads: np.ndarray, vel: np.ndarray, omega_m: np.ndarray, pose: np.ndarray
                ) -> tuple[Force, list[float], float, float]:  # fmt: skip
         """Vectors in the hull plane are complex numbers x + i y (j, forces, velocities)."""
         if self._soil_age <= 0:
-            self._soil(loads, pose)
+            self._soil(loads, pose, self._slip_sinkage(vel, omega_m))
             self._soil_age = SOIL_REFRESH_STEPS
         self._soil_age -= 1
         vx, vy, wz = vel.tolist()
         j = self.j
+        if self.lateral_stiffness != 1.0:  # anisotropic shear: the lateral displacement scaled by K / K_y
+            j = j.real + (1j * self.lateral_stiffness) * j.imag
         mag = np.abs(j)
         if self._track_index is None and self.field.base.shear_type == 'A':
             minus_fraction = np.multiply(mag, -1.0 / self.field.base.K)
@@ -139,26 +157,11 @@ class TrackContact(Contact):
             fx += fc
             mz -= y * fc
             dissipation -= fc * speed
-        # bulldozing on the track's side walls (Ishigami et al. 2007) against the lateral motion
-        # vy + yaw x: sums of bw th, bw x th, bw x^2 th and of th^2 (bw the side walls' resistance
-        # per node along, _soil) in one product
-        th = self._th
-        np.multiply(self.track_x, wz / DIRECTION_SMOOTHING_M_S, out=th[0])
-        th[0] += vy / DIRECTION_SMOOTHING_M_S
-        np.tanh(th[0], out=th[0])
-        np.multiply(th[0], th[0], out=th[1])
-        (b_th, b_th2), (bx_th, bx_th2), (_, bxx_th2) = self._bull_moments.dot(th.T).tolist()
-        s0, s1, s2 = self._bull_sums
-        fy -= b_th
-        mz -= bx_th
-        dissipation += vy * b_th + wz * bx_th
-        # slopes in (vy, yaw rate) for the implicit body step (Twin._move): d/dv of bw tanh(v / s)
-        inv = 1.0 / DIRECTION_SMOOTHING_M_S
-        self.body_damping = (0.0, 0.0, (s0 - b_th2) * inv, (s1 - bx_th2) * inv, (s2 - bxx_th2) * inv)
         return (fx, fy, mz), axle, dissipation, self._sinkage
 
     def advance(self, dt: float, vel: np.ndarray, omega_m: np.ndarray) -> None:
         """Transport the shear displacement with the belt and add the slip (see the module doc)."""
+        self._step_s = dt
         vx, vy, wz = vel.tolist()
         j = self.j
         belts = (omega_m * (self.r / self.G)).tolist()

@@ -82,15 +82,13 @@ class WheelContact(Contact):
         self._u_pair_flat = self._u_pair.reshape(2 * self.n_wheels, -1)
         self._outer = np.zeros((2 * self.n_wheels, 2))
         self._spans, self._slope_spans = [0.0] * self.n_wheels, [0.0] * self.n_wheels
-        self._per_wheel = np.zeros((8, self.n_wheels))  # contact integrals, bulldozing (forces)
+        self._per_wheel = np.zeros((6, self.n_wheels))  # contact integrals (forces)
         self._cell, self._change = np.zeros(nodes), np.empty((2, *nodes))  # (advance)
         self._damped = np.empty((2, *nodes))  # (forces)
         self._soil_age = 0
-        zeros = np.zeros(self.n_wheels)
         self._loads = np.zeros(2)  # side loads of the last force step [N] (_relax_sinkage)
         self._geometry()
-        self._side, self._face_sides = zeros, (0.0, 0.0)  # bulldozing [N] (_contact)
-        self._side_slope = zeros
+        self._face_sides = (0.0, 0.0)  # the excavated step's bulldozing per side [N] (_contact)
         self._contact_age = 1
         self._kinematics: Kinematics | None = None  # of the present velocities
         super().reset()
@@ -198,7 +196,7 @@ class WheelContact(Contact):
             else:
                 self._soil_age -= 1
         kin = self._kinematics if self._kinematics is not None else self._kinematics_of(vel, omega_m)
-        sides, vya = kin
+        sides, _ = kin
         r = self.r
         # Wong-Reece angles (eqs. 2.20, 2.22) at the side's slip i, as fractions of theta_f:
         # theta_r = (b0 + b1 i) theta_f, theta_m = (a0 + a1 i) theta_f. The arc spans theta_f - theta_r;
@@ -238,6 +236,8 @@ class WheelContact(Contact):
         strength = sigma * self._wp_tan_phi
         strength += self._wp_c  # eq. 2.2
         j = self.j
+        if self.lateral_stiffness != 1.0:  # anisotropic shear: the lateral displacement scaled by K / K_y
+            j = np.stack([j[0], self.lateral_stiffness * j[1]])
         mag = np.hypot(j[0], j[1])
         if self._wp_inv_k is not None:
             minus_fraction = np.expm1(mag * self._wp_inv_k)  # eq. 2.3 (tau / tau_max = -this)
@@ -256,19 +256,10 @@ class WheelContact(Contact):
         shear -= np.multiply(strength, self._damped_rate, out=self._damped)
         np.multiply(sigma, trig, out=rows[:2])
         np.multiply(rows[4], trig, out=rows[2:4])
-        # per wheel [N]: s_cos, s_sin, t_cos, t_sin, t_sum, y_sum (arc x width per unit xi [m^2]),
-        # then the side wall's bulldozing against the axle's lateral motion (magnitude from
-        # _wheel_contact) and its slope in that motion (for the implicit step, Twin._move)
+        # per wheel [N]: s_cos, s_sin, t_cos, t_sin, t_sum, y_sum (arc x width per unit xi [m^2])
         per_wheel = self._per_wheel
         np.dot(self._rows_flat, self.xi_w, out=self._integrals_flat)
-        integrals = self._integrals
-        np.multiply(integrals, (r * self.width) * span, out=per_wheel[:6])
-        th = np.multiply(vya, 1.0 / DIRECTION_SMOOTHING_M_S, out=per_wheel[6])
-        np.tanh(th, out=th)
-        slope = np.multiply(th, th, out=per_wheel[7])
-        th *= self._side
-        slope *= self._side_slope
-        np.subtract(self._side_slope, slope, out=slope)  # side / s (1 - th^2)
+        np.multiply(self._integrals, (r * self.width) * span, out=per_wheel)
         # sums over the wheels: all, x-weighted, per side (_wheel_weights)
         (
             _,
@@ -277,8 +268,6 @@ class WheelContact(Contact):
             _,
             (_, _, _, t_sum_l, t_sum_r),
             (y_sum, y_sum_x, _, _, _),
-            (bull_y, bull_y_x, _, _, _),
-            (c_y, c_y_x, c_y_xx, _, _),
         ) = per_wheel.dot(self._wheel_weights).tolist()
         # Per side (floats): the rut's resistance (-sigma sin(theta) of eq. 2.27) against travel (at
         # rest the stress is symmetric and it vanishes; smoothed like the track's compaction
@@ -308,9 +297,9 @@ class WheelContact(Contact):
             torque = sense * r * t_sum  # eq. 2.34: the terrain's resisting torque
             axle.append(torque)
             power += sense * om * torque  # the axle's power into the contact
-        fy = y_sum - bull_y  # eq. 4.9 and the side wall
-        mz += y_sum_x - bull_y_x
-        self.body_damping = (c_x, -c_x_y, c_y, c_y_x, c_x_yy + c_y_xx)
+        fy = y_sum  # eq. 4.9
+        mz += y_sum_x
+        self.body_damping = (c_x, -c_x_y, 0.0, 0.0, c_x_yy)
         # dissipation = power of the contact stresses on the slip velocities = what the axles put in
         # minus what the body receives (F . v + M_z yaw rate)
         vx, vy, wz = vel.tolist()
@@ -410,20 +399,11 @@ class WheelContact(Contact):
 
     def _contact(self) -> None:
         """The slow contact terms, every ``SOIL_REFRESH_STEPS``: the geometry at the sinkage
-        (_geometry) and the bulldozing magnitudes [N] (Ishigami et al. 2007) of each wheel's
-        side wall, int R_b(h) dx over the contact at the rim's depth below the surface
-        h = r (cos(theta) - cos(theta_f)) + dz, dx = r cos(theta) d(theta) (trapezoid over the rim
-        nodes of the last step), and of the excavated step's face, b R_b(dz), summed per side."""
+        (_geometry) and the bulldozing resistance [N] of the excavated step's face in front of each
+        wheel, b R_b(dz) (Hegedus, as Ishigami et al. 2007 apply it), summed per side. (The side
+        walls' bulldozing against lateral sliding is not applied: docs/TWIN.md.)"""
         self._geometry()
         bull_a, bull_b = self._wp_bull
-        cos = self._trig[0]
-        h = cos - self._cos_tf
-        h *= self.r
-        np.maximum(h, 0.0, out=h)
-        h += self.dz[:, None]
-        integrand = bulldozing_resistance(bull_a, bull_b, h) * cos
-        self._side = (integrand @ self.xi_w) * (self.r * self._outer[: self.n_wheels, 0])
-        self._side_slope = self._side * (1.0 / DIRECTION_SMOOTHING_M_S)
         dz = self.dz
         face = (self.width * bulldozing_resistance(bull_a[:, 0], bull_b[:, 0], dz)).tolist()
         k = self._wheels_per_side
