@@ -2,7 +2,7 @@
 Table 7.3's completed / stuck grid, on sand_bin, with the default (extended) contact and, for
 comparison, the classic one (chapter 2-4 laws only). Goals: median |R_twin / R_real - 1| <= 15 %,
 max <= 30 %; every grid cell as the real robot did. The radius method and holds are those of
-``skidsteer_power.twin.motion``; the track's lateral shear modulus was fitted to the track's seven
+``skidsteer_power.twin.motion``; the track's longitudinal shear modulus was fitted to the track's seven
 0.1 m/s cells, so the other seven radii and the grid are the check (reported apart).
 About 3 min of CPU.
 """

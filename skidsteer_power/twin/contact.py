@@ -96,7 +96,6 @@ class Contact:
         self.y_side = np.array([half_tread_m, -half_tread_m])
         self._side_y = (half_tread_m, -half_tread_m)  # (floats)
         self.extended = extended
-        self.lateral_stiffness = 1.0  # K / K_y [-]
 
     def reset(self) -> None:
         """Shear relaxed, static sinkage (subclasses extend it and set ``j`` before calling this)."""

@@ -7,7 +7,7 @@ completed / stuck grid of Table 7.3 (``skidsteer_power.real_robot``), on the twi
   (:meth:`TwinTrace.stuck`: over a 2 s window, less than 20 % of the commanded motion).
 
 ``python -m skidsteer_power.twin.motion [radii|grid|fit] [--contact classic|extended]`` prints them;
-``fit`` repeats the fit of ``track_contact.TRACK_LATERAL_STIFFNESS`` to :data:`FIT_CELLS`.
+``fit`` repeats the fit of ``track_contact.TRACK_LONGITUDINAL_MODULUS`` to :data:`FIT_CELLS`.
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ START_UP_S = 3.0
 GRID_HOLD_S = 6.0
 """Hold of each Table 7.3 cell [s]."""
 FIT_CELLS = tuple(c for c in APPENDIX_D_RADII if c[0] == 'test_robot_track' and c[1] == 0.1)
-"""The subset the track's lateral shear modulus is fitted to: the track's seven 0.1 m/s cells (the
+"""The subset the track's longitudinal shear modulus is fitted to: the track's seven 0.1 m/s cells (the
 other seven Appendix D cells and Table 7.3 are the check)."""
 FIT_CANDIDATES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
-"""K / K_y tried by the fit [-] (1: Wong's isotropic shear)."""
+"""K_x / K tried by the fit [-] (1: Wong's isotropic shear, the belt inextensible)."""
 
 
 @dataclass(frozen=True)
@@ -105,10 +105,10 @@ def grid_mismatches(contact: str = 'extended', cells: list | None = None) -> tup
     return len(cells), wrong
 
 
-def fit_track_lateral_stiffness(
+def fit_track_longitudinal_modulus(
     candidates: tuple[float, ...] = FIT_CANDIDATES,
 ) -> list[tuple[float, float, float]]:
-    """(K / K_y, median, max of |R_twin / R_real - 1| over :data:`FIT_CELLS`) for each candidate
+    """(K_x / K, median, max of |R_twin / R_real - 1| over :data:`FIT_CELLS`) for each candidate
     (extended contact); the fit keeps the smallest median."""
     from unittest import mock
 
@@ -116,7 +116,7 @@ def fit_track_lateral_stiffness(
 
     out = []
     for value in candidates:
-        with mock.patch.object(track_contact, 'TRACK_LATERAL_STIFFNESS', value):
+        with mock.patch.object(track_contact, 'TRACK_LONGITUDINAL_MODULUS', value):
             out.append((value, *radius_summary(radius_cells('extended', FIT_CELLS))))
     return out
 
@@ -136,8 +136,8 @@ def main(argv: list[str] | None = None) -> int:
         median, worst = radius_summary(cells)
         print(f'median |R_twin / R_real - 1| {100 * median:.1f} %, max {100 * worst:.1f} %')
     if 'fit' in args.what:
-        for value, median, worst in fit_track_lateral_stiffness():
-            print(f'K / K_y = {value:g}: median {100 * median:.1f} %, max {100 * worst:.1f} %', flush=True)
+        for value, median, worst in fit_track_longitudinal_modulus():
+            print(f'K_x / K = {value:g}: median {100 * median:.1f} %, max {100 * worst:.1f} %', flush=True)
     if 'grid' in args.what:
         n, wrong = grid_mismatches(args.contact)
         print(f'Table 7.3: {n - len(wrong)} of {n} cells agree; disagree: {wrong}')

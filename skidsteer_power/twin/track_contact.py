@@ -24,12 +24,16 @@ TRACK_NODES = 32
 """Intervals along each track patch [-] (nodes every l / 32; 1.4 cm on the test robot)."""
 TRACK_ROWS = 2
 """Gauss-Legendre rows across each track [-]."""
-TRACK_LATERAL_STIFFNESS = 4.0
-"""K / K_y [-] of a track (extended contact): its lateral shear displacement modulus K_y is K / 4.
-Chapter 3 holds two lateral laws for a track: Steeds' Coulomb lateral resistance (eqs. 3.3-3.6, the
-full mu_t p at any lateral sliding: K_y -> 0) and Wong's isotropic Janosi-Hanamoto shear (eqs.
-3.12-3.15: K_y = K); the test robot's track lies between. FITTED to the track's seven 0.1 m/s
-Appendix D radii (docs/TWIN.md); the track's 0.2 m/s radii and the 6-wheel radii are the check."""
+TRACK_LONGITUDINAL_MODULUS = 4.0
+"""K_x / K [-] of a track (extended contact): the longitudinal shear-displacement modulus of the belt
+against the soil is 4 K; laterally it stays K (eqs. 2.3, 3.12-3.15 in the scaled displacement
+(j_x K / K_x, j_y)). Wong's track theory takes the belt as inextensible and rigidly driven; the test
+robot's belt is neither (ch. 7.3.4: "repeated bending of the tracks ... oscillation of the track
+tension ... sand got into the gaps between the tracks and the sprockets"), a compliance in series
+with the soil's shear along the track. FITTED to the track's seven 0.1 m/s Appendix D radii
+(docs/TWIN.md); the check: the track's 0.2 m/s and the 6-wheel radii, Table 7.3, and chapter 7.3's
+torques (FESS at the measured motion matched the real track's torques; it matches this twin's too,
+while a stiffer lateral law that fits the same radii doubles the torques)."""
 
 
 class TrackContact(Contact):
@@ -39,8 +43,7 @@ class TrackContact(Contact):
 
     def __init__(self, vehicle: Vehicle, field: TerrainField, gear_ratio: float, *, extended: bool) -> None:
         super().__init__(field, vehicle.drive_radius_m, gear_ratio, 0.5 * vehicle.tread_m, extended=extended)
-        if extended:
-            self.lateral_stiffness = TRACK_LATERAL_STIFFNESS
+        self._longitudinal = 1.0 / TRACK_LONGITUDINAL_MODULUS if extended else 1.0  # K / K_x
         length, b = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
         n = TRACK_NODES
         dx = length / n
@@ -126,8 +129,8 @@ class TrackContact(Contact):
         self._soil_age -= 1
         vx, vy, wz = vel.tolist()
         j = self.j
-        if self.lateral_stiffness != 1.0:  # anisotropic shear: the lateral displacement scaled by K / K_y
-            j = j.real + (1j * self.lateral_stiffness) * j.imag
+        if self._longitudinal != 1.0:  # the belt's longitudinal displacement counts K / K_x
+            j = j.real * self._longitudinal + 1j * j.imag
         mag = np.abs(j)
         if self._track_index is None and self.field.base.shear_type == 'A':
             minus_fraction = np.multiply(mag, -1.0 / self.field.base.K)

@@ -236,8 +236,6 @@ class WheelContact(Contact):
         strength = sigma * self._wp_tan_phi
         strength += self._wp_c  # eq. 2.2
         j = self.j
-        if self.lateral_stiffness != 1.0:  # anisotropic shear: the lateral displacement scaled by K / K_y
-            j = np.stack([j[0], self.lateral_stiffness * j[1]])
         mag = np.hypot(j[0], j[1])
         if self._wp_inv_k is not None:
             minus_fraction = np.expm1(mag * self._wp_inv_k)  # eq. 2.3 (tau / tau_max = -this)
