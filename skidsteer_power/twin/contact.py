@@ -7,9 +7,10 @@ at the present state (:meth:`Contact.forces`) and then lets it transport the she
 with the new velocities (:meth:`Contact.advance`). SI units throughout; sides 0 = left, 1 = right.
 
 The laws beyond the steady models of chapters 2-4 (``extended`` contact; ``classic`` switches them
-off): slip-sinkage (Lyasko 2010, :func:`slip_sinkage_factor`) and bulldozing of the contacts' side
-walls and of the excavated step's face (Hegedus, as Ishigami et al. 2007 apply it,
-:func:`bulldozing_coefficients`).
+off): slip-sinkage under wheels and tracks (Lyasko 2010, :func:`slip_sinkage_factor`), bulldozing of
+a digging wheel's excavated step (Hegedus, as Ishigami et al. 2007 apply it,
+:func:`bulldozing_coefficients`) and the track belt's longitudinal shear modulus
+(``track_contact.TRACK_LONGITUDINAL_MODULUS``, fitted; docs/TWIN.md).
 """
 
 from __future__ import annotations
@@ -63,7 +64,8 @@ def bulldozing_coefficients(terrain: Terrain) -> tuple[float, float]:
 
     with the terrain's c [Pa] and phi (eq. 2.2) and gamma = ``SOIL_UNIT_WEIGHT_N_M3``. The
     dissertation names bulldozing (ch. 2.3, "especially significant when sinkage is large") and
-    neglects it for SUGVs; the twin applies it to the lateral sliding of wheels and track sides."""
+    neglects it for SUGVs; the twin applies it to the face of the step a digging wheel leaves (the
+    side walls against lateral sliding: not applied, docs/TWIN.md)."""
     xc = 0.25 * math.pi - 0.5 * terrain.phi
     cot = 1.0 / math.tan(xc)
     d1 = cot + math.tan(xc + terrain.phi)

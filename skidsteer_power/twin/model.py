@@ -30,10 +30,11 @@ Terrain contact (see docs/TWIN.md for where this agrees with and departs from th
   vertical balance Fz = W (eq. 2.29), with W from the lateral load transfer, every
   ``SOIL_REFRESH_STEPS``.
 * beyond the steady models (``contact='extended'``, the default; ``'classic'`` switches them off):
-  slip-sinkage, an excavated rut under each wheel (Lyasko 2010, ``contact.slip_sinkage_factor``),
-  and bulldozing of the contacts' side walls against their lateral motion and of the excavated
-  step against travel (Hegedus, as Ishigami et al. 2007 apply it,
-  ``contact.bulldozing_coefficients``).
+  slip-sinkage, an excavated rut under each wheel and a deeper rut under each track (Lyasko 2010,
+  ``contact.slip_sinkage_factor``), bulldozing of a wheel's excavated step against travel
+  (Hegedus, as Ishigami et al. 2007 apply it, ``contact.bulldozing_coefficients``), and the track
+  belt's longitudinal shear modulus 4 K (``track_contact.TRACK_LONGITUDINAL_MODULUS``, fitted to
+  the track's Appendix D radii at 0.1 m/s).
 
 The contacts are strategies (``track_contact.TrackContact``, ``wheel_contact.WheelContact``, their
 shared part in ``contact.py``); the drivetrain is ``drivetrain.Drivetrain``.
@@ -121,7 +122,7 @@ class Twin:
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
         self.dt = dt
-        # 'classic': the chapter 2-4 laws only (no slip-sinkage, no side-wall or step-face bulldozing)
+        # 'classic': the chapter 2-4 laws only (no slip-sinkage, bulldozing or belt compliance)
         self.contact_laws = contact
         self.drivetrain = Drivetrain(vehicle, self.powertrain)
         d = self.drivetrain
