@@ -5,8 +5,8 @@ Each figure runs a fresh twin (no caches exist) through 20 s of the Table 7.3 ex
 (the least disturbed by other load on a shared machine) for the wall-clock factor, which carries
 the goal, and for the CPU-time factor (process time: what the twin itself needs; goal 25x, the
 margin that keeps the wall-clock goal on a machine with a core to spare). The 1-minute load
-average is printed beside them. Same-run ratios: the cost of the slip-sinkage and bulldozing terms
-(``Twin(dig_and_bulldoze=False)`` over the full twin) and of a 1 ms step.
+average is printed beside them. Same-run ratios: the cost of the extended contact laws
+(``Twin(contact='classic')`` over the full twin) and of a 1 ms step.
 """
 
 from __future__ import annotations
@@ -63,8 +63,8 @@ def run(report: Report) -> None:
                       met=simulated / wall >= GOAL)  # fmt: skip
         report.figure(f'{label}: CPU-time speed', simulated / cpu, 'x real', goal=f'>= {CPU_GOAL:g}x',
                       met=simulated / cpu >= CPU_GOAL)  # fmt: skip
-        _, plain = _times(partial(Twin, vehicle, terrain, dig_and_bulldoze=False), commands, REPEATS)
-        report.ratio(f'{name}: CPU time, full twin / without slip-sinkage and bulldozing', cpu, plain)
+        _, plain = _times(partial(Twin, vehicle, terrain, contact='classic'), commands, REPEATS)
+        report.ratio(f'{name}: CPU time, extended / classic contact', cpu, plain)
         _, fine = _times(partial(Twin, vehicle, terrain, dt=1e-3), commands, 1)
         report.ratio(f'{name}: CPU time, dt = 1 ms / dt = 2 ms', fine, cpu)
     report.figure('1-minute load average at the end', os.getloadavg()[0], '', note='2 cores')

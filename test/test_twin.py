@@ -94,12 +94,12 @@ def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle)
 
 # --------------------------------------------------------------------------- steady states
 # The steady models (chapters 2-4) have no bulldozing and no slip-sinkage excavation: the twin is
-# compared with them with those terms switched off (dig_and_bulldoze=False; docs/TWIN.md).
+# compared with them with those terms switched off (contact='classic'; docs/TWIN.md).
 
 
 def test_straight_track_agrees_with_the_single_track_equations():
     # steady straight running: each track's drawbar pull F_s - R_c = 0 (eq. 2.18) at load W/2
-    twin, trace = _settled('test_robot_track', 0.2, 0.0, dig_and_bulldoze=False)
+    twin, trace = _settled('test_robot_track', 0.2, 0.0, contact='classic')
     v = twin.vehicle
     load, b, length = v.weight_N / 2, v.track_width_m, v.track_length_m
     rc = float(single_track.compaction_resistance(SAND_BIN, load, b, length))  # eq. 2.10
@@ -113,7 +113,7 @@ def test_straight_track_agrees_with_the_single_track_equations():
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
 def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     # steady straight running: every wheel has zero drawbar pull at load W / n (eqs. 2.28-2.29)
-    twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, dig_and_bulldoze=False)
+    twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, contact='classic')
     v = twin.vehicle
     ref = solve_wheel(SAND_BIN, v.weight_N / v.n_wheels, 0.0, v.wheel_radius_m, v.wheel_width_m)
     sprocket = twin.omega_m.mean() / twin.G
@@ -121,7 +121,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     assert twin_slip == pytest.approx(float(ref.slip), rel=0.02)
     per_wheel = trace.axle_torque_Nm[-1] / v.wheels_per_side
     assert per_wheel == pytest.approx([float(ref.drive_torque_Nm)] * 2, rel=0.02)
-    assert twin.z == pytest.approx(float(ref.sinkage_m), rel=0.02)
+    assert twin.contact.z == pytest.approx(float(ref.sinkage_m), rel=0.02)
 
 
 @pytest.mark.parametrize(
@@ -134,7 +134,7 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
     # Tolerance 1 %: the twin discretizes the patches differently (32 trapezoid intervals along a
     # track, 24 along a wheel's arc, vs Gauss-Legendre) and omits the r sin(theta) yaw term of eq.
     # 4.3 and the hull's turn during a wheel's contact; measured differences are <= 0.1 %.
-    twin, trace = _settled(vehicle, 0.2, 0.2, seconds=6.0, dig_and_bulldoze=False)
+    twin, trace = _settled(vehicle, 0.2, 0.2, seconds=6.0, contact='classic')
     speed, yaw = twin.vel[0], twin.vel[2]
     assert 0.0 < yaw < 0.2  # a left turn, wider than commanded
     state = model.solve(twin.vehicle, SAND_BIN, speed, speed / yaw)
@@ -149,22 +149,72 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_tight_turn_on_dry_sand_gets_the_wheeled_robot_stuck(vehicle):
-    # ch. 7.3.4, Table 7.3: on dry sand the test robot completed 0.1 m/s up to 0.2 rad/s and 0.2 m/s
-    # up to 0.35 rad/s, and got stuck "because of the large sinkage" at 0.1 m/s, 0.25-0.35 rad/s
-    # (the empty cells). Nothing in the twin is fitted to the table: the slip-sinkage (Lyasko 2010)
-    # and the bulldozing (Hegedus / Ishigami et al. 2007) are published laws (docs/TWIN.md).
-    dry_sand = load_terrain('dry_sand')
-    tread = load_vehicle(vehicle).tread_m
-    twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand)  # an empty cell
-    assert trace.summary(tread)['stuck'] is True
-    assert twin.dz.max() > twin.z.max()  # dug in: the excavated rut is deeper than the compaction
-    for speed, yaw_rate in [(0.1, 0.2), (0.2, 0.35)]:  # completed cells
-        _twin, trace = _settled(vehicle, speed, yaw_rate, seconds=5.0, terrain=dry_sand)
-        assert trace.summary(tread)['stuck'] is False, (speed, yaw_rate)
-    # without the two terms (the steady models' contact) the same empty cell keeps moving
-    _twin, trace = _settled(vehicle, 0.1, 0.3, seconds=5.0, terrain=dry_sand, dig_and_bulldoze=False)
-    assert trace.summary(tread)['stuck'] is False
+def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle):
+    # ch. 7.3.4, Table 7.3 (skidsteer_power.real_robot): the test robot completed 0.1 m/s up to
+    # 0.2 rad/s and 0.2 m/s up to 0.35 rad/s, and got stuck "because of the large sinkage" at
+    # 0.1 m/s, 0.25-0.35 rad/s (the empty cells). A bounded subset; all 66 cells are in
+    # benchmarks/bench_twin_motion.py. Nothing is fitted to the grid (docs/TWIN.md).
+    from skidsteer_power.real_robot import table_7_3_completed
+    from skidsteer_power.twin.motion import twin_completes
+
+    for speed, yaw_rate in [(0.1, 0.3), (0.2, 0.35)]:
+        assert twin_completes(vehicle, speed, yaw_rate) is table_7_3_completed(speed, yaw_rate), (
+            speed,
+            yaw_rate,
+        )
+    # stuck by digging in: without slip-sinkage and the step's bulldozing the empty cell keeps moving
+    assert twin_completes(vehicle, 0.1, 0.3, contact='classic') is True
+
+
+@pytest.mark.parametrize(
+    ('vehicle', 'speed', 'yaw_rate', 'radius_real'),
+    [('test_robot_track', 0.2, 0.02, 17.48), ('test_robot_6wheel', 0.2, 0.25, 1.62)],
+)
+def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(vehicle, speed, yaw_rate, radius_real):
+    # Appendix D (skidsteer_power.real_robot.APPENDIX_D_RADII); the track's longitudinal shear modulus
+    # was fitted to the track's 0.1 m/s cells only, so these two are a check. Goal of issue 26:
+    # max |R_twin / R_real - 1| <= 30 % (all 14 cells: benchmarks/bench_twin_motion.py).
+    from skidsteer_power.twin.motion import twin_turn
+
+    radius, _speed = twin_turn(vehicle, speed, yaw_rate)
+    assert abs(radius / radius_real - 1.0) <= 0.30
+    # the classic laws turn the track far tighter than the real one (Appendix D: 1.75x commanded)
+    if vehicle == 'test_robot_track':
+        classic, _speed = twin_turn(vehicle, speed, yaw_rate, contact='classic')
+        assert classic < 0.75 * radius_real
+
+
+def test_extended_track_torques_stay_wongs_at_the_actual_motion():
+    # Chapter 7.3.4 (Figure 7.41): FESS (Wong's track theory) at the measured speed and radius was
+    # "validated by the experiments" on the real track's axle torques. The fitted longitudinal
+    # modulus widens the twin's turns as Appendix D's, and keeps that: Wong's theory at the twin's
+    # actual motion gives its outer torque within 15 % (measured 2-10 % over 0.04-0.2 rad/s; the
+    # lateral-stiffness law that fits the same radii gave 2-3x).
+    twin, trace = _settled('test_robot_track', 0.1, 0.1, seconds=6.0)
+    speed, yaw = twin.vel[0], twin.vel[2]
+    assert speed / yaw > 1.3  # wider than the commanded 1 m, as the real track (1.44 m)
+    state = wong_track.solve(twin.vehicle, SAND_BIN, speed, speed / yaw)
+    outer = trace.axle_torque_Nm[-1][1]  # left turn: right = outer
+    assert outer == pytest.approx(float(state.torque_outer_Nm), rel=0.15)
+
+
+def test_track_sinks_deeper_with_slip_in_the_extended_laws():
+    # Lyasko's slip-sinkage (contact.slip_sinkage_factor) under a track as under a wheel: a slipping
+    # outer track in a tight turn sinks deeper than the static eq. 2.6 sinkage the classic laws keep
+    twin, trace = _settled('test_robot_track', 0.1, 0.3, seconds=3.0)
+    _plain, classic = _settled('test_robot_track', 0.1, 0.3, seconds=3.0, contact='classic')
+    static = float(single_track.track_sinkage(SAND_BIN, 0.5 * twin.vehicle.weight_N, 0.074, 0.45))
+    assert classic.sinkage_m.max() == pytest.approx(static, rel=0.1)  # (lateral load transfer: < 10 %)
+    assert trace.sinkage_m.max() > 1.05 * classic.sinkage_m.max()
+
+
+def test_the_real_robots_observations_are_the_dissertations():
+    from skidsteer_power.real_robot import APPENDIX_D_RADII, table_7_3_cells
+
+    cells = table_7_3_cells()
+    assert len(cells) == 66 and sum(not done for *_, done in cells) == 9  # 3 empty cells x 3 configurations
+    assert len(APPENDIX_D_RADII) == 14
+    assert sum(c[0] == 'test_robot_track' for c in APPENDIX_D_RADII) == 9
 
 
 # --------------------------------------------------------------------------- sensors, patches, CLI
@@ -216,7 +266,16 @@ def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, cap
     argv = ['simulate', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--commands', str(csv)]
     assert main([*argv, '--seed', '3', '-o', str(out), '--json']) == 0
     payload = json.loads(capsys.readouterr().out)
-    assert set(payload) == {'duration_s', 'messages', 'energy_J', 'distance_m', 'max_sinkage_m', 'stuck'}
+    assert set(payload) == {
+        'duration_s',
+        'messages',
+        'energy_J',
+        'distance_m',
+        'max_sinkage_m',
+        'stuck',
+        'contact',
+    }
+    assert payload['contact'] == 'extended'  # the default
     assert payload['duration_s'] == pytest.approx(3.0, abs=0.01)  # 1 s lead-in + 2 s
     assert 0.2 < payload['distance_m'] < 0.4 and payload['stuck'] is False
     with open_bag(out) as bag:
@@ -230,6 +289,14 @@ def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, cap
                  '-o', str(tmp_path / 'x.mcap')]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert err.count('\n') == 2 and 'Traceback' not in err
+    classic = tmp_path / 'classic.mcap'
+    assert main([*argv, '--contact', 'classic', '-o', str(classic), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['contact'] == 'classic'
+
+
+def test_twin_refuses_unknown_contact_laws():
+    with pytest.raises(InputError, match='classic, extended'):
+        Twin(load_vehicle('test_robot_4wheel'), SAND_BIN, contact='lyasko')
 
 
 def test_write_bag_needs_a_new_path(tmp_path):
@@ -371,7 +438,11 @@ def test_live_path_counts_the_body_inertia_once():
 
 
 def test_bulldozing_and_slip_sinkage_laws_by_hand():
-    from skidsteer_power.twin.model import SOIL_UNIT_WEIGHT_N_M3, bulldozing_coefficients, slip_sinkage_factor
+    from skidsteer_power.twin.contact import (
+        SOIL_UNIT_WEIGHT_N_M3,
+        bulldozing_coefficients,
+        slip_sinkage_factor,
+    )
 
     # dry sand (Table 2.1): phi = 30 deg, c = 1000 Pa. X_c = 45 - 15 = 30 deg; cot X_c = sqrt(3);
     # D1 = sqrt(3) + tan(60 deg) = 2 sqrt(3); D2 = sqrt(3) + 3 / sqrt(3) = 2 sqrt(3) (Hegedus)

@@ -25,6 +25,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument('--commands', metavar='BAG|CSV', help='cmd_vel of a bag, or a command CSV')
     source.add_argument('--route', help='patrol | search-retrieve | FILE.csv (a mission route)')
     p.add_argument('--speed', type=positive_float, help="route speed [m/s] (default: the route's)")
+    p.add_argument('--contact', choices=('classic', 'extended'), default='extended',
+                   help="the twin's contact laws: classic (the chapter 2-4 laws only) or extended (plus "
+                   'slip-sinkage and bulldozing; docs/TWIN.md). Default extended')  # fmt: skip
     p.add_argument('--seed', type=int, default=0, help='sensor noise seed (default 0)')
     p.add_argument('--lead-in', type=nonnegative_float, default=1.0, help='rest before the commands [s]')
     p.add_argument('-o', '--output', required=True, help='output bag (OUT.mcap)')
@@ -58,7 +61,7 @@ def run_simulate_cmd(args: argparse.Namespace) -> int:
         from skidsteer_power.missions.routes import resolve_route
 
         commands = sensors.commands_from_route(resolve_route(args.route, args.speed))
-    twin = Twin(vehicle, terrain, patches=patches, seed=args.seed)
+    twin = Twin(vehicle, terrain, patches=patches, seed=args.seed, contact=args.contact)
     lead_in = [Segment(0.0, 0.0, args.lead_in)] if args.lead_in > 0 else []
     trace = run_commands(twin, [*lead_in, *commands])
     write_bag(trace, output)

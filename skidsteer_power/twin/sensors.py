@@ -86,6 +86,7 @@ class TwinTrace:
     odom_twist: np.ndarray
     ledger: dict[str, float] = field(default_factory=dict)
     messages: dict[str, int] = field(default_factory=dict)
+    contact: str = 'extended'  # the twin's contact laws, 'classic' or 'extended' (Twin)
 
     @property
     def duration_s(self) -> float:
@@ -116,7 +117,8 @@ class TwinTrace:
         return bool(np.any(commanded & (ratio < STUCK_PROGRESS)))
 
     def summary(self, tread_m: float) -> dict[str, object]:
-        """The ``simulate --json`` keys: duration_s, messages, energy_J, distance_m, max_sinkage_m, stuck."""
+        """The ``simulate --json`` keys: duration_s, messages, energy_J, distance_m, max_sinkage_m, stuck,
+        contact."""
         return {
             'duration_s': self.duration_s,
             'messages': dict(self.messages),
@@ -124,6 +126,7 @@ class TwinTrace:
             'distance_m': self.distance_m,
             'max_sinkage_m': float(self.sinkage_m.max()) if self.sinkage_m.size else 0.0,
             'stuck': self.stuck(tread_m),
+            'contact': self.contact,
         }
 
 
@@ -228,6 +231,7 @@ def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
     return TwinTrace(
         vehicle=twin.vehicle.name,
         terrain=twin.field.base.name,
+        contact=twin.contact_laws,
         t=t,
         cmd=cmd,
         pose=pose,

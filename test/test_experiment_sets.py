@@ -1,0 +1,49 @@
+"""The main job's tables (skidsteer_power/bags/experiment_sets.py) on hand-made results: the torque
+comparison is a median of |error| per side, and the radius table shows commanded, real robot
+(Appendix D), twin and the slot for FESS from set points."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from skidsteer_power.bags import experiment_sets as job
+
+
+def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict:
+    return {'twin_torque_Nm': list(twin), 'fess_motion_torque_Nm': list(fess), 'stuck': stuck}
+
+
+def test_torque_error_is_the_median_of_absolute_errors_per_side():
+    # left: +10 %, -20 %, +30 % -> |.| median 20 % (the signed median would be +10 %);
+    # right: -10 %, +10 %, -10 % -> 10 % (signed: -10 %). The stuck set and the small torque are left out.
+    sets = [
+        _set((1.0, 2.0), (1.1, 1.8)),
+        _set((1.0, 2.0), (0.8, 2.2)),
+        _set((1.0, 2.0), (1.3, 1.8)),
+        _set((1.0, 2.0), (5.0, 5.0), stuck=True),
+        _set((0.1, 0.1), (1.0, 1.0)),
+    ]
+    left, right = job.torque_errors({'sets': sets})
+    assert left == pytest.approx(20.0)
+    assert right == pytest.approx(10.0)
+
+
+def test_radius_table_shows_command_real_robot_twin_and_the_set_point_slot():
+    assert job.real_radius('test_robot_6wheel', 0.2, 0.25) == 1.62  # Appendix D
+    assert job.real_radius('test_robot_4wheel', 0.2, 0.25) is None  # the text gives none
+    rows = [
+        {'speed_cmd_m_s': 0.2, 'yaw_cmd': 0.25, 'radius_cmd_m': 0.8, 'radius_m': 1.782,
+         'radius_real_m': 1.62, 'radius_fess_setpoints_m': None},
+        {'speed_cmd_m_s': 0.2, 'yaw_cmd': 0.0, 'radius_cmd_m': math.inf, 'radius_m': 40.0,
+         'radius_real_m': None, 'radius_fess_setpoints_m': None},
+    ]  # fmt: skip
+    table = job.radius_table([{'vehicle': 'test_robot_6wheel', 'radius': rows}])
+    lines = table.splitlines()
+    assert '| R real robot [m] | R twin [m]' in lines[0] and 'FESS from set points' in lines[0]
+    assert (
+        lines[2] == '| test_robot_6wheel | 0.2 | 0.25 | 0.80 | 1.62 | 1.78 | +10 | - |'
+    )  # 1.782 / 1.62 = 1.10
+    assert len([line for line in lines if line.startswith('| test_robot')]) == 1
+    assert 'median |R_twin / R_real - 1| 10.0 %' in table
