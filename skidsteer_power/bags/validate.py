@@ -149,9 +149,23 @@ SERIES_COLUMNS = (
     'hold_s',
     'clamped',
     'limited',
+    'measured_omega_left_rad_s',
+    'measured_omega_right_rad_s',
+    'online_torque_left_Nm',
+    'online_torque_right_Nm',
+    'online_power_left_W',
+    'online_power_right_W',
+    'online_battery_W',
+    'scaled_power_left_W',
+    'scaled_power_right_W',
 )
 # hold_s: how long the row's values are in force [s] (the weight of the row in energy sums);
-# clamped / limited: 1 where the prediction came from outside the power map (see MapQuery)
+# clamped / limited: 1 where the prediction came from outside the power map (see MapQuery);
+# online_*: the prediction with the online correction the core had learned BEFORE the row's reading
+# (what power_estimator holds at that moment: a one-sample-ahead estimate, estimator/adaptation.py);
+# online_battery_W: the corrected battery power that feeds the node's energy integration;
+# scaled_power_*: the terrain torque scaled by the online terrain scale k as the path energy does
+# (internal torque + k x terrain torque at the motor); measured_omega_*: motor speed [rad/s]
 
 
 def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
@@ -316,15 +330,18 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
                     rejected['joint_states'] += 1
                     continue
                 position = positions[i] if positions is not None else ()
+                online = online_figures(core)  # before the reading updates the correction
                 comparison = core.on_joint_state(names, velocities[i], efforts[i], now, position)
                 if comparison is None:  # speed from positions: waits for a second sample
                     continue
         except RejectedInput:
             rejected['cmd_vel' if kind == 0 else 'joint_states'] += 1
             continue
+        if kind == 0:
+            online = online_figures(core)
         fresh = core.prediction is not None and core.cmd_fresh.is_fresh(now)
         row_hold.append(core.cmd_fresh.timeout_s if kind == 0 else math.nan)
-        rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)))
+        rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)) + online)
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(SERIES_COLUMNS)}
@@ -340,8 +357,37 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     )
 
 
+NO_ONLINE = (math.nan,) * 7
+
+
+def online_figures(core: Any) -> tuple[float, ...]:
+    """The online columns of :data:`SERIES_COLUMNS` for the core's current state: torques [N m],
+    terminal powers [W] and battery power [W] of the corrected prediction, and the terminal powers of
+    the terrain-scaled one (internal + k x terrain torque at the motor) [W]."""
+    from skidsteer_power.powertrain.motor import terminal_power
+
+    p = core.prediction
+    if p is None:
+        return NO_ONLINE
+    motor = core.powertrain.motor
+    torque = core.corrected_torque_Nm()
+    k = core.adaptation.terrain_scale()
+    gear = core.powertrain.gear_ratio
+    scaled = [t + (k - 1.0) * a / gear for t, a in zip(p.motor_torque_Nm, p.terrain_torque_Nm, strict=True)]
+    w = p.motor_omega_rad_s
+    return (
+        torque[0],
+        torque[1],
+        terminal_power(motor, torque[0], w[0]),
+        terminal_power(motor, torque[1], w[1]),
+        core.corrected_bus_W(),
+        terminal_power(motor, scaled[0], w[0]),
+        terminal_power(motor, scaled[1], w[1]),
+    )
+
+
 def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
-    """One row in :data:`SERIES_COLUMNS` order."""
+    """One row in :data:`SERIES_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
     nan = math.nan
     if p is None:
         pred = (nan,) * 10
@@ -351,12 +397,13 @@ def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[
                 p.bus_total_W, p.traction_margin)  # fmt: skip
         flags = (float(p.clamped), float(getattr(p, 'limited', False)))
     if comparison is None:
-        meas = (nan,) * 5
+        meas = (nan,) * 7
     else:
         m = comparison.measured
-        meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W)
+        meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W, *m.omega_rad_s)
     return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
-            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags)  # fmt: skip
+            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags,
+            meas[5], meas[6])  # fmt: skip
 
 
 def error_metrics(series: RunSeries) -> dict[str, Any]:
@@ -394,6 +441,53 @@ def error_metrics(series: RunSeries) -> dict[str, Any]:
     result['energy_measured_J'] = e_meas
     result['energy_error_pct'] = 100.0 * (e_pred - e_meas) / abs(e_meas) if abs(e_meas) > 1e-9 else math.nan
     return result
+
+
+def predicted_battery_J(series: RunSeries, column: str = 'predicted_battery_W') -> float:
+    """Battery-side energy [J] of a predicted power ``column`` [W] over the rows whose command is in
+    force, each row weighted by its ``hold_s`` as the measured energy is (no command in force: the
+    driver stops the motors, no drive power is predicted)."""
+    c = series.columns
+    fresh = c['cmd_fresh'] > 0
+    weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
+    return float(np.sum(np.nan_to_num(c[column] * weights)[fresh]))
+
+
+def with_prediction(series: RunSeries, torque: str | None, power: str) -> RunSeries:
+    """``series`` whose predicted torques and powers are the columns named ``torque`` / ``power``
+    with ``{side}`` in them (torque None: unchanged), for :func:`error_metrics`."""
+    columns = dict(series.columns)
+    for side in ('left', 'right'):
+        if torque is not None:
+            columns[f'predicted_torque_{side}_Nm'] = columns[torque.format(side=side)]
+        columns[f'predicted_power_{side}_W'] = columns[power.format(side=side)]
+    return replace(series, columns=columns)
+
+
+def online_summary(series: RunSeries, core: Any) -> dict[str, Any]:
+    """``online_prediction`` of the summary: what power_estimator would have published from the bag.
+
+    ``metrics``: the prediction with the per-side online correction learned up to each reading
+    (:func:`online_figures`); ``terrain_scaled``: energy and power errors with the terrain torque
+    scaled by the online terrain scale k, as the path energy uses it; ``battery_energy_predicted_J``:
+    the corrected battery energy; the adaptation's final state.
+    """
+    metrics = error_metrics(with_prediction(series, 'online_torque_{side}_Nm', 'online_power_{side}_W'))
+    scaled = error_metrics(with_prediction(series, None, 'scaled_power_{side}_W'))
+    state = core.adaptation.state()
+    return {
+        'metrics': metrics,
+        'terrain_scaled': {
+            key: scaled[key] for key in ('energy_predicted_J', 'energy_measured_J', 'energy_error_pct')
+        }
+        | {'power_left': scaled['power_left'], 'power_right': scaled['power_right']},
+        'battery_energy_predicted_J': predicted_battery_J(series, 'online_battery_W'),
+        'adaptation_enabled': bool(core.adaptation.settings.enabled),
+        'terrain_scale': state.terrain_scale,
+        'correction_scale': list(state.scale),
+        'correction_offset_Nm': list(state.offset_Nm),
+        'terrain_changes': state.terrain_changes,
+    }
 
 
 def map_coverage(series: RunSeries) -> dict[str, float]:
@@ -635,9 +729,14 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
         'kinematics': options.kinematics,
         'metrics': metrics,
         'motion_prediction': motion_summary,
+        'online_prediction': online_summary(series, core),
         'battery': {
             'energy_measured_J': series.energy_J.get('measured', math.nan),
-            'energy_predicted_J': series.energy_J.get('predicted', math.nan),
+            # the open-loop prediction over the same time as the measurement (issue 27: the tracker's
+            # 'predicted' tally below counts only time without a fresh measurement, 0 J on a bag
+            # whose joint_states never stop)
+            'energy_predicted_J': predicted_battery_J(series),
+            'energy_drawn_from_prediction_J': series.energy_J.get('predicted', math.nan),
             'remaining_wh': series.remaining_wh,
             'soc': series.soc,
         },
