@@ -39,6 +39,7 @@ from skidsteer_power.bags.decode import (
     decode_planar_poses,
     decode_twists,
 )
+from skidsteer_power.bags.online import online_figures, online_summary, predicted_battery_J
 from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.errors import ConfigError, InputError
 
@@ -357,35 +358,6 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     )
 
 
-NO_ONLINE = (math.nan,) * 7
-
-
-def online_figures(core: Any) -> tuple[float, ...]:
-    """The online columns of :data:`SERIES_COLUMNS` for the core's current state: torques [N m],
-    terminal powers [W] and battery power [W] of the corrected prediction, and the terminal powers of
-    the terrain-scaled one (internal + k x terrain torque at the motor) [W]."""
-    from skidsteer_power.powertrain.motor import terminal_power
-
-    p = core.prediction
-    if p is None:
-        return NO_ONLINE
-    motor = core.powertrain.motor
-    torque = core.corrected_torque_Nm()
-    k = core.adaptation.terrain_scale()
-    gear = core.powertrain.gear_ratio
-    scaled = [t + (k - 1.0) * a / gear for t, a in zip(p.motor_torque_Nm, p.terrain_torque_Nm, strict=True)]
-    w = p.motor_omega_rad_s
-    return (
-        torque[0],
-        torque[1],
-        terminal_power(motor, torque[0], w[0]),
-        terminal_power(motor, torque[1], w[1]),
-        core.corrected_bus_W(),
-        terminal_power(motor, scaled[0], w[0]),
-        terminal_power(motor, scaled[1], w[1]),
-    )
-
-
 def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
     """One row in :data:`SERIES_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
     nan = math.nan
@@ -441,53 +413,6 @@ def error_metrics(series: RunSeries) -> dict[str, Any]:
     result['energy_measured_J'] = e_meas
     result['energy_error_pct'] = 100.0 * (e_pred - e_meas) / abs(e_meas) if abs(e_meas) > 1e-9 else math.nan
     return result
-
-
-def predicted_battery_J(series: RunSeries, column: str = 'predicted_battery_W') -> float:
-    """Battery-side energy [J] of a predicted power ``column`` [W] over the rows whose command is in
-    force, each row weighted by its ``hold_s`` as the measured energy is (no command in force: the
-    driver stops the motors, no drive power is predicted)."""
-    c = series.columns
-    fresh = c['cmd_fresh'] > 0
-    weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
-    return float(np.sum(np.nan_to_num(c[column] * weights)[fresh]))
-
-
-def with_prediction(series: RunSeries, torque: str | None, power: str) -> RunSeries:
-    """``series`` whose predicted torques and powers are the columns named ``torque`` / ``power``
-    with ``{side}`` in them (torque None: unchanged), for :func:`error_metrics`."""
-    columns = dict(series.columns)
-    for side in ('left', 'right'):
-        if torque is not None:
-            columns[f'predicted_torque_{side}_Nm'] = columns[torque.format(side=side)]
-        columns[f'predicted_power_{side}_W'] = columns[power.format(side=side)]
-    return replace(series, columns=columns)
-
-
-def online_summary(series: RunSeries, core: Any) -> dict[str, Any]:
-    """``online_prediction`` of the summary: what power_estimator would have published from the bag.
-
-    ``metrics``: the prediction with the per-side online correction learned up to each reading
-    (:func:`online_figures`); ``terrain_scaled``: energy and power errors with the terrain torque
-    scaled by the online terrain scale k, as the path energy uses it; ``battery_energy_predicted_J``:
-    the corrected battery energy; the adaptation's final state.
-    """
-    metrics = error_metrics(with_prediction(series, 'online_torque_{side}_Nm', 'online_power_{side}_W'))
-    scaled = error_metrics(with_prediction(series, None, 'scaled_power_{side}_W'))
-    state = core.adaptation.state()
-    return {
-        'metrics': metrics,
-        'terrain_scaled': {
-            key: scaled[key] for key in ('energy_predicted_J', 'energy_measured_J', 'energy_error_pct')
-        }
-        | {'power_left': scaled['power_left'], 'power_right': scaled['power_right']},
-        'battery_energy_predicted_J': predicted_battery_J(series, 'online_battery_W'),
-        'adaptation_enabled': bool(core.adaptation.settings.enabled),
-        'terrain_scale': state.terrain_scale,
-        'correction_scale': list(state.scale),
-        'correction_offset_Nm': list(state.offset_Nm),
-        'terrain_changes': state.terrain_changes,
-    }
 
 
 def map_coverage(series: RunSeries) -> dict[str, float]:
@@ -673,11 +598,26 @@ def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> t
     return None
 
 
-def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
-    """Run the whole validation of ``bag``; write the report; return the JSON summary."""
-    from skidsteer_power.bags.report import write_report
+@dataclass
+class BagPrediction:
+    """The estimator run over a bag as validate runs it (:func:`predict_bag`).
 
-    began = time.perf_counter()
+    inputs : the decoded bag; core : the estimator core after the run (its adaptation's final state);
+    timing : how the commands were published; motion : (kinematics, inputs with the measured twist as
+    commands) or None without odometry; series : the aligned time series (:data:`SERIES_COLUMNS`)
+    """
+
+    inputs: Inputs
+    core: Any
+    timing: CommandTiming
+    motion: tuple[str, Inputs] | None
+    series: RunSeries
+
+
+def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> BagPrediction:
+    """Run the estimator over ``bag`` from what ``options.kinematics`` says (the command, as the
+    live node, by default): the prediction every other offline comparison starts from (validate,
+    compare)."""
     inputs = read_inputs(bag, options)
     core = build_core(options, predictor, options.battery_window_s)
     timing = apply_command_timing(inputs, options.cmd_hold_s, core.settings.cmd_timeout_s)
@@ -687,6 +627,16 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     if options.kinematics != 'cmd' and motion is None:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
     series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
+    return BagPrediction(inputs, core, timing, motion, series)
+
+
+def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
+    """Run the whole validation of ``bag``; write the report; return the JSON summary."""
+    from skidsteer_power.bags.report import write_report
+
+    began = time.perf_counter()
+    run = predict_bag(bag, options, predictor)
+    inputs, core, timing, motion, series = run.inputs, run.core, run.timing, run.motion, run.series
     metrics = error_metrics(series)
     motion_summary = None
     if motion is not None and options.kinematics == 'cmd':  # ch. 7.3: also predict from the motion
