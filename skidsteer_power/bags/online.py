@@ -5,6 +5,11 @@ does; before each joint_states reading updates the core's online adaptation
 (:mod:`skidsteer_power.estimator.adaptation`), :func:`online_figures` records the corrected
 prediction the core holds at that moment (a one-sample-ahead estimate: it has learned from the
 readings before, not from this one). :func:`online_summary` is validate's ``online_prediction``.
+
+Series columns: ``online_torque_*`` [N m] and ``terrain_scale`` k [-] recorded per row; after the run
+(:data:`DERIVED_COLUMNS`) ``online_power_*`` [W], ``online_battery_W`` (the corrected battery power
+that feeds the node's energy integration) and ``scaled_power_*`` [W] (the terrain torque scaled by k
+as the path energy does: internal torque + k x terrain torque at the motor).
 """
 
 from __future__ import annotations
@@ -15,36 +20,58 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from skidsteer_power.powertrain.motor import terminal_power
+from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 if TYPE_CHECKING:
     from skidsteer_power.bags.validate import RunSeries
 
-NO_ONLINE = (math.nan,) * 7
+NO_ONLINE = (math.nan,) * 3
+DERIVED_COLUMNS = (
+    'online_power_left_W',
+    'online_power_right_W',
+    'online_battery_W',
+    'scaled_power_left_W',
+    'scaled_power_right_W',
+)
 
 
-def online_figures(core: Any) -> tuple[float, ...]:
-    """The online columns of :data:`SERIES_COLUMNS` for the core's current state: torques [N m],
-    terminal powers [W] and battery power [W] of the corrected prediction, and the terminal powers of
-    the terrain-scaled one (internal + k x terrain torque at the motor) [W]."""
-    p = core.prediction
-    if p is None:
+def online_figures(core: Any) -> tuple[float, float, float]:
+    """What a row records of the core's online state: the corrected motor torques [N m] (left,
+    right) and the terrain scale k [-]. Kept to three float reads per row (validate's speed); the
+    powers follow from them after the run (:func:`online_columns`)."""
+    if core.prediction is None:
         return NO_ONLINE
-    motor = core.powertrain.motor
-    torque = core.corrected_torque_Nm()
-    k = core.adaptation.terrain_scale()
-    gear = core.powertrain.gear_ratio
-    scaled = [t + (k - 1.0) * a / gear for t, a in zip(p.motor_torque_Nm, p.terrain_torque_Nm, strict=True)]
-    w = p.motor_omega_rad_s
-    return (
-        torque[0],
-        torque[1],
-        terminal_power(motor, torque[0], w[0]),
-        terminal_power(motor, torque[1], w[1]),
-        core.corrected_bus_W(),
-        terminal_power(motor, scaled[0], w[0]),
-        terminal_power(motor, scaled[1], w[1]),
-    )
+    left, right = core.corrected_torque_Nm()
+    return left, right, core.adaptation.terrain_scale()
+
+
+def online_columns(c: dict[str, np.ndarray], powertrain: Any) -> dict[str, np.ndarray]:
+    """:data:`DERIVED_COLUMNS` from a run's rows, vectorized: the corrected prediction's terminal
+    powers [W] at the predicted motor speeds, its battery power [W] (the prediction's plus the change
+    the correction makes through the amplifier, as ``EstimatorCore.corrected_bus_W``), and the
+    terminal powers [W] of the terrain-scaled prediction (internal + k x terrain torque at the motor)."""
+    motor, amplifier, regen = powertrain.motor, powertrain.amplifier, powertrain.regen_efficiency
+    k = c['terrain_scale']
+    out: dict[str, np.ndarray] = {}
+    bus_change = np.zeros_like(k)
+    with np.errstate(invalid='ignore'):
+        for side in ('left', 'right'):
+            omega = c[f'predicted_omega_{side}_rad_s']
+            torque = c[f'predicted_torque_{side}_Nm']
+            online = np.asarray(terminal_power(motor, c[f'online_torque_{side}_Nm'], omega))
+            out[f'online_power_{side}_W'] = online
+            plain = np.asarray(terminal_power(motor, torque, omega))
+            bus_change = (
+                bus_change
+                + np.asarray(bus_power(online, amplifier, regen))
+                - np.asarray(bus_power(plain, amplifier, regen))
+            )
+            terrain = c[f'predicted_axle_torque_{side}_Nm'] / powertrain.gear_ratio
+            out[f'scaled_power_{side}_W'] = np.asarray(
+                terminal_power(motor, torque + (k - 1.0) * terrain, omega)
+            )
+    out['online_battery_W'] = c['predicted_battery_W'] + bus_change
+    return out
 
 
 def predicted_battery_J(series: RunSeries, column: str = 'predicted_battery_W') -> float:

@@ -39,7 +39,13 @@ from skidsteer_power.bags.decode import (
     decode_planar_poses,
     decode_twists,
 )
-from skidsteer_power.bags.online import online_figures, online_summary, predicted_battery_J
+from skidsteer_power.bags.online import (
+    DERIVED_COLUMNS,
+    online_columns,
+    online_figures,
+    online_summary,
+    predicted_battery_J,
+)
 from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.errors import ConfigError, InputError
 
@@ -128,7 +134,7 @@ class RunSeries:
     soc: float
 
 
-SERIES_COLUMNS = (
+ROW_COLUMNS = (
     't_s',
     'speed_cmd_m_s',
     'yaw_rate_cmd_rad_s',
@@ -152,21 +158,16 @@ SERIES_COLUMNS = (
     'limited',
     'measured_omega_left_rad_s',
     'measured_omega_right_rad_s',
+    'predicted_omega_left_rad_s',
+    'predicted_omega_right_rad_s',
     'online_torque_left_Nm',
     'online_torque_right_Nm',
-    'online_power_left_W',
-    'online_power_right_W',
-    'online_battery_W',
-    'scaled_power_left_W',
-    'scaled_power_right_W',
+    'terrain_scale',
 )
+SERIES_COLUMNS = (*ROW_COLUMNS, *DERIVED_COLUMNS)
 # hold_s: how long the row's values are in force [s] (the weight of the row in energy sums);
 # clamped / limited: 1 where the prediction came from outside the power map (see MapQuery);
-# online_*: the prediction with the online correction the core had learned BEFORE the row's reading
-# (what power_estimator holds at that moment: a one-sample-ahead estimate, estimator/adaptation.py);
-# online_battery_W: the corrected battery power that feeds the node's energy integration;
-# scaled_power_*: the terrain torque scaled by the online terrain scale k as the path energy does
-# (internal torque + k x terrain torque at the motor); measured_omega_*: motor speed [rad/s]
+# *_omega_*: motor speed [rad/s]; online_*, terrain_scale and DERIVED_COLUMNS: bags/online.py
 
 
 def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
@@ -344,8 +345,9 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
         row_hold.append(core.cmd_fresh.timeout_s if kind == 0 else math.nan)
         rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)) + online)
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
-    table = np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
-    columns = {name: table[:, j] for j, name in enumerate(SERIES_COLUMNS)}
+    table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
+    columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
+    columns.update(online_columns(columns, core.powertrain))
     t = columns['t_s']
     if motor_data:  # a measurement holds until the next one, at most the joint timeout
         columns['hold_s'] = np.minimum(
@@ -359,15 +361,17 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
 
 
 def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
-    """One row in :data:`SERIES_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
+    """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
     nan = math.nan
     if p is None:
         pred = (nan,) * 10
         flags = (nan, nan)
+        omega: tuple[float, ...] = (nan, nan)
     else:
         pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *p.electrical_W, *p.terrain_torque_Nm,
                 p.bus_total_W, p.traction_margin)  # fmt: skip
         flags = (float(p.clamped), float(getattr(p, 'limited', False)))
+        omega = p.motor_omega_rad_s
     if comparison is None:
         meas = (nan,) * 7
     else:
@@ -375,7 +379,7 @@ def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[
         meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W, *m.omega_rad_s)
     return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
             meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags,
-            meas[5], meas[6])  # fmt: skip
+            meas[5], meas[6], *omega)  # fmt: skip
 
 
 def error_metrics(series: RunSeries) -> dict[str, Any]:
@@ -600,12 +604,8 @@ def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> t
 
 @dataclass
 class BagPrediction:
-    """The estimator run over a bag as validate runs it (:func:`predict_bag`).
-
-    inputs : the decoded bag; core : the estimator core after the run (its adaptation's final state);
-    timing : how the commands were published; motion : (kinematics, inputs with the measured twist as
-    commands) or None without odometry; series : the aligned time series (:data:`SERIES_COLUMNS`)
-    """
+    """The estimator run over a bag (:func:`predict_bag`): decoded inputs, the core after the run,
+    command timing, (kinematics, inputs with the measured twist as commands) or None, the series."""
 
     inputs: Inputs
     core: Any
