@@ -39,10 +39,15 @@ def online_figures(core: Any) -> tuple[float, float, float]:
     """What a row records of the core's online state: the corrected motor torques [N m] (left,
     right) and the terrain scale k [-]. Kept to three float reads per row (validate's speed); the
     powers follow from them after the run (:func:`online_columns`)."""
-    if core.prediction is None:
+    p = core.prediction
+    if p is None:
         return NO_ONLINE
-    left, right = core.corrected_torque_Nm()
-    return left, right, core.adaptation.terrain_scale()
+    adaptation = core.adaptation
+    torque = p.motor_torque_Nm
+    if not adaptation.settings.enabled:
+        return torque[0], torque[1], 1.0
+    left, right = adaptation.sides  # TorqueAdaptation.corrected, inlined: this runs per reading
+    return left.a * torque[0] + left.b, right.a * torque[1] + right.b, adaptation.terrain_scale()
 
 
 def online_columns(c: dict[str, np.ndarray], powertrain: Any) -> dict[str, np.ndarray]:
