@@ -267,13 +267,21 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
 
 
 def compare(options: CompareOptions, progress: Any = None) -> dict[str, Any]:
-    """The whole comparison (module doc); ``progress(message)`` is told each step."""
+    """The whole comparison (module doc); ``progress(message)`` is told each step. Without
+    ``work_dir`` the calibrated terrain lives in a temporary folder removed at the end."""
+    options.check()
+    if options.work_dir:
+        folder = Path(options.work_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        return _compare(options, folder, progress)
+    with tempfile.TemporaryDirectory(prefix='compare_') as tmp:
+        return _compare(options, Path(tmp), progress)
+
+
+def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, Any]:
     from skidsteer_power.estimator import factory
 
-    options.check()
     say = progress or (lambda message: None)
-    folder = Path(options.work_dir) if options.work_dir else Path(tempfile.mkdtemp(prefix='compare_'))
-    folder.mkdir(parents=True, exist_ok=True)
     vehicle = factory.load_vehicle_config(options.vehicle)
     gear = factory.powertrain_for(vehicle).gear_ratio
     cache = options.map_cache_dir
