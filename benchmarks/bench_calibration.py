@@ -120,13 +120,19 @@ def _coverage(report: Report, folder: Path) -> None:
     start = nearest_preset(TRUTH)
     commands = table_7_3_drive(4.0, 0.8, 1)
     fits: dict[str, list[tuple[float, float, float]]] = {}
+    pinned: dict[str, int] = {}
     for seed in range(COVERAGE_RUNS):
         bag = folder / f'seed{seed}.mcap'
         twin_bag(bag, commands, seed=seed + 1)
         result, _ = calibrate_bags([str(bag)], VEHICLE, start, holdout=0.0)
         for name in result.names:
-            lo, hi = result.ci95[name] or (math.nan, math.nan)  # None: the parameter was held fixed
+            # None: held fixed or at a fit bound (issue 27: no interval, so it covers nothing)
+            lo, hi = result.ci95[name] or (math.nan, math.nan)
             fits.setdefault(name, []).append((result.values[name], lo, hi))
+            pinned.setdefault(name, 0)
+            pinned[name] += name in result.at_bound
+    for name, count in pinned.items():
+        report.figure(f'{name}: runs that left it at a fit bound', count, '', note=f'of {COVERAGE_RUNS}')
     for name, rows in fits.items():
         arr = np.array(rows)
         truth = getattr(TRUTH, name) / (math.pi / 180 if name == 'phi' else 1.0)

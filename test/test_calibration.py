@@ -121,8 +121,12 @@ def test_kc_is_reported_non_identifiable_and_left_at_its_start(calibrated):
 def test_fitted_values_lie_inside_their_intervals_and_are_written(calibrated):
     payload, path = calibrated
     terrain = load_terrain(path)  # the calibrated file is a terrain file like any other
-    fitted = {n: e for n, e in payload['parameters'].items() if e['fitted']}
+    fitted = {n: e for n, e in payload['parameters'].items() if e['fitted'] and not e['at_bound']}
     assert fitted, 'at least one parameter fitted'
+    # issue 27: a parameter the fit left at a bound (here phi at 50 deg: the twin's friction is 32 deg,
+    # FESS buys the torque it misses with phi) has no interval and is not in the covariance
+    pinned = [n for n, e in payload['parameters'].items() if e['at_bound']]
+    assert all(payload['parameters'][n]['ci95'] is None for n in pinned)
     for name, entry in fitted.items():
         lo, hi = entry['ci95']
         assert lo < entry['value'] < hi

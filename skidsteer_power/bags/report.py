@@ -283,16 +283,19 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
     parts = []
     if battery['energy_measured_J']:
         parts.append(f'{_energy_words(battery["energy_measured_J"])} from measured power')
-    if battery['energy_predicted_J']:
+    if battery['energy_drawn_from_prediction_J']:
         where = ' where no measurement was fresh' if battery['energy_measured_J'] else ''
-        parts.append(f'{_energy_words(battery["energy_predicted_J"])} from predicted power{where}')
+        drawn_J = battery['energy_drawn_from_prediction_J']
+        parts.append(f'{_energy_words(drawn_J)} from predicted power{where}')
     drawn = ' and '.join(parts) if parts else 'nothing'
     lines += [
         '',
         '## Battery',
         '',
         f'The battery model (through the amplifiers, so a little more than at the motors) drew {drawn}; '
-        f'{_fmt(battery["remaining_wh"])} Wh remain (state of charge {_fmt(battery["soc"])}).',
+        f'{_fmt(battery["remaining_wh"])} Wh remain (state of charge {_fmt(battery["soc"])}). '
+        f'The model predicted {_energy_words(battery["energy_predicted_J"])} at the battery while '
+        'commands were in force.',
     ]
     if summary['pose_topic']:
         lines += ['', '## Trace (constant-command segments; circle fit of eqs. 7.8-7.10)', '']

@@ -39,6 +39,13 @@ from skidsteer_power.bags.decode import (
     decode_planar_poses,
     decode_twists,
 )
+from skidsteer_power.bags.online import (
+    DERIVED_COLUMNS,
+    online_columns,
+    online_figures,
+    online_summary,
+    predicted_battery_J,
+)
 from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
@@ -130,7 +137,7 @@ class RunSeries:
     no_data: int = 0  # joint_states saying "no fresh data" (NaN in every field): skipped, not rejected
 
 
-SERIES_COLUMNS = (
+ROW_COLUMNS = (
     't_s',
     'speed_cmd_m_s',
     'yaw_rate_cmd_rad_s',
@@ -152,9 +159,18 @@ SERIES_COLUMNS = (
     'hold_s',
     'clamped',
     'limited',
+    'measured_omega_left_rad_s',
+    'measured_omega_right_rad_s',
+    'predicted_omega_left_rad_s',
+    'predicted_omega_right_rad_s',
+    'online_torque_left_Nm',
+    'online_torque_right_Nm',
+    'terrain_scale',
 )
+SERIES_COLUMNS = (*ROW_COLUMNS, *DERIVED_COLUMNS)
 # hold_s: how long the row's values are in force [s] (the weight of the row in energy sums);
-# clamped / limited: 1 where the prediction came from outside the power map (see MapQuery)
+# clamped / limited: 1 where the prediction came from outside the power map (see MapQuery);
+# *_omega_*: motor speed [rad/s]; online_*, terrain_scale and DERIVED_COLUMNS: bags/online.py
 
 
 def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
@@ -325,21 +341,25 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
                     rejected['joint_states'] += 1
                     continue
                 position = positions[i] if positions is not None else ()
+                online = online_figures(core)  # before the reading updates the correction
                 comparison = core.on_joint_state(names, velocities[i], efforts[i], now, position)
                 if comparison is None:  # speed from positions: waits for a second sample
                     continue
         except RejectedInput:
             rejected['cmd_vel' if kind == 0 else 'joint_states'] += 1
             continue
+        if kind == 0:
+            online = online_figures(core)
         fresh = core.prediction is not None and core.cmd_fresh.is_fresh(now)
         if kind == 0:  # until the command's hold ends (holds never overlap), else the staleness
             row_hold.append(core.cmd_fresh.timeout_s if ends_list is None else ends_list[i] - now)
         else:
             row_hold.append(math.nan)
-        rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)))
+        rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)) + online)
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
-    table = np.array(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
-    columns = {name: table[:, j] for j, name in enumerate(SERIES_COLUMNS)}
+    table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
+    columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
+    columns.update(online_columns(columns, core.powertrain))
     t = columns['t_s']
     if motor_data:  # a measurement holds until the next one, at most the joint timeout
         columns['hold_s'] = np.minimum(
@@ -358,22 +378,25 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
 
 
 def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
-    """One row in :data:`SERIES_COLUMNS` order."""
+    """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
     nan = math.nan
     if p is None:
         pred = (nan,) * 10
         flags = (nan, nan)
+        omega: tuple[float, ...] = (nan, nan)
     else:
         pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *p.electrical_W, *p.terrain_torque_Nm,
                 p.bus_total_W, p.traction_margin)  # fmt: skip
         flags = (float(p.clamped), float(getattr(p, 'limited', False)))
+        omega = p.motor_omega_rad_s
     if comparison is None:
-        meas = (nan,) * 5
+        meas = (nan,) * 7
     else:
         m = comparison.measured
-        meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W)
+        meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W, *m.omega_rad_s)
     return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
-            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags)  # fmt: skip
+            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags,
+            meas[5], meas[6], *omega)  # fmt: skip
 
 
 def error_metrics(series: RunSeries) -> dict[str, Any]:
@@ -603,11 +626,22 @@ def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> t
     return None
 
 
-def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
-    """Run the whole validation of ``bag``; write the report; return the JSON summary."""
-    from skidsteer_power.bags.report import write_report
+@dataclass
+class BagPrediction:
+    """The estimator run over a bag (:func:`predict_bag`): decoded inputs, the core after the run,
+    command timing, (kinematics, inputs with the measured twist as commands) or None, the series."""
 
-    began = time.perf_counter()
+    inputs: Inputs
+    core: Any
+    timing: CommandTiming
+    motion: tuple[str, Inputs] | None
+    series: RunSeries
+
+
+def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> BagPrediction:
+    """Run the estimator over ``bag`` from what ``options.kinematics`` says (the command, as the
+    live node, by default): the prediction every other offline comparison starts from (validate,
+    compare)."""
     inputs = read_inputs(bag, options)
     core = build_core(options, predictor, options.battery_window_s)
     timing = apply_command_timing(inputs, options.cmd_hold_s, core.settings.cmd_timeout_s)
@@ -618,6 +652,16 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     if options.kinematics != 'cmd' and motion is None:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
     series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
+    return BagPrediction(inputs, core, timing, motion, series)
+
+
+def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
+    """Run the whole validation of ``bag``; write the report; return the JSON summary."""
+    from skidsteer_power.bags.report import write_report
+
+    began = time.perf_counter()
+    run = predict_bag(bag, options, predictor)
+    inputs, core, timing, motion, series = run.inputs, run.core, run.timing, run.motion, run.series
     metrics = error_metrics(series)
     motion_summary = None
     if motion is not None and options.kinematics == 'cmd':  # ch. 7.3: also predict from the motion
@@ -662,9 +706,14 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
         'kinematics': options.kinematics,
         'metrics': metrics,
         'motion_prediction': motion_summary,
+        'online_prediction': online_summary(series, core),
         'battery': {
             'energy_measured_J': series.energy_J.get('measured', math.nan),
-            'energy_predicted_J': series.energy_J.get('predicted', math.nan),
+            # the open-loop prediction over the same time as the measurement (issue 27: the tracker's
+            # 'predicted' tally below counts only time without a fresh measurement, 0 J on a bag
+            # whose joint_states never stop)
+            'energy_predicted_J': predicted_battery_J(series),
+            'energy_drawn_from_prediction_J': series.energy_J.get('predicted', math.nan),
             'remaining_wh': series.remaining_wh,
             'soc': series.soc,
         },

@@ -200,14 +200,25 @@ class CalibrationResult:
     before_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # predicted at the start
     after_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # predicted when fitted
     holdout_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    at_bound: dict[str, str] = field(default_factory=dict)  # fitted name -> 'lower' | 'upper'
+    jacobian_z: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # residual Jacobian in z
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fitted values in search coordinates
+    residual_variance: float = math.nan  # s^2 [N m^2]
 
     def as_json(self) -> dict[str, Any]:
         parameters = {}
         for name in self.values:
             ci = self.ci95.get(name)
+            status = 'fixed' if name not in self.names else 'fitted'
+            if name in self.at_bound:
+                status = f'at_bound ({self.at_bound[name]})'
+            elif not self.identifiable.get(name, True):
+                status = 'fixed: not identifiable'
             parameters[name] = {
                 'value': self.values[name],
                 'ci95': list(ci) if ci is not None else None,
+                'status': status,
+                'at_bound': name in self.at_bound,
                 'unit': PARAMS[name].unit,
                 'fitted': name in self.names,
                 'identifiable': self.identifiable.get(name, True),
@@ -227,7 +238,11 @@ class CalibrationResult:
             'residual_rms_Nm': self.residual_rms_Nm,
             'correlation': {'parameters': self.names, 'matrix': self.correlation.tolist()},
             'segments_dropped': self.dropped,
+            # the optimizer stopped by its tolerances; with a parameter at a bound that is a constrained
+            # optimum, not the unconstrained one: at_bound names them and a warning says so
             'optimizer_converged': self.converged,
+            'at_bound': sorted(self.at_bound),
+            'converged_inside_bounds': self.converged and not self.at_bound,
         }
 
 
@@ -277,6 +292,20 @@ def select_identifiable(
     for name, col in columns.items():
         unexplained.setdefault(name, _rmse(rest(col)))
     return [n for n in fit if n in picked], unexplained
+
+
+BOUND_TOL_Z = 1e-4  # a fitted z this close to a bound (in z units) is at it
+
+
+def bound_hits(names: Sequence[str], z: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> dict[str, str]:
+    """Fitted parameters whose search coordinate ended at (within :data:`BOUND_TOL_Z` of) a bound."""
+    hits = {}
+    for name, value, lo, hi in zip(names, z, lower, upper, strict=True):
+        if math.isfinite(lo) and value - lo <= BOUND_TOL_Z * max(1.0, abs(lo)):
+            hits[name] = 'lower'
+        elif math.isfinite(hi) and hi - value <= BOUND_TOL_Z * max(1.0, abs(hi)):
+            hits[name] = 'upper'
+    return hits
 
 
 def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -398,18 +427,26 @@ def calibrate(
     fitted = _values(names, sol.x)
     r = residuals(sol.x)
     jac = sol.jac
-    dof = max(1, m - p)
+    at_bound = bound_hits(names, sol.x, lower, upper)
+    free = np.array([n not in at_bound for n in names])
+    dof = max(1, m - int(free.sum()))
     s2 = float(r @ r) / dof
-    cov_z = s2 * np.linalg.pinv(jac.T @ jac)
+    # a parameter pinned at a bound is no estimate: no interval, and the others' covariance is that
+    # of the free parameters with it held (the Jacobian's pinned columns dropped)
+    cov_z = np.zeros((p, p))
+    cov_z[np.ix_(free, free)] = s2 * np.linalg.pinv(jac[:, free].T @ jac[:, free])
     sigma_z = np.sqrt(np.clip(np.diag(cov_z), 0.0, None))
     t = float(stats.t.ppf(0.975, dof))
     ci95: dict[str, tuple[float, float] | None] = {}
     deriv = np.empty(p)
     for k, name in enumerate(names):
+        deriv[k] = fitted[name] if PARAMS[name].log else 1.0
+        if name in at_bound:
+            ci95[name] = None
+            continue
         lo = _from_z(name, sol.x[k] - t * sigma_z[k])
         hi = _from_z(name, sol.x[k] + t * sigma_z[k])
         ci95[name] = (lo, hi)
-        deriv[k] = fitted[name] if PARAMS[name].log else 1.0
     covariance = cov_z * np.outer(deriv, deriv)  # delta method, parameter units
     with np.errstate(invalid='ignore', divide='ignore'):
         correlation = cov_z / np.outer(sigma_z, sigma_z)
@@ -421,6 +458,13 @@ def calibrate(
         for j in range(i + 1, p)
         if abs(correlation[i, j]) > RHO_WARN
     ]
+    for name, side in at_bound.items():
+        bound = PARAMS[name].bounds[0 if side == 'lower' else 1]
+        warnings.append(
+            f'{name} = {fitted[name]:.6g} {PARAMS[name].unit} is at its {side} fit bound ({bound:g}): '
+            'the data push it beyond; it is no estimate and has no interval (a closer --terrain, or other '
+            'drives)'
+        )
     after_torque, after_omega, after_ok = model.predict(fitted)
     err_idx = hold_idx if hold_idx.size else fit_idx
     values = {n: fitted.get(n, start[n]) for n in candidates}
@@ -453,6 +497,10 @@ def calibrate(
         powertrain=powertrain_fit,
         dropped=dict(dropped or {}),
         converged=bool(sol.success) and bool(np.all(after_ok)),
+        at_bound=at_bound,
+        jacobian_z=np.asarray(jac),
+        z=np.asarray(sol.x),
+        residual_variance=s2,
         measured_Nm=measured,
         before_Nm=base_torque,
         after_Nm=after_torque,

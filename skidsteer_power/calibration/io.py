@@ -12,6 +12,7 @@ skips::
       covariance: [[...], ...]         # 95 % CIs = value +- 1.96 sqrt(diag) approximately
       ci95: {n: [lo, hi], ...}
       fixed: [kphi, c, kc]             # not identifiable from the data: left at the start value
+      at_bound: [phi]                  # fitted but stopped at a fit bound: no estimate, no covariance
       bags: [...]; date: ISO 8601 UTC; residual_rms_Nm: fit residual (motor torque RMS)
       start_terrain: name of T0; segments_fit, segments_holdout
       powertrain_parameters / powertrain_covariance: when internal resistance was fitted
@@ -43,7 +44,8 @@ def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], li
 
 def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name: str) -> dict[str, Any]:
     """The ``calibration:`` mapping written into the terrain file (see module doc)."""
-    terrain_names = [n for n in result.names if n in TERRAIN_PARAMS]
+    # a parameter at a fit bound is no estimate (fit.py): written as a plain value, listed in at_bound
+    terrain_names = [n for n in result.names if n in TERRAIN_PARAMS and n not in result.at_bound]
     values, cov = _block(result, terrain_names)
     block: dict[str, Any] = {
         'parameters': terrain_names,
@@ -52,6 +54,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'covariance': cov,
         'ci95': {n: [float(v) for v in ci] for n in terrain_names if (ci := result.ci95.get(n))},
         'fixed': [n for n in TERRAIN_PARAMS if n not in result.names],
+        'at_bound': sorted(n for n in result.at_bound if n in TERRAIN_PARAMS),
         'correlations_warnings': list(result.correlations_warnings),
         'bags': [str(Path(b).resolve()) for b in bags],
         'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),

@@ -5,7 +5,9 @@ sensitivity_Nm}), correlations_warnings, segments_fit, segments_holdout, torque_
 torque_rmse_after_Nm (hold-out segments; the fit segments when there is no hold-out),
 holdout_energy_error_before, holdout_energy_error_after (signed fractions: predicted / measured - 1
 of the hold-out segments' motor terminal energy), seconds, residual_rms_Nm, correlation,
-segments_dropped, optimizer_converged, out_terrain, out_powertrain. Method:
+segments_dropped, optimizer_converged (the optimizer's own stop; see at_bound),
+at_bound (fitted parameters pinned at a fit bound: status 'at_bound (lower|upper)', no interval, a
+warning), converged_inside_bounds, suggest (with --suggest), out_terrain, out_powertrain. Method:
 :mod:`skidsteer_power.calibration.fit`.
 """
 
@@ -67,6 +69,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar='PATH',
         help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
     )
+    parser.add_argument(
+        '--suggest',
+        action='store_true',
+        help='name the 2-4 (V, yaw rate) holds that would most shrink the widest interval '
+        "(experiment design from the fit's Fisher information; a 7 x 7 grid over the command envelope)",
+    )
     add_json_flag(parser)
     parser.set_defaults(func=run)
 
@@ -104,6 +112,12 @@ def run(args: argparse.Namespace) -> int:
     payload['out_powertrain'] = None
     if args.out_powertrain:
         payload['out_powertrain'] = str(io.write_powertrain(args.out_powertrain, result, args.bags))
+    payload['suggest'] = None
+    if args.suggest:
+        from skidsteer_power.calibration.design import suggest_holds
+        from skidsteer_power.estimator import factory
+
+        payload['suggest'] = suggest_holds(factory.load_vehicle_config(args.vehicle), result)
     if args.plot:
         from skidsteer_power.calibration.plots import plot_segments
 
@@ -123,10 +137,12 @@ def _print_human(payload: dict[str, Any]) -> None:
     print(f'{"parameter":<17}{"value":>12}  {"95 % CI":<26}{"unit":<12}status')
     for name, p in payload['parameters'].items():
         ci = f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}]' if p['ci95'] else '-'
-        status = 'fitted' if p['fitted'] else ('fixed' if p['identifiable'] else 'fixed: not identifiable')
+        status = p['status']
         print(f'{name:<17}{_fmt(p["value"]):>12}  {ci:<26}{p["unit"]:<12}{status}')
     for warning in payload['correlations_warnings']:
         print(f'warning: {warning}')
+    if payload['at_bound']:
+        print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
     print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out')
     print(
         'hold-out torque RMSE: '
@@ -137,4 +153,16 @@ def _print_human(payload: dict[str, Any]) -> None:
         f'wrote {payload["out_terrain"]}'
         + (f' and {payload["out_powertrain"]}' if payload['out_powertrain'] else '')
     )
+    suggest = payload.get('suggest')
+    if suggest and suggest['holds']:
+        name, unit = suggest['widest_parameter'], suggest['unit']
+        print(f'widest interval: {name} {_ci(suggest["ci95_now"])} {unit}; drive next (steady holds):')
+        for hold in suggest['holds']:
+            after = _ci(hold[f'{name}_ci95_after'])
+            speed, yaw = hold['speed_m_s'], hold['yaw_rate_rad_s']
+            print(f'  V {speed:.3g} m/s, yaw rate {yaw:.3g} rad/s -> {name} {after}')
     print(f'{payload["seconds"]:.1f} s')
+
+
+def _ci(interval: list[float]) -> str:
+    return f'[{_fmt(interval[0])}, {_fmt(interval[1])}]' if interval else '-'
