@@ -278,7 +278,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     [
         (['replay', 'MISSING.mcap'], 'bag not found'),
         (['replay', 'BAG', '--topics', '/nope'], 'no topic /nope'),
-        (['replay', 'BAG', '--rate', '0'], 'must be > 0'),
+        (['replay', 'BAG', '--rate', '0'], 'rate = 0 x is outside its range'),
         (['replay', 'JUNK'], 'truncated or corrupt'),
         (['record', '-o', 'BAG', '/a'], 'output exists already'),
         (['replay', 'BAG', '--msg', 'MISSING'], 'does not exist'),

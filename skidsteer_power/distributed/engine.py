@@ -22,6 +22,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.progress import progress_bar
+from skidsteer_power.terramechanics.ranges import LOCAL_WORKERS
 
 CONNECT_TIMEOUT_S = 10.0
 
@@ -32,8 +34,8 @@ class Engine:
     def __init__(
         self, scheduler: str | None = None, workers: int | None = None, progress: bool | None = None
     ):
-        if workers is not None and workers < 1:
-            raise InputError(f'--jobs/--workers must be >= 1, not {workers}')
+        if workers is not None:
+            LOCAL_WORKERS.check(workers)  # more processes than cores only slow a study: use a cluster
         if scheduler is not None and workers is not None:
             raise InputError('give either a scheduler address or a number of local workers, not both')
         self.scheduler = scheduler
@@ -86,7 +88,7 @@ class Engine:
         futures = self.client.map(fn, list(items), pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
-        with _progress(self.progress, label, len(futures)) as advance:
+        with progress_bar(self.progress, label, len(futures)) as advance:
             try:
                 for future in as_completed(futures):
                     results[index[future.key]] = future.result()
@@ -95,36 +97,6 @@ class Engine:
                 self.client.cancel(futures)
                 raise
         return results
-
-
-class _progress:
-    """A rich progress bar on stderr (or nothing), as a context manager yielding ``advance()``."""
-
-    def __init__(self, enabled: bool, label: str, total: int) -> None:
-        self.enabled, self.label, self.total = enabled, label, total
-        self.bar: Any = None
-
-    def __enter__(self) -> Callable[[], None]:
-        if not self.enabled:
-            return lambda: None
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-        self.bar = Progress(
-            TextColumn('{task.description}'),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeRemainingColumn(),
-            console=Console(stderr=True),
-            transient=True,
-        )
-        self.bar.start()
-        task = self.bar.add_task(self.label, total=self.total)
-        return lambda: self.bar.advance(task)
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.stop()
 
 
 def add_engine_args(parser: Any, jobs_flag: str | None = None) -> None:
@@ -140,8 +112,8 @@ def add_engine_args(parser: Any, jobs_flag: str | None = None) -> None:
     parser.add_argument(
         jobs_flag,
         dest='workers',
-        type=int,
+        type=LOCAL_WORKERS.arg(),
         default=None,
         metavar='N',
-        help='local worker processes (default: one per core)',
+        help=LOCAL_WORKERS.help('local worker processes (default: one per core; more: --scheduler)'),
     )

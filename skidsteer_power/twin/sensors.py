@@ -19,7 +19,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +31,7 @@ from skidsteer_power.bags.synthetic import NS, START_NS
 from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import COMMAND_ROWS, SIM_DURATION_S, check_file_size
 from skidsteer_power.twin.model import Twin
 
 SENSOR_RATE_HZ = 50.0
@@ -127,8 +128,15 @@ class TwinTrace:
         }
 
 
-def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SENSOR_RATE_HZ) -> TwinTrace:
-    """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz]."""
+def run_commands(
+    twin: Twin,
+    commands: Sequence[Segment],
+    *,
+    rate_hz: float = SENSOR_RATE_HZ,
+    progress: Callable[[float], None] | None = None,
+) -> TwinTrace:
+    """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz];
+    ``progress(seconds)`` is told the twin time [s] of each command done."""
     every = max(1, round(1.0 / (rate_hz * twin.dt)))
     rows: list[tuple] = []
     current_sum = [0.0, 0.0]
@@ -169,6 +177,8 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
             count += 1
             if count >= every:
                 sample()
+        if progress is not None:
+            progress(segment.duration_s)
     return _trace(twin, rows)
 
 
@@ -272,29 +282,24 @@ def _every() -> tuple[int, int, int]:
 
 def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     """Columns t_s, speed_m_s, yaw_rate_rad_s; each row holds until the next; the last row's t_s
-    ends the run (its command is not held). InputError naming the line for bad rows."""
+    ends the run (its command is not held). InputError naming the line for bad rows. Read row by row
+    and stopped early: a file over ``ROUTE_CSV_BYTES``, more than ``COMMAND_ROWS`` rows or a t_s
+    beyond the simulated-time range is refused before the rest is read."""
     import csv
 
     file = Path(path)
     try:
+        check_file_size(file)
         with file.open(newline='', encoding='utf-8') as handle:
             reader = csv.DictReader(handle)
             missing = {'t_s', 'speed_m_s', 'yaw_rate_rad_s'} - set(reader.fieldnames or ())
             if missing:
                 raise InputError(f'{file}: missing column(s) {", ".join(sorted(missing))}')
-            rows = []
-            for line, row in enumerate(reader, start=2):
-                try:
-                    values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
-                except (TypeError, ValueError):
-                    raise InputError(
-                        f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers'
-                    ) from None
-                if not all(math.isfinite(v) for v in values):
-                    raise InputError(f'{file}:{line}: values must be finite')
-                rows.append(values)
+            rows = [_command_row(file, line, row) for line, row in _capped(reader, file)]
     except OSError as err:
         raise InputError(f'cannot read command file {file}: {err.strerror or err}') from err
+    except (csv.Error, UnicodeDecodeError) as err:
+        raise InputError(f'{file}: not a command CSV ({err})') from err
     if len(rows) < 2:
         raise InputError(f'{file}: need at least two rows (the last one ends the run)')
     times = np.array([r[0] for r in rows])
@@ -303,6 +308,28 @@ def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     segments = [Segment(0.0, 0.0, float(times[0]))] if times[0] > 0 else []
     segments += [Segment(a[1], a[2], b[0] - a[0]) for a, b in itertools.pairwise(rows) if b[0] > a[0]]
     return segments
+
+
+def _capped(reader: Any, file: Path) -> Any:
+    """(line, row) of ``reader``; InputError past ``COMMAND_ROWS`` rows, before reading further."""
+    for line, row in enumerate(reader, start=2):
+        if line - 1 > COMMAND_ROWS:
+            raise InputError(f'{file}: more than {COMMAND_ROWS:,} rows')
+        yield line, row
+
+
+def _command_row(file: Path, line: int, row: dict[str, str]) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
+    except (TypeError, ValueError):
+        raise InputError(f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers') from None
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f'{file}:{line}: values must be finite')
+    try:
+        SIM_DURATION_S.check(max(values[0], 1e-9))  # t_s: a run beyond the limit stops here
+    except InputError as err:
+        raise InputError(f'{file}:{line}: t_s: {err}') from None
+    return values  # type: ignore[return-value]
 
 
 def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> list[Segment]:
