@@ -206,7 +206,7 @@ def validate_fleet(
     """Run every job on ``engine``; write fleet.csv, summary.md and plots to ``out_dir``; the summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rows = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags')
+    rows = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags', heavy=True)
     files = {'csv': str(out / 'fleet.csv'), 'markdown': str(out / 'summary.md')}
     _write_csv(Path(files['csv']), rows)
     groups = group_means(rows)
