@@ -128,6 +128,10 @@ class TwinTrace:
         }
 
 
+MIN_STEP_S = 1e-9
+"""Shortest twin step taken [s] (a bag's time resolution, 1 ns): a command row ends within it."""
+
+
 def run_commands(
     twin: Twin,
     commands: Sequence[Segment],
@@ -136,16 +140,24 @@ def run_commands(
     progress: Callable[[float], None] | None = None,
 ) -> TwinTrace:
     """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz];
-    ``progress(seconds)`` is told the twin time [s] of each command done."""
-    every = max(1, round(1.0 / (rate_hz * twin.dt)))
+    ``progress(seconds)`` is told the twin time [s] of each command done.
+
+    Each command is held for its own duration: the twin steps at its ``dt`` and shortens the step
+    that would cross the end of a command or a sample time (a 0.5 ms row is one 0.5 ms step, a 3 ms
+    row a 2 ms and a 1 ms step), so the run lasts exactly the commands' total and samples fall on
+    the ``rate_hz`` grid; a run ending between samples gets a last sample at its end. Sensor
+    averages weight each step by its length.
+    """
+    full_dt = twin.dt
+    period = max(1, round(1.0 / (rate_hz * full_dt))) * full_dt  # a whole number of full steps [s]
     rows: list[tuple] = []
     current_sum = [0.0, 0.0]
     bus_sum = 0.0
-    count = 0
+    weight = 0.0  # steps since the last sample, in full steps
 
     def sample() -> None:
-        nonlocal current_sum, bus_sum, count
-        k = max(count, 1)
+        nonlocal current_sum, bus_sum, weight
+        k = weight if weight > 0 else 1.0
         last = twin.last
         rows.append(
             (
@@ -163,22 +175,34 @@ def run_commands(
                 last.sinkage_m,
             )
         )
-        current_sum, bus_sum, count = [0.0, 0.0], 0.0, 0
+        current_sum, bus_sum, weight = [0.0, 0.0], 0.0, 0.0
 
     sample()
-    for segment in commands:
-        twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
-        for _ in range(round(segment.duration_s / twin.dt)):
-            twin._step()
-            left, right = twin.current_A
-            current_sum[0] += left
-            current_sum[1] += right
-            bus_sum += twin.bus_current_A
-            count += 1
-            if count >= every:
-                sample()
-        if progress is not None:
-            progress(segment.duration_s)
+    end_s = next_sample_s = twin.t
+    next_sample_s += period
+    try:
+        for segment in commands:
+            twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
+            end_s += segment.duration_s
+            while end_s - twin.t > MIN_STEP_S:
+                step = min(full_dt, end_s - twin.t, max(next_sample_s - twin.t, MIN_STEP_S))
+                twin.dt = full_dt if step > full_dt - MIN_STEP_S else step
+                twin._step()
+                w = twin.dt / full_dt  # exactly 1.0 for a full step
+                left, right = twin.current_A
+                current_sum[0] += w * left
+                current_sum[1] += w * right
+                bus_sum += w * twin.bus_current_A
+                weight += w
+                if twin.t >= next_sample_s - MIN_STEP_S:
+                    sample()
+                    next_sample_s += period
+            if progress is not None:
+                progress(segment.duration_s)
+    finally:
+        twin.dt = full_dt
+    if weight > 0:
+        sample()  # the run ended between two samples
     return _trace(twin, rows)
 
 
