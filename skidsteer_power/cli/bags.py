@@ -35,17 +35,30 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
 
 
 def _open(args: argparse.Namespace) -> Any:
-    """The bag, checked complete first unless ``--salvage`` (a damaged bag: one line, exit 2)."""
-    from skidsteer_power.bags.reader import load_msg_definitions, open_bag
+    """The bag after one full counting pass: without ``--salvage`` a damaged bag is one line and
+    exit 2; with it the pass measures what is there (``messages_read``), so nothing unread is
+    called complete."""
+    from skidsteer_power.bags.reader import BagDamageError, load_msg_definitions, open_bag
 
-    bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
-    if not args.salvage:
+    try:
+        bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
         try:
-            bag.count_all()  # reads every message once; raises InputError saying what is missing
+            bag.count_all()  # reads every message once; raises (not salvage) saying what is missing
         except BaseException:
             bag.close()
             raise
+    except BagDamageError as err:
+        raise BagDamageError(f'{err}; --salvage recovers every intact message') from err
     return bag
+
+
+def _integrity(bag: Any, undecodable: dict[str, int]) -> dict[str, Any]:
+    """The bag's integrity keys, with ``undecodable`` (skipped messages per topic) merged in."""
+    out = bag.integrity()
+    for topic, count in undecodable.items():
+        out['undecodable'][topic] = out['undecodable'].get(topic, 0) + count
+    out['complete'] = out['complete'] and not out['undecodable']
+    return out
 
 
 def _log_to_stderr() -> None:
@@ -105,8 +118,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             'wall_time_s': result.wall_s,
             'max_late_s': result.max_late_s,
             'stopped_by': stop.signal_name or 'end',
-            'undecodable': result.undecodable,
-            **bag.integrity(),
+            **_integrity(bag, result.undecodable),
         },
         args.json,
     )

@@ -262,10 +262,20 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
     if args.plot:
         from skidsteer_power.missions.plots import plot_missions
 
-        plot_missions([result], Path(args.plot))
-        payload['plot'] = str(args.plot)
+        png = _png(args.plot)
+        plot_missions([result], png)
+        payload['plot'] = str(png)
     emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
     return 0
+
+
+def _png(text: str) -> Path:
+    """The file a ``--plot`` writes: a PNG path ('.png' added when missing, as matplotlib would add
+    it), so the reported name is the file's; an existing directory is an InputError."""
+    path = Path(text)
+    if path.is_dir():
+        raise InputError(f'--plot {text}: is a directory; give a file name such as {path / "plot.png"}')
+    return path if path.suffix.lower() == '.png' else path.with_name(path.name + '.png')
 
 
 def _default_cache() -> Path:
@@ -305,8 +315,9 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
     if args.plot:
         from skidsteer_power.missions.plots import plot_sensitivity
 
-        plot_sensitivity(table, Path(args.plot))
-        table['plot'] = str(args.plot)
+        png = _png(args.plot)
+        plot_sensitivity(table, png)
+        table['plot'] = str(png)
     if args.json:
         emit(table, True)
     else:
@@ -364,8 +375,9 @@ def run_design_cmd(args: argparse.Namespace) -> int:
     if args.plot:
         from skidsteer_power.missions.plots import plot_design_study
 
-        plot_design_study(study['candidates'], study['best'], Path(args.plot))
-        study['plot'] = str(args.plot)
+        png = _png(args.plot)
+        plot_design_study(study['candidates'], study['best'], png)
+        study['plot'] = str(png)
     if args.json:
         emit(study, True)
     else:
