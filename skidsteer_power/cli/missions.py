@@ -230,6 +230,7 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.energy import run_mission
     from skidsteer_power.powertrain import Battery, Powertrain
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     vehicle, terrain = _load(args.vehicle, args.terrain)
     route = _route(args.route, args.speed, args.payload_kg)
     powertrain = Powertrain.for_vehicle(vehicle)
@@ -259,10 +260,9 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
                 engine, vehicle, terrain, route, powertrain, spread, samples=args.samples, seed=args.seed,
                 method=args.sampling, source=_source(args), model=args.model,
             )  # fmt: skip
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_missions
 
-        png = _png(args.plot)
         plot_missions([result], png)
         payload['plot'] = str(png)
     emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
@@ -287,6 +287,7 @@ def _default_cache() -> Path:
 def run_sensitivity_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.sensitivity import sensitivity
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     names = args.vehicle or list(PACKBOTS)
     loaded = [_load(name, args.terrain) for name in names]
     vehicles, terrain = [v for v, _ in loaded], loaded[0][1]
@@ -312,10 +313,9 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
             )  # fmt: skip
     elif args.samples or args.uncertainty or args.scheduler:
         raise InputError('--samples, --uncertainty and --scheduler go with --method sobol')
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_sensitivity
 
-        png = _png(args.plot)
         plot_sensitivity(table, png)
         table['plot'] = str(png)
     if args.json:
@@ -343,6 +343,7 @@ def run_design_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.design import CONFIGURATIONS, design_study, grid
     from skidsteer_power.terramechanics.terrain import load_terrain
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     terrain = load_terrain(args.terrain)
     configs = tuple(args.configuration or CONFIGURATIONS)
     if not (args.samples or args.uncertainty or args.scheduler):
@@ -372,10 +373,9 @@ def run_design_cmd(args: argparse.Namespace) -> int:
                 for c in study['candidates']:
                     c |= stats[c['index']]
                 study |= extra
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_design_study
 
-        png = _png(args.plot)
         plot_design_study(study['candidates'], study['best'], png)
         study['plot'] = str(png)
     if args.json:
