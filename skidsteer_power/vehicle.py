@@ -40,6 +40,8 @@ import yaml
 
 from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
+from skidsteer_power.terramechanics import ranges
+from skidsteer_power.terramechanics.ranges import Range
 
 GRAVITY_M_S2 = 9.81  # [m/s^2], the value used throughout the dissertation
 
@@ -153,12 +155,34 @@ def _fail(vehicle_name: str, message: str) -> ConfigError:
     return ConfigError(f'vehicle {vehicle_name!r}: {message}')
 
 
+def _field_ranges() -> dict[str, Range]:
+    """The physical range of each number of a vehicle file (terramechanics.ranges states why)."""
+    return {
+        'mass_kg': ranges.MASS_KG,
+        'cg_height_m': ranges.CG_HEIGHT_M,
+        'tread_m': ranges.TREAD_M,
+        'max_speed_m_s': ranges.FORWARD_SPEED_M_S,
+        'max_yaw_rate_rad_s': ranges.YAW_RATE_RAD_S,
+        'track_length_m': ranges.LENGTH_M,
+        'track_width_m': ranges.WIDTH_M,
+        'sprocket_radius_m': ranges.RADIUS_M,
+        'wheel_radius_m': ranges.RADIUS_M,
+        'wheel_width_m': ranges.WIDTH_M,
+        'wheelbase_m': ranges.WHEELBASE_M,
+        'yaw_inertia_kg_m2': ranges.YAW_INERTIA_KG_M2,
+    }
+
+
 def _check_positive(vehicle: Vehicle, name: str) -> None:
+    """``name`` is a finite number > 0 inside its physical range (:func:`_field_ranges`)."""
     value = getattr(vehicle, name)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _fail(vehicle.name, f'{name} must be a number, not {value!r}')
     if not math.isfinite(value) or value <= 0:
         raise _fail(vehicle.name, f'{name} must be a finite number > 0, not {value!r}')
+    limits = _field_ranges()[name]
+    if not limits.contains(value):
+        raise _fail(vehicle.name, f'{name} = {value:g} is outside its range {limits.text}')
 
 
 def _validate(vehicle: Vehicle) -> None:

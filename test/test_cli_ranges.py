@@ -121,11 +121,12 @@ def test_mission_speed_inside_the_power_map_runs(capsys):
 
 @pytest.mark.parametrize(
     ('length', 'radius', 'ok'),
-    [('1e12', 'inf', True), ('1e12', '1', False), ('1e5', '-2', False), ('100', '0.5', True)],
+    [('1e5', 'inf', True), ('1e5', '1', False), ('1e5', '-2', False), ('100', '0.5', True)],
 )
 def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length, radius, ok):
-    """A 1e12 m straight segment is one step (it once exhausted memory); an arc needs one step per
-    5 degrees of turn, and a route needing more than MAX_TRACE_STEPS is one clear error."""
+    """A straight segment of the longest leg (1e5 m; a 1e12 m one once exhausted memory, and is now
+    outside the leg range) is one step; an arc needs one step per 5 degrees of turn, and a route
+    needing more than MAX_TRACE_STEPS is one clear error."""
     csv = tmp_path / 'route.csv'
     csv.write_text(f'length_m,speed_m_s,turn_radius_m\n{length},0.2,{radius}\n')
     if not ok:

@@ -65,11 +65,27 @@ def test_an_impossible_prediction_is_clamped_and_counted(battery_W):
 
 
 # --- the state file -------------------------------------------------------------------------------
+def _state_bytes(soc: str = '0.5', measured: str = '100.0') -> bytes:
+    """A state file of the test robot, with the given raw JSON for soc and the measured tally."""
+    text = (
+        '{"format_version": 1, "vehicle": "test_robot_track", "battery": {"state": {"soc": SOC, '
+        '"elapsed_s": 10.0, "drawn_J": 50.0}}, "energy_J": {"measured": MEASURED, "predicted": 90.0}}'
+    )
+    return text.replace('SOC', soc).replace('MEASURED', measured).encode()
+
+
 DAMAGED = {
     'garbage bytes': b'\x89\xff\x00garbage\xfe' * 20,
     'truncated JSON': b'{"format_version": 1, "batt',
     'wrong schema': b'{"format_version": 1, "vehicle": "test_robot_track", "battery": [1, 2]}',
     'other format': b'[1, 2, 3]',
+    # issue 28: a RecursionError once stopped the node; "nan" and 1e308 tallies were accepted
+    'nested 40 KB': b'[' * 20_000 + b']' * 20_000,
+    'nested 400 KB (over the size limit)': b'[' * 200_000 + b']' * 200_000,
+    'nan tally': _state_bytes(measured='"nan"'),
+    'NaN tally': _state_bytes(measured='NaN'),
+    'tally out of range': _state_bytes(measured='1e308'),
+    'soc out of range': _state_bytes(soc='1.5'),
 }
 
 
@@ -94,6 +110,35 @@ def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path)
     core = make_core()
     state, warning = load_or_quarantine(path, core.restore)
     assert warning == '' and state is not None and core.battery.soc == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize('capacity', ['10', '1e308'])
+def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(tmp_path, capacity):
+    """A state file carrying a battery configuration (the old format did) keeps its tallies only:
+    capacity_Ah 10 once made the test robot's battery 449.7 Wh, 1e308 inf Wh."""
+    path = tmp_path / 'energy.json'
+    reference = make_core()
+    reference.energy.battery = Battery.default_test_robot(soc=0.5)  # the vehicle's battery at 50 %
+    state = json.loads(_state_bytes())
+    state['battery']['config'] = dict(reference.battery.to_dict()['config'], capacity_Ah=float(capacity))
+    path.write_text(json.dumps(state))
+    core = make_core()
+    restored, warning = load_or_quarantine(path, core.restore)
+    assert warning == '' and restored is not None
+    assert core.battery.config == reference.battery.config
+    assert core.battery.remaining_wh == pytest.approx(reference.battery.remaining_wh)
+    assert core.energy.energy_J == {'measured': 100.0, 'predicted': 90.0}
+    assert core.battery.state.drawn_J == 50.0 and core.battery.state.elapsed_s == 10.0
+
+
+def test_the_state_file_keeps_tallies_only(tmp_path):
+    core = make_core()
+    saved = core.state_dict()
+    assert set(saved['battery']) == {'state'} and set(saved['battery']['state']) == {
+        'soc',
+        'elapsed_s',
+        'drawn_J',
+    }
 
 
 # --- the node, over real rclpy ----------------------------------------------------------------------

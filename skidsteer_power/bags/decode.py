@@ -54,8 +54,7 @@ def decode_twists(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndarray, n
             return t, fast
     stamps_ns: list[int] = []
     values: list[tuple[float, float]] = []
-    for message in bag.messages([topic]):
-        msg = bag.deserialize(message)
+    for message, msg in bag.decoded(topic):
         twist = msg.twist if stamped else msg
         stamps_ns.append(message.timestamp_ns - t0_ns)
         values.append((twist.linear.x, twist.angular.z))
@@ -95,8 +94,7 @@ def decode_joint_arrays(
     nan_row = np.full(k, np.nan)
     last_names: list[str] | None = None
     rows: list[int] = []
-    for message in bag.messages([topic]):
-        msg = bag.deserialize(message)
+    for message, msg in bag.decoded(topic):
         t.append(message.timestamp_ns - t0_ns)
         if msg.name != last_names:  # joint order rarely changes: look the rows up once
             index = {name: i for i, name in enumerate(msg.name)}
@@ -126,8 +124,7 @@ def decode_planar_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndar
     msgtype = bag.topics[topic].msgtype
     nested = msgtype in ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/PoseWithCovarianceStamped')
     t, rows = [], []
-    for message in bag.messages([topic]):
-        msg = bag.deserialize(message)
+    for message, msg in bag.decoded(topic):
         pose = msg.pose.pose if nested else msg.pose
         q = pose.orientation
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))

@@ -45,6 +45,9 @@ CSV_COLUMNS = (
     'terrain',
     'ok',
     'error',
+    'complete',
+    'messages_expected',
+    'messages_read',
     'duration_s',
     'distance_m',
     'distance_source',
@@ -162,8 +165,10 @@ def validate_job(job: BagJob) -> dict[str, Any]:
 
         options = job.options
         with open_bag(job.bag, salvage=job.salvage, warn_unknown=False) as bag:
+            bag.count_all()  # what the bag holds against what it says it holds (salvage: no raise)
             summary = validate(bag, options)
             distance, source = distance_driven(read_inputs(bag, options))
+            integrity = bag.integrity()
     except Exception as err:  # any failure of one bag is that bag's row, the fleet goes on
         last = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
         where = f' ({Path(last.filename).name}:{last.lineno})' if last else ''
@@ -176,6 +181,9 @@ def validate_job(job: BagJob) -> dict[str, Any]:
     row.update(
         ok=True,
         error='',
+        complete=integrity['complete'],  # a salvaged bag is validated but never complete
+        messages_expected=integrity['messages_expected'],
+        messages_read=integrity['messages_read'],
         duration_s=summary['duration_s'],
         distance_m=distance,
         distance_source=source,
@@ -206,7 +214,7 @@ def validate_fleet(
     """Run every job on ``engine``; write fleet.csv, summary.md and plots to ``out_dir``; the summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rows = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags')
+    rows = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags', heavy=True)
     files = {'csv': str(out / 'fleet.csv'), 'markdown': str(out / 'summary.md')}
     _write_csv(Path(files['csv']), rows)
     groups = group_means(rows)
@@ -220,6 +228,7 @@ def validate_fleet(
         'bags': len(rows),
         'ok': len(ok),
         'failed': len(rows) - len(ok),
+        'incomplete': sum(not r['complete'] for r in ok),  # validated from part of the bag
         'energy_error_pct_mean': float(np.mean(errors)) if errors.size else math.nan,
         'energy_error_pct_abs_max': float(np.max(np.abs(errors))) if errors.size else math.nan,
         'groups': groups,
@@ -257,6 +266,8 @@ def group_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _fmt(value: Any, fmt: str = '.4g') -> str:
+    if value is None:
+        return ''
     if isinstance(value, float):
         return '' if math.isnan(value) else format(value, fmt)
     return str(value)
@@ -268,6 +279,15 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
         writer.writerow(CSV_COLUMNS)
         for r in rows:
             writer.writerow([_fmt(r.get(c, math.nan), '.6g') for c in CSV_COLUMNS])
+
+
+def _status(row: dict[str, Any]) -> str:
+    if not row['ok']:
+        return f'FAILED: {row["error"]}'.replace('|', '/')
+    if row.get('complete'):
+        return 'ok'
+    expected = row.get('messages_expected')
+    return f'ok, INCOMPLETE: read {row.get("messages_read")} of {"?" if expected is None else expected}'
 
 
 def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: str) -> str:
@@ -282,7 +302,7 @@ def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: 
         '| --- | --- | --- | --- | --- | --- | --- | --- | --- |',
     ]
     for r in rows:
-        status = 'ok' if r['ok'] else f'FAILED: {r["error"]}'.replace('|', '/')
+        status = _status(r)
         cells = [
             Path(r['bag']).name,
             r['vehicle'],
@@ -369,8 +389,8 @@ def run_fleet_cmd(args: Any, shared: ValidateOptions) -> int:
         print_json(summary)
     else:
         print(
-            f'{summary["bags"]} bags: {summary["ok"]} validated, {summary["failed"]} failed '
-            f'({summary["engine"]})'
+            f'{summary["bags"]} bags: {summary["ok"]} validated ({summary["incomplete"]} of them '
+            f'incomplete), {summary["failed"]} failed ({summary["engine"]})'
         )
         for g in summary['groups']:
             print(

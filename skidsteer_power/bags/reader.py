@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 LOG = logging.getLogger(__name__)
 
 DEFAULT_STORE = Stores.ROS2_JAZZY
-_SALVAGE_HINT = '; --salvage recovers every intact message'
+ROS_ENCODING = 'cdr'  # message encoding of ROS 2 channels; others (protobuf, json) are skipped
 _IDL_SEPARATOR = '=' * 80 + '\n'
 # Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
 _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
@@ -63,6 +63,11 @@ try:  # rosbags reads sqlite3 through apsw when it is installed
     _DAMAGE_ERRORS += (apsw.Error,)
 except ImportError:  # pragma: no cover - depends on the rosbags build
     pass
+
+
+class BagDamageError(InputError):
+    """The bag is damaged or holds fewer messages than it says. Commands that offer ``--salvage``
+    add that hint to the message (cli/bags.py); the others do not suggest a flag they lack."""
 
 
 class BagMessage(NamedTuple):
@@ -174,6 +179,7 @@ class BagReader:
     salvage: bool = False
     messages_expected: int | None = None
     messages_read: int | None = None
+    undecodable: dict[str, int] = field(default_factory=dict)
     _reader: Rosbag2Reader | None = None
     _connections: list[Connection] = field(default_factory=list)
     _salvaged: list[BagMessage] | None = None
@@ -185,16 +191,23 @@ class BagReader:
 
     @property
     def complete(self) -> bool:
-        """True when every message the bag says it holds was read (False when that count is unknown)."""
-        read = self.messages_read if self.messages_read is not None else self.message_count
-        return self.messages_expected is not None and read >= self.messages_expected
+        """True only when a full pass read every message the bag says it holds and each could be
+        decoded (False when that count is unknown, no full pass was made, or one was skipped)."""
+        return (
+            self.messages_expected is not None
+            and self.messages_read is not None
+            and self.messages_read >= self.messages_expected
+            and not self.undecodable
+        )
 
     def integrity(self) -> dict[str, Any]:
-        """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``."""
+        """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``,
+        ``undecodable`` (messages skipped per topic because they could not be decoded; salvage only)."""
         return {
             'messages_expected': self.messages_expected,
             'messages_read': self.messages_read,
             'complete': self.complete,
+            'undecodable': dict(self.undecodable),
         }
 
     def count_all(self) -> int:
@@ -248,7 +261,7 @@ class BagReader:
                 yield BagMessage(connection.topic, timestamp, data, connection.msgtype)
         except _DAMAGE_ERRORS as err:
             if not self.salvage:
-                raise InputError(_damage_text(self.path, err) + _SALVAGE_HINT) from err
+                raise BagDamageError(_damage_text(self.path, err)) from err
             yield from self._salvage_after(err, last, wanted, start_ns, stop_ns)
             return
         if start_ns is None and stop_ns is None:
@@ -266,7 +279,7 @@ class BagReader:
         text = f'{self.path}: read {got} of {held} messages ({held - got} missing: {detail})'
         text += '; the bag is damaged'
         if not self.salvage:
-            raise InputError(text + '; --salvage recovers every intact message')
+            raise BagDamageError(text)
         self.damage = self.damage or text
         LOG.warning('%s', text)
 
@@ -282,6 +295,8 @@ class BagReader:
         file = _single_file(self.path, err)
         messages = _scan_sqlite(file)[1] if file.suffix == '.db3' else _scan_mcap(file)[1]
         self._salvaged = messages
+        if wanted == set(self.topics) and start_ns is None and stop_ns is None:
+            self.messages_read = len(messages)
         self.damage = f'damaged ({str(err) or type(err).__name__}); read by streaming up to the damage'
         LOG.warning('%s: %s', self.path, self.damage)
         skip = last[1]
@@ -305,6 +320,20 @@ class BagReader:
             return self.typestore.deserialize_cdr(message.data, message.msgtype)
         except Exception as err:  # rosbags raises assorted errors for bad bytes; report one clear line
             raise InputError(f'{message.topic}: cannot decode a {message.msgtype} message: {err}') from err
+
+    def decoded(self, topic: str) -> Iterator[tuple[BagMessage, Any]]:
+        """(message, decoded message) of ``topic`` in time order. A message that cannot be decoded
+        raises InputError, or, in a salvage read, is skipped and counted in ``undecodable`` (as
+        ``replay --salvage`` does), with one warning per topic."""
+        for message in self.messages([topic]):
+            try:
+                yield message, self.deserialize(message)
+            except InputError as err:
+                if not self.salvage or not self.topics[topic].decodable:
+                    raise
+                if topic not in self.undecodable:
+                    LOG.warning('%s: skipping messages that cannot be decoded (%s)', self.path, err)
+                self.undecodable[topic] = self.undecodable.get(topic, 0) + 1
 
     def close(self) -> None:
         if self._reader is not None:
@@ -363,6 +392,11 @@ def open_bag(
     try:
         if salvage and _storage_of(bag_path) == 'mcap' and bag_path.is_file():
             bag = _open_salvage(bag_path, extra_types, None)
+        elif _storage_of(bag_path) == 'mcap' and _has_foreign_channels(bag_path):
+            bag = _open_salvage(bag_path, extra_types, None, warn=False)  # rosbags cannot open it
+            bag.salvage = False
+            if bag.damage:
+                raise BagDamageError(f'{bag_path}: bag is truncated or corrupt ({bag.damage})')
         else:
             bag = _open_intact(bag_path, extra_types)
             bag.salvage = salvage
@@ -370,7 +404,7 @@ def open_bag(
         if _FOREIGN_PROFILE in str(err) and bag_path.is_file():
             bag = _open_foreign_profile(bag_path, extra_types, salvage)
         elif not salvage:
-            raise InputError(_damage_text(bag_path, err) + _SALVAGE_HINT) from err
+            raise BagDamageError(_damage_text(bag_path, err)) from err
         else:
             bag = _open_salvage(bag_path, extra_types, err)
     except FileNotFoundError as err:
@@ -403,7 +437,7 @@ def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, sal
     except Exception as err:  # the mcap library's own errors; damage is the scanner's to describe
         summary, profile = None, '?'
         if not salvage:
-            raise InputError(_damage_text(path, err) + _SALVAGE_HINT) from err
+            raise BagDamageError(_damage_text(path, err)) from err
     if summary is not None:
         foreign = sorted(
             {f'message encoding {c.message_encoding}' for c in summary.channels.values()}
@@ -416,7 +450,7 @@ def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, sal
             raise InputError(f'{path}: not a ROS 2 bag (MCAP profile {profile!r}; {", ".join(foreign)})')
     bag = _open_salvage(path, extra_types, None)
     if bag.damage and not salvage:
-        raise InputError(f'{path}: bag is truncated or corrupt ({bag.damage})' + _SALVAGE_HINT)
+        raise BagDamageError(f'{path}: bag is truncated or corrupt ({bag.damage})')
     bag.salvage = salvage
     LOG.warning(
         '%s: MCAP header profile is %r, not "ros2"; its schemas are ROS 2 definitions and its messages '
@@ -425,6 +459,25 @@ def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, sal
         profile,
     )
     return bag
+
+
+def _has_foreign_channels(path: Path) -> bool:
+    """Whether an MCAP file's summary lists a channel that is not ROS 2 CDR (e.g. protobuf), which
+    rosbags' reader refuses (KeyError); False when there is no readable summary."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    files = [path] if path.is_file() else sorted(path.glob('*.mcap'))
+    if len(files) != 1:
+        return False
+    try:
+        with files[0].open('rb') as stream:
+            summary = make_reader(stream).get_summary()
+    except (McapError, OSError, ValueError, KeyError, struct.error):
+        return False
+    if summary is None:
+        return False
+    return any(c.message_encoding != ROS_ENCODING for c in summary.channels.values())
 
 
 def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader:
@@ -441,6 +494,8 @@ def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader
         )
         topics = {k: _with_decodable(v, store) for k, v in topics.items()}
         count = reader.message_count
+        # a bare .db3 has no count of its own (rosbags counts its rows): nothing to call it complete by
+        own_count = _storage_of(path) != 'sqlite3' or (path.is_dir() and (path / 'metadata.yaml').exists())
         return BagReader(
             path=path,
             storage=_storage_of(path),
@@ -449,7 +504,7 @@ def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader
             end_ns=max(reader.end_time - 1, reader.start_time) if count else 0,
             message_count=count,
             typestore=store,
-            messages_expected=count,
+            messages_expected=count if own_count else None,
             _reader=reader,
             _connections=connections,
         )
@@ -487,7 +542,7 @@ def _single_file(path: Path, cause: BaseException) -> Path:
 
 
 def _open_salvage(
-    path: Path, extra_types: Mapping[str, str] | None, cause: BaseException | None
+    path: Path, extra_types: Mapping[str, str] | None, cause: BaseException | None, *, warn: bool = True
 ) -> BagReader:
     bag_dir = path if path.is_dir() else None
     path = _single_file(path, cause or InputError('salvage'))
@@ -504,7 +559,7 @@ def _open_salvage(
     held = 'an unknown number of' if expected is None else f'{expected}'
     if not messages:
         raise InputError(f'{path}: nothing intact to salvage (0 of {held} messages; {damage or "no data"})')
-    if damage or expected is None or len(messages) < expected:
+    if warn and (damage or expected is None or len(messages) < expected):
         LOG.warning('%s: salvaged %d of %s messages; %s', path, len(messages), held, damage or 'no count')
     stamps = [m.timestamp_ns for m in messages]
     return BagReader(
@@ -545,10 +600,16 @@ def _scan_mcap(
 
     found = salvage_mcap(path.read_bytes())
     formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
-    schemas, channels = found.schemas, found.channels
+    schemas = found.schemas
+    channels = {k: c for k, c in found.channels.items() if c.message_encoding == ROS_ENCODING}
+    foreign = {k: c for k, c in found.channels.items() if k not in channels}
     messages: list[BagMessage] = []
     counts: dict[int, int] = {}
+    skipped = 0
     for record in found.messages:
+        if record.channel_id not in channels:
+            skipped += 1
+            continue
         channel = channels[record.channel_id]
         schema = schemas.get(channel.schema_id)
         msgtype = schema.name if schema else ''
@@ -576,7 +637,16 @@ def _scan_mcap(
         for s in schemas.values()
         if s.encoding in formats
     ]
-    return topics, messages, '; '.join(found.damage), stored, found.expected
+    expected = found.expected
+    if foreign:
+        LOG.warning(
+            '%s: skipping %s (not ROS 2 CDR: %d messages)',
+            path,
+            ', '.join(f'{c.topic} ({c.message_encoding})' for c in foreign.values()),
+            skipped,
+        )
+        expected = None if expected is None else expected - skipped  # of the ROS channels
+    return topics, messages, '; '.join(found.damage), stored, expected
 
 
 def _scan_sqlite(path: Path) -> tuple[dict[str, TopicInfo], list[BagMessage], str]:

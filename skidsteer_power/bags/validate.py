@@ -616,8 +616,8 @@ def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> t
         topic = GROUND_TRUTH_TOPIC if kind == 'ground_truth' else options.odom_topic
         if topic in bag.topics and bag.topics[topic].msgtype == 'nav_msgs/msg/Odometry':
             t, twist = [], []
-            for message in bag.messages([topic]):
-                msg = bag.deserialize(message).twist.twist
+            for message, decoded in bag.decoded(topic):
+                msg = decoded.twist.twist
                 t.append(message.timestamp_ns - bag.start_ns)
                 twist.append((msg.linear.x, msg.angular.z))
             if t:

@@ -124,8 +124,7 @@ def _decode_poses(
     odometry = msgtype == 'nav_msgs/msg/Odometry'
     nested = odometry or msgtype == 'geometry_msgs/msg/PoseWithCovarianceStamped'
     t, xy, yaw, twist = [], [], [], []
-    for message in bag.messages([topic]):
-        msg = bag.deserialize(message)
+    for message, msg in bag.decoded(topic):
         pose = msg.pose.pose if nested else msg.pose
         t.append((message.timestamp_ns - t0) * 1e-9)
         xy.append((pose.position.x, pose.position.y))

@@ -7,13 +7,14 @@ import logging
 import sys
 from typing import Any
 
-from skidsteer_power.cli.common import (
-    _number,
-    add_json_flag,
-    emit,
-    nonnegative_float,
-    positive_float,
-    print_json,
+from skidsteer_power.cli.common import _number, add_json_flag, emit, print_json
+from skidsteer_power.terramechanics.ranges import (
+    BAG_TIME_S,
+    CLOCK_HZ,
+    LOCAL_WORKERS,
+    RECORD_DURATION_S,
+    REPLAY_RATE,
+    SUBSCRIBER_WAIT_S,
 )
 
 
@@ -34,17 +35,30 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
 
 
 def _open(args: argparse.Namespace) -> Any:
-    """The bag, checked complete first unless ``--salvage`` (a damaged bag: one line, exit 2)."""
-    from skidsteer_power.bags.reader import load_msg_definitions, open_bag
+    """The bag after one full counting pass: without ``--salvage`` a damaged bag is one line and
+    exit 2; with it the pass measures what is there (``messages_read``), so nothing unread is
+    called complete."""
+    from skidsteer_power.bags.reader import BagDamageError, load_msg_definitions, open_bag
 
-    bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
-    if not args.salvage:
+    try:
+        bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
         try:
-            bag.count_all()  # reads every message once; raises InputError saying what is missing
+            bag.count_all()  # reads every message once; raises (not salvage) saying what is missing
         except BaseException:
             bag.close()
             raise
+    except BagDamageError as err:
+        raise BagDamageError(f'{err}; --salvage recovers every intact message') from err
     return bag
+
+
+def _integrity(bag: Any, undecodable: dict[str, int]) -> dict[str, Any]:
+    """The bag's integrity keys, with ``undecodable`` (skipped messages per topic) merged in."""
+    out = bag.integrity()
+    for topic, count in undecodable.items():
+        out['undecodable'][topic] = out['undecodable'].get(topic, 0) + count
+    out['complete'] = out['complete'] and not out['undecodable']
+    return out
 
 
 def _log_to_stderr() -> None:
@@ -104,8 +118,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             'wall_time_s': result.wall_s,
             'max_late_s': result.max_late_s,
             'stopped_by': stop.signal_name or 'end',
-            'undecodable': result.undecodable,
-            **bag.integrity(),
+            **_integrity(bag, result.undecodable),
         },
         args.json,
     )
@@ -176,7 +189,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     rec.add_argument('-o', '--output', required=True, metavar='OUT.mcap', help='bag to write (new)')
     rec.add_argument('topics', nargs='*', metavar='TOPIC', help='topics to record (default: all)')
-    rec.add_argument('--duration', type=positive_float, default=None, metavar='S', help='stop after S s')
+    rec.add_argument(
+        '--duration', type=RECORD_DURATION_S.arg(), metavar='S', help=RECORD_DURATION_S.help('stop after S s')
+    )
     add_json_flag(rec)
     rec.set_defaults(func=_cmd_record)
 
@@ -187,21 +202,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'message type is not installed for Python are skipped with a warning.',
     )
     rep.add_argument('bag', metavar='BAG', help='bag file (.mcap/.db3) or rosbag2 directory')
-    rep.add_argument('--rate', type=positive_float, default=1.0, metavar='R', help='speed factor (default 1)')
+    rep.add_argument(
+        '--rate',
+        type=REPLAY_RATE.arg(),
+        default=1.0,
+        metavar='R',
+        help=REPLAY_RATE.help('speed factor (default 1)'),
+    )
     rep.add_argument('--loop', action='store_true', help='start over at the end until stopped')
     rep.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='only these topics')
-    rep.add_argument('--start', type=nonnegative_float, default=0.0, metavar='S', help='skip the first S s')
     rep.add_argument(
-        '--duration', type=positive_float, default=None, metavar='D', help='only D s of bag time'
+        '--start', type=BAG_TIME_S.arg(), default=0.0, metavar='S', help=BAG_TIME_S.help('skip the first S s')
+    )
+    rep.add_argument(
+        '--duration',
+        type=RECORD_DURATION_S.arg(),
+        metavar='D',
+        help=RECORD_DURATION_S.help('only D s of bag time'),
     )
     rep.add_argument('--clock', action='store_true', help='publish the bag time on /clock')
-    rep.add_argument('--clock-hz', type=positive_float, default=40.0, metavar='HZ', help='/clock rate (40)')
+    rep.add_argument(
+        '--clock-hz', type=CLOCK_HZ.arg(), default=40.0, metavar='HZ', help=CLOCK_HZ.help('/clock rate (40)')
+    )
     rep.add_argument(
         '--wait-for-subscribers',
-        type=nonnegative_float,
+        type=SUBSCRIBER_WAIT_S.arg(),
         default=0.0,
         metavar='S',
-        help='wait up to S s for every topic to have a subscriber before starting',
+        help=SUBSCRIBER_WAIT_S.help('wait up to S s for every topic to have a subscriber before starting'),
     )
     _add_bag_reading(rep)
     add_json_flag(rep)
@@ -230,7 +258,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
     val.add_argument(
-        '--jobs', type=int, default=None, metavar='N', help='fleet: local worker processes (cores)'
+        '--jobs',
+        type=LOCAL_WORKERS.arg(),
+        default=None,
+        metavar='N',
+        help=LOCAL_WORKERS.help('fleet: local worker processes (default: the cores; more: --scheduler)'),
     )
     val.add_argument(
         '--scheduler', default=None, metavar='ADDR', help='fleet: existing Dask cluster tcp://HOST:8786'

@@ -20,6 +20,7 @@ from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import SEED
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         '--holdout', type=nonnegative_float, default=0.3, help='fraction of segments held out'
     )
-    parser.add_argument('--seed', type=int, default=0, help='seed of the hold-out split')
+    parser.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('seed of the hold-out split'))
     parser.add_argument('--out-terrain', required=True, help='calibrated terrain YAML to write')
     parser.add_argument(
         '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal)'

@@ -23,22 +23,20 @@ import time
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
+from skidsteer_power.cli.common import add_json_flag, emit, finite_float
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.maps import PowerMap, cache_path
 from skidsteer_power.maps.power_map import DEFAULT_SHAPE
+from skidsteer_power.terramechanics.ranges import (
+    FORWARD_SPEED_M_S,
+    MAP_ANGLES,
+    MAP_ELEMENTS,
+    MAP_RINGS,
+    MIN_RADIUS_M,
+    YAW_RATE_RAD_S,
+)
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f'need at least 2 grid points: {text!r}')
-    return value
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -56,20 +54,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         help='cache directory (default $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
     )
-    build.add_argument(
-        '--max-speed', type=positive_float, help="largest |forward speed| [m/s] (default: the vehicle file's)"
+    # every option that sets the build's work or the map's extent has a range (terramechanics.ranges)
+    options = (
+        ('--max-speed', FORWARD_SPEED_M_S, "largest |forward speed| (default: the vehicle file's)"),
+        ('--max-yaw-rate', YAW_RATE_RAD_S, "largest |yaw rate| (default: the vehicle file's)"),
+        ('--rings', MAP_RINGS, f'grid rings of command magnitude (default {DEFAULT_SHAPE[0]})'),
+        ('--angles', MAP_ANGLES, f'grid turn angles, -90..90 deg (default {DEFAULT_SHAPE[1]})'),
+        ('--elements', MAP_ELEMENTS, 'FESS elements per contact (default 40)'),
+        ('--min-radius', MIN_RADIUS_M, 'small-radius limit (default 2 x tread)'),
     )
-    build.add_argument(
-        '--max-yaw-rate', type=positive_float, help="largest |yaw rate| [rad/s] (default: the vehicle file's)"
-    )
-    build.add_argument(
-        '--rings', type=_count, help=f'grid rings of command magnitude (default {DEFAULT_SHAPE[0]})'
-    )
-    build.add_argument(
-        '--angles', type=_count, help=f'grid turn angles, -90..90 deg (default {DEFAULT_SHAPE[1]})'
-    )
-    build.add_argument('--elements', type=_count, help='FESS elements per contact (default 40)')
-    build.add_argument('--min-radius', type=positive_float, help='small-radius limit [m] (default 2 x tread)')
+    for flag, limits, what in options:
+        build.add_argument(flag, type=limits.arg(), help=limits.help(what))
     build.add_argument('--no-progress', action='store_true', help='no progress bar')
     add_json_flag(build)
     build.set_defaults(func=run_build)
@@ -106,8 +101,6 @@ def _progress_bar(enabled: bool) -> Any:
 def run_build(args: argparse.Namespace) -> int:
     vehicle = load_vehicle(args.vehicle)
     terrain = load_terrain(args.terrain)
-    if args.angles is not None and args.angles < 3:
-        raise InputError('--angles must be at least 3')
     options = {
         'max_speed': args.max_speed,
         'max_yaw_rate': args.max_yaw_rate,

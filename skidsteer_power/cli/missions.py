@@ -15,7 +15,13 @@ from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
-from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, PAYLOAD_KG
+from skidsteer_power.terramechanics.ranges import (
+    FORWARD_SPEED_M_S,
+    LOCAL_WORKERS,
+    PAYLOAD_KG,
+    SAMPLES,
+    SEED,
+)
 
 PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 MODEL_CHOICES = ('fess', 'wong', 'steeds', 'icr', 'fast')
@@ -59,9 +65,7 @@ def _register_mission(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument('--plot', metavar='PNG', help='write power and energy along the route to this PNG')
     _add_uncertainty_args(p, calibration=True)
-    p.add_argument(
-        '--workers', type=int, default=None, help='with --samples: local processes (default: all cores)'
-    )
+    _add_workers(p, 'with --samples: local processes (default: all cores)')
     add_json_flag(p)
     p.set_defaults(func=run_mission_cmd)
 
@@ -80,10 +84,14 @@ def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
         '--terrain', default='sandy_soil', help='terrain preset or YAML (default sandy_soil, Table 8.2)'
     )
     p.add_argument('--route', default='search-retrieve', help='patrol | search-retrieve | FILE.csv')
-    p.add_argument('--speed', type=positive_float, help="forward speed [m/s] (default: the route's)")
+    p.add_argument(
+        '--speed',
+        type=FORWARD_SPEED_M_S.arg(),
+        help=FORWARD_SPEED_M_S.help("forward speed (default: the route's)"),
+    )
     p.add_argument('--delta', type=positive_float, default=0.01, help='relative change (default 0.01 = 1 %%)')
     _add_source_args(p)
-    p.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
+    _add_workers(p, 'processes (default: all cores)')
     p.add_argument('--plot', metavar='PNG', help='write a bar chart of the changes to this PNG')
     p.add_argument(
         '--method',
@@ -117,11 +125,15 @@ def _register_design(subparsers: argparse._SubParsersAction) -> None:
         choices=CONFIGURATIONS,
         help='study only this configuration (repeatable; default: all three)',
     )
-    p.add_argument('--workers', type=int, default=None, help='processes (default: 2 or the cores there are)')
+    _add_workers(p, 'processes (default: 2 or the cores there are)')
     p.add_argument('--plot', metavar='PNG', help='write the power vs mobility scatter to this PNG')
     _add_uncertainty_args(p, calibration=False)
     add_json_flag(p)
     p.set_defaults(func=run_design_cmd)
+
+
+def _add_workers(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument('--workers', type=LOCAL_WORKERS.arg(), default=None, help=LOCAL_WORKERS.help(what))
 
 
 def _add_source_args(p: argparse.ArgumentParser) -> None:
@@ -140,8 +152,14 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, calibration: bool) -> None
     g = p.add_argument_group(
         'uncertainty (Monte Carlo over terrain and powertrain; README "Studies with uncertainty")'
     )
-    g.add_argument('--samples', type=int, default=0, metavar='N', help='samples (default 0: nominal only)')
-    g.add_argument('--seed', type=int, default=0, help='sampling seed (default 0)')
+    g.add_argument(
+        '--samples',
+        type=SAMPLES.arg(),
+        default=0,
+        metavar='N',
+        help=SAMPLES.help('samples (default 0: nominal only)'),
+    )
+    g.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('sampling seed (default 0)'))
     g.add_argument(
         '--sampling', choices=('sobol', 'random'), default='sobol', help='scrambled Sobol (default) or random'
     )
@@ -212,6 +230,7 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.energy import run_mission
     from skidsteer_power.powertrain import Battery, Powertrain
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     vehicle, terrain = _load(args.vehicle, args.terrain)
     route = _route(args.route, args.speed, args.payload_kg)
     powertrain = Powertrain.for_vehicle(vehicle)
@@ -241,13 +260,22 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
                 engine, vehicle, terrain, route, powertrain, spread, samples=args.samples, seed=args.seed,
                 method=args.sampling, source=_source(args), model=args.model,
             )  # fmt: skip
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_missions
 
-        plot_missions([result], Path(args.plot))
-        payload['plot'] = str(args.plot)
+        plot_missions([result], png)
+        payload['plot'] = str(png)
     emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
     return 0
+
+
+def _png(text: str) -> Path:
+    """The file a ``--plot`` writes: a PNG path ('.png' added when missing, as matplotlib would add
+    it), so the reported name is the file's; an existing directory is an InputError."""
+    path = Path(text)
+    if path.is_dir():
+        raise InputError(f'--plot {text}: is a directory; give a file name such as {path / "plot.png"}')
+    return path if path.suffix.lower() == '.png' else path.with_name(path.name + '.png')
 
 
 def _default_cache() -> Path:
@@ -259,6 +287,7 @@ def _default_cache() -> Path:
 def run_sensitivity_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.sensitivity import sensitivity
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     names = args.vehicle or list(PACKBOTS)
     loaded = [_load(name, args.terrain) for name in names]
     vehicles, terrain = [v for v, _ in loaded], loaded[0][1]
@@ -284,11 +313,11 @@ def run_sensitivity_cmd(args: argparse.Namespace) -> int:
             )  # fmt: skip
     elif args.samples or args.uncertainty or args.scheduler:
         raise InputError('--samples, --uncertainty and --scheduler go with --method sobol')
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_sensitivity
 
-        plot_sensitivity(table, Path(args.plot))
-        table['plot'] = str(args.plot)
+        plot_sensitivity(table, png)
+        table['plot'] = str(png)
     if args.json:
         emit(table, True)
     else:
@@ -314,6 +343,7 @@ def run_design_cmd(args: argparse.Namespace) -> int:
     from skidsteer_power.missions.design import CONFIGURATIONS, design_study, grid
     from skidsteer_power.terramechanics.terrain import load_terrain
 
+    png = _png(args.plot) if args.plot else None  # checked before the work
     terrain = load_terrain(args.terrain)
     configs = tuple(args.configuration or CONFIGURATIONS)
     if not (args.samples or args.uncertainty or args.scheduler):
@@ -343,11 +373,11 @@ def run_design_cmd(args: argparse.Namespace) -> int:
                 for c in study['candidates']:
                     c |= stats[c['index']]
                 study |= extra
-    if args.plot:
+    if png is not None:
         from skidsteer_power.missions.plots import plot_design_study
 
-        plot_design_study(study['candidates'], study['best'], Path(args.plot))
-        study['plot'] = str(args.plot)
+        plot_design_study(study['candidates'], study['best'], png)
+        study['plot'] = str(png)
     if args.json:
         emit(study, True)
     else:

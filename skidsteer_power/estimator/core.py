@@ -34,9 +34,11 @@ from skidsteer_power.estimator.inputs import (
     check_command,
 )
 from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
+from skidsteer_power.estimator.persistence import battery_tallies, restored_tallies
 from skidsteer_power.estimator.prediction import Prediction, Predictor
 from skidsteer_power.estimator.tte_bounds import TimeToEmptyBounds
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.battery import BatteryState
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
@@ -374,9 +376,13 @@ class EstimatorCore:
         return level, message, values
 
     def state_dict(self) -> dict[str, Any]:
-        """What a restart needs: the battery state and the energy tallies."""
+        """What a restart needs: the battery's tallies and the energy tallies (no configuration:
+        estimator/persistence.py)."""
         self.energy.flush()
-        return {'battery': self.battery.to_dict(), 'energy_J': dict(self.energy.energy_J)}
+        return {
+            'battery': {'state': battery_tallies(vars(self.battery.state))},
+            'energy_J': dict(self.energy.energy_J),
+        }
 
     def reset_energy(self, battery: Any, now_s: float) -> None:
         """A battery swap at ``now_s`` [s]: ``battery`` (a full one) replaces the old, the energy
@@ -388,12 +394,10 @@ class EstimatorCore:
         self.time_to_empty_s = self.energy.time_to_empty_s()
 
     def restore(self, state: dict[str, Any]) -> None:
-        """Restore from :meth:`state_dict` output; ConfigError if it does not fit."""
-        try:
-            battery = type(self.battery).from_dict(state['battery'])
-            energy = {k: float(state['energy_J'][k]) for k in ('measured', 'predicted')}
-        except (KeyError, TypeError, ValueError) as err:
-            raise ConfigError(f'saved energy state does not fit this battery: {err}') from err
+        """Restore the tallies of :meth:`state_dict` output into this battery (its configuration
+        stays this vehicle's); ConfigError if a number is missing or outside its range."""
+        tallies, energy = restored_tallies(state)
+        battery = type(self.battery)(self.battery.config, BatteryState(**tallies))
         self.energy.flush()
         self.energy.battery = battery
         self.energy.energy_J.update(energy)

@@ -19,6 +19,11 @@ as 1 / R x (ds / 2R) / sin(ds / 2R), e.g. 0.26 % high for ds = 0.25 m, R = 1 m, 
 
 Duplicate poses (zero-length chords) are dropped. Sign convention REP 103: a left turn has R > 0.
 
+Size (issue 28): a path of more than :data:`MAX_PATH_POSES` poses is decimated first
+(:func:`decimate_polyline`, Ramer-Douglas-Peucker with the distance to each kept segment): every
+original pose stays within :data:`PATH_TOLERANCE_M` of the decimated polyline. A path that needs more
+than :data:`MAX_PATH_POSES` poses even then is an InputError.
+
 Margin (issue 19): remaining battery energy - energy of the path - energy back to the path's start
 along the reversed path - a reserve [Wh]. Path energies are the battery (DC bus) energy of the
 missions (motor and amplifier losses included), at a constant speed, with the map's axle torques
@@ -46,6 +51,42 @@ from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route, Segment
 
 JOULES_PER_WH = 3600.0
 MIN_CHORD_M = 1e-6  # [m] shorter chords are duplicate poses
+MAX_PATH_POSES = 10_000
+"""Most poses a planned path keeps; a longer one is decimated to :data:`PATH_TOLERANCE_M`."""
+PATH_TOLERANCE_M = 0.05
+"""[m] every pose of a decimated path lies within this distance of the decimated polyline."""
+
+
+def decimate_polyline(xy: np.ndarray, tolerance_m: float, max_points: int) -> np.ndarray:
+    """Indices of the points of ``xy`` [m] (n, 2) kept by Ramer-Douglas-Peucker: every dropped point
+    lies within ``tolerance_m`` [m] of the segment between the kept points around it (the segment,
+    not its line, so a path that doubles back keeps its turning point). InputError when more than
+    ``max_points`` points are needed."""
+    n = len(xy)
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, n - 1]] = True
+    kept, stack = 2, [(0, n - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        start, chord = xy[a], xy[b] - xy[a]
+        rel = xy[a + 1 : b] - start
+        length2 = float(chord @ chord)
+        t = np.clip(rel @ chord / length2, 0.0, 1.0) if length2 > 0 else np.zeros(b - a - 1)
+        off = rel - t[:, None] * chord
+        dist2 = np.einsum('ij,ij->i', off, off)
+        k = int(np.argmax(dist2))
+        if dist2[k] > tolerance_m * tolerance_m:
+            m = a + 1 + k
+            keep[m] = True
+            kept += 1
+            if kept > max_points:
+                raise InputError(
+                    f'path of {n:,} poses needs more than {max_points:,} to stay within {tolerance_m:g} m'
+                )
+            stack += [(a, m), (m, b)]
+    return np.flatnonzero(keep)
 
 
 @dataclass(frozen=True)
@@ -155,6 +196,14 @@ class PlannedPath:
 
     def __init__(self, x: Any, y: Any) -> None:
         xs, ys = np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
+        self.poses_given = xs.size
+        if xs.size > MAX_PATH_POSES:  # module doc, "Size"
+            xy = np.column_stack([xs, ys])
+            if not np.all(np.isfinite(xy)):
+                raise InputError('path points must be finite')
+            kept = decimate_polyline(xy, PATH_TOLERANCE_M, MAX_PATH_POSES)
+            xs, ys = xs[kept], ys[kept]
+        self.poses_kept = xs.size
         self.there = PathGeometry.from_polyline(xs, ys)
         self.back = PathGeometry.from_polyline(xs[::-1], ys[::-1])
 
@@ -208,9 +257,13 @@ class PathTracker:
 
     def set_path(self, x: Any, y: Any) -> None:
         """A new plan [m]; an empty path clears it; InputError (and no path) for a bad one."""
-        self.path, self._loads_key, self._loads, self._key, self.energy = None, None, None, None, None
+        self.set_planned(None)
         if np.asarray(x).size:
             self.path = PlannedPath(x, y)
+
+    def set_planned(self, path: PlannedPath | None) -> None:
+        """A plan whose geometry was built elsewhere (e.g. on a worker thread); None clears it."""
+        self.path, self._loads_key, self._loads, self._key, self.energy = path, None, None, None, None
 
     def evaluate(
         self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0

@@ -7,6 +7,13 @@ mid-write leaves either the old or the new state, never a torn file.
 A state file that cannot be used (garbage bytes, torn JSON, another schema, another vehicle) is never
 overwritten: :func:`load_or_quarantine` moves it aside to ``<file>.corrupt-<UTC time>`` and returns one
 warning naming both files, and the caller starts from a fresh battery.
+
+The file keeps tallies only (issue 28): the battery's state of charge, time and energy drawn, and the
+measured and predicted energy. The battery's configuration (capacity, cells, curve) comes from the
+vehicle's configuration, never from the file (a file saying ``capacity_Ah: 10`` once turned the test
+robot's battery into 449.7 Wh, ``1e308`` into inf Wh). Every restored number is range-checked
+(:data:`TALLY_RANGES`); a file over :data:`MAX_STATE_BYTES` or nested deeper than JSON's recursion
+limit is unusable, never fatal.
 """
 
 from __future__ import annotations
@@ -19,9 +26,39 @@ from pathlib import Path
 from typing import Any
 
 from skidsteer_power.cache import atomic_file
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.terramechanics.ranges import Range
 
 FORMAT_VERSION = 1
+MAX_STATE_BYTES = 64 * 1024
+"""Largest state file read [bytes]; one is about 0.5 KB."""
+TALLY_RANGES = {
+    'soc': Range('state of charge', 0.0, 1.0, ''),
+    'elapsed_s': Range('elapsed time', 0.0, 1e10, 's'),  # 317 years
+    'drawn_J': Range('energy drawn', -1e12, 1e12, 'J'),  # 278 MWh either way
+    'measured': Range('measured energy', -1e12, 1e12, 'J'),
+    'predicted': Range('predicted energy', -1e12, 1e12, 'J'),
+}
+"""Range of each restored number (far beyond any small robot's battery; they stop nan, inf, 1e308)."""
+
+
+def battery_tallies(state: Any) -> dict[str, float]:
+    """The battery numbers a restart keeps, from a battery's state dict: soc, elapsed_s, drawn_J."""
+    return {k: float(state[k]) for k in ('soc', 'elapsed_s', 'drawn_J')}
+
+
+def restored_tallies(state: dict[str, Any]) -> tuple[dict[str, float], dict[str, float]]:
+    """(battery tallies, energy tallies [J]) of a loaded state, each range-checked; ConfigError if
+    a number is missing, not a number or outside its range (:data:`TALLY_RANGES`)."""
+    try:
+        battery = battery_tallies(state['battery']['state'])
+        energy = {k: float(state['energy_J'][k]) for k in ('measured', 'predicted')}
+        for key, value in (battery | energy).items():
+            TALLY_RANGES[key].check(value)
+    except (KeyError, TypeError, ValueError) as err:  # InputError is a ValueError
+        reason = str(err) if isinstance(err, InputError) else f'missing or not a number: {err}'
+        raise ConfigError(f'saved energy state does not fit this battery: {reason}') from err
+    return battery, energy
 
 
 def save_state(path: str | os.PathLike, state: dict[str, Any]) -> None:
@@ -39,6 +76,9 @@ def load_state(path: str | os.PathLike) -> dict[str, Any] | None:
     """
     source = Path(path)
     try:
+        size = source.stat().st_size
+        if size > MAX_STATE_BYTES:
+            raise ConfigError(f'energy state {source} is {size:,} bytes; at most {MAX_STATE_BYTES:,} read')
         text = source.read_text(encoding='utf-8')
     except FileNotFoundError:
         return None
@@ -50,6 +90,8 @@ def load_state(path: str | os.PathLike) -> dict[str, Any] | None:
         state = json.loads(text)
     except json.JSONDecodeError as err:
         raise ConfigError(f'energy state {source} is not valid JSON ({err.msg}, line {err.lineno})') from err
+    except RecursionError as err:
+        raise ConfigError(f'energy state {source} is nested too deeply to be a state') from err
     if not isinstance(state, dict) or state.get('format_version') != FORMAT_VERSION:
         raise ConfigError(f'energy state {source} has an unknown format (expected version {FORMAT_VERSION})')
     return state

@@ -380,7 +380,8 @@ class PowerMap:
                 }
         except FileNotFoundError:
             raise ConfigError(f'map file not found: {source}') from None
-        except (OSError, KeyError, ValueError, json.JSONDecodeError) as err:
+        except (OSError, KeyError, ValueError, TypeError, json.JSONDecodeError) as err:
+            # TypeError: a plain .npy array (not a zip archive) cannot be opened as an archive
             raise ConfigError(f'{source}: not a skidsteer_power map ({err})') from err
         _check_meta(source, meta, vehicle, terrain)
         out = cls(

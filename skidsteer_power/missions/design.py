@@ -149,7 +149,7 @@ def design_study(
     parts = _balanced_parts(rows, workers)
     jobs = [(part, terrain, model) for part in parts]
     if engine is not None:
-        done = engine.map(_evaluate_chunk, jobs, label='design study')
+        done = engine.map(_evaluate_chunk, jobs, label='design study', heavy=True)
     elif workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             done = list(pool.map(_evaluate_chunk, jobs))

@@ -29,7 +29,14 @@ import numpy as np
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
-from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, PAYLOAD_KG, TURN_RADIUS_M
+from skidsteer_power.terramechanics.ranges import (
+    FORWARD_SPEED_M_S,
+    LEG_DURATION_S,
+    LEG_LENGTH_M,
+    PAYLOAD_KG,
+    TURN_RADIUS_M,
+    check_file_size,
+)
 
 PATROL_TOTAL_M = 154.4  # ch. 8.1
 PATROL_TURN_RADIUS_M = 1.0  # ch. 8.1
@@ -215,7 +222,11 @@ def read_route_csv(path: str | os.PathLike[str], default_speed_m_s: float | None
 
     Columns: ``length_m`` or ``duration_s`` (one per row), ``speed_m_s`` (optional when a default is
     given), ``turn_radius_m`` (signed; empty or ``inf`` = straight), ``payload_kg`` (optional, 0).
+    Read row by row: a file over ``ROUTE_CSV_BYTES`` is refused unread, and reading stops at the row
+    past :data:`MAX_TRACE_STEPS` (each row is at least one traced point), so memory stays bounded.
     """
+    check_file_size(path)
+    segments: list[Segment] = []
     try:
         with open(path, newline='', encoding='utf-8') as stream:
             reader = csv.DictReader(stream)
@@ -223,9 +234,14 @@ def read_route_csv(path: str | os.PathLike[str], default_speed_m_s: float | None
             reader.fieldnames = fields
             if 'length_m' not in fields and 'duration_s' not in fields:
                 raise InputError(f'{path}: route CSV needs a length_m or duration_s column')
-            segments = [_segment(row, path, k, default_speed_m_s) for k, row in enumerate(reader, start=2)]
+            for k, row in enumerate(reader, start=2):
+                if len(segments) >= MAX_TRACE_STEPS:
+                    raise InputError(f'{path}: more than {MAX_TRACE_STEPS:,} rows (one point each at least)')
+                segments.append(_segment(row, path, k, default_speed_m_s))
     except UnicodeDecodeError as err:
         raise InputError(f'{path}: not a text CSV file ({err.reason})') from err
+    except csv.Error as err:
+        raise InputError(f'{path}: not a route CSV ({err})') from err
     if not segments:
         raise InputError(f'{path}: route has no segments')
     route = Route(os.path.basename(os.fspath(path)), tuple(segments), f'route from {os.fspath(path)}')
@@ -251,11 +267,16 @@ def _segment(row: dict[str, str], path: object, line: int, default_speed: float 
         if radius is not None and not math.isinf(radius) and radius != 0:
             TURN_RADIUS_M.check(radius)
         PAYLOAD_KG.check(payload)  # type: ignore[arg-type]
+        length, duration = number('length_m'), number('duration_s')
+        if length is not None:
+            LEG_LENGTH_M.check(length)  # a 1e300 m leg would give 1.9e302 J (issue 28)
+        if duration is not None:
+            LEG_DURATION_S.check(duration)
         return Segment.along(
             speed_m_s=speed,
             turn_radius_m=radius,  # type: ignore[arg-type]
-            length_m=number('length_m'),
-            duration_s=number('duration_s'),
+            length_m=length,
+            duration_s=duration,
             payload_kg=payload,  # type: ignore[arg-type]
         )
     except InputError as err:

@@ -560,6 +560,9 @@ class PowerEstimator(QuietNode):
         return True
 
     def destroy_node(self) -> None:
+        hook = getattr(self, 'path_energy', None)  # absent when the node failed before making it
+        if hook is not None:
+            hook.close()
         self.save()
         super().destroy_node()
 

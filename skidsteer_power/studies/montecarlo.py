@@ -135,7 +135,7 @@ def design_uncertainty(
         for k, s in enumerate(sets)
         for part in parts
     ]
-    done = engine.map(_design_task, jobs, label=f'design study x {samples} samples')
+    done = engine.map(_design_task, jobs, label=f'design study x {samples} samples', heavy=True)
     by_row = {r['index']: r for r in rows}
     merit: dict[int, list[float]] = {r['index']: [] for r in rows}
     wins: dict[str, Counter[int]] = {}

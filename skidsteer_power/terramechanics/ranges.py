@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -26,7 +27,8 @@ from skidsteer_power.errors import InputError
 @dataclass(frozen=True)
 class Range:
     """A closed interval [low, high] of a physical input in ``unit``; ``positive``: low is excluded;
-    ``symmetric``: the interval holds the magnitude, low <= |value| <= high."""
+    ``symmetric``: the interval holds the magnitude, low <= |value| <= high; ``integer``: a count
+    (parsed as an int; '1e6' is not a count)."""
 
     name: str
     low: float
@@ -34,14 +36,19 @@ class Range:
     unit: str
     positive: bool = False
     symmetric: bool = False
+    integer: bool = False
+
+    def _show(self, value: float) -> str:
+        return f'{int(value):,}' if self.integer else f'{value:g}'
 
     @property
     def text(self) -> str:
+        unit = f' {self.unit}' if self.unit else ''
         if self.symmetric:
             low = f'{self.low:g} <= ' if self.low > 0 else ''
-            return f'{low}|{self.name}| <= {self.high:g} {self.unit}'
+            return f'{low}|{self.name}| <= {self.high:g}{unit}'
         left = '(' if self.positive else '['
-        return f'{left}{self.low:g}, {self.high:g}] {self.unit}'
+        return f'{left}{self._show(self.low)}, {self._show(self.high)}]{unit}'
 
     def contains(self, value: float) -> bool:
         if not math.isfinite(value):
@@ -52,20 +59,24 @@ class Range:
         return above and value <= self.high
 
     def check(self, value: float) -> float:
-        """``value`` as a float if it lies in the range, else InputError naming the range."""
-        value = float(value)
-        if not self.contains(value):
-            raise InputError(f'{self.name} = {value:g} {self.unit} is outside its range {self.text}')
-        return value
+        """``value`` as a float (an int for a count) if it lies in the range, else InputError
+        naming the range."""
+        number = float(value)
+        if not self.contains(number):
+            unit = f' {self.unit}' if self.unit else ''
+            shown = self._show(number) if self.integer and math.isfinite(number) else f'{number:g}'
+            raise InputError(f'{self.name} = {shown}{unit} is outside its range {self.text}')
+        return int(value) if self.integer else number
 
     def arg(self) -> Callable[[str], float]:
         """argparse ``type=``: a number in this range (one-line error otherwise)."""
 
         def parse(text: str) -> float:
             try:
-                return self.check(float(text))
+                return self.check(int(text) if self.integer else float(text))
             except ValueError as err:  # InputError is a ValueError too
-                message = str(err) if isinstance(err, InputError) else f'not a number: {text!r}'
+                what = 'an integer' if self.integer else 'a number'
+                message = str(err) if isinstance(err, InputError) else f'not {what}: {text!r}'
                 raise argparse.ArgumentTypeError(message) from None
 
         parse.__name__ = self.name  # argparse names the type in some messages
@@ -73,7 +84,8 @@ class Range:
 
     def help(self, what: str) -> str:
         """``what`` with the unit and the range, for ``--help``."""
-        return f'{what} [{self.unit}], range {self.text}'
+        unit = f' [{self.unit}]' if self.unit else ''
+        return f'{what}{unit}, range {self.text}'
 
 
 # Inputs of the single track / single wheel (chapter 2) and of the skid-steer models (chapters 3-6).
@@ -87,6 +99,39 @@ TURN_RADIUS_M = Range('turn radius', 1e-3, 1e6, 'm', symmetric=True)  # |R|; inf
 PAYLOAD_KG = Range('payload', 0.0, 1000.0, 'kg')
 HEIGHT_M = Range('track height', 0.005, 2.0, 'm', positive=True)
 FRICTION = Range('coefficient', 0.0, 10.0, '-', positive=True)  # mu_t (Table 3.1), mu: order 1
+
+# Vehicle files (skidsteer_power.vehicle): the dissertation's robots weigh 20-60 kg with 0.1 m sprockets;
+# these bounds hold any small-to-medium skid-steered vehicle and reject numbers without a meaning.
+MASS_KG = Range('mass', 0.0, 10_000.0, 'kg', positive=True)  # up to a 10 t vehicle
+CG_HEIGHT_M = Range('cg height', 0.0, 5.0, 'm', positive=True)
+TREAD_M = Range('tread', 0.0, 10.0, 'm', positive=True)
+WHEELBASE_M = Range('wheelbase', 0.0, 20.0, 'm', positive=True)
+YAW_RATE_RAD_S = Range('yaw rate', 0.0, 20.0, 'rad/s', positive=True)  # robot <= 2 rad/s
+YAW_INERTIA_KG_M2 = Range('yaw inertia', 0.0, 1e6, 'kg m^2', positive=True)
+
+# Amounts of work (issue 28): every input that sets how long a command runs or how much memory it
+# takes has a maximum, checked and shown in --help by the same Range. Measured on the 2-core CI
+# machine: the twin runs about 0.5 s of CPU and 0.07 MB per simulated second.
+SIM_DURATION_S = Range('simulated time', 0.0, 3600.0, 's', positive=True)  # ~30 min CPU, ~0.3 GB
+LEAD_IN_S = Range('lead-in', 0.0, 60.0, 's')
+LEG_LENGTH_M = Range('leg length', 0.0, 1e5, 'm', positive=True)  # 100 km: far beyond a battery
+LEG_DURATION_S = Range('leg duration', 0.0, 1e6, 's', positive=True)  # 11.6 days
+MAP_RINGS = Range('rings', 2, 64, '', integer=True)  # default 16
+MAP_ANGLES = Range('angles', 3, 401, '', integer=True)  # default 101
+MAP_ELEMENTS = Range('elements', 2, 200, '', integer=True)  # default 40 per contact
+MIN_RADIUS_M = Range('min radius', 0.0, 100.0, 'm', positive=True)
+CLOCK_HZ = Range('clock rate', 0.0, 1000.0, 'Hz', positive=True)
+REPLAY_RATE = Range('rate', 1e-3, 1e3, 'x')
+BAG_TIME_S = Range('bag time', 0.0, 1e7, 's')  # 116 days; int64 nanoseconds hold 292 years
+SUBSCRIBER_WAIT_S = Range('wait', 0.0, 3600.0, 's')
+RECORD_DURATION_S = Range('duration', 0.0, 1e7, 's', positive=True)
+SAMPLES = Range('samples', 0, 10_000, '', integer=True)
+SEED = Range('seed', 0, 2**32 - 1, '', integer=True)  # numpy's SeedSequence takes non-negative ints
+LOCAL_WORKERS = Range('local workers', 1, os.cpu_count() or 1, '', integer=True)  # more: --scheduler
+ROUTE_CSV_BYTES = 64 * 2**20
+"""Largest route or command CSV read [bytes] (a 200 000-row route is about 8 MB)."""
+COMMAND_ROWS = 1_000_000
+"""Most rows a command CSV may have (0.5 ms rows for 500 s; the twin steps at 2 ms)."""
 
 DEFAULT_TRACK_HEIGHT_M = 0.2
 """Track height assumed when none is given [m]: twice the test robot's 0.1 m sprocket radius (the
@@ -108,6 +153,13 @@ def turn_radius_arg(text: str) -> float:
     if value == 0:
         raise argparse.ArgumentTypeError('turning radius must be non-zero (inf = straight)')
     return TURN_RADIUS_M.arg()(text)
+
+
+def check_file_size(path: str | os.PathLike[str], limit: int = ROUTE_CSV_BYTES) -> None:
+    """InputError when the file at ``path`` is larger than ``limit`` bytes (checked before reading)."""
+    size = os.path.getsize(path)
+    if size > limit:
+        raise InputError(f'{os.fspath(path)}: {size:,} bytes; at most {limit:,} are read')
 
 
 def check_sinkage(sinkage_m: float, limit_m: float, what: str) -> float:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +31,7 @@ from skidsteer_power.bags.synthetic import NS, START_NS
 from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import COMMAND_ROWS, SIM_DURATION_S, check_file_size
 from skidsteer_power.twin.model import Twin
 
 SENSOR_RATE_HZ = 50.0
@@ -130,17 +131,36 @@ class TwinTrace:
         }
 
 
-def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SENSOR_RATE_HZ) -> TwinTrace:
-    """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz]."""
-    every = max(1, round(1.0 / (rate_hz * twin.dt)))
+MIN_STEP_S = 1e-9
+"""Shortest twin step taken [s] (a bag's time resolution, 1 ns): a command row ends within it."""
+
+
+def run_commands(
+    twin: Twin,
+    commands: Sequence[Segment],
+    *,
+    rate_hz: float = SENSOR_RATE_HZ,
+    progress: Callable[[float], None] | None = None,
+) -> TwinTrace:
+    """Drive ``twin`` (from its present state) through ``commands`` and sample at ``rate_hz`` [Hz];
+    ``progress(seconds)`` is told the twin time [s] of each command done.
+
+    Each command is held for its own duration: the twin steps at its ``dt`` and shortens the step
+    that would cross the end of a command or a sample time (a 0.5 ms row is one 0.5 ms step, a 3 ms
+    row a 2 ms and a 1 ms step), so the run lasts exactly the commands' total and samples fall on
+    the ``rate_hz`` grid; a run ending between samples gets a last sample at its end. Sensor
+    averages weight each step by its length.
+    """
+    full_dt = twin.dt
+    period = max(1, round(1.0 / (rate_hz * full_dt))) * full_dt  # a whole number of full steps [s]
     rows: list[tuple] = []
     current_sum = [0.0, 0.0]
     bus_sum = 0.0
-    count = 0
+    weight = 0.0  # steps since the last sample, in full steps
 
     def sample() -> None:
-        nonlocal current_sum, bus_sum, count
-        k = max(count, 1)
+        nonlocal current_sum, bus_sum, weight
+        k = weight if weight > 0 else 1.0
         last = twin.last
         rows.append(
             (
@@ -158,20 +178,34 @@ def run_commands(twin: Twin, commands: Sequence[Segment], *, rate_hz: float = SE
                 last.sinkage_m,
             )
         )
-        current_sum, bus_sum, count = [0.0, 0.0], 0.0, 0
+        current_sum, bus_sum, weight = [0.0, 0.0], 0.0, 0.0
 
     sample()
-    for segment in commands:
-        twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
-        for _ in range(round(segment.duration_s / twin.dt)):
-            twin._step()
-            left, right = twin.current_A
-            current_sum[0] += left
-            current_sum[1] += right
-            bus_sum += twin.bus_current_A
-            count += 1
-            if count >= every:
-                sample()
+    end_s = next_sample_s = twin.t
+    next_sample_s += period
+    try:
+        for segment in commands:
+            twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
+            end_s += segment.duration_s
+            while end_s - twin.t > MIN_STEP_S:
+                step = min(full_dt, end_s - twin.t, max(next_sample_s - twin.t, MIN_STEP_S))
+                twin.dt = full_dt if step > full_dt - MIN_STEP_S else step
+                twin._step()
+                w = twin.dt / full_dt  # exactly 1.0 for a full step
+                left, right = twin.current_A
+                current_sum[0] += w * left
+                current_sum[1] += w * right
+                bus_sum += w * twin.bus_current_A
+                weight += w
+                if twin.t >= next_sample_s - MIN_STEP_S:
+                    sample()
+                    next_sample_s += period
+            if progress is not None:
+                progress(segment.duration_s)
+    finally:
+        twin.dt = full_dt
+    if weight > 0:
+        sample()  # the run ended between two samples
     return _trace(twin, rows)
 
 
@@ -276,29 +310,24 @@ def _every() -> tuple[int, int, int]:
 
 def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     """Columns t_s, speed_m_s, yaw_rate_rad_s; each row holds until the next; the last row's t_s
-    ends the run (its command is not held). InputError naming the line for bad rows."""
+    ends the run (its command is not held). InputError naming the line for bad rows. Read row by row
+    and stopped early: a file over ``ROUTE_CSV_BYTES``, more than ``COMMAND_ROWS`` rows or a t_s
+    beyond the simulated-time range is refused before the rest is read."""
     import csv
 
     file = Path(path)
     try:
+        check_file_size(file)
         with file.open(newline='', encoding='utf-8') as handle:
             reader = csv.DictReader(handle)
             missing = {'t_s', 'speed_m_s', 'yaw_rate_rad_s'} - set(reader.fieldnames or ())
             if missing:
                 raise InputError(f'{file}: missing column(s) {", ".join(sorted(missing))}')
-            rows = []
-            for line, row in enumerate(reader, start=2):
-                try:
-                    values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
-                except (TypeError, ValueError):
-                    raise InputError(
-                        f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers'
-                    ) from None
-                if not all(math.isfinite(v) for v in values):
-                    raise InputError(f'{file}:{line}: values must be finite')
-                rows.append(values)
+            rows = [_command_row(file, line, row) for line, row in _capped(reader, file)]
     except OSError as err:
         raise InputError(f'cannot read command file {file}: {err.strerror or err}') from err
+    except (csv.Error, UnicodeDecodeError) as err:
+        raise InputError(f'{file}: not a command CSV ({err})') from err
     if len(rows) < 2:
         raise InputError(f'{file}: need at least two rows (the last one ends the run)')
     times = np.array([r[0] for r in rows])
@@ -307,6 +336,28 @@ def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     segments = [Segment(0.0, 0.0, float(times[0]))] if times[0] > 0 else []
     segments += [Segment(a[1], a[2], b[0] - a[0]) for a, b in itertools.pairwise(rows) if b[0] > a[0]]
     return segments
+
+
+def _capped(reader: Any, file: Path) -> Any:
+    """(line, row) of ``reader``; InputError past ``COMMAND_ROWS`` rows, before reading further."""
+    for line, row in enumerate(reader, start=2):
+        if line - 1 > COMMAND_ROWS:
+            raise InputError(f'{file}: more than {COMMAND_ROWS:,} rows')
+        yield line, row
+
+
+def _command_row(file: Path, line: int, row: dict[str, str]) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
+    except (TypeError, ValueError):
+        raise InputError(f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers') from None
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f'{file}:{line}: values must be finite')
+    try:
+        SIM_DURATION_S.check(max(values[0], 1e-9))  # t_s: a run beyond the limit stops here
+    except InputError as err:
+        raise InputError(f'{file}:{line}: t_s: {err}') from None
+    return values  # type: ignore[return-value]
 
 
 def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> list[Segment]:
