@@ -158,6 +158,40 @@ def _wheels(report: Report) -> None:
     report.figure('wheel torque vs ch. 4 at exactly R = 2 m, dry sand', _side_error(exact, ref) * 100, '%')
 
 
+def _appendix_d(report: Report) -> None:
+    """Issue 25: the real robot's 14 Appendix D turning circles, predicted from the set points on the
+    shipped sand_bin terrain (nothing fitted), beside the commanded radius (the naive alternative)."""
+    from skidsteer_power.models import appendix_d
+
+    start = time.perf_counter()
+    rows = appendix_d.check()
+    elapsed = time.perf_counter() - start
+    for row in rows:
+        c = row.cell
+        report.figure(
+            f'Appendix D {c.vehicle} {c.speed_cmd:g} m/s {c.yaw_cmd:g} rad/s: R_pred / R_real',
+            row.radius_m / c.radius_m,
+            'x',
+            note=f'R_real {c.radius_m:g} m, R_pred {row.radius_m:.2f} m, R_cmd {c.commanded_radius_m:.2f} m, '
+            f'V_real {c.speed_m_s:g}, V_pred {row.speed_m_s:.3f} m/s',
+        )
+    summary = appendix_d.summary(rows)
+    report.under(
+        'Appendix D median |R_pred/R_real - 1|', summary['median_error'] * 100, '%', 15, inclusive=True
+    )
+    report.under('Appendix D max |R_pred/R_real - 1|', summary['max_error'] * 100, '%', 30, inclusive=True)
+    report.figure(
+        'Appendix D median |R_cmd/R_real - 1| (commanded radius)',
+        summary['median_commanded_error'] * 100,
+        '%',
+    )
+    report.figure(
+        'Appendix D max |R_cmd/R_real - 1| (commanded radius)', summary['max_commanded_error'] * 100, '%'
+    )
+    report.figure('Appendix D: 14 set-point predictions (two batched solves)', elapsed * 1e3, 'ms')
+
+
 def run(report: Report) -> None:
     _tracks(report)
     _wheels(report)
+    _appendix_d(report)
