@@ -119,8 +119,12 @@ def test_no_motor_past_its_no_load_speed(sand) -> None:
     assert pred.clamped[0]
 
 
-def test_predict_cli_keys_and_bad_input(capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ['predict', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--speed', '0.1']
+@pytest.mark.parametrize('form', [['--direct'], []])
+def test_predict_cli_keys_and_bad_input(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path, form: list[str]
+) -> None:
+    monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))  # the map form builds its map here
+    argv = ['predict', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--speed', '0.1', *form]
     assert main([*argv, '--yaw-rate', '0.2', '--json']) == 0
     out = json.loads(capsys.readouterr().out)
     assert tuple(out) == JSON_KEYS

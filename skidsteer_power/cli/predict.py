@@ -7,17 +7,20 @@ skidsteer-power predict --vehicle V --terrain T --speed V --yaw-rate W [--direct
        battery_power_W, limited, clamped, reason
 
 The set points are the driver's (axle speeds, left and right); the motion, torques and currents are
-FESS's steady state at those side speeds (:mod:`skidsteer_power.models.predict`). No set-point map
-exists yet, so both forms solve FESS directly (``--direct`` is accepted for the contract).
-turn_radius_m is +-inf straight, 0 spinning in place, null at rest.
+FESS's steady state at those side speeds: by default the vehicle x terrain's set-point map
+(:mod:`skidsteer_power.maps.setpoint_map`, built once and cached, as the robot queries it),
+with ``--direct`` the solve itself (:mod:`skidsteer_power.models.predict`). turn_radius_m is +-inf
+straight, 0 spinning in place, null at rest.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit
+from skidsteer_power.maps.setpoint_map import SetpointQuery, load_or_build
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
 from skidsteer_power.terramechanics.ranges import SPEED_M_S, Range
 from skidsteer_power.terramechanics.terrain import load_terrain
@@ -41,16 +44,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         '--yaw-rate', required=True, type=YAW_RATE_RAD_S.arg(), help=YAW_RATE_RAD_S.help('commanded yaw rate')
     )
-    parser.add_argument('--direct', action='store_true', help='solve FESS for this command (no map)')
+    parser.add_argument(
+        '--direct',
+        action='store_true',
+        help='solve FESS for this command (default: the cached set-point map)',
+    )
     add_json_flag(parser)
     parser.set_defaults(func=run_predict)
 
 
 def run_predict(args: argparse.Namespace) -> int:
-    predictor = CommandPredictor(load_vehicle(args.vehicle), load_terrain(args.terrain))
-    record = predictor.predict(args.speed, args.yaw_rate).record(0)
+    vehicle, terrain = load_vehicle(args.vehicle), load_terrain(args.terrain)
+    if args.direct:
+        record = CommandPredictor(vehicle, terrain).predict(args.speed, args.yaw_rate).record(0)
+    else:
+        smap, _ = load_or_build(vehicle, terrain)
+        record = _map_record(args.speed, args.yaw_rate, smap.query(args.speed, args.yaw_rate))
     radius = record['turn_radius_m']
     if isinstance(radius, float) and math.isnan(radius):
         record['turn_radius_m'] = None  # at rest: no turning radius
     emit({key: record[key] for key in JSON_KEYS}, args.json)
     return 0
+
+
+def _map_record(speed: float, yaw_rate: float, q: SetpointQuery) -> dict[str, Any]:
+    record: dict[str, Any] = {
+        'speed_cmd_m_s': speed,
+        'yaw_rate_cmd_rad_s': yaw_rate,
+        'turn_radius_m': q.turn_radius_m,
+        'omega_left_rad_s': q.setpoint_left_rad_s,
+        'omega_right_rad_s': q.setpoint_right_rad_s,
+    }
+    for key in JSON_KEYS:
+        record.setdefault(key, getattr(q, key, None))
+    return record
