@@ -10,8 +10,8 @@ quadrants are mirror images, exact for the laterally and fore-aft symmetric vehi
 doc of fess.py): a negative mean is reverse driving (every speed, yaw rate and torque negated), a
 negative difference a right turn (sides swapped, yaw rate negated).
 
-Stored per node: V, w_z, both axle torques, both slips, sinkage and ``limited`` (no steady state,
-the dug-in answer). A query interpolates bilinearly in plain Python floats, then adds the
+Stored per node: V, w_z, both axle torques, both slips, sinkage, traction margin and ``limited``
+(no steady state, the dug-in answer). A query interpolates bilinearly in plain Python floats, then adds the
 powertrain (motor currents under the current limit, battery power) exactly as the direct path does
 (:meth:`CommandPredictor.electrical`'s formulas, via :meth:`Powertrain.motor_side` on floats). A query
 in a cell with a limited corner is ``limited``; outside the envelope it is answered at the edge and
@@ -40,7 +40,10 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-FIELDS = ('speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage', 'limited')
+FIELDS = (
+    'speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage',
+    'traction_margin', 'limited',
+)  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAX_NODES = 200_000
 
@@ -58,6 +61,7 @@ class SetpointQuery:
     slip_left: float
     slip_right: float
     sinkage_m: float
+    traction_margin: float
     current_left_A: float
     current_right_A: float
     battery_power_W: float
@@ -120,6 +124,7 @@ class SetpointMap:
             sol.slip[:, 0],
             sol.slip[:, 1],
             sol.sinkage,
+            sol.traction_margin,
             sol.limited.astype(float),
         )
         values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
@@ -140,7 +145,7 @@ class SetpointMap:
         mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
         reverse, right = flip < 0, diff < 0
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
-        speed, yaw, t_l, t_r, s_l, s_r, sinkage, _ = vals
+        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _ = vals
         if right:  # a right turn: the left turn's mirror image
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
@@ -151,7 +156,7 @@ class SetpointMap:
         current = over_l or over_r
         reason = REASON_TRACTION if traction else REASON_CURRENT if current else ''
         return SetpointQuery(
-            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, i_l, i_r, p_l + p_r,
+            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, i_l, i_r, p_l + p_r,
             traction or current, clamped_sp or off_grid, reason,
         )  # fmt: skip
 

@@ -48,7 +48,10 @@ if TYPE_CHECKING:
 SETPOINT_MAX_ITERATIONS = 60
 CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set points
 REASON_OK = ''
-REASON_TRACTION = 'traction limit: no steady state at these set points (the robot digs in, wheels spinning)'
+REASON_TRACTION = (
+    'no steady state found at these set points (a traction limit, or a tight turn with the inner side near '
+    'standstill where FESS has none); the values are the dug-in state: V = 0, wheels at their set points'
+)
 
 
 def command_setpoints(
