@@ -81,7 +81,16 @@ def map_predictor(
         smap, built = setpoint_map.load_or_build(vehicle, terrain, cache_dir=cache_dir or None)
         where = setpoint_map.cache_path(vehicle, terrain, cache_dir=cache_dir or None)
         description = f'{vehicle.name} on {terrain.name}, set points ({where})'
-        return SetpointPredictor(smap, powertrain_for(vehicle), description=description), built, str(where)
+
+        def motion_map() -> Any:  # path energy starts from a motion: the (V, yaw rate) map
+            from skidsteer_power.maps import load_or_build
+
+            return load_or_build(vehicle, terrain, cache_dir or None)[0]
+
+        predictor = SetpointPredictor(
+            smap, powertrain_for(vehicle), description=description, motion_map=motion_map
+        )
+        return predictor, built, str(where)
     from skidsteer_power.maps import cache_path, load_or_build
 
     power_map, built = load_or_build(vehicle, terrain, cache_dir or None)

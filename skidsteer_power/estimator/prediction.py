@@ -21,6 +21,7 @@ Reverse driving (V < 0) and spinning in place (V = 0, r != 0) are answered by th
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Protocol
@@ -167,15 +168,34 @@ class SetpointPredictor:
     of set points, the terrain decides the motion). Each side turns at its set point with the torque
     FESS finds for the motion those set points produce (current limit applied); the achieved motion
     is in ``achieved_speed_m_s`` / ``achieved_yaw_rate_rad_s``. Repeated commands come from a cache.
+
+    ``power_map`` is the (V, yaw rate) map of the same vehicle and terrain, for what starts from a
+    motion rather than a command (path energy: a route's (V, R) is the achieved motion, and its
+    side speeds are the set points that produce it). ``motion_map`` loads it on first use.
     """
 
     def __init__(
-        self, setpoint_map: Any, powertrain: Any, *, description: str = '', cache_size: int = 256
+        self,
+        setpoint_map: Any,
+        powertrain: Any,
+        *,
+        description: str = '',
+        cache_size: int = 256,
+        motion_map: Callable[[], Any] | None = None,
     ) -> None:
         self.setpoint_map = setpoint_map
         self.powertrain = powertrain
         self.description = description or 'set-point map'
         self.predict = lru_cache(maxsize=cache_size)(self._predict)
+        self._motion_map = motion_map
+        self._power_map: Any = None
+
+    @property
+    def power_map(self) -> Any:
+        """The (V, yaw rate) power map (loaded or built on first use), or None if none was given."""
+        if self._power_map is None and self._motion_map is not None:
+            self._power_map = self._motion_map()
+        return self._power_map
 
     def _predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction:
         q = self.setpoint_map.query(speed_m_s, yaw_rate_rad_s)
