@@ -66,6 +66,8 @@ if TYPE_CHECKING:
 DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
 FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
 MAX_HALVINGS = 12
+STALL_ITERATIONS = 8  # newton_point: steps without STALL_GAIN progress before it gives up
+STALL_GAIN = 1e-2  # relative decrease of the largest residual that counts as progress
 RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
 STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
@@ -487,7 +489,10 @@ def newton_point(
     forward-difference perturbations (eq. 3.22), the trust region of :func:`_limit`, and halving of
     the last step when the largest residual does not drop (at most MAX_HALVINGS times). Returns
     (x, residual, converged, iterations). Measured against :func:`newton` on one point: the same
-    iterates, about 2.5x less time (benchmarks/bench_fess.py).
+    iterates, about 2.5x less time (benchmarks/bench_fess.py). Unlike :func:`newton` it stops a point
+    whose largest residual has not fallen by STALL_GAIN in STALL_ITERATIONS steps: where FESS has no
+    steady state (tight turns) that used to cost all MAX_ITERATIONS steps (a tenth of 200 random
+    commands, half of all their Newton steps).
     """
     x = np.array(x0, dtype=float)
     idx = np.zeros(1, dtype=int)
@@ -497,6 +502,7 @@ def newton_point(
     trial = np.empty((1, 4, 3))
     x_prev, step_prev = x.copy(), np.zeros(3)
     norm_prev, halvings = math.inf, 0
+    best, best_at = math.inf, 0
     f = np.full(3, np.nan)
     for iteration in range(1, MAX_ITERATIONS + 1):
         h[0] = 1e-7 * length
@@ -511,6 +517,10 @@ def newton_point(
             norm = math.inf
         if norm < tol:
             return x, f, True, iteration
+        if norm < (1.0 - STALL_GAIN) * best:
+            best, best_at = norm, iteration
+        elif iteration - best_at >= STALL_ITERATIONS:  # no root here: stop (not converged)
+            return x, f, False, iteration
         if norm >= norm_prev:  # backtrack: halve the last step
             if halvings >= MAX_HALVINGS:
                 return x, f, False, iteration
@@ -679,7 +689,7 @@ class FessSolver:
             zero = np.zeros(2)
             return PointSolution(0.0, zero, zero.copy(), True, 0)
         prob = self.problem(np.array([v]), np.array([w]))
-        guess = initial_guess(prob)
+        guess = self._straight_guess(prob, initial_guess(prob))
         if x0 is not None:
             guess = _best_start(prob, guess, np.asarray(x0, dtype=float) * flip)
         x, _, converged, iterations = newton_point(prob, guess[0], tol)
@@ -688,6 +698,35 @@ class FessSolver:
         slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
         ok = converged and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
         return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
+
+    @cached_property
+    def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(V [m/s], s0 [m], slip [-]) of straight running at 13 speeds from 0 to 1.2 x max_speed:
+        one batched solve on first use, the first guess of :meth:`solve_point` (measured: cold solves
+        of random commands take about half the Newton steps from it; benchmarks/bench_fess.py)."""
+        top = 1.2 * float(getattr(self.vehicle, 'max_speed_m_s', 1.5) or 1.5)
+        speeds = np.concatenate([[0.0], np.geomspace(0.01, top, 12)])
+        sol = self.solve_twist(speeds[1:], 0.0)
+        ok = sol.converged
+        s0 = np.concatenate([[0.0], np.where(ok, sol.s0, np.nan)])
+        slip = np.concatenate([[0.0], np.where(ok, sol.slip[:, 0], np.nan)])
+        good = np.isfinite(s0) & np.isfinite(slip)
+        return speeds[good], s0[good], slip[good]
+
+    def _straight_guess(self, prob: Problem, guess: np.ndarray) -> np.ndarray:
+        """``guess`` (1, 3) with s0 and the slips of straight running at this speed (the table):
+        s0 faded by V^2 / (V^2 + (w_z l / 2)^2) towards 0 for a spin (s0 = 0 by symmetry), both
+        sides' speeds raised by the straight-running slip."""
+        speeds, s0, slip = self.straight_table
+        if speeds.size < 2:
+            return guess
+        v, w = float(prob.speed[0]), float(prob.yaw[0])
+        half_span = 0.5 * prob.contact.length_scale * w
+        fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
+        out = guess.copy()
+        out[0, 0] = float(np.interp(v, speeds, s0)) * fade
+        out[0, 1:] = guess[0, 1:] / (1.0 - min(float(np.interp(v, speeds, slip)), 0.9))
+        return out
 
     def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
         """Re-solve failed points warm-started from the nearest converged point (in V and w_z scaled
