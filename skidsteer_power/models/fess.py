@@ -123,12 +123,21 @@ def _trapezoid_weights(n: int) -> np.ndarray:
     return w
 
 
-def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
-    """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
-    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+@lru_cache(maxsize=64)
+def _track_elements(length: float, width: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(forward position [m], area weight [m^2]) of a track's n + 1 element nodes, shapes (1, 1, 1, n+1):
+    fixed per track, built once (the on-board point solve sets up a contact per command)."""
     s = np.linspace(0.0, 1.0, n + 1)
     fwd = (0.5 * length - s * length)[None, None, None, :]  # element k at l/2 - k l / n (eq. 6.6)
     area = width * length * _trapezoid_weights(n)[None, None, None, :]
+    fwd.flags.writeable = area.flags.writeable = False
+    return fwd, area
+
+
+def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
+    """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
+    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    fwd, area = _track_elements(length, width, n)
     pressure = np.maximum(loads, 0.0) / (width * length)
     tau_max = (terrain.c + pressure * math.tan(terrain.phi))[:, :, None, None]  # eq. 2.2
     safe = np.maximum(loads, 0.0)
