@@ -73,12 +73,16 @@ def _tracks(report: Report) -> None:
 
 
 def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
-    """Issue 25: 200 random commands solved cold and warm-started from the previous command's state
-    (the robot's sequence); a warm start must never cost more than a cold one."""
+    """Issue 25: 200 random commands, and 200 of a joystick's random walk, solved cold and
+    warm-started from the previous command's state (the robot's sequence); a warm start must never
+    cost more than a cold one."""
     rng = np.random.default_rng(0)
-    commands = np.column_stack([rng.uniform(0.1, 1.5, 200), rng.uniform(-1.0, 1.0, 200)])
+    sequences = {
+        'random commands': np.column_stack([rng.uniform(0.1, 1.5, 200), rng.uniform(-1.0, 1.0, 200)]),
+        'random walk': np.cumsum(rng.normal(0.0, 0.05, (200, 2)), axis=0) + [0.5, 0.0],
+    }
 
-    def sequence(warm: bool) -> tuple[float, float]:
+    def run(commands: np.ndarray, warm: bool) -> tuple[float, float]:
         state, iterations = None, 0
         start = time.perf_counter()
         for v, w in commands:
@@ -87,26 +91,23 @@ def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
             state = point.state
         return (time.perf_counter() - start) / len(commands), iterations / len(commands)
 
-    (t_cold, it_cold), (t_warm, it_warm) = sequence(False), sequence(True)
-    (t_cold2, _), (t_warm2, _) = sequence(False), sequence(True)  # alternate: a busy machine drifts
-    t_cold, t_warm = min(t_cold, t_cold2), min(t_warm, t_warm2)
-    report.figure('200 random commands: Newton iterations per cold solve', it_cold, '')
-    report.figure(
-        '200 random commands: Newton iterations per warm solve',
-        it_warm,
-        '',
-        goal='<= cold',
-        met=it_warm <= it_cold,
-    )
-    report.under('200 random commands: time per cold solve_point', t_cold * 1e3, 'ms', 0.5)
-    report.under('200 random commands: time per warm solve_point', t_warm * 1e3, 'ms', 0.5)
-    report.ratio(
-        '200 random commands: warm / cold time',
-        t_warm,
-        t_cold,
-        goal='<= 1.1 (noise)',
-        met=t_warm <= 1.1 * t_cold,
-    )
+    for name, commands in sequences.items():
+        (t_cold, it_cold), (t_warm, it_warm) = run(commands, False), run(commands, True)
+        (t_cold2, _), (t_warm2, _) = run(commands, False), run(commands, True)  # alternate: load drifts
+        t_cold, t_warm = min(t_cold, t_cold2), min(t_warm, t_warm2)
+        report.figure(f'200 {name}: Newton iterations per cold solve', it_cold, '')
+        report.figure(
+            f'200 {name}: Newton iterations per warm solve',
+            it_warm,
+            '',
+            goal='<= cold',
+            met=it_warm <= it_cold,
+        )
+        report.under(f'200 {name}: time per cold solve_point', t_cold * 1e3, 'ms', 0.5)
+        report.under(f'200 {name}: time per warm solve_point', t_warm * 1e3, 'ms', 0.5)
+        report.ratio(
+            f'200 {name}: warm / cold time', t_warm, t_cold, goal='<= 1.1 (noise)', met=t_warm <= 1.1 * t_cold
+        )
     prob = solver.problem(np.array([0.5]), np.array([0.25]))
     guess = fess.initial_guess(prob)
     batched = best_time(lambda: fess.newton(prob, guess), repeat=5, number=50)

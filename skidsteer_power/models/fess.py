@@ -68,6 +68,7 @@ FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.
 MAX_HALVINGS = 12
 STALL_ITERATIONS = 8  # newton_point: steps without STALL_GAIN progress before it gives up
 STALL_GAIN = 1e-2  # relative decrease of the largest residual that counts as progress
+WARM_MARGIN = 2.0  # _best_start: a warm candidate's scaled residual must be this much smaller
 RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
 STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
@@ -563,6 +564,7 @@ def _best_start(problem: Problem, cold: np.ndarray, warm: np.ndarray) -> np.ndar
     scale = np.array([weight, weight * problem.lateral_scale[0], weight * problem.contact.length_scale])
     norms = np.max(np.abs(residual(problem, candidates)[0]) / scale, axis=1)
     norms = np.where(np.isfinite(norms), norms, np.inf)
+    norms[1:] *= WARM_MARGIN  # a warm candidate must beat the physics guess clearly to be taken
     return candidates[0, int(np.argmin(norms))][None, :]
 
 
