@@ -79,7 +79,7 @@ def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
     rng = np.random.default_rng(0)
     sequences = {
         'random commands': np.column_stack([rng.uniform(0.1, 1.5, 200), rng.uniform(-1.0, 1.0, 200)]),
-        'random walk': np.cumsum(rng.normal(0.0, 0.05, (200, 2)), axis=0) + [0.5, 0.0],
+        'random walk': np.cumsum(rng.normal(0.0, 0.05, (200, 2)), axis=0) + np.array([0.5, 0.0]),
     }
 
     def run(commands: np.ndarray, warm: bool) -> tuple[float, float]:
