@@ -148,6 +148,15 @@ def test_predicted_twist_and_odometry(rig, cache_dir):
     assert twists[-1].twist.linear.x == pytest.approx(p.achieved_speed_m_s)
     assert twists[-1].twist.angular.z == pytest.approx(p.achieved_yaw_rate_rad_s)
     assert 0 < twists[-1].twist.angular.z < 0.1  # the track skids: less yaw than commanded
+
+    def motion_in_summary() -> bool:
+        for m in rig.received['power/summary']:
+            s = summary_from_key_values((kv.key, kv.value) for kv in m.status[0].values)
+            if s.get('predicted_motion_speed_m_s') == pytest.approx(p.achieved_speed_m_s):
+                return s['predicted_motion_yaw_rate_rad_s'] == pytest.approx(p.achieved_yaw_rate_rad_s)
+        return False
+
+    rig.spin_until(motion_in_summary)  # the monitor shows it from power/summary
     rig.spin_until(lambda: odoms and odoms[-1].pose.pose.position.x > 0.01)
     client = rig.probe.create_client(Trigger, f'/{rig.namespace}/power_estimator/reset_odometry')
     assert client.wait_for_service(timeout_sec=5.0)
