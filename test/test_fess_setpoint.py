@@ -9,6 +9,7 @@ I_cont 10 A); the Appendix D radii are the real robot's (dissertation lines 2131
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -145,3 +146,20 @@ def test_appendix_d_subset_beats_the_commanded_radius() -> None:
         assert row.radius_m > row.cell.commanded_radius_m  # wider than commanded, as measured
         assert row.error < row.commanded_error
     assert rows[2].error < 0.15  # six wheels, 0.2 m/s, 0.2 rad/s: measured 1.92 m
+
+
+def test_a_routes_commands_give_back_its_motion(sand) -> None:
+    """Mission energy reports, per route segment, the set points that produce its (V, R) and the
+    command the driver turns into them; predicting from that command must give the route's motion
+    back (reference: the route itself; the mission's set points are FESS's side speeds there)."""
+    from skidsteer_power.missions.energy import run_mission
+    from skidsteer_power.missions.routes import patrol
+
+    vehicle = load_vehicle('test_robot_6wheel')
+    result = run_mission(vehicle, sand, patrol(0.2), source='direct')
+    commands = result.commands()
+    turn = next(c for c in commands if math.isfinite(c['turn_radius_m']))
+    assert turn['speed_cmd_m_s'] > turn['speed_m_s']  # six wheels slip: ask for more than you get
+    pred = CommandPredictor(vehicle, sand).predict(turn['speed_cmd_m_s'], turn['yaw_rate_cmd_rad_s'])
+    assert pred.speed[0] == pytest.approx(turn['speed_m_s'], abs=1e-5)
+    assert pred.turn_radius[0] == pytest.approx(turn['turn_radius_m'], rel=1e-4)

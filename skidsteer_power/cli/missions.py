@@ -246,7 +246,10 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
 
         plot_missions([result], Path(args.plot))
         payload['plot'] = str(args.plot)
-    emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
+    emit(
+        payload if args.json else {k: v for k, v in payload.items() if k not in ('legs', 'commands')},
+        args.json,
+    )
     return 0
 
 
