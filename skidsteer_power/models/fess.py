@@ -68,7 +68,7 @@ FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.
 MAX_HALVINGS = 12
 STALL_ITERATIONS = 8  # newton_point: steps without STALL_GAIN progress before it gives up
 STALL_GAIN = 1e-2  # relative decrease of the largest residual that counts as progress
-WARM_MARGIN = 2.0  # _best_start: a warm candidate's scaled residual must be this much smaller
+WARM_MARGIN = 2.0  # _pick_start: a warm guess's scaled residual must be this much smaller
 RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
 STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
@@ -491,7 +491,7 @@ def newton(
 
 
 def newton_point(
-    problem: Problem, x0: np.ndarray, tol: float = FORCE_TOL_N
+    problem: Problem, x0: np.ndarray, tol: float = FORCE_TOL_N, *, alternatives: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, bool, int]:
     """:func:`newton` for ONE operating point, without the batch bookkeeping (the on-board path).
 
@@ -503,6 +503,10 @@ def newton_point(
     whose largest residual has not fallen by STALL_GAIN in STALL_ITERATIONS steps: where FESS has no
     steady state (tight turns) that used to cost all MAX_ITERATIONS steps (a tenth of 200 random
     commands, half of all their Newton steps).
+
+    ``alternatives`` (k, 3): other first guesses (a warm start). The first iteration evaluates every
+    guess with its perturbations in the same residual call and goes on from the one
+    :func:`_pick_start` prefers, so choosing costs no extra call.
     """
     x = np.array(x0, dtype=float)
     idx = np.zeros(1, dtype=int)
@@ -520,7 +524,10 @@ def newton_point(
         h[2] = 1e-7 * max(abs(x[2]), omega_ref)
         trial[0] = x
         trial[0, _PERTURBED, _UNKNOWNS] += h
-        fall = residual(problem, trial)[0]
+        if iteration == 1 and alternatives is not None and alternatives.size:
+            x, h, fall = _pick_start(problem, x, h, trial[0], alternatives)
+        else:
+            fall = residual(problem, trial)[0]
         f = fall[0]
         norm = float(np.max(np.abs(f)))
         if not norm < math.inf:
@@ -549,23 +556,40 @@ def newton_point(
     return x, f, False, MAX_ITERATIONS
 
 
-def _best_start(problem: Problem, cold: np.ndarray, warm: np.ndarray) -> np.ndarray:
-    """The first guess (1, 3) of a warm-started point: of the physics-based guess ``cold``, the
-    previous state ``warm``, and ``cold`` with the previous turning-centre offset (s0 is what the
-    cold guess knows least; the side speeds follow the command), the one whose residual is smallest
-    (forces over the weight, the moment over weight x contact span; one residual call)."""
-    warm = warm.reshape(1, 3)
+def warm_alternatives(cold: np.ndarray, warm: np.ndarray) -> np.ndarray:
+    """First guesses (k, 3) a warm start adds to the physics-based ``cold`` (3,): the previous state
+    ``warm`` itself and ``cold`` with the previous turning-centre offset (s0 is what the cold guess
+    knows least; the side speeds follow the command). None finite: (0, 3)."""
+    warm = np.asarray(warm, dtype=float).reshape(3)
     if not np.all(np.isfinite(warm)):
-        return cold
-    mixed = cold.copy()
-    mixed[:, 0] = warm[:, 0]
-    candidates = np.stack([cold[0], mixed[0], warm[0]])[None]  # (1, 3, 3)
+        return np.zeros((0, 3))
+    mixed = np.array(cold, dtype=float).reshape(3).copy()
+    mixed[0] = warm[0]
+    return np.stack([mixed, warm])
+
+
+def _pick_start(
+    problem: Problem, x: np.ndarray, h: np.ndarray, trial: np.ndarray, alternatives: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Evaluate ``x`` and every alternative with their perturbations in ONE residual call; keep the
+    one with the smallest residual (forces over the weight, the moment over weight x contact span),
+    an alternative only if that is under 1 / WARM_MARGIN of ``x``'s. Returns (x, steps, residuals
+    (4, 3) of x and its perturbations)."""
+    omega_ref = float(problem.omega_ref[0])
+    guesses = np.vstack([x[None, :], alternatives])
+    steps = np.repeat(h[None, :], len(guesses), axis=0)
+    steps[:, 1:] = 1e-7 * np.maximum(np.abs(guesses[:, 1:]), omega_ref)
+    states = np.repeat(guesses[:, None, :], 4, axis=1)
+    states[:, _PERTURBED, _UNKNOWNS] += steps
+    states[0] = trial
+    fall = residual(problem, states.reshape(1, -1, 3))[0].reshape(len(guesses), 4, 3)
     weight = problem.vehicle.mass_kg * 9.81
     scale = np.array([weight, weight * problem.lateral_scale[0], weight * problem.contact.length_scale])
-    norms = np.max(np.abs(residual(problem, candidates)[0]) / scale, axis=1)
+    norms = np.max(np.abs(fall[:, 0]) / scale, axis=1)
     norms = np.where(np.isfinite(norms), norms, np.inf)
-    norms[1:] *= WARM_MARGIN  # a warm candidate must beat the physics guess clearly to be taken
-    return candidates[0, int(np.argmin(norms))][None, :]
+    norms[1:] *= WARM_MARGIN  # a warm guess must beat the physics guess clearly to be taken
+    k = int(np.argmin(norms))
+    return guesses[k].copy(), steps[k], fall[k]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -700,10 +724,9 @@ class FessSolver:
             zero = np.zeros(2)
             return PointSolution(0.0, zero, zero.copy(), True, 0)
         prob = self.problem(np.array([v]), np.array([w]))
-        guess = self._straight_guess(prob, initial_guess(prob))
-        if x0 is not None:
-            guess = _best_start(prob, guess, np.asarray(x0, dtype=float) * flip)
-        x, _, converged, iterations = newton_point(prob, guess[0], tol)
+        guess = self._straight_guess(prob, initial_guess(prob))[0]
+        others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
+        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others)
         fx = element_forces(prob, x[None, None, :])[0]
         torque = prob.radius * np.sum(fx * prob.contact.wt[:, None], axis=(-2, -1))[0, 0]
         slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
