@@ -15,9 +15,10 @@ publishes per cmd_vel
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
                  terrain needs [N m]); stamp = the TwistStamped's, else receive time
-    ``power/predicted_twist`` geometry_msgs/TwistStamped, when it changes: the motion the model
-                 expects for the command (``kinematics: setpoint``: FESS at its wheel speed set
-                 points; linear.x = V [m/s], angular.z = yaw rate [rad/s]; frame base_link)
+    ``power/predicted_twist`` geometry_msgs/TwistStamped, with the figures below (``figure_period_s``):
+                 the motion the model expects for the latest command (``kinematics: setpoint``: FESS
+                 at its wheel speed set points; linear.x = V [m/s], angular.z = yaw rate [rad/s];
+                 frame base_link; stamp = that command's)
 periodic, and on ``~/reset_odometry``
     ``odom/predicted`` nav_msgs/Odometry: that motion dead-reckoned (frame odom, child base_link;
                  every ``publish_period_s``; the pose restarts at the origin on ``~/reset_odometry``)
@@ -222,7 +223,7 @@ class PowerEstimator(QuietNode):
         self.terrain_name = p['terrain']
         self.kinematics = str(p['kinematics'])
         self.odometry = PredictedOdometry()
-        self._last_predicted_twist: tuple[float, float] | None = None
+        self._predicted_twist_stamp: Any = None
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
         adaptation = AdaptationSettings(
@@ -430,17 +431,17 @@ class PowerEstimator(QuietNode):
         self.pub_predicted.publish(self._predicted_wire.pack(sec, nanosec, velocity, effort))
 
     def _publish_predicted_motion(self, prediction: Any, now: float, stamp: Any) -> None:
-        """``power/predicted_twist``: the motion the model expects for this command, published when
-        it differs from the last one (teleoperation repeats commands; per message it would cost the
-        1 kHz budget of issue 18); the dead reckoning of ``odom/predicted`` takes it at once."""
-        speed, yaw_rate = prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s
+        """The dead reckoning of ``odom/predicted`` takes this command's predicted motion at once;
+        ``power/predicted_twist`` goes out with the figures (``figure_period_s``, the newest
+        command's stamp), as a message per command would cost the 1 kHz budget of issue 18."""
         with self._lock:
-            self.odometry.set_twist(speed, yaw_rate, now)
-        if (speed, yaw_rate) == self._last_predicted_twist:
-            return
-        self._last_predicted_twist = (speed, yaw_rate)
+            self.odometry.set_twist(prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s, now)
+        self._predicted_twist_stamp = stamp
+
+    def _publish_predicted_twist(self, prediction: Any) -> None:
+        speed, yaw_rate = prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s
         twist = TwistStamped()
-        twist.header.stamp, twist.header.frame_id = stamp, 'base_link'
+        twist.header.stamp, twist.header.frame_id = self._predicted_twist_stamp, 'base_link'
         twist.twist.linear.x, twist.twist.angular.z = float(speed), float(yaw_rate)
         self.pub_predicted_twist.publish(twist)
 
@@ -486,6 +487,8 @@ class PowerEstimator(QuietNode):
         figures: list[tuple[Any, float]] = []
         if command_due:
             figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
+            if prediction is not None and self._predicted_twist_stamp is not None:
+                self._publish_predicted_twist(prediction)
         if measurement_due:
             figures += zip(self.pub_measurement_figures, measurement_figures(comparison), strict=True)
         for publisher, value in figures:
