@@ -201,8 +201,10 @@ class SetpointPredictor:
         q = self.setpoint_map.query(speed_m_s, yaw_rate_rad_s)
         omega = (q.setpoint_left_rad_s, q.setpoint_right_rad_s)
         torque = (q.torque_left_Nm, q.torque_right_Nm)
-        left = self.powertrain.motor_side('left', torque[0], omega[0])
-        right = self.powertrain.motor_side('right', torque[1], omega[1])
+        left, right = q.motors  # the map's powertrain is this one (factory.map_predictor)
+        if left is None or right is None:
+            left = self.powertrain.motor_side('left', torque[0], omega[0])
+            right = self.powertrain.motor_side('right', torque[1], omega[1])
         return Prediction(
             speed_m_s=speed_m_s,
             yaw_rate_rad_s=yaw_rate_rad_s,

@@ -68,6 +68,7 @@ class SetpointQuery:
     limited: bool
     clamped: bool
     reason: str
+    motors: tuple[Any, Any] = (None, None)  # each side's MotorPoint (the estimator reuses them)
 
     @property
     def turn_radius_m(self) -> float:
@@ -143,21 +144,23 @@ class SetpointMap:
         (sp_l, sp_r), clamped_sp = self._setpoints(v, w)
         flip = -1.0 if sp_l + sp_r < 0 else 1.0  # reverse: (l, r) -> (-l, -r), the fore-aft mirror
         mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
-        reverse, right = flip < 0, diff < 0
+        reverse, right_turn = flip < 0, diff < 0
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
         speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _ = vals
-        if right:  # a right turn: the left turn's mirror image
+        if right_turn:  # a right turn: the left turn's mirror image
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
             speed, yaw, t_l, t_r = -speed, -yaw, -t_l, -t_r
         traction = self._cell_limited[cell]
-        t_l, i_l, p_l, over_l = self._side('left', t_l, sp_l)
-        t_r, i_r, p_r, over_r = self._side('right', t_r, sp_r)
+        t_l, left, over_l = self._side('left', t_l, sp_l)
+        t_r, right, over_r = self._side('right', t_r, sp_r)
         current = over_l or over_r
         reason = REASON_TRACTION if traction else REASON_CURRENT if current else ''
         return SetpointQuery(
-            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, i_l, i_r, p_l + p_r,
-            traction or current, clamped_sp or off_grid, reason,
+            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin,
+            float(left.current_A), float(right.current_A),
+            float(left.electrical_power_W) + float(right.electrical_power_W),
+            traction or current, clamped_sp or off_grid, reason, (left, right),
         )  # fmt: skip
 
     def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:
@@ -171,18 +174,18 @@ class SetpointMap:
             return (left * top / peak, right * top / peak), True
         return (left, right), False
 
-    def _side(self, side: str, torque: float, omega: float) -> tuple[float, float, float, bool]:
-        """(torque, current, bus power, over the limit) of one side, the current limit applied."""
+    def _side(self, side: str, torque: float, omega: float) -> tuple[float, Any, bool]:
+        """(torque, motor point (:class:`MotorPoint`), over the limit) of one side, the current
+        limit applied (the point's current is then the limit)."""
         pt = self.predictor.powertrain
         point: Any = pt.motor_side(side, torque, omega)
         current = float(point.current_A)
         if abs(current) <= self._limit:
-            return torque, current, float(point.electrical_power_W), False
+            return torque, point, False
         held = math.copysign(self._limit, current)
         internal = float(pt.resistance(side).torque(self._gear * omega))
         torque = self._gear * (held * self._kt - internal)
-        point = pt.motor_side(side, torque, omega)
-        return torque, held, float(point.electrical_power_W), True
+        return torque, pt.motor_side(side, torque, omega), True
 
 
 def cache_path(
