@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from benchmarks.harness import Report, best_time
-from skidsteer_power.models import fess, wong_track, wong_wheel
+from skidsteer_power.models import fess, fess_point, wong_track, wong_wheel
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -111,7 +111,7 @@ def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
     prob = solver.problem(np.array([0.5]), np.array([0.25]))
     guess = fess.initial_guess(prob)
     batched = best_time(lambda: fess.newton(prob, guess), repeat=5, number=50)
-    lean = best_time(lambda: fess.newton_point(prob, guess[0]), repeat=5, number=50)
+    lean = best_time(lambda: fess_point.newton_point(prob, guess[0]), repeat=5, number=50)
     report.ratio('one point: batched newton / lean newton_point (same run)', batched, lean)
 
 
