@@ -30,7 +30,8 @@ WARM_MARGIN = 2.0  # _pick_start: a warm guess's scaled residual must be this mu
 def newton_point(
     problem: Problem, x0: np.ndarray, tol: float = FORCE_TOL_N, *, alternatives: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, bool, int]:
-    """:func:`newton` for ONE operating point, without the batch bookkeeping (the on-board path).
+    """FESS's :func:`~skidsteer_power.models.fess.newton` for ONE operating point, without the batch
+    bookkeeping (the on-board path).
 
     The same iteration, step by step: one residual call per iteration on the state and its three
     forward-difference perturbations (eq. 3.22), the trust region of :func:`_limit`, and halving of
