@@ -17,11 +17,13 @@ positive one (module doc of fess.py), so reversing is exact; equal set points ar
 (w_z pinned at 0, s0 by FESS's straight-running limit); opposite set points are a spin (V = 0 by
 symmetry, reached by the Newton iteration, not imposed).
 
-Where no steady state exists (Newton finds no equilibrium, or a side would have to slip more than
-:data:`~skidsteer_power.models.fess.SLIP_LIMIT`) the robot cannot develop the thrust the set points
-ask for: it stops and digs in with the wheels turning at their set points. That is what is predicted
-(V = 0, w_z = 0, full slip, the shear torque of the spinning contacts), with ``limited`` set and
-a ``reason``.
+Where no steady state exists (Newton finds no equilibrium, also after a continuation from straight
+running, or a side would have to slip more than :data:`~skidsteer_power.models.fess.SLIP_LIMIT`)
+the answer is the robot dug in: V = 0, w_z = 0, the wheels turning at their set points with the
+shear torque of the spinning contacts, ``limited`` and a ``reason``. That is a traction limit, or a
+tight turn with one side near standstill, where FESS's element kinematics (eq. 6.6: an element's time
+in the contact grows without bound as its side stops) give no steady state at all (README, "Predicting
+from set points": 3-7 % of each envelope).
 """
 
 from __future__ import annotations
