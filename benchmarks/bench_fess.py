@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from benchmarks.harness import Report, best_time
-from skidsteer_power.models import fess, wong_track, wong_wheel
+from skidsteer_power.models import fess, fess_point, wong_track, wong_wheel
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -59,12 +59,9 @@ def _tracks(report: Report) -> None:
     x0 = solver.solve_point(0.5, 0.25).state
     warm = best_time(lambda: solver.solve_point(0.52, 0.26, x0=x0), repeat=5, number=50)
     batch1 = best_time(lambda: solver.solve_twist(0.5, 0.25), repeat=5, number=20)
-    report.figure(
-        'one online track solve, solve_point (cold start)', cold * 1e3, 'ms', goal='< 1 ms', met=cold < 1e-3
-    )
-    report.figure(
-        'one online track solve, solve_point (warm start)', warm * 1e3, 'ms', goal='< 1 ms', met=warm < 1e-3
-    )
+    report.under('one online track solve, solve_point (cold start)', cold * 1e3, 'ms', 0.5)
+    report.under('one online track solve, solve_point (warm start, next command)', warm * 1e3, 'ms', 0.5)
+    _warm_vs_cold(report, solver)
     report.figure('one track point through the batched solve_twist', batch1 * 1e3, 'ms')
     wheel_solver = fess.FessSolver(load_vehicle('test_robot_6wheel'), dry)
     wheel_solver.solve_point(0.5, 0.25)
@@ -73,6 +70,49 @@ def _tracks(report: Report) -> None:
     api = best_time(lambda: fess.solve(track, dry, 0.5, 2.0), repeat=5, number=20)
     report.figure('one track solve via models.solve (SteadyState)', api * 1e3, 'ms')
     _map_vs_direct(report, track, dry, solver)
+
+
+def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
+    """Issue 25: 200 random commands, and 200 of a joystick's random walk, solved cold and
+    warm-started from the previous command's state (the robot's sequence); a warm start must never
+    cost more than a cold one."""
+    rng = np.random.default_rng(0)
+    sequences = {
+        'random commands': np.column_stack([rng.uniform(0.1, 1.5, 200), rng.uniform(-1.0, 1.0, 200)]),
+        'random walk': np.cumsum(rng.normal(0.0, 0.05, (200, 2)), axis=0) + np.array([0.5, 0.0]),
+    }
+
+    def run(commands: np.ndarray, warm: bool) -> tuple[float, float]:
+        state, iterations = None, 0
+        start = time.perf_counter()
+        for v, w in commands:
+            point = solver.solve_point(v, w, x0=state if warm else None)
+            iterations += point.iterations
+            state = point.state
+        return (time.perf_counter() - start) / len(commands), iterations / len(commands)
+
+    for name, commands in sequences.items():
+        (t_cold, it_cold), (t_warm, it_warm) = run(commands, False), run(commands, True)
+        (t_cold2, _), (t_warm2, _) = run(commands, False), run(commands, True)  # alternate: load drifts
+        t_cold, t_warm = min(t_cold, t_cold2), min(t_warm, t_warm2)
+        report.figure(f'200 {name}: Newton iterations per cold solve', it_cold, '')
+        report.figure(
+            f'200 {name}: Newton iterations per warm solve',
+            it_warm,
+            '',
+            goal='<= cold',
+            met=it_warm <= it_cold,
+        )
+        report.under(f'200 {name}: time per cold solve_point', t_cold * 1e3, 'ms', 0.5)
+        report.under(f'200 {name}: time per warm solve_point', t_warm * 1e3, 'ms', 0.5)
+        report.ratio(
+            f'200 {name}: warm / cold time', t_warm, t_cold, goal='<= 1.1 (noise)', met=t_warm <= 1.1 * t_cold
+        )
+    prob = solver.problem(np.array([0.5]), np.array([0.25]))
+    guess = fess.initial_guess(prob)
+    batched = best_time(lambda: fess.newton(prob, guess), repeat=5, number=50)
+    lean = best_time(lambda: fess_point.newton_point(prob, guess[0]), repeat=5, number=50)
+    report.ratio('one point: batched newton / lean newton_point (same run)', batched, lean)
 
 
 def _map_vs_direct(report: Report, track: Vehicle, dry: Terrain, solver: fess.FessSolver) -> None:
@@ -158,6 +198,40 @@ def _wheels(report: Report) -> None:
     report.figure('wheel torque vs ch. 4 at exactly R = 2 m, dry sand', _side_error(exact, ref) * 100, '%')
 
 
+def _appendix_d(report: Report) -> None:
+    """Issue 25: the real robot's 14 Appendix D turning circles, predicted from the set points on the
+    shipped sand_bin terrain (nothing fitted), beside the commanded radius (the naive alternative)."""
+    from skidsteer_power.models import appendix_d
+
+    start = time.perf_counter()
+    rows = appendix_d.check()
+    elapsed = time.perf_counter() - start
+    for row in rows:
+        c = row.cell
+        report.figure(
+            f'Appendix D {c.vehicle} {c.speed_cmd:g} m/s {c.yaw_cmd:g} rad/s: R_pred / R_real',
+            row.radius_m / c.radius_m,
+            'x',
+            note=f'R_real {c.radius_m:g} m, R_pred {row.radius_m:.2f} m, R_cmd {c.commanded_radius_m:.2f} m, '
+            f'V_real {c.speed_m_s:g}, V_pred {row.speed_m_s:.3f} m/s',
+        )
+    summary = appendix_d.summary(rows)
+    report.under(
+        'Appendix D median |R_pred/R_real - 1|', summary['median_error'] * 100, '%', 15, inclusive=True
+    )
+    report.under('Appendix D max |R_pred/R_real - 1|', summary['max_error'] * 100, '%', 30, inclusive=True)
+    report.figure(
+        'Appendix D median |R_cmd/R_real - 1| (commanded radius)',
+        summary['median_commanded_error'] * 100,
+        '%',
+    )
+    report.figure(
+        'Appendix D max |R_cmd/R_real - 1| (commanded radius)', summary['max_commanded_error'] * 100, '%'
+    )
+    report.figure('Appendix D: 14 set-point predictions (two batched solves)', elapsed * 1e3, 'ms')
+
+
 def run(report: Report) -> None:
     _tracks(report)
     _wheels(report)
+    _appendix_d(report)

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -337,3 +338,27 @@ def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(tmp_p
     wrong_error = abs(wrong['metrics']['energy_error_pct'])
     right_error = abs(right['metrics']['energy_error_pct'])
     assert wrong_error > 3 * right_error
+
+
+def test_set_points_predict_the_twins_wider_turns(tmp_path, bundled_maps):
+    """Issue 25: --kinematics cmd predicts at the wheel speed set points, twist takes the command as
+    the motion. Reference: the twin's ground-truth circles (a model that does not use FESS; DESIGN.md).
+    Per segment the set-point prediction's radius must be nearer the twin's than the commanded one,
+    and the twist reading must predict exactly the commanded radius."""
+    vehicle, name = 'test_robot_6wheel', 'test_robot_6wheel_sand_bin.mcap'
+    with open_bag(BUNDLED / name) as bag:
+        options = ValidateOptions(vehicle, TERRAIN, tmp_path / 'cmd', odom_topic='/ground_truth/odom',
+                                  map_cache_dir=bundled_maps, plots=False)  # fmt: skip
+        setpoints = validate(bag, options)
+        twist = validate(bag, replace(options, report_dir=tmp_path / 'twist', kinematics='twist'))
+    turning = [
+        s for s in setpoints['segments'] if s['yaw_rate_cmd_rad_s'] >= 0.04 and np.isfinite(s['radius_m'])
+    ]
+    assert turning
+    err_sp = [abs(s['predicted_radius_m'] / s['radius_m'] - 1) for s in turning]
+    err_cmd = [abs(s['radius_cmd_m'] / s['radius_m'] - 1) for s in turning]
+    assert np.median(err_sp) < np.median(err_cmd)
+    for s in twist['segments']:
+        if s['yaw_rate_cmd_rad_s'] != 0:
+            assert s['predicted_radius_m'] == pytest.approx(s['radius_cmd_m'])
+    assert setpoints['kinematics'] == 'cmd' and twist['kinematics'] == 'twist'

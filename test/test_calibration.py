@@ -313,3 +313,19 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
         assert b.command == a.command
         assert b.motor_torque_Nm == pytest.approx(a.motor_torque_Nm, rel=1e-9)
         assert b.motor_omega_rad_s == pytest.approx(a.motor_omega_rad_s, rel=1e-9)
+
+
+def test_fit_at_the_motion_predicts_at_the_set_points(calibrated):
+    """Issue 25: the fit uses the measured motion; the same fitted terrain predicting each segment
+    from its command at the wheel speed set points is reported beside it (reference: the bag's
+    measured motor torques and motion, which the twin made without FESS)."""
+    p, _ = calibrated
+    sp = p['setpoints']
+    keys = {'torque_rmse_Nm', 'holdout_energy_error', 'speed_error_median', 'yaw_rate_error_median'}
+    assert set(sp) == keys | {'limited_segments'}
+    assert sp['limited_segments'] == 0
+    assert sp['speed_error_median'] < 0.05  # measured 1.2 %
+    assert sp['torque_rmse_Nm'] < p['torque_rmse_before_Nm']  # measured 0.064 against 0.099 N m
+    # not asserted, reported (README): the yaw rate disagrees by a median 122 % (the twin's wheeled
+    # robot turns far less than FESS at the set points says) and the hold-out energy error is +17 %
+    # from the set points against -4 % from the motion: the two do not agree yet on this bag

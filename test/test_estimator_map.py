@@ -87,3 +87,29 @@ def test_factory_builds_and_caches_the_map(vehicle, tmp_path):
     second, built_again, _ = map_predictor(vehicle, 'dry_sand', tmp_path)
     assert built and not built_again and where.startswith(str(tmp_path))
     assert second.predict(0.2, 0.1).bus_total_W == pytest.approx(first.predict(0.2, 0.1).bus_total_W)
+
+
+def test_the_default_predictor_works_at_the_set_points(tmp_path):
+    """Issue 25: a command is a pair of wheel speed set points. Reference: the direct set-point solve
+    (CommandPredictor, test_fess_setpoint.py) at a node of the set-point map, where the map is exact."""
+    from skidsteer_power.estimator.prediction import SetpointPredictor
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    six = load_vehicle('test_robot_6wheel')
+    predictor, built, _ = map_predictor(six, 'sand_bin', tmp_path)
+    assert built and isinstance(predictor, SetpointPredictor)
+    grid = predictor.setpoint_map.grid
+    m, d = grid.axis0.values[3], grid.axis1.values[2]  # a node: (mean, half difference) [rad/s]
+    v, w = m * six.drive_radius_m, 2 * d * six.drive_radius_m / six.tread_m
+    got = predictor.predict(float(v), float(w))
+    direct = CommandPredictor(six, load_terrain('sand_bin')).predict(v, w)
+    assert got.axle_omega_rad_s == pytest.approx(
+        tuple(direct.setpoint[0])
+    )  # the wheels hold their set points
+    assert got.terrain_torque_Nm == pytest.approx(tuple(direct.torque[0]), rel=1e-9)
+    assert got.bus_total_W == pytest.approx(direct.battery_power[0], rel=1e-9)
+    assert got.achieved_speed_m_s == pytest.approx(direct.speed[0], rel=1e-9)
+    assert got.achieved_speed_m_s < v  # six wheels on sand slip: slower than commanded
+    twist, _, _ = map_predictor(six, 'sand_bin', tmp_path, kinematics='twist')
+    assert twist.predict(float(v), float(w)).achieved_speed_m_s == v  # the old reading: motion = command

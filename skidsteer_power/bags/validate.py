@@ -77,8 +77,9 @@ class ValidateOptions:
         until the next command)
     left_joints, right_joints, effort_is, joints_at : override the vehicle file's joint_states
         mapping ('' = the file's; joint lists comma-separated)
-    kinematics : what the estimator predicts from: 'cmd' (the command, as the live node), 'odom'
-        (the twist of the Odometry ``odom_topic``) or 'ground_truth' (``/ground_truth/odom``)
+    kinematics : what the estimator predicts from: 'cmd' (the command at its wheel speed set points,
+        as the live node), 'twist' (the command taken as the motion, the old reading), 'odom' (the
+        twist of the Odometry ``odom_topic``) or 'ground_truth' (``/ground_truth/odom``)
     """
 
     vehicle: str
@@ -277,14 +278,22 @@ class WindowedBattery:
         return getattr(self._battery, name)
 
 
-def build_core(options: ValidateOptions, predictor: Any = None, battery_window_s: float = 0.2) -> Any:
-    """An :class:`EstimatorCore` for the vehicle and terrain; ``predictor`` None builds the map one."""
+def build_core(
+    options: ValidateOptions,
+    predictor: Any = None,
+    battery_window_s: float = 0.2,
+    kinematics: str | None = None,
+) -> Any:
+    """An :class:`EstimatorCore` for the vehicle and terrain; ``predictor`` None builds the map one:
+    the set-point map for ``kinematics`` 'cmd' (default: ``options.kinematics``), else the (V, yaw
+    rate) map that takes its input as the motion (``twist`` and the measured-motion kinematics)."""
     from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, factory
 
     vehicle = factory.load_vehicle_config(options.vehicle)
     if predictor is None:
         try:
-            predictor, _, _ = factory.map_predictor(vehicle, options.terrain, options.map_cache_dir)
+            kind = 'setpoint' if (kinematics or options.kinematics) == 'cmd' else 'twist'
+            predictor, _, _ = factory.map_predictor(vehicle, options.terrain, options.map_cache_dir, kind)
         except ImportError as err:
             raise ConfigError(f'power maps are not available in this installation: {err}') from err
     else:
@@ -467,6 +476,8 @@ class TraceSegment:
     rms_residual_m: float
     speed_m_s: float
     note: str = ''
+    predicted_speed_m_s: float = math.nan
+    predicted_radius_m: float = math.nan
 
 
 def command_segments(
@@ -498,9 +509,10 @@ def command_segments(
     return segments
 
 
-def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegment]:
+def trace_segments(inputs: Inputs, options: ValidateOptions, predictor: Any = None) -> list[TraceSegment]:
     """Trace analysis (eqs. 7.8-7.10) of every constant-command segment (a note says why where the
-    poses are too few or collinear)."""
+    poses are too few or collinear), beside the motion ``predictor`` expects for its command
+    (``predicted_speed_m_s`` and ``predicted_radius_m``, |V / yaw rate|; NaN without a predictor)."""
     result: list[TraceSegment] = []
     if inputs.pose_t.size < 3:
         return result
@@ -519,6 +531,7 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegmen
             fit = fit_circle(xy[:, 0], xy[:, 1])
         except InputError as err:
             note = str(err)
+        predicted_speed, predicted_radius = _predicted_motion(predictor, speed, yaw)
         if t.size == 2:
             note = 'only 2 poses: mean speed, no circle'
         elif t.size == 3 and fit is not None:
@@ -537,9 +550,21 @@ def trace_segments(inputs: Inputs, options: ValidateOptions) -> list[TraceSegmen
                 rms_residual_m=fit.rms_residual_m if fit else math.nan,
                 speed_m_s=speed_m,
                 note=note,
+                predicted_speed_m_s=predicted_speed,
+                predicted_radius_m=predicted_radius,
             )
         )
     return result
+
+
+def _predicted_motion(predictor: Any, speed: float, yaw: float) -> tuple[float, float]:
+    """(|V| [m/s], |R| [m]) of the motion ``predictor`` expects for a command; NaN if unknown."""
+    if predictor is None:
+        return math.nan, math.nan
+    p = predictor.predict(speed, yaw)
+    v, w = getattr(p, 'achieved_speed_m_s', math.nan), getattr(p, 'achieved_yaw_rate_rad_s', math.nan)
+    radius = abs(v / w) if w != 0 else (math.inf if v != 0 else math.nan)
+    return abs(v), radius
 
 
 LIVE_TOLERANCE_NM = 1e-6
@@ -599,7 +624,8 @@ def stream_hold_ends(t: np.ndarray, cap_s: float) -> np.ndarray:
     return np.minimum(np.append(t[1:], math.inf), t + cap_s)
 
 
-KINEMATICS = ('cmd', 'odom', 'ground_truth')
+KINEMATICS = ('cmd', 'twist', 'odom', 'ground_truth')
+FROM_COMMAND = ('cmd', 'twist')  # predicted from the command: at its set points, or as the motion
 GROUND_TRUTH_TOPIC = '/ground_truth/odom'
 
 
@@ -609,7 +635,7 @@ def motion_inputs(bag: BagReader, options: ValidateOptions, inputs: Inputs) -> t
     the ground truth if the bag has it, else ``odom_topic``. Returns (kinematics, inputs) or None."""
     if options.kinematics not in KINEMATICS:
         raise InputError(f'kinematics must be one of {", ".join(KINEMATICS)}, not {options.kinematics!r}')
-    candidates = {'odom': ['odom'], 'ground_truth': ['ground_truth']}.get(
+    candidates = {'odom': ['odom'], 'ground_truth': ['ground_truth']}.get(  # cmd, twist: either
         options.kinematics, ['ground_truth', 'odom']
     )
     for kind in candidates:
@@ -649,9 +675,10 @@ def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None)
     if motion is not None:  # a measured twist is a stream: each row holds until the next one
         ends = stream_hold_ends(motion[1].cmd_t, core.settings.cmd_timeout_s)
         motion = (motion[0], replace(motion[1], cmd_end=ends))
-    if options.kinematics != 'cmd' and motion is None:
+    from_command = options.kinematics in FROM_COMMAND
+    if not from_command and motion is None:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
-    series = run_estimator(core, inputs if options.kinematics == 'cmd' else motion[1])  # type: ignore[index]
+    series = run_estimator(core, inputs if from_command else motion[1])  # type: ignore[index]
     return BagPrediction(inputs, core, timing, motion, series)
 
 
@@ -662,13 +689,15 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
     began = time.perf_counter()
     run = predict_bag(bag, options, predictor)
     inputs, core, timing, motion, series = run.inputs, run.core, run.timing, run.motion, run.series
+    from_command = options.kinematics in FROM_COMMAND
     metrics = error_metrics(series)
     motion_summary = None
-    if motion is not None and options.kinematics == 'cmd':  # ch. 7.3: also predict from the motion
-        other = build_core(options, core.predictor, options.battery_window_s)
+    if motion is not None and from_command:  # ch. 7.3: also predict from the motion
+        measured_motion = None if options.kinematics == 'cmd' and predictor is None else core.predictor
+        other = build_core(options, measured_motion, options.battery_window_s, kinematics='twist')
         motion_metrics = error_metrics(run_estimator(other, motion[1]))
         motion_summary = {'kinematics': motion[0], 'metrics': motion_metrics}
-    segments = trace_segments(inputs, options)
+    segments = trace_segments(inputs, options, core.predictor)
     fitted = [s for s in segments if s.points >= 2]  # fewer: no speed, no circle: left out
     live = live_comparison(inputs, core.predictor)
     elapsed = time.perf_counter() - began

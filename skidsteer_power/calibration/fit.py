@@ -204,6 +204,7 @@ class CalibrationResult:
     jacobian_z: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # residual Jacobian in z
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fitted values in search coordinates
     residual_variance: float = math.nan  # s^2 [N m^2]
+    setpoints: dict[str, float] = field(default_factory=dict)
 
     def as_json(self) -> dict[str, Any]:
         parameters = {}
@@ -243,6 +244,7 @@ class CalibrationResult:
             'optimizer_converged': self.converged,
             'at_bound': sorted(self.at_bound),
             'converged_inside_bounds': self.converged and not self.at_bound,
+            'setpoints': self.setpoints,
         }
 
 
@@ -505,4 +507,46 @@ def calibrate(
         before_Nm=base_torque,
         after_Nm=after_torque,
         holdout_index=hold_idx,
+        setpoints=setpoint_check(vehicle, terrain_fit, powertrain_fit, segments, measured, err_idx, hold_idx),
     )
+
+
+def setpoint_check(
+    vehicle: Any,
+    terrain: Any,
+    powertrain: Any,
+    segments: Sequence[Segment],
+    measured: np.ndarray,
+    err_idx: np.ndarray,
+    hold_idx: np.ndarray,
+) -> dict[str, float]:
+    """The fitted terrain and powertrain predicting each segment from its COMMAND, at the wheel
+    speed set points (issue 25), where the fit used the measured motion: the two must agree.
+
+    Keys: ``torque_rmse_Nm`` (motor torque vs measured, the segments of ``torque_rmse_after_Nm``),
+    ``holdout_energy_error`` (signed), ``speed_error_median`` and ``yaw_rate_error_median``
+    (|predicted - measured| / |measured| of the body motion [-]), ``limited_segments``.
+    """
+    from skidsteer_power.models.predict import CommandPredictor
+
+    if not segments:
+        return {}
+    commands = np.array([seg.command for seg in segments], dtype=float)
+    pred = CommandPredictor(vehicle, terrain, powertrain).predict(commands[:, 0], commands[:, 1])
+    torque = np.empty_like(pred.torque)
+    omega = np.empty_like(pred.torque)
+    for i, side in enumerate(('left', 'right')):
+        point = powertrain.motor_side(side, pred.torque[:, i], pred.setpoint[:, i])
+        torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+    speed = np.array([seg.speed_m_s for seg in segments])
+    yaw = np.array([seg.yaw_rate_rad_s for seg in segments])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        speed_err = np.abs(pred.speed - speed) / np.abs(speed)
+        yaw_err = np.abs(pred.yaw_rate - yaw) / np.abs(yaw)
+    return {
+        'torque_rmse_Nm': _rmse(torque[err_idx] - measured[err_idx]),
+        'holdout_energy_error': _energy_error(segments, hold_idx, torque, omega, powertrain.motor),
+        'speed_error_median': float(np.nanmedian(np.where(np.abs(speed) > 1e-3, speed_err, np.nan))),
+        'yaw_rate_error_median': float(np.nanmedian(np.where(np.abs(yaw) > 1e-3, yaw_err, np.nan))),
+        'limited_segments': int(np.sum(pred.limited)),
+    }

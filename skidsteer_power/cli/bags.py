@@ -275,10 +275,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     val.add_argument(
         '--kinematics',
-        choices=('cmd', 'odom', 'ground_truth'),
+        choices=('cmd', 'twist', 'odom', 'ground_truth'),
         default='cmd',
-        help='predict from the command (default), the --odom twist, or /ground_truth/odom; with cmd, '
-        'a bag with odometry also gets the prediction from the measured motion',
+        help='predict from the command at its wheel speed set points (default), from the command taken '
+        'as the motion (twist), the --odom twist, or /ground_truth/odom; with cmd or twist, a bag with '
+        'odometry also gets the prediction from the measured motion',
     )
     val.add_argument(
         '--cmd-hold',

@@ -265,7 +265,10 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
 
         plot_missions([result], png)
         payload['plot'] = str(png)
-    emit(payload if args.json else {k: v for k, v in payload.items() if k != 'legs'}, args.json)
+    emit(
+        payload if args.json else {k: v for k, v in payload.items() if k not in ('legs', 'commands')},
+        args.json,
+    )
     return 0
 
 

@@ -13,13 +13,15 @@ from __future__ import annotations
 import math
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.numeric import Real
 
 RPM = 2.0 * math.pi / 60.0
 """One revolution per minute in rad/s."""
 
 
-def side_speeds(linear_m_s: float, yaw_rate_rad_s: float, tread_m: float) -> tuple[float, float]:
-    """(left, right) track/wheel ground speeds [m/s] for a body twist (v [m/s], yaw rate [rad/s])."""
+def side_speeds(linear_m_s: Real, yaw_rate_rad_s: Real, tread_m: float) -> tuple[Real, Real]:
+    """(left, right) track/wheel ground speeds [m/s] for a body twist (v [m/s], yaw rate [rad/s]);
+    floats or arrays (:mod:`skidsteer_power.numeric`)."""
     half = 0.5 * yaw_rate_rad_s * tread_m
     return linear_m_s - half, linear_m_s + half
 

@@ -10,8 +10,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator.inputs import JointMap
-from skidsteer_power.estimator.prediction import MapPredictor
+from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -53,18 +54,45 @@ def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:
     return Battery.from_config(powertrain_for(vehicle).battery, soc)
 
 
+KINEMATICS = ('setpoint', 'twist')
+"""How a command is predicted: 'setpoint' (default: at the command's wheel speed set points, the
+motion FESS finds for them; issue 25) or 'twist' (the command taken as the motion itself)."""
+
+
 def map_predictor(
-    vehicle: Vehicle, terrain_name: str, cache_dir: str | os.PathLike | None = None
-) -> tuple[MapPredictor, bool, str]:
-    """A :class:`MapPredictor` for ``vehicle`` on the named terrain; the map is loaded from
+    vehicle: Vehicle,
+    terrain_name: str,
+    cache_dir: str | os.PathLike | None = None,
+    kinematics: str = 'setpoint',
+) -> tuple[MapPredictor | SetpointPredictor, bool, str]:
+    """A predictor for ``vehicle`` on the named terrain from its cached map, loaded from
     ``cache_dir`` (default: $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power) or built there
-    (FESS) if missing.
+    (FESS) if missing: the set-point map (:class:`SetpointPredictor`) for ``kinematics='setpoint'``,
+    the (V, yaw rate) power map (:class:`MapPredictor`) for ``'twist'``.
 
     Returns (predictor, built, description of the map).
     """
+    if kinematics not in KINEMATICS:
+        raise ConfigError(f'kinematics must be one of {", ".join(KINEMATICS)}, not {kinematics!r}')
+    terrain = check_terrain(terrain_name)
+    if kinematics == 'setpoint':
+        from skidsteer_power.maps import setpoint_map
+
+        smap, built = setpoint_map.load_or_build(vehicle, terrain, cache_dir=cache_dir or None)
+        where = setpoint_map.cache_path(vehicle, terrain, cache_dir=cache_dir or None)
+        description = f'{vehicle.name} on {terrain.name}, set points ({where})'
+
+        def motion_map() -> Any:  # path energy starts from a motion: the (V, yaw rate) map
+            from skidsteer_power.maps import load_or_build
+
+            return load_or_build(vehicle, terrain, cache_dir or None)[0]
+
+        predictor = SetpointPredictor(
+            smap, powertrain_for(vehicle), description=description, motion_map=motion_map
+        )
+        return predictor, built, str(where)
     from skidsteer_power.maps import cache_path, load_or_build
 
-    terrain = check_terrain(terrain_name)
     power_map, built = load_or_build(vehicle, terrain, cache_dir or None)
     where = cache_path(vehicle, terrain, cache_dir or None)
     description = f'{vehicle.name} on {terrain.name} ({where})'

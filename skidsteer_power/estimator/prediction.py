@@ -20,6 +20,8 @@ Reverse driving (V < 0) and spinning in place (V = 0, r != 0) are answered by th
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Protocol
@@ -45,6 +47,9 @@ class Prediction:
     traction_margin : 1 - required / available thrust (<= 0: about to get stuck) [-]
     clamped : the command lay outside the map's command envelope and was answered at its edge
     limited : a physics limit (a turn tighter than the map's small-radius limit, or no steady state)
+    achieved_speed_m_s, achieved_yaw_rate_rad_s : the motion the model expects [m/s], [rad/s]: at the
+        command's wheel speed set points (:class:`SetpointPredictor`), or the command itself when the
+        command is taken as the motion (:class:`MapPredictor`, ``kinematics='twist'``)
     """
 
     speed_m_s: float
@@ -61,6 +66,8 @@ class Prediction:
     traction_margin: float
     clamped: bool
     limited: bool = False
+    achieved_speed_m_s: float = math.nan
+    achieved_yaw_rate_rad_s: float = math.nan
 
     @property
     def bus_total_W(self) -> float:
@@ -150,4 +157,69 @@ class MapPredictor:
             traction_margin=_scalar(q.traction_margin),
             clamped=bool(_scalar(q.clamped)),
             limited=bool(_scalar(q.limited)),
+            achieved_speed_m_s=speed,
+            achieved_yaw_rate_rad_s=yaw_rate,
+        )
+
+
+class SetpointPredictor:
+    """Prediction at the command's wheel speed set points, from a
+    :class:`skidsteer_power.maps.setpoint_map.SetpointMap` (issue 25; DESIGN.md: a command is a pair
+    of set points, the terrain decides the motion). Each side turns at its set point with the torque
+    FESS finds for the motion those set points produce (current limit applied); the achieved motion
+    is in ``achieved_speed_m_s`` / ``achieved_yaw_rate_rad_s``. Repeated commands come from a cache.
+
+    ``power_map`` is the (V, yaw rate) map of the same vehicle and terrain, for what starts from a
+    motion rather than a command (path energy: a route's (V, R) is the achieved motion, and its
+    side speeds are the set points that produce it). ``motion_map`` loads it on first use.
+    """
+
+    def __init__(
+        self,
+        setpoint_map: Any,
+        powertrain: Any,
+        *,
+        description: str = '',
+        cache_size: int = 256,
+        motion_map: Callable[[], Any] | None = None,
+    ) -> None:
+        self.setpoint_map = setpoint_map
+        self.powertrain = powertrain
+        self.description = description or 'set-point map'
+        self.predict = lru_cache(maxsize=cache_size)(self._predict)
+        self._motion_map = motion_map
+        self._power_map: Any = None
+
+    @property
+    def power_map(self) -> Any:
+        """The (V, yaw rate) power map (loaded or built on first use), or None if none was given."""
+        if self._power_map is None and self._motion_map is not None:
+            self._power_map = self._motion_map()
+        return self._power_map
+
+    def _predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction:
+        q = self.setpoint_map.query(speed_m_s, yaw_rate_rad_s)
+        omega = (q.setpoint_left_rad_s, q.setpoint_right_rad_s)
+        torque = (q.torque_left_Nm, q.torque_right_Nm)
+        left, right = q.motors  # the map's powertrain is this one (factory.map_predictor)
+        if left is None or right is None:
+            left = self.powertrain.motor_side('left', torque[0], omega[0])
+            right = self.powertrain.motor_side('right', torque[1], omega[1])
+        return Prediction(
+            speed_m_s=speed_m_s,
+            yaw_rate_rad_s=yaw_rate_rad_s,
+            axle_omega_rad_s=omega,
+            terrain_torque_Nm=torque,
+            terrain_W=(left.terrain_power_W, right.terrain_power_W),
+            internal_W=(left.internal_power_W, right.internal_power_W),
+            motor_omega_rad_s=(left.motor_omega_rad_s, right.motor_omega_rad_s),
+            motor_torque_Nm=(left.motor_torque_Nm, right.motor_torque_Nm),
+            current_A=(left.current_A, right.current_A),
+            electrical_W=(left.terminal_power_W, right.terminal_power_W),
+            bus_W=(left.electrical_power_W, right.electrical_power_W),
+            traction_margin=q.traction_margin,
+            clamped=q.clamped,
+            limited=q.limited,
+            achieved_speed_m_s=q.speed_m_s,
+            achieved_yaw_rate_rad_s=q.yaw_rate_rad_s,
         )

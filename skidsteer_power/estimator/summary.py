@@ -25,6 +25,8 @@ from skidsteer_power.estimator.energy import SOURCES
 SUMMARY_FIELDS: tuple[str, ...] = (
     'speed_cmd_m_s',
     'yaw_rate_cmd_rad_s',
+    'predicted_motion_speed_m_s',
+    'predicted_motion_yaw_rate_rad_s',
     'predicted_left_W',
     'predicted_right_W',
     'measured_left_W',
@@ -88,6 +90,8 @@ def _prediction_values(p: Any) -> dict[str, float]:
     return {
         'speed_cmd_m_s': p.speed_m_s,
         'yaw_rate_cmd_rad_s': p.yaw_rate_rad_s,
+        'predicted_motion_speed_m_s': getattr(p, 'achieved_speed_m_s', math.nan),
+        'predicted_motion_yaw_rate_rad_s': getattr(p, 'achieved_yaw_rate_rad_s', math.nan),
         'predicted_left_W': p.electrical_W[0],
         'predicted_right_W': p.electrical_W[1],
         'predicted_battery_W': p.bus_total_W,

@@ -62,6 +62,28 @@ class MissionResult:
     limited: np.ndarray
     drawbar_pull_by_payload: dict[float, float] = field(default_factory=dict)
     weight_by_payload: dict[float, float] = field(default_factory=dict)
+    setpoint_rad_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    drive_radius_m: float = math.nan
+    tread_m: float = math.nan
+
+    def commands(self) -> list[dict[str, float]]:
+        """Per route segment, the wheel speed set points that produce its (V, R) (each side's axle
+        speed in FESS's steady state of that motion: the amplifiers hold these, issue 25) and the
+        command (V, yaw rate) the driver turns into them (des/kinematics.py, inverted)."""
+        a = self.route.arrays()
+        out = []
+        for k, (left, right) in enumerate(self.setpoint_rad_s.tolist()):
+            out.append(
+                {
+                    'speed_m_s': float(a['speed_m_s'][k]),
+                    'turn_radius_m': float(a['turn_radius_m'][k]),
+                    'setpoint_left_rad_s': left,
+                    'setpoint_right_rad_s': right,
+                    'speed_cmd_m_s': 0.5 * (left + right) * self.drive_radius_m,
+                    'yaw_rate_cmd_rad_s': (right - left) * self.drive_radius_m / self.tread_m,
+                }
+            )
+        return out
 
     @property
     def duration_s(self) -> np.ndarray:
@@ -149,6 +171,7 @@ class MissionResult:
             'terrain': self.terrain_name,
             'model': self.model,
             'legs': self.legs(),
+            'commands': self.commands(),
         }
 
     def trace(self, samples_per_segment: int = 2) -> dict[str, np.ndarray]:
@@ -211,7 +234,7 @@ def run_mission(
     pt = powertrain or Powertrain.for_vehicle(vehicle)
     a = route.arrays()
     n = len(route.segments)
-    fields_ = {k: np.zeros(n) for k in ('P', 'Pt', 'Pi', 'Pb', 'Pl', 'Pr', 'z', 'tm')}
+    fields_ = {k: np.zeros(n) for k in ('P', 'Pt', 'Pi', 'Pb', 'Pl', 'Pr', 'z', 'tm', 'wl', 'wr')}
     clamped = np.zeros(n, dtype=bool)
     limited = np.zeros(n, dtype=bool)
     dp: dict[float, float] = {}
@@ -230,6 +253,8 @@ def run_mission(
             fields_[key][rows] = powers[name][inv]
         for key, name in (('Pt', 'terrain_W'), ('Pi', 'internal_W'), ('Pb', 'battery_W')):
             fields_[key][rows] = powers[name][inv]
+        fields_['wl'][rows] = axle['omega_left'][inv]  # the side speeds of the motion: its set points
+        fields_['wr'][rows] = axle['omega_right'][inv]
         fields_['z'][rows] = axle['sinkage'][inv]
         fields_['tm'][rows] = axle['traction_margin'][inv]
         clamped[rows] = axle['clamped'][inv]
@@ -253,6 +278,9 @@ def run_mission(
         limited=limited,
         drawbar_pull_by_payload=dp,
         weight_by_payload=weight,
+        setpoint_rad_s=np.column_stack([fields_['wl'], fields_['wr']]),
+        drive_radius_m=float(vehicle.drive_radius_m),
+        tread_m=float(vehicle.tread_m),
     )
 
 

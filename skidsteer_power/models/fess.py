@@ -121,12 +121,21 @@ def _trapezoid_weights(n: int) -> np.ndarray:
     return w
 
 
-def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
-    """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
-    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+@lru_cache(maxsize=64)
+def _track_elements(length: float, width: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(forward position [m], area weight [m^2]) of a track's n + 1 element nodes, shapes (1, 1, 1, n+1):
+    fixed per track, built once (the on-board point solve sets up a contact per command)."""
     s = np.linspace(0.0, 1.0, n + 1)
     fwd = (0.5 * length - s * length)[None, None, None, :]  # element k at l/2 - k l / n (eq. 6.6)
     area = width * length * _trapezoid_weights(n)[None, None, None, :]
+    fwd.flags.writeable = area.flags.writeable = False
+    return fwd, area
+
+
+def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
+    """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
+    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    fwd, area = _track_elements(length, width, n)
     pressure = np.maximum(loads, 0.0) / (width * length)
     tau_max = (terrain.c + pressure * math.tan(terrain.phi))[:, :, None, None]  # eq. 2.2
     safe = np.maximum(loads, 0.0)
@@ -610,12 +619,45 @@ class FessSolver:
             zero = np.zeros(2)
             return PointSolution(0.0, zero, zero.copy(), True, 0)
         prob = self.problem(np.array([v]), np.array([w]))
-        guess = initial_guess(prob) if x0 is None else np.asarray(x0, dtype=float)[None, :] * flip
-        result = newton(prob, guess, tol)
-        sol = _outputs(prob, result, np.zeros(1, dtype=bool))
-        x, iterations, ok = result.x[0], int(result.iterations[0]), bool(sol.converged[0])
-        torque = sol.torque[0]
+        from skidsteer_power.models.fess_point import newton_point, warm_alternatives
+
+        guess = self._straight_guess(prob, initial_guess(prob))[0]
+        others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
+        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others)
+        fx = element_forces(prob, x[None, None, :])[0]
+        torque = prob.radius * np.sum(fx * prob.contact.wt[:, None], axis=(-2, -1))[0, 0]
+        slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
+        ok = converged and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
         return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
+
+    @cached_property
+    def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(V [m/s], s0 [m], slip [-]) of straight running at 13 speeds from 0 to 1.2 x max_speed:
+        one batched solve on first use, the first guess of :meth:`solve_point` (measured: cold solves
+        of random commands take about half the Newton steps from it; benchmarks/bench_fess.py)."""
+        top = 1.2 * float(getattr(self.vehicle, 'max_speed_m_s', 1.5) or 1.5)
+        speeds = np.concatenate([[0.0], np.geomspace(0.01, top, 12)])
+        sol = self.solve_twist(speeds[1:], 0.0)
+        ok = sol.converged
+        s0 = np.concatenate([[0.0], np.where(ok, sol.s0, np.nan)])
+        slip = np.concatenate([[0.0], np.where(ok, sol.slip[:, 0], np.nan)])
+        good = np.isfinite(s0) & np.isfinite(slip)
+        return speeds[good], s0[good], slip[good]
+
+    def _straight_guess(self, prob: Problem, guess: np.ndarray) -> np.ndarray:
+        """``guess`` (1, 3) with s0 and the slips of straight running at this speed (the table):
+        s0 faded by V^2 / (V^2 + (w_z l / 2)^2) towards 0 for a spin (s0 = 0 by symmetry), both
+        sides' speeds raised by the straight-running slip."""
+        speeds, s0, slip = self.straight_table
+        if speeds.size < 2:
+            return guess
+        v, w = float(prob.speed[0]), float(prob.yaw[0])
+        half_span = 0.5 * prob.contact.length_scale * w
+        fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
+        out = guess.copy()
+        out[0, 0] = float(np.interp(v, speeds, s0)) * fade
+        out[0, 1:] = guess[0, 1:] / (1.0 - min(float(np.interp(v, speeds, slip)), 0.9))
+        return out
 
     def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
         """Re-solve failed points warm-started from the nearest converged point (in V and w_z scaled

@@ -15,6 +15,13 @@ publishes per cmd_vel
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
                  terrain needs [N m]); stamp = the TwistStamped's, else receive time
+    ``power/predicted_twist`` geometry_msgs/TwistStamped, with the figures below (``figure_period_s``):
+                 the motion the model expects for the latest command (``kinematics: setpoint``: FESS
+                 at its wheel speed set points; linear.x = V [m/s], angular.z = yaw rate [rad/s];
+                 frame base_link; stamp = that command's)
+periodic, and on ``~/reset_odometry``
+    ``odom/predicted`` nav_msgs/Odometry: that motion dead-reckoned (frame odom, child base_link;
+                 every ``publish_period_s``; the pose restarts at the origin on ``~/reset_odometry``)
 publishes per joint_states
     ``power/measured`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` as measured (velocity
                  [rad/s], effort = Kt * I [N m]) after the side mapping; stamp = the joint_states'
@@ -44,6 +51,7 @@ path energy (:mod:`skidsteer_power.nodes.path_hook`)
 service
     ``~/reset_energy`` std_srvs/Trigger: the battery was swapped for a full one; state of charge back
     to full, energy tallies to 0 J, state file rewritten.
+    ``~/reset_odometry`` std_srvs/Trigger: ``odom/predicted`` restarts at the origin, heading 0.
 
 QoS
 ---
@@ -77,6 +85,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -89,6 +98,7 @@ from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits
+from skidsteer_power.estimator.odometry import PredictedOdometry
 from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
@@ -109,6 +119,10 @@ NODE_NAME = 'power_estimator'
 PARAMETERS: dict[str, tuple[Any, str]] = {
     'vehicle': ('test_robot_track', 'vehicle name in config/vehicles/ or a YAML file'),
     'terrain': ('dry_sand', 'terrain preset or YAML file; may be changed at run time (swaps maps)'),
+    'kinematics': (
+        'setpoint',
+        "how a command is predicted: 'setpoint' (at its wheel speed set points) or 'twist' (as the motion)",
+    ),
     'map_cache_dir': (
         '',
         'directory of cached maps ("" = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
@@ -208,6 +222,9 @@ class PowerEstimator(QuietNode):
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         self.terrain_name = p['terrain']
+        self.kinematics = str(p['kinematics'])
+        self.odometry = PredictedOdometry()
+        self._predicted_twist_stamp: Any = None
         if predictor is None:
             predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
         adaptation = AdaptationSettings(
@@ -265,7 +282,9 @@ class PowerEstimator(QuietNode):
 
     def _make_predictor(self, terrain: str, cache_dir: str) -> Any:
         started = time.monotonic()
-        predictor, built, path = factory.map_predictor(self.vehicle, terrain, cache_dir or None)
+        predictor, built, path = factory.map_predictor(
+            self.vehicle, terrain, cache_dir or None, self.kinematics
+        )
         if built:
             self.get_logger().info(
                 f'built the power map for {self.vehicle.name} on {terrain} '
@@ -327,7 +346,10 @@ class PowerEstimator(QuietNode):
         self.pub_tte_p90 = pub(Float64, 'energy/time_to_empty_p90_s')
         self.pub_correction = pub(JointState, 'power/correction')
         self.pub_diag = pub(DiagnosticArray, 'diagnostics')
+        self.pub_predicted_twist = pub(TwistStamped, 'power/predicted_twist', qos_out)
+        self.pub_predicted_odom = pub(Odometry, 'odom/predicted', qos_out)
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
+        self.create_service(Trigger, '~/reset_odometry', self._on_reset_odometry)
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
         self._figure_timer = self.create_timer(float(p['figure_period_s']), self._publish_figures)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
@@ -356,6 +378,7 @@ class PowerEstimator(QuietNode):
             return
         stamp = msg.header.stamp if self._cmd_vel_stamped else received.to_msg()
         self._publish_predicted(prediction, stamp.sec, stamp.nanosec)
+        self._publish_predicted_motion(prediction, now, stamp)
         self._figure_due(0)
         self._log_traction_change()
 
@@ -414,6 +437,40 @@ class PowerEstimator(QuietNode):
         effort = (*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm)
         self.pub_predicted.publish(self._predicted_wire.pack(sec, nanosec, velocity, effort))
 
+    def _publish_predicted_motion(self, prediction: Any, now: float, stamp: Any) -> None:
+        """The dead reckoning of ``odom/predicted`` takes this command's predicted motion at once;
+        ``power/predicted_twist`` goes out with the figures (``figure_period_s``, the newest
+        command's stamp), as a message per command would cost the 1 kHz budget of issue 18."""
+        with self._lock:
+            self.odometry.set_twist(prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s, now)
+        self._predicted_twist_stamp = stamp
+
+    def _publish_predicted_twist(self, prediction: Any) -> None:
+        speed, yaw_rate = prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s
+        twist = TwistStamped()
+        twist.header.stamp, twist.header.frame_id = self._predicted_twist_stamp, 'base_link'
+        twist.twist.linear.x, twist.twist.angular.z = float(speed), float(yaw_rate)
+        self.pub_predicted_twist.publish(twist)
+
+    def _publish_odometry(self, stamp: Any) -> None:
+        with self._lock:
+            odo = dataclasses.replace(self.odometry)
+        msg = Odometry()
+        msg.header.stamp, msg.header.frame_id, msg.child_frame_id = stamp, 'odom', 'base_link'
+        msg.pose.pose.position.x, msg.pose.pose.position.y = odo.x_m, odo.y_m
+        q = msg.pose.pose.orientation
+        q.x, q.y, q.z, q.w = odo.quaternion()
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = odo.speed_m_s, odo.yaw_rate_rad_s
+        self.pub_predicted_odom.publish(msg)
+
+    def _on_reset_odometry(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/reset_odometry``: ``odom/predicted`` starts again at the origin, heading 0."""
+        with self._lock:
+            self.odometry.reset(self.now_s())
+        self._publish_odometry(self.get_clock().now().to_msg())
+        response.success, response.message = True, 'predicted odometry reset to the origin'
+        return response
+
     def _figure_due(self, which: int) -> None:
         """A new prediction (0) or measurement (1) for the figure timer; restarts it if idle."""
         self._figures_due[which] = True
@@ -437,6 +494,8 @@ class PowerEstimator(QuietNode):
         figures: list[tuple[Any, float]] = []
         if command_due:
             figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
+            if prediction is not None and self._predicted_twist_stamp is not None:
+                self._publish_predicted_twist(prediction)
         if measurement_due:
             figures += zip(self.pub_measurement_figures, measurement_figures(comparison), strict=True)
         for publisher, value in figures:
@@ -445,6 +504,10 @@ class PowerEstimator(QuietNode):
     def _on_publish_timer(self) -> None:
         now = self.now_s()
         with self._lock:
+            if not self.core.cmd_fresh.is_fresh(now):  # no command in force: the robot stands
+                self.odometry.set_twist(0.0, 0.0, now)
+            else:
+                self.odometry.advance(now)
             self.core.tick(now)
             fields = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
             remaining = float(self.core.battery.remaining_wh)
@@ -469,6 +532,7 @@ class PowerEstimator(QuietNode):
         self.pub_tte_p90.publish(Float64(data=float(bounds[1])))
         correction.header.stamp = battery.header.stamp
         self.pub_correction.publish(correction)
+        self._publish_odometry(stamp)
         self.path_energy.publish()  # the battery changed: the path margin too
 
     def _on_reset_energy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

@@ -81,6 +81,8 @@ class Powertrain:
     gear_ratio : motor speed / axle speed [-]
     left, right : internal resistance of each side at the motor shaft
     regen_efficiency : bus power / terminal power when generating [-] (None = amplifier efficiency)
+    current_limit_A : largest motor current the amplifier delivers [A] (the DES 70/10's current
+        limit, 10 A = its continuous current, Appendix A; the preset's ``current_limit_A``)
     battery : battery preset name or mapping (for :meth:`Battery.from_config`), may be None
     source : provenance of the numbers
     """
@@ -95,6 +97,7 @@ class Powertrain:
     regen_efficiency: float | None = None
     battery: Any = None
     source: str = ''
+    current_limit_A: float = DES_70_10.continuous_current_A
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any] | None, running_gear: str = 'track') -> Powertrain:
@@ -127,6 +130,9 @@ class Powertrain:
             regen_efficiency=None if regen is None else float(regen),
             battery=cfg.get('battery'),
             source=str(cfg.get('source', '')),
+            current_limit_A=_positive(
+                cfg.get('current_limit_A', amplifier.continuous_current_A), 'current_limit_A'
+            ),
         )
 
     @classmethod

@@ -260,7 +260,11 @@ def _battery_panel(view: MonitorView) -> Panel:
         f'{_num(view.voltage_V, ".1f")} V\n',
         f'time to empty {format_duration(view.time_to_empty_s)}{_tte_band(view)}   ',
         f'battery power: predicted {_num(view.get("predicted_battery_W"), ".1f")} W, ',
-        f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})',
+        f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})\n',
+        f'command V {_num(view.get("speed_cmd_m_s"), ".2f")} m/s, yaw rate '
+        f'{_num(view.get("yaw_rate_cmd_rad_s"), ".2f")} rad/s -> predicted motion '
+        f'V {_num(view.get("predicted_motion_speed_m_s"), ".2f")} m/s, yaw rate '
+        f'{_num(view.get("predicted_motion_yaw_rate_rad_s"), ".2f")} rad/s (set points: the wheels slip)',
     )
     if math.isfinite(view.path_required_wh):
         short = math.isfinite(view.path_margin_wh) and view.path_margin_wh < 0

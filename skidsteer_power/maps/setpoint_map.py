@@ -1,0 +1,229 @@
+"""Look-up map of the set-point prediction: what a command really does, in microseconds (issue 25).
+
+:class:`~skidsteer_power.models.predict.CommandPredictor` solves FESS at a command's wheel speed set
+points (milliseconds). This map tabulates that solve over set-point space so the robot can query it
+per message. Coordinates: the mean m = (sp_left + sp_right) / 2 and the half difference
+d = (sp_right - sp_left) / 2 of the axle speed set points [rad/s], on a rectangular grid over
+m in [0, m_max], d in [0, d_max] with m_max = max_speed / r and d_max = max_yaw_rate B / (2 r) (the
+vehicle's command envelope, its ``max_speed_m_s`` and ``max_yaw_rate_rad_s``). The other three
+quadrants are mirror images, exact for the laterally and fore-aft symmetric vehicles here (module
+doc of fess.py): a negative mean is reverse driving (every speed, yaw rate and torque negated), a
+negative difference a right turn (sides swapped, yaw rate negated).
+
+Stored per node: V, w_z, both axle torques, both slips, sinkage, traction margin and ``limited``
+(no steady state, the dug-in answer). A query interpolates bilinearly in plain Python floats, then adds the
+powertrain (motor currents under the current limit, battery power) exactly as the direct path does
+(:meth:`CommandPredictor.electrical`'s formulas, via :meth:`Powertrain.motor_side` on floats). A query
+in a cell with a limited corner is ``limited``; outside the envelope it is answered at the edge and
+``clamped``. Accuracy and speed against the direct solve: benchmarks/bench_maps.py.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skidsteer_power.cache import atomic_file, default_cache_dir, physics_digest
+from skidsteer_power.errors import InputError
+from skidsteer_power.interpolation import Axis, BilinearGrid
+from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
+from skidsteer_power.models.setpoint import REASON_TRACTION
+from skidsteer_power.terramechanics.terrain import terrain_fingerprint
+from skidsteer_power.vehicle import vehicle_fingerprint
+
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
+
+FIELDS = (
+    'speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage',
+    'traction_margin', 'limited',
+)  # fmt: skip
+DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
+MAX_NODES = 200_000
+
+
+@dataclass(frozen=True)
+class SetpointQuery:
+    """One command's answer from the map, SI units (the keys of ``skidsteer-power predict``)."""
+
+    setpoint_left_rad_s: float
+    setpoint_right_rad_s: float
+    speed_m_s: float
+    yaw_rate_rad_s: float
+    torque_left_Nm: float
+    torque_right_Nm: float
+    slip_left: float
+    slip_right: float
+    sinkage_m: float
+    traction_margin: float
+    current_left_A: float
+    current_right_A: float
+    battery_power_W: float
+    limited: bool
+    clamped: bool
+    reason: str
+    motors: tuple[Any, Any] = (None, None)  # each side's MotorPoint (the estimator reuses them)
+
+    @property
+    def turn_radius_m(self) -> float:
+        """V / w_z [m]: +-inf straight, 0 spinning in place, NaN at rest."""
+        if self.yaw_rate_rad_s == 0:
+            return math.nan if self.speed_m_s == 0 else math.inf
+        return self.speed_m_s / self.yaw_rate_rad_s
+
+
+class SetpointMap:
+    """The set-point prediction of one vehicle x terrain over (mean, half difference) of set points."""
+
+    def __init__(
+        self, predictor: CommandPredictor, mean: np.ndarray, diff: np.ndarray, values: np.ndarray
+    ) -> None:
+        self.predictor = predictor
+        self.grid = BilinearGrid(
+            Axis(mean, 'set point mean'), Axis(diff, 'set point half difference'), values
+        )
+        limited = values[..., FIELDS.index('limited')] > 0
+        cell = limited[:-1, :-1] | limited[1:, :-1] | limited[:-1, 1:] | limited[1:, 1:]
+        self._cell_limited = cell.ravel().tolist()
+        pt = predictor.powertrain
+        self._limit = pt.current_limit_A
+        self._kt = pt.motor.torque_constant_Nm_A
+        self._gear = pt.gear_ratio
+
+    @classmethod
+    def build(
+        cls,
+        vehicle: Vehicle,
+        terrain: Terrain,
+        nodes: tuple[int, int] = DEFAULT_NODES,
+        predictor: CommandPredictor | None = None,
+    ) -> SetpointMap:
+        """Solve every node in one batched set-point solve (nodes = (mean, difference) counts, each
+        >= 2, at most MAX_NODES in all)."""
+        n_mean, n_diff = (int(n) for n in nodes)
+        if min(n_mean, n_diff) < 2 or n_mean * n_diff > MAX_NODES:
+            raise InputError(
+                f'set-point map nodes must be >= 2 each and at most {MAX_NODES:,} in all: {nodes}'
+            )
+        predictor = predictor or CommandPredictor(vehicle, terrain)
+        r, half_tread = float(vehicle.drive_radius_m), 0.5 * float(vehicle.tread_m)
+        mean = np.linspace(0.0, vehicle.max_speed_m_s / r, n_mean)
+        diff = np.linspace(0.0, vehicle.max_yaw_rate_rad_s * half_tread / r, n_diff)
+        m, d = np.meshgrid(mean, diff, indexing='ij')
+        sol = predictor.solver.solve(np.column_stack([(m - d).ravel(), (m + d).ravel()]))
+        columns = (
+            sol.speed,
+            sol.yaw_rate,
+            sol.torque[:, 0],
+            sol.torque[:, 1],
+            sol.slip[:, 0],
+            sol.slip[:, 1],
+            sol.sinkage,
+            sol.traction_margin,
+            sol.limited.astype(float),
+        )
+        values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
+        return cls(predictor, mean, diff, values)
+
+    @property
+    def limited_fraction(self) -> float:
+        """Share of the map's nodes with no steady state [-]."""
+        return float(np.mean(self.grid.values[..., FIELDS.index('limited')] > 0))
+
+    def query(self, speed_cmd: float, yaw_cmd: float) -> SetpointQuery:
+        """The prediction for one command (V [m/s], w_z [rad/s]) in plain Python floats."""
+        v, w = float(speed_cmd), float(yaw_cmd)
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise InputError('commanded speed and yaw rate must be finite numbers (m/s, rad/s)')
+        (sp_l, sp_r), clamped_sp = self._setpoints(v, w)
+        flip = -1.0 if sp_l + sp_r < 0 else 1.0  # reverse: (l, r) -> (-l, -r), the fore-aft mirror
+        mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
+        reverse, right_turn = flip < 0, diff < 0
+        vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
+        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _ = vals
+        if right_turn:  # a right turn: the left turn's mirror image
+            yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
+        if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
+            speed, yaw, t_l, t_r = -speed, -yaw, -t_l, -t_r
+        traction = self._cell_limited[cell]
+        t_l, left, over_l = self._side('left', t_l, sp_l)
+        t_r, right, over_r = self._side('right', t_r, sp_r)
+        current = over_l or over_r
+        reason = REASON_TRACTION if traction else REASON_CURRENT if current else ''
+        return SetpointQuery(
+            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin,
+            float(left.current_A), float(right.current_A),
+            float(left.electrical_power_W) + float(right.electrical_power_W),
+            traction or current, clamped_sp or off_grid, reason, (left, right),
+        )  # fmt: skip
+
+    def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:
+        veh = self.predictor.vehicle
+        half = 0.5 * w * float(veh.tread_m)  # des/kinematics.side_speeds, in floats
+        r = float(veh.drive_radius_m)
+        left, right = (v - half) / r, (v + half) / r
+        peak = max(abs(left), abs(right))
+        top = self.predictor.max_axle_rad_s
+        if peak > top:  # both scaled: the curvature kept (twist_to_motor_rpm's rule)
+            return (left * top / peak, right * top / peak), True
+        return (left, right), False
+
+    def _side(self, side: str, torque: float, omega: float) -> tuple[float, Any, bool]:
+        """(torque, motor point (:class:`MotorPoint`), over the limit) of one side, the current
+        limit applied (the point's current is then the limit)."""
+        pt = self.predictor.powertrain
+        point: Any = pt.motor_side(side, torque, omega)
+        current = float(point.current_A)
+        if abs(current) <= self._limit:
+            return torque, point, False
+        held = math.copysign(self._limit, current)
+        internal = float(pt.resistance(side).torque(self._gear * omega))
+        torque = self._gear * (held * self._kt - internal)
+        return torque, pt.motor_side(side, torque, omega), True
+
+
+def cache_path(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    nodes: tuple[int, int] = DEFAULT_NODES,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> Path:
+    """Where :func:`load_or_build` keeps the set-point map: the name holds the vehicle and terrain
+    fingerprints, the physics-code digest and the node counts (everything that changes the nodes)."""
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    parts = (
+        f'{vehicle.name}-{vehicle_fingerprint(vehicle)}',
+        f'{terrain.name}-{terrain_fingerprint(terrain)}',
+        physics_digest(),
+        f'{nodes[0]}x{nodes[1]}',
+    )
+    return folder / ('setpoint_' + '_'.join(parts) + '.npz')
+
+
+def load_or_build(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    nodes: tuple[int, int] = DEFAULT_NODES,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> tuple[SetpointMap, bool]:
+    """The cached set-point map of ``vehicle`` on ``terrain``, built and saved if missing or
+    unreadable. Returns (map, built)."""
+    path = cache_path(vehicle, terrain, nodes, cache_dir)
+    if path.exists():
+        try:
+            with np.load(path) as data:
+                mean, diff, values = data['mean'], data['diff'], data['values']
+            if values.shape == (len(mean), len(diff), len(FIELDS)):
+                return SetpointMap(CommandPredictor(vehicle, terrain), mean, diff, values), False
+        except (OSError, ValueError, KeyError):
+            pass  # damaged: rebuild below, never use it
+    built = SetpointMap.build(vehicle, terrain, nodes)
+    with atomic_file(path) as handle:
+        np.savez(handle, mean=built.grid.axis0.values, diff=built.grid.axis1.values, values=built.grid.values)
+    return built, True

@@ -1,0 +1,195 @@
+"""What the robot does for a command: set points, FESS at the set points, motors, amplifiers, battery.
+
+``predict_commands(vehicle, terrain, speed_cmd, yaw_cmd)`` is the direct (solver) answer of
+``skidsteer-power predict --direct`` (DESIGN.md): the command's side axle speed set points
+(:func:`~skidsteer_power.models.setpoint.command_setpoints`, the driver's kinematics, scaled so no
+motor passes its no-load speed at the battery's full voltage), the body motion FESS finds for them
+(:class:`~skidsteer_power.models.setpoint.SetpointSolver`), and each side's motor current and the
+battery power through the powertrain of chapter 7 (:meth:`Powertrain.motor_side`, eqs. 7.1-7.4, the
+EC-45 and the DES 70/10).
+
+No prediction draws more than the powertrain's ``current_limit_A``. A side whose steady state needs
+more cannot hold its set point: its current is the limit, its torque the one the limit gives, and the
+point is ``limited`` with a reason (the motion shown is still the one at the set points, an upper
+bound on what the robot achieves there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skidsteer_power.models.fess import FessSolver
+from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
+from skidsteer_power.powertrain.battery import Battery
+from skidsteer_power.powertrain.drivetrain import SIDES, Powertrain
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
+
+REASON_CURRENT = 'current limit: a side needs more than the amplifier gives and falls behind its set point'
+
+JSON_KEYS = (
+    'speed_cmd_m_s',
+    'yaw_rate_cmd_rad_s',
+    'setpoint_left_rad_s',
+    'setpoint_right_rad_s',
+    'speed_m_s',
+    'yaw_rate_rad_s',
+    'turn_radius_m',
+    'omega_left_rad_s',
+    'omega_right_rad_s',
+    'torque_left_Nm',
+    'torque_right_Nm',
+    'slip_left',
+    'slip_right',
+    'sinkage_m',
+    'current_left_A',
+    'current_right_A',
+    'battery_power_W',
+    'limited',
+    'clamped',
+    'reason',
+)
+"""The keys of ``skidsteer-power predict --json`` (DESIGN.md), in order."""
+
+
+@dataclass
+class CommandPrediction:
+    """Predictions for P commands; every array (P,) or (P, 2) (left, right), SI units.
+
+    setpoint : side axle speed set points [rad/s]; speed, yaw_rate, turn_radius : the motion they
+    produce [m/s, rad/s, m]; torque : axle torque [N m]; slip [-]; sinkage [m]; current : motor
+    current [A] (|.| <= the current limit); battery_power : both amplifiers' bus power [W];
+    limited, clamped, reason : see the module doc and :func:`command_setpoints`.
+    """
+
+    speed_cmd: np.ndarray
+    yaw_rate_cmd: np.ndarray
+    setpoint: np.ndarray
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    turn_radius: np.ndarray
+    torque: np.ndarray
+    slip: np.ndarray
+    sinkage: np.ndarray
+    current: np.ndarray
+    battery_power: np.ndarray
+    limited: np.ndarray
+    clamped: np.ndarray
+    reason: list[str]
+
+    def record(self, k: int) -> dict[str, Any]:
+        """Point ``k`` as the JSON record of ``skidsteer-power predict`` (keys :data:`JSON_KEYS`)."""
+        left, right = 0, 1
+        values = (
+            self.speed_cmd[k],
+            self.yaw_rate_cmd[k],
+            self.setpoint[k, left],
+            self.setpoint[k, right],
+            self.speed[k],
+            self.yaw_rate[k],
+            self.turn_radius[k],
+            self.setpoint[k, left],
+            self.setpoint[k, right],
+            self.torque[k, left],
+            self.torque[k, right],
+            self.slip[k, left],
+            self.slip[k, right],
+            self.sinkage[k],
+            self.current[k, left],
+            self.current[k, right],
+            self.battery_power[k],
+        )
+        out: dict[str, Any] = {key: float(v) for key, v in zip(JSON_KEYS, values, strict=False)}
+        out.update(limited=bool(self.limited[k]), clamped=bool(self.clamped[k]), reason=self.reason[k])
+        return out
+
+
+def max_axle_speed(powertrain: Powertrain) -> float:
+    """Largest axle speed [rad/s] a set point may ask for: the motor's no-load speed at the battery's
+    full open-circuit voltage (Kn V_bus), at most its permissible speed, through the reduction."""
+    motor = powertrain.motor
+    try:
+        v_bus = float(Battery.from_config(powertrain.battery).config.ocv(1.0))
+    except Exception:  # no battery described or readable: the motor's nominal voltage
+        v_bus = motor.nominal_voltage_V
+    return min(motor.speed_constant_rad_s_V * v_bus, motor.max_speed_rad_s) / powertrain.gear_ratio
+
+
+class CommandPredictor:
+    """Set-point predictions for one vehicle and terrain, prepared once."""
+
+    def __init__(self, vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain | None = None) -> None:
+        self.vehicle = vehicle
+        self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
+        self.solver = SetpointSolver(FessSolver(vehicle, terrain))
+        self.max_axle_rad_s = max_axle_speed(self.powertrain)
+
+    def setpoints(self, speed_cmd: ArrayLike, yaw_cmd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(set points (P, 2) [rad/s], clamped (P,)) of commands, as the driver computes them."""
+        veh = self.vehicle
+        return command_setpoints(
+            speed_cmd,
+            yaw_cmd,
+            tread_m=float(veh.tread_m),
+            drive_radius_m=float(veh.drive_radius_m),
+            max_axle_rad_s=self.max_axle_rad_s,
+        )
+
+    def predict(self, speed_cmd: ArrayLike, yaw_cmd: ArrayLike) -> CommandPrediction:
+        """Predict P commands (V [m/s], w_z [rad/s], broadcast) in one batched solve."""
+        v, w = np.broadcast_arrays(np.asarray(speed_cmd, dtype=float), np.asarray(yaw_cmd, dtype=float))
+        sp, clamped = self.setpoints(v, w)
+        sol = self.solver.solve(sp)
+        torque, current, power, over = self.electrical(sol.torque, sp)
+        limited = sol.limited | over
+        reason = [r or (REASON_CURRENT if o else '') for r, o in zip(sol.reason, over, strict=True)]
+        return CommandPrediction(
+            speed_cmd=v.ravel().copy(),
+            yaw_rate_cmd=w.ravel().copy(),
+            setpoint=sp,
+            speed=sol.speed,
+            yaw_rate=sol.yaw_rate,
+            turn_radius=sol.turn_radius,
+            torque=torque,
+            slip=sol.slip,
+            sinkage=sol.sinkage,
+            current=current,
+            battery_power=power,
+            limited=limited,
+            clamped=clamped,
+            reason=reason,
+        )
+
+    def electrical(
+        self, torque: np.ndarray, omega: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Axle torque (P, 2) [N m] at axle speeds (P, 2) [rad/s] through the powertrain, with the
+        current limit: (torque, current [A], battery power (P,) [W], over the limit (P,))."""
+        pt = self.powertrain
+        limit = pt.current_limit_A
+        torque = torque.copy()
+        current = np.empty_like(torque)
+        power = np.zeros(len(torque))
+        over = np.zeros(len(torque), dtype=bool)
+        for k, side in enumerate(SIDES):
+            point = pt.motor_side(side, torque[:, k], omega[:, k])
+            i = np.asarray(point.current_A, dtype=float)
+            high = np.abs(i) > limit
+            if np.any(high):  # the amplifier holds the current at its limit: that torque, no more
+                i_lim = np.sign(i) * limit
+                motor_torque = i_lim * pt.motor.torque_constant_Nm_A
+                internal = np.asarray(pt.resistance(side).torque(pt.gear_ratio * omega[:, k]), dtype=float)
+                torque[:, k] = np.where(high, pt.gear_ratio * (motor_torque - internal), torque[:, k])
+                point = pt.motor_side(side, torque[:, k], omega[:, k])
+                i = np.where(high, i_lim, np.asarray(point.current_A, dtype=float))
+            current[:, k] = i
+            power += np.asarray(point.electrical_power_W, dtype=float)
+            over |= high
+        return torque, current, power, over

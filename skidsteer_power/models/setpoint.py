@@ -1,0 +1,281 @@
+"""FESS driven by the wheel speed set points: what the robot really does for a command (issue 25).
+
+The amplifiers hold the side (sprocket / axle) speeds; the terrain decides the body motion. A command
+(V_cmd [m/s], yaw rate w_cmd [rad/s]) gives the set points with the driver's own kinematics
+(:mod:`skidsteer_power.des.kinematics`: v_side = V -+ w B / 2, omega = v_side / r, both scaled
+together so no motor passes its top speed). FESS (:mod:`skidsteer_power.models.fess`) is then solved
+the other way round: the side speeds are given and the unknowns are the body motion (V, w_z) and the
+turning-centre offset s0, under the same three equilibrium equations of eq. 3.19 (sum F_x, sum F_y,
+sum M_z). Writing the set points as two more equations (omega_left = sp_left, omega_right =
+sp_right) around FESS's three-unknown system and eliminating them leaves a 3 x 3 system in
+(s0, V, w_z), solved for the whole batch by the project's batched Newton
+(:func:`~skidsteer_power.models.newton.newton_solve`, eqs. 3.20-3.22). The vertical loads (eq. 6.12)
+and the contacts are rebuilt from the trial (V, w_z) at every residual call.
+
+Symmetry: a set point pair with a negative mean is solved as the fore-aft mirror image of the
+positive one (module doc of fess.py), so reversing is exact; equal set points are straight running
+(w_z pinned at 0, s0 by FESS's straight-running limit); opposite set points are a spin (V = 0 by
+symmetry, reached by the Newton iteration, not imposed).
+
+Where no steady state exists (Newton finds no equilibrium, also after a continuation from straight
+running, or a side would have to slip more than :data:`~skidsteer_power.models.fess.SLIP_LIMIT`)
+the answer is the robot dug in: V = 0, w_z = 0, the wheels turning at their set points with the
+shear torque of the spinning contacts, ``limited`` and a ``reason``. That is a traction limit, or a
+tight turn with one side near standstill, where FESS's element kinematics (eq. 6.6: an element's time
+in the contact grows without bound as its side stops) give no steady state at all (README, "Predicting
+from set points": 3-7 % of each envelope).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from skidsteer_power.des.kinematics import side_speeds
+from skidsteer_power.errors import InputError
+from skidsteer_power.models.fess import (
+    FORCE_TOL_N,
+    FessSolver,
+    _outputs,
+    residual,
+)
+from skidsteer_power.models.newton import NewtonResult, newton_solve
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+SETPOINT_MAX_ITERATIONS = 60
+CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set points
+REASON_OK = ''
+REASON_TRACTION = (
+    'no steady state found at these set points (a traction limit, or a tight turn with the inner side near '
+    'standstill where FESS has none); the values are the dug-in state: V = 0, wheels at their set points'
+)
+
+
+def command_setpoints(
+    speed_cmd: ArrayLike, yaw_cmd: ArrayLike, *, tread_m: float, drive_radius_m: float, max_axle_rad_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Side axle speed set points [rad/s] (P, 2) (left, right) for commands (V [m/s], w_z [rad/s]).
+
+    The driver's kinematics (:func:`skidsteer_power.des.kinematics.side_speeds` and the rule of
+    :func:`~skidsteer_power.des.kinematics.twist_to_motor_rpm`): if a side would pass
+    ``max_axle_rad_s``, both are scaled by the same factor (the path curvature is kept). Returns
+    (set points, clamped (P,) bool).
+    """
+    v, w = np.broadcast_arrays(np.asarray(speed_cmd, dtype=float), np.asarray(yaw_cmd, dtype=float))
+    v, w = v.ravel(), w.ravel()
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
+        raise InputError('commanded speed and yaw rate must be finite numbers (m/s, rad/s)')
+    left, right = side_speeds(v, w, tread_m)
+    sp = np.column_stack([left, right]) / drive_radius_m
+    peak = np.max(np.abs(sp), axis=1)
+    clamped = peak > max_axle_rad_s
+    scale = np.where(clamped, max_axle_rad_s / np.where(peak > 0, peak, 1.0), 1.0)
+    return sp * scale[:, None], clamped
+
+
+@dataclass
+class SetpointSolution:
+    """Steady state of a batch of P set point pairs, per side (left, right), SI units.
+
+    speed, yaw_rate : body motion V [m/s], w_z [rad/s] the set points produce
+    s0 : turning-centre offset ahead of the CG [m]
+    omega : (P, 2) side axle speeds [rad/s] (the set points)
+    torque : (P, 2) axle torque the terrain asks for [N m]
+    slip : (P, 2) [-] eq. 2.13
+    sinkage : (P,) largest sinkage [m]
+    traction_margin : (P,) 1 - required / available thrust [-]
+    limited : (P,) no steady state (the prediction is the dug-in state); reason says why
+    iterations : (P,) Newton steps
+    """
+
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    s0: np.ndarray
+    omega: np.ndarray
+    torque: np.ndarray
+    slip: np.ndarray
+    sinkage: np.ndarray
+    traction_margin: np.ndarray
+    limited: np.ndarray
+    reason: list[str]
+    iterations: np.ndarray
+
+    @property
+    def turn_radius(self) -> np.ndarray:
+        """Signed R = V / w_z [m]: +-inf straight, 0 spinning in place, NaN at rest."""
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return np.where(
+                self.yaw_rate == 0, np.where(self.speed == 0, np.nan, np.inf), self.speed / self.yaw_rate
+            )
+
+    @property
+    def state(self) -> np.ndarray:
+        """(P, 3) (s0, V, w_z) to warm-start a later solve."""
+        return np.column_stack([self.s0, self.speed, self.yaw_rate])
+
+
+def no_slip_motion(setpoints: np.ndarray, drive_radius_m: float, tread_m: float) -> np.ndarray:
+    """(P, 2) (V, w_z) of the set points with no slip (the inverse of the driver's kinematics)."""
+    rim = setpoints * drive_radius_m
+    return np.column_stack([rim.mean(axis=1), (rim[:, 1] - rim[:, 0]) / tread_m])
+
+
+class SetpointSolver:
+    """FESS at given side speeds for one vehicle and terrain (wraps a :class:`FessSolver`)."""
+
+    def __init__(self, fess: FessSolver) -> None:
+        self.fess = fess
+        veh = fess.vehicle
+        self.radius = float(veh.drive_radius_m)
+        self.tread = float(veh.tread_m)
+
+    def solve(
+        self, setpoints: ArrayLike, *, x0: np.ndarray | None = None, tol: float = FORCE_TOL_N
+    ) -> SetpointSolution:
+        """Solve P set point pairs (P, 2) [rad/s] (left, right axle speeds) at once.
+
+        ``x0`` (P, 3) = (s0, V, w_z) warm-starts the Newton iteration (e.g. a previous
+        :attr:`SetpointSolution.state`); non-finite rows use the no-slip first guess.
+        """
+        sp = np.atleast_2d(np.asarray(setpoints, dtype=float))
+        if sp.ndim != 2 or sp.shape[1] != 2 or not np.all(np.isfinite(sp)):
+            raise InputError('set points must be finite (left, right) axle speeds in rad/s')
+        flip = np.where(sp.sum(axis=1) < 0, -1.0, 1.0)  # reverse: the fore-aft mirror image
+        spf = sp * flip[:, None]
+        rest = np.all(spf == 0, axis=1)
+        straight = spf[:, 0] == spf[:, 1]
+        guess = self._first_guess(spf)
+        if x0 is not None:
+            warm = np.asarray(x0, dtype=float) * flip[:, None]
+            guess = np.where(np.isfinite(warm), warm, guess)
+        guess[straight, 2] = 0.0
+        result = self._newton(spf, straight, guess, rest, tol)
+        self._continue_failed(spf, straight, result, tol)
+        return self._outputs(sp, spf, flip, straight, rest, result)
+
+    def _first_guess(self, spf: np.ndarray) -> np.ndarray:
+        """(s0, V, w_z): the no-slip motion and the s0 guess of FESS (Steeds' eq. 3.7 form)."""
+        motion = no_slip_motion(spf, self.radius, self.tread)
+        length = self._length_scale()
+        s0 = motion[:, 0] * np.abs(motion[:, 1]) * length / (2 * 0.5 * 9.81)
+        return np.column_stack([np.minimum(s0, 0.25 * length), motion])
+
+    def _length_scale(self) -> float:
+        veh = self.fess.vehicle
+        if veh.is_tracked:
+            return float(veh.track_length_m)  # type: ignore[arg-type]
+        return float(veh.wheelbase_m) + 2 * float(veh.wheel_radius_m)  # type: ignore[arg-type]
+
+    def _residual(
+        self, spf: np.ndarray, straight: np.ndarray
+    ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        def fn(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+            s0, v, w = x[:, 0], x[:, 1], np.where(straight[idx], 0.0, x[:, 2])
+            prob = self.fess.problem(v, w)
+            state = np.column_stack([s0, spf[idx]])[:, None, :]
+            f = residual(prob, state)[:, 0]
+            f[:, 2] = np.where(straight[idx], x[:, 2], f[:, 2])  # straight: w_z = 0 (symmetry)
+            return f
+
+        return fn
+
+    def _newton(
+        self, spf: np.ndarray, straight: np.ndarray, guess: np.ndarray, rest: np.ndarray, tol: float
+    ) -> NewtonResult:
+        n = len(spf)
+        x = guess.copy()
+        x[rest] = 0.0
+        out = NewtonResult(x, np.zeros((n, 3)), rest.copy(), np.zeros(n, dtype=int))
+        todo = np.flatnonzero(~rest)
+        if todo.size == 0:
+            return out
+        length = self._length_scale()
+        v_ref = np.maximum(np.max(np.abs(spf), axis=1) * self.radius, 1e-3)
+        w_ref = 2 * v_ref / self.tread
+
+        def limit(xa: np.ndarray, dx: np.ndarray, idx: np.ndarray) -> np.ndarray:
+            caps = np.column_stack(
+                [np.full(len(idx), 0.2 * length), 0.5 * v_ref[todo][idx], 0.5 * w_ref[todo][idx]]
+            )
+            return 1.0 / np.maximum(np.max(np.abs(dx) / caps, axis=1), 1.0)
+
+        fn = self._residual(spf[todo], straight[todo])
+        steps = np.array([1e-7 * length, 1e-7, 1e-7])
+        res = newton_solve(
+            fn, guess[todo], steps=steps, tol=tol, max_iter=SETPOINT_MAX_ITERATIONS, limit_step=limit
+        )
+        out.x[todo], out.residual[todo] = res.x, res.residual
+        out.converged[todo], out.iterations[todo] = res.converged, res.iterations
+        return out
+
+    def _continue_failed(
+        self, spf: np.ndarray, straight: np.ndarray, result: NewtonResult, tol: float
+    ) -> None:
+        """Re-solve the points Newton missed by continuation: the set points' difference grows from 0
+        (straight running at their mean) to its full value in CONTINUATION_STEPS steps, each solve
+        warm-started from the last (the steady state moves smoothly with the set points). Updates
+        ``result`` where the last step converges."""
+        failed = np.flatnonzero(~result.converged)
+        if failed.size == 0:
+            return
+        target = spf[failed]
+        mean = target.mean(axis=1, keepdims=True)
+        x = self._first_guess(np.repeat(mean, 2, axis=1))
+        x[:, 2] = 0.0
+        ok = np.ones(failed.size, dtype=bool)
+        for lam in np.linspace(0.0, 1.0, CONTINUATION_STEPS + 1):
+            sp = mean + lam * (target - mean)
+            flat = sp[:, 0] == sp[:, 1]
+            x[flat, 2] = 0.0
+            step = self._newton(sp, flat, x, np.all(sp == 0, axis=1), tol)
+            x = np.where(step.converged[:, None], step.x, x)
+            ok &= step.converged
+        result.x[failed[ok]] = x[ok]
+        result.converged[failed[ok]] = True
+
+    def _outputs(
+        self,
+        sp: np.ndarray,
+        spf: np.ndarray,
+        flip: np.ndarray,
+        straight: np.ndarray,
+        rest: np.ndarray,
+        result: NewtonResult,
+    ) -> SetpointSolution:
+        x = result.x.copy()
+        x[straight, 2] = 0.0
+        sol = self._fess_outputs(x, spf, result.converged, rest)
+        limited = ~sol.converged
+        if np.any(limited):  # no steady state: dug in, V = w_z = 0, the wheels turning at the set points
+            x[limited] = 0.0
+            dug = self._fess_outputs(
+                x[limited], spf[limited], np.ones(int(limited.sum()), bool), rest[limited]
+            )
+            for name in ('torque', 'slip', 'sinkage', 'traction_margin'):
+                getattr(sol, name)[limited] = getattr(dug, name)
+            sol.slip[limited] = np.sign(spf[limited])
+        speed, yaw = x[:, 1] * flip, x[:, 2] * flip
+        return SetpointSolution(
+            speed=speed,
+            yaw_rate=yaw,
+            s0=x[:, 0] * flip,
+            omega=sp.copy(),
+            torque=sol.torque * flip[:, None],
+            slip=sol.slip,
+            sinkage=sol.sinkage,
+            traction_margin=sol.traction_margin,
+            limited=limited,
+            reason=[REASON_TRACTION if lim else REASON_OK for lim in limited],
+            iterations=result.iterations,
+        )
+
+    def _fess_outputs(self, x: np.ndarray, spf: np.ndarray, converged: np.ndarray, rest: np.ndarray):  # type: ignore[no-untyped-def]
+        prob = self.fess.problem(x[:, 1], x[:, 2])
+        state = np.column_stack([x[:, 0], spf])
+        res = NewtonResult(state, np.zeros_like(state), converged.copy(), np.zeros(len(x), dtype=int))
+        return _outputs(prob, res, rest)

@@ -1,0 +1,74 @@
+"""The set-point map (skidsteer_power.maps.setpoint_map): the direct set-point solve, tabulated.
+
+Reference: CommandPredictor.predict (the direct FESS solve at the set points, test_fess_setpoint.py);
+at a node the map must give exactly the direct answer, between nodes a bilinear blend of them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from skidsteer_power.errors import InputError
+from skidsteer_power.maps.setpoint_map import SetpointMap
+from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.vehicle import load_vehicle
+
+
+@pytest.fixture(scope='module')
+def track_map() -> SetpointMap:
+    return SetpointMap.build(load_vehicle('test_robot_track'), load_terrain('sand_bin'), nodes=(7, 7))
+
+
+def _node_command(smap: SetpointMap, i: int, j: int) -> tuple[float, float]:
+    veh = smap.predictor.vehicle
+    m, d = smap.grid.axis0.values[i], smap.grid.axis1.values[j]
+    return float(m * veh.drive_radius_m), float(2 * d * veh.drive_radius_m / veh.tread_m)
+
+
+def test_at_a_node_the_map_is_the_direct_solve(track_map: SetpointMap) -> None:
+    v, w = _node_command(track_map, 2, 1)
+    q = track_map.query(v, w)
+    direct = track_map.predictor.predict(v, w)
+    assert not q.limited and not direct.limited[0]
+    assert q.speed_m_s == pytest.approx(direct.speed[0], rel=1e-9)
+    assert q.yaw_rate_rad_s == pytest.approx(direct.yaw_rate[0], rel=1e-9)
+    assert [q.torque_left_Nm, q.torque_right_Nm] == pytest.approx(direct.torque[0], rel=1e-9)
+    assert [q.current_left_A, q.current_right_A] == pytest.approx(direct.current[0], rel=1e-9)
+    assert q.battery_power_W == pytest.approx(direct.battery_power[0], rel=1e-9)
+
+
+@pytest.mark.parametrize('sv, sw', [(1, 1), (1, -1), (-1, 1), (-1, -1)])
+def test_every_quadrant_is_the_direct_solve_at_a_node(track_map: SetpointMap, sv: int, sw: int) -> None:
+    v, w = _node_command(track_map, 3, 2)
+    q = track_map.query(sv * v, sw * w)
+    direct = track_map.predictor.predict(sv * v, sw * w)
+    assert q.speed_m_s == pytest.approx(direct.speed[0], rel=1e-6)
+    assert q.yaw_rate_rad_s == pytest.approx(direct.yaw_rate[0], rel=1e-6)
+    assert [q.torque_left_Nm, q.torque_right_Nm] == pytest.approx(direct.torque[0], rel=1e-6)
+    assert [q.slip_left, q.slip_right] == pytest.approx(direct.slip[0], rel=1e-6, abs=1e-12)
+
+
+def test_between_nodes_it_is_close_to_the_direct_solve(track_map: SetpointMap) -> None:
+    q = track_map.query(0.4, 0.3)
+    direct = track_map.predictor.predict(0.4, 0.3)
+    assert q.speed_m_s == pytest.approx(direct.speed[0], rel=0.02)
+    assert q.yaw_rate_rad_s == pytest.approx(direct.yaw_rate[0], rel=0.05)
+
+
+def test_clamped_outside_the_envelope_and_bad_input(track_map: SetpointMap) -> None:
+    veh = track_map.predictor.vehicle
+    assert track_map.query(2 * veh.max_speed_m_s, 0.0).clamped
+    assert not track_map.query(0.5 * veh.max_speed_m_s, 0.0).clamped
+    with pytest.raises(InputError):
+        track_map.query(math.nan, 0.0)
+
+
+def test_current_limit_holds_in_every_query(track_map: SetpointMap) -> None:
+    rng = np.random.default_rng(3)
+    veh = track_map.predictor.vehicle
+    for v, w in zip(rng.uniform(-2, 2, 200) * veh.max_speed_m_s, rng.uniform(-2, 2, 200) * 2.0, strict=True):
+        q = track_map.query(float(v), float(w))
+        assert abs(q.current_left_A) <= 10.0 + 1e-9 and abs(q.current_right_A) <= 10.0 + 1e-9
