@@ -125,7 +125,8 @@ def cache_dir(tmp_path_factory):
 
 
 def test_a_1e5_pose_plan_leaves_the_battery_tick_running(ros_context, tmp_path, cache_dir):
-    """battery/state at 5 Hz keeps arriving (no gap of 1 s: a liveness check, not a benchmark) while
+    """battery/state at 5 Hz keeps arriving (no gap of 2 s: a liveness check, not a benchmark; reading the plan on the executor thread
+    stalled it 2.65 s of CPU, 5.8 s on a loaded machine; this one saw 1.4 s at load 8, mostly DDS delivery) while
     the node reads a 1e5-pose plan, and the path energy arrives: that of the same curve given as 2001
     poses (no decimation), to 1 %."""
     vehicle = load_vehicle('test_robot_track')
@@ -146,7 +147,7 @@ def test_a_1e5_pose_plan_leaves_the_battery_tick_running(ros_context, tmp_path, 
         rig.spin_until(lambda: bool(required), timeout_s=60.0)
         rig.spin_until(lambda: sum(t > sent for t in arrivals) >= 5, timeout_s=10.0)  # and 1 s more
         window = np.array([sent, *[t for t in arrivals if t > sent]])
-        assert np.diff(window).max() < 1.0, np.diff(window)
+        assert np.diff(window).max() < 2.0, np.diff(window)
         assert 'decimated' in rig.node.path_energy.status
         coarse = _curve(2001)
         tracker = PathTracker()

@@ -462,8 +462,9 @@ def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, sal
 
 
 def _has_foreign_channels(path: Path) -> bool:
-    """Whether an MCAP file's summary lists a channel that is not ROS 2 CDR (e.g. protobuf), which
-    rosbags' reader refuses (KeyError); False when there is no readable summary."""
+    """Whether an MCAP file's summary mixes ROS 2 CDR channels with others (e.g. protobuf), which
+    rosbags' reader refuses (KeyError); False when there is no readable summary or no CDR channel at
+    all (not a ROS 2 bag: the ordinary path says so)."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
@@ -477,7 +478,8 @@ def _has_foreign_channels(path: Path) -> bool:
         return False
     if summary is None:
         return False
-    return any(c.message_encoding != ROS_ENCODING for c in summary.channels.values())
+    encodings = {c.message_encoding for c in summary.channels.values()}
+    return ROS_ENCODING in encodings and len(encodings) > 1
 
 
 def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader:
