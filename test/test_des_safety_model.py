@@ -54,7 +54,8 @@ RPM_PER_M_S = 12.0 / 0.1 * 60.0 / (2.0 * math.pi)  # side speed [m/s] -> motor [
 # A side's speed is V +- w B / 2 (kinematics), so it changes by at most a + alpha B / 2 per second:
 # (1.0 + 4.0 * 0.426 / 2) m/s^2 * 1145.9 rpm per m/s = 2122 rpm/s, 42.4 rpm per 20 ms poll period.
 MAX_RPM_PER_S = (LIMITS.max_accel_m_s2 + LIMITS.max_yaw_accel_rad_s2 * 0.426 / 2) * RPM_PER_M_S
-EXAMPLES = int(os.environ.get('DES_MODEL_EXAMPLES', '40'))
+EXAMPLES = int(os.environ.get('DES_MODEL_EXAMPLES', '60'))
+SIGNAL_AFTER = 8  # steps before a signal may end an example (it ends every later step's use)
 
 number = st.one_of(
     st.floats(-2.5, 2.5),
@@ -99,6 +100,7 @@ class DriverModel(RuleBasedStateMachine):
         self.reconnecting_until: dict[str, float] = {}  # repaired, the poller not yet back
         self.previous = {side: 0 for side in SIDES}
         self.previous_reachable: list[str] = []
+        self.steps = 0
         self.stopped = False
 
     def teardown(self) -> None:
@@ -167,7 +169,7 @@ class DriverModel(RuleBasedStateMachine):
             self._tick()
 
     @precondition(lambda self: not self.stopped)
-    @rule(seconds=st.sampled_from([0.1, 0.25, 0.34, 0.5, 1.0]))
+    @rule(seconds=st.sampled_from([0.1, 0.34, 0.4, 0.5, 1.0]))
     def wait(self, seconds: float) -> None:
         for _ in range(round(seconds / POLL_S)):
             self._tick()
@@ -225,7 +227,7 @@ class DriverModel(RuleBasedStateMachine):
         self.error_at.clear()
         self._tick()
 
-    @precondition(lambda self: not self.stopped)
+    @precondition(lambda self: not self.stopped and self.steps >= SIGNAL_AFTER)
     @rule()
     def signal(self) -> None:
         """What des_driver does on any signal that ends it (stop_motors: shutting down, then each
@@ -248,6 +250,7 @@ class DriverModel(RuleBasedStateMachine):
 
     @invariant()
     def set_points_are_bounded(self) -> None:
+        self.steps += 1  # an invariant runs after every step: the count SIGNAL_AFTER reads
         for side in SIDES:
             rpm = self.sims[side].speed_setpoint_rpm
             assert isinstance(rpm, int) and abs(rpm) <= GEOMETRY.motor_rpm(1.5, 2.0)['left'] + 1
