@@ -31,7 +31,7 @@ plant acceleration_limit_removed skidsteer_power/des/command.py \
 plant stop_both_on_link_loss_ignored skidsteer_power/des/poller.py \
   '        if self.stop_both_on_link_loss and down:' '        if False and down:'
 status=0
-for fault in watchdog_5x_slower watchdog_removed acceleration_limit_removed stop_both_on_link_loss_ignored; do
+for fault in ${FAULTS:-watchdog_5x_slower watchdog_removed acceleration_limit_removed stop_both_on_link_loss_ignored}; do
   for seed in $SEEDS; do
     out=$(cd "$SCRATCH/$fault" && DES_MODEL_SHRINK=0 PYTHONPATH=$PWD timeout 900 "$PY" -m pytest -q \
       -p no:cacheprovider test/test_des_safety_model.py --hypothesis-seed="$seed" 2>&1)

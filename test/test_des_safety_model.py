@@ -169,6 +169,25 @@ class DriverModel(RuleBasedStateMachine):
             self._tick()
 
     @precondition(lambda self: not self.stopped)
+    @rule(
+        speed=st.floats(0.1, 1.5),
+        yaw_rate=st.floats(-2.0, 2.0),
+        reverse=st.booleans(),
+        polls=st.integers(3, 10),
+        silence_s=st.sampled_from([0.34, 0.5, 1.0]),
+    )
+    def drive_then_silence(
+        self, speed: float, yaw_rate: float, reverse: bool, polls: int, silence_s: float
+    ) -> None:
+        """A teleop drives, then goes quiet (its link dropped, a crashed node): the watchdog's case."""
+        for _ in range(polls):  # a stream of the same valid command, one per poll period
+            self.command.set_twist(-speed if reverse else speed, yaw_rate)
+            self.valid_at = self.clock.now
+            self._tick()
+        for _ in range(round(silence_s / POLL_S)):
+            self._tick()
+
+    @precondition(lambda self: not self.stopped)
     @rule(seconds=st.sampled_from([0.1, 0.34, 0.4, 0.5, 1.0]))
     def wait(self, seconds: float) -> None:
         for _ in range(round(seconds / POLL_S)):
