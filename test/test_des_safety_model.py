@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import os
 
+from des_harness import Clock
 from hypothesis import HealthCheck, Phase, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
@@ -64,20 +65,10 @@ number = st.one_of(
 )
 
 
-class Clock:
-    """The stepped clock [s] the command and the pollers read."""
-
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 class DriverModel(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
-        self.clock = Clock()
+        self.clock = Clock(1000.0)
         self.pair = SimulatedPair(38400, emulate_baud=False).start()
         self.sims = {'left': self.pair.left, 'right': self.pair.right}
         self.command = DriveCommand(
