@@ -358,7 +358,7 @@ def _spin_until_stopped(
         node = make_node()
         spinner = executor() if executor is not None else SingleThreadedExecutor()
         spinner.add_node(node)
-        while not stop.is_set() and rclpy.ok():
+        while not stop.is_set():  # an external shutdown raises ExternalShutdownException from the wait
             spinner.spin_once(timeout_sec=SIGNAL_CHECK_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
