@@ -88,6 +88,7 @@ def measure(baud: int, emulate: bool) -> tuple[float, float, int]:
 
 def run(report: Report) -> None:
     run_fail_safe(report)
+    run_signals(report)
     nbytes = cycle_bytes()
     report.figure('bytes on the line per poll cycle (one side)', nbytes, 'B')
     for baud in (38400, 115200):
@@ -205,6 +206,81 @@ def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], l
             for poller in pollers.values():
                 poller.stop()
     return own, other
+
+
+SIGNAL_TRIALS = 3
+SIGNALS = ('SIGINT', 'SIGTERM', 'SIGHUP', 'SIGQUIT', 'SIGUSR1', 'SIGALRM')  # issue 28: not only INT/TERM
+
+
+def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[float], list[float]]:
+    """Per trial: (seconds from sending ``signame`` to a ``des_driver`` process until the left
+    amplifier holds zero, until the right one does). A real process per trial (``python -m
+    skidsteer_power.nodes.des_driver``, autostart, default timing) drives the simulated pair at
+    0.2 m/s from cmd_vel published over DDS; arrival times from the simulator's command log. A trial
+    whose process did not exit 0 or left an amplifier enabled is NaN."""
+    import os
+    import signal
+    import uuid
+
+    import rclpy
+    from geometry_msgs.msg import Twist
+    from rclpy.context import Context
+
+    from skidsteer_power.des.simulator import SimulatedPair
+    from skidsteer_power.nodes.spin import node_command
+
+    left, right = [], []
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('bench_des_signal', context=context)
+        for _ in range(trials):
+            with SimulatedPair(38400) as pair:
+                ns = f'/b{uuid.uuid4().hex[:8]}'
+                params = {'left_port': pair.left.port, 'right_port': pair.right.port, 'autostart': 'true'}
+                proc = subprocess.Popen(
+                    node_command('skidsteer_power.nodes.des_driver', ns, params), env=os.environ.copy()
+                )
+                publisher = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
+                msg = Twist()
+                msg.linear.x = 0.2
+                try:
+                    deadline = time.monotonic() + 30
+                    while not (pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0):
+                        if time.monotonic() > deadline:
+                            raise RuntimeError('des_driver never drove both sides')
+                        publisher.publish(msg)
+                        time.sleep(0.02)
+                    time.sleep(0.2 + 0.02 * random.random())  # driving, at a random phase
+                    t0 = time.monotonic()
+                    proc.send_signal(getattr(signal, signame))
+                    clean = proc.wait(timeout=15) == 0 and not (pair.left.enabled or pair.right.enabled)
+                finally:
+                    proc.kill()
+                    proc.wait()
+                    node.destroy_publisher(publisher)
+                left.append(_zeroed_at(pair.left, t0) - t0 if clean else math.nan)
+                right.append(_zeroed_at(pair.right, t0) - t0 if clean else math.nan)
+    finally:
+        rclpy.try_shutdown(context=context)
+    return left, right
+
+
+def run_signals(report: Report) -> None:
+    goal_s = 0.5  # as for the faults: not slower than the command timeout
+    for signame in SIGNALS:
+        left, right = signal_to_zero(signame)
+        for side, values in (('left', left), ('right', right)):
+            p50, worst = _p50_max(values)
+            failed = sum(math.isnan(v) for v in values)
+            report.figure(
+                f'{signame} -> zero speed and disabled, {side} amplifier: max of {len(values)}',
+                worst if not failed else math.nan,
+                's',
+                goal=f'< {goal_s:g} s, every trial',
+                met=not failed and worst < goal_s,
+                note=f'p50 {1000 * p50:.0f} ms' + (f'; {failed} trial(s) not zeroed' if failed else ''),
+            )
 
 
 def _p50_max(values: list[float]) -> tuple[float, float]:

@@ -7,8 +7,9 @@ from the installed ``config/estimator.yaml`` and ``config/des_driver.yaml``.
 
 des_driver is a managed (lifecycle) node: this file configures it once its process is up, activates
 it once it is inactive, and on shutdown deactivates it (zero speed, power stages off) and cleans it
-up (ports closed). The node zeroes and disables on SIGINT by itself too, should the launch's
-SIGINT arrive before the transitions are through.
+up (ports closed). The node zeroes and disables on SIGINT (and on any other signal that would end
+it) by itself too, should the launch's SIGINT arrive before the transitions are through. If
+power_estimator or des_driver exits, the launch shuts the whole suite down.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from __future__ import annotations
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler, Shutdown
 from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessStart, OnShutdown
 from launch.events import matches_action
@@ -48,6 +49,7 @@ def generate_launch_description() -> LaunchDescription:
             },
         ],
         output='screen',
+        on_exit=[Shutdown(reason='des_driver exited')],  # a node that dies stops the suite
     )
 
     def transition(transition_id: int) -> EmitEvent:
@@ -93,6 +95,7 @@ def generate_launch_description() -> LaunchDescription:
                     {'vehicle': vehicle, 'terrain': LaunchConfiguration('terrain')},
                 ],
                 output='screen',
+                on_exit=[Shutdown(reason='power_estimator exited')],
             ),
             driver,
             *driver_transitions,

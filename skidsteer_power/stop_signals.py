@@ -1,8 +1,17 @@
-"""Clean stops on SIGINT and SIGTERM for long-running commands (record, replay, run).
+"""Clean stops on every signal that would end the process (record, replay, run, des, the nodes).
+
+SIGINT and SIGTERM, and every other catchable signal whose default action ends the process (SIGHUP
+from an SSH disconnect or a closed terminal, SIGQUIT, SIGUSR1/2, SIGALRM, SIGPWR, the real-time
+signals, ...: :data:`TERMINATING_SIGNALS`) set a flag instead: the command stops its work, zeroes and
+disables the motors, saves what it recorded, and exits. Signals that cannot be caught (SIGKILL, and
+the hardware-fault signals SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGSYS, after which the interpreter
+cannot run a handler) and power loss are why the README asks for the amplifiers' enable line.
 
 A command started in the background of a non-interactive shell inherits SIGINT as *ignored*, so
 relying on KeyboardInterrupt alone would leave it unstoppable by Ctrl-C-style signals and a SIGTERM
-would kill it before it saved anything: the handlers below turn both signals into a flag instead.
+would kill it before it saved anything: SIGINT and SIGTERM are taken even when ignored. The other
+signals are taken only where they would end the process (their handler is the default): ``nohup``'s
+ignored SIGHUP and Python's ignored SIGPIPE/SIGXFSZ stay ignored, a profiler's SIGPROF stays its.
 """
 
 from __future__ import annotations
@@ -12,9 +21,43 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+_DEFAULT_TERMINATES = (
+    'SIGHUP',
+    'SIGINT',
+    'SIGQUIT',
+    'SIGTRAP',
+    'SIGABRT',
+    'SIGUSR1',
+    'SIGUSR2',
+    'SIGPIPE',
+    'SIGALRM',
+    'SIGTERM',
+    'SIGSTKFLT',
+    'SIGXCPU',
+    'SIGXFSZ',
+    'SIGVTALRM',
+    'SIGPROF',
+    'SIGIO',
+    'SIGPWR',
+)  # fmt: skip  (signal(7): default action Term or Core; SIGKILL cannot be caught)
+TERMINATING_SIGNALS: tuple[int, ...] = tuple(
+    int(getattr(signal, name)) for name in _DEFAULT_TERMINATES if hasattr(signal, name)
+) + tuple(range(signal.SIGRTMIN, signal.SIGRTMAX + 1) if hasattr(signal, 'SIGRTMIN') else ())
+"""Every catchable signal whose default action ends the process (Linux, signal(7)), less the
+hardware-fault signals (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGSYS: no handler can run after them)."""
+ALWAYS_TAKEN = (signal.SIGINT, signal.SIGTERM)
+"""Taken even when inherited as ignored."""
+
+
+def signal_name(signum: int) -> str:
+    try:
+        return signal.Signals(signum).name
+    except ValueError:  # a real-time signal between SIGRTMIN and SIGRTMAX
+        return f'SIGRTMIN+{signum - signal.SIGRTMIN}'
+
 
 class StopFlag:
-    """Set by SIGINT or SIGTERM (see :func:`stop_on_signals`), or by :meth:`set`."""
+    """Set by a terminating signal (see :func:`stop_on_signals`), or by :meth:`set` with a reason."""
 
     def __init__(self) -> None:
         self._event = threading.Event()
@@ -33,7 +76,8 @@ class StopFlag:
 
 @contextmanager
 def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
-    """Within the block, SIGINT and SIGTERM set ``flag`` instead of raising or killing.
+    """Within the block, every signal of :data:`TERMINATING_SIGNALS` that would end the process sets
+    ``flag`` instead of raising or killing (SIGINT, SIGTERM always).
 
     Only possible from the main thread; elsewhere the block runs with the handlers untouched.
     """
@@ -41,8 +85,9 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
         yield flag
         return
     previous = {}
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        previous[signum] = signal.signal(signum, lambda num, _frame: flag.set(signal.Signals(num).name))
+    for signum in TERMINATING_SIGNALS:
+        if signum in ALWAYS_TAKEN or signal.getsignal(signum) is signal.SIG_DFL:
+            previous[signum] = signal.signal(signum, lambda num, _frame: flag.set(signal_name(num)))
     try:
         yield flag
     finally:

@@ -12,6 +12,16 @@ import uuid
 from skidsteer_power.des.simulator import SimulatedPair
 
 
+class Clock:
+    """A clock the test steps [s] (DriveCommand's ``clock``): no sleeps, the same result on any load."""
+
+    def __init__(self, now: float = 100.0) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
+
+
 class Harness:
     """The driver node, a test node publishing cmd_vel and recording outputs, one executor."""
 

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
+from des_harness import Clock
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -67,14 +67,15 @@ def test_slew_limiter_ramps_at_the_limits():
 
 @given(v=any_float, w=any_float)
 def test_every_set_point_is_a_bounded_integer(v, w):
-    command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, max_rpm=4000.0)
+    clock = Clock()
+    command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, max_rpm=4000.0, clock=clock)
     for side in ('left', 'right'):
         command.link_up(side)
     try:
         command.set_twist(v, w)
     except InputError:
         assert not (math.isfinite(v) and math.isfinite(w))
-    time.sleep(0.001)
+    clock.now += 0.001
     for _ in range(3):
         for side in ('left', 'right'):
             rpm = command.wanted_rpm(side)
@@ -82,7 +83,8 @@ def test_every_set_point_is_a_bounded_integer(v, w):
 
 
 def test_drive_command_stop_conditions():
-    command = DriveCommand(0.2, geometry=GEOMETRY, limits=LIMITS, active=False)
+    clock = Clock()
+    command = DriveCommand(0.2, geometry=GEOMETRY, limits=LIMITS, active=False, clock=clock)
     command.set_twist(0.2, 0.0)
     assert command.wanted_rpm('left') == 0 and command.stop_reason() == 'inactive'
     command.active = True  # activation forgets any earlier command
@@ -92,7 +94,7 @@ def test_drive_command_stop_conditions():
     assert command.stop_reason() == 'no fresh command'
     command.set_twist(0.2, 0.0)
     command.wanted_rpm('left')  # the pollers ask every cycle; the ramp starts at the first call
-    time.sleep(0.05)
+    clock.now += 0.05
     assert command.wanted_rpm('left') > 0 and command.wanted_rpm('right') < 0
     command.link_down('right', 'port lost')
     assert command.wanted_rpm('left') == 0  # stop_both_on_link_loss (default)
@@ -100,16 +102,17 @@ def test_drive_command_stop_conditions():
     command.halt('left')
     assert command.wanted_rpm('right') == 0 and 'fault on left' in command.stop_reason()
     command.cleared('left')
-    time.sleep(0.25)
+    clock.now += 0.25
     assert command.wanted_rpm('left') == 0 and command.timed_out()  # watchdog
 
 
 def test_opting_out_of_stop_both_keeps_the_other_side():
-    command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, stop_both_on_link_loss=False)
+    clock = Clock()
+    command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, stop_both_on_link_loss=False, clock=clock)
     command.link_up('left')
     command.set_twist(0.2, 0.0)
     command.wanted_rpm('left')
-    time.sleep(0.05)
+    clock.now += 0.05
     assert command.wanted_rpm('left') > 0 and command.wanted_rpm('right') == 0  # right never connected
 
 
@@ -124,14 +127,15 @@ def test_rpm_targets_are_capped_at_the_motor_limit():
 
 
 def test_a_stalled_poller_counts_as_a_lost_link():
-    command = DriveCommand(10.0, geometry=GEOMETRY, limits=LIMITS, stall_timeout_s=0.1)
+    clock = Clock()
+    command = DriveCommand(10.0, geometry=GEOMETRY, limits=LIMITS, stall_timeout_s=0.1, clock=clock)
     command.link_up('left')
     command.link_up('right')
     command.set_twist(0.2, 0.0)
     command.wanted_rpm('left')
-    time.sleep(0.05)
+    clock.now += 0.05
     assert command.wanted_rpm('left') > 0
-    time.sleep(0.1)  # the right poller has not reported a good cycle since: hung or dead
+    clock.now += 0.1  # the right poller has not reported a good cycle since: hung or dead
     command.link_up('left')
     assert command.wanted_rpm('left') == 0 and 'right (poller stalled' in command.stop_reason()
     command.link_up('right')

@@ -6,6 +6,7 @@ import math
 import os
 import signal
 import subprocess
+import sys
 import time
 import uuid
 
@@ -15,6 +16,7 @@ from des_harness import Harness
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
 from skidsteer_power.des.simulator import Fault, SimulatedPair
 from skidsteer_power.nodes.spin import node_command
+from skidsteer_power.stop_signals import TERMINATING_SIGNALS, signal_name
 
 pytestmark = pytest.mark.ros
 
@@ -170,8 +172,17 @@ def test_silent_amplifier_is_reported_and_reconnected(harness, pair):
     assert harness.spin_until(lambda: not math.isnan(harness.joints[-1].velocity[1]))
 
 
-@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
-def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
+# every signal that ends a Python process by default (stop_signals.TERMINATING_SIGNALS less SIGPIPE
+# and SIGXFSZ, which Python ignores), the first and the last real-time one
+ENDING_SIGNALS = [
+    s for s in TERMINATING_SIGNALS if s not in (signal.SIGPIPE, signal.SIGXFSZ) and s < signal.SIGRTMIN
+] + [signal.SIGRTMIN, signal.SIGRTMAX]
+
+
+@pytest.mark.parametrize('signum', ENDING_SIGNALS, ids=signal_name)
+def test_every_ending_signal_zeroes_speed_then_disables(ros_context, pair, signum):
+    """Before issue 28 only SIGINT and SIGTERM did: SIGHUP, SIGQUIT, SIGUSR1 ... ended des_driver
+    with both amplifiers enabled and turning."""
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -214,6 +225,32 @@ def test_sigterm_zeroes_speed_then_disables(ros_context, pair, signum):
         proc.wait()
         node.destroy_node()
         executor.shutdown()
+
+
+@pytest.mark.parametrize('signum', [signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1], ids=signal_name)
+def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path, signum):
+    """``run --left-port --right-port`` (the suite against the amplifiers on the given ports, here the
+    simulated pair): before issue 28 a SIGHUP left 344 rpm on the motors."""
+    command = [
+        sys.executable, '-m', 'skidsteer_power.cli.main', 'run', '--left-port', pair.left.port,
+        '--right-port', pair.right.port, '--speed', '0.2', '--duration', '120', '--json',
+        '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'),
+    ]  # fmt: skip
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(100 + signum)}  # its own graph: no other test's cmd_vel
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0):
+            assert proc.poll() is None and time.monotonic() < deadline, 'run never drove both sides'
+            time.sleep(0.05)
+        proc.send_signal(signum)
+        _, stderr = proc.communicate(timeout=30)
+        assert proc.returncode == 0, stderr[-2000:]
+        for sim in (pair.left, pair.right):
+            assert sim.speed_setpoint_rpm == 0 and not sim.enabled
+    finally:
+        proc.kill()
+        proc.wait()
 
 
 def test_bad_parameters_are_one_clear_error(ros_context, pair):

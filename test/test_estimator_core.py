@@ -99,6 +99,9 @@ def test_plausible_commands_pass_unchanged(speed, yaw):
         (['left_motor', 'right_motor'], [1.0, -math.inf], [0.1, 0.1], 'right_motor velocity is infinite'),
         (['left_motor', 'right_motor'], [1.0, 5000.0], [0.1, 0.1], 'right_motor velocity = 5000'),
         (['left_motor', 'right_motor'], [1.0, 1.0], [0.1, 80.0], 'right_motor effort = 80'),
+        # finite but huge (issue 28): the old test sum(out) - sum(out) overflowed to inf - inf
+        (['left_motor', 'right_motor'], [1.0, 1.0], [9e307, 9e307], 'left_motor effort = 9e\\+307'),
+        (['left_motor', 'right_motor'], [1e308, 1e308], [0.1, 0.1], 'left_motor velocity = 1e\\+308'),
     ],
 )
 def test_bad_joint_state_is_rejected_with_its_reason(names, velocity, effort, match):
@@ -229,9 +232,11 @@ def test_core_rejects_and_counts_bad_inputs():
         core.on_command(0.1, math.inf, 0.1)
     with pytest.raises(RejectedInput, match='joint_states: left_motor velocity'):
         core.on_joint_state(['left_motor', 'right_motor'], [1e9, 0.0], [0.0, 0.0], 0.2)
+    with pytest.raises(RejectedInput, match='effort = 9e\\+307'):  # finite, huge: counted, no crash
+        core.on_joint_state(['left_motor', 'right_motor'], [1.0, 1.0], [9e307, 9e307], 0.2)
     assert first.value.warn and not second.value.warn
     level, _, values = core.diagnostics(0.3)
-    assert values['rejected_cmd_vel'] == '2' and values['rejected_joint_states'] == '1'
+    assert values['rejected_cmd_vel'] == '2' and values['rejected_joint_states'] == '2'
     assert core.prediction is None and level == 1  # nothing accepted: both inputs stale
 
 

@@ -140,3 +140,31 @@ def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(tmp_path, sign
     assert report['duration_s'] < 60
     saved = json.loads(state.read_text())
     assert saved  # the estimator wrote its state on shutdown
+
+
+# a planted fault in a real `run --simulate` process: every joint_states callback of power_estimator
+# raises (issue 28 found one that did: a finite but huge effort), which ends its spin thread
+_DYING_ESTIMATOR = """
+import sys
+from skidsteer_power.estimator import inputs
+def planted(self, what, values, rows):
+    raise AssertionError('planted fault')
+inputs.JointReader._pick = planted
+from skidsteer_power.cli.main import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_run_stops_non_zero_when_a_thread_of_the_suite_dies(tmp_path):
+    """Before: the estimator thread died, the suite went on printing 'drive 0.0 W' and exited 0
+    after --duration. Now the suite stops, one error line names the thread, exit 1, no summary."""
+    result = subprocess.run(
+        [sys.executable, '-c', _DYING_ESTIMATOR, 'run', '--simulate', '--duration', '60', '--json',
+         '--speed', '0.2', '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json')],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert result.stdout == ''  # no summary of a run that failed
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith('skidsteer-power run: error: spin-power_estimator died: AssertionError')
+    assert json.loads((tmp_path / 'e.json').read_text())  # the energy state was saved on the way out

@@ -16,11 +16,15 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import sys
 import time
 from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+
+EXIT_FAILURE = 1
+"""Exit code when a thread or process of the suite died (2 is bad input, 0 a clean stop)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -93,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     suite = None
     counters = _Counters()
     try:
-        suite = Suite(options, context=context)
+        suite = Suite(options, context=context, stop=stop)
         helper = rclpy.create_node('run_cli', context=context)
         suite.add_node(helper)
         helper.create_subscription(JointState, 'joint_states', lambda m: _count(counters, 'joint_states'), 50)
@@ -115,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
             suite.shutdown()
         rclpy.try_shutdown(context=context)
         signals.close()
+    if suite.failure:  # a thread of the suite died: the motors are stopped, the run is not a result
+        print(f'skidsteer-power run: error: {suite.failure}; the suite stopped', file=sys.stderr)
+        return EXIT_FAILURE
     emit(
         {
             'duration_s': time.monotonic() - started,
@@ -138,7 +145,7 @@ def _count(counters: _Counters, name: str) -> None:
 
 
 def _wait(suite: Any, args: argparse.Namespace, started: float, counters: _Counters, stop: StopFlag) -> None:
-    """Print status lines until ``--duration`` has passed or SIGINT / SIGTERM arrived."""
+    """Print status lines until ``--duration`` has passed, a signal arrived or a thread died."""
     duration = args.duration if args.duration is not None else math.inf
     next_status = started + args.status_every
     while time.monotonic() - started < duration and not stop.is_set():

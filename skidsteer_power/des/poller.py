@@ -46,7 +46,8 @@ class DriveCommand:
     either side, a command younger than ``timeout_s`` [s], this side's link up, and with
     ``stop_both_on_link_loss`` the other side's link up too (a link is up after a good poll cycle and
     for ``stall_timeout_s`` [s] after the latest one, so a hung poller counts as a lost link). A set
-    point is always a finite integer within +-``max_rpm``.
+    point is always a finite integer within +-``max_rpm``. Every time is read from ``clock`` [s]
+    (default time.monotonic; a test steps its own, like the estimator core's ``now_s``).
     """
 
     def __init__(
@@ -60,7 +61,9 @@ class DriveCommand:
         active: bool = True,
         sides: tuple[str, ...] = ('left', 'right'),
         stall_timeout_s: float = 1.0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        self.clock = clock
         self.timeout_s = timeout_s
         self.max_rpm = min(max_rpm, MAX_MOTOR_RPM)
         self.geometry = geometry
@@ -73,7 +76,7 @@ class DriveCommand:
         self._stamp = -math.inf
         self._halted_by: set[str] = set()
         self._down: dict[str, str] = dict.fromkeys(sides, 'not connected yet')  # up after a good cycle
-        self._up_at: dict[str, float] = {}  # time.monotonic() of each side's last good cycle [s]
+        self._up_at: dict[str, float] = {}  # self.clock() of each side's last good cycle [s]
         self.stall_timeout_s = stall_timeout_s
         self._clear_requests: set[str] = set()
         self._active = active
@@ -87,7 +90,7 @@ class DriveCommand:
         """Motor speed targets [rpm, amplifier sense] per side, fresh from now."""
         with self._lock:
             self._targets, self._twist = dict(targets), None
-            self._stamp = time.monotonic()
+            self._stamp = self.clock()
 
     def set_twist(self, linear_m_s: float, yaw_rate_rad_s: float) -> CheckedTwist:
         """A body twist (V [m/s], w_z [rad/s]), fresh from now: InputError if non-finite, clamped
@@ -97,7 +100,7 @@ class DriveCommand:
         checked = limit_twist(linear_m_s, yaw_rate_rad_s, self.limits)
         with self._lock:
             self._twist = (checked.linear_m_s, checked.yaw_rate_rad_s)
-            self._stamp = time.monotonic()
+            self._stamp = self.clock()
         return checked
 
     def forget(self) -> None:
@@ -129,7 +132,7 @@ class DriveCommand:
     def wanted_rpm(self, side: str) -> int:
         """The set point to send now [rpm, amplifier sense]; 0 whenever a condition for motion fails."""
         with self._lock:
-            now = time.monotonic()
+            now = self.clock()
             if self._stop_reason_locked(now):
                 self._slew.reset(now)
                 return 0
@@ -148,7 +151,7 @@ class DriveCommand:
     def stop_reason(self) -> str:
         """Why both sides hold zero speed now ('' when a command may drive them)."""
         with self._lock:
-            return self._stop_reason_locked(time.monotonic())
+            return self._stop_reason_locked(self.clock())
 
     def _stop_reason_locked(self, now: float) -> str:
         if self.shutting_down:
@@ -166,7 +169,7 @@ class DriveCommand:
 
     def timed_out(self) -> bool:
         with self._lock:
-            return time.monotonic() - self._stamp > self.timeout_s
+            return self.clock() - self._stamp > self.timeout_s
 
     # -- faults and links -----------------------------------------------------------------------
 
@@ -189,12 +192,12 @@ class DriveCommand:
         counts as down, so a hung poller stops the other side too)."""
         with self._lock:
             self._down.pop(side, None)
-            self._up_at[side] = time.monotonic()
+            self._up_at[side] = self.clock()
 
     @property
     def links_down(self) -> dict[str, str]:
         with self._lock:
-            return self._down_locked(time.monotonic())
+            return self._down_locked(self.clock())
 
     def _down_locked(self, now: float) -> dict[str, str]:
         down = dict(self._down)
@@ -294,6 +297,7 @@ class AmplifierPoller:
         max_failed_cycles: int = 5,
         log_error: Callable[[str], None] | None = None,
     ) -> None:
+        self.clock = command.clock  # stamps and fault times; the thread's own waits are real time
         self.side = side
         self.encoder_resolution = encoder_resolution
         self.max_failed_cycles = max_failed_cycles
@@ -364,38 +368,48 @@ class AmplifierPoller:
     def _run(self) -> None:
         next_cycle = time.monotonic()
         while not self._stop.is_set():
-            try:
-                if not self.amp.link.is_open and not self._connect():
-                    self._stop.wait(self.reconnect_period_s)
-                    continue
-                self._cycle_once()
-                self._failed_cycles = 0
-            except DesPortError as err:
-                self._lost(err)
-                continue
-            except DesLinkError as err:
-                self._failed_cycles += 1
-                self.command.link_down(self.side, f'link error: {err}')
-                if self._failed_cycles >= self.max_failed_cycles:
-                    self.amp.close()
-                    self._update(connected=False, message=f'amplifier not answering, reconnecting: {err}')
-                    continue
-                self._update(message=f'link error: {err}')
-            except Exception as err:  # a bug here must never leave the motor turning
-                self._fault(err)
+            wait_s = self.poll_once()
+            if wait_s is not None:
+                self._stop.wait(wait_s)
                 continue
             next_cycle = max(next_cycle + self.poll_period_s, time.monotonic())
             self._stop.wait(max(0.0, next_cycle - time.monotonic()))
         self._shutdown()
 
-    def _fault(self, err: Exception) -> None:
-        """An unexpected exception: zero, disable, close, report, back off, then poll again."""
+    def poll_once(self) -> float | None:
+        """One turn of the thread: (re)connect if needed and run one cycle, every failure handled.
+
+        Returns None after a cycle (the next is due one poll period after this one began), else how
+        long to wait before the next turn [s] (reconnect period, a poller fault's back-off, 0).
+        """
+        try:
+            if not self.amp.link.is_open and not self._connect():
+                return self.reconnect_period_s
+            self._cycle_once()
+            self._failed_cycles = 0
+        except DesPortError as err:
+            self._lost(err)
+            return 0.0
+        except DesLinkError as err:
+            self._failed_cycles += 1
+            self.command.link_down(self.side, f'link error: {err}')
+            if self._failed_cycles >= self.max_failed_cycles:
+                self.amp.close()
+                self._update(connected=False, message=f'amplifier not answering, reconnecting: {err}')
+                return 0.0
+            self._update(message=f'link error: {err}')
+        except Exception as err:  # a bug here must never leave the motor turning
+            return self._fault(err)
+        return None
+
+    def _fault(self, err: Exception) -> float:
+        """An unexpected exception: zero, disable, close, report; the back-off before polling again [s]."""
         self.command.link_down(self.side, f'poller fault: {type(err).__name__}')
         with contextlib.suppress(Exception):
             self._zero_and_disable()
         with contextlib.suppress(Exception):
             self.amp.close()
-        now = time.monotonic()
+        now = self.clock()
         if now - self._sample.poller_fault_at > 3.0 * MAX_BACKOFF_S:
             self._backoff_s = self.reconnect_period_s
         backoff, self._backoff_s = self._backoff_s, min(MAX_BACKOFF_S, 2.0 * self._backoff_s)
@@ -413,7 +427,7 @@ class AmplifierPoller:
                 poller_fault_at=now,
                 message=f'poller fault (motor zeroed, disabled; restart in {backoff:g} s): {text}',
             )
-        self._stop.wait(backoff)
+        return backoff
 
     def _zero_and_disable(self) -> None:
         if self.amp.link.is_open:
@@ -472,7 +486,7 @@ class AmplifierPoller:
             self._last_sent = None  # the amplifier lost our set point (reset, stop toggle): resend
         current = amp.read_current()
         counter = amp.read_encoder_counter()
-        now = time.monotonic()
+        now = self.clock()
         position = self._unwrap(counter, velocity.actual_rpm, now)
         self._cycle += 1
         if self._cycle % self.status_every == 1 or self.status_every == 1:

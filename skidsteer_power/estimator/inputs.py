@@ -14,6 +14,8 @@ from typing import Any
 
 from skidsteer_power.errors import ConfigError, InputError
 
+_isfinite = math.isfinite
+
 JOINT_NAMES = ('left_motor', 'right_motor')  # the test robot's (TEST_ROBOT_JOINTS)
 
 
@@ -47,9 +49,13 @@ def _finite_within(name: str, value: float, limit: float, unit: str) -> float:
         raise InputError(f'{name} is NaN')
     if math.isinf(value):
         raise InputError(f'{name} is infinite')
-    if abs(value) > limit:
-        raise InputError(f'{name} = {value:g} {unit} exceeds the plausible limit {limit:g} {unit}')
+    _within(name, value, limit, unit)
     return value
+
+
+def _within(name: str, value: float, limit: float, unit: str) -> None:
+    if not abs(value) <= limit:
+        raise InputError(f'{name} = {value:g} {unit} exceeds the plausible limit {limit:g} {unit}')
 
 
 def check_command(speed: float, yaw_rate: float, limits: InputLimits) -> tuple[float, float]:
@@ -250,7 +256,9 @@ class JointReader:
             out = [values[i] * sign for i, sign in zip(rows, self._sign)]  # noqa: B905 (same length)
         except IndexError:
             out = []
-        if out and sum(out) - sum(out) == 0:  # NaN - NaN and inf - inf are NaN: every value is finite
+        # per value: a sum of finite values can overflow (9e307 + 9e307 = inf). all(map(isfinite))
+        # also takes less time than the sum test it replaced (0.13 vs 0.19 us for two joints)
+        if out and all(map(_isfinite, out)):
             return out
         for name, i in zip(self.map.joints, rows, strict=True):  # say which one, and why
             if i >= len(values):
@@ -260,7 +268,7 @@ class JointReader:
                 raise InputError(f'{name} {what} is NaN')
             if math.isinf(value):
                 raise InputError(f'{name} {what} is infinite')
-        raise AssertionError('unreachable: every value was finite')
+        raise InputError(f'joint_states {what}: a value is not a finite number')  # e.g. inf * sign
 
     def _rows_of(self, names: Sequence[str]) -> list[int]:
         """Where the mapped joints are in ``names``; kept while a driver sends the same names (per
@@ -313,8 +321,9 @@ class JointReader:
             if abs(w) <= limits.max_motor_speed_rad_s and abs(t) <= limits.max_motor_torque_Nm:
                 continue
             label = joints[0] if len(joints) == 1 else f'{("left", "right")[k]} side (motor-equivalent)'
-            _finite_within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
-            _finite_within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
+            # every value was finite: an inf here is a sum or product of huge ones, beyond the limit too
+            _within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
+            _within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
         return omega_m, torque_m
 
     def no_data(

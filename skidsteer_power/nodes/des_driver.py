@@ -39,8 +39,10 @@ stopped, reported, cleared only by ``~/clear_faults``; a failed exchange or a lo
 too, until the link is back (the port is reopened until it returns); an exception in a poller
 thread -> that amplifier zeroed and disabled, ERROR in diagnostics, the poller restarted after a
 back-off; an exception in a callback -> both amplifiers zeroed and disabled, then the error
-propagates; SIGINT/SIGTERM, destroy and interpreter exit -> zero speed, then disable. All serial I/O
-runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never in the executor.
+propagates; every signal that would end the process (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1,
+...: :mod:`skidsteer_power.stop_signals`), destroy and interpreter exit -> zero speed, then
+disable. All serial I/O runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never
+in the executor.
 
 Geometry (tread, drive radius, gear ratio) comes from the vehicle file named by ``vehicle``.
 

@@ -18,12 +18,14 @@ from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.utilities import timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities, Waitable
 
 from skidsteer_power.errors import SkidsteerError
+from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
 
 class LeanExecutor(SingleThreadedExecutor):
@@ -318,32 +320,54 @@ def node_command(module: str, namespace: str, params: dict[str, Any] | None = No
     return argv
 
 
+SIGNAL_CHECK_S = 0.05
+"""Longest wait of the spin loop [s]: a signal's Python handler runs only once the main thread is
+back from the middleware's wait, so an idle node still sees a signal within this time."""
+
+
 def spin_node(
     make_node: Callable[[], Node],
     name: str,
     args: list[str] | None = None,
     executor: Callable[[], Any] | None = None,
 ) -> None:
-    """Create the node with ``make_node`` and spin it until Ctrl-C or an external shutdown.
+    """Create the node with ``make_node`` and spin it until a signal or an external shutdown.
 
-    ``executor`` makes the executor (None: rclpy's global one). A bad configuration
+    ``executor`` makes the executor (None: rclpy's SingleThreadedExecutor). Every signal that would
+    end the process (:data:`~skidsteer_power.stop_signals.TERMINATING_SIGNALS`, SIGINT and SIGTERM
+    included: rclpy's own handlers are not installed) stops the spin, and stays caught until the node
+    is destroyed, so a second one cannot cut the safe stop short. A bad configuration
     (``SkidsteerError`` or a rejected parameter) is one line on stderr and exit code 2; the node is
     always destroyed (its ``destroy_node`` does the safe stop) and rclpy shut down.
     """
-    rclpy.init(args=args)
+    with stop_on_signals(StopFlag()) as stop:
+        _spin_until_stopped(make_node, name, args, executor, stop)
+
+
+def _spin_until_stopped(
+    make_node: Callable[[], Node],
+    name: str,
+    args: list[str] | None,
+    executor: Callable[[], Any] | None,
+    stop: StopFlag,
+) -> None:
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     exit_code = 0
     try:
         node = make_node()
-        rclpy.spin(node, executor() if executor is not None else None)
+        spinner = executor() if executor is not None else SingleThreadedExecutor()
+        spinner.add_node(node)
+        while not stop.is_set():  # an external shutdown raises ExternalShutdownException from the wait
+            spinner.spin_once(timeout_sec=SIGNAL_CHECK_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (SkidsteerError, ParameterException) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         exit_code = 2
     except Exception:
-        # SIGINT/SIGTERM shut the context down from rclpy's signal handler, possibly while a callback
-        # was publishing ("publisher's context is invalid"): that is the shutdown, not a failure
+        # an external shutdown (rclpy.shutdown from elsewhere) can invalidate the context while a
+        # callback was publishing ("publisher's context is invalid"): that is the shutdown, not a failure
         if rclpy.ok():
             raise
     finally:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -27,6 +28,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from skidsteer_power.estimator import factory
+from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
     from skidsteer_power.des.simulator import SimulatedPair
@@ -87,12 +89,15 @@ class SuiteOptions:
 class Suite:
     """Creates, spins (in a background thread or the caller's) and tears down the node suite."""
 
-    def __init__(self, options: SuiteOptions, context: Any = None) -> None:
+    def __init__(self, options: SuiteOptions, context: Any = None, stop: StopFlag | None = None) -> None:
         from skidsteer_power.nodes.des_driver import DesDriver
         from skidsteer_power.nodes.power_estimator import PowerEstimator
 
         self.options = options
         self.context = context
+        self.stop = stop if stop is not None else StopFlag()
+        self.failure = ''  # why a thread of the process died (then ``stop`` is set), else ''
+        self._previous_excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
         self.vehicle = factory.load_vehicle_config(options.vehicle)
         self.sim: SimulatedPair | None = None
         self.nodes: list[Node] = []
@@ -157,6 +162,7 @@ class Suite:
         from skidsteer_power.nodes.des_driver import bring_up
 
         bring_up(self.driver)  # managed node: configure + activate (ConfigError if it fails)
+        self._previous_excepthook, threading.excepthook = threading.excepthook, self._thread_died
         for node in self.nodes:
             executor = SingleThreadedExecutor(context=self.context)
             executor.add_node(node)
@@ -166,10 +172,22 @@ class Suite:
             thread.start()
         return self
 
+    def _thread_died(self, args: threading.ExceptHookArgs) -> None:
+        """Any thread of the process ending with an exception (a node's spin thread when a callback
+        raises, a simulated amplifier) stops the whole suite: ``failure`` says which and why, and
+        ``stop`` is set. The traceback is printed as before (the previous hook)."""
+        if self._previous_excepthook is not None:
+            self._previous_excepthook(args)
+        name = args.thread.name if args.thread is not None else 'a thread'
+        self.failure = self.failure or f'{name} died: {args.exc_type.__name__}: {args.exc_value}'
+        self.stop.set(self.failure)
+
     def shutdown(self) -> None:
         """Save the energy state, stop the motors, destroy the nodes, stop the simulated amplifiers."""
         from skidsteer_power.nodes.des_driver import bring_down
 
+        if self._previous_excepthook is not None:
+            threading.excepthook, self._previous_excepthook = self._previous_excepthook, None
         if getattr(self, 'driver', None) is not None:
             bring_down(self.driver)  # managed node: deactivate (zero, disable) + cleanup (close)
         for executor in self._executors:
