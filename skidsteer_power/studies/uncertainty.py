@@ -211,9 +211,7 @@ def default_spread(terrain: Terrain, powertrain: Any) -> ParameterSpread:
     sigma = np.asarray([DEFAULT_RELATIVE_SIGMA[k] for k in names]) * np.abs(
         nominal_values(names, terrain, powertrain)
     )
-    return ParameterSpread(
-        names, np.diag(sigma**2), 'default sigmas (assumed; README "Studies with uncertainty")'
-    )
+    return ParameterSpread(names, np.diag(sigma**2), 'default sigmas (assumed; docs/STUDIES.md)')
 
 
 def spread_from_yaml(path: str | Path, terrain: Terrain, powertrain: Any) -> ParameterSpread:
