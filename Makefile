@@ -32,7 +32,7 @@ test: setup lint
 	$(BIN)/python -m pytest -q
 
 bench: setup
-	$(BIN)/python -m benchmarks.run
+	$(BIN)/python -m benchmarks.run --write-docs
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .ruff_cache
