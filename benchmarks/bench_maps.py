@@ -186,7 +186,8 @@ def markdown_table(rows: list[dict]) -> str:
 
 def _table(report: Report) -> None:
     rows = accuracy_table()
-    print(markdown_table(rows), flush=True)
+    report.tables['map-accuracy'] = markdown_table(rows)
+    print(report.tables['map-accuracy'], flush=True)
     worst = max(rows, key=lambda r: r['power_pct'])
     report.figure(
         'off-grid power vs direct FESS, unflagged points, worst vehicle x terrain',

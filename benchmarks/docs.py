@@ -2,7 +2,9 @@
 
 The table sits between :data:`BEGIN` and :data:`END` in the doc; everything outside stays as written.
 A run of some areas (``python -m benchmarks.run fess --write-docs``) replaces only those areas' rows
-and keeps the others' rows from the last run, each row with the date it was measured.
+and keeps the others' rows from the last run, each row with the date it was measured. A benchmark's
+own tables (``Report.tables``, e.g. bench_maps' 'map-accuracy') replace the block between
+``<!-- benchmarks:NAME:begin -->`` and ``<!-- benchmarks:NAME:end -->`` where the doc has one.
 """
 
 from __future__ import annotations
@@ -79,3 +81,13 @@ def existing_rows(doc: str) -> dict[str, list[str]]:
 def update_doc(doc: str, reports: Iterable[tuple[str, Sequence[Figure]]], run: str) -> str:
     """``doc`` (docs/BENCHMARKS.md's text) with its goal table rendered from ``reports``."""
     return replace_block(doc, goal_table(reports, run, existing_rows(doc)))
+
+
+def replace_named(doc: str, name: str, table: str, run: str) -> str:
+    """``doc`` with the block ``name`` (its markers kept) holding ``table`` and the run it came from;
+    unchanged when the doc has no such block (a table is placed by hand, where its prose is)."""
+    begin, end = f'<!-- benchmarks:{name}:begin -->', f'<!-- benchmarks:{name}:end -->'
+    if begin not in doc or end not in doc:
+        return doc
+    head, rest = doc.split(begin, 1)
+    return f'{head}{begin}\nMeasured {run}.\n\n{table}\n{end}{rest.split(end, 1)[1]}'

@@ -17,7 +17,7 @@ import pkgutil
 import sys
 from pathlib import Path
 
-from benchmarks.docs import update_doc
+from benchmarks.docs import replace_named, update_doc
 from benchmarks.harness import Figure, Report
 
 DOC = Path(__file__).resolve().parents[1] / 'docs' / 'BENCHMARKS.md'
@@ -32,6 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     missed = 0
     reports: list[tuple[str, list[Figure]]] = []
+    tables: dict[str, str] = {}
     for name in names:
         short = name.removeprefix('bench_')
         if wanted and short not in wanted and name not in wanted:
@@ -41,9 +42,14 @@ def main(argv: list[str] | None = None) -> int:
         importlib.import_module(f'benchmarks.{name}').run(report)
         missed += sum(1 for f in report.figures if f.met is False)
         reports.append((short, report.figures))
+        tables.update(report.tables)
     print(f'\n{missed} goal(s) missed')
     if write_docs:
-        DOC.write_text(update_doc(DOC.read_text(), reports, run_label()))
+        run = run_label()
+        doc = update_doc(DOC.read_text(), reports, run)
+        for name, table in tables.items():
+            doc = replace_named(doc, name, table, run)
+        DOC.write_text(doc)
         print(f'goal table written to {DOC}')
     return 1 if missed else 0
 

@@ -1,7 +1,7 @@
 """The goal table of docs/BENCHMARKS.md rendered from a benchmark run's figures (benchmarks/docs.py),
 on a small hand-made run: the expected rows are written out by hand below."""
 
-from benchmarks.docs import BEGIN, END, existing_rows, goal_table, update_doc
+from benchmarks.docs import BEGIN, END, existing_rows, goal_table, replace_named, update_doc
 from benchmarks.harness import Figure
 
 RUN = '2026-12-02, 2 cores, load 3.0'
@@ -43,3 +43,14 @@ def test_the_hand_written_text_stays_and_a_partial_run_keeps_other_areas():
     assert rows['fess'] == [f'| fess | track 8 x 16 map | < 0.05 s | 0.007 s | yes | {later} |']
     assert rows['maps'] == [f'| maps | vectorized queries | - | 3.8e+06 1/s | - | {RUN} |']  # kept
     assert '0 goal(s) missed in this table.' in second
+
+
+def test_a_named_table_replaces_only_its_own_block():
+    begin, end = '<!-- benchmarks:map-accuracy:begin -->', '<!-- benchmarks:map-accuracy:end -->'
+    doc = f'Prose.\n{begin}\n| old |\n{end}\nGoal text.\n'
+    new = replace_named(doc, 'map-accuracy', '| new |', RUN)
+    assert new == (
+        'Prose.\n<!-- benchmarks:map-accuracy:begin -->\n'
+        f'Measured {RUN}.\n\n| new |\n<!-- benchmarks:map-accuracy:end -->\nGoal text.\n'
+    )
+    assert replace_named(doc, 'other', '| new |', RUN) == doc  # no block of that name: unchanged
