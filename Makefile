@@ -35,4 +35,4 @@ bench: setup
 	$(BIN)/python -m benchmarks.run --write-docs
 
 clean:
-	rm -rf $(VENV) build install log .pytest_cache .ruff_cache
+	rm -rf $(VENV) build install log .pytest_cache .ruff_cache .import_linter_cache
