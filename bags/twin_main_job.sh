@@ -14,7 +14,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-validation}
-.venv/bin/python -m skidsteer_power.bags.experiment_sets "$OUT"
+.venv/bin/python -m skidsteer_power.apps.experiment_sets "$OUT"
 # Calibration (issue 15): fit the terrain to the steady segments of the bundled 4-wheel bag driven on
 # clay, starting from the terrain its name claims (dry_sand): parameters with 95 % intervals, hold-out
 # error before -> after, validation/calibrated_terrain.yaml and validation/calibration.png.

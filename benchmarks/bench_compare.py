@@ -12,7 +12,7 @@ maps) drives the test robot with four and separate command sets:
 
 FESS is given the truth terrain for the presets and the nearest preset for the hidden one (what a
 user would pick), calibrated on the training bag, and corrected online as power_estimator does
-(:mod:`skidsteer_power.analysis.compare`). Goal (issue 27): FESS calibrated + online no worse than
+(:mod:`skidsteer_power.apps.compare`). Goal (issue 27): FESS calibrated + online no worse than
 the best baseline on the same range, and at most a third of its |energy error| (or within 5 %) on
 extrapolation and transfer. Nothing here is tuned toward the goal; the table is what it is.
 ``python -m benchmarks.run compare`` (a few minutes on 2 cores: 12 twin runs, 3 calibrations).
@@ -29,7 +29,7 @@ from typing import Any
 from benchmarks.bench_calibration import TRUTH as HIDDEN
 from benchmarks.bench_calibration import nearest_preset
 from benchmarks.harness import Report
-from skidsteer_power.analysis.compare import CompareOptions, compare, table
+from skidsteer_power.apps.compare import CompareOptions, compare, table
 from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, run_commands, write_bag

@@ -167,7 +167,7 @@ def accuracy_table(points: int = 1000, seed: int = 7) -> list[dict]:
 
 
 def markdown_table(rows: list[dict]) -> str:
-    """The README table of :func:`accuracy_table`."""
+    """The docs/BENCHMARKS.md table of :func:`accuracy_table`."""
     lines = [
         '| vehicle | terrain | build [CPU s] | flagged [%] | of which by the cell check [%] '
         '| side torque max [%] | side speed max [%] | power max [%] | power p99 [%] '
@@ -186,7 +186,8 @@ def markdown_table(rows: list[dict]) -> str:
 
 def _table(report: Report) -> None:
     rows = accuracy_table()
-    print(markdown_table(rows), flush=True)
+    report.tables['map-accuracy'] = markdown_table(rows)
+    print(report.tables['map-accuracy'], flush=True)
     worst = max(rows, key=lambda r: r['power_pct'])
     report.figure(
         'off-grid power vs direct FESS, unflagged points, worst vehicle x terrain',
@@ -218,7 +219,7 @@ def run(report: Report) -> None:
     setpoint_maps(report)
 
 
-if __name__ == '__main__':  # python -m benchmarks.bench_maps: the README's accuracy table only
+if __name__ == '__main__':  # python -m benchmarks.bench_maps: docs/BENCHMARKS.md's accuracy table only
     print(markdown_table(accuracy_table()))
 
 

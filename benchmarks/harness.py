@@ -24,6 +24,8 @@ class Figure:
 class Report:
     section: str = ''
     figures: list[Figure] = field(default_factory=list)
+    tables: dict[str, str] = field(default_factory=dict)
+    """Markdown tables by name, written into docs/BENCHMARKS.md's block of that name (benchmarks/docs.py)."""
 
     def figure(
         self, name: str, value: float, unit: str, *, goal: str = '', met: bool | None = None, note: str = ''

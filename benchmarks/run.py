@@ -2,6 +2,7 @@
 
     python -m benchmarks.run              # all
     python -m benchmarks.run fess maps    # bench_fess.py and bench_maps.py
+    python -m benchmarks.run --write-docs # ... and render the goal table into docs/BENCHMARKS.md
 
 Each module defines ``run(report: benchmarks.harness.Report) -> None``. The exit code is 1 when any
 goal was missed (so ``make bench`` fails), 0 when every goal was met.
@@ -9,20 +10,29 @@ goal was missed (so ``make bench`` fails), 0 when every goal was met.
 
 from __future__ import annotations
 
+import datetime
 import importlib
+import os
 import pkgutil
 import sys
 from pathlib import Path
 
-from benchmarks.harness import Report
+from benchmarks.docs import replace_named, update_doc
+from benchmarks.harness import Figure, Report
+
+DOC = Path(__file__).resolve().parents[1] / 'docs' / 'BENCHMARKS.md'
 
 
 def main(argv: list[str] | None = None) -> int:
-    wanted = set(argv if argv is not None else sys.argv[1:])
+    args = list(argv if argv is not None else sys.argv[1:])
+    write_docs = '--write-docs' in args
+    wanted = set(args) - {'--write-docs'}
     names = sorted(
         m.name for m in pkgutil.iter_modules([str(Path(__file__).parent)]) if m.name.startswith('bench_')
     )
     missed = 0
+    reports: list[tuple[str, list[Figure]]] = []
+    tables: dict[str, str] = {}
     for name in names:
         short = name.removeprefix('bench_')
         if wanted and short not in wanted and name not in wanted:
@@ -31,8 +41,24 @@ def main(argv: list[str] | None = None) -> int:
         report = Report(section=short)
         importlib.import_module(f'benchmarks.{name}').run(report)
         missed += sum(1 for f in report.figures if f.met is False)
+        reports.append((short, report.figures))
+        tables.update(report.tables)
     print(f'\n{missed} goal(s) missed')
+    if write_docs:
+        run = run_label()
+        doc = update_doc(DOC.read_text(), reports, run)
+        for name, table in tables.items():
+            doc = replace_named(doc, name, table, run)
+        DOC.write_text(doc)
+        print(f'goal table written to {DOC}')
     return 1 if missed else 0
+
+
+def run_label() -> str:
+    """When and where this run measured: UTC date, cores, 1-minute load average at the end."""
+    load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
+    day = datetime.datetime.now(datetime.UTC).date().isoformat()
+    return f'{day}, {os.cpu_count()} cores, load {load:.1f}'
 
 
 if __name__ == '__main__':

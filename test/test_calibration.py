@@ -326,6 +326,7 @@ def test_fit_at_the_motion_predicts_at_the_set_points(calibrated):
     assert sp['limited_segments'] == 0
     assert sp['speed_error_median'] < 0.05  # measured 1.2 %
     assert sp['torque_rmse_Nm'] < p['torque_rmse_before_Nm']  # measured 0.064 against 0.099 N m
-    # not asserted, reported (README): the yaw rate disagrees by a median 122 % (the twin's wheeled
-    # robot turns far less than FESS at the set points says) and the hold-out energy error is +17 %
-    # from the set points against -4 % from the motion: the two do not agree yet on this bag
+    # not asserted, reported (docs/PREDICTION.md): the yaw rate disagrees by a median 122 % (the
+    # twin's wheeled robot turns far less than FESS at the set points says) and the hold-out energy
+    # error is +17 % from the set points against -4 % from the motion: the two do not agree yet on
+    # this bag

@@ -8,7 +8,7 @@ that venv's Python, as ``colcon build`` on a robot uses the distribution's. The 
 copied (not symlinked: colcon would then install a symlink back into this checkout, and the
 resolver would find ``config/`` next to the code instead of the installed share directory).
 
-The workspace holds a Python venv the way the README's recipe makes one (``VENV_RECIPE``): a venv
+The workspace holds a Python venv the way docs/ROS.md's recipe makes one (``VENV_RECIPE``): a venv
 inside a colcon workspace breaks ``colcon build`` once the ROS wheels are in it (colcon crawls
 ``venv/share/<pkg>/package.xml`` and finds every ROS package twice), so the recipe writes
 ``COLCON_IGNORE`` into it. The wheels' ``share/`` tree is copied from this test venv, where pip put it.
@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ('package.xml', 'setup.py', 'setup.cfg', 'resource', 'config', 'launch', 'skidsteer_power')
 COLCON = Path(sys.executable).with_name('colcon')
 VENV_RECIPE = 'python3 -m venv --system-site-packages venv && touch venv/COLCON_IGNORE'
-"""The README's line (section "Building on the robot with colcon"), run in the workspace root."""
+"""docs/ROS.md's line (section "Building on the robot with colcon"), run in the workspace root."""
 
 
 def _colcon() -> Path:
@@ -91,12 +91,12 @@ def add_ros_wheels_share(venv: Path) -> None:
         shutil.copy2(xml, venv / 'share' / xml.parent.name / 'package.xml')
 
 
-def test_readme_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path):
-    """The README's colcon recipe makes its venv the way this test does; with the ROS wheels in that
+def test_ros_doc_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path):
+    """docs/ROS.md's colcon recipe makes its venv the way this test does; with the ROS wheels in that
     venv, colcon sees only this package there, and without COLCON_IGNORE it would see them all."""
     colcon = _colcon()
-    readme = (ROOT / 'README.md').read_text()
-    recipe = readme.split('### Building on the robot with colcon', 1)[1].split('```', 2)[1]
+    ros_doc = (ROOT / 'docs' / 'ROS.md').read_text()
+    recipe = ros_doc.split('### Building on the robot with colcon', 1)[1].split('```', 2)[1]
     assert VENV_RECIPE in recipe
     shutil.copytree(ROOT / 'resource', tmp_path / 'src' / 'skidsteer_power' / 'resource')
     shutil.copy2(ROOT / 'package.xml', tmp_path / 'src' / 'skidsteer_power' / 'package.xml')

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from skidsteer_power.analysis.baselines import Samples
-from skidsteer_power.analysis.compare import MAX_BAGS, MODELS, BagRun, envelope, outside_share, scores
+from skidsteer_power.apps.compare import MAX_BAGS, MODELS, BagRun, envelope, outside_share, scores
 
 BUNDLED = Path(__file__).resolve().parents[1] / 'bags'
 VEHICLE = 'test_robot_4wheel'

@@ -1,4 +1,4 @@
-"""The main job's tables (skidsteer_power/bags/experiment_sets.py) on hand-made results: the torque
+"""The main job's tables (skidsteer_power/apps/experiment_sets.py) on hand-made results: the torque
 comparison is a median of |error| per side, and the radius table shows commanded, real robot
 (Appendix D), twin and the slot for FESS from set points."""
 
@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from skidsteer_power.bags import experiment_sets as job
+from skidsteer_power.apps import experiment_sets as job
 
 
 def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict:

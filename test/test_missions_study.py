@@ -144,7 +144,7 @@ def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_stu
     import math
 
     from skidsteer_power.errors import ConvergenceError
-    from skidsteer_power.missions.design import _evaluate_chunk
+    from skidsteer_power.missions.design import evaluate_chunk
     from skidsteer_power.terramechanics.wheel import solve_wheel
 
     weak = dataclasses.replace(load_terrain('sandy_soil'), phi=math.radians(20.0), c=200.0)
@@ -154,6 +154,6 @@ def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_stu
         c for c in grid() if c['configuration'] == '4-wheel' and (c['radius_m'], c['width_m']) == (0.08, 0.05)
     )
     track = next(c for c in grid() if c['configuration'] == 'track')
-    out = _evaluate_chunk(([small, track], weak, 'fess'))
+    out = evaluate_chunk(([small, track], weak, 'fess'))
     assert out[0]['converged'] is False and out[0]['power_straight_W'] is None
     assert out[1]['index'] == track['index'] and 'power_straight_W' in out[1]

@@ -249,7 +249,7 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     truth. The path energy of that route (a pose every 0.25 m) with the learned scale is much closer
     to it than without (measured: +135 % -> +18 %, 3391 J -> 1699 J against 1443 J; the start-up,
     the final stop and the twin's wider-than-commanded turns are not in the steady path model;
-    README "Path energy")."""
+    docs/ROS.md "Path energy")."""
     from skidsteer_power.bags.synthetic import table_7_3_segments
     from skidsteer_power.calibration.direct import feed_trace
     from skidsteer_power.estimator.core import EstimatorCore

@@ -50,7 +50,7 @@ P0_ICR = 1.0  # initial covariance of an ICR position [m^2]
 @dataclass(frozen=True)
 class Samples:
     """Time-aligned samples of one or more bags (one row per joint_states reading with a command in
-    force; see :func:`skidsteer_power.analysis.compare.bag_samples`).
+    force; see :func:`skidsteer_power.apps.compare.bag_samples`).
 
     weight_s : hold of each sample [s]; speed_cmd, yaw_cmd : the command in force [m/s, rad/s];
     power_W : measured terminal power of both sides [W]; side_speed : (n, 2) measured sprocket surface

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import glob
 import logging
 import sys
+from pathlib import Path
 from typing import Any
 
 from skidsteer_power.cli.common import _number, add_json_flag, emit, print_json
+from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     BAG_TIME_S,
     CLOCK_HZ,
@@ -125,8 +128,54 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _is_fleet(args: argparse.Namespace) -> bool:
+    """Fleet mode: several bags, a folder of bags, a glob, --jobs, --scheduler or --manifest."""
+    from skidsteer_power.apps.fleet import is_bag
+
+    specs = args.bag
+    return (
+        len(specs) > 1
+        or args.jobs is not None
+        or args.scheduler is not None
+        or args.manifest is not None
+        or glob.has_magic(specs[0])
+        or (Path(specs[0]).is_dir() and not is_bag(Path(specs[0])))
+    )
+
+
+def _run_fleet(args: argparse.Namespace, shared: Any) -> int:
+    """``validate`` in fleet mode (:mod:`skidsteer_power.apps.fleet`): ``shared`` holds the single-bag
+    ValidateOptions."""
+    from skidsteer_power.apps.fleet import expand, fmt, plan_jobs, read_manifest, validate_fleet
+    from skidsteer_power.distributed.engine import Engine
+
+    if args.msg:
+        raise InputError('--msg is not supported with several bags yet')
+    manifest = read_manifest(args.manifest) if args.manifest else None
+    jobs = plan_jobs(expand(args.bag), shared, manifest, salvage=args.salvage)
+    with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
+        summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            f'{summary["bags"]} bags: {summary["ok"]} validated ({summary["incomplete"]} of them '
+            f'incomplete), {summary["failed"]} failed ({summary["engine"]})'
+        )
+        for g in summary['groups']:
+            print(
+                f'  {g["vehicle"]} on {g["terrain"]}: {g["bags"]} bags, {g["distance_m"]:.1f} m, '
+                f'{fmt(g["energy_per_m_J_m"])} J/m, '
+                f'mean energy error {fmt(g["energy_error_pct_mean"], "+.1f")} %'
+            )
+        for r in summary['rows']:
+            if not r['ok']:
+                print(f'  FAILED {r["bag"]}: {r["error"]}')
+        print(f'fleet summary: {summary["files"]["markdown"]}')
+    return 0 if summary['failed'] == 0 else 1
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags.fleet import is_fleet, run_fleet_cmd
     from skidsteer_power.bags.report import one_screen
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
@@ -146,8 +195,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         joints_at=args.joints_at,
         kinematics=args.kinematics,
     )
-    if is_fleet(args):  # several bags: skidsteer_power.bags.fleet (Dask), each with these options
-        return run_fleet_cmd(args, options)
+    if _is_fleet(args):  # several bags: skidsteer_power.apps.fleet (Dask), each with these options
+        return _run_fleet(args, options)
     args.bag = args.bag[0]
     _log_to_stderr()
     with _open(args) as bag:
@@ -247,7 +296,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         nargs='+',
         metavar='BAG',
         help='bag file (.mcap/.db3) or rosbag2 directory; several, a folder of bags or a glob: fleet '
-        'validation (one report per bag in DIR/<bag>/, fleet.csv, summary.md, plots; bags/fleet.py)',
+        'validation (one report per bag in DIR/<bag>/, fleet.csv, summary.md, plots; apps/fleet.py)',
     )
     val.add_argument('--vehicle', required=True, metavar='FILE', help='vehicle YAML or config name')
     val.add_argument('--terrain', required=True, metavar='T', help='terrain preset or YAML file')

@@ -6,7 +6,7 @@
 For robots without ``foxglove_bridge``: the Foxglove app connects to ``ws://HOST:8765`` and gets
 every topic (or only ``--topics``) as ros2msg schemas with CDR payloads
 (:mod:`skidsteer_power.nodes.foxglove_bridge`). It listens on 127.0.0.1 (reach it through an SSH
-tunnel, README); ``--host 0.0.0.0`` serves every network the robot is on, with a warning: there is
+tunnel, docs/ROS.md); ``--host 0.0.0.0`` serves every network the robot is on, with a warning: there is
 no authentication. Web pages are refused unless served from localhost or named by
 ``--allow-origin``. ``--allow-publish cmd_vel`` lets clients publish there (Foxglove's Teleop
 panel); des_driver's checks apply to it as to any cmd_vel. Open ``config/foxglove/operator_layout.json`` in
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
             f'warning: serving Foxglove on {args.host}: no authentication, anyone who can reach port '
             f'{args.port} reads every bridged topic'
             + (f' and publishes to {", ".join(args.allow_publish)}' if args.allow_publish else '')
-            + '; prefer --host 127.0.0.1 and an SSH tunnel (README, "Watching the robot in Foxglove")',
+            + '; prefer --host 127.0.0.1 and an SSH tunnel (docs/ROS.md, "Watching the robot in Foxglove")',
             file=sys.stderr,
             flush=True,
         )

@@ -1,5 +1,5 @@
 """``skidsteer-power compare BAG... --vehicle V --terrain T [--holdout BAG...]``: FESS against the
-simple models a user would fit (issue 27; :mod:`skidsteer_power.analysis.compare`).
+simple models a user would fit (issue 27; :mod:`skidsteer_power.apps.compare`).
 
 JSON keys: vehicle, terrain, train_bags, train_envelope {max_speed_m_s, max_yaw_rate_rad_s},
 holdout [{bag, split, outside_envelope_share, max_speed_m_s, max_yaw_rate_rad_s}], transfer,
@@ -18,7 +18,7 @@ from skidsteer_power.cli.common import add_json_flag, emit, finite_float
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from skidsteer_power.analysis.compare import MAX_BAG_S, MAX_BAGS
+    from skidsteer_power.apps.compare import MAX_BAG_S, MAX_BAGS
 
     parser = subparsers.add_parser(
         'compare',
@@ -58,7 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from skidsteer_power.analysis.compare import CompareOptions, compare, plot, table
+    from skidsteer_power.apps.compare import CompareOptions, compare, plot, table
 
     train, holdout = list(args.bags), list(args.holdout)
     if not holdout and len(train) >= 2 and not args.transfer:

@@ -149,9 +149,7 @@ def _add_source_args(p: argparse.ArgumentParser) -> None:
 def _add_uncertainty_args(p: argparse.ArgumentParser, calibration: bool) -> None:
     from skidsteer_power.distributed.engine import add_engine_args
 
-    g = p.add_argument_group(
-        'uncertainty (Monte Carlo over terrain and powertrain; README "Studies with uncertainty")'
-    )
+    g = p.add_argument_group('uncertainty (Monte Carlo over terrain and powertrain; docs/STUDIES.md)')
     g.add_argument(
         '--samples',
         type=SAMPLES.arg(),

@@ -14,8 +14,7 @@ the LocalCluster is started only for the first larger map or a map of ``heavy`` 
 chunk, a bag). Its workers run one BLAS/OpenMP thread each (``ONE_THREAD_ENV``) and keep
 glibc's default malloc: Dask's default ``MALLOC_TRIM_THRESHOLD_=65536`` turns off glibc's dynamic
 mmap threshold, and every numpy temporary of a map build was then mmap'ed and zero-filled anew
-(8 mission samples in one process: 4.5 s of system time with it, 0.16 s without; README
-"Reliability").
+(8 mission samples in one process: 4.5 s of system time with it, 0.16 s without; docs/STUDIES.md).
 
 Tasks that raise stop the study with the task's own exception (a bug shows its traceback; the
 project's errors are the user's). Studies that must survive a failing item (fleet validation) catch
@@ -36,7 +35,7 @@ from skidsteer_power.terramechanics.ranges import LOCAL_WORKERS
 
 CONNECT_TIMEOUT_S = 10.0
 IN_PROCESS_MAX_TASKS = 32
-"""Largest map run in-process without a scheduler (a pool's start-up costs more; README figures)."""
+"""Largest map run in-process without a scheduler (a pool's start-up costs more; docs/STUDIES.md)."""
 ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1'}
 """Environment of each local worker process, set before it starts: one BLAS thread per worker."""
 

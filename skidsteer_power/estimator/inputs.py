@@ -334,7 +334,7 @@ class JointReader:
         effort: Sequence[float],
     ) -> bool:
         """True when a mapped joint reads NaN in every number field the mapping uses: the driver's
-        "no fresh data for this side" (des_driver's convention, README "ROS 2 interface"), which is
+        "no fresh data for this side" (des_driver's convention, docs/ROS.md "ROS 2 interface"), which is
         no reading, not a bad one. A NaN beside a finite value in another field stays bad input."""
         try:
             rows = self._rows_of(names)

@@ -11,8 +11,8 @@ within one yaw-rate step) that bilinear interpolation was measured 36 % off at o
 3 min_radius, where a wheeled vehicle's outer-side slip rises steeply towards the traction limit.
 The map stores torques and slip speeds; each side's axle speed is derived from its exact ground
 speed plus the interpolated slip speed, and its power as torque x speed. Accuracy against direct
-FESS for every shipped vehicle x terrain: README ("Map accuracy"; ``python -m benchmarks.bench_maps``).
-Straight running is
+FESS for every shipped vehicle x terrain: docs/BENCHMARKS.md ("Map accuracy";
+``python -m benchmarks.bench_maps``). Straight running is
 psi = 0, spinning in place psi = +-pi/2 and rest s = 0: no division by zero anywhere (hypot,
 atan2). The grid covers the vehicle's command envelope, V up to ``max_speed`` and |w_z| up to
 ``max_yaw_rate`` (its vehicle-file fields; the corner included: s_max = sqrt(2) max_speed); a query
@@ -57,7 +57,7 @@ every query in it is ``limited``. Those are the fast turns approaching the tract
 outer side's slip climbs steeply with speed (centrifugal load transfer) and speed and power grow
 towards an asymptote; finer uniform grids converged there too slowly to be an answer (16 x 101:
 83 %, 31 x 101: 10.8 %). The check costs up to as many solves again as the nodes (fewer: cells
-flagged anyway are skipped). Measured per vehicle x terrain: README ("Map accuracy").
+flagged anyway are skipped). Measured per vehicle x terrain: docs/BENCHMARKS.md ("Map accuracy").
 
 Right turns are the mirror image of left turns (every vehicle here is laterally symmetric): only
 psi >= 0 is solved, so mirrored commands give mirrored answers exactly.

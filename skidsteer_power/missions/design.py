@@ -37,6 +37,7 @@ from skidsteer_power.missions.energy import state_powers
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.powertrain.perturbed import apply_powertrain
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -87,15 +88,13 @@ def candidate_vehicle(c: dict[str, Any]) -> Any:
     )
 
 
-def _evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
+def evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
     """Solve (candidates, terrain, model[, powertrain sample]) (see skidsteer_power.studies)."""
     from skidsteer_power.models import solve
 
     candidates, terrain, model, *sample = job
     powertrains = {g: Powertrain.default_test_robot(g) for g in ('track', 'wheel')}
     if sample and sample[0]:
-        from skidsteer_power.studies.uncertainty import apply_powertrain
-
         powertrains = {g: apply_powertrain(pt, sample[0]) for g, pt in powertrains.items()}
     out = []
     for c in candidates:
@@ -146,15 +145,15 @@ def design_study(
     rows = [c for c in grid() if c['configuration'] in configurations]
     workers = workers or min(2, os.cpu_count() or 1)
     _preload(model)
-    parts = _balanced_parts(rows, workers)
+    parts = balanced_parts(rows, workers)
     jobs = [(part, terrain, model) for part in parts]
     if engine is not None:
-        done = engine.map(_evaluate_chunk, jobs, label='design study', heavy=True)
+        done = engine.map(evaluate_chunk, jobs, label='design study', heavy=True)
     elif workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            done = list(pool.map(_evaluate_chunk, jobs))
+            done = list(pool.map(evaluate_chunk, jobs))
     else:
-        done = [_evaluate_chunk(job) for job in jobs]
+        done = [evaluate_chunk(job) for job in jobs]
     evaluated = score(sorted(itertools.chain.from_iterable(done), key=lambda c: c['index']), terrain)
     best = best_per_configuration(evaluated, criterion)
     return {
@@ -202,7 +201,7 @@ def _preload(model: str) -> None:
 _TRACK_COST, _WHEEL_COST, _WHEEL_TABLE_COST = 1.6, 2.5, 3.0  # ms, measured (see module doc)
 
 
-def _balanced_parts(rows: list[dict[str, Any]], parts: int) -> list[list[dict[str, Any]]]:
+def balanced_parts(rows: list[dict[str, Any]], parts: int) -> list[list[dict[str, Any]]]:
     """Split the grid into ``parts`` contiguous pieces of about equal estimated cost."""
     cost = np.array([_TRACK_COST if c['configuration'] == 'track' else _WHEEL_COST for c in rows])
     first_of_group = np.array([k % (len(LENGTHS_M) * len(TREADS_M)) == 0 for k in range(len(rows))])

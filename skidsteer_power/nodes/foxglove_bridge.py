@@ -10,7 +10,7 @@ messages only to clients that subscribed to it, behind :class:`~skidsteer_power.
 foxglove_front.FrontDoor` (Origin check, both subprotocol names).
 
 Security: it listens on 127.0.0.1 unless told otherwise; there is no authentication, so anyone who
-can reach the port reads every bridged topic (README: expose it through an SSH tunnel). With
+can reach the port reads every bridged topic (docs/ROS.md: expose it through an SSH tunnel). With
 ``allow_publish`` (off by default), clients may publish to those topics only (Foxglove's Teleop
 panel on ``cmd_vel``): the CDR bytes go to ROS as they are, and des_driver checks them like any
 other cmd_vel (finite, clamped, slew-limited, watchdog).

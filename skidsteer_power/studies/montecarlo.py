@@ -88,10 +88,10 @@ def mission_uncertainty(
 
 # ------------------------------------------------------------------------------------ design study
 def _design_task(job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]]) -> list[tuple]:
-    from skidsteer_power.missions.design import _evaluate_chunk, score
+    from skidsteer_power.missions.design import evaluate_chunk, score
 
     _sample, rows, terrain, model, pt_sample = job
-    scored = score(_evaluate_chunk((rows, terrain, model, pt_sample)), terrain)
+    scored = score(evaluate_chunk((rows, terrain, model, pt_sample)), terrain)
     return [
         (c['index'], c['merit'], c['converged'] and c['max_drawbar_pull_N'] > 0 and c['merit'] is not None)
         for c in scored
@@ -117,7 +117,7 @@ def design_uncertainty(
     the grid (default: all 729 of Table 8.4); each sample is split into ``parts_per_sample`` tasks.
     """
     from skidsteer_power.errors import InputError
-    from skidsteer_power.missions.design import _balanced_parts, grid
+    from skidsteer_power.missions.design import balanced_parts, grid
     from skidsteer_power.powertrain import Powertrain
 
     sides = [n for n in spread.names if n.startswith(('left_', 'right_'))]
@@ -128,7 +128,7 @@ def design_uncertainty(
     rows = grid() if rows is None else rows
     nominal_pt = Powertrain.default_test_robot('track')
     sets = draw(spread, terrain, nominal_pt, samples, seed, method)
-    parts = _balanced_parts(rows, parts_per_sample)
+    parts = balanced_parts(rows, parts_per_sample)
     pt_names = [n for n in spread.names if not hasattr(terrain, n)]
     jobs = [
         (k, part, apply_terrain(terrain, s), model, {n: s[n] for n in pt_names})

@@ -47,7 +47,7 @@ import numpy as np
 import yaml
 
 from skidsteer_power.errors import ConfigError, InputError
-from skidsteer_power.powertrain.internal import Resistance, SideResistance
+from skidsteer_power.powertrain.perturbed import apply_powertrain as apply_powertrain  # its home (re-export)
 from skidsteer_power.terramechanics.terrain import _UNIT_KEYS, Terrain
 
 DEFAULT_RELATIVE_SIGMA: dict[str, float] = {
@@ -174,28 +174,6 @@ def apply_terrain(terrain: Terrain, sample: Mapping[str, float]) -> Terrain:
     return dataclasses.replace(terrain, name=f'{terrain.name}~', **changes)
 
 
-def apply_powertrain(powertrain: Any, sample: Mapping[str, float]) -> Any:
-    """``powertrain`` with the sample's powertrain parameters applied (module doc)."""
-    scale = sample.get('internal_scale', 1.0)
-    sides = {}
-    for side in ('left', 'right'):
-        resistance = powertrain.resistance(side)
-        if f'{side}_b' in sample or f'{side}_c' in sample:
-            total = resistance.total
-            b = sample.get(f'{side}_b', total.viscous_Nm_s)
-            c = sample.get(f'{side}_c', total.coulomb_Nm)
-            resistance = SideResistance({'total': Resistance(b, c)})
-        if scale != 1.0:
-            resistance = SideResistance(
-                {
-                    k: Resistance(r.viscous_Nm_s * scale, r.coulomb_Nm * scale)
-                    for k, r in resistance.components.items()
-                }
-            )
-        sides[side] = resistance
-    return dataclasses.replace(powertrain, left=sides['left'], right=sides['right'])
-
-
 def _is_terrain(name: str) -> bool:
     return name in {f.name for f in dataclasses.fields(Terrain)} and name not in ('name', 'shear_type')
 
@@ -211,9 +189,7 @@ def default_spread(terrain: Terrain, powertrain: Any) -> ParameterSpread:
     sigma = np.asarray([DEFAULT_RELATIVE_SIGMA[k] for k in names]) * np.abs(
         nominal_values(names, terrain, powertrain)
     )
-    return ParameterSpread(
-        names, np.diag(sigma**2), 'default sigmas (assumed; README "Studies with uncertainty")'
-    )
+    return ParameterSpread(names, np.diag(sigma**2), 'default sigmas (assumed; docs/STUDIES.md)')
 
 
 def spread_from_yaml(path: str | Path, terrain: Terrain, powertrain: Any) -> ParameterSpread:

@@ -14,7 +14,7 @@ For each configuration of the test robot (track, 4-wheel, 6-wheel):
    command and FESS predicted from the twin's actual motion (ch. 7.3.4 validated FESS with the
    measured speed and turning radius), plotted in the style of Figures 7.39-7.41.
 
-``python -m skidsteer_power.bags.experiment_sets OUT_DIR`` (``make run``) writes everything to
+``python -m skidsteer_power.apps.experiment_sets OUT_DIR`` (``make run``) writes everything to
 OUT_DIR and prints the summary table.
 """
 
@@ -329,7 +329,7 @@ def summary_table(results: list[dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog='python -m skidsteer_power.bags.experiment_sets', description=__doc__
+        prog='python -m skidsteer_power.apps.experiment_sets', description=__doc__
     )
     parser.add_argument('out_dir', nargs='?', default='validation', help='output folder (validation/)')
     parser.add_argument('--vehicles', nargs='+', default=list(CONFIGURATIONS))

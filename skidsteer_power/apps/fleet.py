@@ -265,7 +265,7 @@ def group_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def _fmt(value: Any, fmt: str = '.4g') -> str:
+def fmt(value: Any, fmt: str = '.4g') -> str:
     if value is None:
         return ''
     if isinstance(value, float):
@@ -278,7 +278,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
         writer = csv.writer(stream)
         writer.writerow(CSV_COLUMNS)
         for r in rows:
-            writer.writerow([_fmt(r.get(c, math.nan), '.6g') for c in CSV_COLUMNS])
+            writer.writerow([fmt(r.get(c, math.nan), '.6g') for c in CSV_COLUMNS])
 
 
 def _status(row: dict[str, Any]) -> str:
@@ -307,9 +307,9 @@ def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: 
             Path(r['bag']).name,
             r['vehicle'],
             r['terrain'],
-            *(_fmt(r.get(k, math.nan)) for k in ('distance_m', 'energy_measured_J', 'energy_predicted_J')),
-            _fmt(r.get('energy_error_pct', math.nan), '+.1f'),
-            _fmt(r.get('energy_per_m_J_m', math.nan)),
+            *(fmt(r.get(k, math.nan)) for k in ('distance_m', 'energy_measured_J', 'energy_predicted_J')),
+            fmt(r.get('energy_error_pct', math.nan), '+.1f'),
+            fmt(r.get('energy_per_m_J_m', math.nan)),
             status,
         ]
         lines.append('| ' + ' | '.join(cells) + ' |')
@@ -322,8 +322,8 @@ def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: 
     lines.append('| --- | --- | --- | --- | --- | --- |')
     for g in groups:
         lines.append(
-            f'| {g["vehicle"]} | {g["terrain"]} | {g["bags"]} | {_fmt(g["distance_m"])} | '
-            f'{_fmt(g["energy_per_m_J_m"])} | {_fmt(g["energy_error_pct_mean"], "+.1f")} |'
+            f'| {g["vehicle"]} | {g["terrain"]} | {g["bags"]} | {fmt(g["distance_m"])} | '
+            f'{fmt(g["energy_per_m_J_m"])} | {fmt(g["energy_error_pct_mean"], "+.1f")} |'
         )
     return '\n'.join(lines) + '\n'
 
@@ -359,47 +359,3 @@ def _plots(out: Path, rows: list[dict[str, Any]], groups: list[dict[str, Any]]) 
     fig.savefig(files['prediction_error_png'], dpi=100)
     plt.close(fig)
     return files
-
-
-def is_fleet(args: Any) -> bool:
-    """Fleet mode: several bags, a folder of bags, a glob, --jobs, --scheduler or --manifest."""
-    specs = args.bag
-    return (
-        len(specs) > 1
-        or args.jobs is not None
-        or args.scheduler is not None
-        or args.manifest is not None
-        or glob.has_magic(specs[0])
-        or (Path(specs[0]).is_dir() and not is_bag(Path(specs[0])))
-    )
-
-
-def run_fleet_cmd(args: Any, shared: ValidateOptions) -> int:
-    """``validate`` in fleet mode (see cli/bags.py): ``shared`` holds the single-bag options."""
-    from skidsteer_power.cli.common import print_json
-    from skidsteer_power.distributed.engine import Engine
-
-    if args.msg:
-        raise InputError('--msg is not supported with several bags yet')
-    manifest = read_manifest(args.manifest) if args.manifest else None
-    jobs = plan_jobs(expand(args.bag), shared, manifest, salvage=args.salvage)
-    with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
-        summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
-    if args.json:
-        print_json(summary)
-    else:
-        print(
-            f'{summary["bags"]} bags: {summary["ok"]} validated ({summary["incomplete"]} of them '
-            f'incomplete), {summary["failed"]} failed ({summary["engine"]})'
-        )
-        for g in summary['groups']:
-            print(
-                f'  {g["vehicle"]} on {g["terrain"]}: {g["bags"]} bags, {g["distance_m"]:.1f} m, '
-                f'{_fmt(g["energy_per_m_J_m"])} J/m, '
-                f'mean energy error {_fmt(g["energy_error_pct_mean"], "+.1f")} %'
-            )
-        for r in summary['rows']:
-            if not r['ok']:
-                print(f'  FAILED {r["bag"]}: {r["error"]}')
-        print(f'fleet summary: {summary["files"]["markdown"]}')
-    return 0 if summary['failed'] == 0 else 1
