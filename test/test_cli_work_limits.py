@@ -115,6 +115,8 @@ def _cases(tmp: Path) -> list[tuple[list[str], str]]:
         (['replay', str(BAG), '--start', '1e300'], 'bag time = 1e\\+300 s is outside its range'),
         (['replay', str(BAG), '--clock-hz', '1e9'], 'clock rate = 1e\\+09 Hz is outside its range'),
         (['design-study', '--workers', '1000'], 'local workers = 1,000 is outside its range'),
+        (['run', '--simulate', '--duration', '1e9'], 'duration = 1e\\+09 s is outside its range'),
+        (['bridge', '--duration', '1e9'], 'duration = 1e\\+09 s is outside its range'),
         (
             [
                 'validate',
@@ -166,6 +168,8 @@ WORK_OPTIONS = [
     (('replay',), '--start', ranges.BAG_TIME_S),
     (('replay',), '--duration', ranges.RECORD_DURATION_S),
     (('record',), '--duration', ranges.RECORD_DURATION_S),
+    (('run',), '--duration', ranges.RECORD_DURATION_S),
+    (('bridge',), '--duration', ranges.RECORD_DURATION_S),
     (('validate',), '--jobs', ranges.LOCAL_WORKERS),
 ]
 

@@ -22,9 +22,10 @@ import math
 import sys
 import time
 
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
 
 
 def _port(text: str) -> int:
@@ -75,7 +76,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar='TOPIC',
         help='topics clients may publish to, e.g. cmd_vel for the Teleop panel (default: none)',
     )
-    parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
+    parser.add_argument(
+        '--duration',
+        type=RECORD_DURATION_S.arg(),
+        help=RECORD_DURATION_S.help('stop after this many seconds (default: until a signal)'),
+    )
     add_json_flag(parser)
     parser.set_defaults(func=run)
 

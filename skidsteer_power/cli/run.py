@@ -22,6 +22,7 @@ from typing import Any
 
 from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
 
 EXIT_FAILURE = 1
 """Exit code when a thread or process of the suite died (2 is bad input, 0 a clean stop)."""
@@ -42,7 +43,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="--simulate: the digital twin's (true) terrain (default --terrain)",
     )
     parser.add_argument('--patches', default='', help='--simulate: YAML polygons of other truth terrains')
-    parser.add_argument('--duration', type=positive_float, help='stop after this many seconds [s]')
+    parser.add_argument(
+        '--duration',
+        type=RECORD_DURATION_S.arg(),
+        help=RECORD_DURATION_S.help('stop after this many seconds (default: until a signal)'),
+    )
     parser.add_argument('--speed', type=finite_float, help='publish cmd_vel with this forward speed [m/s]')
     parser.add_argument('--yaw-rate', type=finite_float, default=0.0, help='... and this yaw rate [rad/s]')
     parser.add_argument('--left-port', default='/dev/ttyUSB0', help='left amplifier port (hardware)')
