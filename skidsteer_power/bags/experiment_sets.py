@@ -21,6 +21,7 @@ OUT_DIR and prints the summary table.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -47,18 +48,29 @@ MIN_TORQUE_NM = 0.2
 """Sets whose twin axle torque is smaller than this [N m] are left out of the relative torque error."""
 
 
+@functools.lru_cache(maxsize=8)
+def _command_predictor(vehicle_name: str) -> Any:
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.terramechanics import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    return CommandPredictor(load_vehicle(vehicle_name), load_terrain(TRUTH))
+
+
 def setpoint_radius(vehicle_name: str, speed_m_s: float, yaw_rate_rad_s: float) -> float | None:
-    """The radius [m] FESS predicts from the wheel-speed set points of a command (issue 25); None
-    until that prediction exists. The SLOT for it: the radius figure and table show it once this
-    returns numbers."""
-    return None
+    """The radius [m] FESS predicts from the wheel-speed set points of a command on the truth
+    terrain (issue 25: :class:`~skidsteer_power.models.predict.CommandPredictor`, a direct FESS
+    solve, not the maps); inf for straight running, None where FESS finds no steady state
+    (``limited``: the robot digs in)."""
+    pred = _command_predictor(vehicle_name).predict(speed_m_s, yaw_rate_rad_s)
+    return None if bool(pred.limited[0]) else float(pred.turn_radius[0])
 
 
 def real_radius(vehicle_name: str, speed_m_s: float, yaw_rate_rad_s: float) -> float | None:
     """The real robot's radius [m] at this command (Appendix D), None where the text gives none."""
-    for name, speed, yaw, radius in APPENDIX_D_RADII:
-        if (name, speed, yaw) == (vehicle_name, speed_m_s, yaw_rate_rad_s):
-            return radius
+    for c in APPENDIX_D_RADII:
+        if (c.vehicle, c.speed_cmd, c.yaw_cmd) == (vehicle_name, speed_m_s, yaw_rate_rad_s):
+            return c.radius_m
     return None
 
 
@@ -201,8 +213,8 @@ def plot_configuration(result: dict[str, Any], path: Path) -> None:
 
 
 def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
-    """Figure 7.38 style: commanded, real robot (Appendix D), twin (circle fit of the ground truth) and,
-    once it exists, FESS from the set points (:func:`setpoint_radius`) turning radius."""
+    """Figure 7.38 style: commanded, real robot (Appendix D), twin (circle fit of the ground truth) and
+    FESS from the set points (:func:`setpoint_radius`) turning radius."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -226,7 +238,7 @@ def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
             fess = [
                 (r['yaw_cmd'], r['radius_fess_setpoints_m']) for r in segs if r['radius_fess_setpoints_m']
             ]
-            if fess:  # the slot for FESS from the set points (issue 25)
+            if fess:
                 ax.semilogy(*zip(*fess, strict=True), 'd:', label='FESS from set points')
             ax.set_title(f'{result["vehicle"]}, V_cmd = {speed} m/s')
             ax.set_xlabel('commanded yaw rate [rad/s]')
@@ -287,6 +299,15 @@ def radius_table(results: list[dict[str, Any]]) -> str:
         median, worst = np.median(errors), np.max(errors)
         lines.append(f'\nTwin against the real robot: median |R_twin / R_real - 1| {median:.1f} %, '
                      f'max {worst:.1f} % over {len(errors)} cells.')  # fmt: skip
+    fess = [
+        abs(_ratio_error(x['radius_fess_setpoints_m'], x['radius_real_m']))
+        for x in radius_rows(results)
+        if x['radius_fess_setpoints_m'] is not None
+    ]
+    if fess:
+        median, worst = np.median(fess), np.max(fess)
+        lines.append(f'FESS from set points against the real robot: median |R_FESS / R_real - 1| '
+                     f'{median:.1f} %, max {worst:.1f} % over {len(fess)} cells.')  # fmt: skip
     return '\n'.join(lines)
 
 
@@ -306,7 +327,7 @@ def summary_table(results: list[dict[str, Any]]) -> str:
         cells = [x for x in r['radius'] if x['radius_real_m'] is not None]
         real = [abs(_ratio_error(x['radius_m'], x['radius_real_m'])) for x in cells]
         fess = [x for x in cells if x['radius_fess_setpoints_m'] is not None]
-        fess_text = '-'  # the slot for FESS from the set points (issue 25)
+        fess_text = '-'
         if fess:
             vs_twin = np.median(
                 [abs(_ratio_error(x['radius_fess_setpoints_m'], x['radius_m'])) for x in fess]

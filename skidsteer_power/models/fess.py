@@ -100,6 +100,7 @@ class Contact:
     resistance: np.ndarray  # (P, 2) compaction resistance magnitude of each side [N]
     sinkage: np.ndarray  # (P, 2) sinkage of each side [m]
     length_scale: float  # contact span used to scale s0 steps [m]
+    longitudinal: float = 1.0  # K / K_x: weight of the displacement along the contact (tracks)
 
     @property
     def xi(self) -> np.ndarray:
@@ -150,6 +151,7 @@ def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
         resistance=compaction_resistance(terrain, safe, width, length),  # eq. 2.10
         sinkage=track_sinkage(terrain, safe, width, length),  # eq. 2.6
         length_scale=length,
+        longitudinal=1.0 / float(vehicle.track_longitudinal_shear_ratio),
     )
 
 
@@ -332,6 +334,8 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
     """
     c = problem.contact
     jx, jy, xk = element_displacement(problem, x)
+    if c.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement (j_x K / K_x, j_y)
+        jx = jx * c.longitudinal
     j = np.hypot(jx, jy)
     # eq. 6.7; the fraction is 0 at j = 0, so dividing by 1 there gives the zero stress
     scale = c.tau_max[:, None] * shear_fraction(problem.terrain, j) / np.where(j > 0, j, 1.0)
