@@ -359,9 +359,10 @@ def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     c = problem.contact
     fx, fy, xk = element_forces(problem, x)
     sum_axes = (-2, -1)
-    fx_side = np.sum(fx * c.wx[:, None], axis=sum_axes)  # (P, S, 2) trapezoid sums
-    fy_side = np.sum(fy * c.wy[:, None], axis=sum_axes)
-    mz_lat = np.sum(xk * fy * c.wy[:, None], axis=(-3, -2, -1))
+    # (P, S, 2) trapezoid sums; the array methods: np.sum's reduction without its Python wrapper
+    fx_side = (fx * c.wx[:, None]).sum(axis=sum_axes)
+    fy_side = (fy * c.wy[:, None]).sum(axis=sum_axes)
+    mz_lat = (xk * fy * c.wy[:, None]).sum(axis=(-3, -2, -1))
     net = fx_side - problem.rolling[:, None, :]  # rolling resistance against each side's motion
     s0 = x[..., 0]
     cfx, cfy = _centrifugal(problem, s0)
@@ -629,9 +630,9 @@ class FessSolver:
         others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
         x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others)
         fx = element_forces(prob, x[None, None, :])[0]
-        torque = prob.radius * np.sum(fx * prob.contact.wt[:, None], axis=(-2, -1))[0, 0]
+        torque = prob.radius * (fx * prob.contact.wt[:, None]).sum(axis=(-2, -1))[0, 0]
         slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
-        ok = converged and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
+        ok = converged and bool((np.abs(slip) <= SLIP_LIMIT).all()) and bool((prob.loads > 0).all())
         return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
 
     @cached_property

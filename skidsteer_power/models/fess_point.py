@@ -18,7 +18,6 @@ from skidsteer_power.models.fess import (
     MAX_HALVINGS,
     MAX_ITERATIONS,
     Problem,
-    _limit,
     residual,
 )
 
@@ -47,7 +46,6 @@ def newton_point(
     :func:`_pick_start` prefers, so choosing costs no extra call.
     """
     x = np.array(x0, dtype=float)
-    idx = np.zeros(1, dtype=int)
     length = problem.contact.length_scale
     omega_ref = float(problem.omega_ref[0])
     h = np.empty(3)
@@ -67,7 +65,7 @@ def newton_point(
         else:
             fall = residual(problem, trial)[0]
         f = fall[0]
-        norm = float(np.max(np.abs(f)))
+        norm = float(np.abs(f).max())
         if not norm < math.inf:
             norm = math.inf
         if norm < tol:
@@ -88,10 +86,22 @@ def newton_point(
             step = np.linalg.solve(jac, -f)
         except np.linalg.LinAlgError:
             step = np.zeros(3)
-        step = _limit(problem, idx, x[None, :], step[None, :])[0]
+        step = _limit_point(length, omega_ref, x, step)
         x_prev, norm_prev, step_prev, halvings = x, norm, step, 0
         x = x + step
     return x, f, False, MAX_ITERATIONS
+
+
+def _limit_point(length: float, omega_ref: float, x: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """:func:`~skidsteer_power.models.fess._limit` (the trust region) for one point, in floats: the same
+    operations without the batch's array set-up (a tenth of a cold solve_point's time under cProfile)."""
+    ratios = (
+        abs(step[0]) / (0.2 * length),
+        abs(step[1]) / (0.5 * max(abs(x[1]), omega_ref)),
+        abs(step[2]) / (0.5 * max(abs(x[2]), omega_ref)),
+    )
+    ratio = math.nan if any(r != r for r in ratios) else max(ratios)  # NaN propagates, as np.max
+    return step / max(ratio, 1.0)
 
 
 def warm_alternatives(cold: np.ndarray, warm: np.ndarray) -> np.ndarray:
