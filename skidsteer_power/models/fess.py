@@ -46,7 +46,7 @@ from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
 from skidsteer_power.terramechanics.soil import shear_fraction
-from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
+from skidsteer_power.terramechanics.track import compaction_resistance_unchecked, track_sinkage_unchecked
 from skidsteer_power.terramechanics.wheel import (
     first_guess_unknowns,
     quadratic_stress_coefficients,
@@ -148,8 +148,10 @@ def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
         wx=area,
         wy=area,
         wt=area,
-        resistance=compaction_resistance(terrain, safe, width, length),  # eq. 2.10
-        sinkage=track_sinkage(terrain, safe, width, length),  # eq. 2.6
+        # eqs. 2.10, 2.6; loads >= 0 (above) and finite (side_loads of finite V, w_z), b and l
+        # validated by the vehicle file
+        resistance=compaction_resistance_unchecked(terrain, safe, width, length),
+        sinkage=track_sinkage_unchecked(terrain, safe, width, length),
         length_scale=length,
         longitudinal=1.0 / float(vehicle.track_longitudinal_shear_ratio),
     )
