@@ -358,6 +358,12 @@ def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     """Equilibrium residuals (P, S, 3) of eq. 3.19 at trial states x (P, S, 3) [N, N, N m]."""
+    return residual_and_forces(problem, x)[0]
+
+
+def residual_and_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`residual` and the longitudinal element forces fx (P, S, 2, G, N) [Pa] it summed (the
+    one-point path takes the axle torque of the converged state from them)."""
     c = problem.contact
     fx, fy, xk = element_forces(problem, x)
     sum_axes = (-2, -1)
@@ -376,7 +382,7 @@ def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     # yaw rate and the lateral balance is scaled up by 1/STRAIGHT_YAW, so s0 takes its limit as
     # R -> inf (continuous across w_z = 0 in a map) while torques differ by O(STRAIGHT_YAW^2).
     out[..., 1] = e2 * problem.lateral_scale[:, None]
-    return out
+    return out, fx
 
 
 # --------------------------------------------------------------------------------------------------
@@ -630,8 +636,9 @@ class FessSolver:
 
         guess = self._straight_guess(prob, initial_guess(prob))[0]
         others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
-        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others)
-        fx = element_forces(prob, x[None, None, :])[0]
+        last: dict[str, np.ndarray] = {}
+        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others, forces=last)
+        fx = last['fx'] if 'fx' in last else element_forces(prob, x[None, None, :])[0]
         torque = prob.radius * (fx * prob.contact.wt[:, None]).sum(axis=(-2, -1))[0, 0]
         slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
         ok = converged and bool((np.abs(slip) <= SLIP_LIMIT).all()) and bool((prob.loads > 0).all())
