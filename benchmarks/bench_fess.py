@@ -200,7 +200,9 @@ def _wheels(report: Report) -> None:
 
 def _appendix_d(report: Report) -> None:
     """Issue 25: the real robot's 14 Appendix D turning circles, predicted from the set points on the
-    shipped sand_bin terrain (nothing fitted), beside the commanded radius (the naive alternative)."""
+    shipped sand_bin terrain, beside the commanded radius (the naive alternative). One parameter is
+    fitted, to the track's seven 0.1 m/s cells only: test_robot_track's K_x / K (the other seven are
+    the check; docs/PREDICTION_FIT.md)."""
     from skidsteer_power.models import appendix_d
 
     start = time.perf_counter()

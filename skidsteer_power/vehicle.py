@@ -17,6 +17,7 @@ names carry the unit)::
     wheel_width_m: 0.074
     wheelbase_m: 0.45            # front axle to rear axle
     yaw_inertia_kg_m2: 1.5       # optional; default: a uniform box (see Vehicle.yaw_inertia)
+    track_longitudinal_shear_ratio: 4.0   # optional, tracks only: K_x / K in FESS (default 1)
     powertrain: {preset: test_robot}
     drivetrain: {preset: test_robot}   # joint_states mapping (skidsteer_power.estimator.inputs.JointMap)
     max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
@@ -79,6 +80,10 @@ class Vehicle:
     max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
         maps cover it, commands beyond it are flagged ``clamped``
     max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
+    track_longitudinal_shear_ratio : K_x / K [-] of a track (tracks only; default 1: Wong's
+        inextensible belt, eqs. 3.12-3.15): FESS's track shears the soil along the track as if the
+        shear deformation modulus K were K_x, across it as K (a compliant belt in series with the
+        soil; docs/PREDICTION_FIT.md). Only FESS reads it
     """
 
     name: str
@@ -99,6 +104,7 @@ class Vehicle:
     drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
+    track_longitudinal_shear_ratio: float = 1.0
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -170,6 +176,7 @@ def _field_ranges() -> dict[str, Range]:
         'wheel_width_m': ranges.WIDTH_M,
         'wheelbase_m': ranges.WHEELBASE_M,
         'yaw_inertia_kg_m2': ranges.YAW_INERTIA_KG_M2,
+        'track_longitudinal_shear_ratio': ranges.LONGITUDINAL_SHEAR_RATIO,
     }
 
 
@@ -219,6 +226,9 @@ def _validate(vehicle: Vehicle) -> None:
             raise _fail(vehicle.name, f'wheelbase_m ({vehicle.wheelbase_m}) is too short: the wheels overlap')
     if vehicle.yaw_inertia_kg_m2 is not None:
         _check_positive(vehicle, 'yaw_inertia_kg_m2')
+    _check_positive(vehicle, 'track_longitudinal_shear_ratio')
+    if not vehicle.is_tracked and vehicle.track_longitudinal_shear_ratio != 1.0:
+        raise _fail(vehicle.name, "track_longitudinal_shear_ratio does not apply to running_gear 'wheel'")
     if not isinstance(vehicle.powertrain, dict):
         raise _fail(vehicle.name, f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
     if not isinstance(vehicle.drivetrain, dict):
@@ -312,6 +322,8 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
         # the inertia (the steady models ignore it) and the joint_states mapping
         if f.name not in _NOT_FINGERPRINTED
     }
+    if vehicle.track_longitudinal_shear_ratio == 1.0:
+        del payload['track_longitudinal_shear_ratio']  # the default: fingerprints from before it stay
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             payload[key] = repr(float(value))  # 4 and 4.0 hash alike

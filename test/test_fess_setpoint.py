@@ -8,6 +8,7 @@ I_cont 10 A); the Appendix D radii are the real robot's (dissertation lines 2131
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -15,11 +16,12 @@ import numpy as np
 import pytest
 
 from skidsteer_power.cli.main import main
-from skidsteer_power.models import appendix_d
+from skidsteer_power.models import appendix_d, fess
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
 from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
 from skidsteer_power.powertrain.drivetrain import Powertrain
+from skidsteer_power.real_robot import APPENDIX_D_RADII
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -139,13 +141,34 @@ def test_predict_cli_keys_and_bad_input(
 
 def test_appendix_d_subset_beats_the_commanded_radius() -> None:
     # a bounded subset (one cell per vehicle and speed); the full 14 cells: benchmarks/bench_fess.py
-    cells = (appendix_d.CELLS[4], appendix_d.CELLS[8], appendix_d.CELLS[10])
+    cells = (APPENDIX_D_RADII[4], APPENDIX_D_RADII[8], APPENDIX_D_RADII[10])
     rows = appendix_d.check(cells)
     for row in rows:
         assert not row.limited
         assert row.radius_m > row.cell.commanded_radius_m  # wider than commanded, as measured
         assert row.error < row.commanded_error
+    # the track's K_x / K was fitted to its 0.1 m/s cells (rows[0], measured +2.7 %); 0.2 m/s is a
+    # check (measured -14.2 %; issue 25's goal for every cell: <= 30 %)
+    assert rows[0].error < 0.05
+    assert rows[1].error < 0.20
     assert rows[2].error < 0.15  # six wheels, 0.2 m/s, 0.2 rad/s: measured 1.92 m
+
+
+def test_track_belt_law_widens_the_turn_from_set_points_but_not_the_torque_at_a_motion(sand) -> None:
+    """K_x = 4 K (a compliant belt in series with the soil) lets each track slip more for the same
+    thrust: from set points the turn widens (Appendix D: the real track turned on 1.44 m at 1 m
+    commanded), while at a given motion the torques stay those of Wong's inextensible belt, the
+    model ch. 7.3.4 found "validated by the experiments" at the measured motion."""
+    track = load_vehicle('test_robot_track')
+    belt = dataclasses.replace(track, track_longitudinal_shear_ratio=1.0)  # Wong's, no belt law
+    wide = CommandPredictor(track, sand).predict(0.1, 0.1).turn_radius[0]
+    tight = CommandPredictor(belt, sand).predict(0.1, 0.1).turn_radius[0]
+    assert wide > 1.25 * tight  # measured 1.48 against 1.11 m (R_real 1.44 m)
+    motion = (0.1, 1.44)  # the real robot's V and R in that cell (Appendix D)
+    with_law, without = fess.solve(track, sand, *motion), fess.solve(belt, sand, *motion)
+    assert float(with_law.torque_outer_Nm) == pytest.approx(float(without.torque_outer_Nm), rel=0.02)
+    assert float(with_law.torque_inner_Nm) == pytest.approx(float(without.torque_inner_Nm), rel=0.02)
+    assert float(with_law.slip_outer) > 2.0 * float(without.slip_outer)  # the belt's compliance slips
 
 
 def test_a_routes_commands_give_back_its_motion(sand) -> None:

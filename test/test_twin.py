@@ -214,7 +214,7 @@ def test_the_real_robots_observations_are_the_dissertations():
     cells = table_7_3_cells()
     assert len(cells) == 66 and sum(not done for *_, done in cells) == 9  # 3 empty cells x 3 configurations
     assert len(APPENDIX_D_RADII) == 14
-    assert sum(c[0] == 'test_robot_track' for c in APPENDIX_D_RADII) == 9
+    assert sum(c.vehicle == 'test_robot_track' for c in APPENDIX_D_RADII) == 9
 
 
 # --------------------------------------------------------------------------- sensors, patches, CLI

@@ -167,3 +167,18 @@ def test_fingerprint_is_stable_and_physical() -> None:
     geared = dataclasses.replace(v, powertrain={'preset': 'test_robot'})
     assert vehicle_fingerprint(geared) != vehicle_fingerprint(v)
     assert len({vehicle_fingerprint(load_vehicle(n)) for n in SHIPPED}) == len(SHIPPED)
+
+
+def test_track_longitudinal_shear_ratio_is_a_track_parameter_with_a_neutral_default() -> None:
+    # default 1 (Wong's inextensible belt) leaves the fingerprint as it was, so maps built before
+    # the field existed stay valid; any other value is new physics (a new fingerprint)
+    v = load_vehicle('chapter3_track')
+    assert v.track_longitudinal_shear_ratio == 1.0
+    text = vehicle_fingerprint(v)
+    assert vehicle_fingerprint(dataclasses.replace(v, track_longitudinal_shear_ratio=1)) == text
+    assert vehicle_fingerprint(dataclasses.replace(v, track_longitudinal_shear_ratio=4.0)) != text
+    assert load_vehicle('test_robot_track').track_longitudinal_shear_ratio == 4.0  # fitted, shipped
+    with pytest.raises(ConfigError, match='track_longitudinal_shear_ratio'):
+        dataclasses.replace(v, track_longitudinal_shear_ratio=0.5)  # a belt only adds compliance
+    with pytest.raises(ConfigError, match='does not apply'):
+        dataclasses.replace(load_vehicle('test_robot_6wheel'), track_longitudinal_shear_ratio=4.0)

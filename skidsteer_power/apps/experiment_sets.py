@@ -21,6 +21,7 @@ OUT_DIR and prints the summary table.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -47,18 +48,29 @@ MIN_TORQUE_NM = 0.2
 """Sets whose twin axle torque is smaller than this [N m] are left out of the relative torque error."""
 
 
+@functools.lru_cache(maxsize=8)
+def _command_predictor(vehicle_name: str) -> Any:
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.terramechanics import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    return CommandPredictor(load_vehicle(vehicle_name), load_terrain(TRUTH))
+
+
 def setpoint_radius(vehicle_name: str, speed_m_s: float, yaw_rate_rad_s: float) -> float | None:
-    """The radius [m] FESS predicts from the wheel-speed set points of a command (issue 25); None
-    until that prediction exists. The SLOT for it: the radius figure and table show it once this
-    returns numbers."""
-    return None
+    """The radius [m] FESS predicts from the wheel-speed set points of a command on the truth
+    terrain (issue 25: :class:`~skidsteer_power.models.predict.CommandPredictor`, a direct FESS
+    solve, not the maps); inf for straight running, None where FESS finds no steady state
+    (``limited``: the robot digs in)."""
+    pred = _command_predictor(vehicle_name).predict(speed_m_s, yaw_rate_rad_s)
+    return None if bool(pred.limited[0]) else float(pred.turn_radius[0])
 
 
 def real_radius(vehicle_name: str, speed_m_s: float, yaw_rate_rad_s: float) -> float | None:
     """The real robot's radius [m] at this command (Appendix D), None where the text gives none."""
-    for name, speed, yaw, radius in APPENDIX_D_RADII:
-        if (name, speed, yaw) == (vehicle_name, speed_m_s, yaw_rate_rad_s):
-            return radius
+    for c in APPENDIX_D_RADII:
+        if (c.vehicle, c.speed_cmd, c.yaw_cmd) == (vehicle_name, speed_m_s, yaw_rate_rad_s):
+            return c.radius_m
     return None
 
 
@@ -104,9 +116,13 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     )
     with open_bag(bag_path) as bag:
         summary = validate(bag, options)
+    # from the command: the set-point map (FESS driven by the wheel speed set points, issue 25); at
+    # the twin's motion: the (V, yaw rate) map, FESS AT that motion as ch. 7.3.4 compared it. (The
+    # set-point map there would read the motion as a command and predict a wider, slipping turn.)
     predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir)
+    motion_predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir, kinematics='twist')
     powertrain = factory.powertrain_for(vehicle)
-    sets = _experiment_sets(trace, predictor, powertrain, vehicle.tread_m)
+    sets = _experiment_sets(trace, predictor, motion_predictor, powertrain, vehicle.tread_m)
     motion_energy = summary['motion_prediction']['metrics']['energy_error_pct']  # from ground truth
     keys = {'speed_cmd_m_s': 'speed_cmd_m_s', 'yaw_cmd': 'yaw_rate_cmd_rad_s'}
     keys.update(radius_cmd_m='radius_cmd_m', radius_m='radius_m')
@@ -129,7 +145,9 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     }
 
 
-def _experiment_sets(trace: Any, predictor: Any, powertrain: Any, tread_m: float) -> list[dict[str, Any]]:
+def _experiment_sets(
+    trace: Any, predictor: Any, motion_predictor: Any, powertrain: Any, tread_m: float
+) -> list[dict[str, Any]]:
     rows = []
     for speed, yaw, start, end in set_windows():
         inside = (trace.t >= start) & (trace.t <= end)
@@ -146,7 +164,7 @@ def _experiment_sets(trace: Any, predictor: Any, powertrain: Any, tread_m: float
         v_true = float(trace.twist[inside, 0].mean())
         yaw_true = float(trace.twist[inside, 2].mean())
         cmd = predictor.predict(speed, yaw)
-        actual = predictor.predict(v_true, yaw_true)
+        actual = motion_predictor.predict(v_true, yaw_true)
         rows.append(
             {
                 'speed_cmd_m_s': speed,
@@ -201,8 +219,8 @@ def plot_configuration(result: dict[str, Any], path: Path) -> None:
 
 
 def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
-    """Figure 7.38 style: commanded, real robot (Appendix D), twin (circle fit of the ground truth) and,
-    once it exists, FESS from the set points (:func:`setpoint_radius`) turning radius."""
+    """Figure 7.38 style: commanded, real robot (Appendix D), twin (circle fit of the ground truth) and
+    FESS from the set points (:func:`setpoint_radius`) turning radius."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -226,7 +244,7 @@ def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
             fess = [
                 (r['yaw_cmd'], r['radius_fess_setpoints_m']) for r in segs if r['radius_fess_setpoints_m']
             ]
-            if fess:  # the slot for FESS from the set points (issue 25)
+            if fess:
                 ax.semilogy(*zip(*fess, strict=True), 'd:', label='FESS from set points')
             ax.set_title(f'{result["vehicle"]}, V_cmd = {speed} m/s')
             ax.set_xlabel('commanded yaw rate [rad/s]')
@@ -287,6 +305,15 @@ def radius_table(results: list[dict[str, Any]]) -> str:
         median, worst = np.median(errors), np.max(errors)
         lines.append(f'\nTwin against the real robot: median |R_twin / R_real - 1| {median:.1f} %, '
                      f'max {worst:.1f} % over {len(errors)} cells.')  # fmt: skip
+    fess = [
+        abs(_ratio_error(x['radius_fess_setpoints_m'], x['radius_real_m']))
+        for x in radius_rows(results)
+        if x['radius_fess_setpoints_m'] is not None
+    ]
+    if fess:
+        median, worst = np.median(fess), np.max(fess)
+        lines.append(f'FESS from set points against the real robot: median |R_FESS / R_real - 1| '
+                     f'{median:.1f} %, max {worst:.1f} % over {len(fess)} cells.')  # fmt: skip
     return '\n'.join(lines)
 
 
@@ -306,7 +333,7 @@ def summary_table(results: list[dict[str, Any]]) -> str:
         cells = [x for x in r['radius'] if x['radius_real_m'] is not None]
         real = [abs(_ratio_error(x['radius_m'], x['radius_real_m'])) for x in cells]
         fess = [x for x in cells if x['radius_fess_setpoints_m'] is not None]
-        fess_text = '-'  # the slot for FESS from the set points (issue 25)
+        fess_text = '-'
         if fess:
             vs_twin = np.median(
                 [abs(_ratio_error(x['radius_fess_setpoints_m'], x['radius_m'])) for x in fess]

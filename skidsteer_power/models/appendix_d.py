@@ -2,67 +2,39 @@
 
 Appendix D, "Trace of the Test Robot and the Curve Fitted Circle" (dissertation text from line
 2090), fits a circle (eqs. 7.8-7.10) to each trace of the chapter 7 test robot driving a constant
-command on the sand bin and prints its radius and average forward speed. Fourteen turning cells
-survive in the text (the straight runs drifted on 59.06 m and 43.46 m circles and are left out):
-the track at 0.1 m/s (seven yaw rates) and 0.2 m/s (two), and the six-wheel robot at 0.2 m/s, whose
-five printed circles are the last five of its section and so belong to its five highest yaw rates
-(issue 25). The commanded yaw rates are those of Figure 7.38's runs.
+command on the sand bin and prints its radius and average forward speed. The 14 turning cells that
+survive in the text are :data:`skidsteer_power.real_robot.APPENDIX_D_RADII` (the project's one copy).
 
-This is truth the predictor does not contain: nothing here is fitted to these radii.
+One FESS parameter is fitted to these radii: the test robot track's longitudinal shear ratio K_x / K
+(``track_longitudinal_shear_ratio`` in ``config/vehicles/test_robot_track.yaml``), to the track's
+seven 0.1 m/s cells only (:data:`~skidsteer_power.real_robot.TRACK_FIT_CELLS`,
+:func:`fit_track_shear_ratio`); the other seven cells are the check. ``python -m
+skidsteer_power.models.appendix_d [fit]`` prints the table (and the fit's sweep).
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from skidsteer_power.models.predict import CommandPredictor
+from skidsteer_power.real_robot import APPENDIX_D_RADII, TRACK_FIT_CELLS, AppendixDCell
 from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
-
-@dataclass(frozen=True)
-class Cell:
-    """One Appendix D run: vehicle, command (V [m/s], yaw rate [rad/s]), measured R [m] and V [m/s]."""
-
-    vehicle: str
-    speed_cmd: float
-    yaw_cmd: float
-    radius_m: float
-    speed_m_s: float
-
-    @property
-    def commanded_radius_m(self) -> float:
-        return self.speed_cmd / self.yaw_cmd
-
-
-CELLS = (
-    # track, 0.1 m/s (Appendix D, text lines 2174-2216)
-    Cell('test_robot_track', 0.1, 0.01, 19.44, 0.10),
-    Cell('test_robot_track', 0.1, 0.02, 7.40, 0.10),
-    Cell('test_robot_track', 0.1, 0.04, 3.64, 0.10),
-    Cell('test_robot_track', 0.1, 0.08, 1.83, 0.10),
-    Cell('test_robot_track', 0.1, 0.10, 1.44, 0.10),
-    Cell('test_robot_track', 0.1, 0.15, 1.00, 0.09),
-    Cell('test_robot_track', 0.1, 0.20, 0.84, 0.08),
-    # track, 0.2 m/s (lines 2239-2246)
-    Cell('test_robot_track', 0.2, 0.01, 33.49, 0.20),
-    Cell('test_robot_track', 0.2, 0.02, 17.48, 0.20),
-    # six wheels, 0.2 m/s (lines 2131-2158)
-    Cell('test_robot_6wheel', 0.2, 0.15, 2.45, 0.20),
-    Cell('test_robot_6wheel', 0.2, 0.20, 1.92, 0.19),
-    Cell('test_robot_6wheel', 0.2, 0.25, 1.62, 0.18),
-    Cell('test_robot_6wheel', 0.2, 0.30, 1.44, 0.17),
-    Cell('test_robot_6wheel', 0.2, 0.35, 1.26, 0.17),
-)
+FIT_CANDIDATES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
+"""K_x / K tried by :func:`fit_track_shear_ratio` [-] (1: Wong's inextensible belt); the twin's
+sweep (docs/TWIN.md) tried the same values on its own contact."""
 
 
 @dataclass(frozen=True)
 class Row:
     """A cell with the set-point prediction: predicted R [m] and V [m/s], whether it was limited."""
 
-    cell: Cell
+    cell: AppendixDCell
     radius_m: float
     speed_m_s: float
     limited: bool
@@ -78,13 +50,20 @@ class Row:
         return abs(self.cell.commanded_radius_m / self.cell.radius_m - 1.0)
 
 
-def check(cells: tuple[Cell, ...] = CELLS, terrain: str = 'sand_bin') -> list[Row]:
-    """Predict every cell from its set points on ``terrain`` (one batched solve per vehicle)."""
+def check(
+    cells: tuple[AppendixDCell, ...] = APPENDIX_D_RADII,
+    terrain: str = 'sand_bin',
+    vehicles: dict[str, Vehicle] | None = None,
+) -> list[Row]:
+    """Predict every cell from its set points on ``terrain`` (one batched solve per vehicle);
+    ``vehicles`` replaces shipped vehicles by name (the fit's candidates)."""
     ground = load_terrain(terrain)
-    rows: dict[Cell, Row] = {}
+    given = vehicles or {}
+    rows: dict[AppendixDCell, Row] = {}
     for name in sorted({c.vehicle for c in cells}):
         mine = [c for c in cells if c.vehicle == name]
-        pred = CommandPredictor(load_vehicle(name), ground).predict(
+        vehicle = given[name] if name in given else load_vehicle(name)
+        pred = CommandPredictor(vehicle, ground).predict(
             np.array([c.speed_cmd for c in mine]), np.array([c.yaw_cmd for c in mine])
         )
         for k, c in enumerate(mine):
@@ -102,3 +81,39 @@ def summary(rows: list[Row]) -> dict[str, float]:
         'median_commanded_error': float(np.median(cmd)),
         'max_commanded_error': float(np.max(cmd)),
     }
+
+
+def fit_track_shear_ratio(candidates: tuple[float, ...] = FIT_CANDIDATES) -> list[tuple[float, float, float]]:
+    """(K_x / K, median, max of |R_pred / R_real - 1| over the track's seven 0.1 m/s cells) per
+    candidate; the shipped value is the candidate with the smallest median."""
+    track = load_vehicle('test_robot_track')
+    out = []
+    for ratio in candidates:
+        trial = dataclasses.replace(track, track_longitudinal_shear_ratio=ratio)
+        result = summary(check(TRACK_FIT_CELLS, vehicles={track.name: trial}))
+        out.append((ratio, result['median_error'], result['max_error']))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m skidsteer_power.models.appendix_d')
+    parser.add_argument('what', nargs='*', choices=('table', 'fit'), default=['table'])
+    args = parser.parse_args(argv)
+    if 'table' in args.what:
+        rows = check()
+        print('vehicle | V cmd | yaw cmd | R cmd | R real | R FESS set points | R pred / R real - 1')
+        for r in rows:
+            c = r.cell
+            radii = f'{c.commanded_radius_m:.2f} | {c.radius_m:.2f} | {r.radius_m:.2f}'
+            print(f'{c.vehicle} | {c.speed_cmd:g} | {c.yaw_cmd:g} | {radii} | '
+                  f'{100 * (r.radius_m / c.radius_m - 1):+.1f} %')  # fmt: skip
+        result = summary(rows)
+        print(f'median {100 * result["median_error"]:.1f} %, max {100 * result["max_error"]:.1f} %')
+    if 'fit' in args.what:
+        for ratio, median, worst in fit_track_shear_ratio():
+            print(f'K_x / K = {ratio:g}: median {100 * median:.1f} %, max {100 * worst:.1f} %', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -46,7 +46,7 @@ from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult, newton_solve
 from skidsteer_power.terramechanics.soil import shear_fraction
-from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage
+from skidsteer_power.terramechanics.track import compaction_resistance_unchecked, track_sinkage_unchecked
 from skidsteer_power.terramechanics.wheel import (
     first_guess_unknowns,
     quadratic_stress_coefficients,
@@ -100,6 +100,7 @@ class Contact:
     resistance: np.ndarray  # (P, 2) compaction resistance magnitude of each side [N]
     sinkage: np.ndarray  # (P, 2) sinkage of each side [m]
     length_scale: float  # contact span used to scale s0 steps [m]
+    longitudinal: float = 1.0  # K / K_x: weight of the displacement along the contact (tracks)
 
     @property
     def xi(self) -> np.ndarray:
@@ -147,9 +148,12 @@ def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
         wx=area,
         wy=area,
         wt=area,
-        resistance=compaction_resistance(terrain, safe, width, length),  # eq. 2.10
-        sinkage=track_sinkage(terrain, safe, width, length),  # eq. 2.6
+        # eqs. 2.10, 2.6; loads >= 0 (above) and finite (side_loads of finite V, w_z), b and l
+        # validated by the vehicle file
+        resistance=compaction_resistance_unchecked(terrain, safe, width, length),
+        sinkage=track_sinkage_unchecked(terrain, safe, width, length),
         length_scale=length,
+        longitudinal=1.0 / float(vehicle.track_longitudinal_shear_ratio),
     )
 
 
@@ -332,6 +336,8 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
     """
     c = problem.contact
     jx, jy, xk = element_displacement(problem, x)
+    if c.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement (j_x K / K_x, j_y)
+        jx = jx * c.longitudinal
     j = np.hypot(jx, jy)
     # eq. 6.7; the fraction is 0 at j = 0, so dividing by 1 there gives the zero stress
     scale = c.tau_max[:, None] * shear_fraction(problem.terrain, j) / np.where(j > 0, j, 1.0)
@@ -352,12 +358,19 @@ def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     """Equilibrium residuals (P, S, 3) of eq. 3.19 at trial states x (P, S, 3) [N, N, N m]."""
+    return residual_and_forces(problem, x)[0]
+
+
+def residual_and_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`residual` and the longitudinal element forces fx (P, S, 2, G, N) [Pa] it summed (the
+    one-point path takes the axle torque of the converged state from them)."""
     c = problem.contact
     fx, fy, xk = element_forces(problem, x)
     sum_axes = (-2, -1)
-    fx_side = np.sum(fx * c.wx[:, None], axis=sum_axes)  # (P, S, 2) trapezoid sums
-    fy_side = np.sum(fy * c.wy[:, None], axis=sum_axes)
-    mz_lat = np.sum(xk * fy * c.wy[:, None], axis=(-3, -2, -1))
+    # (P, S, 2) trapezoid sums; the array methods: np.sum's reduction without its Python wrapper
+    fx_side = (fx * c.wx[:, None]).sum(axis=sum_axes)
+    fy_side = (fy * c.wy[:, None]).sum(axis=sum_axes)
+    mz_lat = (xk * fy * c.wy[:, None]).sum(axis=(-3, -2, -1))
     net = fx_side - problem.rolling[:, None, :]  # rolling resistance against each side's motion
     s0 = x[..., 0]
     cfx, cfy = _centrifugal(problem, s0)
@@ -369,7 +382,7 @@ def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     # yaw rate and the lateral balance is scaled up by 1/STRAIGHT_YAW, so s0 takes its limit as
     # R -> inf (continuous across w_z = 0 in a map) while torques differ by O(STRAIGHT_YAW^2).
     out[..., 1] = e2 * problem.lateral_scale[:, None]
-    return out
+    return out, fx
 
 
 # --------------------------------------------------------------------------------------------------
@@ -623,11 +636,12 @@ class FessSolver:
 
         guess = self._straight_guess(prob, initial_guess(prob))[0]
         others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
-        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others)
-        fx = element_forces(prob, x[None, None, :])[0]
-        torque = prob.radius * np.sum(fx * prob.contact.wt[:, None], axis=(-2, -1))[0, 0]
+        last: dict[str, np.ndarray] = {}
+        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others, forces=last)
+        fx = last['fx'] if 'fx' in last else element_forces(prob, x[None, None, :])[0]
+        torque = prob.radius * (fx * prob.contact.wt[:, None]).sum(axis=(-2, -1))[0, 0]
         slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
-        ok = converged and bool(np.all(np.abs(slip) <= SLIP_LIMIT)) and bool(np.all(prob.loads > 0))
+        ok = converged and bool((np.abs(slip) <= SLIP_LIMIT).all()) and bool((prob.loads > 0).all())
         return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
 
     @cached_property

@@ -106,6 +106,8 @@ MASS_KG = Range('mass', 0.0, 10_000.0, 'kg', positive=True)  # up to a 10 t vehi
 CG_HEIGHT_M = Range('cg height', 0.0, 5.0, 'm', positive=True)
 TREAD_M = Range('tread', 0.0, 10.0, 'm', positive=True)
 WHEELBASE_M = Range('wheelbase', 0.0, 20.0, 'm', positive=True)
+# K_x / K of a track: a belt in series with the soil adds compliance, never takes it away
+LONGITUDINAL_SHEAR_RATIO = Range('track_longitudinal_shear_ratio', 1.0, 100.0, '')
 YAW_RATE_RAD_S = Range('yaw rate', 0.0, 20.0, 'rad/s', positive=True)  # robot <= 2 rad/s
 YAW_INERTIA_KG_M2 = Range('yaw inertia', 0.0, 1e6, 'kg m^2', positive=True)
 

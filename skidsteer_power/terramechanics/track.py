@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -55,6 +56,12 @@ def check_slip(slip: ArrayLike) -> FloatArray:
 def track_sinkage(terrain: Terrain, load: ArrayLike, width: ArrayLike, length: ArrayLike) -> FloatArray:
     """Sinkage z0 [m] of a track, load W [N], contact width b and length l [m] (eq. 2.6)."""
     w, b, l = check_load(load), check_length(width, 'width'), check_length(length, 'length')  # noqa: E741
+    return track_sinkage_unchecked(terrain, w, b, l)
+
+
+def track_sinkage_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) -> Any:  # noqa: E741
+    """:func:`track_sinkage` for inputs the caller has checked (W >= 0 finite, b, l > 0): FESS's
+    per-command contact (a tenth of a cold solve_point went to the checks)."""
     return ((w / (b * l)) / (terrain.kc / b + terrain.kphi)) ** (1.0 / terrain.n)
 
 
@@ -63,6 +70,12 @@ def compaction_resistance(
 ) -> FloatArray:
     """Motion resistance R_c [N] from compacting a rut (eq. 2.10); W [N], b, l [m]."""
     w, b, l = check_load(load), check_length(width, 'width'), check_length(length, 'length')  # noqa: E741
+    return compaction_resistance_unchecked(terrain, w, b, l)
+
+
+def compaction_resistance_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) -> Any:  # noqa: E741
+    """:func:`compaction_resistance` for inputs the caller has checked (as
+    :func:`track_sinkage_unchecked`)."""
     n = terrain.n
     return b / ((n + 1.0) * (terrain.kc / b + terrain.kphi) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
 

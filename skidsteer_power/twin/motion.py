@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skidsteer_power.commands import Segment
-from skidsteer_power.real_robot import APPENDIX_D_RADII, table_7_3_cells
+from skidsteer_power.real_robot import APPENDIX_D_RADII, TRACK_FIT_CELLS, AppendixDCell, table_7_3_cells
 from skidsteer_power.terramechanics import load_terrain
 from skidsteer_power.twin.model import Twin
 from skidsteer_power.twin.sensors import run_commands
@@ -34,7 +34,7 @@ START_UP_S = 3.0
 """Start-up left out of the radius [s]: set-point ramp, sinkage and shear settling."""
 GRID_HOLD_S = 6.0
 """Hold of each Table 7.3 cell [s]."""
-FIT_CELLS = tuple(c for c in APPENDIX_D_RADII if c[0] == 'test_robot_track' and c[1] == 0.1)
+FIT_CELLS = TRACK_FIT_CELLS
 """The subset the track's longitudinal shear modulus is fitted to: the track's seven 0.1 m/s cells (the
 other seven Appendix D cells and Table 7.3 are the check)."""
 FIT_CANDIDATES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
@@ -82,12 +82,14 @@ def twin_completes(vehicle: str, speed: float, yaw_rate: float, contact: str = '
     return not trace.stuck(v.tread_m)
 
 
-def radius_cells(contact: str = 'extended', cells: tuple = APPENDIX_D_RADII) -> list[RadiusCell]:
+def radius_cells(
+    contact: str = 'extended', cells: tuple[AppendixDCell, ...] = APPENDIX_D_RADII
+) -> list[RadiusCell]:
     """The twin at the Appendix D cells (all 14 by default)."""
     out = []
-    for vehicle, speed, yaw_rate, real in cells:
-        radius, mean_speed = twin_turn(vehicle, speed, yaw_rate, contact)
-        out.append(RadiusCell(vehicle, speed, yaw_rate, real, radius, mean_speed))
+    for c in cells:
+        radius, mean_speed = twin_turn(c.vehicle, c.speed_cmd, c.yaw_cmd, contact)
+        out.append(RadiusCell(c.vehicle, c.speed_cmd, c.yaw_cmd, c.radius_m, radius, mean_speed))
     return out
 
 
