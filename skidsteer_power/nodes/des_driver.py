@@ -42,7 +42,8 @@ back-off; an exception in a callback -> both amplifiers zeroed and disabled, the
 propagates; SIGINT/SIGTERM, destroy and interpreter exit -> zero speed, then disable. All serial I/O
 runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never in the executor.
 
-Geometry (tread, drive radius, gear ratio) comes from the vehicle file named by ``vehicle``.
+Geometry (tread, drive radius, gear ratio) and the motor (the published effort K_t I, the largest
+set point) come from the vehicle file named by ``vehicle`` and its powertrain.
 
 On the robot: each transaction takes four turn-arounds ('O' handshakes), so a USB-RS232 adapter's
 read latency dominates. FTDI adapters default to a 16 ms latency timer, which could cap the poll
@@ -109,7 +110,11 @@ class ParamSpec:
 
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec('vehicle', 'test_robot_track', 'vehicle name or YAML file: tread, drive radius, gear ratio'),
+    ParamSpec(
+        'vehicle',
+        'test_robot_track',
+        'vehicle name or YAML file: tread, drive radius, powertrain (gear ratio, motor: effort = K_t I)',
+    ),
     ParamSpec('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier'),
     ParamSpec('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier'),
     ParamSpec('baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200'),
@@ -252,10 +257,16 @@ class DesDriver(LifecycleNode):
         if p['left_port'] == p['right_port']:
             raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
         vehicle = load_vehicle(p['vehicle'])
+        p['powertrain'] = powertrain = Powertrain.for_vehicle(vehicle)
+        motor_max_rpm = powertrain.motor.max_speed_rad_s / RPM
+        if p['max_motor_rpm'] > motor_max_rpm:
+            raise ConfigError(
+                f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
+            )
         p['geometry'] = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
-            gear_ratio=float(Powertrain.for_vehicle(vehicle).gear_ratio),
+            gear_ratio=float(powertrain.gear_ratio),
             polarity={side: p[f'{side}_polarity'] for side in SIDES},
             max_rpm=float(p['max_motor_rpm']),
         )
@@ -514,7 +525,7 @@ class DesDriver(LifecycleNode):
         )
         position = sign * sample.position_counts / counts_per_rev * 2.0 * math.pi
         velocity = sign * sample.velocity_rpm * RPM
-        effort = sign * EC45.torque_constant_Nm_A * sample.current_ma / 1000.0
+        effort = sign * self.params['powertrain'].motor.torque_constant_Nm_A * sample.current_ma / 1000.0
         return position, velocity, effort
 
     @_fail_safe
