@@ -55,7 +55,7 @@ def check_slip(slip: ArrayLike) -> FloatArray:
 def track_sinkage(terrain: Terrain, load: ArrayLike, width: ArrayLike, length: ArrayLike) -> FloatArray:
     """Sinkage z0 [m] of a track, load W [N], contact width b and length l [m] (eq. 2.6)."""
     w, b, l = check_load(load), check_length(width, 'width'), check_length(length, 'length')  # noqa: E741
-    return ((w / (b * l)) / (terrain.kc / b + terrain.kphi)) ** (1.0 / terrain.n)
+    return ((w / (b * l)) / terrain.k_eq(b)) ** (1.0 / terrain.n)
 
 
 def compaction_resistance(
@@ -64,7 +64,7 @@ def compaction_resistance(
     """Motion resistance R_c [N] from compacting a rut (eq. 2.10); W [N], b, l [m]."""
     w, b, l = check_load(load), check_length(width, 'width'), check_length(length, 'length')  # noqa: E741
     n = terrain.n
-    return b / ((n + 1.0) * (terrain.kc / b + terrain.kphi) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
+    return b / ((n + 1.0) * terrain.k_eq(b) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
 
 
 def _mean_fraction(u: FloatArray) -> FloatArray:
