@@ -24,9 +24,14 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+
+from skidsteer_power.seams import PowerMapLike, PowertrainLike
+
+if TYPE_CHECKING:
+    from skidsteer_power.maps.power_map import MapQuery
 
 Pair = tuple[float, float]
 
@@ -119,8 +124,8 @@ class MapPredictor:
 
     def __init__(
         self,
-        power_map: Any,
-        powertrain: Any,
+        power_map: PowerMapLike,
+        powertrain: PowertrainLike,
         *,
         description: str = '',
         cache_size: int = 256,
@@ -137,7 +142,7 @@ class MapPredictor:
         return self._with_powertrain(speed_m_s, yaw_rate_rad_s, omega, torque, q)
 
     def _with_powertrain(
-        self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: Any
+        self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: MapQuery
     ) -> Prediction:
         # floats, one side at a time: ~20x faster than numpy on two values (skidsteer_power.numeric)
         left = self.powertrain.motor_side('left', torque[0], omega[0])
@@ -177,21 +182,21 @@ class SetpointPredictor:
     def __init__(
         self,
         setpoint_map: Any,
-        powertrain: Any,
+        powertrain: PowertrainLike,
         *,
         description: str = '',
         cache_size: int = 256,
-        motion_map: Callable[[], Any] | None = None,
+        motion_map: Callable[[], PowerMapLike] | None = None,
     ) -> None:
         self.setpoint_map = setpoint_map
         self.powertrain = powertrain
         self.description = description or 'set-point map'
         self.predict = lru_cache(maxsize=cache_size)(self._predict)
         self._motion_map = motion_map
-        self._power_map: Any = None
+        self._power_map: PowerMapLike | None = None
 
     @property
-    def power_map(self) -> Any:
+    def power_map(self) -> PowerMapLike | None:
         """The (V, yaw rate) power map (loaded or built on first use), or None if none was given."""
         if self._power_map is None and self._motion_map is not None:
             self._power_map = self._motion_map()
