@@ -69,7 +69,6 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
@@ -81,6 +80,7 @@ from skidsteer_power.des.poller import MAX_MOTOR_RPM, AmplifierPoller, Amplifier
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
@@ -353,16 +353,6 @@ class DesDriver(LifecycleNode):
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
 
-    def _LifecycleNodeMixin__on_change_state(self, request: Any, response: Any) -> Any:
-        """rclpy's change_state handler raises (and ends the spin) on a transition the current state
-        does not have; answer ``success: false`` instead."""
-        try:
-            return LifecycleNodeMixin._LifecycleNodeMixin__on_change_state(self, request, response)  # type: ignore[attr-defined]
-        except RCLError as err:
-            self.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
-            response.success = False
-            return response
-
     def _start_pollers(self, p: dict[str, Any]) -> None:
         self.command = DriveCommand(
             p['cmd_timeout_s'],
@@ -629,6 +619,15 @@ class DesDriver(LifecycleNode):
     def destroy_node(self) -> None:
         self._teardown()
         super().destroy_node()
+
+
+def _log_refused(node: Any, request: Any, err: Exception) -> None:
+    node.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
+
+
+# rclpy's change_state handler raises (and ends the spin) on a transition the current state does not
+# have; answer success: false instead (stock rclpy's behaviour where its internals differ)
+refuse_invalid_transitions(DesDriver, (RCLError,), _log_refused)
 
 
 def bring_up(node: DesDriver) -> None:
