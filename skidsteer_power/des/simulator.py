@@ -139,7 +139,7 @@ class MotorModel:
         half of :data:`DEFAULT_VEHICLE`'s mass at its drive radius, :func:`reflected_inertia`)
     supply_voltage_V : amplifier supply [V] (default 44.4 V: two 6-cell LiPo packs in series at
         3.7 V/cell, ASSUMED; ch. 7.1.2 names the packs, not their wiring)
-    load_torque : see :data:`LoadTorque`
+    load_torque : see :data:`LoadTorque` (default: :class:`ViscousCoulombLoad` with the motor's K_t I_0)
     bandwidth_rad_s : speed-loop bandwidth of the PI controller [rad/s] (ASSUMED, see
         :mod:`skidsteer_power.powertrain.speed_loop`, the drive model shared with the twin)
     mean_time_constant_s : low-pass behind the 'mean' speed and current readings [s] (assumed)
@@ -163,7 +163,9 @@ class MotorModel:
         self.motor = motor
         self.inertia_kg_m2 = motor.rotor_inertia_kg_m2 + load_inertia_kg_m2
         self.supply_voltage_V = supply_voltage_V
-        self.load_torque: LoadTorque = ViscousCoulombLoad() if load_torque is None else load_torque
+        if load_torque is None:  # the motor's own no-load friction, K_t I_0
+            load_torque = ViscousCoulombLoad(coulomb_Nm=motor.torque_constant_Nm_A * motor.no_load_current_A)
+        self.load_torque: LoadTorque = load_torque
         self.kp_A_s, self.ki_A = speed_loop_gains(
             self.inertia_kg_m2, motor.torque_constant_Nm_A, bandwidth_rad_s
         )

@@ -17,7 +17,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.numeric import Real, by_sign, real
@@ -149,6 +149,8 @@ DES_70_10 = AmplifierConstants(
 )
 """The test robot's amplifier, one per motor (ch. 7.1.2, Appendix A)."""
 
+Preset = TypeVar('Preset', MotorConstants, AmplifierConstants)
+
 MOTORS: dict[str, MotorConstants] = {'EC45': EC45}
 """Motor presets a powertrain file names (``motor: EC45``), each with its datasheet constants."""
 AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10}
@@ -168,7 +170,7 @@ def amplifier_from_config(value: str | Mapping[str, Any] | None) -> AmplifierCon
     return _from_config(value, AMPLIFIERS, 'DES_70_10', 'amplifier')
 
 
-def _from_config(value: Any, presets: Mapping[str, Any], default: str, what: str) -> Any:
+def _from_config(value: object, presets: Mapping[str, Preset], default: str, what: str) -> Preset:
     if value is None or isinstance(value, str):
         name = default if value is None else value
         if name not in presets:
