@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Generic
+from typing import TYPE_CHECKING, Any, Generic
 
 import numpy as np
 
@@ -39,6 +39,9 @@ from skidsteer_power.powertrain.motor import (
     motor_from_config,
     terminal_power,
 )
+
+if TYPE_CHECKING:
+    from skidsteer_power.vehicle import Vehicle
 
 __all__ = ['AMPLIFIERS', 'MOTORS', 'SIDES', 'MotorPoint', 'Powertrain']
 SIDES = ('left', 'right')
@@ -97,7 +100,7 @@ class Powertrain:
     left: SideResistance
     right: SideResistance
     regen_efficiency: float | None = None
-    battery: Any = None
+    battery: str | Mapping[str, Any] | None = None
     source: str = ''
     current_limit_A: float = DES_70_10.continuous_current_A
 
@@ -140,7 +143,7 @@ class Powertrain:
         return cls.from_config({'preset': 'test_robot'}, running_gear)
 
     @classmethod
-    def for_vehicle(cls, vehicle: Any) -> Powertrain:
+    def for_vehicle(cls, vehicle: Vehicle) -> Powertrain:
         """The powertrain of a :class:`~skidsteer_power.vehicle.Vehicle` (its ``powertrain:`` section)."""
         return cls.from_config(getattr(vehicle, 'powertrain', None) or None, vehicle.running_gear)
 
