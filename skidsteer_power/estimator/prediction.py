@@ -24,7 +24,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -32,6 +32,7 @@ from skidsteer_power.seams import PowerMapLike, PowertrainLike
 
 if TYPE_CHECKING:
     from skidsteer_power.maps.power_map import MapQuery
+    from skidsteer_power.maps.setpoint_map import SetpointMap
 
 Pair = tuple[float, float]
 
@@ -102,7 +103,7 @@ class Predictor(Protocol):
     def predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction: ...
 
 
-def _scalar(value: Any) -> float:
+def _scalar(value: float | np.ndarray) -> float:
     """A Python float from a number, a 0-d array or the first element of a 1-d one (per message:
     the plain ``float`` path first, as most values here are floats or 0-d arrays)."""
     if isinstance(value, np.ndarray) and value.ndim:
@@ -110,7 +111,7 @@ def _scalar(value: Any) -> float:
     return float(value)
 
 
-def _pair(left: Any, right: Any) -> Pair:
+def _pair(left: float | np.ndarray, right: float | np.ndarray) -> Pair:
     return _scalar(left), _scalar(right)
 
 
@@ -181,7 +182,7 @@ class SetpointPredictor:
 
     def __init__(
         self,
-        setpoint_map: Any,
+        setpoint_map: SetpointMap,
         powertrain: PowertrainLike,
         *,
         description: str = '',
