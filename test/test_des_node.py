@@ -102,6 +102,8 @@ def test_published_effort_uses_the_vehicles_motor(ros_context, pair, tmp_path):
         assert harness.spin_until(
             lambda: bool(harness.joints) and abs(harness.joints[-1].velocity[0] - 24.0) < 0.3
         )
+        settled = harness.joints[-1].header.stamp.sec
+        harness.spin_until(lambda: harness.joints[-1].header.stamp.sec > settled + 1, timeout_s=5)  # steady
         effort = harness.joints[-1].effort[0]
         assert effort == pytest.approx(0.228 * pair.left.model.mean_current_A, abs=0.01)
         assert effort > 1.5 * 0.114 * pair.left.model.mean_current_A  # not the EC-45's K_t
