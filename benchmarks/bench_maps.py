@@ -137,10 +137,10 @@ def accuracy_table(points: int = 1000, seed: int = 7) -> list[dict]:
             build_s = time.process_time() - start
             q = m.query(v, w)
             direct = fess.FessSolver(vehicle, terrain).solve_twist(v, w)
-            flagged = q.clamped | q.limited
+            flagged = np.asarray(q.clamped | q.limited)  # array queries give arrays
             unchecked = PowerMap(m.radial, m.angles, m.length_m, m.values, m.converged, m.limited, m.meta)
             q0 = unchecked.query(v, w)  # the same map without the cell check's flags
-            by_check = flagged & ~(q0.clamped | q0.limited)
+            by_check = flagged & ~np.asarray(q0.clamped | q0.limited)
             ok = ~flagged & direct.converged
             t_map = np.column_stack([q.torque_left_Nm, q.torque_right_Nm])
             o_map = np.column_stack([q.omega_left_rad_s, q.omega_right_rad_s])

@@ -152,10 +152,15 @@ def _free_wheel_tables(report: Report) -> None:
     from skidsteer_power.models.fess import _free_wheel_table
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.terramechanics.wheel import solve_wheel
+    from skidsteer_power.vehicle import GRAVITY_M_S2
 
     terrain = load_terrain('sandy_soil')
     wheels = [
-        (r, b, m * 9.81 / (2 * per)) for r in RADII_M for b in WIDTHS_M for m in MASSES_KG for per in (2, 3)
+        (r, b, m * GRAVITY_M_S2 / (2 * per))
+        for r in RADII_M
+        for b in WIDTHS_M
+        for m in MASSES_KG
+        for per in (2, 3)
     ]
     _free_wheel_table.cache_clear()
     batched = _timed(lambda: [_free_wheel_table(terrain, r, b, w) for r, b, w in wheels])

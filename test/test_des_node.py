@@ -83,6 +83,36 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
         assert moved > 0 and moved == pytest.approx(integral, rel=0.1)
 
 
+def test_published_effort_uses_the_vehicles_motor(ros_context, pair, tmp_path):
+    """effort = K_t I with the K_t of the vehicle's powertrain (here 0.228 N m/A = 2 x the EC-45's
+    0.114, Appendix B line 12), not a built-in EC-45."""
+    from skidsteer_power import resources
+
+    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
+    vehicle = tmp_path / 'strong_motor.yaml'
+    vehicle.write_text(
+        base.replace(
+            'powertrain: {preset: test_robot}',
+            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
+        ),
+        encoding='utf-8',
+    )
+    harness = Harness(ros_context, pair, vehicle=str(vehicle))
+    try:
+        harness.twist = (0.2, 0.0)
+        # 0.2 m/s on r = 0.1 m through 12:1: 24 rad/s at each motor
+        assert harness.spin_until(
+            lambda: bool(harness.joints) and abs(harness.joints[-1].velocity[0] - 24.0) < 0.3
+        )
+        settled = harness.joints[-1].header.stamp.sec
+        harness.spin_until(lambda: harness.joints[-1].header.stamp.sec > settled + 1, timeout_s=5)  # steady
+        effort = harness.joints[-1].effort[0]
+        assert effort == pytest.approx(0.228 * pair.left.model.mean_current_A, abs=0.01)
+        assert effort > 1.5 * 0.114 * pair.left.model.mean_current_A  # not the EC-45's K_t
+    finally:
+        harness.close()
+
+
 def test_twist_stamped_by_parameter(ros_context, pair):
     h = Harness(ros_context, pair, twist_stamped=True)
     try:

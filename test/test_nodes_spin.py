@@ -236,3 +236,92 @@ def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, s
             proc.wait()
         executor.shutdown()
         probe.destroy_node()
+
+
+# --------------------------------------------------------------------------- rclpy compatibility
+
+
+def test_the_installed_rclpy_has_every_internal_we_use(ros_context):
+    from skidsteer_power.nodes import rclpy_compat
+
+    support = rclpy_compat.check()
+    assert support.tested, f'rclpy {support.version} is not in {rclpy_compat.TESTED_RCLPY}'
+    assert support.wait_set and support.change_state_handler
+    executor = SingleThreadedExecutor(context=ros_context)
+    assert support.lean_executor(executor)
+    executor.shutdown()
+    assert not support.lean_executor(object())  # an executor without rclpy's attributes
+
+
+def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(ros_context, monkeypatch):
+    from skidsteer_power.nodes import rclpy_compat
+
+    missing = rclpy_compat.RclpySupport('99.0.0', tested=False, wait_set=False, change_state_handler=False)
+    monkeypatch.setattr(rclpy_compat, 'check', lambda: missing)
+
+    class Counted(LeanExecutor):
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            assert not self.lean  # the stock path
+
+    received, ticks, calls, success, triggers = _exercise(ros_context, Counted)
+    assert received == [float(i) for i in range(N_MESSAGES)]
+    assert ticks >= 3 and calls == 1 and success
+    assert triggers >= 2 * N_MESSAGES  # rclpy's own executor: it wakes itself around each callback
+
+
+def _ask_transition(context, node_class, transition_id: int):
+    """Ask a fresh ``node_class`` node for a lifecycle transition over real DDS; (answer, node)."""
+    from lifecycle_msgs.srv import ChangeState
+
+    ns = f'lc_{uuid.uuid4().hex[:8]}'
+    node = node_class('lc', namespace=ns, context=context)
+    asker = rclpy.create_node('asker', namespace=ns, context=context)
+    client = asker.create_client(ChangeState, f'/{ns}/lc/change_state')
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(asker)
+    try:
+        _spin_until(executor, client.service_is_ready)
+        request = ChangeState.Request()
+        request.transition.id = transition_id
+        future = client.call_async(request)
+        _spin_until(executor, future.done)
+        return future.result()
+    finally:
+        executor.shutdown()
+        asker.destroy_node()
+        node.destroy_node()
+
+
+def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_context):
+    from lifecycle_msgs.msg import Transition
+    from rclpy._rclpy_pybind11 import RCLError
+    from rclpy.lifecycle import LifecycleNode
+
+    from skidsteer_power.nodes import rclpy_compat
+
+    refused = []
+
+    class Refusing(LifecycleNode):
+        pass
+
+    assert rclpy_compat.refuse_invalid_transitions(Refusing, (RCLError,), lambda n, r, e: refused.append(e))
+    answer = _ask_transition(ros_context, Refusing, Transition.TRANSITION_ACTIVATE)  # not from unconfigured
+    assert answer.success is False and len(refused) == 1
+    assert _ask_transition(ros_context, Refusing, Transition.TRANSITION_CONFIGURE).success is True
+
+
+def test_without_the_handler_the_node_class_stays_stock_rclpy(monkeypatch):
+    from rclpy.lifecycle import LifecycleNode
+
+    from skidsteer_power.nodes import rclpy_compat
+
+    missing = rclpy_compat.RclpySupport('99.0.0', tested=False, wait_set=True, change_state_handler=False)
+    monkeypatch.setattr(rclpy_compat, 'check', lambda: missing)
+
+    class Stock(LifecycleNode):
+        pass
+
+    assert not rclpy_compat.refuse_invalid_transitions(Stock, (Exception,), lambda n, r, e: None)
+    assert rclpy_compat.CHANGE_STATE_HANDLER not in vars(Stock)

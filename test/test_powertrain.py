@@ -187,3 +187,40 @@ def test_bad_config_errors():
         Powertrain.from_config({'preset': 'test_robot', 'internal_resistance': {'left': {}}})
     with pytest.raises(InputError, match='side'):
         Powertrain.default_test_robot().internal_torque('middle', 1.0)
+
+
+# --------------------------------------------------------------------------- motor presets
+
+
+def test_motor_presets_and_overrides_from_the_powertrain_file():
+    from skidsteer_power.powertrain.motor import MOTORS, motor_from_config
+
+    assert Powertrain.default_test_robot().motor is EC45 is MOTORS['EC45'] is motor_from_config('EC45')
+    # A mapping replaces the named fields of its preset and keeps the rest (Appendix B for EC-45).
+    doubled = Powertrain.from_config(
+        {'preset': 'test_robot', 'motor': {'preset': 'EC45', 'torque_constant_Nm_A': 0.228}}
+    )
+    assert doubled.motor.torque_constant_Nm_A == 0.228
+    assert doubled.motor.terminal_resistance_ohm == EC45.terminal_resistance_ohm == 0.710
+    # Kt enters eq. 7.1's current: the same axle load draws half the current (0.114 / 0.228).
+    base = Powertrain.default_test_robot().motor_side('left', 2.0, 10.0)
+    assert doubled.motor_side('left', 2.0, 10.0).current_A == pytest.approx(base.current_A / 2.0)
+    # A full motor without a preset: every field, SI units.
+    full = {f.name: getattr(EC45, f.name) for f in dataclasses.fields(EC45)}
+    assert motor_from_config({**full, 'name': 'copy'}) == dataclasses.replace(EC45, name='copy')
+
+
+@pytest.mark.parametrize(
+    'motor, message',
+    [
+        ('EC46', "unknown motor 'EC46'"),
+        ({'preset': 'EC45', 'torque_constant': 0.1}, 'unknown motor fields'),
+        ({'preset': 'EC45', 'torque_constant_Nm_A': 0.0}, 'must be a number > 0'),
+        ({'preset': 'EC45', 'torque_constant_Nm_A': '0.1'}, 'must be a number > 0'),
+        ({'torque_constant_Nm_A': 0.1}, 'without a preset needs'),
+        (3, 'preset name or a mapping'),
+    ],
+)
+def test_bad_motor_entries_are_one_config_error(motor, message):
+    with pytest.raises(ConfigError, match=message):
+        Powertrain.from_config({'preset': 'test_robot', 'motor': motor})

@@ -57,6 +57,32 @@ def test_fit_internal_wide_csv(tmp_path, capsys):
     assert fits['right']['all']['viscous_A_s'] == pytest.approx(2e-4)  # reverse running, same resistance
 
 
+def test_fit_internal_uses_the_vehicles_motor(tmp_path, capsys):
+    """A CSV current becomes torque through the K_t of --vehicle's motor: 0.228 N m/A (a preset
+    override of the EC-45's 0.114, Appendix B line 12), so 0.05 A Coulomb current = 0.0114 N m."""
+    from skidsteer_power import resources
+
+    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
+    vehicle = tmp_path / 'strong_motor.yaml'
+    vehicle.write_text(
+        base.replace(
+            'powertrain: {preset: test_robot}',
+            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
+        ),
+        encoding='utf-8',
+    )
+    path = tmp_path / 'wide.csv'
+    rows = ['left_speed_rpm,left_current_A']
+    for n in (200, 400, 800, 1600):
+        rows.append(f'{n},{0.05 + 1e-4 * n * 2 * math.pi / 60}')
+    path.write_text('\n'.join(rows) + '\n')
+    assert main(['fit-internal', str(path), '--vehicle', str(vehicle), '--json']) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out['torque_constant_Nm_A'] == 0.228
+    assert out['fits']['left']['all']['coulomb_Nm'] == pytest.approx(0.05 * 0.228)
+    assert main(['fit-internal', str(path), '--vehicle', str(tmp_path / 'none.yaml')]) == 2
+
+
 def _write_bag(path, samples):
     store = get_typestore(Stores.ROS2_JAZZY)
     JointState = store.types['sensor_msgs/msg/JointState']

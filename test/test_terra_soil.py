@@ -177,3 +177,13 @@ def test_type_c_residual_and_peak() -> None:
 def test_construction_validates() -> None:
     with pytest.raises(ConfigError, match="'K'"):
         Terrain('x', n=1.0, kc=0.0, kphi=1e6, c=0.0, phi=0.5, K=-1.0)
+
+
+def test_k_eq_is_eq_2_1s_modulus_on_floats_and_arrays():
+    # sandy_soil.yaml: kc = 900 N/m^(n+1), kphi = 1 523 400 N/m^(n+2); b = 0.1 m:
+    # k_eq = 900 / 0.1 + 1 523 400 = 1 532 400 (hand calculation), and at z = 1 m eq. 2.1 gives p = k_eq.
+    terrain = load_terrain('sandy_soil')
+    assert terrain.k_eq(0.1) == pytest.approx(1_532_400.0)
+    widths = np.array([0.05, 0.1, 0.2])
+    np.testing.assert_allclose(terrain.k_eq(widths), [1_541_400.0, 1_532_400.0, 1_527_900.0])
+    np.testing.assert_allclose(pressure_sinkage(terrain, 1.0, widths), terrain.k_eq(widths))

@@ -15,9 +15,10 @@ import numpy as np
 
 from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float
 from skidsteer_power.errors import InputError
+from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import COMPONENTS, components_from_stages, fit_internal
-from skidsteer_power.powertrain.motor import EC45
 from skidsteer_power.powertrain.samples import read_bag, read_csv
+from skidsteer_power.vehicle import load_vehicle
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,6 +36,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         '--min-speed', type=nonnegative_float, default=1.0, help='drop samples slower than this [rad/s]'
     )
+    parser.add_argument(
+        '--vehicle',
+        default='test_robot_track',
+        help='vehicle name or YAML file; its motor K_t turns a CSV current into torque (%(default)s)',
+    )
     add_json_flag(parser)
     parser.set_defaults(func=run)
 
@@ -43,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.source)
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')
-    kt = EC45.torque_constant_Nm_A
+    kt = Powertrain.for_vehicle(load_vehicle(args.vehicle)).motor.torque_constant_Nm_A
     if path.is_file() and path.suffix.lower() == '.csv':
         samples = read_csv(path, kt)
     else:

@@ -14,9 +14,9 @@ import math
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.numeric import Real
+from skidsteer_power.powertrain.motor import RPM
 
-RPM = 2.0 * math.pi / 60.0
-"""One revolution per minute in rad/s."""
+__all__ = ['RPM', 'side_speeds', 'twist_to_motor_rpm', 'unwrap_counter']
 
 
 def side_speeds(linear_m_s: Real, yaw_rate_rad_s: Real, tread_m: float) -> tuple[Real, Real]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import enum
+import functools
 import math
 import os
 import select
@@ -60,10 +61,17 @@ from skidsteer_power.des.protocol import (
     to_int16,
     to_word,
 )
-from skidsteer_power.powertrain.motor import DES_70_10, EC45, GEAR_RATIO, MotorConstants
-
-RPM = 2.0 * math.pi / 60.0
-"""One rpm in rad/s."""
+from skidsteer_power.powertrain.drivetrain import Powertrain
+from skidsteer_power.powertrain.motor import DES_70_10, EC45, GEAR_RATIO, RPM, MotorConstants
+from skidsteer_power.powertrain.speed_loop import (
+    SPEED_LOOP_BANDWIDTH_RAD_S,
+    current_limits,
+    pi_current,
+    ramp_setpoint,
+    reflected_inertia,
+    speed_loop_gains,
+)
+from skidsteer_power.vehicle import load_vehicle
 
 LoadTorque = float | Callable[[float, float], float]
 """Load torque at the motor shaft [N m]: a constant or ``f(omega_rad_s, t_s)``."""
@@ -71,12 +79,8 @@ LoadTorque = float | Callable[[float, float], float]
 SIM_VERSION = (0x2010, 0x6510, 0x0001, 0x0001)
 """ReadVersion words the simulator answers (its own, not a real firmware's)."""
 
-ROBOT_MASS_KG = 30.0
-"""Test robot operating mass, ch. 7.1.1 ("around 30 kg") [kg]."""
-DRIVE_RADIUS_M = 0.1
-"""Sprocket / wheel radius, ASSUMED as in config/vehicles/test_robot_track.yaml [m]."""
-REFLECTED_INERTIA_KG_M2 = (ROBOT_MASS_KG / 2.0) * DRIVE_RADIUS_M**2 / GEAR_RATIO**2
-"""Half the robot's mass at the drive radius, seen at one motor through 12:1: m r^2 / (2 G^2) [kg m^2]."""
+DEFAULT_VEHICLE = 'test_robot_track'
+"""The vehicle whose mass, drive radius and powertrain a :class:`MotorModel` drives by default."""
 
 
 @dataclass(frozen=True)
@@ -130,13 +134,14 @@ class MotorModel:
 
     Parameters
     ----------
-    motor : motor constants (default EC-45, Appendix B)
-    load_inertia_kg_m2 : inertia reflected to the motor shaft besides the rotor [kg m^2]
+    motor : motor constants (default: the motor of :data:`DEFAULT_VEHICLE`'s powertrain, the EC-45)
+    load_inertia_kg_m2 : inertia reflected to the motor shaft besides the rotor [kg m^2] (default:
+        half of :data:`DEFAULT_VEHICLE`'s mass at its drive radius, :func:`reflected_inertia`)
     supply_voltage_V : amplifier supply [V] (default 44.4 V: two 6-cell LiPo packs in series at
         3.7 V/cell, ASSUMED; ch. 7.1.2 names the packs, not their wiring)
-    load_torque : see :data:`LoadTorque`
-    bandwidth_rad_s : speed-loop bandwidth of the PI controller [rad/s] (assumed; the real gains,
-        parameters 5 and 6, are in units the sources do not give)
+    load_torque : see :data:`LoadTorque` (default: :class:`ViscousCoulombLoad` with the motor's K_t I_0)
+    bandwidth_rad_s : speed-loop bandwidth of the PI controller [rad/s] (ASSUMED, see
+        :mod:`skidsteer_power.powertrain.speed_loop`, the drive model shared with the twin)
     mean_time_constant_s : low-pass behind the 'mean' speed and current readings [s] (assumed)
     """
 
@@ -144,19 +149,26 @@ class MotorModel:
 
     def __init__(
         self,
-        motor: MotorConstants = EC45,
-        load_inertia_kg_m2: float = REFLECTED_INERTIA_KG_M2,
+        motor: MotorConstants | None = None,
+        load_inertia_kg_m2: float | None = None,
         supply_voltage_V: float = 44.4,
         load_torque: LoadTorque | None = None,
-        bandwidth_rad_s: float = 60.0,
+        bandwidth_rad_s: float = SPEED_LOOP_BANDWIDTH_RAD_S,
         mean_time_constant_s: float = 0.01,
     ) -> None:
+        if motor is None or load_inertia_kg_m2 is None:
+            default_motor, default_load = _vehicle_drive(DEFAULT_VEHICLE)
+            motor = default_motor if motor is None else motor
+            load_inertia_kg_m2 = default_load if load_inertia_kg_m2 is None else load_inertia_kg_m2
         self.motor = motor
         self.inertia_kg_m2 = motor.rotor_inertia_kg_m2 + load_inertia_kg_m2
         self.supply_voltage_V = supply_voltage_V
-        self.load_torque: LoadTorque = ViscousCoulombLoad() if load_torque is None else load_torque
-        self.kp_A_s = bandwidth_rad_s * self.inertia_kg_m2 / motor.torque_constant_Nm_A
-        self.ki_A = self.kp_A_s * bandwidth_rad_s / 4.0
+        if load_torque is None:  # the motor's own no-load friction, K_t I_0
+            load_torque = ViscousCoulombLoad(coulomb_Nm=motor.torque_constant_Nm_A * motor.no_load_current_A)
+        self.load_torque: LoadTorque = load_torque
+        self.kp_A_s, self.ki_A = speed_loop_gains(
+            self.inertia_kg_m2, motor.torque_constant_Nm_A, bandwidth_rad_s
+        )
         self.mean_time_constant_s = mean_time_constant_s
         self.omega_rad_s = 0.0
         self.theta_rad = 0.0
@@ -186,9 +198,8 @@ class MotorModel:
     ) -> None:
         """Advance the state by ``dt_s`` [s] (explicit Euler)."""
         motor = self.motor
-        max_step = acceleration_rad_s2 * dt_s
-        self.ramped_setpoint_rad_s += max(
-            -max_step, min(max_step, speed_setpoint_rad_s - self.ramped_setpoint_rad_s)
+        self.ramped_setpoint_rad_s = ramp_setpoint(
+            self.ramped_setpoint_rad_s, speed_setpoint_rad_s, acceleration_rad_s2 * dt_s
         )
         if not powered:
             wanted, self._integral_A = 0.0, 0.0
@@ -197,14 +208,16 @@ class MotorModel:
             wanted = current_setpoint_A
         else:
             error = self.ramped_setpoint_rad_s - self.omega_rad_s
-            self._integral_A = max(
-                -peak_current_A, min(peak_current_A, self._integral_A + self.ki_A * error * dt_s)
+            wanted, self._integral_A = pi_current(
+                error, self._integral_A, self.kp_A_s, self.ki_A, dt_s, peak_current_A
             )
-            wanted = self.kp_A_s * error + self._integral_A
-        v_max = DES_70_10.max_output_voltage_fraction * self.supply_voltage_V
-        emf = self.omega_rad_s / motor.speed_constant_rad_s_V
-        upper = min(peak_current_A, (v_max - emf) / motor.terminal_resistance_ohm)
-        lower = max(-peak_current_A, (-v_max - emf) / motor.terminal_resistance_ohm)
+        lower, upper = current_limits(
+            self.omega_rad_s,
+            DES_70_10.max_output_voltage_fraction * self.supply_voltage_V,
+            motor.speed_constant_rad_s_V,
+            motor.terminal_resistance_ohm,
+            peak_current_A,
+        )
         current = min(upper, max(lower, wanted)) if powered else 0.0
         self.current_limited = powered and current != wanted
         self.current_A = current
@@ -216,6 +229,15 @@ class MotorModel:
         alpha = dt_s / (self.mean_time_constant_s + dt_s)
         self.mean_omega_rad_s += alpha * (self.omega_rad_s - self.mean_omega_rad_s)
         self.mean_current_A += alpha * (current - self.mean_current_A)
+
+
+@functools.cache
+def _vehicle_drive(vehicle_name: str) -> tuple[MotorConstants, float]:
+    """(motor, reflected inertia [kg m^2]) of a vehicle file and its powertrain."""
+    vehicle = load_vehicle(vehicle_name)
+    powertrain = Powertrain.for_vehicle(vehicle)
+    inertia = reflected_inertia(vehicle.mass_kg, vehicle.drive_radius_m, powertrain.gear_ratio)
+    return powertrain.motor, inertia
 
 
 class Fault(enum.Enum):
@@ -296,7 +318,7 @@ class SimulatedDes:
     baudrate : the link speed it emulates [bit/s]; with ``emulate_baud`` every byte costs its
         byte time (10 bits, 8N1) on the line, so link throughput is realistic on a pty
     config : protocol options (UNCONFIRMED items); the simulator answers in the same convention
-    model : motor model (default EC-45 with the test robot's reflected inertia)
+    model : motor model (default: :class:`MotorModel` of :data:`DEFAULT_VEHICLE`)
     link_path : stable path of the port (a symlink to the pty); default in a fresh temp directory
     """
 
@@ -439,8 +461,8 @@ class SimulatedDes:
     def _reset_state(self) -> None:
         self.eeprom = default_parameters(self.baudrate, self.model.motor)
         self.params = dict(self.eeprom)
-        self.errors = DesErrorFlags(0)
-        self.enabled = False
+        self.errors: DesErrorFlags = DesErrorFlags(0)
+        self.enabled: bool = False
         self.current_mode = False
         self.stopped = False
         self.speed_setpoint_rpm = 0

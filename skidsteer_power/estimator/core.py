@@ -37,9 +37,9 @@ from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_powe
 from skidsteer_power.estimator.persistence import battery_tallies, restored_tallies
 from skidsteer_power.estimator.prediction import Prediction, Predictor
 from skidsteer_power.estimator.tte_bounds import TimeToEmptyBounds
-from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.battery import BatteryState
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
+from skidsteer_power.seams import BatteryModel, PowertrainLike
 
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
 IMPLAUSIBLE_WARN_S = 10.0
@@ -121,17 +121,17 @@ class Comparison:
 class EstimatorCore:
     """Per-command prediction, per-reading measurement, battery integration and diagnostics.
 
-    ``battery`` is a :class:`skidsteer_power.powertrain.Battery` (``step``, ``remaining_wh``,
-    ``time_to_empty_s``, ``to_dict``/``from_dict``); ``powertrain`` (a
-    :class:`skidsteer_power.powertrain.Powertrain`) gives the motor and amplifier that convert
-    joint_states into power.
+    ``battery`` is a :class:`skidsteer_power.seams.BatteryModel` (e.g.
+    :class:`skidsteer_power.powertrain.Battery`); ``powertrain`` (a
+    :class:`skidsteer_power.seams.PowertrainLike`, e.g. :class:`skidsteer_power.powertrain.Powertrain`)
+    gives the motor and amplifier that convert joint_states into power.
     """
 
     def __init__(
         self,
         predictor: Predictor,
-        battery: Any,
-        powertrain: Powertrain,
+        battery: BatteryModel,
+        powertrain: PowertrainLike,
         settings: EstimatorSettings | None = None,
         adaptation: AdaptationSettings | None = None,
     ) -> None:
@@ -167,11 +167,11 @@ class EstimatorCore:
         self.time_to_empty_s = math.inf
         self.implausible: Counter[str] = Counter()
         self._implausible_s: float | None = None
-        self._limit_of: Any = None  # the battery whose power limit is in _limit_W [W]
+        self._limit_of: BatteryModel | None = None  # the battery whose power limit is in _limit_W [W]
         self._limit_W = math.inf
 
     @property
-    def battery(self) -> Any:
+    def battery(self) -> BatteryModel:
         return self.energy.battery
 
     def _reject(self, topic: str, err: InputError, now_s: float) -> RejectedInput:
@@ -213,8 +213,7 @@ class EstimatorCore:
         asked of each battery once (twice per input pair otherwise)."""
         battery = self.battery
         if battery is not self._limit_of:
-            limit = getattr(battery, 'max_power_W', None)
-            self._limit_W = float(limit()) if callable(limit) else math.inf
+            self._limit_W = float(battery.max_power_W())
             self._limit_of = battery
         return self._limit_W
 
@@ -384,7 +383,7 @@ class EstimatorCore:
             'energy_J': dict(self.energy.energy_J),
         }
 
-    def reset_energy(self, battery: Any, now_s: float) -> None:
+    def reset_energy(self, battery: BatteryModel, now_s: float) -> None:
         """A battery swap at ``now_s`` [s]: ``battery`` (a full one) replaces the old, the energy
         tallies restart at 0 J; power drawn before ``now_s`` is charged to the old battery."""
         self.energy.advance(now_s)
@@ -397,7 +396,7 @@ class EstimatorCore:
         """Restore the tallies of :meth:`state_dict` output into this battery (its configuration
         stays this vehicle's); ConfigError if a number is missing or outside its range."""
         tallies, energy = restored_tallies(state)
-        battery = type(self.battery)(self.battery.config, BatteryState(**tallies))
+        battery = self.battery.with_state(BatteryState(**tallies))
         self.energy.flush()
         self.energy.battery = battery
         self.energy.energy_J.update(energy)

@@ -23,20 +23,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Protocol
+
+from skidsteer_power.seams import BatteryModel
 
 SOURCES = ('measured', 'predicted', 'none')
-
-
-class BatteryLike(Protocol):
-    """What the tracker needs of a battery (``skidsteer_power.powertrain.Battery``)."""
-
-    def step(self, power_W: float, dt_s: float) -> None: ...
-
-    @property
-    def remaining_wh(self) -> float: ...
-
-    def time_to_empty_s(self, power_W: float) -> float: ...
 
 
 @dataclass
@@ -59,7 +49,7 @@ class EnergyTracker:
     to empty (the track's power oscillates, 7.3.4).
     """
 
-    battery: BatteryLike
+    battery: BatteryModel
     measured_timeout_s: float = 0.5
     predicted_timeout_s: float = 0.5
     filter_s: float = 5.0

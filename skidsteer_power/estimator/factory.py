@@ -14,6 +14,7 @@ from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator.inputs import JointMap
 from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
+from skidsteer_power.seams import BatteryModel
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
 
@@ -103,7 +104,7 @@ CURRENT_DEADBAND_A = 1e-3
 """|current| [A] below which the battery is neither charging nor discharging."""
 
 
-def battery_message_fields(battery: Battery, power_W: float) -> dict[str, Any]:
+def battery_message_fields(battery: BatteryModel, power_W: float) -> dict[str, Any]:
     """sensor_msgs/BatteryState fields for the battery under ``power_W`` [W] (battery side).
 
     The message's conventions: ``current`` [A] negative while discharging; voltage [V]; charge,

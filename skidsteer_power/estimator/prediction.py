@@ -24,9 +24,15 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+
+from skidsteer_power.seams import PowerMapLike, PowertrainLike
+
+if TYPE_CHECKING:
+    from skidsteer_power.maps.power_map import MapQuery
+    from skidsteer_power.maps.setpoint_map import SetpointMap
 
 Pair = tuple[float, float]
 
@@ -97,7 +103,7 @@ class Predictor(Protocol):
     def predict(self, speed_m_s: float, yaw_rate_rad_s: float) -> Prediction: ...
 
 
-def _scalar(value: Any) -> float:
+def _scalar(value: float | np.ndarray) -> float:
     """A Python float from a number, a 0-d array or the first element of a 1-d one (per message:
     the plain ``float`` path first, as most values here are floats or 0-d arrays)."""
     if isinstance(value, np.ndarray) and value.ndim:
@@ -105,7 +111,7 @@ def _scalar(value: Any) -> float:
     return float(value)
 
 
-def _pair(left: Any, right: Any) -> Pair:
+def _pair(left: float | np.ndarray, right: float | np.ndarray) -> Pair:
     return _scalar(left), _scalar(right)
 
 
@@ -119,8 +125,8 @@ class MapPredictor:
 
     def __init__(
         self,
-        power_map: Any,
-        powertrain: Any,
+        power_map: PowerMapLike,
+        powertrain: PowertrainLike,
         *,
         description: str = '',
         cache_size: int = 256,
@@ -137,7 +143,7 @@ class MapPredictor:
         return self._with_powertrain(speed_m_s, yaw_rate_rad_s, omega, torque, q)
 
     def _with_powertrain(
-        self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: Any
+        self, speed: float, yaw_rate: float, omega: Pair, torque: Pair, q: MapQuery
     ) -> Prediction:
         # floats, one side at a time: ~20x faster than numpy on two values (skidsteer_power.numeric)
         left = self.powertrain.motor_side('left', torque[0], omega[0])
@@ -176,22 +182,22 @@ class SetpointPredictor:
 
     def __init__(
         self,
-        setpoint_map: Any,
-        powertrain: Any,
+        setpoint_map: SetpointMap,
+        powertrain: PowertrainLike,
         *,
         description: str = '',
         cache_size: int = 256,
-        motion_map: Callable[[], Any] | None = None,
+        motion_map: Callable[[], PowerMapLike] | None = None,
     ) -> None:
         self.setpoint_map = setpoint_map
         self.powertrain = powertrain
         self.description = description or 'set-point map'
         self.predict = lru_cache(maxsize=cache_size)(self._predict)
         self._motion_map = motion_map
-        self._power_map: Any = None
+        self._power_map: PowerMapLike | None = None
 
     @property
-    def power_map(self) -> Any:
+    def power_map(self) -> PowerMapLike | None:
         """The (V, yaw rate) power map (loaded or built on first use), or None if none was given."""
         if self._power_map is None and self._motion_map is not None:
             self._power_map = self._motion_map()

@@ -71,9 +71,10 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from skidsteer_power.cache import atomic_file, default_cache_dir, options_digest, physics_digest
 from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
@@ -121,6 +122,10 @@ _ODD_IN_REVERSE = ('torque_left_Nm', 'torque_right_Nm', 'omega_left_rad_s', 'ome
 _REST = {name: (1.0 if name == 'traction_margin' else 0.0) for name in QUERY_FIELDS}  # V = w_z = 0
 
 ProgressCallback = Callable[[int, int], None]
+Values: TypeAlias = float | NDArray[np.float64]
+"""A scalar query's float or an array query's values."""
+Flags: TypeAlias = bool | NDArray[np.bool_]
+"""A scalar query's bool or an array query's flags."""
 
 
 @dataclass
@@ -141,20 +146,20 @@ class MapQuery:
         steep approach to the traction limit; module doc).
     """
 
-    torque_left_Nm: Any
-    torque_right_Nm: Any
-    omega_left_rad_s: Any
-    omega_right_rad_s: Any
-    power_left_W: Any
-    power_right_W: Any
-    s0_m: Any
-    sinkage_m: Any
-    traction_margin: Any
-    clamped: Any
-    limited: Any
+    torque_left_Nm: Values
+    torque_right_Nm: Values
+    omega_left_rad_s: Values
+    omega_right_rad_s: Values
+    power_left_W: Values
+    power_right_W: Values
+    s0_m: Values
+    sinkage_m: Values
+    traction_margin: Values
+    clamped: Flags
+    limited: Flags
 
     @property
-    def total_power_W(self) -> Any:
+    def total_power_W(self) -> Values:
         return self.power_left_W + self.power_right_W
 
 
@@ -486,7 +491,7 @@ class PowerMap:
         """Total terrain power [W] at the grid nodes (rings x angles)."""
         s, psi = np.meshgrid(self.radial, self.angles, indexing='ij')
         q = self.query(s * np.cos(psi), s * np.sin(psi) / self.length_m)
-        return q.power_left_W + q.power_right_W
+        return np.asarray(q.power_left_W + q.power_right_W)
 
 
 _HALF_PI = 0.5 * math.pi

@@ -154,7 +154,7 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
 
     per_side = vehicle.wheels_per_side
     r = vehicle.drive_radius_m
-    k = terrain.kc / b + terrain.kphi
+    k = terrain.k_eq(b)
     z_o = single_wheel.bekker_wheel_sinkage(terrain, load_o / per_side, r, b)  # eq. 2.32
     z_i = single_wheel.bekker_wheel_sinkage(terrain, safe_i / per_side, r, b)
     rut = per_side * b * k / (terrain.n + 1.0)  # eq. 2.7 per unit rut length, times wheels per side

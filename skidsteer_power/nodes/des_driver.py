@@ -44,7 +44,8 @@ propagates; every signal that would end the process (SIGINT, SIGTERM, SIGHUP, SI
 disable. All serial I/O runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never
 in the executor.
 
-Geometry (tread, drive radius, gear ratio) comes from the vehicle file named by ``vehicle``.
+Geometry (tread, drive radius, gear ratio) and the motor (the published effort K_t I, the largest
+set point) come from the vehicle file named by ``vehicle`` and its powertrain.
 
 On the robot: each transaction takes four turn-arounds ('O' handshakes), so a USB-RS232 adapter's
 read latency dominates. FTDI adapters default to a 16 ms latency timer, which could cap the poll
@@ -70,7 +71,6 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
@@ -82,6 +82,7 @@ from skidsteer_power.des.poller import MAX_MOTOR_RPM, AmplifierPoller, Amplifier
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
@@ -111,7 +112,11 @@ class ParamSpec:
 
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec('vehicle', 'test_robot_track', 'vehicle name or YAML file: tread, drive radius, gear ratio'),
+    ParamSpec(
+        'vehicle',
+        'test_robot_track',
+        'vehicle name or YAML file: tread, drive radius, powertrain (gear ratio, motor: effort = K_t I)',
+    ),
     ParamSpec('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier'),
     ParamSpec('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier'),
     ParamSpec('baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200'),
@@ -254,10 +259,16 @@ class DesDriver(LifecycleNode):
         if p['left_port'] == p['right_port']:
             raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
         vehicle = load_vehicle(p['vehicle'])
+        p['powertrain'] = powertrain = Powertrain.for_vehicle(vehicle)
+        motor_max_rpm = powertrain.motor.max_speed_rad_s / RPM
+        if p['max_motor_rpm'] > motor_max_rpm:
+            raise ConfigError(
+                f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
+            )
         p['geometry'] = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
-            gear_ratio=float(Powertrain.for_vehicle(vehicle).gear_ratio),
+            gear_ratio=float(powertrain.gear_ratio),
             polarity={side: p[f'{side}_polarity'] for side in SIDES},
             max_rpm=float(p['max_motor_rpm']),
         )
@@ -343,16 +354,6 @@ class DesDriver(LifecycleNode):
         self.get_logger().error(f'transition from {state.label} failed: motors zeroed, ports closed')
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
-
-    def _LifecycleNodeMixin__on_change_state(self, request: Any, response: Any) -> Any:
-        """rclpy's change_state handler raises (and ends the spin) on a transition the current state
-        does not have; answer ``success: false`` instead."""
-        try:
-            return LifecycleNodeMixin._LifecycleNodeMixin__on_change_state(self, request, response)  # type: ignore[attr-defined]
-        except RCLError as err:
-            self.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
-            response.success = False
-            return response
 
     def _start_pollers(self, p: dict[str, Any]) -> None:
         self.command = DriveCommand(
@@ -516,7 +517,7 @@ class DesDriver(LifecycleNode):
         )
         position = sign * sample.position_counts / counts_per_rev * 2.0 * math.pi
         velocity = sign * sample.velocity_rpm * RPM
-        effort = sign * EC45.torque_constant_Nm_A * sample.current_ma / 1000.0
+        effort = sign * self.params['powertrain'].motor.torque_constant_Nm_A * sample.current_ma / 1000.0
         return position, velocity, effort
 
     @_fail_safe
@@ -620,6 +621,15 @@ class DesDriver(LifecycleNode):
     def destroy_node(self) -> None:
         self._teardown()
         super().destroy_node()
+
+
+def _log_refused(node: Any, request: Any, err: Exception) -> None:
+    node.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
+
+
+# rclpy's change_state handler raises (and ends the spin) on a transition the current state does not
+# have; answer success: false instead (stock rclpy's behaviour where its internals differ)
+refuse_invalid_transitions(DesDriver, (RCLError,), _log_refused)
 
 
 def bring_up(node: DesDriver) -> None:

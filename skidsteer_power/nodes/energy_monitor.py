@@ -46,7 +46,7 @@ from std_msgs.msg import Float64
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.estimator.summary import SUMMARY_STATUS_NAME, summary_from_key_values
-from skidsteer_power.powertrain import EC45
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.ui.monitor import (
     STALE_AFTER_S,
     CaseProfile,
@@ -58,6 +58,7 @@ from skidsteer_power.ui.monitor import (
     load_case_csv,
     render,
 )
+from skidsteer_power.vehicle import load_vehicle
 
 MODES = ('free', 'case', 'view')
 
@@ -108,6 +109,7 @@ class EnergyMonitor(Node):
         rate_hz: float = 10.0,
         refresh_hz: float = 5.0,
         drive: FreeDrive | None = None,
+        vehicle: str = 'test_robot_track',
         **node_kwargs: Any,
     ) -> None:
         super().__init__('energy_monitor', **node_kwargs)
@@ -116,6 +118,8 @@ class EnergyMonitor(Node):
         if mode == 'case' and profile is None:
             raise InputError('case mode needs a profile (a case file or --speed/--yaw-rate/--duration)')
         self.view = MonitorView(mode=mode)
+        self.torque_constant_Nm_A = Powertrain.for_vehicle(load_vehicle(vehicle)).motor.torque_constant_Nm_A
+        """K_t of the vehicle's motor [N m/A]: the driver publishes effort = K_t I (DESIGN.md, des_driver)."""
         self.profile, self.keys, self.on_frame = profile, keys, on_frame
         self.drive = drive or FreeDrive()
         self.stamped = stamped
@@ -167,7 +171,7 @@ class EnergyMonitor(Node):
         if len(msg.velocity) > max(left, right):
             self.view.motor_speed_rad_s = (msg.velocity[left], msg.velocity[right])
         if len(msg.effort) > max(left, right):
-            kt = EC45.torque_constant_Nm_A  # effort = Kt * I (DESIGN.md, des_driver)
+            kt = self.torque_constant_Nm_A
             self.view.motor_current_A = (msg.effort[left] / kt, msg.effort[right] / kt)
         self._heard('joint_states')
 
@@ -257,6 +261,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--csv', help='CSV file of what was shown (default energy_monitor_<UTC>.csv)')
     parser.add_argument('--stamped', action='store_true', help='publish TwistStamped')
     parser.add_argument('--rate', type=float, default=10.0, help='cmd_vel rate [Hz]')
+    parser.add_argument(
+        '--vehicle',
+        default='test_robot_track',
+        help='vehicle name or YAML file (current = effort / its K_t)',
+    )
     return parser
 
 
@@ -297,7 +306,8 @@ def _run(options: argparse.Namespace, ros_args: list[str] | None) -> int:
         with Live(render(MonitorView(mode=options.mode)), console=console, auto_refresh=False) as live:
             node = EnergyMonitor(
                 options.mode, profile=profile, keys=keys, csv_path=csv_path, stamped=options.stamped,
-                rate_hz=options.rate, on_frame=lambda view: live.update(render(view), refresh=True),
+                rate_hz=options.rate, vehicle=options.vehicle,
+                on_frame=lambda view: live.update(render(view), refresh=True),
             )  # fmt: skip
             while rclpy.ok() and not node.done:
                 rclpy.spin_once(node, timeout_sec=0.1)

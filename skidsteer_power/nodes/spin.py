@@ -16,7 +16,6 @@ import rclpy.logging
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
@@ -25,6 +24,8 @@ from rclpy.utilities import timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities, Waitable
 
 from skidsteer_power.errors import SkidsteerError
+from skidsteer_power.nodes import rclpy_compat
+from skidsteer_power.nodes.rclpy_compat import _rclpy
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
 
@@ -40,8 +41,9 @@ class LeanExecutor(SingleThreadedExecutor):
     same handles (a few C calls); after it, it calls the ready callbacks directly, in rclpy's order:
     timers, subscriptions, services, clients, then waitables (QoS events) by their own ``execute``.
 
-    It relies on rclpy internals pinned at 7.1.6 (``_rclpy.WaitSet``, the entities' ``handle``, the
-    executor's ``_guard``, ``_sigint_gc``, ``_tasks``, ``_cb_iter`` and ``_work_tracker``);
+    It relies on rclpy internals (``_rclpy.WaitSet``, the entities' ``handle``, the executor's
+    attributes in :data:`~skidsteer_power.nodes.rclpy_compat.EXECUTOR_INTERNALS`), checked against
+    the installed rclpy by :mod:`skidsteer_power.nodes.rclpy_compat`;
     ``test/test_nodes_spin.py`` exercises every kind of entity over real DDS. It is for nodes whose
     callbacks are plain functions: while a node has a coroutine callback or a guard condition, or a
     Task is pending (a future's done-callback), it spins with rclpy's own code; with another rclpy it
@@ -50,10 +52,11 @@ class LeanExecutor(SingleThreadedExecutor):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.lean = hasattr(_rclpy, 'WaitSet') and all(hasattr(self, name) for name in _PRIVATE)
+        self.lean = rclpy_compat.check().lean_executor(self)
         if not self.lean:  # another rclpy: its own executor, unchanged (correct, only slower)
             rclpy.logging.get_logger('spin').warning(
-                "LeanExecutor: this rclpy's executor internals differ from 7.1.6; using it unchanged"
+                f"LeanExecutor: rclpy {rclpy_compat.check().version}'s executor internals differ; "
+                'using its own executor unchanged'
             )
         self._plan: _WaitPlan | None = None
 
@@ -85,9 +88,6 @@ class LeanExecutor(SingleThreadedExecutor):
 
     def _shut_down(self) -> bool:
         return self._is_shutdown
-
-
-_PRIVATE = ('_guard', '_sigint_gc', '_tasks', '_context', '_is_shutdown', '_cb_iter', '_work_tracker')
 
 
 @dataclasses.dataclass

@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -185,6 +185,10 @@ class Battery:
         """Largest terminal power [W] the battery can deliver at ANY state of charge
         (:attr:`BatteryConfig.max_power_W`)."""
         return self.config.max_power_W
+
+    def with_state(self, state: BatteryState) -> Battery:
+        """This battery's configuration in ``state`` (a restart restores the tallies)."""
+        return replace(self, state=state)
 
     def current_for_power(self, power_W: float, soc: float | None = None) -> float:
         """Battery current [A] delivering terminal power ``power_W`` [W] at ``soc`` (default: now)."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Generic
+from typing import TYPE_CHECKING, Any, Generic
 
 import numpy as np
 
@@ -27,18 +27,23 @@ from skidsteer_power.numeric import Real, real
 from skidsteer_power.powertrain.config import merged
 from skidsteer_power.powertrain.internal import SideResistance, side_from_config
 from skidsteer_power.powertrain.motor import (
+    AMPLIFIERS,
     DES_70_10,
-    EC45,
     GEAR_RATIO,
+    MOTORS,
     AmplifierConstants,
     MotorConstants,
+    amplifier_from_config,
     bus_power,
     motor_current,
+    motor_from_config,
     terminal_power,
 )
 
-MOTORS: dict[str, MotorConstants] = {'EC45': EC45}
-AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10}
+if TYPE_CHECKING:
+    from skidsteer_power.vehicle import Vehicle
+
+__all__ = ['AMPLIFIERS', 'MOTORS', 'SIDES', 'MotorPoint', 'Powertrain']
 SIDES = ('left', 'right')
 
 
@@ -95,7 +100,7 @@ class Powertrain:
     left: SideResistance
     right: SideResistance
     regen_efficiency: float | None = None
-    battery: Any = None
+    battery: str | Mapping[str, Any] | None = None
     source: str = ''
     current_limit_A: float = DES_70_10.continuous_current_A
 
@@ -106,11 +111,8 @@ class Powertrain:
         An empty mapping means the test robot. Raises ConfigError for unknown or bad values.
         """
         cfg = merged('powertrains', config or {'preset': 'test_robot'})
-        try:
-            motor = MOTORS[str(cfg.get('motor', 'EC45'))]
-            amplifier = AMPLIFIERS[str(cfg.get('amplifier', 'DES_70_10'))]
-        except KeyError as err:
-            raise ConfigError(f'powertrain: unknown motor or amplifier {err}') from None
+        motor = motor_from_config(cfg.get('motor'))
+        amplifier = amplifier_from_config(cfg.get('amplifier'))
         gear_ratio = _positive(cfg.get('gear_ratio', GEAR_RATIO), 'gear_ratio')
         internal = cfg.get('internal_resistance')
         if not isinstance(internal, Mapping) or not all(isinstance(internal.get(s), Mapping) for s in SIDES):
@@ -141,7 +143,7 @@ class Powertrain:
         return cls.from_config({'preset': 'test_robot'}, running_gear)
 
     @classmethod
-    def for_vehicle(cls, vehicle: Any) -> Powertrain:
+    def for_vehicle(cls, vehicle: Vehicle) -> Powertrain:
         """The powertrain of a :class:`~skidsteer_power.vehicle.Vehicle` (its ``powertrain:`` section)."""
         return cls.from_config(getattr(vehicle, 'powertrain', None) or None, vehicle.running_gear)
 

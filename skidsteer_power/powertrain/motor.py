@@ -13,8 +13,11 @@ return part of the mechanical braking power: it never creates energy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.numeric import Real, by_sign, real
@@ -145,6 +148,53 @@ DES_70_10 = AmplifierConstants(
     four_quadrant=True,
 )
 """The test robot's amplifier, one per motor (ch. 7.1.2, Appendix A)."""
+
+Preset = TypeVar('Preset', MotorConstants, AmplifierConstants)
+
+MOTORS: dict[str, MotorConstants] = {'EC45': EC45}
+"""Motor presets a powertrain file names (``motor: EC45``), each with its datasheet constants."""
+AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10}
+"""Amplifier presets a powertrain file names (``amplifier: DES_70_10``)."""
+
+
+def motor_from_config(value: str | Mapping[str, Any] | None) -> MotorConstants:
+    """The motor of a powertrain file's ``motor:`` entry: a preset name (:data:`MOTORS`), or a mapping
+    ``{preset: EC45, <field>: <SI value>, ...}`` whose fields (those of :class:`MotorConstants`, SI
+    units) replace the preset's; without ``preset`` every field must be given. None = EC-45.
+    Raises ConfigError for an unknown preset or field, or a non-positive number."""
+    return _from_config(value, MOTORS, 'EC45', 'motor')
+
+
+def amplifier_from_config(value: str | Mapping[str, Any] | None) -> AmplifierConstants:
+    """The amplifier of a powertrain file's ``amplifier:`` entry, as :func:`motor_from_config`."""
+    return _from_config(value, AMPLIFIERS, 'DES_70_10', 'amplifier')
+
+
+def _from_config(value: object, presets: Mapping[str, Preset], default: str, what: str) -> Preset:
+    if value is None or isinstance(value, str):
+        name = default if value is None else value
+        if name not in presets:
+            raise ConfigError(f'powertrain: unknown {what} {name!r} (presets: {", ".join(presets)})')
+        return presets[name]
+    if not isinstance(value, Mapping):
+        raise ConfigError(f'powertrain: {what} must be a preset name or a mapping, not {value!r}')
+    fields = {f.name for f in dataclasses.fields(next(iter(presets.values())))}
+    values = dict(value)
+    unknown = set(values) - set(fields) - {'preset'}
+    if unknown:
+        raise ConfigError(f'powertrain: unknown {what} fields {sorted(unknown)}')
+    for key, number in values.items():
+        if key in ('preset', 'name', 'four_quadrant'):
+            continue
+        if not isinstance(number, int | float) or isinstance(number, bool) or not number > 0:
+            raise ConfigError(f'powertrain: {what}.{key} must be a number > 0, not {number!r}')
+    preset = values.pop('preset', None)
+    if preset is not None:
+        return dataclasses.replace(_from_config(str(preset), presets, default, what), **values)
+    missing = set(fields) - set(values) - {'four_quadrant'}
+    if missing:
+        raise ConfigError(f'powertrain: {what} without a preset needs {sorted(missing)}')
+    return type(next(iter(presets.values())))(**values)
 
 
 def motor_current(motor: MotorConstants, motor_torque_Nm: Real) -> Real:

@@ -24,7 +24,7 @@ def pressure_sinkage(terrain: Terrain, z: ArrayLike, b: ArrayLike) -> FloatArray
     """
     z = np.asarray(z, dtype=float)
     b = _positive(b, 'width b')
-    return (terrain.kc / b + terrain.kphi) * np.maximum(z, 0.0) ** terrain.n
+    return terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
 
 
 def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -33,7 +33,7 @@ def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatA
     if np.any(~np.isfinite(p)) or np.any(p < 0):
         raise InputError('pressure must be finite and >= 0 Pa')
     b = _positive(b, 'width b')
-    return (p / (terrain.kc / b + terrain.kphi)) ** (1.0 / terrain.n)
+    return (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
 
 
 def shear_strength(terrain: Terrain, sigma: ArrayLike) -> FloatArray:

@@ -33,6 +33,7 @@ import yaml
 
 from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
+from skidsteer_power.numeric import Real
 
 # Table 2.4 (Wong and Reece, dry sand): the only wheel coefficients the dissertation gives. Chapter 2
 # uses them for all three soils, and so do the presets here.
@@ -72,8 +73,9 @@ class Terrain:
         """Internal friction angle [deg]."""
         return math.degrees(self.phi)
 
-    def k_eq(self, b: float) -> float:
-        """Equivalent pressure-sinkage modulus kc/b + kphi [N/m^(n+2)] for contact width b [m]."""
+    def k_eq(self, b: Real) -> Real:
+        """Equivalent pressure-sinkage modulus kc/b + kphi [N/m^(n+2)] for contact width b [m]
+        (eq. 2.1); a float or an array (:mod:`skidsteer_power.numeric`)."""
         return self.kc / b + self.kphi
 
 

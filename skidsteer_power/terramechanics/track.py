@@ -62,7 +62,7 @@ def track_sinkage(terrain: Terrain, load: ArrayLike, width: ArrayLike, length: A
 def track_sinkage_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) -> Any:  # noqa: E741
     """:func:`track_sinkage` for inputs the caller has checked (W >= 0 finite, b, l > 0): FESS's
     per-command contact (a tenth of a cold solve_point went to the checks)."""
-    return ((w / (b * l)) / (terrain.kc / b + terrain.kphi)) ** (1.0 / terrain.n)
+    return ((w / (b * l)) / terrain.k_eq(b)) ** (1.0 / terrain.n)
 
 
 def compaction_resistance(
@@ -77,7 +77,7 @@ def compaction_resistance_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) ->
     """:func:`compaction_resistance` for inputs the caller has checked (as
     :func:`track_sinkage_unchecked`)."""
     n = terrain.n
-    return b / ((n + 1.0) * (terrain.kc / b + terrain.kphi) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
+    return b / ((n + 1.0) * terrain.k_eq(b) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
 
 
 def _mean_fraction(u: FloatArray) -> FloatArray:

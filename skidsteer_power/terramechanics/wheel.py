@@ -93,7 +93,7 @@ def normal_stress(
     equivalent = np.where(theta >= tm, theta, theta_e)
     depth = np.maximum(np.cos(equivalent) - np.cos(tf), 0.0)
     inside = (theta >= tr) & (theta <= tf)
-    return np.where(inside, r**terrain.n * (terrain.kc / b + terrain.kphi) * depth**terrain.n, 0.0)
+    return np.where(inside, r**terrain.n * terrain.k_eq(b) * depth**terrain.n, 0.0)
 
 
 def shear_displacement(
@@ -165,7 +165,7 @@ def bekker_wheel_sinkage(
     n = terrain.n
     if n >= 3:
         raise InputError(f'eq. 2.32 needs a sinkage exponent n < 3, terrain {terrain.name!r} has {n:g}')
-    k = terrain.kc / b + terrain.kphi
+    k = terrain.k_eq(b)
     return (3.0 * w / (b * (3.0 - n) * k * np.sqrt(2.0 * r))) ** (2.0 / (2.0 * n + 1.0))
 
 

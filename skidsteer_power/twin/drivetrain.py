@@ -3,7 +3,8 @@ the gearbox's internal resistance (Table 7.1, eqs. 7.1-7.4), integrated with the
 implicit so the stiff zero-speed friction stays stable. SI units; sides 0 = left, 1 = right.
 
 J dw_m/dt = K_t i - (b w_m + c tanh(w_m / 1 rad/s)) - T_axle / G, the current from the DES speed
-loop (PI, the gains of ``des/simulator.MotorModel``, 10 A limit, voltage limit 0.9 V_bus - EMF).
+loop (``powertrain/speed_loop.py``, shared with ``des/simulator.MotorModel``: PI, 10 A limit,
+voltage limit 0.9 V_bus - EMF).
 """
 
 from __future__ import annotations
@@ -12,18 +13,17 @@ import math
 
 import numpy as np
 
-from skidsteer_power.des.kinematics import RPM
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.powertrain.speed_loop import (
+    SETPOINT_ACCEL_RAD_S2,
+    current_limits,
+    pi_current,
+    ramp_setpoint,
+    reflected_inertia,
+    speed_loop_gains,
+)
 from skidsteer_power.vehicle import Vehicle
 
-SPEED_LOOP_BANDWIDTH_RAD_S = 60.0
-"""DES speed-loop bandwidth [rad/s], as ``des/simulator.MotorModel`` (ASSUMED there: the real gains
-are in units the sources do not give)."""
-SETPOINT_ACCEL_RAD_S2 = 10.0 * 1000.0 * RPM
-"""Set-point ramp of the DES [rad/s^2 at the motor]: parameter ACCELERATION = 10 rpm/ms, as the
-driver configures it (``des/simulator.default_parameters``)."""
-MAX_MOTOR_RPM = 10000.0
-"""Max. permissible EC-45 speed [rpm] (Appendix B), the driver's set-point limit."""
 FRICTION_SMOOTHING_RAD_S = 1.0
 """Motor speed over which the Coulomb terms change sign (tanh) [rad/s], as nodes/suite.py."""
 TRACK_ASSEMBLY_INERTIA_KG_M2 = 0.015
@@ -60,10 +60,9 @@ class Drivetrain:
         else:
             axle_inertia = vehicle.wheels_per_side * WHEEL_INERTIA_KG_M2 * scale
         self.J = motor.rotor_inertia_kg_m2 + axle_inertia / self.G**2
-        # PI gains of des/simulator.MotorModel: designed on the rotor + half the robot's mass at r
-        j_design = motor.rotor_inertia_kg_m2 + 0.5 * vehicle.mass_kg * r**2 / self.G**2
-        self.kp = SPEED_LOOP_BANDWIDTH_RAD_S * j_design / self.kt
-        self.ki = self.kp * SPEED_LOOP_BANDWIDTH_RAD_S / 4.0
+        # PI gains as des/simulator.MotorModel: designed on the rotor + half the robot's mass at r
+        j_design = motor.rotor_inertia_kg_m2 + reflected_inertia(vehicle.mass_kg, r, self.G)
+        self.kp, self.ki = speed_loop_gains(j_design, self.kt)
         amp = powertrain.amplifier
         self._eta = amp.efficiency
         regen = powertrain.regen_efficiency
@@ -81,7 +80,7 @@ class Drivetrain:
         the terrain's axle torques [N m] at the bus voltage [V] (see :data:`SideFigures`).
 
         Per side, in plain floats (two-element numpy arrays cost more than they save here).
-        Amplifier: ramped set point, PI speed loop, current and voltage limits (des/simulator)."""
+        Amplifier: ramped set point, PI speed loop, current and voltage limits (powertrain/speed_loop)."""
         ramp = SETPOINT_ACCEL_RAD_S2 * dt
         v_max = self.v_fraction * bus_voltage_V
         kp, ki, kt, res, peak, inertia, gear = self.kp, self.ki, self.kt, self.R, self.peak_A, self.J, self.G
@@ -93,16 +92,10 @@ class Drivetrain:
         eta, eta_regen = self._eta, self._eta_regen
         for k in (0, 1):
             omega = omegas[k]
-            set_k = setpoints[k]
-            set_k += min(ramp, max(-ramp, targets[k] - set_k))
-            setpoints[k] = set_k
+            set_k = setpoints[k] = ramp_setpoint(setpoints[k], targets[k], ramp)
             error = set_k - omega
-            integral = min(peak, max(-peak, integrals[k] + ki * error * dt))
-            integrals[k] = integral
-            wanted = kp * error + integral
-            emf = omega / kn
-            upper = min(peak, (v_max - emf) / res)
-            lower = max(-peak, (-v_max - emf) / res)
+            wanted, integrals[k] = pi_current(error, integrals[k], kp, ki, dt, peak)
+            lower, upper = current_limits(omega, v_max, kn, res, peak)
             current = min(upper, max(lower, wanted))
             free = lower < wanted < upper
             # implicit in omega: the PI proportional part (where not limited) and the friction slope

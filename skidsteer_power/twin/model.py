@@ -56,7 +56,7 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.twin.contact import CONTACT_LAWS, Contact
-from skidsteer_power.twin.drivetrain import MAX_MOTOR_RPM, Drivetrain
+from skidsteer_power.twin.drivetrain import Drivetrain
 from skidsteer_power.twin.terrain_field import Patch, TerrainField
 from skidsteer_power.twin.track_contact import TrackContact
 from skidsteer_power.twin.wheel_contact import WheelContact
@@ -199,7 +199,7 @@ class Twin:
             tread_m=self.vehicle.tread_m,
             drive_radius_m=self.r,
             gear_ratio=self.G,
-            max_rpm=MAX_MOTOR_RPM,
+            max_rpm=self.powertrain.motor.max_speed_rad_s / RPM,  # the driver's set-point limit
         )
         self._target = np.array(rpm) * RPM
         self._targets = self._target.tolist()

@@ -119,7 +119,7 @@ class WheelContact(Contact):
         def spread(values: list[float]) -> np.ndarray:  # over the rim nodes (see _geometry)
             return np.repeat(column(values), WHEEL_NODES + 1, axis=1)
 
-        self._wp_stress = spread([r**t.n * (t.kc / b + t.kphi) for t in terrains])
+        self._wp_stress = spread([r**t.n * t.k_eq(b) for t in terrains])
         exponents = {t.n for t in terrains}
         self._wp_n: float | np.ndarray = (
             exponents.pop() if len(exponents) == 1 else spread([t.n for t in terrains])
