@@ -64,7 +64,9 @@ class CompareOptions:
     """vehicle, terrain : as for validate; train, holdout, transfer : bag paths; transfer_terrain /
     transfer_payload_kg : what changed for the transfer bags [-, kg]; work_dir : where the calibrated
     terrain and a payload vehicle file are written (None: a temporary folder); map_cache_dir : power
-    map cache (None: the estimator's default); calibrate_fit : parameters calibrate fits."""
+    map cache (None: the estimator's default); calibrate_fit : parameters calibrate fits;
+    calibrate_fit_at : what calibrate solves the segments at ('setpoints', as the node predicts, or
+    'motion')."""
 
     vehicle: str
     terrain: str
@@ -76,6 +78,7 @@ class CompareOptions:
     work_dir: str | Path | None = None
     map_cache_dir: str | Path | None = None
     calibrate_fit: str = 'kphi,n,c,phi,K'
+    calibrate_fit_at: str = 'setpoints'
 
     def check(self) -> None:
         for label, bags in (
@@ -246,7 +249,12 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
 
     try:
         result, _ = calibrate_bags(
-            options.train, options.vehicle, options.terrain, fit=options.calibrate_fit, holdout=0.0
+            options.train,
+            options.vehicle,
+            options.terrain,
+            fit=options.calibrate_fit,
+            holdout=0.0,
+            fit_at=options.calibrate_fit_at,
         )
     except SkidsteerError as err:
         return None, {'error': str(err)}
@@ -261,6 +269,7 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
             for n, p in report['parameters'].items()
         },
         'optimizer_converged': report['optimizer_converged'],
+        'fit_at': report['fit_at'],
         'at_bound': report.get('at_bound', []),
         'segments_fit': report['segments_fit'],
     }

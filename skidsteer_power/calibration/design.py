@@ -101,7 +101,9 @@ def _candidate_rows(
     vehicle: Any, result: CalibrationResult, free: list[str], candidates: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """(C, 2, p) motor-torque derivatives [N m per z unit] at each candidate, and which solved."""
-    model = Model(vehicle, result.terrain, result.powertrain, candidates[:, 0], candidates[:, 1])
+    model = Model(
+        vehicle, result.terrain, result.powertrain, candidates[:, 0], candidates[:, 1], result.fit_at
+    )
     base, _, ok = model.predict({})
     rows = np.zeros((len(candidates), 2, len(free)))
     for k, name in enumerate(free):
