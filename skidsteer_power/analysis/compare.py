@@ -4,7 +4,8 @@ The baselines (:mod:`skidsteer_power.analysis.baselines`) are fitted on the trai
 motor terminal power; FESS predicts each bag as ``validate`` does (:func:`skidsteer_power.bags.
 validate.predict_bag`: the estimator core fed the bag's commands, so whatever validate predicts from
 by default, compare follows), with the given terrain, with the terrain calibrated on the training
-bags (:func:`skidsteer_power.calibration.calibrate_bags`) and with that calibration plus the online
+bags (:func:`skidsteer_power.calibration.calibrate_bags`, by default fitted at the wheel speed set
+points of the commands, as the node predicts: ``calibrate_fit_at``) and with that calibration plus the online
 correction the estimator core applies (validate's ``online_prediction``). Every model is scored on
 the same samples: the joint_states readings of the hold-out bags with a command in force, each
 held as validate holds it.
