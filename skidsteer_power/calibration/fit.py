@@ -54,7 +54,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import Segment
-from skidsteer_power.errors import InputError
+from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 from skidsteer_power.powertrain.motor import terminal_power
@@ -151,8 +151,16 @@ class Model:
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(motor torque (S, 2) [N m], motor speed (S, 2) [rad/s], converged (S,)) for ``values``."""
         terrain, powertrain = self.with_values(values)
-        if self.fit_at == 'setpoints':
-            return self._predict_setpoints(terrain, powertrain)
+        try:
+            if self.fit_at == 'setpoints':
+                return self._predict_setpoints(terrain, powertrain)
+            return self._predict_motion(terrain, powertrain)
+        except ConvergenceError:  # a trial terrain where FESS's contact has no solution at all
+            nan = np.full((len(self.speed), 2), np.nan)
+            return nan, nan.copy(), np.zeros(len(self.speed), dtype=bool)
+
+    def _predict_motion(self, terrain: Any, powertrain: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`predict`, FESS solved at the measured motion (``speed``, ``yaw``)."""
         sol = FessSolver(self.vehicle, terrain).solve_twist(
             self.speed, self.yaw, x0=self._warm, tol=SOLVE_TOL_N
         )
