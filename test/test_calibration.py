@@ -396,6 +396,11 @@ def test_fit_at_the_motion_stays_available(twin_bag, tmp_path, holdout_segments)
     assert abs(p['holdout_energy_error_after']) < abs(p['holdout_energy_error_before'])
     # reported, not asserted (docs/COMPARE_RESULTS.md): on the hold-out bag the motion fit's terrain
     # predicts the commands to within a few % too; the set-point fit is the one that cannot lose
+    code, text, _ = run_cli(
+        ['calibrate', str(twin_bag), '--vehicle', VEHICLE, '--terrain', 'dry_sand', '--fit-at', 'motion',
+         '--out-terrain', str(tmp_path / 'again.yaml')]
+    )  # fmt: skip
+    assert code == 0 and 'solved at the measured motion' in text  # the table says what was fitted
     motion_error = command_energy_error(load_terrain(out), holdout_segments)
     assert math.isfinite(motion_error)
     print(f'hold-out bag from the command, motion-fitted terrain: {motion_error:+.2%}')

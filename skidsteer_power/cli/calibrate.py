@@ -155,7 +155,8 @@ def _print_human(payload: dict[str, Any]) -> None:
         print(f'warning: {warning}')
     if payload['at_bound']:
         print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
-    print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out')
+    at = 'the set points of their commands' if payload['fit_at'] == 'setpoints' else 'the measured motion'
+    print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out, solved at {at}')
     print(
         'hold-out torque RMSE: '
         f'{payload["torque_rmse_before_Nm"]:.4g} -> {payload["torque_rmse_after_Nm"]:.4g} N m; energy error: '
