@@ -373,6 +373,8 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
     return {
         'vehicle': options.vehicle,
         'terrain': options.terrain,
+        # what FESS predicted from: validate's default ('cmd': the commands' wheel speed set points)
+        'kinematics': _validate_options(options.vehicle, options.terrain, cache).kinematics,
         'train_bags': list(options.train),
         'train_envelope': train_envelope,
         'holdout': holdout_report,
