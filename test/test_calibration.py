@@ -315,18 +315,93 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
         assert b.motor_omega_rad_s == pytest.approx(a.motor_omega_rad_s, rel=1e-9)
 
 
-def test_fit_at_the_motion_predicts_at_the_set_points(calibrated):
-    """Issue 25: the fit uses the measured motion; the same fitted terrain predicting each segment
-    from its command at the wheel speed set points is reported beside it (reference: the bag's
-    measured motor torques and motion, which the twin made without FESS)."""
-    p, _ = calibrated
+@pytest.fixture(scope='module')
+def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list:
+    """Steady segments of a second twin bag (same terrain, seed 5) with commands the training bag
+    never drove, inside its envelope: the hold-out the calibration never sees."""
+    from skidsteer_power.twin import Twin, run_commands, write_bag
+    from skidsteer_power.vehicle import load_vehicle
+
+    commands = []
+    for speed, yaw in ((0.15, 0.0), (0.15, 0.08), (0.15, 0.15), (0.15, 0.25), (0.12, 0.03), (0.18, 0.12)):
+        commands += [Segment(speed, yaw, 3.5), Segment(0.0, 0.0, 0.5)]
+    path = tmp_path_factory.mktemp('holdout') / 'holdout.mcap'
+    write_bag(run_commands(Twin(load_vehicle(VEHICLE), TRUTH, seed=5), commands), path)
+    options = SegmentOptions(settle_s=1.5)
+    segments, _ = find_segments(read_recording(path, options), options)
+    assert len(segments) == 6
+    return segments
+
+
+def command_energy_error(terrain, segments) -> float:
+    """Signed energy error [-] of the set-point prediction from each segment's command (as the node
+    predicts) against the twin's measured motor terminal energy."""
+    from skidsteer_power.calibration.fit import setpoint_check
+    from skidsteer_power.estimator import factory
+
+    vehicle = factory.load_vehicle_config(VEHICLE)
+    measured = np.array([s.motor_torque_Nm for s in segments])
+    every = np.arange(len(segments))
+    check = setpoint_check(
+        vehicle, terrain, factory.powertrain_for(vehicle), segments, measured, every, every
+    )
+    return check['holdout_energy_error']
+
+
+def test_calibrating_never_worsens_the_prediction_from_the_command(calibrated, holdout_segments):
+    """Issue 27: calibrate fits what the node predicts (the torques at the set points of each
+    command), so the hold-out prediction from the command is no worse after than before. Reference:
+    the twin's measured motor power on a bag the fit never read (FESS is not in the twin)."""
+    payload, path = calibrated
+    assert payload['fit_at'] == 'setpoints'
+    assert yaml.safe_load(path.read_text())['calibration']['fit_at'] == 'setpoints'  # the file says so
+    before = command_energy_error(load_terrain('dry_sand'), holdout_segments)
+    after = command_energy_error(load_terrain(path), holdout_segments)
+    assert abs(after) <= abs(before)  # measured +18.8 % -> -0.3 %
+    assert abs(after) <= 0.05
+    # the calibration's own hold-out segments, predicted from their commands: the same (to the
+    # solvers' tolerance: the fit's solve is warm-started, the check's is not)
+    assert abs(payload['holdout_energy_error_after']) <= abs(payload['holdout_energy_error_before'])
+    assert payload['setpoints']['holdout_energy_error'] == pytest.approx(
+        payload['holdout_energy_error_after'], abs=1e-4
+    )
+    print(f'hold-out bag from the command: before {before:+.2%}, after {after:+.2%}')
+
+
+def test_fit_at_the_motion_stays_available(twin_bag, tmp_path, holdout_segments):
+    """``--fit-at motion`` solves the segments at the measured motion (the twin's ground truth); its
+    terrain then predicts the commands through the set points, reported in ``setpoints``."""
+    out = tmp_path / 'motion.yaml'
+    code, stdout, stderr = run_cli(
+        [
+            'calibrate',
+            str(twin_bag),
+            '--vehicle',
+            VEHICLE,
+            '--terrain',
+            'dry_sand',
+            '--fit-at',
+            'motion',
+            '--out-terrain',
+            str(out),
+            '--json',
+        ]
+    )
+    assert code == 0, stderr
+    p = json.loads(stdout)
+    assert p['fit_at'] == 'motion'
     sp = p['setpoints']
     keys = {'torque_rmse_Nm', 'holdout_energy_error', 'speed_error_median', 'yaw_rate_error_median'}
     assert set(sp) == keys | {'limited_segments'}
-    assert sp['limited_segments'] == 0
-    assert sp['speed_error_median'] < 0.05  # measured 1.2 %
-    assert sp['torque_rmse_Nm'] < p['torque_rmse_before_Nm']  # measured 0.064 against 0.099 N m
-    # not asserted, reported (docs/PREDICTION.md): the yaw rate disagrees by a median 122 % (the
-    # twin's wheeled robot turns far less than FESS at the set points says) and the hold-out energy
-    # error is +17 % from the set points against -4 % from the motion: the two do not agree yet on
-    # this bag
+    assert sp['speed_error_median'] < 0.05  # measured 2.1 %
+    assert abs(p['holdout_energy_error_after']) < abs(p['holdout_energy_error_before'])
+    # reported, not asserted (docs/COMPARE_RESULTS.md): on the hold-out bag the motion fit's terrain
+    # predicts the commands to within a few % too; the set-point fit is the one that cannot lose
+    code, text, _ = run_cli(
+        ['calibrate', str(twin_bag), '--vehicle', VEHICLE, '--terrain', 'dry_sand', '--fit-at', 'motion',
+         '--out-terrain', str(tmp_path / 'again.yaml')]
+    )  # fmt: skip
+    assert code == 0 and 'solved at the measured motion' in text  # the table says what was fitted
+    motion_error = command_energy_error(load_terrain(out), holdout_segments)
+    assert math.isfinite(motion_error)
+    print(f'hold-out bag from the command, motion-fitted terrain: {motion_error:+.2%}')

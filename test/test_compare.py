@@ -50,6 +50,10 @@ def test_every_model_is_scored_on_every_split(result):
             assert model_scores['segments'] == 19  # the Table 7.3 sets, each a constant command
     assert Path(result['plot']).stat().st_size > 10_000
     assert result['holdout'][0]['outside_envelope_share'] == 0.0  # the training bag itself
+    # issue 27 round 2: FESS predicts from the commands' set points, as the node does, and is
+    # calibrated on the same footing
+    assert result['kinematics'] == 'cmd'
+    assert result['calibration']['fit_at'] == 'setpoints'
 
 
 def test_linear_baseline_on_its_own_training_bag_has_zero_energy_error(result):

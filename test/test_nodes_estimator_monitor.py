@@ -261,3 +261,44 @@ def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, tmp
         monitor.close()
         for node in (monitor, sender):
             node.destroy_node()
+
+
+def test_view_shows_the_corrected_online_figure(ros_context, tmp_path):
+    """Issue 27: the monitor shows the estimate power_estimator corrects online, over real DDS on sim
+    time. The predictor says 0.1 N m per motor at 12 rad/s (test_estimator_core.FixedPowerPredictor,
+    30 W per side); the motors measure 0.13 N m, so after the 1 s settle the correction maps 0.1 to
+    0.13 N m (test_adaptation) and the corrected terminal power per side is, by hand with the EC-45's
+    datasheet (Appendix B: R = 0.710 ohm, Kt = 0.114 N m / A): T w + R (T / Kt)^2 =
+    0.13 x 12 + 0.710 x (0.13 / 0.114)^2 = 1.560 + 0.923 = 2.483 W."""
+    from test_estimator_core import FixedPowerPredictor
+    from test_nodes_estimator import Rig
+
+    rig = Rig(ros_context, tmp_path, FixedPowerPredictor(60.0), use_sim_time=True, persist=False)
+    frames, draw = frame_recorder()
+    monitor = EnergyMonitor(
+        'view', on_frame=draw, refresh_hz=20.0, namespace=rig.namespace, context=ros_context,
+        parameter_overrides=[Parameter('use_sim_time', value=False)],
+    )  # fmt: skip
+    rig.executor.add_node(monitor)
+    try:
+        for k in range(61):  # 3 s at 20 Hz
+            t = k * 0.05
+            rig.set_clock(t)
+            rig.command(0.2, 0.0)
+            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+            rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+
+        def corrected_shown() -> bool:
+            return abs(monitor.view.get('corrected_left_W') - 2.483) < 0.01
+
+        rig.run_clock(3.05, corrected_shown)
+        assert monitor.view.get('predicted_left_W') == pytest.approx(30.0)  # the open-loop figure beside it
+        assert monitor.view.get('corrected_battery_W') == pytest.approx(
+            rig.node.core.corrected_bus_W(), rel=1e-3
+        )  # the core has had samples since that summary
+        assert monitor.view.get('corrected_battery_W') > 60.0  # the motors need more than predicted
+        rig.spin_until(lambda: any('corrected (online) [W]' in f and '2.5' in f for f in frames))
+    finally:
+        rig.executor.remove_node(monitor)
+        monitor.destroy_node()
+        rig.close()

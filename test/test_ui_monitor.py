@@ -40,7 +40,8 @@ def full_view(**changes) -> MonitorView:
         'measured_right_W': 11.0, 'error_left_W': 2.75, 'error_right_W': -1.5, 'terrain_W': 30.0,
         'internal_W': 10.0, 'terrain_share': 0.75,
         'traction_margin': 0.42, 'traction_warning': 0.0, 'energy_source': 0.0, 'predicted_battery_W': 58.0,
-        'measured_battery_W': 60.0,
+        'measured_battery_W': 60.0, 'corrected_left_W': 43.75, 'corrected_right_W': 11.5,
+        'corrected_battery_W': 59.5,
     }  # fmt: skip
     view = MonitorView(
         mode='free', command=(0.2, 0.1), ready=True, summary=summary,
@@ -58,6 +59,8 @@ def test_render_shows_speeds_currents_power_battery_and_ready():
     assert '2400' in text and '2000' in text  # 251.327 rad/s = 2400 rpm, 209.44 rad/s = 2000 rpm
     assert '1.50' in text and '-0.25' in text  # currents [A]
     assert '41.2' in text and '44.0' in text and '+2.8' in text  # predicted, measured, error [W]
+    assert 'corrected (online) [W]' in text and '43.8' in text  # issue 27: the corrected estimate
+    assert 'corrected 59.5 W' in text
     assert 'charge 80.0 %' in text and '180.0 Wh' in text
     assert 'time to empty 2:02:02' in text  # 7322 s
     assert 'terrain share 75 %' in text and 'energy from measured' in text

@@ -4,7 +4,8 @@ The baselines (:mod:`skidsteer_power.analysis.baselines`) are fitted on the trai
 motor terminal power; FESS predicts each bag as ``validate`` does (:func:`skidsteer_power.bags.
 validate.predict_bag`: the estimator core fed the bag's commands, so whatever validate predicts from
 by default, compare follows), with the given terrain, with the terrain calibrated on the training
-bags (:func:`skidsteer_power.calibration.calibrate_bags`) and with that calibration plus the online
+bags (:func:`skidsteer_power.calibration.calibrate_bags`, by default fitted at the wheel speed set
+points of the commands, as the node predicts: ``calibrate_fit_at``) and with that calibration plus the online
 correction the estimator core applies (validate's ``online_prediction``). Every model is scored on
 the same samples: the joint_states readings of the hold-out bags with a command in force, each
 held as validate holds it.
@@ -64,7 +65,9 @@ class CompareOptions:
     """vehicle, terrain : as for validate; train, holdout, transfer : bag paths; transfer_terrain /
     transfer_payload_kg : what changed for the transfer bags [-, kg]; work_dir : where the calibrated
     terrain and a payload vehicle file are written (None: a temporary folder); map_cache_dir : power
-    map cache (None: the estimator's default); calibrate_fit : parameters calibrate fits."""
+    map cache (None: the estimator's default); calibrate_fit : parameters calibrate fits;
+    calibrate_fit_at : what calibrate solves the segments at ('setpoints', as the node predicts, or
+    'motion')."""
 
     vehicle: str
     terrain: str
@@ -76,6 +79,7 @@ class CompareOptions:
     work_dir: str | Path | None = None
     map_cache_dir: str | Path | None = None
     calibrate_fit: str = 'kphi,n,c,phi,K'
+    calibrate_fit_at: str = 'setpoints'
 
     def check(self) -> None:
         for label, bags in (
@@ -246,7 +250,12 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
 
     try:
         result, _ = calibrate_bags(
-            options.train, options.vehicle, options.terrain, fit=options.calibrate_fit, holdout=0.0
+            options.train,
+            options.vehicle,
+            options.terrain,
+            fit=options.calibrate_fit,
+            holdout=0.0,
+            fit_at=options.calibrate_fit_at,
         )
     except SkidsteerError as err:
         return None, {'error': str(err)}
@@ -261,6 +270,7 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
             for n, p in report['parameters'].items()
         },
         'optimizer_converged': report['optimizer_converged'],
+        'fit_at': report['fit_at'],
         'at_bound': report.get('at_bound', []),
         'segments_fit': report['segments_fit'],
     }
@@ -363,6 +373,8 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
     return {
         'vehicle': options.vehicle,
         'terrain': options.terrain,
+        # what FESS predicted from: validate's default ('cmd': the commands' wheel speed set points)
+        'kinematics': _validate_options(options.vehicle, options.terrain, cache).kinematics,
         'train_bags': list(options.train),
         'train_envelope': train_envelope,
         'holdout': holdout_report,

@@ -8,12 +8,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from skidsteer_power.calibration.fit import DEFAULT_FIT, CalibrationResult, calibrate, parse_fit_list
+from skidsteer_power.calibration.fit import (
+    DEFAULT_FIT,
+    FIT_AT,
+    CalibrationResult,
+    calibrate,
+    parse_fit_list,
+)
 from skidsteer_power.calibration.segments import Segment, SegmentOptions, find_segments, read_recording
 from skidsteer_power.errors import InputError
 
 __all__ = [
     'DEFAULT_FIT',
+    'FIT_AT',
     'CalibrationResult',
     'Segment',
     'SegmentOptions',
@@ -37,8 +44,10 @@ def calibrate_bags(
     min_segment_s: float = 1.0,
     topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', ''),
     extra_types: Mapping[str, str] | None = None,
+    fit_at: str = 'setpoints',
 ) -> tuple[CalibrationResult, list[Segment]]:
-    """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain`` (see fit.py)."""
+    """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain``, solved at
+    ``fit_at`` (:data:`FIT_AT`; see fit.py)."""
     from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits, JointReader
     from skidsteer_power.terramechanics.terrain import load_terrain
@@ -73,5 +82,7 @@ def calibrate_bags(
             f'only {len(segments)} steady segment(s) in {len(bags)} bag(s) (dropped: {dropped}); '
             'calibration needs constant commands held for longer than --settle-s + --min-segment-s'
         )
-    result = calibrate(veh, start, powertrain, segments, names, holdout=holdout, seed=seed, dropped=dropped)
+    result = calibrate(
+        veh, start, powertrain, segments, names, holdout=holdout, seed=seed, dropped=dropped, fit_at=fit_at
+    )
     return result, segments

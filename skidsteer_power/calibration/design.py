@@ -3,9 +3,10 @@
 The fit's information about the free parameters (search coordinates z: ln of the moduli, n and phi
 [deg] themselves) is the Gauss-Newton Fisher information F = J^T J / s^2 of the residual Jacobian J
 [N m per z unit] at the optimum, and the 95 % interval of parameter k is z_k +- t sqrt((F^-1)_kk)
-(fit.py). One more steady segment held at the motion (V [m/s], yaw rate [rad/s]) adds its two
-torque rows j (left, right motor torque derivatives, by forward differences of FESS at the fitted
-terrain): F' = F + j^T j / s^2. The widest interval is the one widest relative to its parameter
+(fit.py). One more steady segment held at (V [m/s], yaw rate [rad/s]) adds its two torque rows j
+(left, right motor torque derivatives, by forward differences of FESS at the fitted terrain, solved
+as the fit was: at that command's wheel speed set points, or with ``fit_at`` 'motion' at that
+motion): F' = F + j^T j / s^2. The widest interval is the one widest relative to its parameter
 (for a log parameter the z interval is already relative). Holds are chosen greedily from a grid
 over the vehicle's command envelope, each the one that most shrinks that parameter's variance given
 the ones chosen before (D_s-optimal for one parameter, sequential design); 2 to :data:`MAX_HOLDS`
@@ -101,7 +102,9 @@ def _candidate_rows(
     vehicle: Any, result: CalibrationResult, free: list[str], candidates: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """(C, 2, p) motor-torque derivatives [N m per z unit] at each candidate, and which solved."""
-    model = Model(vehicle, result.terrain, result.powertrain, candidates[:, 0], candidates[:, 1])
+    model = Model(
+        vehicle, result.terrain, result.powertrain, candidates[:, 0], candidates[:, 1], result.fit_at
+    )
     base, _, ok = model.predict({})
     rows = np.zeros((len(candidates), 2, len(free)))
     for k, name in enumerate(free):

@@ -1,10 +1,20 @@
 """Fit terrain (and drivetrain) parameters to steady segments of the user's own recordings.
 
-The model of a segment is FESS (chapter 6) solved directly at the segment's measured forward speed V
-[m/s] and yaw rate [rad/s], all segments in one batched Newton solve per parameter vector (no map is
-rebuilt), followed by the powertrain (eqs. 7.1-7.4: axle torque / G + internal resistance at the motor
-shaft). Residuals are predicted minus measured motor torque K_t i [N m], both sides of every fit
-segment.
+The model of a segment is what the estimator predicts for it (``fit_at``, :data:`FIT_AT`):
+
+* ``setpoints`` (default, issue 27): FESS driven by the wheel speed set points of the segment's
+  COMMAND (:class:`~skidsteer_power.models.predict.CommandPredictor`, issue 25: the driver's
+  kinematics, the body motion FESS finds for them, the amplifiers' current limit), as power_estimator
+  and ``validate --kinematics cmd`` predict. Fitting what the node predicts is what makes calibrating
+  improve the prediction from the command: a terrain fitted at the measured motion can make it worse
+  (on the twin's wheeled robot FESS turns far more at the set points than the robot does, so the
+  terrain that matches the torques at the measured motion over-predicts them from the command);
+* ``motion``: FESS solved directly at the segment's measured forward speed V [m/s] and yaw rate
+  [rad/s] (the terrain as a terramechanics description of the ground; needs a pose topic).
+
+All segments are solved in one batched Newton solve per parameter vector (no map is rebuilt), followed
+by the powertrain (eqs. 7.1-7.4: axle torque / G + internal resistance at the motor shaft). Residuals
+are predicted minus measured motor torque K_t i [N m], both sides of every fit segment.
 
 Method
 ------
@@ -44,7 +54,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import Segment
-from skidsteer_power.errors import InputError
+from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 from skidsteer_power.powertrain.motor import terminal_power
@@ -82,6 +92,7 @@ INTERNAL_PARAMS: dict[str, ParamSpec] = {
 }
 PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
+FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
 
 def parse_fit_list(text: str) -> list[str]:
@@ -110,8 +121,9 @@ class Model:
     vehicle: Any
     terrain: Any
     powertrain: Any
-    speed: np.ndarray  # (S,) [m/s]
+    speed: np.ndarray  # (S,) [m/s]: the measured motion, or the command with fit_at 'setpoints'
     yaw: np.ndarray  # (S,) [rad/s]
+    fit_at: str = 'motion'
     _warm: np.ndarray | None = field(default=None, init=False)
 
     def start_value(self, name: str) -> float:
@@ -139,6 +151,16 @@ class Model:
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(motor torque (S, 2) [N m], motor speed (S, 2) [rad/s], converged (S,)) for ``values``."""
         terrain, powertrain = self.with_values(values)
+        try:
+            if self.fit_at == 'setpoints':
+                return self._predict_setpoints(terrain, powertrain)
+            return self._predict_motion(terrain, powertrain)
+        except ConvergenceError:  # a trial terrain where FESS's contact has no solution at all
+            nan = np.full((len(self.speed), 2), np.nan)
+            return nan, nan.copy(), np.zeros(len(self.speed), dtype=bool)
+
+    def _predict_motion(self, terrain: Any, powertrain: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`predict`, FESS solved at the measured motion (``speed``, ``yaw``)."""
         sol = FessSolver(self.vehicle, terrain).solve_twist(
             self.speed, self.yaw, x0=self._warm, tol=SOLVE_TOL_N
         )
@@ -151,6 +173,23 @@ class Model:
             torque[:, i] = point.motor_torque_Nm
             omega[:, i] = point.motor_omega_rad_s
         return torque, omega, np.asarray(sol.converged)
+
+    def _predict_setpoints(self, terrain: Any, powertrain: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`predict` for commands (``speed``, ``yaw``) at their wheel speed set points, as
+        :class:`CommandPredictor` predicts them (its dug-in answer where FESS has no steady state is
+        the node's prediction too, so every segment counts as solved)."""
+        from skidsteer_power.models.predict import CommandPredictor
+
+        predictor = CommandPredictor(self.vehicle, terrain, powertrain)
+        setpoints, _ = predictor.setpoints(self.speed, self.yaw)
+        sol = predictor.solver.solve(setpoints, x0=self._warm, tol=SOLVE_TOL_N)
+        self._warm = np.where(sol.limited[:, None], np.nan, sol.state)  # dug in: start from no slip
+        axle_torque, *_ = predictor.electrical(sol.torque, setpoints)
+        torque, omega = np.empty_like(axle_torque), np.empty_like(axle_torque)
+        for i, side in enumerate(('left', 'right')):
+            point = powertrain.motor_side(side, axle_torque[:, i], setpoints[:, i])
+            torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+        return torque, omega, np.ones(len(torque), dtype=bool)
 
 
 def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
@@ -205,6 +244,7 @@ class CalibrationResult:
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fitted values in search coordinates
     residual_variance: float = math.nan  # s^2 [N m^2]
     setpoints: dict[str, float] = field(default_factory=dict)
+    fit_at: str = 'motion'
 
     def as_json(self) -> dict[str, Any]:
         parameters = {}
@@ -244,6 +284,7 @@ class CalibrationResult:
             'optimizer_converged': self.converged,
             'at_bound': sorted(self.at_bound),
             'converged_inside_bounds': self.converged and not self.at_bound,
+            'fit_at': self.fit_at,
             'setpoints': self.setpoints,
         }
 
@@ -348,22 +389,20 @@ def calibrate(
     seed: int = 0,
     ident_tol_Nm: float | None = None,
     dropped: dict[str, int] | None = None,
+    fit_at: str = 'setpoints',
 ) -> CalibrationResult:
-    """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method.
+    """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method
+    and for ``fit_at`` ('setpoints': the commands at their set points, 'motion': the measured motion).
 
     ``ident_tol_Nm`` : RMS torque change [N m] below which a 10 % parameter change counts as
     invisible (None: 0.2 % of the RMS measured torque, at least 1e-3 N m).
     """
     started = time.perf_counter()
+    if fit_at not in FIT_AT:
+        raise InputError(f'--fit-at must be one of {", ".join(FIT_AT)}, not {fit_at!r}')
     segments = list(segments)
     fit_idx, hold_idx = split_holdout(len(segments), holdout, seed)
-    model = Model(
-        vehicle,
-        terrain,
-        powertrain,
-        np.array([s.speed_m_s for s in segments]),
-        np.array([s.yaw_rate_rad_s for s in segments]),
-    )
+    model = segment_model(vehicle, terrain, powertrain, segments, fit_at)
     measured = np.array([s.motor_torque_Nm for s in segments])
     candidates = list(dict.fromkeys([*fit, *[k for k in TERRAIN_PARAMS if k not in fit]]))
     start = {n: model.start_value(n) for n in candidates}
@@ -473,6 +512,13 @@ def calibrate(
     for n in candidates:
         ci95.setdefault(n, None)
     terrain_fit, powertrain_fit = model.with_values(fitted)
+    before_error = _energy_error(segments, hold_idx, base_torque, base_omega, powertrain.motor)
+    after_error = _energy_error(segments, hold_idx, after_torque, after_omega, powertrain_fit.motor)
+    if abs(after_error) > abs(before_error):
+        warnings.append(
+            f'the hold-out energy error grew with calibrating ({before_error:+.1%} -> {after_error:+.1%} '
+            f'at the {fit_at}): the fit segments do not represent the hold-out ones (more, or other, drives)'
+        )
     return CalibrationResult(
         names=names,
         values=values,
@@ -487,12 +533,8 @@ def calibrate(
         segments_holdout=int(hold_idx.size),
         torque_rmse_before_Nm=_rmse(base_torque[err_idx] - measured[err_idx]),
         torque_rmse_after_Nm=_rmse(after_torque[err_idx] - measured[err_idx]),
-        holdout_energy_error_before=_energy_error(
-            segments, hold_idx, base_torque, base_omega, powertrain.motor
-        ),
-        holdout_energy_error_after=_energy_error(
-            segments, hold_idx, after_torque, after_omega, powertrain_fit.motor
-        ),
+        holdout_energy_error_before=before_error,
+        holdout_energy_error_after=after_error,
         residual_rms_Nm=_rmse(r),
         seconds=time.perf_counter() - started,
         terrain=terrain_fit,
@@ -508,7 +550,19 @@ def calibrate(
         after_Nm=after_torque,
         holdout_index=hold_idx,
         setpoints=setpoint_check(vehicle, terrain_fit, powertrain_fit, segments, measured, err_idx, hold_idx),
+        fit_at=fit_at,
     )
+
+
+def segment_model(
+    vehicle: Any, terrain: Any, powertrain: Any, segments: Sequence[Segment], fit_at: str
+) -> Model:
+    """The :class:`Model` of ``segments``: at their commands ('setpoints') or measured motion ('motion')."""
+    if fit_at == 'setpoints':
+        at = np.array([s.command for s in segments], dtype=float).reshape(-1, 2)
+    else:
+        at = np.array([(s.speed_m_s, s.yaw_rate_rad_s) for s in segments], dtype=float).reshape(-1, 2)
+    return Model(vehicle, terrain, powertrain, at[:, 0], at[:, 1], fit_at)
 
 
 def setpoint_check(
@@ -521,7 +575,9 @@ def setpoint_check(
     hold_idx: np.ndarray,
 ) -> dict[str, float]:
     """The fitted terrain and powertrain predicting each segment from its COMMAND, at the wheel
-    speed set points (issue 25), where the fit used the measured motion: the two must agree.
+    speed set points (issue 25), whatever the fit was solved at (with ``fit_at`` 'setpoints' the
+    torques and energy are the fit's own; the motion errors say how far FESS's set-point motion is
+    from the measured one).
 
     Keys: ``torque_rmse_Nm`` (motor torque vs measured, the segments of ``torque_rmse_after_Nm``),
     ``holdout_energy_error`` (signed), ``speed_error_median`` and ``yaw_rate_error_median``

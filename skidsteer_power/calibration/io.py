@@ -15,6 +15,8 @@ skips::
       at_bound: [phi]                  # fitted but stopped at a fit bound: no estimate, no covariance
       bags: [...]; date: ISO 8601 UTC; residual_rms_Nm: fit residual (motor torque RMS)
       start_terrain: name of T0; segments_fit, segments_holdout
+      fit_at: setpoints | motion       # what the segments were solved at (the commands' wheel speed
+                                       # set points, as the estimator predicts, or the measured motion)
       powertrain_parameters / powertrain_covariance: when internal resistance was fitted
 
 The covariance of a log-searched parameter is the delta-method linearization (see ``fit.py``).
@@ -62,6 +64,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'start_terrain': start_name,
         'segments_fit': result.segments_fit,
         'segments_holdout': result.segments_holdout,
+        'fit_at': result.fit_at,
     }
     internal = [n for n in result.names if n in INTERNAL_PARAMS]
     if internal:

@@ -7,7 +7,9 @@ holdout_energy_error_before, holdout_energy_error_after (signed fractions: predi
 of the hold-out segments' motor terminal energy), seconds, residual_rms_Nm, correlation,
 segments_dropped, optimizer_converged (the optimizer's own stop; see at_bound),
 at_bound (fitted parameters pinned at a fit bound: status 'at_bound (lower|upper)', no interval, a
-warning), converged_inside_bounds, suggest (with --suggest), out_terrain, out_powertrain. Method:
+warning), converged_inside_bounds, fit_at ('setpoints' | 'motion', what the segments were solved
+at), setpoints (the fitted terrain predicting each segment from its command, at the wheel speed set
+points), suggest (with --suggest), out_terrain, out_powertrain. Method:
 :mod:`skidsteer_power.calibration.fit`.
 """
 
@@ -28,7 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'calibrate',
         help='fit terrain parameters (and internal resistance) to recorded drives; write a terrain YAML',
         description='Find the steady segments of the bags (constant command, settled motion), solve FESS at '
-        'their measured speed and yaw rate, and fit the identifiable terrain parameters to the measured '
+        'the wheel speed set points of their commands (as the estimator predicts; --fit-at motion: at their '
+        'measured speed and yaw rate), and fit the identifiable terrain parameters to the measured '
         'motor torque by robust least squares, with 95 %% confidence intervals and a hold-out check.',
     )
     parser.add_argument('bags', nargs='+', metavar='BAG', help='rosbag2 bags (MCAP or sqlite3)')
@@ -39,6 +42,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default='kphi,n,c,phi,K',
         help='comma-separated parameters to fit (kphi, kc, n, c, phi, K, '
         'internal = per-side internal resistance b, c); default kphi,n,c,phi,K',
+    )
+    parser.add_argument(
+        '--fit-at',
+        choices=('setpoints', 'motion'),
+        default='setpoints',
+        help='solve the segments at the wheel speed set points of their commands (default: what '
+        'power_estimator and validate predict from) or at the measured motion (needs a pose topic)',
     )
     parser.add_argument(
         '--holdout', type=nonnegative_float, default=0.3, help='fraction of segments held out'
@@ -104,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         min_segment_s=args.min_segment_s,
         topics=(args.cmd_vel_topic, args.joint_states_topic, args.odom_topic),
         extra_types=load_msg_definitions(args.msg),
+        fit_at=args.fit_at,
     )
     result.seconds = time.perf_counter() - started
     name = args.name or out.stem
@@ -144,7 +155,8 @@ def _print_human(payload: dict[str, Any]) -> None:
         print(f'warning: {warning}')
     if payload['at_bound']:
         print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
-    print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out')
+    at = 'the set points of their commands' if payload['fit_at'] == 'setpoints' else 'the measured motion'
+    print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out, solved at {at}')
     print(
         'hold-out torque RMSE: '
         f'{payload["torque_rmse_before_Nm"]:.4g} -> {payload["torque_rmse_after_Nm"]:.4g} N m; energy error: '

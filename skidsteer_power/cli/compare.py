@@ -1,12 +1,14 @@
 """``skidsteer-power compare BAG... --vehicle V --terrain T [--holdout BAG...]``: FESS against the
 simple models a user would fit (issue 27; :mod:`skidsteer_power.apps.compare`).
 
-JSON keys: vehicle, terrain, train_bags, train_envelope {max_speed_m_s, max_yaw_rate_rad_s},
+JSON keys: vehicle, terrain, kinematics (what FESS predicted from: validate's default, 'cmd' = the
+commands' wheel speed set points), train_bags, train_envelope {max_speed_m_s, max_yaw_rate_rad_s},
 holdout [{bag, split, outside_envelope_share, max_speed_m_s, max_yaw_rate_rad_s}], transfer,
-calibration, baselines, splits {same_range | extrapolation | transfer: {bags, models {linear,
-gazebo_cmd_vel, icr_rls_online, fess, fess_online, fess_calibrated, fess_calibrated_online:
-{energy_error_pct, power_rmse_W, median_abs_segment_error_pct, energy_predicted_J,
-energy_measured_J, segments}}}}, goal {split: {best_baseline, ..., met}}, plot.
+calibration (with fit_at: what calibrate solved the segments at), baselines, splits {same_range |
+extrapolation | transfer: {bags, models {linear, gazebo_cmd_vel, icr_rls_online, fess, fess_online,
+fess_calibrated, fess_calibrated_online: {energy_error_pct, power_rmse_W,
+median_abs_segment_error_pct, energy_predicted_J, energy_measured_J, segments}}}}, goal {split:
+{best_baseline, ..., met}}, plot.
 """
 
 from __future__ import annotations

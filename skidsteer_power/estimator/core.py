@@ -226,6 +226,17 @@ class EstimatorCore:
         assert self.prediction is not None
         return self.adaptation.corrected(self.prediction.motor_torque_Nm)
 
+    def corrected_terminal_W(self) -> tuple[float, float]:
+        """Motor terminal power [W] (left, right) of the corrected prediction, at the predicted motor
+        speeds (validate's ``online_power_*``: :func:`skidsteer_power.bags.online.online_columns`)."""
+        p = self.prediction
+        assert p is not None
+        left, right = (
+            float(terminal_power(self.powertrain.motor, torque, omega))
+            for torque, omega in zip(self.corrected_torque_Nm(), p.motor_omega_rad_s, strict=True)
+        )
+        return left, right
+
     def corrected_bus_W(self) -> float:
         """Battery power [W] of the corrected prediction: the prediction's own plus the change the
         correction makes through the motor and amplifier at the predicted motor speeds (exactly the

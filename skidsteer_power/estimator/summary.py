@@ -10,7 +10,10 @@ back with :func:`summary_from_key_values`.
 Power entries per side are motor terminal (electrical) power [W]: measured = Kt*I*omega + R*I^2,
 predicted = the same for the predicted operating point. ``*_battery_W`` are both sides at the DC
 bus (through the amplifiers), which is what the battery gives. ``error_*_W`` = measured - predicted.
-``energy_source``: 0 measured, 1 predicted, 2 none (see :mod:`skidsteer_power.estimator.energy`).
+``corrected_*_W`` are the prediction with the online correction applied (the estimate the battery
+forecast uses, :meth:`EstimatorCore.corrected_bus_W`; equal to ``predicted_*`` until the correction
+has settled). ``energy_source``: 0 measured, 1 predicted, 2 none (see
+:mod:`skidsteer_power.estimator.energy`).
 ``soc`` and ``remaining_wh`` are as of the last battery update (the node's publish timer, 0.2 s).
 """
 
@@ -61,6 +64,9 @@ SUMMARY_FIELDS: tuple[str, ...] = (
     'energy_source',
     'cmd_vel_stale',
     'joint_states_stale',
+    'corrected_left_W',
+    'corrected_right_W',
+    'corrected_battery_W',
 )
 
 SUMMARY_STATUS_NAME = 'power summary'
@@ -135,6 +141,11 @@ def summary_dict(core: Any, now_s: float) -> dict[str, float]:
     values = dict.fromkeys(SUMMARY_FIELDS, math.nan)
     values.update(_prediction_values(core.prediction))
     values.update(_measured_values(core.comparison))
+    if core.prediction is not None:
+        left, right = core.corrected_terminal_W()
+        values.update(
+            corrected_left_W=left, corrected_right_W=right, corrected_battery_W=core.corrected_bus_W()
+        )
     battery = core.battery
     values.update(
         traction_warning=float(core.traction_warning()),

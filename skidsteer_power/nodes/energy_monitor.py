@@ -10,7 +10,8 @@ Modes
 ``view``  watch only; nothing is published.
 
 Subscribes ``cmd_vel`` (the command shown is the one on the topic, whoever sends it),
-``power/summary`` (diagnostic_msgs/DiagnosticArray, figures by name), ``joint_states``,
+``power/summary`` (diagnostic_msgs/DiagnosticArray, figures by name, among them the prediction
+power_estimator corrects online: ``corrected_*_W``), ``joint_states``,
 ``battery/state``, ``energy/remaining_wh``, ``energy/time_to_empty_s`` and its ``_p10_s`` /
 ``_p90_s`` bounds, ``energy/path_required_wh``, ``energy/path_margin_wh`` (all best effort, so they
 match any publisher); publishes ``cmd_vel`` (Twist, or TwistStamped with ``--stamped``) at

@@ -7,7 +7,8 @@ Modelled on the test robot's own control software (chapter 7.1.3): a case mode (
 yaw rate as inputs), a free mode (Up/Down/Left/Right keys drive the robot like a remote-controlled
 vehicle), a display of the two motors' speeds and currents, a "Ready"/"Not Ready" link indicator, and
 the data saved to a CSV file at the end. Added for energy-aware operation: predicted vs measured
-power per side, battery gauge, time to empty and the traction warning (chapter 7.3.4: the robot got
+power per side, the prediction as power_estimator corrects it online (issue 27: the figure its battery
+forecast uses), battery gauge, time to empty and the traction warning (chapter 7.3.4: the robot got
 stuck in tight turns on sand).
 """
 
@@ -226,6 +227,12 @@ def _motor_table(view: MonitorView) -> Table:
             '.1f',
             'summary',
         ),
+        (
+            'corrected (online) [W]',
+            [view.get('corrected_left_W'), view.get('corrected_right_W')],
+            '.1f',
+            'summary',
+        ),
         ('measured power [W]', [view.get('measured_left_W'), view.get('measured_right_W')], '.1f', 'summary'),
         ('error meas-pred [W]', [view.get('error_left_W'), view.get('error_right_W')], '+.1f', 'summary'),
     ]
@@ -258,8 +265,9 @@ def _battery_panel(view: MonitorView) -> Panel:
     lines = Text.assemble(
         f'charge {_num(100.0 * soc, ".1f")} %   {_num(view.remaining_wh, ".1f")} Wh   ',
         f'{_num(view.voltage_V, ".1f")} V\n',
-        f'time to empty {format_duration(view.time_to_empty_s)}{_tte_band(view)}   ',
+        f'time to empty {format_duration(view.time_to_empty_s)}{_tte_band(view)}\n',
         f'battery power: predicted {_num(view.get("predicted_battery_W"), ".1f")} W, ',
+        f'corrected {_num(view.get("corrected_battery_W"), ".1f")} W, ',
         f'measured {_num(view.get("measured_battery_W"), ".1f")} W (energy from {source_name})\n',
         f'command V {_num(view.get("speed_cmd_m_s"), ".2f")} m/s, yaw rate '
         f'{_num(view.get("yaw_rate_cmd_rad_s"), ".2f")} rad/s -> predicted motion '
@@ -339,6 +347,7 @@ CSV_COLUMNS = (
     'predicted_battery_W', 'measured_battery_W', 'terrain_W', 'internal_W',
     'traction_margin', 'traction_warning', 'soc', 'remaining_wh', 'time_to_empty_s', 'energy_source',
     'time_to_empty_p10_s', 'time_to_empty_p90_s',
+    'corrected_left_W', 'corrected_right_W', 'corrected_battery_W',
 )  # fmt: skip
 
 
@@ -353,6 +362,7 @@ def csv_row(view: MonitorView, time_s: float) -> list[str]:
                                 'traction_margin', 'traction_warning')),
         view.soc, view.remaining_wh, view.time_to_empty_s, view.get('energy_source'),
         view.time_to_empty_p10_s, view.time_to_empty_p90_s,
+        *(view.get(k) for k in ('corrected_left_W', 'corrected_right_W', 'corrected_battery_W')),
     ]  # fmt: skip
     return [f'{v:.6g}' if isinstance(v, float) else str(v) for v in values]
 
