@@ -5,7 +5,7 @@ from an SSH disconnect or a closed terminal, SIGQUIT, SIGUSR1/2, SIGALRM, SIGPWR
 signals, ...: :data:`TERMINATING_SIGNALS`) set a flag instead: the command stops its work, zeroes and
 disables the motors, saves what it recorded, and exits. Signals that cannot be caught (SIGKILL, and
 the hardware-fault signals SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGSYS, after which the interpreter
-cannot run a handler) and power loss are why the README asks for the amplifiers' enable line.
+cannot run a handler) and power loss are why docs/RELIABILITY.md asks for the amplifiers' enable line.
 
 A command started in the background of a non-interactive shell inherits SIGINT as *ignored*, so
 relying on KeyboardInterrupt alone would leave it unstoppable by Ctrl-C-style signals and a SIGTERM

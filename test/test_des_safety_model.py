@@ -22,7 +22,7 @@ rules after every poll period:
 
 Each rule fails on a copy of the code with its fault planted (watchdog 5x slower, watchdog removed,
 acceleration limit removed, ``stop_both_on_link_loss`` ignored), on every seed tried: the table is
-in the README's Reliability section.
+in docs/RELIABILITY.md ("Planted faults").
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ running, or a side would have to slip more than :data:`~skidsteer_power.models.f
 the answer is the robot dug in: V = 0, w_z = 0, the wheels turning at their set points with the
 shear torque of the spinning contacts, ``limited`` and a ``reason``. That is a traction limit, or a
 tight turn with one side near standstill, where FESS's element kinematics (eq. 6.6: an element's time
-in the contact grows without bound as its side stops) give no steady state at all (README, "Predicting
-from set points": 3-7 % of each envelope).
+in the contact grows without bound as its side stops) give no steady state at all
+(docs/PREDICTION.md, "Limits of the set-point solve": 3-7 % of each envelope).
 """
 
 from __future__ import annotations
