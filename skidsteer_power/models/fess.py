@@ -305,6 +305,14 @@ class Problem:
         return c.centre + fwd, c.centre + -1.0 * fwd, c.centre + entry, c.centre + -1.0 * entry
 
     @cached_property
+    def centrifugal_terms(self) -> tuple[np.ndarray, ...]:
+        """(P, 1) V, w_z, |V|, |w_z| and -m |V w_z|, -m V w_z [N]: the parts of eq. 3.18 that do not
+        depend on the trial state (:func:`_centrifugal`)."""
+        v, w = self.speed[:, None], self.yaw[:, None]
+        mass = self.vehicle.mass_kg
+        return v, w, np.abs(v), np.abs(w), -mass * np.abs(v * w), -mass * v * w
+
+    @cached_property
     def omega_ref(self) -> np.ndarray:
         """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
         (scales the Newton steps and their trust region)."""
@@ -356,14 +364,13 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centrifugal force components (x, y) on the CG [N], eq. 3.18: m V^2/R (-sin beta, -cos beta)."""
-    v, w = problem.speed[:, None], problem.yaw[:, None]
-    mass = problem.vehicle.mass_kg
+    v, w, abs_v, abs_w, force_x, force_y = problem.centrifugal_terms
     q = np.hypot(v, w * s0)
     # beta = atan(s0 / R); at q = 0 (V = 0) both forces vanish whatever beta
     safe = np.where(q > 0, q, 1.0)
-    sin_b = s0 * np.abs(w) / safe
-    cos_b = np.abs(v) / safe
-    return -mass * np.abs(v * w) * sin_b, -mass * v * w * cos_b
+    sin_b = s0 * abs_w / safe
+    cos_b = abs_v / safe
+    return force_x * sin_b, force_y * cos_b
 
 
 def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
