@@ -99,7 +99,7 @@ def test_run_simulate_cli_reports_a_falling_battery(tmp_path):
     [
         (('--vehicle', 'no_such_robot', '--simulate', '--duration', '1'), 'no_such_robot'),
         (('--terrain', 'lava', '--simulate', '--duration', '1'), 'lava'),
-        (('--duration', '-1'), 'must be > 0'),
+        (('--duration', '-1'), 'duration = -1 s is outside its range'),
     ],
 )
 def test_run_bad_arguments_give_one_line(tmp_path, args, match):

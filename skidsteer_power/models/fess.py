@@ -296,6 +296,23 @@ class Problem:
         return (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
 
     @cached_property
+    def element_x(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each element's x now and at touch-down from the CG [m], forward (omega >= 0) and mirrored:
+        (centre + fwd, centre - fwd, centre + entry, centre - entry), each (P|1, 1, 2|1, G, N|1).
+        :func:`element_displacement` picks per side (the same sums, built once per batch)."""
+        c = self.contact
+        fwd, entry = c.fwd[:, None], c.entry[:, None]
+        return c.centre + fwd, c.centre + -1.0 * fwd, c.centre + entry, c.centre + -1.0 * entry
+
+    @cached_property
+    def centrifugal_terms(self) -> tuple[np.ndarray, ...]:
+        """(P, 1) V, w_z, |V|, |w_z| and -m |V w_z|, -m V w_z [N]: the parts of eq. 3.18 that do not
+        depend on the trial state (:func:`_centrifugal`)."""
+        v, w = self.speed[:, None], self.yaw[:, None]
+        mass = self.vehicle.mass_kg
+        return v, w, np.abs(v), np.abs(w), -mass * np.abs(v * w), -mass * v * w
+
+    @cached_property
     def omega_ref(self) -> np.ndarray:
         """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
         (scales the Newton steps and their trust region)."""
@@ -309,18 +326,19 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     ground point it gripped at touch-down, along the vehicle's current x and y axes, and each
     element's x relative to the turning-centre projection [m].
     """
-    c = problem.contact
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
-    direction = np.where(omega >= 0, 1.0, -1.0)  # omega < 0: entry at the rear (mirrored contact)
+    forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
     half = problem.half_turn_rate / np.maximum(np.abs(omega) * problem.radius, 1e-12)
     dy = problem.centre_offset
     sh, ch = np.sin(half), np.cos(half)
-    sin, one_minus_cos = 2.0 * sh * ch, 2.0 * sh * sh
-    xk = c.centre + direction * c.fwd[:, None] - s0  # element now, relative to the turning centre
-    xe = c.centre + direction * c.entry[:, None] - s0  # where it touched down
+    twice_sh = 2.0 * sh
+    sin, one_minus_cos = twice_sh * ch, twice_sh * sh
+    fwd_plus, fwd_minus, entry_plus, entry_minus = problem.element_x
+    xk = np.where(forward, fwd_plus, fwd_minus) - s0  # element now, relative to the turning centre
+    xe = np.where(forward, entry_plus, entry_minus) - s0  # where it touched down
     # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); 1 - cos written as 2 sin^2 (no cancellation)
     jx = xk - xe + one_minus_cos * xe - dy * sin
     jy = dy * one_minus_cos + xe * sin
@@ -346,14 +364,13 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centrifugal force components (x, y) on the CG [N], eq. 3.18: m V^2/R (-sin beta, -cos beta)."""
-    v, w = problem.speed[:, None], problem.yaw[:, None]
-    mass = problem.vehicle.mass_kg
+    v, w, abs_v, abs_w, force_x, force_y = problem.centrifugal_terms
     q = np.hypot(v, w * s0)
     # beta = atan(s0 / R); at q = 0 (V = 0) both forces vanish whatever beta
     safe = np.where(q > 0, q, 1.0)
-    sin_b = s0 * np.abs(w) / safe
-    cos_b = np.abs(v) / safe
-    return -mass * np.abs(v * w) * sin_b, -mass * v * w * cos_b
+    sin_b = s0 * abs_w / safe
+    cos_b = abs_v / safe
+    return force_x * sin_b, force_y * cos_b
 
 
 def residual(problem: Problem, x: np.ndarray) -> np.ndarray:

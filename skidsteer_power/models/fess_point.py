@@ -123,32 +123,53 @@ def warm_alternatives(cold: np.ndarray, warm: np.ndarray) -> np.ndarray:
     ``warm`` itself and ``cold`` with the previous turning-centre offset (s0 is what the cold guess
     knows least; the side speeds follow the command). None finite: (0, 3)."""
     warm = np.asarray(warm, dtype=float).reshape(3)
-    if not np.all(np.isfinite(warm)):
-        return np.zeros((0, 3))
-    mixed = np.array(cold, dtype=float).reshape(3).copy()
-    mixed[0] = warm[0]
-    return np.stack([mixed, warm])
+    if not (math.isfinite(warm[0]) and math.isfinite(warm[1]) and math.isfinite(warm[2])):
+        return _NO_ALTERNATIVES
+    out = np.empty((2, 3))
+    out[0] = cold
+    out[0, 0] = warm[0]
+    out[1] = warm
+    return out
+
+
+_NO_ALTERNATIVES = np.zeros((0, 3))
 
 
 def _pick_start(
     problem: Problem, x: np.ndarray, h: np.ndarray, trial: np.ndarray, alternatives: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Evaluate ``x`` and every alternative with their perturbations in ONE residual call; keep the
-    one with the smallest residual (forces over the weight, the moment over weight x contact span),
-    an alternative only if that is under 1 / WARM_MARGIN of ``x``'s. Returns (x, steps, residuals
-    (4, 3) of x and its perturbations)."""
+    """Evaluate ``x`` with its perturbations and every alternative (unperturbed) in ONE residual call;
+    keep the one with the smallest residual (forces over the weight, the moment over weight x contact
+    span), an alternative only if that is under 1 / WARM_MARGIN of ``x``'s. Returns (x, steps,
+    residuals (4, 3) of x and its perturbations).
+
+    Only a chosen alternative's perturbations cost a second call: evaluating all of them up front
+    (3 x 4 states) made a warm start slower than a cold one at equal iterations (issue 25,
+    docs/PREDICTION.md "Speed")."""
     omega_ref = float(problem.omega_ref[0])
-    guesses = np.vstack([x[None, :], alternatives])
-    steps = np.repeat(h[None, :], len(guesses), axis=0)
-    steps[:, 1:] = 1e-7 * np.maximum(np.abs(guesses[:, 1:]), omega_ref)
-    states = np.repeat(guesses[:, None, :], 4, axis=1)
-    states[:, _PERTURBED, _UNKNOWNS] += steps
-    states[0] = trial
-    fall = residual(problem, states.reshape(1, -1, 3))[0].reshape(len(guesses), 4, 3)
+    k_alt = len(alternatives)
+    states = np.empty((1, 4 + k_alt, 3))
+    states[0, :4] = trial
+    states[0, 4:] = alternatives
+    fall = residual(problem, states)[0]
     weight = problem.vehicle.mass_kg * 9.81
-    scale = np.array([weight, weight * problem.lateral_scale[0], weight * problem.contact.length_scale])
-    norms = np.max(np.abs(fall[:, 0]) / scale, axis=1)
-    norms = np.where(np.isfinite(norms), norms, np.inf)
-    norms[1:] *= WARM_MARGIN  # a warm guess must beat the physics guess clearly to be taken
-    k = int(np.argmin(norms))
-    return guesses[k].copy(), steps[k], fall[k]
+    scale = (weight, weight * float(problem.lateral_scale[0]), weight * problem.contact.length_scale)
+    k, best = 0, math.inf
+    for row in (0, *range(4, 4 + k_alt)):  # k_alt + 1 rows of 3: floats beat array set-up here
+        a, b, c = abs(fall[row, 0]) / scale[0], abs(fall[row, 1]) / scale[1], abs(fall[row, 2]) / scale[2]
+        if not (a < math.inf and b < math.inf and c < math.inf):  # NaN or inf: never chosen
+            norm = math.inf
+        else:
+            # a warm guess must beat the physics guess clearly to be taken
+            norm = max(a, b, c) * (WARM_MARGIN if row else 1.0)
+        if norm < best:
+            k, best = (row - 3 if row else 0), norm
+    if k == 0:
+        return x, h, fall[:4]
+    start = alternatives[k - 1].copy()
+    steps = h.copy()
+    steps[1:] = 1e-7 * np.maximum(np.abs(start[1:]), omega_ref)
+    perturbed = np.repeat(start[None, None, :], 3, axis=1)
+    perturbed[0, _PERTURBED - 1, _UNKNOWNS] += steps
+    rest = residual(problem, perturbed)[0]
+    return start, steps, np.vstack([fall[3 + k][None, :], rest])

@@ -21,9 +21,12 @@ Where no steady state exists (Newton finds no equilibrium, also after a continua
 running, or a side would have to slip more than :data:`~skidsteer_power.models.fess.SLIP_LIMIT`)
 the answer is the robot dug in: V = 0, w_z = 0, the wheels turning at their set points with the
 shear torque of the spinning contacts, ``limited`` and a ``reason``. That is a traction limit, or a
-tight turn with one side near standstill, where FESS's element kinematics (eq. 6.6: an element's time
-in the contact grows without bound as its side stops) give no steady state at all
-(docs/PREDICTION.md, "Limits of the set-point solve": 3-7 % of each envelope).
+tight turn with one side near standstill (3-7 % of each envelope). There FESS does have roots (a
+residual scan and least squares find them at 41 of test_robot_track's 43 such map nodes), but no
+usable steady state: an inner element turns past half a revolution while in the contact (eqs. 6.3,
+6.5), eq. 6.6's chord displacement then shrinks as the soil is sheared further, and the torque jumps
+by a factor 3 between set points 2 % apart (docs/PREDICTION.md, "The pivot band";
+test/test_fess_pivot_band.py).
 """
 
 from __future__ import annotations
@@ -52,7 +55,8 @@ CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set po
 REASON_OK = ''
 REASON_TRACTION = (
     'no steady state found at these set points (a traction limit, or a tight turn with the inner side near '
-    'standstill where FESS has none); the values are the dug-in state: V = 0, wheels at their set points'
+    'standstill where FESS has no usable one); the values are the dug-in state: V = 0, wheels at their '
+    'set points'
 )
 
 
