@@ -33,6 +33,7 @@ from skidsteer_power.seams import PowerMapLike, PowertrainLike
 if TYPE_CHECKING:
     from skidsteer_power.maps.power_map import MapQuery
     from skidsteer_power.maps.setpoint_map import SetpointMap
+    from skidsteer_power.powertrain.drivetrain import MotorPoint
 
 Pair = tuple[float, float]
 
@@ -148,24 +149,8 @@ class MapPredictor:
         # floats, one side at a time: ~20x faster than numpy on two values (skidsteer_power.numeric)
         left = self.powertrain.motor_side('left', torque[0], omega[0])
         right = self.powertrain.motor_side('right', torque[1], omega[1])
-        return Prediction(
-            speed_m_s=speed,
-            yaw_rate_rad_s=yaw_rate,
-            axle_omega_rad_s=omega,
-            terrain_torque_Nm=torque,
-            terrain_W=(left.terrain_power_W, right.terrain_power_W),
-            internal_W=(left.internal_power_W, right.internal_power_W),
-            motor_omega_rad_s=(left.motor_omega_rad_s, right.motor_omega_rad_s),
-            motor_torque_Nm=(left.motor_torque_Nm, right.motor_torque_Nm),
-            current_A=(left.current_A, right.current_A),
-            electrical_W=(left.terminal_power_W, right.terminal_power_W),
-            bus_W=(left.electrical_power_W, right.electrical_power_W),
-            traction_margin=_scalar(q.traction_margin),
-            clamped=bool(_scalar(q.clamped)),
-            limited=bool(_scalar(q.limited)),
-            achieved_speed_m_s=speed,
-            achieved_yaw_rate_rad_s=yaw_rate,
-        )
+        flags = (_scalar(q.traction_margin), bool(_scalar(q.clamped)), bool(_scalar(q.limited)))
+        return _prediction(speed, yaw_rate, omega, torque, (left, right), flags, (speed, yaw_rate))
 
 
 class SetpointPredictor:
@@ -211,21 +196,39 @@ class SetpointPredictor:
         if left is None or right is None:
             left = self.powertrain.motor_side('left', torque[0], omega[0])
             right = self.powertrain.motor_side('right', torque[1], omega[1])
-        return Prediction(
-            speed_m_s=speed_m_s,
-            yaw_rate_rad_s=yaw_rate_rad_s,
-            axle_omega_rad_s=omega,
-            terrain_torque_Nm=torque,
-            terrain_W=(left.terrain_power_W, right.terrain_power_W),
-            internal_W=(left.internal_power_W, right.internal_power_W),
-            motor_omega_rad_s=(left.motor_omega_rad_s, right.motor_omega_rad_s),
-            motor_torque_Nm=(left.motor_torque_Nm, right.motor_torque_Nm),
-            current_A=(left.current_A, right.current_A),
-            electrical_W=(left.terminal_power_W, right.terminal_power_W),
-            bus_W=(left.electrical_power_W, right.electrical_power_W),
-            traction_margin=q.traction_margin,
-            clamped=q.clamped,
-            limited=q.limited,
-            achieved_speed_m_s=q.speed_m_s,
-            achieved_yaw_rate_rad_s=q.yaw_rate_rad_s,
-        )
+        flags = (q.traction_margin, q.clamped, q.limited)
+        achieved = (q.speed_m_s, q.yaw_rate_rad_s)
+        return _prediction(speed_m_s, yaw_rate_rad_s, omega, torque, (left, right), flags, achieved)
+
+
+def _prediction(
+    speed: float,
+    yaw_rate: float,
+    omega: Pair,
+    torque: Pair,
+    sides: tuple[MotorPoint[float], MotorPoint[float]],
+    flags: tuple[float, bool, bool],
+    achieved: Pair,
+) -> Prediction:
+    """A :class:`Prediction` from the command, the axle speeds [rad/s] and torques [N m], the two
+    sides' motor operating points, (traction margin, clamped, limited) and the achieved (V [m/s],
+    yaw rate [rad/s]): one assembly for the (V, yaw rate) map and the set-point map."""
+    left, right = sides
+    return Prediction(
+        speed_m_s=speed,
+        yaw_rate_rad_s=yaw_rate,
+        axle_omega_rad_s=omega,
+        terrain_torque_Nm=torque,
+        terrain_W=(left.terrain_power_W, right.terrain_power_W),
+        internal_W=(left.internal_power_W, right.internal_power_W),
+        motor_omega_rad_s=(left.motor_omega_rad_s, right.motor_omega_rad_s),
+        motor_torque_Nm=(left.motor_torque_Nm, right.motor_torque_Nm),
+        current_A=(left.current_A, right.current_A),
+        electrical_W=(left.terminal_power_W, right.terminal_power_W),
+        bus_W=(left.electrical_power_W, right.electrical_power_W),
+        traction_margin=flags[0],
+        clamped=flags[1],
+        limited=flags[2],
+        achieved_speed_m_s=achieved[0],
+        achieved_yaw_rate_rad_s=achieved[1],
+    )
