@@ -116,7 +116,7 @@ def test_parameter_file_matches_the_node_and_is_read(tmp_path, cache_dir):
 
     path = Path(__file__).resolve().parents[1] / 'config' / 'estimator.yaml'
     values = yaml.safe_load(path.read_text())['power_estimator']['ros__parameters']
-    assert values == {name: default for name, (default, _) in PARAMETERS.items()}
+    assert values == {spec.name: spec.default for spec in PARAMETERS}
     values.update(terrain='clay', map_cache_dir=cache_dir, persist=False)
     params = tmp_path / 'params.yaml'
     params.write_text(yaml.safe_dump({'power_estimator': {'ros__parameters': values}}))

@@ -1,10 +1,11 @@
-"""rclpy helpers shared by record and replay: message classes by type name, QoS conversion."""
+"""rclpy helpers shared by record, replay and the Foxglove bridge: message classes by type name, QoS
+conversion, discovery of the topics on the graph."""
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING, Any
 
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -18,9 +19,15 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 
 from skidsteer_power.errors import InputError
 
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
 # Queue depth for recording and replay: deep enough that a 2 kHz burst never overwrites a message
 # the other side has not taken yet.
 QUEUE_DEPTH = 1000
+
+# Topics every ROS graph carries; recorded or bridged only when named explicitly.
+GRAPH_TOPICS = frozenset({'/rosout', '/parameter_events'})
 
 
 def message_class(msgtype: str) -> Any:
@@ -80,3 +87,34 @@ def qos_for_stored(profiles: Sequence[Qos]) -> QoSProfile:
         [p.reliability != QosReliability.BEST_EFFORT for p in profiles],
         [p.durability == QosDurability.TRANSIENT_LOCAL for p in profiles],
     )
+
+
+def absolute_topic(name: str) -> str:
+    """``name`` with a leading '/' (ROS resolves a relative name against the root namespace here)."""
+    return name if name.startswith('/') else f'/{name}'
+
+
+def discover_topics(
+    node: Node,
+    wanted: Collection[str],
+    known: Callable[[str], bool],
+    take: Callable[[str, str], None],
+    skip: Callable[[str, str], None],
+) -> None:
+    """Hand every new topic on ``node``'s graph to ``take(name, type)``, or to ``skip(name, reason)``.
+
+    ``wanted``: absolute topic names, or empty for every topic but :data:`GRAPH_TOPICS`. Topics for
+    which ``known(name)`` is true (taken or skipped before) are passed over. A topic published with
+    several types is skipped; so is one whose ``take`` raises InputError (e.g. its type is not
+    installed), with the error as the reason. Called on a timer, it picks topics up as they appear.
+    """
+    for name, types in node.get_topic_names_and_types():
+        if known(name) or (name not in wanted if wanted else name in GRAPH_TOPICS):
+            continue
+        if len(types) != 1:
+            skip(name, f'published with several types ({", ".join(types)})')
+            continue
+        try:
+            take(name, types[0])
+        except InputError as err:
+            skip(name, str(err))

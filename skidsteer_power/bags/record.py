@@ -23,7 +23,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.bags._ros import message_class, qos_for_stored, to_bag_qos
+from skidsteer_power.bags._ros import (
+    GRAPH_TOPICS,
+    absolute_topic,
+    discover_topics,
+    message_class,
+    qos_for_stored,
+    to_bag_qos,
+)
 from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag
@@ -34,8 +41,7 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger(__name__)
 
-# Topics every ROS graph carries; recorded only when named explicitly.
-DEFAULT_EXCLUDED = frozenset({'/rosout', '/parameter_events'})
+DEFAULT_EXCLUDED = GRAPH_TOPICS  # recorded only when named explicitly
 
 
 @dataclass
@@ -61,25 +67,16 @@ class Recorder:
     skipped: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.topics = [t if t.startswith('/') else f'/{t}' for t in self.topics]
+        self.topics = [absolute_topic(t) for t in self.topics]
         self.discover()
         self._timer = self.node.create_timer(0.2, self.discover)
 
-    def _wanted(self, name: str) -> bool:
-        return name in self.topics if self.topics else name not in DEFAULT_EXCLUDED
+    def _known(self, name: str) -> bool:
+        return name in self.recorded or name in self.skipped
 
     def discover(self) -> None:
         """Subscribe to every wanted topic that has appeared on the graph since the last call."""
-        for name, types in self.node.get_topic_names_and_types():
-            if name in self.recorded or name in self.skipped or not self._wanted(name):
-                continue
-            if len(types) != 1:
-                self._skip(name, f'published with several types ({", ".join(types)})')
-                continue
-            try:
-                self._subscribe(name, types[0])
-            except InputError as err:
-                self._skip(name, str(err))
+        discover_topics(self.node, self.topics, self._known, self._subscribe, self._skip)
 
     def _skip(self, name: str, reason: str) -> None:
         self.skipped[name] = reason

@@ -61,13 +61,12 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -82,6 +81,7 @@ from skidsteer_power.des.poller import MAX_MOTOR_RPM, AmplifierPoller, Amplifier
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.nodes.param_spec import ParamSpec, descriptor
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
@@ -99,16 +99,6 @@ def cmd_vel_qos() -> QoSProfile:
     ``qos_overrides./cmd_vel.subscription.reliability: reliable`` (or any other policy) overrides
     it. A new profile each call: rclpy writes the overrides into the profile it is given."""
     return QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One declared parameter: name, default (its type is the parameter's), description, range."""
-
-    name: str
-    default: bool | int | float | str
-    description: str
-    range: tuple[float, float] | None = None
 
 
 PARAMETERS: tuple[ParamSpec, ...] = (
@@ -179,17 +169,6 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 """Every parameter of the node, declared and read from this one table."""
 
 
-def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(description=spec.description)
-    if spec.range is not None:
-        low, high = spec.range
-        if isinstance(spec.default, int) and not isinstance(spec.default, bool):
-            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
-        else:
-            descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
-    return descriptor
-
-
 def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
     """An exception in a callback zeroes and disables both amplifiers before it propagates."""
 
@@ -230,7 +209,7 @@ class DesDriver(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
         self.params = self._read_parameters()  # a bad value is one clear error at once
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.command: DriveCommand | None = None

@@ -32,14 +32,14 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from skidsteer_power.bags._ros import message_class
+from skidsteer_power.bags._ros import GRAPH_TOPICS, absolute_topic, discover_topics, message_class
 from skidsteer_power.bags.writer import message_definition
 from skidsteer_power.errors import InputError
 
 LOG = logging.getLogger(__name__)
 
 DEFAULT_PORT = 8765
-EXCLUDED = frozenset({'/rosout', '/parameter_events'})
+EXCLUDED = GRAPH_TOPICS  # bridged only when named explicitly
 SCHEMA_ENCODING = 'ros2msg'
 MESSAGE_ENCODING = 'cdr'
 
@@ -63,10 +63,6 @@ def _forwarder(entry: Forwarded) -> Any:
         entry.channel.log(data, log_time=time.time_ns())
 
     return on_message
-
-
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith('/') else f'/{topic}'
 
 
 class FoxgloveBridge:
@@ -97,7 +93,7 @@ class FoxgloveBridge:
 
         self._foxglove = foxglove
         self.node = node
-        self.topics = {_absolute(t) for t in topics}
+        self.topics = {absolute_topic(t) for t in topics}
         self.forwarded: dict[str, Forwarded] = {}
         self.skipped: dict[str, str] = {}
         self.context = foxglove.Context()
@@ -128,21 +124,12 @@ class FoxgloveBridge:
         """The TCP port the server listens on."""
         return self.front.port
 
-    def _wanted(self, topic: str) -> bool:
-        return topic in self.topics if self.topics else topic not in EXCLUDED
+    def _known(self, topic: str) -> bool:
+        return topic in self.forwarded or topic in self.skipped
 
     def discover(self) -> None:
         """Bridge every wanted topic that appeared on the graph since the last call."""
-        for topic, types in self.node.get_topic_names_and_types():
-            if topic in self.forwarded or topic in self.skipped or not self._wanted(topic):
-                continue
-            if len(types) != 1:
-                self._skip(topic, f'published with several types ({", ".join(types)})')
-                continue
-            try:
-                self._forward(topic, types[0])
-            except InputError as err:
-                self._skip(topic, str(err))
+        discover_topics(self.node, self.topics, self._known, self._forward, self._skip)
 
     def _skip(self, topic: str, reason: str) -> None:
         self.skipped[topic] = reason
@@ -191,13 +178,13 @@ class ClientPublish:
 
     def __init__(self, node: Node, topics: Sequence[str]) -> None:
         self.node = node
-        self.topics = {_absolute(t) for t in topics}
+        self.topics = {absolute_topic(t) for t in topics}
         self.publishers: dict[tuple[int, int], Any] = {}  # (client id, client channel id) -> publisher
         self.published: dict[str, int] = dict.fromkeys(sorted(self.topics), 0)
         self.refused = 0
 
     def on_client_advertise(self, client: Any, channel: Any) -> None:
-        topic = _absolute(channel.topic)
+        topic = absolute_topic(channel.topic)
         reason = ''
         if topic not in self.topics:
             reason = f'publishing is allowed on {", ".join(sorted(self.topics))} only'

@@ -43,16 +43,19 @@ from skidsteer_power.estimator.path_energy import (
     PathTracker,
     PlannedPath,
 )
+from skidsteer_power.nodes.param_spec import ParamSpec
 from skidsteer_power.nodes.wire import decoder
 
 MAX_READ_POSES = 2_000_000
 """Most poses of a ``plan`` read (about 140 MB of CDR); a larger one is refused unread."""
 _POSE_BYTES = 56  # geometry_msgs/Pose: 7 float64
 
-PARAMETERS: dict[str, tuple[Any, str]] = {
-    'path_speed_m_s': (0.0, 'speed to drive the planned path at [m/s]; 0 = the last commanded speed'),
-    'path_reserve_wh': (0.0, 'energy kept in reserve in energy/path_margin_wh [Wh]'),
-}
+PARAMETERS = (
+    ParamSpec(
+        'path_speed_m_s', 0.0, 'speed to drive the planned path at [m/s]; 0 = the last commanded speed'
+    ),
+    ParamSpec('path_reserve_wh', 0.0, 'energy kept in reserve in energy/path_margin_wh [Wh]'),
+)
 
 
 class PathInputs(NamedTuple):
@@ -73,7 +76,7 @@ class PathEnergyHook:
     """Subscribes ``plan`` on ``node`` and publishes the path energies (module doc)."""
 
     def __init__(self, node: Any, p: dict[str, Any], qos: Any) -> None:
-        for name in PARAMETERS:
+        for name in (spec.name for spec in PARAMETERS):
             if not p[name] >= 0:
                 raise ConfigError(f'{name} must be >= 0, got {p[name]!r}')
         self.node = node

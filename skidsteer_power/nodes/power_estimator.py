@@ -86,7 +86,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import BatteryState, JointState
@@ -108,6 +108,7 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes.param_spec import ParamSpec, descriptor
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
@@ -116,59 +117,69 @@ from skidsteer_power.nodes.wire import PackedJointState, decoder
 
 NODE_NAME = 'power_estimator'
 
-PARAMETERS: dict[str, tuple[Any, str]] = {
-    'vehicle': ('test_robot_track', 'vehicle name in config/vehicles/ or a YAML file'),
-    'terrain': ('dry_sand', 'terrain preset or YAML file; may be changed at run time (swaps maps)'),
-    'kinematics': (
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec('vehicle', 'test_robot_track', 'vehicle name in config/vehicles/ or a YAML file'),
+    ParamSpec('terrain', 'dry_sand', 'terrain preset or YAML file; may be changed at run time (swaps maps)'),
+    ParamSpec(
+        'kinematics',
         'setpoint',
         "how a command is predicted: 'setpoint' (at its wheel speed set points) or 'twist' (as the motion)",
     ),
-    'map_cache_dir': (
+    ParamSpec(
+        'map_cache_dir',
         '',
         'directory of cached maps ("" = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
     ),
-    'state_file': ('', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'),
-    'persist': (True, 'save the energy state and restore it on start'),
-    'initial_soc': (-1.0, 'state of charge at start when nothing is restored [-]; < 0 = full'),
-    'cmd_vel_stamped': (False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
-    'cmd_timeout_s': (0.5, 'cmd_vel older than this is stale [s]'),
-    'joint_timeout_s': (0.5, 'joint_states older than this is stale [s]'),
-    'traction_warning_margin': (0.1, 'warn when the traction margin is at or below this [-]'),
-    'power_filter_s': (5.0, 'time constant of the power filter behind time to empty [s]'),
-    'warn_period_s': (2.0, 'least time between two warnings about rejected inputs [s]'),
-    'max_speed_m_s': (5.0, 'cmd_vel |linear.x| above this is rejected [m/s]'),
-    'max_yaw_rate_rad_s': (10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]'),
-    'max_motor_speed_rad_s': (1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
-    'max_motor_torque_Nm': (5.0, 'joint_states |effort| above this is rejected [N m]'),
-    'publish_period_s': (0.2, 'period of battery and energy topics [s]'),
-    'figure_period_s': (0.05, 'least period of the Float64 figure topics (latest value) [s]'),
-    'diagnostics_period_s': (1.0, 'period of diagnostics [s]'),
-    'save_period_s': (10.0, 'period of energy-state saves [s]'),
-    'qos_depth': (100, 'queue depth of the subscriptions and the per-message outputs'),
-    'input_reliability': (
+    ParamSpec(
+        'state_file', '', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'
+    ),
+    ParamSpec('persist', True, 'save the energy state and restore it on start'),
+    ParamSpec('initial_soc', -1.0, 'state of charge at start when nothing is restored [-]; < 0 = full'),
+    ParamSpec('cmd_vel_stamped', False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
+    ParamSpec('cmd_timeout_s', 0.5, 'cmd_vel older than this is stale [s]'),
+    ParamSpec('joint_timeout_s', 0.5, 'joint_states older than this is stale [s]'),
+    ParamSpec('traction_warning_margin', 0.1, 'warn when the traction margin is at or below this [-]'),
+    ParamSpec('power_filter_s', 5.0, 'time constant of the power filter behind time to empty [s]'),
+    ParamSpec('warn_period_s', 2.0, 'least time between two warnings about rejected inputs [s]'),
+    ParamSpec('max_speed_m_s', 5.0, 'cmd_vel |linear.x| above this is rejected [m/s]'),
+    ParamSpec('max_yaw_rate_rad_s', 10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]'),
+    ParamSpec('max_motor_speed_rad_s', 1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
+    ParamSpec('max_motor_torque_Nm', 5.0, 'joint_states |effort| above this is rejected [N m]'),
+    ParamSpec('publish_period_s', 0.2, 'period of battery and energy topics [s]'),
+    ParamSpec('figure_period_s', 0.05, 'least period of the Float64 figure topics (latest value) [s]'),
+    ParamSpec('diagnostics_period_s', 1.0, 'period of diagnostics [s]'),
+    ParamSpec('save_period_s', 10.0, 'period of energy-state saves [s]'),
+    ParamSpec('qos_depth', 100, 'queue depth of the subscriptions and the per-message outputs'),
+    ParamSpec(
+        'input_reliability',
         'best_effort',
         'cmd_vel / joint_states subscriptions: best_effort (matches reliable and best-effort '
         'publishers) or reliable (matches reliable publishers only)',
     ),
-    'output_qos': ('reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'),
-    # joint_states mapping: empty / 0 = the vehicle file's drivetrain section (JointMap)
-    'left_joints': ('', 'comma-separated joint names of the left side ("" = vehicle file)'),
-    'right_joints': ('', 'comma-separated joint names of the right side ("" = vehicle file)'),
-    'effort_is': ('', 'joint_states effort is "torque" [N m] or "current" [A] ("" = vehicle file)'),
-    'joints_at': ('', 'joint values are at the "motor" shaft or the "wheel" ("" = vehicle file)'),
-    'joint_gear_ratio': (0.0, 'motor turns per wheel turn of the joints [-] (0 = vehicle file)'),
-    'joint_torque_constant_Nm_A': (
+    ParamSpec(
+        'output_qos', 'reliable', 'per-message outputs: reliable, or sensor_data (best effort, depth 5)'
+    ),
+    ParamSpec('left_joints', '', 'comma-separated joint names of the left side ("" = vehicle file)'),
+    ParamSpec('right_joints', '', 'comma-separated joint names of the right side ("" = vehicle file)'),
+    ParamSpec('effort_is', '', 'joint_states effort is "torque" [N m] or "current" [A] ("" = vehicle file)'),
+    ParamSpec('joints_at', '', 'joint values are at the "motor" shaft or the "wheel" ("" = vehicle file)'),
+    ParamSpec('joint_gear_ratio', 0.0, 'motor turns per wheel turn of the joints [-] (0 = vehicle file)'),
+    ParamSpec(
+        'joint_torque_constant_Nm_A',
         0.0,
         'motor torque constant for a current effort [N m/A] (0 = vehicle file)',
     ),
-    'adaptation': (True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
-    'adaptation_memory_s': (10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
-    'adaptation_terrain_memory_s': (
+    ParamSpec('adaptation', True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
+    ParamSpec('adaptation_memory_s', 10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
+    ParamSpec(
+        'adaptation_terrain_memory_s',
         60.0,
         'memory of the terrain scale that carries over between commands (path energy) [s]',
     ),
-    **PATH_PARAMETERS,
-}
+    *PATH_PARAMETERS,
+)
+
+PARAMETER_NAMES = frozenset(spec.name for spec in PARAMETERS)
 
 INPUT_RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT, 'reliable': ReliabilityPolicy.RELIABLE}
 OUTPUT_QOS = ('reliable', 'sensor_data')
@@ -209,9 +220,9 @@ class PowerEstimator(QuietNode):
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
-        for name, (default, description) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=description))
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
+        p = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
         self._lock = threading.Lock()
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
@@ -590,7 +601,7 @@ class PowerEstimator(QuietNode):
                 if self._terrain_worker is not None and self._terrain_worker.is_alive():
                     return SetParametersResult(successful=False, reason='a terrain change is in progress')
                 self._start_terrain_change(param.value)
-            elif param.name in PARAMETERS and param.name != 'terrain':
+            elif param.name in PARAMETER_NAMES and param.name != 'terrain':
                 return SetParametersResult(successful=False, reason=f'{param.name} is read at start only')
         return SetParametersResult(successful=True)
 

@@ -1,0 +1,103 @@
+"""Render the parameter files and the parameter tables from the nodes' specs (module
+:mod:`skidsteer_power.nodes.param_spec`): config/des_driver.yaml, config/estimator.yaml and the tables
+between the ``<!-- params:NODE -->`` markers of docs/INTERFACES.md.
+
+    python -m skidsteer_power.nodes.param_files          # rewrite them from the specs
+    python -m skidsteer_power.nodes.param_files --check  # exit 1 if a shipped file differs
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NamedTuple
+
+from skidsteer_power.nodes import des_driver, power_estimator
+from skidsteer_power.nodes.param_spec import ParamSpec, render_table, render_yaml, replace_between
+
+ROOT = Path(__file__).resolve().parents[2]
+DOC = Path('docs/INTERFACES.md')
+
+
+class NodeParams(NamedTuple):
+    node: str
+    specs: Sequence[ParamSpec]
+    yaml_file: Path  # relative to the source tree
+    header: str
+
+
+DES_DRIVER_HEADER = """\
+# Default parameters of the des_driver node, rendered from its spec (PARAMETERS in
+# skidsteer_power/nodes/des_driver.py) by `python -m skidsteer_power.nodes.param_files`; edit the spec.
+# ROS 2 parameter-file format:
+#   des_driver --ros-args --params-file config/des_driver.yaml
+# The launch file passes it (then vehicle, left_port and right_port from its arguments); copy it and
+# edit for your robot. test/test_param_spec.py checks that this file is the spec's rendering.
+# cmd_vel is read best effort (matches reliable and best-effort publishers); to force reliable, add
+#   qos_overrides:
+#     /cmd_vel:
+#       subscription:
+#         reliability: reliable
+"""
+
+ESTIMATOR_HEADER = """\
+# Default parameters of the power_estimator node, rendered from its spec (PARAMETERS in
+# skidsteer_power/nodes/power_estimator.py) by `python -m skidsteer_power.nodes.param_files`; edit the
+# spec. ROS 2 parameter-file format:
+#   power_estimator --ros-args --params-file config/estimator.yaml
+# test/test_param_spec.py checks that this file is the spec's rendering.
+# Every publisher and subscription takes the standard QoS overrides, for example:
+#   qos_overrides:
+#     /joint_states:
+#       subscription:
+#         reliability: reliable
+"""
+
+NODES = (
+    NodeParams(
+        des_driver.NODE_NAME, des_driver.PARAMETERS, Path('config/des_driver.yaml'), DES_DRIVER_HEADER
+    ),
+    NodeParams(
+        power_estimator.NODE_NAME, power_estimator.PARAMETERS, Path('config/estimator.yaml'), ESTIMATOR_HEADER
+    ),
+)
+
+
+def markers(node: str) -> tuple[str, str]:
+    """The marker lines around ``node``'s table in the doc."""
+    return (
+        f'<!-- params:{node} (generated: python -m skidsteer_power.nodes.param_files) -->',
+        '<!-- /params -->',
+    )
+
+
+def rendered(root: Path = ROOT) -> dict[Path, str]:
+    """Every generated file (relative path) and the text it should have."""
+    out = {entry.yaml_file: render_yaml(entry.node, entry.specs, entry.header) for entry in NODES}
+    doc = (root / DOC).read_text(encoding='utf-8')
+    for entry in NODES:
+        doc = replace_between(doc, *markers(entry.node), render_table(entry.specs))
+    out[DOC] = doc
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--check', action='store_true', help='exit 1 if a shipped file differs')
+    args = parser.parse_args(argv)
+    stale = []
+    for path, text in rendered().items():
+        if (ROOT / path).read_text(encoding='utf-8') != text:
+            stale.append(str(path))
+            if not args.check:
+                (ROOT / path).write_text(text, encoding='utf-8')
+    if args.check and stale:
+        print(f'not the specs rendering: {", ".join(stale)}', file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

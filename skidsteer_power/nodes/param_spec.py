@@ -1,0 +1,111 @@
+"""Node parameters declared once: a typed spec per parameter (name, default and so type, description
+with its unit in brackets, optional range), from which the node declares them (with ROS ranges),
+the shipped parameter files (config/*.yaml) and the tables of docs/INTERFACES.md are rendered.
+
+``scripts/gen_params.py`` writes the files; test/test_param_spec.py checks the shipped ones equal
+the rendering, so a parameter is added or changed in its node's ``PARAMETERS`` only.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+_UNIT = re.compile(r'\[([^\]]+)\]')
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One declared parameter: name, default (its type is the parameter's), description, range."""
+
+    name: str
+    default: bool | int | float | str
+    description: str
+    range: tuple[float, float] | None = None
+
+    @property
+    def type_name(self) -> str:
+        """The ROS parameter type of the default: bool, integer, double or string."""
+        kind = type(self.default)
+        return {bool: 'bool', int: 'integer', float: 'double', str: 'string'}[kind]
+
+    @property
+    def unit(self) -> str:
+        """The unit written in the description's first [...] ('' if none or not a number), e.g. 'rad/s'."""
+        if isinstance(self.default, (bool, str)):
+            return ''
+        found = _UNIT.search(self.description)
+        return found.group(1) if found else ''
+
+    def range_text(self) -> str:
+        """'lo .. hi' of the range in %g, or ''."""
+        return '' if self.range is None else f'{self.range[0]:g} .. {self.range[1]:g}'
+
+
+def descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    """The ROS descriptor of ``spec``: its description and, with a range, an integer or float range
+    that ROS enforces on every set."""
+    result = ParameterDescriptor(description=spec.description)
+    if spec.range is not None:
+        low, high = spec.range
+        if isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            result.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+        else:
+            result.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
+    return result
+
+
+def yaml_value(value: bool | int | float | str) -> str:
+    """``value`` as a YAML scalar that loads back to the same Python value and type."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if value == '':
+        return "''"
+    plain = re.fullmatch(r'[A-Za-z_/][A-Za-z0-9_./-]*', value) and value.lower() not in {
+        'true', 'false', 'yes', 'no', 'on', 'off', 'null', 'none', '~',
+    }  # fmt: skip
+    return value if plain else json.dumps(value)
+
+
+def render_yaml(node: str, specs: Sequence[ParamSpec], header: str) -> str:
+    """The ROS 2 parameter file of ``node``: ``header`` (comment lines), then every parameter with its
+    default and a comment with its description and range."""
+    lines = [*header.rstrip('\n').split('\n'), f'{node}:', '  ros__parameters:']
+    for spec in specs:
+        comment = spec.description + (f' [{spec.range_text()}]' if spec.range else '')
+        lines.append(f'    {spec.name}: {yaml_value(spec.default)}  # {comment}')
+    return '\n'.join(lines) + '\n'
+
+
+def render_table(specs: Sequence[ParamSpec]) -> str:
+    """A Markdown table of ``specs``: name, type, default, range, unit, description."""
+    rows = [
+        '| parameter | type | default | range | unit | description |',
+        '| --- | --- | --- | --- | --- | --- |',
+    ]
+    for spec in specs:
+        cells = (
+            f'`{spec.name}`',
+            spec.type_name,
+            f'`{yaml_value(spec.default)}`',
+            spec.range_text(),
+            spec.unit,
+            spec.description.replace('|', '\\|'),
+        )
+        rows.append('| ' + ' | '.join(cells) + ' |')
+    return '\n'.join(rows) + '\n'
+
+
+def replace_between(text: str, begin: str, end: str, body: str) -> str:
+    """``text`` with what lies between the marker lines ``begin`` and ``end`` replaced by ``body``."""
+    head, found, rest = text.partition(begin + '\n')
+    _, found_end, tail = rest.partition(end)
+    if not found or not found_end:
+        raise ValueError(f'markers {begin!r} ... {end!r} not found')
+    return head + begin + '\n' + body + end + tail

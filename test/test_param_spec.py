@@ -1,0 +1,68 @@
+"""Node parameters declared once (nodes/param_spec.py): the shipped parameter files and the doc
+tables are the rendering of the nodes' specs, and the rendering loads back to the specs' defaults."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from skidsteer_power.nodes import param_files
+from skidsteer_power.nodes.param_spec import (
+    ParamSpec,
+    descriptor,
+    render_table,
+    render_yaml,
+    replace_between,
+    yaml_value,
+)
+
+
+def test_shipped_parameter_files_and_doc_tables_are_the_specs_rendering():
+    for path, text in param_files.rendered().items():
+        shipped = (param_files.ROOT / path).read_text(encoding='utf-8')
+        assert shipped == text, f'{path} is stale: run python -m skidsteer_power.nodes.param_files'
+    assert param_files.main(['--check']) == 0
+
+
+@pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
+def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry):
+    """Independent of the renderer: the YAML parser reads back every default, type included."""
+    shipped = yaml.safe_load((param_files.ROOT / entry.yaml_file).read_text(encoding='utf-8'))
+    values = shipped[entry.node]['ros__parameters']
+    assert list(values) == [spec.name for spec in entry.specs]
+    for spec in entry.specs:
+        assert values[spec.name] == spec.default and type(values[spec.name]) is type(spec.default), spec.name
+
+
+@pytest.mark.parametrize('value', ['', 'true', 'on', 'No', '1.5', '~', 'a: b', "it's", '/dev/ttyUSB0', 'x y'])
+def test_yaml_value_round_trips_strings_yaml_would_read_as_something_else(value):
+    assert yaml.safe_load(f'k: {yaml_value(value)}')['k'] == value
+
+
+def test_ranges_become_ros_ranges_and_docs_of_the_right_kind():
+    count = ParamSpec('status_every', 5, 'read the status every N polls [-]', (1, 1000))
+    rate = ParamSpec('poll_rate_hz', 50.0, 'poll rate [Hz]', (0.1, 1000.0))
+    name = ParamSpec('frame_id', '', 'frame of joint_states')
+    d = descriptor(count)
+    assert (d.integer_range[0].from_value, d.integer_range[0].to_value) == (
+        1,
+        1000,
+    ) and not d.floating_point_range
+    d = descriptor(rate)
+    assert d.floating_point_range[0].from_value == pytest.approx(0.1) and not d.integer_range
+    assert not descriptor(name).integer_range and not descriptor(name).floating_point_range
+    assert (count.type_name, rate.type_name, name.type_name) == ('integer', 'double', 'string')
+    assert (rate.unit, name.unit) == ('Hz', '')
+    table = render_table([rate, name])
+    assert '| `poll_rate_hz` | double | `50.0` | 0.1 .. 1000 | Hz | poll rate [Hz] |' in table
+    assert "| `frame_id` | string | `''` |  |  | frame of joint_states |" in table
+    text = render_yaml('n', [rate], '# header')
+    assert (
+        text == '# header\nn:\n  ros__parameters:\n    poll_rate_hz: 50.0  # poll rate [Hz] [0.1 .. 1000]\n'
+    )
+
+
+def test_replace_between_needs_both_markers():
+    assert replace_between('a\n<b>\nold\n</b>\n', '<b>', '</b>', 'new\n') == 'a\n<b>\nnew\n</b>\n'
+    with pytest.raises(ValueError, match='markers'):
+        replace_between('no markers here', '<b>', '</b>', 'x')
