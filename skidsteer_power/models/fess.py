@@ -45,6 +45,7 @@ from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.fess_contact import Contact, track_contact, wheel_contact
 from skidsteer_power.models.fess_contact import _free_wheel_table as _free_wheel_table
+from skidsteer_power.models.fess_steady import reshape_state, to_steady_state
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult
 from skidsteer_power.terramechanics.soil import shear_fraction
@@ -62,7 +63,6 @@ RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neigh
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
 STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
 
-LEFT, RIGHT = 0, 1
 SIDE_Y_SIGN = np.array([1.0, -1.0])  # left side at y = +B/2, right side at y = -B/2
 
 
@@ -624,52 +624,6 @@ def _mirror_reverse(sol: TwistSolution, reverse: np.ndarray, v: np.ndarray, w: n
     return sol
 
 
-def to_steady_state(sol: TwistSolution, turn_radius: np.ndarray, solve_time: float) -> SteadyState:
-    """Convert left/right results to the outer/inner :class:`SteadyState` (R >= 0: outer = right)."""
-    outer_left = turn_radius < 0
-    o = np.where(outer_left, LEFT, RIGHT)
-    i = 1 - o
-    rows = np.arange(len(o))
-
-    def pick(a: np.ndarray, side: np.ndarray) -> np.ndarray:
-        return a[rows, side]
-
-    power = sol.power
-    return SteadyState(
-        speed_m_s=sol.speed,
-        turn_radius_m=turn_radius,
-        s0_m=sol.s0,
-        omega_outer_rad_s=pick(sol.omega, o),
-        omega_inner_rad_s=pick(sol.omega, i),
-        torque_outer_Nm=pick(sol.torque, o),
-        torque_inner_Nm=pick(sol.torque, i),
-        power_outer_W=pick(power, o),
-        power_inner_W=pick(power, i),
-        slip_outer=pick(sol.slip, o),
-        slip_inner=pick(sol.slip, i),
-        thrust_outer_N=pick(sol.thrust, o),
-        thrust_inner_N=pick(sol.thrust, i),
-        sinkage_m=sol.sinkage,
-        traction_margin=sol.traction_margin,
-        converged=sol.converged,
-        model='fess',
-        extra={
-            'lateral_outer_N': pick(sol.lateral, o),
-            'lateral_inner_N': pick(sol.lateral, i),
-            'solve_time_s': np.full(len(o), solve_time),
-            'iterations': np.asarray(sol.iterations, dtype=float),
-        },
-    )
-
-
-def _reshape(state: SteadyState, shape: tuple[int, ...]) -> SteadyState:
-    for name, value in list(vars(state).items()):
-        if isinstance(value, np.ndarray) and value.ndim == 1:
-            setattr(state, name, value.reshape(shape))
-    state.extra = {k: v.reshape(shape) for k, v in state.extra.items()}
-    return state
-
-
 def solve(
     vehicle: Vehicle,
     terrain: Terrain,
@@ -705,7 +659,7 @@ def solve(
     except ConvergenceError:
         if raise_on_failure:
             raise
-        return _reshape(SteadyState.unsolved(v, r, 'fess'), shape)
+        return reshape_state(SteadyState.unsolved(v, r, 'fess'), shape)
     elapsed = time.perf_counter() - start
     state = to_steady_state(sol, r, elapsed)
     if raise_on_failure and not np.all(state.converged):
@@ -714,4 +668,4 @@ def solve(
             f'FESS did not converge at V = {v[k]:.6g} m/s, R = {r[k]:.6g} m on {terrain.name!r} '
             f'(residuals {np.array2string(sol.residual[k], precision=3)})'
         )
-    return _reshape(state, shape)
+    return reshape_state(state, shape)
