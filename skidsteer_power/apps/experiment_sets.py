@@ -348,7 +348,8 @@ def summary_table(results: list[dict[str, Any]]) -> str:
             f'| {r["vehicle"]} | {r["twin"]["energy_J"]:.0f} | {m["energy_error_pct"]:+.1f} | '
             f'{r["energy_error_motion_pct"]:+.1f} | {m["torque_left"]["mae_Nm"]:.3f} / '
             f'{m["torque_right"]["mae_Nm"]:.3f} | {left:.1f} / {right:.1f}{met} | '
-            f'{np.median(real) if real else math.nan:.0f} ({len(real)} cells) | {fess_text} | '
+            f'{f"{np.median(real):.0f} ({len(real)} cells)" if real else "no Appendix D cells"} | '
+            f'{fess_text} | '
             f'{sum(s["stuck"] for s in r["sets"])} |'
         )
     return '\n'.join(lines)
