@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import _number, add_json_flag, emit, print_json
+from skidsteer_power.cli.common import _number, add_json_flag, add_msg_option, emit, print_json
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     BAG_TIME_S,
@@ -22,13 +22,7 @@ from skidsteer_power.terramechanics.ranges import (
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        '--msg',
-        action='append',
-        default=[],
-        metavar='PATH',
-        help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
-    )
+    add_msg_option(parser)
     parser.add_argument(
         '--salvage',
         action='store_true',

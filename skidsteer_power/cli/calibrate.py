@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float
+from skidsteer_power.cli.common import add_json_flag, add_msg_option, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
 
@@ -73,13 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help='odometry or ground-truth pose topic (default: a *ground_truth* topic if any, else /odom)',
     )
     parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
-    parser.add_argument(
-        '--msg',
-        action='append',
-        default=[],
-        metavar='PATH',
-        help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
-    )
+    add_msg_option(parser)
     parser.add_argument(
         '--suggest',
         action='store_true',

@@ -117,3 +117,14 @@ def native_stdout_to_stderr() -> Iterator[None]:
 
 def add_json_flag(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--json', action='store_true', help='print machine-readable JSON (SI units)')
+
+
+def add_msg_option(parser: argparse.ArgumentParser) -> None:
+    """``--msg PATH`` (repeatable): message definitions for types a bag does not define."""
+    parser.add_argument(
+        '--msg',
+        action='append',
+        default=[],
+        metavar='PATH',
+        help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
+    )

@@ -22,11 +22,9 @@ from typing import Any
 from skidsteer_power.cli.common import add_json_flag, emit
 from skidsteer_power.maps.setpoint_map import SetpointQuery, load_or_build
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
-from skidsteer_power.terramechanics.ranges import SPEED_M_S, Range
+from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, SPEED_M_S
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
-
-YAW_RATE_RAD_S = Range('yaw rate', 0.0, 10.0, 'rad/s', symmetric=True)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,7 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         '--speed', required=True, type=SPEED_M_S.arg(), help=SPEED_M_S.help('commanded speed V')
     )
     parser.add_argument(
-        '--yaw-rate', required=True, type=YAW_RATE_RAD_S.arg(), help=YAW_RATE_RAD_S.help('commanded yaw rate')
+        '--yaw-rate',
+        required=True,
+        type=COMMAND_YAW_RATE_RAD_S.arg(),
+        help=COMMAND_YAW_RATE_RAD_S.help('commanded yaw rate'),
     )
     parser.add_argument(
         '--direct',

@@ -109,6 +109,7 @@ WHEELBASE_M = Range('wheelbase', 0.0, 20.0, 'm', positive=True)
 # K_x / K of a track: a belt in series with the soil adds compliance, never takes it away
 LONGITUDINAL_SHEAR_RATIO = Range('track_longitudinal_shear_ratio', 1.0, 100.0, '')
 YAW_RATE_RAD_S = Range('yaw rate', 0.0, 20.0, 'rad/s', positive=True)  # robot <= 2 rad/s
+COMMAND_YAW_RATE_RAD_S = Range('yaw rate', 0.0, 10.0, 'rad/s', symmetric=True)  # a signed command
 YAW_INERTIA_KG_M2 = Range('yaw inertia', 0.0, 1e6, 'kg m^2', positive=True)
 
 # Amounts of work (issue 28): every input that sets how long a command runs or how much memory it
