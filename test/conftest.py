@@ -74,3 +74,21 @@ def rig_factory(ros_context, tmp_path):
     yield make
     for rig in rigs:
         rig.close()
+
+
+@pytest.fixture
+def strong_motor_vehicle(tmp_path) -> Path:
+    """test_robot_track with its powertrain's motor overridden to K_t = 0.228 N m/A (2 x the EC-45's
+    0.114, Appendix B line 12): a vehicle file whose motor differs from the built-in one."""
+    from skidsteer_power import resources
+
+    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
+    vehicle = tmp_path / 'strong_motor.yaml'
+    vehicle.write_text(
+        base.replace(
+            'powertrain: {preset: test_robot}',
+            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
+        ),
+        encoding='utf-8',
+    )
+    return vehicle

@@ -83,20 +83,10 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
         assert moved > 0 and moved == pytest.approx(integral, rel=0.1)
 
 
-def test_published_effort_uses_the_vehicles_motor(ros_context, pair, tmp_path):
+def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_motor_vehicle):
     """effort = K_t I with the K_t of the vehicle's powertrain (here 0.228 N m/A = 2 x the EC-45's
     0.114, Appendix B line 12), not a built-in EC-45."""
-    from skidsteer_power import resources
-
-    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
-    vehicle = tmp_path / 'strong_motor.yaml'
-    vehicle.write_text(
-        base.replace(
-            'powertrain: {preset: test_robot}',
-            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
-        ),
-        encoding='utf-8',
-    )
+    vehicle = strong_motor_vehicle
     harness = Harness(ros_context, pair, vehicle=str(vehicle))
     try:
         harness.twist = (0.2, 0.0)

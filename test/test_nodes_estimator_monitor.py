@@ -224,22 +224,12 @@ def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(grap
     monitor.close()
 
 
-def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, tmp_path):
+def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, strong_motor_vehicle):
     """joint_states effort = K_t I (des_driver); the monitor divides by the K_t of --vehicle's motor:
     0.228 N m/A (an override of the EC-45's 0.114, Appendix B line 12), so 0.456 N m is 2 A."""
     from sensor_msgs.msg import JointState
 
-    from skidsteer_power import resources
-
-    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
-    vehicle = tmp_path / 'strong_motor.yaml'
-    vehicle.write_text(
-        base.replace(
-            'powertrain: {preset: test_robot}',
-            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
-        ),
-        encoding='utf-8',
-    )
+    vehicle = strong_motor_vehicle
     namespace = f'mon_{uuid.uuid4().hex[:8]}'
     monitor = EnergyMonitor('view', vehicle=str(vehicle), namespace=namespace, context=ros_context)
     sender = rclpy.create_node('joints_probe', namespace=namespace, context=ros_context)

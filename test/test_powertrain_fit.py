@@ -57,20 +57,10 @@ def test_fit_internal_wide_csv(tmp_path, capsys):
     assert fits['right']['all']['viscous_A_s'] == pytest.approx(2e-4)  # reverse running, same resistance
 
 
-def test_fit_internal_uses_the_vehicles_motor(tmp_path, capsys):
+def test_fit_internal_uses_the_vehicles_motor(tmp_path, capsys, strong_motor_vehicle):
     """A CSV current becomes torque through the K_t of --vehicle's motor: 0.228 N m/A (a preset
     override of the EC-45's 0.114, Appendix B line 12), so 0.05 A Coulomb current = 0.0114 N m."""
-    from skidsteer_power import resources
-
-    base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
-    vehicle = tmp_path / 'strong_motor.yaml'
-    vehicle.write_text(
-        base.replace(
-            'powertrain: {preset: test_robot}',
-            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
-        ),
-        encoding='utf-8',
-    )
+    vehicle = strong_motor_vehicle
     path = tmp_path / 'wide.csv'
     rows = ['left_speed_rpm,left_current_A']
     for n in (200, 400, 800, 1600):
