@@ -18,7 +18,7 @@ trap 'rm -rf "$WORK"' EXIT
 # Table 7.3: 0.1 m/s at yaw rates 0-0.2 rad/s, 0.2 m/s at 0-0.35 rad/s; each set held 4 s, then 1 s
 # at rest; a 2 s lead-in at rest (simulate adds 1 s more).
 $BIN/python -c "
-from skidsteer_power.bags.synthetic import Segment, table_7_3_segments, write_command_csv
+from skidsteer_power.bag_io.synthetic import Segment, table_7_3_segments, write_command_csv
 write_command_csv('$WORK/table_7_3.csv', [Segment(0.0, 0.0, 2.0), *table_7_3_segments()])"
 
 make_bag() {  # vehicle truth-terrain bag

@@ -25,7 +25,7 @@ from benchmarks.harness import Report
 if TYPE_CHECKING:
     from rclpy.context import Context
 
-    from skidsteer_power.bags.replay import ReplayResult
+    from skidsteer_power.bag_io.replay import ReplayResult
 
 Stored = list[tuple[str, int, bytes]]  # (topic, receive time [ns], CDR bytes) of each message
 
@@ -36,8 +36,8 @@ VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
 
 
 def _validate_throughput(report: Report, folder: Path) -> None:
-    from skidsteer_power.bags import open_bag
-    from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io import open_bag
+    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.estimator import factory
 
@@ -85,8 +85,8 @@ def _replay_against_recorder(
 ) -> tuple[ReplayResult, Stored, Stored]:
     import rclpy
 
-    from skidsteer_power.bags import open_bag
-    from skidsteer_power.bags.replay import Replayer, ReplayOptions
+    from skidsteer_power.bag_io import open_bag
+    from skidsteer_power.bag_io.replay import Replayer, ReplayOptions
 
     recorder = _record_subprocess(out, topics)
     node = rclpy.create_node('bench_replayer', context=context)
@@ -111,8 +111,8 @@ def _string_bag(path: Path, topics: list[str], rate_hz: float, seconds: float) -
     from rclpy.serialization import serialize_message
     from std_msgs.msg import String
 
-    from skidsteer_power.bags.synthetic import START_NS
-    from skidsteer_power.bags.writer import BagWriter
+    from skidsteer_power.bag_io.synthetic import START_NS
+    from skidsteer_power.bag_io.writer import BagWriter
 
     step = round(1e9 / rate_hz)
     n = round(seconds * rate_hz)
@@ -215,7 +215,7 @@ def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, secon
     from rclpy.context import Context
     from std_msgs.msg import String
 
-    from skidsteer_power.bags import open_bag
+    from skidsteer_power.bag_io import open_bag
 
     context = Context()
     rclpy.init(context=context)
@@ -301,8 +301,8 @@ def damage(raw: bytes, case: str) -> bytes:
 def _salvage_figures(report: Report, folder: Path) -> None:
     """Salvage yield (messages recovered / written) for each damage case, on a bag from ``record``'s
     writer (8 s of /cmd_vel and /joint_states at 200 Hz, /odom at 10 Hz), and on the bundled bag."""
-    from skidsteer_power.bags import open_bag
-    from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io import open_bag
+    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
 
     made = folder / 'salvage_src.mcap'
     write_drive_bag(made, [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)], rate_hz=200, odom_hz=10)

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from benchmarks.harness import Report
-from skidsteer_power.bags.synthetic import Segment, table_7_3_segments
+from skidsteer_power.bag_io.synthetic import Segment, table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.calibration.direct import feed_trace
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
@@ -158,7 +158,7 @@ def _fess_bag(path: Path, truth: Terrain, seed: int) -> None:
     """A bag whose torques are FESS at ``truth`` plus white current noise (0.02 N m per sample): the
     model the fit uses (calibrate's default since issue 27: FESS at the wheel speed set points of each
     command, :class:`CommandPredictor`), so its intervals can be checked without model error."""
-    from skidsteer_power.bags.synthetic import DriveSamples, MotorArrays, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import DriveSamples, MotorArrays, write_drive_bag
     from skidsteer_power.models.predict import CommandPredictor
     from skidsteer_power.powertrain import Powertrain
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from functools import partial
 
 from benchmarks.harness import Report
-from skidsteer_power.bags.synthetic import table_7_3_segments
+from skidsteer_power.bag_io.synthetic import table_7_3_segments
 from skidsteer_power.commands import Segment
 from skidsteer_power.terramechanics import load_terrain
 from skidsteer_power.twin import Twin, run_commands

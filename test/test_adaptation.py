@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from skidsteer_power.bags.synthetic import Segment
+from skidsteer_power.bag_io.synthetic import Segment
 from skidsteer_power.calibration.direct import DirectFessMap, feed_trace
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.core import EstimatorCore

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from skidsteer_power.bags.reader import open_bag
-from skidsteer_power.bags.salvage import salvage_mcap
-from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.reader import open_bag
+from skidsteer_power.bag_io.salvage import salvage_mcap
+from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
 from skidsteer_power.cli.main import main
 
 RUNS = [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)]

@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from skidsteer_power.bags import open_bag
+from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bags.cmd_timing import command_timing
 from skidsteer_power.bags.report import MIN_TURN_RAD, flagged_spans, is_turn
 from skidsteer_power.bags.validate import TraceSegment, ValidateOptions, validate

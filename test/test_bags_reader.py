@@ -12,10 +12,10 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags import load_msg_definitions, open_bag
-from skidsteer_power.bags.reader import BagDamageError
-from skidsteer_power.bags.synthetic import START_NS, Segment, write_drive_bag
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io import load_msg_definitions, open_bag
+from skidsteer_power.bag_io.reader import BagDamageError
+from skidsteer_power.bag_io.synthetic import START_NS, Segment, write_drive_bag
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.errors import InputError
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
@@ -218,7 +218,7 @@ def test_synthetic_drive_bag_has_expected_topics_and_counts(tmp_path: Path) -> N
 
 
 def test_table_7_3_command_sets() -> None:
-    from skidsteer_power.bags.synthetic import table_7_3_segments
+    from skidsteer_power.bag_io.synthetic import table_7_3_segments
 
     runs = [s for s in table_7_3_segments() if s.speed_m_s != 0]
     # Table 7.3: 8 sets at 0.1 m/s (yaw 0 ... 0.2 rad/s) and 11 at 0.2 m/s (yaw 0 ... 0.35 rad/s).
@@ -228,7 +228,7 @@ def test_table_7_3_command_sets() -> None:
 
 
 def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> None:
-    from skidsteer_power.bags.decode import twists_vectorized
+    from skidsteer_power.bag_io.decode import twists_vectorized
 
     write_drive_bag(tmp_path / 'v.mcap', [Segment(0.1, -0.25, 1.0), Segment(-0.2, 0.35, 1.0)], rate_hz=20)
     with open_bag(tmp_path / 'v.mcap') as bag:

@@ -20,7 +20,7 @@ from pathlib import Path
 from mcap.records import Channel, Header, Schema
 from mcap.stream_reader import StreamReader
 
-from skidsteer_power.bags.reader import open_bag
+from skidsteer_power.bag_io.reader import open_bag
 
 RATE_HZ = 500.0
 ALLOWED_LOSS_S = 1.5

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bags import open_bag
-from skidsteer_power.bags.record import Recorder, record
-from skidsteer_power.bags.replay import Replayer, ReplayOptions, deadlines
-from skidsteer_power.bags.synthetic import START_NS
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io import open_bag
+from skidsteer_power.bag_io.record import Recorder, record
+from skidsteer_power.bag_io.replay import Replayer, ReplayOptions, deadlines
+from skidsteer_power.bag_io.synthetic import START_NS
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.stop_signals import StopFlag
 
 pytestmark = pytest.mark.ros

@@ -3,7 +3,7 @@ read, fleet rows carry ``complete`` and the counts, ``validate --salvage`` skips
 it cannot decode (as ``replay --salvage`` does), a healthy bag with a non-ROS (protobuf) channel is
 read with that channel skipped, and only commands that have ``--salvage`` suggest it.
 
-The bags are written here: a synthetic drive (bags/synthetic.py), then damaged on purpose.
+The bags are written here: a synthetic drive (bag_io/synthetic.py), then damaged on purpose.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from skidsteer_power.bags.reader import open_bag
-from skidsteer_power.bags.synthetic import Segment, write_drive_bag
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io.reader import open_bag
+from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.cli.main import main
 
 VALIDATE = ['--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--no-plots', '--json']
@@ -132,7 +132,7 @@ def test_a_healthy_bag_with_a_protobuf_channel_is_read_without_it(tmp_path, capl
     from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    from skidsteer_power.bags.writer import message_definition
+    from skidsteer_power.bag_io.writer import message_definition
 
     store = get_typestore(Stores.ROS2_JAZZY)
     string = store.types['std_msgs/msg/String']

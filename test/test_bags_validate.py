@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bags import open_bag
-from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io import open_bag
+from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
 from skidsteer_power.bags.validate import (
     ValidateOptions,
     WindowedBattery,
@@ -247,7 +247,7 @@ def test_validate_reproduces_what_the_live_node_published(ros_context, tmp_path,
     from rclpy.parameter import Parameter
     from test_bags_ros import BackgroundRecording, _wait_for
 
-    from skidsteer_power.bags.replay import Replayer, ReplayOptions
+    from skidsteer_power.bag_io.replay import Replayer, ReplayOptions
     from skidsteer_power.nodes.power_estimator import PowerEstimator
 
     write_drive_bag(tmp_path / 'in.mcap', RUNS, rate_hz=20, odom_hz=None, motors=_predicted_motors(predictor))

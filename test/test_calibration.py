@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
 from skidsteer_power.calibration.fit import select_identifiable
 from skidsteer_power.calibration.io import read_calibration
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
@@ -205,7 +205,7 @@ def test_missing_bag_and_bag_without_motor_data(tmp_path):
 
 
 def test_segments_are_the_settled_moving_commands(tmp_path):
-    """Synthetic ideal drive (bags/synthetic.py): odometry twist = command, so the measured motion of
+    """Synthetic ideal drive (bag_io/synthetic.py): odometry twist = command, so the measured motion of
     each segment is its command; stops are dropped, and each window starts settle_s after the change."""
     bag = tmp_path / 'ideal.mcap'
     plan = [Segment(0.2, 0.0, 4.0), Segment(0.0, 0.0, 1.0), Segment(0.1, 0.2, 4.0)]
@@ -277,8 +277,8 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
     per side two joints each carrying half the axle torque, T_w = T_m G / 2, at the axle speed
     w_w = w_m / G (G = 12, the test robot's reduction). Mapped back (sum of T_w / G, mean of w_w x G)
     this is the motor's own reading again, so both bags must give the same steady segments."""
-    from skidsteer_power.bags import open_bag
-    from skidsteer_power.bags.writer import BagWriter
+    from skidsteer_power.bag_io import open_bag
+    from skidsteer_power.bag_io.writer import BagWriter
     from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits, JointReader
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from skidsteer_power.bags.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
 from skidsteer_power.cli.main import main
 
 DASK = str(Path(sys.executable).with_name('dask'))

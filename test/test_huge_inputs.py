@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bags.synthetic import Segment, motor_speeds, write_drive_bag
+from skidsteer_power.bag_io.synthetic import Segment, motor_speeds, write_drive_bag
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
 
 HUGE = 9e307  # finite; two of them sum to inf (float max 1.797e308)

@@ -1,6 +1,6 @@
 """Any skid-steer robot: joint mapping, vehicle files, held cmd_vel, map coverage, real bag (issue 16).
 
-Bags are written here with the project's MCAP writer (:class:`skidsteer_power.bags.writer.BagWriter`)
+Bags are written here with the project's MCAP writer (:class:`skidsteer_power.bag_io.writer.BagWriter`)
 from real rosbags message objects; predictions come from a real (coarse) FESS power map.
 """
 
@@ -15,10 +15,10 @@ import pytest
 from conftest import REQUIRE_SHARED_ENV, shared_path
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags import open_bag
+from skidsteer_power.bag_io import open_bag
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.bags.cmd_timing import command_timing
 from skidsteer_power.bags.validate import ValidateOptions, validate
-from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, MapPredictor, factory
 from skidsteer_power.estimator.core import LEVEL_WARN
@@ -363,7 +363,7 @@ def test_markers_and_tf_are_read_and_markers_can_be_replayed(tmp_path, track):
     from rclpy.serialization import serialize_message
     from visualization_msgs.msg import Marker
 
-    from skidsteer_power.bags._ros import message_class
+    from skidsteer_power.bag_io._ros import message_class
 
     marker = Marker(ns='person', id=7, type=Marker.CYLINDER)
     transform = T['geometry_msgs/msg/TransformStamped'](

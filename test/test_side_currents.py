@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bags import open_bag
-from skidsteer_power.bags.reader import build_typestore, load_msg_definitions
+from skidsteer_power.bag_io import open_bag
+from skidsteer_power.bag_io.reader import build_typestore, load_msg_definitions
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.bags.validate import ValidateOptions, validate
-from skidsteer_power.bags.writer import BagWriter
 from skidsteer_power.calibration.segments import SegmentOptions, read_recording
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator import MapPredictor, factory

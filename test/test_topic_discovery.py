@@ -1,4 +1,4 @@
-"""The one topic discovery of the recorder and the Foxglove bridge (bags/_ros.discover_topics), on a
+"""The one topic discovery of the recorder and the Foxglove bridge (bag_io/_ros.discover_topics), on a
 real ROS graph (rclpy + DDS): a publisher that appears is found with its type, exactly once; the
 graph's own topics only when named; a topic with two types and one whose type is not installed are
 skipped with the reason."""
@@ -10,7 +10,7 @@ import uuid
 
 import pytest
 
-from skidsteer_power.bags._ros import GRAPH_TOPICS, absolute_topic, discover_topics
+from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics
 from skidsteer_power.errors import InputError
 
 pytestmark = pytest.mark.ros

@@ -258,7 +258,7 @@ def test_command_csv_rows_hold_until_the_next(tmp_path):
 
 
 def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, capsys):
-    from skidsteer_power.bags.reader import open_bag
+    from skidsteer_power.bag_io.reader import open_bag
 
     csv = tmp_path / 'cmd.csv'
     csv.write_text('t_s,speed_m_s,yaw_rate_rad_s\n0,0.2,0.1\n2,0,0\n')
@@ -339,7 +339,7 @@ def turning_bag(tmp_path_factory):
 
 
 def test_validate_kinematics_predicts_from_the_motion(turning_bag):
-    from skidsteer_power.bags.reader import open_bag
+    from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
     bag_path, folder = turning_bag
@@ -365,7 +365,7 @@ def test_validate_kinematics_predicts_from_the_motion(turning_bag):
 
 
 def test_validate_kinematics_without_odometry_is_one_clear_error(tmp_path, capsys):
-    from skidsteer_power.bags.synthetic import write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
 
     bag = tmp_path / 'no_odom.mcap'
     write_drive_bag(bag, [Segment(0.2, 0.0, 1.0)], odom_hz=None)

@@ -124,7 +124,7 @@ def _validate_options(vehicle: str, terrain: str, cache: Any) -> Any:
 
 
 def _predict(path: str, vehicle: str, terrain: str, cache: Any) -> Any:
-    from skidsteer_power.bags import open_bag
+    from skidsteer_power.bag_io import open_bag
     from skidsteer_power.bags.validate import predict_bag
 
     with open_bag(path) as bag:

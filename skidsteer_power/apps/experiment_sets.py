@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from skidsteer_power.bags.synthetic import TABLE_7_3_SETS, Segment, table_7_3_segments
+from skidsteer_power.bag_io.synthetic import TABLE_7_3_SETS, Segment, table_7_3_segments
 from skidsteer_power.real_robot import APPENDIX_D_RADII
 
 CONFIGURATIONS = ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel')
@@ -92,7 +92,7 @@ def set_windows() -> list[tuple[float, float, float, float]]:
 
 def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = None) -> dict[str, Any]:
     """Simulate, record, validate and tabulate one configuration; returns its summary."""
-    from skidsteer_power.bags.reader import open_bag
+    from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.estimator import factory
     from skidsteer_power.terramechanics import load_terrain

@@ -160,7 +160,7 @@ def validate_job(job: BagJob) -> dict[str, Any]:
         'report_dir': job.report_dir,
     }
     try:
-        from skidsteer_power.bags.reader import open_bag
+        from skidsteer_power.bag_io.reader import open_bag
         from skidsteer_power.bags.validate import read_inputs, validate
 
         options = job.options

@@ -1,11 +1,7 @@
-"""Bags: read (MCAP and sqlite3 rosbag2), record, replay and validate against the estimator.
+"""Bags against the model: validate a recording with the estimator, online and from the command.
 
-Reading needs no ROS graph; recording and replay use rclpy's raw (serialized) subscriptions and
-``publish(bytes)`` so messages pass through byte for byte.
+Reading and writing the files is :mod:`skidsteer_power.bag_io`, a layer below; this package is the
+analysis above the estimator: per-segment and whole-run comparisons (:mod:`.validate`,
+:mod:`.validate_metrics`), the estimator run online over a bag (:mod:`.online`), how long a
+recorded command holds (:mod:`.cmd_timing`) and the report (:mod:`.report`).
 """
-
-from __future__ import annotations
-
-from skidsteer_power.bags.reader import BagMessage, BagReader, TopicInfo, load_msg_definitions, open_bag
-
-__all__ = ['BagMessage', 'BagReader', 'TopicInfo', 'load_msg_definitions', 'open_bag']

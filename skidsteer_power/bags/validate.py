@@ -31,13 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from skidsteer_power.bags.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
-from skidsteer_power.bags.decode import (
+from skidsteer_power.bag_io.decode import (
     decode_joint_arrays,
     decode_joint_states,
     decode_planar_poses,
     decode_twists,
 )
+from skidsteer_power.bag_io.reader import BagReader
+from skidsteer_power.bags.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
 from skidsteer_power.bags.online import (
     DERIVED_COLUMNS,
     online_columns,
@@ -45,7 +46,6 @@ from skidsteer_power.bags.online import (
     online_summary,
     predicted_battery_J,
 )
-from skidsteer_power.bags.reader import BagReader
 from skidsteer_power.bags.validate_metrics import (  # re-exported: their old import path
     LIVE_TOLERANCE_NM as LIVE_TOLERANCE_NM,
 )

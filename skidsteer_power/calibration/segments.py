@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skidsteer_power.bags.decode import decode_joint_arrays, decode_twists
-from skidsteer_power.bags.reader import BagReader, open_bag
+from skidsteer_power.bag_io.decode import decode_joint_arrays, decode_twists
+from skidsteer_power.bag_io.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays

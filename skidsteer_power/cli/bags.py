@@ -35,7 +35,7 @@ def _open(args: argparse.Namespace) -> Any:
     """The bag after one full counting pass: without ``--salvage`` a damaged bag is one line and
     exit 2; with it the pass measures what is there (``messages_read``), so nothing unread is
     called complete."""
-    from skidsteer_power.bags.reader import BagDamageError, load_msg_definitions, open_bag
+    from skidsteer_power.bag_io.reader import BagDamageError, load_msg_definitions, open_bag
 
     try:
         bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
@@ -63,7 +63,7 @@ def _log_to_stderr() -> None:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags.record import record
+    from skidsteer_power.bag_io.record import record
     from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
     _log_to_stderr()
@@ -89,7 +89,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags.replay import ReplayOptions, replay
+    from skidsteer_power.bag_io.replay import ReplayOptions, replay
     from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
     _log_to_stderr()

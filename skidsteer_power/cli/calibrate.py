@@ -85,7 +85,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags.reader import load_msg_definitions
+    from skidsteer_power.bag_io.reader import load_msg_definitions
     from skidsteer_power.calibration import calibrate_bags, io
 
     started = time.perf_counter()

@@ -1,7 +1,7 @@
 """A Foxglove WebSocket server that forwards ROS 2 topics, for robots without ``foxglove_bridge``.
 
 Each ROS topic becomes one Foxglove channel: schema encoding ``ros2msg`` (the .msg definition text
-with its dependencies, as rosbag2 stores it in MCAP; :func:`skidsteer_power.bags.writer.message_definition`),
+with its dependencies, as rosbag2 stores it in MCAP; :func:`..bag_io.writer.message_definition`),
 message encoding ``cdr`` (the serialized message exactly as DDS delivered it: a raw subscription,
 no decoding on the robot). The Foxglove app connects to ``ws://HOST:8765`` (protocol v1, named
 ``foxglove.sdk.v1`` or ``foxglove.websocket.v1``) and decodes the messages itself. The server is
@@ -32,8 +32,8 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from skidsteer_power.bags._ros import GRAPH_TOPICS, absolute_topic, discover_topics, message_class
-from skidsteer_power.bags.writer import message_definition
+from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics, message_class
+from skidsteer_power.bag_io.writer import message_definition
 from skidsteer_power.errors import InputError
 
 LOG = logging.getLogger(__name__)

@@ -15,7 +15,7 @@ class SideCurrentFeed:
     package is installed; :meth:`joint_values` rewrites a joint_states reading with it."""
 
     def __init__(self, node: Any, joint_map: Any, qos: Any) -> None:
-        from skidsteer_power.bags._ros import message_class
+        from skidsteer_power.bag_io._ros import message_class
         from skidsteer_power.errors import InputError
 
         self.map = joint_map

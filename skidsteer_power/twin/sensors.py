@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags.synthetic import NS, START_NS
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io.synthetic import NS, START_NS
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import COMMAND_ROWS, SIM_DURATION_S, check_file_size
@@ -363,8 +363,8 @@ def _command_row(file: Path, line: int, row: dict[str, str]) -> tuple[float, flo
 def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> list[Segment]:
     """The bag's cmd_vel (Twist or TwistStamped), each held until the next or for at most
     ``COMMAND_TIMEOUT_S`` (then the robot stops, as the des_driver does)."""
-    from skidsteer_power.bags.decode import decode_twists
-    from skidsteer_power.bags.reader import open_bag
+    from skidsteer_power.bag_io.decode import decode_twists
+    from skidsteer_power.bag_io.reader import open_bag
 
     with open_bag(path) as bag:
         if topic not in bag.topics:

@@ -6,10 +6,10 @@ found (reliable only if all are; transient-local likewise), as ``ros2 bag record
 definitions come from the rosbags Jazzy type store, or from the ``.msg`` file the Python message
 package installs, so Foxglove/Lichtblick, PlotJuggler and ``ros2 bag`` can decode the bag.
 
-Output layout: see :mod:`skidsteer_power.bags.writer`. A clean stop (SIGINT, SIGTERM, end of
+Output layout: see :mod:`skidsteer_power.bag_io.writer`. A clean stop (SIGINT, SIGTERM, end of
 ``duration``) first takes every message still queued, then writes the index. The file is written in
 place from the start: header and schemas at once, then a chunk at least every
-:data:`~skidsteer_power.bags.writer.FLUSH_PERIOD_S` (also while no message arrives), so a recorder
+:data:`~skidsteer_power.bag_io.writer.FLUSH_PERIOD_S` (also while no message arrives), so a recorder
 killed by SIGKILL or a power cut leaves an MCAP missing at most about that much at its end, readable
 with ``--salvage``.
 """
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.bags._ros import (
+from skidsteer_power.bag_io._ros import (
     GRAPH_TOPICS,
     absolute_topic,
     discover_topics,
@@ -31,7 +31,7 @@ from skidsteer_power.bags._ros import (
     qos_for_stored,
     to_bag_qos,
 )
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag
 

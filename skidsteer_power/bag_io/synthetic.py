@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags.writer import BagWriter
+from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.commands import Segment
 
 NS = 1_000_000_000

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from skidsteer_power.bags.reader import BagReader
+from skidsteer_power.bag_io.reader import BagReader
 from skidsteer_power.errors import InputError
 
 NS = 1e9

@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from skidsteer_power.bags._ros import message_class, qos_for_stored
-from skidsteer_power.bags.reader import BagMessage, BagReader
+from skidsteer_power.bag_io._ros import message_class, qos_for_stored
+from skidsteer_power.bag_io.reader import BagMessage, BagReader
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag
 

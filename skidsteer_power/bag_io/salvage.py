@@ -17,7 +17,7 @@
    metadata record, else unknown (a recorder killed before it wrote either).
 
 A message whose record frame is intact but whose payload was damaged is still returned: decoding it
-is the caller's check (:meth:`skidsteer_power.bags.reader.BagReader.deserialize` raises, replay and
+is the caller's check (:meth:`skidsteer_power.bag_io.reader.BagReader.deserialize` raises, replay and
 validate skip and count it). Records are parsed with the ``mcap`` library's record types.
 """
 

@@ -9,7 +9,7 @@ Damage: the reader compares what it read with what the bag says it holds (the MC
 or the message counts of the rosbag2 metadata): ``messages_expected``, ``messages_read``, ``complete``.
 Without ``salvage`` a bag that cannot be opened, or a full pass that reads fewer messages than the bag
 holds, raises :class:`~skidsteer_power.errors.InputError` naming the file and how much is missing.
-With ``salvage=True`` an MCAP file is read by :func:`skidsteer_power.bags.salvage.salvage_mcap`, which
+With ``salvage=True`` an MCAP file is read by :func:`skidsteer_power.bag_io.salvage.salvage_mcap`, which
 recovers every intact message (below chunk granularity: a damaged chunk is read record by record), in
 time order; ``damage`` says what was damaged and one warning says how much is missing. An sqlite3
 file is salvaged by a plain table scan, which keeps the rows sqlite can still reach.
@@ -425,7 +425,7 @@ _ROS2_SCHEMA_ENCODINGS = ('ros2msg', 'ros2idl')
 def _open_foreign_profile(path: Path, extra_types: Mapping[str, str] | None, salvage: bool) -> BagReader:
     """An MCAP file whose header profile is not 'ros2' (several writers leave it empty) but whose
     schemas are ROS 2 message definitions and messages CDR: read with the MCAP scanner of
-    :mod:`skidsteer_power.bags.salvage` (the whole file in memory), with a warning about the
+    :mod:`skidsteer_power.bag_io.salvage` (the whole file in memory), with a warning about the
     profile. Other encodings are refused with one clear InputError; so is damage without ``salvage``."""
     from mcap.reader import make_reader
 
@@ -584,7 +584,7 @@ def _metadata_count(folder: Path) -> int | None:
     """Message count in a rosbag2 directory's metadata.yaml (None if absent or unreadable)."""
     import yaml
 
-    from skidsteer_power.bags.salvage import message_count_of
+    from skidsteer_power.bag_io.salvage import message_count_of
 
     try:
         return message_count_of(yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8')))
@@ -597,8 +597,8 @@ def _scan_mcap(
 ) -> tuple[
     dict[str, TopicInfo], list[BagMessage], str, list[tuple[str, MessageDefinitionFormat, str]], int | None
 ]:
-    """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bags.salvage`)."""
-    from skidsteer_power.bags.salvage import salvage_mcap
+    """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bag_io.salvage`)."""
+    from skidsteer_power.bag_io.salvage import salvage_mcap
 
     found = salvage_mcap(path.read_bytes())
     formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}

@@ -16,7 +16,7 @@ killed before that left a 0-byte file). Here the file is written in place from t
   and the file is fsync'ed: a SIGKILL or a power cut loses at most ``flush_period_s`` of messages plus
   what the OS has not yet received (``BagWriter.flush_if_due`` lets an idle recorder flush too);
 - chunks are not compressed, so a damaged chunk can be salvaged record by record
-  (:mod:`skidsteer_power.bags.reader`); each chunk carries a CRC of its records.
+  (:mod:`skidsteer_power.bag_io.reader`); each chunk carries a CRC of its records.
 
 :meth:`BagWriter.close` writes the rosbag2 metadata record, the summary (statistics, chunk and message
 indexes) and the footer. A file without them (a killed writer) is read with ``--salvage``.
@@ -42,7 +42,7 @@ from rosbags.interfaces import Qos
 from rosbags.rosbag2 import CompressionMode, StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
-from skidsteer_power.bags.reader import build_typestore
+from skidsteer_power.bag_io.reader import build_typestore
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
