@@ -13,6 +13,7 @@ import pytest
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.maps.setpoint_map import SetpointMap
+from skidsteer_power.models.setpoint import REASON_PIVOT
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -72,3 +73,16 @@ def test_current_limit_holds_in_every_query(track_map: SetpointMap) -> None:
     for v, w in zip(rng.uniform(-2, 2, 200) * veh.max_speed_m_s, rng.uniform(-2, 2, 200) * 2.0, strict=True):
         q = track_map.query(float(v), float(w))
         assert abs(q.current_left_A) <= 10.0 + 1e-9 and abs(q.current_right_A) <= 10.0 + 1e-9
+
+
+def test_pivot_flag_agrees_with_the_direct_solve(track_map: SetpointMap) -> None:
+    """A command whose interpolated motion turns an inner element past half a revolution in the
+    contact is flagged by the map exactly as the direct solve flags it (models/setpoint.py's
+    element_turn_rev; docs/PREDICTION.md, "The pivot band"). (0.196 m/s, 0.744 rad/s) lies in a map
+    cell without a dug-in node, so only the element turn can flag it."""
+    query = track_map.query(0.196, 0.744)
+    assert query.limited and query.reason == REASON_PIVOT
+    direct = track_map.predictor.predict([0.196], [0.744])
+    assert direct.limited[0] and direct.reason[0] == REASON_PIVOT
+    wide = track_map.query(0.196, 0.2)  # the same speed on a wide turn: an ordinary answer
+    assert not wide.limited and wide.reason == ''

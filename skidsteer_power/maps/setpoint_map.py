@@ -10,12 +10,15 @@ quadrants are mirror images, exact for the laterally and fore-aft symmetric vehi
 doc of fess.py): a negative mean is reverse driving (every speed, yaw rate and torque negated), a
 negative difference a right turn (sides swapped, yaw rate negated).
 
-Stored per node: V, w_z, both axle torques, both slips, sinkage, traction margin and ``limited``
-(no steady state, the dug-in answer). A query interpolates bilinearly in plain Python floats, then adds the
-powertrain (motor currents under the current limit, battery power) exactly as the direct path does
-(:meth:`CommandPredictor.electrical`'s formulas, via :meth:`Powertrain.motor_side` on floats). A query
-in a cell with a limited corner is ``limited``; outside the envelope it is answered at the edge and
-``clamped``. Accuracy and speed against the direct solve: benchmarks/bench_maps.py.
+Stored per node: V, w_z, both axle torques, both slips, sinkage, traction margin, ``dug_in`` (no
+steady state, the dug-in answer) and the contact length. A query interpolates bilinearly in plain
+Python floats, then adds the powertrain (motor currents under the current limit, battery power)
+exactly as the direct path does (:meth:`CommandPredictor.electrical`'s formulas, via
+:meth:`Powertrain.motor_side` on floats). A query in a cell with a dug-in corner is ``limited``, and
+so is one whose interpolated motion turns an element past half a revolution in the contact
+(:func:`~skidsteer_power.models.setpoint.element_turn_rev`, the direct solve's test); outside the
+envelope it is answered at the edge and ``clamped``. Accuracy and speed against the direct solve:
+benchmarks/bench_maps.py.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from skidsteer_power.cache import atomic_file, default_cache_dir, physics_digest
 from skidsteer_power.errors import InputError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
-from skidsteer_power.models.setpoint import REASON_TRACTION
+from skidsteer_power.models.setpoint import ELEMENT_TURN_LIMIT_REV, REASON_PIVOT, REASON_TRACTION
 from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 from skidsteer_power.vehicle import vehicle_fingerprint
 
@@ -42,7 +45,7 @@ if TYPE_CHECKING:
 
 FIELDS = (
     'speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage',
-    'traction_margin', 'limited',
+    'traction_margin', 'dug_in', 'contact_length',
 )  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAX_NODES = 200_000
@@ -88,9 +91,12 @@ class SetpointMap:
         self.grid = BilinearGrid(
             Axis(mean, 'set point mean'), Axis(diff, 'set point half difference'), values
         )
-        limited = values[..., FIELDS.index('limited')] > 0
-        cell = limited[:-1, :-1] | limited[1:, :-1] | limited[:-1, 1:] | limited[1:, 1:]
+        dug_in = values[..., FIELDS.index('dug_in')] > 0
+        cell = dug_in[:-1, :-1] | dug_in[1:, :-1] | dug_in[:-1, 1:] | dug_in[1:, 1:]
         self._cell_limited = cell.ravel().tolist()
+        self._radius = float(predictor.vehicle.drive_radius_m)
+        # element_turn_rev's test in floats: |w_z| xi / v_rim > limit [rev] times 2 pi [rad]
+        self._turn_limit = ELEMENT_TURN_LIMIT_REV * 2.0 * math.pi
         pt = predictor.powertrain
         self._limit = pt.current_limit_A
         self._kt = pt.motor.torque_constant_Nm_A
@@ -126,15 +132,16 @@ class SetpointMap:
             sol.slip[:, 1],
             sol.sinkage,
             sol.traction_margin,
-            sol.limited.astype(float),
+            sol.dug_in.astype(float),
+            sol.contact_length,
         )
         values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
         return cls(predictor, mean, diff, values)
 
     @property
     def limited_fraction(self) -> float:
-        """Share of the map's nodes with no steady state [-]."""
-        return float(np.mean(self.grid.values[..., FIELDS.index('limited')] > 0))
+        """Share of the map's nodes with no steady state [-] (dug in; the pivot flag is per query)."""
+        return float(np.mean(self.grid.values[..., FIELDS.index('dug_in')] > 0))
 
     def query(self, speed_cmd: float, yaw_cmd: float) -> SetpointQuery:
         """The prediction for one command (V [m/s], w_z [rad/s]) in plain Python floats."""
@@ -146,7 +153,9 @@ class SetpointMap:
         mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
         reverse, right_turn = flip < 0, diff < 0
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
-        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _ = vals
+        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact = vals
+        inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
+        pivot = yaw != 0 and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
         if right_turn:  # a right turn: the left turn's mirror image
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
@@ -155,12 +164,12 @@ class SetpointMap:
         t_l, left, over_l = self._side('left', t_l, sp_l)
         t_r, right, over_r = self._side('right', t_r, sp_r)
         current = over_l or over_r
-        reason = REASON_TRACTION if traction else REASON_CURRENT if current else ''
+        reason = REASON_TRACTION if traction else REASON_PIVOT if pivot else REASON_CURRENT if current else ''
         return SetpointQuery(
             sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin,
             float(left.current_A), float(right.current_A),
             float(left.electrical_power_W) + float(right.electrical_power_W),
-            traction or current, clamped_sp or off_grid, reason, (left, right),
+            traction or pivot or current, clamped_sp or off_grid, reason, (left, right),
         )  # fmt: skip
 
     def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:

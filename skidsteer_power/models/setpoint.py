@@ -26,7 +26,9 @@ residual scan and least squares find them at 41 of test_robot_track's 43 such ma
 usable steady state: an inner element turns past half a revolution while in the contact (eqs. 6.3,
 6.5), eq. 6.6's chord displacement then shrinks as the soil is sheared further, and the torque jumps
 by a factor 3 between set points 2 % apart (docs/PREDICTION.md, "The pivot band";
-test/test_fess_pivot_band.py).
+test/test_fess_pivot_band.py). A root Newton does find where an element turns past half a
+revolution (:func:`element_turn_rev` > :data:`ELEMENT_TURN_LIMIT_REV`) is kept but flagged
+``limited`` with :data:`REASON_PIVOT`: its torque is as erratic.
 """
 
 from __future__ import annotations
@@ -52,11 +54,20 @@ if TYPE_CHECKING:
 
 SETPOINT_MAX_ITERATIONS = 60
 CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set points
+# Past half a revolution of the body while an element crosses the contact (eqs. 6.3, 6.5), eq. 6.6's
+# chord from the gripped ground point shrinks although the soil is sheared further: FESS's torque
+# there is erratic (docs/PREDICTION.md, "The pivot band"), so such a root is not a usable answer.
+ELEMENT_TURN_LIMIT_REV = 0.5
 REASON_OK = ''
 REASON_TRACTION = (
     'no steady state found at these set points (a traction limit, or a tight turn with the inner side near '
     'standstill where FESS has no usable one); the values are the dug-in state: V = 0, wheels at their '
     'set points'
+)
+REASON_PIVOT = (
+    'tight turn with the inner side near standstill: an element turns past half a revolution while in '
+    "the contact, where FESS's shear displacement (eq. 6.6) stops growing; the motion is FESS's root, "
+    "the torques are outside the model's validity"
 )
 
 
@@ -93,7 +104,12 @@ class SetpointSolution:
     slip : (P, 2) [-] eq. 2.13
     sinkage : (P,) largest sinkage [m]
     traction_margin : (P,) 1 - required / available thrust [-]
-    limited : (P,) no steady state (the prediction is the dug-in state); reason says why
+    limited : (P,) no usable steady state; reason says why: ``dug_in`` (no root: the prediction is the
+        dug-in state) or an element turning past :data:`ELEMENT_TURN_LIMIT_REV` (FESS's root is kept)
+    dug_in : (P,) no root was found; the values are the dug-in state (V = 0, wheels at the set points)
+    element_turn : (P,) the body's turn while an element crosses the slower side's contact [rev]
+        (:func:`element_turn_rev`)
+    contact_length : (P,) the longer contact length behind the entry of the two sides [m]
     iterations : (P,) Newton steps
     """
 
@@ -108,6 +124,9 @@ class SetpointSolution:
     limited: np.ndarray
     reason: list[str]
     iterations: np.ndarray
+    dug_in: np.ndarray
+    element_turn: np.ndarray
+    contact_length: np.ndarray
 
     @property
     def turn_radius(self) -> np.ndarray:
@@ -253,16 +272,21 @@ class SetpointSolver:
     ) -> SetpointSolution:
         x = result.x.copy()
         x[straight, 2] = 0.0
-        sol = self._fess_outputs(x, spf, result.converged, rest)
-        limited = ~sol.converged
-        if np.any(limited):  # no steady state: dug in, V = w_z = 0, the wheels turning at the set points
-            x[limited] = 0.0
-            dug = self._fess_outputs(
-                x[limited], spf[limited], np.ones(int(limited.sum()), bool), rest[limited]
+        sol, prob = self._fess_outputs(x, spf, result.converged, rest)
+        dug_in = ~sol.converged
+        contact_length = np.broadcast_to(np.max(prob.contact.xi, axis=(-3, -2, -1)), dug_in.shape)
+        inner_rim = np.min(np.abs(spf), axis=1) * self.radius
+        turn = element_turn_rev(x[:, 2], contact_length, inner_rim)
+        if np.any(dug_in):  # no steady state: dug in, V = w_z = 0, the wheels turning at the set points
+            x[dug_in] = 0.0
+            turn[dug_in] = 0.0
+            dug, _ = self._fess_outputs(
+                x[dug_in], spf[dug_in], np.ones(int(dug_in.sum()), bool), rest[dug_in]
             )
             for name in ('torque', 'slip', 'sinkage', 'traction_margin'):
-                getattr(sol, name)[limited] = getattr(dug, name)
-            sol.slip[limited] = np.sign(spf[limited])
+                getattr(sol, name)[dug_in] = getattr(dug, name)
+            sol.slip[dug_in] = np.sign(spf[dug_in])
+        pivot = turn > ELEMENT_TURN_LIMIT_REV
         speed, yaw = x[:, 1] * flip, x[:, 2] * flip
         return SetpointSolution(
             speed=speed,
@@ -273,13 +297,30 @@ class SetpointSolver:
             slip=sol.slip,
             sinkage=sol.sinkage,
             traction_margin=sol.traction_margin,
-            limited=limited,
-            reason=[REASON_TRACTION if lim else REASON_OK for lim in limited],
+            limited=dug_in | pivot,
+            reason=[
+                REASON_TRACTION if d else REASON_PIVOT if p else REASON_OK
+                for d, p in zip(dug_in, pivot, strict=True)
+            ],
             iterations=result.iterations,
+            dug_in=dug_in,
+            element_turn=turn,
+            contact_length=np.array(contact_length, dtype=float),
         )
 
     def _fess_outputs(self, x: np.ndarray, spf: np.ndarray, converged: np.ndarray, rest: np.ndarray):  # type: ignore[no-untyped-def]
         prob = self.fess.problem(x[:, 1], x[:, 2])
         state = np.column_stack([x[:, 0], spf])
         res = NewtonResult(state, np.zeros_like(state), converged.copy(), np.zeros(len(x), dtype=int))
-        return _outputs(prob, res, rest)
+        return _outputs(prob, res, rest), prob
+
+
+def element_turn_rev(yaw: ArrayLike, contact_length: ArrayLike, inner_rim_speed: ArrayLike) -> np.ndarray:
+    """The body's turn while an element crosses the slower side's contact [rev]: |w_z| xi / (v_rim 2 pi)
+    (eqs. 6.3, 6.5: the time in contact is xi / v_rim), with the yaw rate w_z [rad/s], the contact
+    length behind the entry xi [m] and the inner side's rim speed |omega| r [m/s]; infinite for a
+    stopped side of a turning body, 0 without turning."""
+    yaw_abs = np.abs(np.asarray(yaw, dtype=float))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        turn = yaw_abs * np.asarray(contact_length, dtype=float) / np.asarray(inner_rim_speed, dtype=float)
+    return np.where(yaw_abs == 0.0, 0.0, turn / (2.0 * np.pi))
