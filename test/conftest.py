@@ -79,7 +79,9 @@ def rig_factory(ros_context, tmp_path):
 @pytest.fixture
 def strong_motor_vehicle(tmp_path) -> Path:
     """test_robot_track with its powertrain's motor overridden to K_t = 0.228 N m/A (2 x the EC-45's
-    0.114, Appendix B line 12): a vehicle file whose motor differs from the built-in one."""
+    0.114, Appendix B line 12) and a max. speed of 5000 rpm = 523.6 rad/s (half the EC-45's 10 000,
+    line 23, as a doubled K_t halves the speed constant): a vehicle file whose motor differs from the
+    built-in one."""
     from skidsteer_power import resources
 
     base = resources.find('vehicles', 'test_robot_track').read_text(encoding='utf-8')
@@ -87,7 +89,8 @@ def strong_motor_vehicle(tmp_path) -> Path:
     vehicle.write_text(
         base.replace(
             'powertrain: {preset: test_robot}',
-            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228}}',
+            'powertrain: {preset: test_robot, motor: {preset: EC45, torque_constant_Nm_A: 0.228,'
+            ' max_speed_rad_s: 523.5987755982989}}',
         ),
         encoding='utf-8',
     )

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from cli_run import one_line_error
 
 from skidsteer_power.cli.main import main
 from skidsteer_power.missions.routes import MAX_TRACE_STEPS, read_route_csv
@@ -32,22 +33,6 @@ SOLVE = ['solve', '--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--s
          '--turn-radius', '2', '--model', 'wong']  # fmt: skip
 MISSION = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', 'patrol',
            '--no-cache']  # fmt: skip
-
-
-def _run(argv: list[str]) -> int:
-    """Exit code of the CLI (argparse rejects a bad option value by SystemExit)."""
-    try:
-        return main(argv)
-    except SystemExit as exit_:
-        return int(exit_.code or 0)
-
-
-def _one_line_error(capsys, argv: list[str]) -> str:
-    assert _run(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and not captured.out and 'Traceback' not in captured.err
-    return lines[0]
 
 
 def _set(argv: list[str], option: str, value: str) -> list[str]:
@@ -82,7 +67,7 @@ def _set(argv: list[str], option: str, value: str) -> list[str]:
 def test_an_input_outside_its_range_is_one_line_and_exit_2(capsys, base, option, value, match):
     import re
 
-    line = _one_line_error(capsys, _set(base, option, value))
+    line = one_line_error(capsys, _set(base, option, value))
     assert re.search(match, line), line
 
 
@@ -104,13 +89,13 @@ def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(capsys, base, l
     if limit_option == '--height':  # the track's sinkage does not depend on its height
         assert main([*_set(heavy, '--height', f'{sinkage * 1.01:.6g}'), '--json']) == 0
         capsys.readouterr()
-    line = _one_line_error(capsys, _set(heavy, limit_option, f'{sinkage * 0.9:.6g}'))
+    line = one_line_error(capsys, _set(heavy, limit_option, f'{sinkage * 0.9:.6g}'))
     assert 'sink' in line and ('track height' in line or 'radius' in line)
 
 
 @pytest.mark.parametrize('speed', ['1.6', '3', '10'])
 def test_mission_speed_beyond_the_power_map_is_an_error_not_a_clamp(capsys, speed):
-    line = _one_line_error(capsys, _set(MISSION, '--speed', speed))
+    line = one_line_error(capsys, _set(MISSION, '--speed', speed))
     assert f'speed {float(speed):g} m/s is beyond the power map' in line and '--direct' in line
 
 
@@ -130,7 +115,7 @@ def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length,
     csv = tmp_path / 'route.csv'
     csv.write_text(f'length_m,speed_m_s,turn_radius_m\n{length},0.2,{radius}\n')
     if not ok:
-        line = _one_line_error(capsys, _set(MISSION, '--route', str(csv)))
+        line = one_line_error(capsys, _set(MISSION, '--route', str(csv)))
         assert f'more than {MAX_TRACE_STEPS:,} points' in line
         return
     route = read_route_csv(csv)
@@ -155,5 +140,5 @@ def test_route_csv_rows_have_the_same_ranges(tmp_path, capsys, row, match):
 
     csv = tmp_path / 'route.csv'
     csv.write_text(f'length_m,speed_m_s,turn_radius_m,payload_kg\n{row}\n')
-    line = _one_line_error(capsys, _set(MISSION, '--route', str(csv)))
+    line = one_line_error(capsys, _set(MISSION, '--route', str(csv)))
     assert re.search(match, line) and 'route.csv:2' in line, line

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import one_line_error
 
 from skidsteer_power.cli.main import build_parser, main
 from skidsteer_power.errors import ConfigError, InputError
@@ -26,21 +27,6 @@ MISSION = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil'
            '--no-cache']  # fmt: skip
 SIMULATE = ['simulate', '--vehicle', 'test_robot_track', '--terrain', 'dry_sand']
 MAP_BUILD = ['map', 'build', '--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--no-progress']
-
-
-def _run(argv: list[str]) -> int:
-    try:
-        return main(argv)
-    except SystemExit as exit_:
-        return int(exit_.code or 0)
-
-
-def _one_line_error(capsys, argv: list[str]) -> str:
-    assert _run(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and 'Traceback' not in captured.err, captured.err
-    return lines[0]
 
 
 def _csv(tmp_path: Path, name: str, text: str) -> str:
@@ -138,7 +124,7 @@ def _cases(tmp: Path) -> list[tuple[list[str], str]]:
 def test_each_input_beyond_its_work_limit_is_one_line_and_exit_2(tmp_path, capsys):
     failures = []
     for argv, match in _cases(tmp_path):
-        line = _one_line_error(capsys, argv)
+        line = one_line_error(capsys, argv)
         if not re.search(match, line):
             failures.append(f'{" ".join(argv)}\n  -> {line}\n  wanted /{match}/')
     assert not failures, '\n'.join(failures)
@@ -216,9 +202,9 @@ def test_an_oversized_route_or_command_csv_is_refused_unread(tmp_path, capsys):
     big = tmp_path / 'big.csv'
     with big.open('wb') as handle:
         handle.truncate(ranges.ROUTE_CSV_BYTES + 1)  # sparse: no disk used
-    line = _one_line_error(capsys, [*MISSION[:-2], str(big), '--no-cache'])
+    line = one_line_error(capsys, [*MISSION[:-2], str(big), '--no-cache'])
     assert f'{ranges.ROUTE_CSV_BYTES + 1:,} bytes; at most {ranges.ROUTE_CSV_BYTES:,}' in line
-    line = _one_line_error(capsys, [*SIMULATE, '--commands', str(big), '-o', str(tmp_path / 'o.mcap')])
+    line = one_line_error(capsys, [*SIMULATE, '--commands', str(big), '-o', str(tmp_path / 'o.mcap')])
     assert 'bytes; at most' in line
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -10,9 +11,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from skidsteer_power.des.command import CommandLimits, DriveGeometry, SlewLimiter, limit_twist
-from skidsteer_power.des.kinematics import twist_to_motor_rpm
-from skidsteer_power.des.poller import MAX_MOTOR_RPM, DriveCommand
+from skidsteer_power.des.kinematics import set_point_limit_rpm, twist_to_motor_rpm
+from skidsteer_power.des.poller import DriveCommand
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.powertrain import EC45, Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 LIMITS = CommandLimits(
     max_speed_m_s=1.5, max_yaw_rate_rad_s=2.0, max_accel_m_s2=1.0, max_yaw_accel_rad_s2=4.0
@@ -117,13 +120,34 @@ def test_opting_out_of_stop_both_keeps_the_other_side():
 
 
 def test_rpm_targets_are_capped_at_the_motor_limit():
-    command = DriveCommand(1.0, max_rpm=1e9)
-    assert command.max_rpm == MAX_MOTOR_RPM == pytest.approx(10000.0)  # Appendix B line 23
+    command = DriveCommand(1.0, max_rpm=1e9)  # the default: the test robot's motor, the EC-45
+    assert command.max_rpm == command.motor_limit_rpm == pytest.approx(10000.0)  # Appendix B line 23
     command.link_up('left')
     command.link_up('right')
     command.set({'left': 1e12, 'right': math.nan})
     assert command.wanted_rpm('left') == 10000
     assert command.wanted_rpm('right') == 0 and command.nonfinite_setpoints == 1
+
+
+def test_the_vehicles_motor_sets_the_set_point_limit(strong_motor_vehicle):
+    """A vehicle whose motor allows 5000 rpm (the fixture) caps the set points there, not at the
+    EC-45's 10 000 rpm; a requested max_rpm below the motor's limit stays."""
+    motor = Powertrain.for_vehicle(load_vehicle(str(strong_motor_vehicle))).motor
+    command = DriveCommand(1.0, max_rpm=1e9, motor=motor)
+    assert command.max_rpm == pytest.approx(5000.0)
+    command.link_up('left')
+    command.link_up('right')
+    command.set({'left': 7000.0, 'right': -7000.0})
+    assert (command.wanted_rpm('left'), command.wanted_rpm('right')) == (5000, -5000)
+    assert DriveCommand(1.0, max_rpm=4000.0, motor=motor).max_rpm == 4000.0
+
+
+def test_the_amplifier_caps_a_fast_motor():
+    """The DES 70/10 runs at most 25 000 rpm with one pole pair (Appendix A), 25 000 / p with p:
+    a 2-pole-pair motor allowed 20 000 rpm gets 12 500 rpm, a 1-pole-pair one 20 000 rpm."""
+    fast = dataclasses.replace(EC45, max_speed_rad_s=20000 * 2 * math.pi / 60)
+    assert set_point_limit_rpm(fast) == pytest.approx(12500.0)
+    assert set_point_limit_rpm(dataclasses.replace(fast, pole_pairs=1)) == pytest.approx(20000.0)
 
 
 def test_a_stalled_poller_counts_as_a_lost_link():

@@ -103,6 +103,16 @@ def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_moto
         harness.close()
 
 
+def test_max_motor_rpm_above_the_vehicles_motor_is_refused(ros_context, pair, strong_motor_vehicle):
+    """6000 rpm is within the EC-45's 10 000 rpm but above the fixture motor's 5000 rpm: the node
+    refuses to start with one clear error naming that limit (no amplifier is touched)."""
+    from skidsteer_power.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"above the motor's max\. speed 5000 rpm"):
+        Harness(ros_context, pair, activate=False, vehicle=str(strong_motor_vehicle), max_motor_rpm=6000.0)
+    assert pair.left.speed_setpoint_rpm == 0 and not pair.left.enabled
+
+
 def test_twist_stamped_by_parameter(ros_context, pair):
     h = Harness(ros_context, pair, twist_stamped=True)
     try:

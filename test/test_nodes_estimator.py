@@ -263,7 +263,8 @@ def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(rig_f
 
 @pytest.mark.parametrize(
     ('name', 'value', 'match'),
-    [('cmd_timeout_s', -1.0, 'cmd_timeout_s must be'), ('save_period_s', 0.0, 'save_period_s must be > 0'),
+    [('cmd_timeout_s', -1.0, 'cmd_timeout_s must be'),
+     ('save_period_s', 0.0, 'save_period_s must be within 0.1 .. 86400'),
      ('vehicle', 'no_such_robot', 'no_such_robot'), ('max_speed_m_s', math.nan, 'max_speed_m_s')],
 )  # fmt: skip
 def test_bad_start_parameters_are_one_clear_error(ros_context, name, value, match):

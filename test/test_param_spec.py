@@ -66,3 +66,43 @@ def test_replace_between_needs_both_markers():
     assert replace_between('a\n<b>\nold\n</b>\n', '<b>', '</b>', 'new\n') == 'a\n<b>\nnew\n</b>\n'
     with pytest.raises(ValueError, match='markers'):
         replace_between('no markers here', '<b>', '</b>', 'x')
+
+
+@pytest.mark.ros
+def test_a_value_out_of_its_range_is_one_clear_error_at_start_and_refused_by_ros_later(ros_context):
+    """A real rclpy node declaring a spec: a start value outside the range is one ConfigError naming
+    the parameter, its range, unit and value; a later set outside it is ROS's rejection."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.errors import ConfigError
+    from skidsteer_power.nodes.param_spec import declare
+
+    spec = ParamSpec('poll_rate_hz', 50.0, 'poll rate [Hz]', (0.1, 1000.0))
+    node = Node(
+        'param_range_bad', context=ros_context, parameter_overrides=[Parameter('poll_rate_hz', value=0.0)]
+    )
+    try:
+        with pytest.raises(ConfigError) as caught:
+            declare(node, [spec])
+        assert str(caught.value) == 'poll_rate_hz must be within 0.1 .. 1000 [Hz], got 0.0'
+    finally:
+        node.destroy_node()
+    node = Node(
+        'param_range_good', context=ros_context, parameter_overrides=[Parameter('poll_rate_hz', value=20.0)]
+    )
+    try:
+        assert declare(node, [spec]) == {'poll_rate_hz': 20.0}
+        (result,) = node.set_parameters([Parameter('poll_rate_hz', value=2000.0)])
+        assert not result.successful and 'out of range' in result.reason
+        assert node.get_parameter('poll_rate_hz').value == 20.0
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
+def test_every_numeric_parameter_has_a_range_holding_its_default(entry):
+    for spec in entry.specs:
+        if spec.type_name in ('integer', 'double'):
+            assert spec.range is not None, spec.name
+            assert spec.range[0] <= spec.default <= spec.range[1], spec.name

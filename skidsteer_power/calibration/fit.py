@@ -66,7 +66,7 @@ FAILED_RESIDUAL_NM = 1.0  # residual given to a segment where FESS has no steady
 
 
 @dataclass(frozen=True)
-class ParamSpec:
+class FitParameter:
     """A fittable parameter: ``field`` of Terrain (or an internal coefficient), unit, log search,
     bounds in the parameter's own (reported) unit, and the factor from that unit to SI."""
 
@@ -76,19 +76,19 @@ class ParamSpec:
     to_si: float = 1.0
 
 
-TERRAIN_PARAMS: dict[str, ParamSpec] = {
-    'kphi': ParamSpec('N/m^(n+2)', True, (1e3, 1e9)),
-    'kc': ParamSpec('N/m^(n+1)', True, (1.0, 1e7)),
-    'n': ParamSpec('-', False, (0.2, 2.0)),
-    'c': ParamSpec('Pa', True, (1.0, 5e4)),
-    'phi': ParamSpec('deg', False, (5.0, 50.0), math.pi / 180.0),
-    'K': ParamSpec('m', True, (1e-4, 0.2)),
+TERRAIN_PARAMS: dict[str, FitParameter] = {
+    'kphi': FitParameter('N/m^(n+2)', True, (1e3, 1e9)),
+    'kc': FitParameter('N/m^(n+1)', True, (1.0, 1e7)),
+    'n': FitParameter('-', False, (0.2, 2.0)),
+    'c': FitParameter('Pa', True, (1.0, 5e4)),
+    'phi': FitParameter('deg', False, (5.0, 50.0), math.pi / 180.0),
+    'K': FitParameter('m', True, (1e-4, 0.2)),
 }
-INTERNAL_PARAMS: dict[str, ParamSpec] = {
-    'left_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
-    'left_c': ParamSpec('N m', False, (0.0, 3.0)),
-    'right_b': ParamSpec('N m s/rad', False, (0.0, 0.05)),
-    'right_c': ParamSpec('N m', False, (0.0, 3.0)),
+INTERNAL_PARAMS: dict[str, FitParameter] = {
+    'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
+    'left_c': FitParameter('N m', False, (0.0, 3.0)),
+    'right_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
+    'right_c': FitParameter('N m', False, (0.0, 3.0)),
 }
 PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')

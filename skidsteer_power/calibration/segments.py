@@ -28,7 +28,8 @@ from skidsteer_power.bag_io.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
-from skidsteer_power.powertrain.motor import EC45, MotorConstants, terminal_power
+from skidsteer_power.powertrain.drivetrain import Powertrain
+from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 
 POSE_TYPES = (
     'nav_msgs/msg/Odometry',
@@ -235,10 +236,12 @@ def _measured_motion(
 
 
 def find_segments(
-    rec: Recording, options: SegmentOptions | None = None, motor: MotorConstants = EC45
+    rec: Recording, options: SegmentOptions | None = None, motor: MotorConstants | None = None
 ) -> tuple[list[Segment], dict[str, int]]:
-    """Steady segments of ``rec`` and the count of runs dropped per reason (``motor``: for power)."""
+    """Steady segments of ``rec`` and the count of runs dropped per reason (``motor``: for power; the
+    vehicle's powertrain motor, default the test robot's, :meth:`Powertrain.default_test_robot`)."""
     options = options or SegmentOptions()
+    motor = motor or Powertrain.default_test_robot().motor
     dropped = {'standing': 0, 'too_short': 0, 'not_settled': 0}
     segments = []
     for start, end, k in command_runs(rec.cmd_t, rec.cmd, options):

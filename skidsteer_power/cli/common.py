@@ -79,14 +79,6 @@ def nonnegative_float(text: str) -> float:
     return value
 
 
-def radius_float(text: str) -> float:
-    """argparse type: a turning radius in m; 'inf' (straight) allowed, 0 is not (use a yaw rate)."""
-    value = _number(text, allow_inf=True)
-    if value == 0:
-        raise argparse.ArgumentTypeError('turning radius must be non-zero (inf = straight)')
-    return value
-
-
 @contextlib.contextmanager
 def native_stdout_to_stderr() -> Iterator[None]:
     """For the block, what native code writes to file descriptor 1 goes to stderr, while Python's

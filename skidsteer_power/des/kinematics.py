@@ -14,9 +14,25 @@ import math
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.numeric import Real
-from skidsteer_power.powertrain.motor import RPM
+from skidsteer_power.powertrain.motor import RPM, MotorConstants
 
-__all__ = ['RPM', 'side_speeds', 'twist_to_motor_rpm', 'unwrap_counter']
+__all__ = [
+    'DES_MAX_SPEED_1PP_RPM',
+    'RPM',
+    'set_point_limit_rpm',
+    'side_speeds',
+    'twist_to_motor_rpm',
+    'unwrap_counter',
+]
+
+DES_MAX_SPEED_1PP_RPM = 25000.0
+"""The DES 70/10's max. speed with a one-pole-pair motor [rpm] (Appendix A); p pole pairs: / p."""
+
+
+def set_point_limit_rpm(motor: MotorConstants) -> float:
+    """The largest speed set point for ``motor`` on a DES 70/10 [rpm]: the motor's max. permissible
+    speed (EC-45: 10 000 rpm, Appendix B line 23), at most the amplifier's 25 000 rpm / pole pairs."""
+    return min(motor.max_speed_rad_s / RPM, DES_MAX_SPEED_1PP_RPM / motor.pole_pairs)
 
 
 def side_speeds(linear_m_s: Real, yaw_rate_rad_s: Real, tread_m: float) -> tuple[Real, Real]:

@@ -1,4 +1,4 @@
-"""The DES simulator's motor and load: one EC-45 shaft behind the amplifier's speed loop (SI units).
+"""The DES simulator's motor and load: one motor shaft behind the amplifier's speed loop (SI units).
 
     J dw/dt = Kt i - T_load(w, t)                                   (Newton, motor shaft)
     i = clamp(PI(w_set - w), peak current, (+-0.9 V_supply - w/Kn) / R)   (speed mode)
@@ -10,13 +10,14 @@ Split from :mod:`skidsteer_power.des.simulator` (the protocol server), which re-
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from skidsteer_power.powertrain.drivetrain import Powertrain
-from skidsteer_power.powertrain.motor import DES_70_10, EC45, GEAR_RATIO, MotorConstants
+from skidsteer_power.powertrain.motor import DES_70_10, GEAR_RATIO, MotorConstants
 from skidsteer_power.powertrain.speed_loop import (
     SPEED_LOOP_BANDWIDTH_RAD_S,
     current_limits,
@@ -34,17 +35,28 @@ DEFAULT_VEHICLE = 'test_robot_track'
 """The vehicle whose mass, drive radius and powertrain a :class:`MotorModel` drives by default."""
 
 
+def default_motor() -> MotorConstants:
+    """The motor of :data:`DEFAULT_VEHICLE`'s powertrain (the EC-45, Appendix B), read from its files."""
+    return _vehicle_drive(DEFAULT_VEHICLE)[0]
+
+
+def no_load_friction_Nm(motor: MotorConstants) -> float:
+    """A motor's own no-load friction torque K_t I_0 [N m] (Appendix B lines 3 and 12)."""
+    return motor.torque_constant_Nm_A * motor.no_load_current_A
+
+
 @dataclass(frozen=True)
 class ViscousCoulombLoad:
     """Default load torque [N m] = b w + c tanh(w / w_eps) (cf. eq. 7.1's b w + c).
 
-    Defaults: Coulomb part c = Kt I0 = 0.114 N m/A x 0.193 A = 0.022 N m (Appendix B lines 3 and 12,
-    the no-load friction of the motor); a small viscous part b = 1e-5 N m s/rad (assumed); tanh
-    smoothing over w_eps = 1 rad/s keeps the explicit integration stable through zero speed.
+    Defaults: Coulomb part c = Kt I0 of :func:`default_motor` (EC-45: 0.114 N m/A x 0.193 A =
+    0.022 N m, Appendix B lines 3 and 12, the no-load friction of the motor); a small viscous part
+    b = 1e-5 N m s/rad (assumed); tanh smoothing over w_eps = 1 rad/s keeps the explicit integration
+    stable through zero speed.
     """
 
     viscous_Nm_s: float = 1e-5
-    coulomb_Nm: float = EC45.torque_constant_Nm_A * EC45.no_load_current_A
+    coulomb_Nm: float = field(default_factory=lambda: no_load_friction_Nm(default_motor()))
     smoothing_rad_s: float = 1.0
 
     def __call__(self, omega_rad_s: float, t_s: float) -> float:
@@ -62,7 +74,7 @@ class AxleLoad:
     either direction (its magnitude is used, with the sign of the speed, smoothed over
     ``smoothing_rad_s`` at the motor). The motor sees it divided by ``gear_ratio`` [-] and by the
     transmission ``efficiency`` [-], plus the motor's own ``friction`` (default
-    :class:`ViscousCoulombLoad`).
+    :class:`ViscousCoulombLoad`; a :class:`MotorModel` gives it its motor's K_t I_0).
     """
 
     axle_torque_Nm: float | Callable[[float, float], float]
@@ -81,7 +93,7 @@ class AxleLoad:
 
 
 class MotorModel:
-    """EC-45 driven by a DES in speed or current mode; state in SI units.
+    """A motor (the EC-45 by default) driven by a DES in speed or current mode; state in SI units.
 
     Parameters
     ----------
@@ -90,7 +102,8 @@ class MotorModel:
         half of :data:`DEFAULT_VEHICLE`'s mass at its drive radius, :func:`reflected_inertia`)
     supply_voltage_V : amplifier supply [V] (default 44.4 V: two 6-cell LiPo packs in series at
         3.7 V/cell, ASSUMED; ch. 7.1.2 names the packs, not their wiring)
-    load_torque : see :data:`LoadTorque` (default: :class:`ViscousCoulombLoad` with the motor's K_t I_0)
+    load_torque : see :data:`LoadTorque` (default: :class:`ViscousCoulombLoad` with the motor's K_t I_0,
+        also an :class:`AxleLoad`'s friction when it names none)
     bandwidth_rad_s : speed-loop bandwidth of the PI controller [rad/s] (ASSUMED, see
         :mod:`skidsteer_power.powertrain.speed_loop`, the drive model shared with the twin)
     mean_time_constant_s : low-pass behind the 'mean' speed and current readings [s] (assumed)
@@ -114,8 +127,11 @@ class MotorModel:
         self.motor = motor
         self.inertia_kg_m2 = motor.rotor_inertia_kg_m2 + load_inertia_kg_m2
         self.supply_voltage_V = supply_voltage_V
+        own_friction = ViscousCoulombLoad(coulomb_Nm=no_load_friction_Nm(motor))
         if load_torque is None:  # the motor's own no-load friction, K_t I_0
-            load_torque = ViscousCoulombLoad(coulomb_Nm=motor.torque_constant_Nm_A * motor.no_load_current_A)
+            load_torque = own_friction
+        elif isinstance(load_torque, AxleLoad) and load_torque.friction is None:
+            load_torque = dataclasses.replace(load_torque, friction=own_friction)
         self.load_torque: LoadTorque = load_torque
         self.kp_A_s, self.ki_A = speed_loop_gains(
             self.inertia_kg_m2, motor.torque_constant_Nm_A, bandwidth_rad_s

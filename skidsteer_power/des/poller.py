@@ -22,13 +22,12 @@ from dataclasses import dataclass, field
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.command import CheckedTwist, CommandLimits, DriveGeometry, SlewLimiter, limit_twist
 from skidsteer_power.des.errors import DesLinkError, DesPortError
-from skidsteer_power.des.kinematics import unwrap_counter
+from skidsteer_power.des.kinematics import set_point_limit_rpm, unwrap_counter
+from skidsteer_power.des.motor_model import default_motor
 from skidsteer_power.des.protocol import DesConfig, DesErrorFlags, Status
 from skidsteer_power.des.transport import DesLink, LinkTiming
-from skidsteer_power.powertrain.motor import EC45
+from skidsteer_power.powertrain.motor import MotorConstants
 
-MAX_MOTOR_RPM = EC45.max_speed_rad_s * 60.0 / (2.0 * math.pi)
-"""The motor's max. permissible speed (EC-45: 10 000 rpm, Appendix B line 23): no set point beyond [rpm]."""
 FAULT_REPORT_HOLD_S = 10.0
 """A poller fault keeps its side's diagnostics at ERROR this long after the restart [s]."""
 MAX_BACKOFF_S = 10.0
@@ -46,7 +45,9 @@ class DriveCommand:
     either side, a command younger than ``timeout_s`` [s], this side's link up, and with
     ``stop_both_on_link_loss`` the other side's link up too (a link is up after a good poll cycle and
     for ``stall_timeout_s`` [s] after the latest one, so a hung poller counts as a lost link). A set
-    point is always a finite integer within +-``max_rpm``. Every time is read from ``clock`` [s]
+    point is always a finite integer within +-``max_rpm``, itself at most :func:`set_point_limit_rpm`
+    of ``motor`` (the vehicle's powertrain motor; default: the test robot's, read from its files,
+    :func:`~skidsteer_power.des.motor_model.default_motor`). Every time is read from ``clock`` [s]
     (default time.monotonic; a test steps its own, like the estimator core's ``now_s``).
     """
 
@@ -54,7 +55,8 @@ class DriveCommand:
         self,
         timeout_s: float,
         *,
-        max_rpm: float = MAX_MOTOR_RPM,
+        max_rpm: float | None = None,
+        motor: MotorConstants | None = None,
         geometry: DriveGeometry | None = None,
         limits: CommandLimits | None = None,
         stop_both_on_link_loss: bool = True,
@@ -65,7 +67,8 @@ class DriveCommand:
     ) -> None:
         self.clock = clock
         self.timeout_s = timeout_s
-        self.max_rpm = min(max_rpm, MAX_MOTOR_RPM)
+        self.motor_limit_rpm = set_point_limit_rpm(motor or default_motor())
+        self.max_rpm = self.motor_limit_rpm if max_rpm is None else min(max_rpm, self.motor_limit_rpm)
         self.geometry = geometry
         self.limits = limits or CommandLimits()
         self.stop_both_on_link_loss = stop_both_on_link_loss
@@ -280,6 +283,7 @@ class AmplifierPoller:
     disables the amplifier, closes the link, is reported in the sample (and logged with its
     traceback through ``log_error``) and the polling restarts after a back-off that doubles up to
     :data:`MAX_BACKOFF_S`. On :meth:`stop` the motor gets zero velocity, then is disabled.
+    ``encoder_resolution``: encoder lines per motor turn [-] (default: the test robot's motor's).
     """
 
     def __init__(
@@ -293,13 +297,13 @@ class AmplifierPoller:
         poll_period_s: float = 0.02,
         status_every: int = 5,
         reconnect_period_s: float = 0.5,
-        encoder_resolution: int = 2048,
+        encoder_resolution: int | None = None,
         max_failed_cycles: int = 5,
         log_error: Callable[[str], None] | None = None,
     ) -> None:
         self.clock = command.clock  # stamps and fault times; the thread's own waits are real time
         self.side = side
-        self.encoder_resolution = encoder_resolution
+        self.encoder_resolution = encoder_resolution or default_motor().encoder_counts_per_turn
         self.max_failed_cycles = max_failed_cycles
         self._failed_cycles = 0
         self.command = command

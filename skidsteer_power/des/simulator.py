@@ -1,4 +1,4 @@
-"""A virtual DES 70/10 amplifier with an EC-45 motor, on a pseudo-terminal pair.
+"""A virtual DES 70/10 amplifier with its motor (the EC-45 by default), on a pseudo-terminal pair.
 
 The simulator holds the master side of an :func:`os.openpty` pair and speaks the DES protocol in a
 thread; the host opens the slave side (through a stable symlink, like a udev
@@ -38,6 +38,7 @@ from skidsteer_power.des.motor_model import (  # re-exported: the old import pat
     LoadTorque,
     MotorModel,
     ViscousCoulombLoad,
+    default_motor,
 )
 from skidsteer_power.des.protocol import (
     ACK_FAIL,
@@ -60,7 +61,7 @@ from skidsteer_power.des.protocol import (
     to_int16,
     to_word,
 )
-from skidsteer_power.powertrain.motor import DES_70_10, EC45, RPM, MotorConstants
+from skidsteer_power.powertrain.motor import DES_70_10, RPM, MotorConstants
 
 __all__ = [  # the motor model's names stay importable from here, their old home
     'DEFAULT_VEHICLE',
@@ -91,8 +92,10 @@ class Fault(enum.Enum):
     SILENT = 'silent'  # answer nothing at all
 
 
-def default_parameters(baudrate: int, motor: MotorConstants = EC45) -> dict[int, int]:
-    """RAM parameters of a freshly configured amplifier for the test robot."""
+def default_parameters(baudrate: int, motor: MotorConstants | None = None) -> dict[int, int]:
+    """RAM parameters of a freshly configured amplifier for ``motor`` (default: :func:`default_motor`,
+    the test robot's; :class:`SimulatedDes` passes its model's motor)."""
+    motor = motor or default_motor()
     return {
         Param.BAUD_RATE: BAUD_CODES[baudrate],
         Param.SYSTEM_CONFIG: int(
@@ -159,7 +162,9 @@ class SimulatedDes:
     baudrate : the link speed it emulates [bit/s]; with ``emulate_baud`` every byte costs its
         byte time (10 bits, 8N1) on the line, so link throughput is realistic on a pty
     config : protocol options (UNCONFIRMED items); the simulator answers in the same convention
-    model : motor model (default: :class:`MotorModel` of :data:`DEFAULT_VEHICLE`)
+    model : motor model (default: :class:`MotorModel` of ``motor``)
+    motor : the motor constants of the default model (default: :data:`DEFAULT_VEHICLE`'s motor;
+        give a vehicle's powertrain motor to simulate that vehicle's amplifier)
     link_path : stable path of the port (a symlink to the pty); default in a fresh temp directory
     """
 
@@ -171,13 +176,14 @@ class SimulatedDes:
         *,
         config: DesConfig | None = None,
         model: MotorModel | None = None,
+        motor: MotorConstants | None = None,
         link_path: str | None = None,
         emulate_baud: bool = True,
         name: str = 'des',
     ) -> None:
         self.config = config or DesConfig(baudrate=baudrate)
         self.baudrate = baudrate
-        self.model = model or MotorModel()
+        self.model = model or MotorModel(motor)
         self.name = name
         self.emulate_baud = emulate_baud
         self._byte_time_s = 10.0 / baudrate

@@ -38,6 +38,7 @@ from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.perturbed import apply_powertrain
+from skidsteer_power.vehicle import GRAVITY_M_S2
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -174,7 +175,7 @@ def score(evaluated: list[dict[str, Any]], terrain: Any) -> list[dict[str, Any]]
     """Add max drawbar pull [N], its ratio to the weight [-] and the merit [1/W] to solved candidates."""
     dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
     for c, pull in zip(evaluated, dp, strict=True):
-        weight = c['mass_kg'] * 9.81
+        weight = c['mass_kg'] * GRAVITY_M_S2
         c['max_drawbar_pull_N'] = float(pull)
         c['drawbar_pull_ratio'] = float(pull / weight)
         c['merit'] = _merit(c)

@@ -22,7 +22,8 @@ rad/s, REP 103), best effort by default so that reliable and best-effort publish
 Every number is checked where it enters: a message with any non-finite field is rejected and
 counted; V and yaw rate are clamped to ``max_speed_m_s`` / ``max_yaw_rate_rad_s`` (a throttled
 warning, counted) and their changes to ``max_accel_m_s2`` / ``max_yaw_accel_rad_s2``; the
-motor set points never exceed ``max_motor_rpm`` (itself at most the motor's 10 000 rpm).
+motor set points never exceed ``max_motor_rpm`` (itself at most the vehicle's motor's max. speed,
+EC-45: 10 000 rpm).
 Service ``~/clear_faults`` (std_srvs/Trigger): clear latched amplifier errors, re-enable; the answer
 says whether every side came back.
 Publishes ``joint_states`` (sensor_msgs/JointState, joints ``left_motor`` and ``right_motor``:
@@ -76,17 +77,16 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from skidsteer_power.des.command import CommandLimits, DriveGeometry
-from skidsteer_power.des.kinematics import RPM
-from skidsteer_power.des.poller import MAX_MOTOR_RPM, AmplifierPoller, AmplifierSample, DriveCommand
+from skidsteer_power.des.kinematics import DES_MAX_SPEED_1PP_RPM, RPM, set_point_limit_rpm
+from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCommand
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
-from skidsteer_power.nodes.param_spec import ParamSpec, descriptor
+from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
-from skidsteer_power.powertrain.motor import EC45
 from skidsteer_power.vehicle import load_vehicle
 
 NODE_NAME = 'des_driver'
@@ -109,22 +109,28 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier'),
     ParamSpec('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier'),
-    ParamSpec('baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200'),
-    ParamSpec('left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1'),
     ParamSpec(
-        'right_polarity', -1, 'amplifier sense of forward motion, right side (mirrored motor): +1 or -1'
+        'baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200', (9600, 115200)
+    ),
+    ParamSpec('left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1', (-1, 1)),
+    ParamSpec(
+        'right_polarity',
+        -1,
+        'amplifier sense of forward motion, right side (mirrored motor): +1 or -1',
+        (-1, 1),
     ),
     ParamSpec(
         'encoder_resolution',
-        EC45.encoder_counts_per_turn,
-        'encoder lines per motor turn [-] (ch. 7.1.2)',
-        (1, 65535),
+        0,
+        "encoder lines per motor turn [-]; 0 = the vehicle's motor's (EC-45: 2048, ch. 7.1.2)",
+        (0, 65535),
     ),
     ParamSpec(
         'max_motor_rpm',
         4000.0,
-        'largest motor set point [rpm] (EC-45: 4010 rpm no-load at 48 V)',
-        (1.0, MAX_MOTOR_RPM),
+        "largest motor set point [rpm] (EC-45: 4010 rpm no-load at 48 V); at most the vehicle's motor's"
+        ' max. speed (EC-45: 10 000 rpm) and the DES 70/10 max. 25 000 rpm / pole pairs',
+        (1.0, DES_MAX_SPEED_1PP_RPM),
     ),
     ParamSpec(
         'max_speed_m_s', 1.5, '|V| commands beyond are clamped [m/s] (the maps cover 1.5 m/s)', (0.001, 10.0)
@@ -208,8 +214,7 @@ class DesDriver(LifecycleNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, descriptor(spec))
+        declare(self, PARAMETERS)  # a value out of its range: one ConfigError
         self.params = self._read_parameters()  # a bad value is one clear error at once
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.command: DriveCommand | None = None
@@ -239,11 +244,12 @@ class DesDriver(LifecycleNode):
             raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
         vehicle = load_vehicle(p['vehicle'])
         p['powertrain'] = powertrain = Powertrain.for_vehicle(vehicle)
-        motor_max_rpm = powertrain.motor.max_speed_rad_s / RPM
+        motor_max_rpm = set_point_limit_rpm(powertrain.motor)
         if p['max_motor_rpm'] > motor_max_rpm:
             raise ConfigError(
                 f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
             )
+        p['encoder_resolution'] = p['encoder_resolution'] or powertrain.motor.encoder_counts_per_turn
         p['geometry'] = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
@@ -338,6 +344,7 @@ class DesDriver(LifecycleNode):
         self.command = DriveCommand(
             p['cmd_timeout_s'],
             max_rpm=p['max_motor_rpm'],
+            motor=p['powertrain'].motor,
             geometry=p['geometry'],
             limits=p['limits'],
             stop_both_on_link_loss=p['stop_both_on_link_loss'],

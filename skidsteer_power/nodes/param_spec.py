@@ -2,8 +2,10 @@
 with its unit in brackets, optional range), from which the node declares them (with ROS ranges),
 the shipped parameter files (config/*.yaml) and the tables of docs/INTERFACES.md are rendered.
 
-``scripts/gen_params.py`` writes the files; test/test_param_spec.py checks the shipped ones equal
-the rendering, so a parameter is added or changed in its node's ``PARAMETERS`` only.
+``python -m skidsteer_power.nodes.param_files`` writes the files (``--check`` in CI);
+test/test_param_spec.py checks the shipped ones equal the rendering, so a parameter is added or
+changed in its node's ``PARAMETERS`` only. Every number has a range: ROS refuses a set outside it,
+and :func:`declare` turns an out-of-range or mistyped start value into one ConfigError.
 """
 
 from __future__ import annotations
@@ -12,8 +14,13 @@ import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+
+from skidsteer_power.errors import ConfigError
 
 _UNIT = re.compile(r'\[([^\]]+)\]')
 
@@ -57,6 +64,27 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
         else:
             result.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
     return result
+
+
+def declare(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+    """Declare every parameter of ``specs`` on ``node`` (:func:`descriptor`: ROS enforces the range on
+    every later set) and return their values by name. A start value (override, parameter file) out of
+    its range or of another type is one ConfigError naming the parameter, the value and the range."""
+    for spec in specs:
+        try:
+            node.declare_parameter(spec.name, spec.default, descriptor(spec))
+        except InvalidParameterValueException as err:
+            raise ConfigError(_out_of_range(spec, str(err.args[0]))) from None
+        except InvalidParameterTypeException as err:
+            raise ConfigError(f'{spec.name} must be of type {spec.type_name}: {err.args[0]}') from None
+    return {spec.name: node.get_parameter(spec.name).value for spec in specs}
+
+
+def _out_of_range(spec: ParamSpec, ros_message: str) -> str:
+    found = re.match(r'Invalid parameter value \((.*)\) for parameter', ros_message)
+    unit = f' [{spec.unit}]' if spec.unit else ''
+    got = found.group(1) if found else ros_message
+    return f'{spec.name} must be within {spec.range_text()}{unit}, got {got}'
 
 
 def yaml_value(value: bool | int | float | str) -> str:

@@ -35,7 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Path
 from std_msgs.msg import Float64
 
-from skidsteer_power.errors import ConfigError, InputError, SkidsteerError
+from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.estimator.path_energy import (
     MAX_PATH_POSES,
     PATH_TOLERANCE_M,
@@ -52,9 +52,12 @@ _POSE_BYTES = 56  # geometry_msgs/Pose: 7 float64
 
 PARAMETERS = (
     ParamSpec(
-        'path_speed_m_s', 0.0, 'speed to drive the planned path at [m/s]; 0 = the last commanded speed'
+        'path_speed_m_s',
+        0.0,
+        'speed to drive the planned path at [m/s]; 0 = the last commanded speed',
+        (0.0, 10.0),
     ),
-    ParamSpec('path_reserve_wh', 0.0, 'energy kept in reserve in energy/path_margin_wh [Wh]'),
+    ParamSpec('path_reserve_wh', 0.0, 'energy kept in reserve in energy/path_margin_wh [Wh]', (0.0, 1e6)),
 )
 
 
@@ -76,9 +79,7 @@ class PathEnergyHook:
     """Subscribes ``plan`` on ``node`` and publishes the path energies (module doc)."""
 
     def __init__(self, node: Any, p: dict[str, Any], qos: Any) -> None:
-        for name in (spec.name for spec in PARAMETERS):
-            if not p[name] >= 0:
-                raise ConfigError(f'{name} must be >= 0, got {p[name]!r}')
+        """``p``: the node's declared parameters (:data:`PARAMETERS`, within their ranges)."""
         self.node = node
         self.speed_m_s = float(p['path_speed_m_s'])
         self.reserve_wh = float(p['path_reserve_wh'])

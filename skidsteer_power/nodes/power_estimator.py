@@ -108,7 +108,7 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
-from skidsteer_power.nodes.param_spec import ParamSpec, descriptor
+from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
@@ -134,22 +134,44 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'state_file', '', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'
     ),
     ParamSpec('persist', True, 'save the energy state and restore it on start'),
-    ParamSpec('initial_soc', -1.0, 'state of charge at start when nothing is restored [-]; < 0 = full'),
+    ParamSpec(
+        'initial_soc', -1.0, 'state of charge at start when nothing is restored [-]; < 0 = full', (-1.0, 1.0)
+    ),
     ParamSpec('cmd_vel_stamped', False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
-    ParamSpec('cmd_timeout_s', 0.5, 'cmd_vel older than this is stale [s]'),
-    ParamSpec('joint_timeout_s', 0.5, 'joint_states older than this is stale [s]'),
-    ParamSpec('traction_warning_margin', 0.1, 'warn when the traction margin is at or below this [-]'),
-    ParamSpec('power_filter_s', 5.0, 'time constant of the power filter behind time to empty [s]'),
-    ParamSpec('warn_period_s', 2.0, 'least time between two warnings about rejected inputs [s]'),
-    ParamSpec('max_speed_m_s', 5.0, 'cmd_vel |linear.x| above this is rejected [m/s]'),
-    ParamSpec('max_yaw_rate_rad_s', 10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]'),
-    ParamSpec('max_motor_speed_rad_s', 1200.0, 'joint_states |velocity| above this is rejected [rad/s]'),
-    ParamSpec('max_motor_torque_Nm', 5.0, 'joint_states |effort| above this is rejected [N m]'),
-    ParamSpec('publish_period_s', 0.2, 'period of battery and energy topics [s]'),
-    ParamSpec('figure_period_s', 0.05, 'least period of the Float64 figure topics (latest value) [s]'),
-    ParamSpec('diagnostics_period_s', 1.0, 'period of diagnostics [s]'),
-    ParamSpec('save_period_s', 10.0, 'period of energy-state saves [s]'),
-    ParamSpec('qos_depth', 100, 'queue depth of the subscriptions and the per-message outputs'),
+    ParamSpec('cmd_timeout_s', 0.5, 'cmd_vel older than this is stale [s]', (0.01, 60.0)),
+    ParamSpec('joint_timeout_s', 0.5, 'joint_states older than this is stale [s]', (0.01, 60.0)),
+    ParamSpec(
+        'traction_warning_margin', 0.1, 'warn when the traction margin is at or below this [-]', (0.0, 1.0)
+    ),
+    ParamSpec(
+        'power_filter_s', 5.0, 'time constant of the power filter behind time to empty [s]', (0.0, 3600.0)
+    ),
+    ParamSpec(
+        'warn_period_s', 2.0, 'least time between two warnings about rejected inputs [s]', (0.01, 3600.0)
+    ),
+    ParamSpec('max_speed_m_s', 5.0, 'cmd_vel |linear.x| above this is rejected [m/s]', (0.001, 100.0)),
+    ParamSpec(
+        'max_yaw_rate_rad_s', 10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]', (0.001, 100.0)
+    ),
+    ParamSpec(
+        'max_motor_speed_rad_s',
+        1200.0,
+        'joint_states |velocity| above this is rejected [rad/s]',
+        (1.0, 10000.0),
+    ),
+    ParamSpec(
+        'max_motor_torque_Nm', 5.0, 'joint_states |effort| above this is rejected [N m]', (0.001, 1000.0)
+    ),
+    ParamSpec('publish_period_s', 0.2, 'period of battery and energy topics [s]', (0.001, 3600.0)),
+    ParamSpec(
+        'figure_period_s',
+        0.05,
+        'least period of the Float64 figure topics (latest value) [s]',
+        (0.001, 3600.0),
+    ),
+    ParamSpec('diagnostics_period_s', 1.0, 'period of diagnostics [s]', (0.01, 3600.0)),
+    ParamSpec('save_period_s', 10.0, 'period of energy-state saves [s]', (0.1, 86400.0)),
+    ParamSpec('qos_depth', 100, 'queue depth of the subscriptions and the per-message outputs', (1, 100000)),
     ParamSpec(
         'input_reliability',
         'best_effort',
@@ -163,18 +185,30 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('right_joints', '', 'comma-separated joint names of the right side ("" = vehicle file)'),
     ParamSpec('effort_is', '', 'joint_states effort is "torque" [N m] or "current" [A] ("" = vehicle file)'),
     ParamSpec('joints_at', '', 'joint values are at the "motor" shaft or the "wheel" ("" = vehicle file)'),
-    ParamSpec('joint_gear_ratio', 0.0, 'motor turns per wheel turn of the joints [-] (0 = vehicle file)'),
+    ParamSpec(
+        'joint_gear_ratio',
+        0.0,
+        'motor turns per wheel turn of the joints [-] (0 = vehicle file)',
+        (0.0, 1000.0),
+    ),
     ParamSpec(
         'joint_torque_constant_Nm_A',
         0.0,
         'motor torque constant for a current effort [N m/A] (0 = vehicle file)',
+        (0.0, 100.0),
     ),
     ParamSpec('adaptation', True, 'adapt a per-side torque scale and offset online, detect terrain changes'),
-    ParamSpec('adaptation_memory_s', 10.0, 'memory (forgetting time constant) of the online adaptation [s]'),
+    ParamSpec(
+        'adaptation_memory_s',
+        10.0,
+        'memory (forgetting time constant) of the online adaptation [s]',
+        (0.1, 86400.0),
+    ),
     ParamSpec(
         'adaptation_terrain_memory_s',
         60.0,
         'memory of the terrain scale that carries over between commands (path energy) [s]',
+        (0.1, 86400.0),
     ),
     *PATH_PARAMETERS,
 )
@@ -220,9 +254,7 @@ class PowerEstimator(QuietNode):
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
-        for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, descriptor(spec))
-        p = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        p = declare(self, PARAMETERS)  # a value out of its range: one ConfigError
         self._lock = threading.Lock()
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
@@ -259,10 +291,6 @@ class PowerEstimator(QuietNode):
     # --- set-up -------------------------------------------------------------------------------
     @staticmethod
     def _settings(p: dict[str, Any]) -> EstimatorSettings:
-        periods = ('publish_period_s', 'figure_period_s', 'diagnostics_period_s', 'save_period_s')
-        for name in (*periods, 'qos_depth'):
-            if not p[name] > 0:
-                raise ConfigError(f'{name} must be > 0, got {p[name]!r}')
         if p['input_reliability'] not in INPUT_RELIABILITY:
             reliability = p['input_reliability']
             raise ConfigError(f'input_reliability must be best_effort or reliable, got {reliability!r}')

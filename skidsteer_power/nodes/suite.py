@@ -142,7 +142,7 @@ class Suite:
         patches = load_patches(o.patches) if o.patches else None
         twin = Twin(self.vehicle, load_terrain(o.sim_terrain or o.terrain), patches=patches)
         coupling = TwinCoupling(twin)
-        self.sim = SimulatedPair()
+        self.sim = SimulatedPair(motor=twin.powertrain.motor)  # the vehicle's motor, as the driver's
         polarity = {'left': int(o.driver_params.get('left_polarity', 1))}
         polarity['right'] = int(o.driver_params.get('right_polarity', -1))
         for side, amp in (('left', self.sim.left), ('right', self.sim.right)):

@@ -23,7 +23,7 @@ def pressure_sinkage(terrain: Terrain, z: ArrayLike, b: ArrayLike) -> FloatArray
     A sinkage z <= 0 means no contact and gives 0 Pa.
     """
     z = np.asarray(z, dtype=float)
-    b = _positive(b, 'width b')
+    b = check_length(b, 'width b')
     return terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
 
 
@@ -32,7 +32,7 @@ def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatA
     p = np.asarray(p, dtype=float)
     if np.any(~np.isfinite(p)) or np.any(p < 0):
         raise InputError('pressure must be finite and >= 0 Pa')
-    b = _positive(b, 'width b')
+    b = check_length(b, 'width b')
     return (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
 
 
@@ -80,7 +80,8 @@ def shear_stress(terrain: Terrain, sigma: ArrayLike, j: ArrayLike) -> FloatArray
     return shear_strength(terrain, sigma) * shear_fraction(terrain, j)
 
 
-def _positive(value: ArrayLike, what: str) -> FloatArray:
+def check_length(value: ArrayLike, what: str) -> FloatArray:
+    """A width, length or radius [m] as an array; InputError unless finite and > 0."""
     arr = np.asarray(value, dtype=float)
     if np.any(~np.isfinite(arr)) or np.any(arr <= 0):
         raise InputError(f'{what} must be finite and > 0 m, got {value!r}')

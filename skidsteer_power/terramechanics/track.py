@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from scipy.special import roots_legendre
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.terramechanics.soil import FloatArray, shear_fraction
+from skidsteer_power.terramechanics.soil import FloatArray, check_length, shear_fraction
 from skidsteer_power.terramechanics.terrain import Terrain
 
 
@@ -35,14 +35,6 @@ def check_load(load: ArrayLike) -> FloatArray:
     if np.any(~np.isfinite(w)) or np.any(w < 0):
         raise InputError(f'load must be finite and >= 0 N, got {load!r}')
     return w
-
-
-def check_length(value: ArrayLike, what: str) -> FloatArray:
-    """A width, length or radius [m] as an array; InputError unless finite and > 0."""
-    arr = np.asarray(value, dtype=float)
-    if np.any(~np.isfinite(arr)) or np.any(arr <= 0):
-        raise InputError(f'{what} must be finite and > 0 m, got {value!r}')
-    return arr
 
 
 def check_slip(slip: ArrayLike) -> FloatArray:

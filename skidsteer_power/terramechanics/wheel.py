@@ -28,9 +28,9 @@ from scipy.optimize import elementwise, root
 from scipy.special import roots_legendre
 
 from skidsteer_power.errors import ConvergenceError, InputError
-from skidsteer_power.terramechanics.soil import FloatArray, shear_stress
+from skidsteer_power.terramechanics.soil import FloatArray, check_length, shear_stress
 from skidsteer_power.terramechanics.terrain import Terrain
-from skidsteer_power.terramechanics.track import check_length, check_load, check_slip
+from skidsteer_power.terramechanics.track import check_load, check_slip
 
 NODES_PER_PANEL = 24
 BALANCE_TOL_N = 1e-3  # eq. 2.29 stopping rule: |each equation| < 0.001 N

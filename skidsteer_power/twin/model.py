@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skidsteer_power.des.kinematics import RPM, twist_to_motor_rpm
+from skidsteer_power.des.kinematics import RPM, set_point_limit_rpm, twist_to_motor_rpm
 from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
@@ -199,7 +199,7 @@ class Twin:
             tread_m=self.vehicle.tread_m,
             drive_radius_m=self.r,
             gear_ratio=self.G,
-            max_rpm=self.powertrain.motor.max_speed_rad_s / RPM,  # the driver's set-point limit
+            max_rpm=set_point_limit_rpm(self.powertrain.motor),  # the driver's set-point limit
         )
         self._target = np.array(rpm) * RPM
         self._targets = self._target.tolist()

@@ -64,21 +64,27 @@ def _indicator(
     )
 
 
-def _power_plot(fl: Any, side: str) -> Any:
+def _time_plot(fl: Any, title: str, paths: list[Any], window_s: float, **config: Any) -> Any:
+    """A plot of ``paths`` over the last ``window_s`` seconds (sliding), legend on top."""
     return fl.PlotPanel(
-        title=f'{side} motor power: predicted vs measured [W]',
+        title=title,
         config=fl.PlotConfig(
-            paths=[
-                _series(fl, f'/power/predicted_{side}_w', f'predicted {side} [W]', PREDICTED, dashed=True),
-                _series(fl, f'/power/measured_{side}_w', f'measured {side} [W]', MEASURED),
-            ],
+            paths=paths,
             show_legend=True,
             legend_display='top',
-            y_axis_label='W',
             time_window_mode='sliding',
-            following_view_width=60.0,
+            following_view_width=window_s,
+            **config,
         ),
     )
+
+
+def _power_plot(fl: Any, side: str) -> Any:
+    paths = [
+        _series(fl, f'/power/predicted_{side}_w', f'predicted {side} [W]', PREDICTED, dashed=True),
+        _series(fl, f'/power/measured_{side}_w', f'measured {side} [W]', MEASURED),
+    ]
+    return _time_plot(fl, f'{side} motor power: predicted vs measured [W]', paths, 60.0, y_axis_label='W')
 
 
 def operator_layout() -> Any:
@@ -95,16 +101,10 @@ def operator_layout() -> Any:
             color_map='red-yellow-green',
         ),
     )  # fmt: skip
-    battery_power = fl.PlotPanel(
-        title='battery power: predicted vs measured [W]',
-        config=fl.PlotConfig(
-            paths=[
-                _series(fl, '/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
-                _series(fl, '/power/measured_battery_w', 'measured [W]', MEASURED),
-            ],
-            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=600.0,
-        ),
-    )  # fmt: skip
+    battery_power = _time_plot(fl, 'battery power: predicted vs measured [W]', [
+        _series(fl, '/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
+        _series(fl, '/power/measured_battery_w', 'measured [W]', MEASURED),
+    ], 600.0)  # fmt: skip
     time_to_empty = _indicator(
         fl, 'time to empty [s]', '/energy/time_to_empty_s', ('<', str(LOW_TIME_TO_EMPTY_S)),
         'battery low: under 10 min', 'time to empty',
@@ -113,31 +113,19 @@ def operator_layout() -> Any:
         fl, 'traction margin [-]', '/power/traction_margin', ('<=', str(TRACTION_WARNING_MARGIN)),
         'TRACTION WARNING: the robot may get stuck', 'traction ok',
     )  # fmt: skip
-    traction_plot = fl.PlotPanel(
-        title='traction margin [-] and time to empty [s]',
-        config=fl.PlotConfig(
-            paths=[
-                _series(fl, '/power/traction_margin', 'traction margin [-]', '#9467bd'),
-                fl.PlotSeries(value='/energy/time_to_empty_s.data', label='time to empty [s]', enabled=True,
-                              color='#2ca02c', timestamp_method='receiveTime', use_right_y_axis=True),
-            ],
-            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=120.0,
-        ),
-    )  # fmt: skip
+    traction_plot = _time_plot(fl, 'traction margin [-] and time to empty [s]', [
+        _series(fl, '/power/traction_margin', 'traction margin [-]', '#9467bd'),
+        fl.PlotSeries(value='/energy/time_to_empty_s.data', label='time to empty [s]', enabled=True,
+                      color='#2ca02c', timestamp_method='receiveTime', use_right_y_axis=True),
+    ], 120.0)  # fmt: skip
     path_margin = _indicator(
         fl, 'path margin [Wh]', '/energy/path_margin_wh', ('<', '0'),
         'CANNOT drive the path and return', 'path and return ok',
     )  # fmt: skip
-    path_energy = fl.PlotPanel(
-        title='planned path: energy required and margin [Wh]',
-        config=fl.PlotConfig(
-            paths=[
-                _series(fl, '/energy/path_required_wh', 'required [Wh]', PREDICTED),
-                _series(fl, '/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
-            ],
-            show_legend=True, legend_display='top', time_window_mode='sliding', following_view_width=600.0,
-        ),
-    )  # fmt: skip
+    path_energy = _time_plot(fl, 'planned path: energy required and margin [Wh]', [
+        _series(fl, '/energy/path_required_wh', 'required [Wh]', PREDICTED),
+        _series(fl, '/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
+    ], 600.0)  # fmt: skip
     odom_x = fl.PlotXAxisPath(value='/odom.pose.pose.position.x', enabled=True)
     trace = fl.PlotPanel(
         title='trace from odometry: y [m] vs x [m]',
