@@ -33,7 +33,6 @@ that does not move over the ground (w_z y_side = V) makes no rut.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -477,26 +476,9 @@ class FessSolver:
         them) for one point, without the neighbour retries. ``x0`` = (s0, omega_left, omega_right) warm-starts
         it, e.g. with the previous command's :attr:`PointSolution.state`.
         """
-        v, w = float(speed), float(yaw_rate)
-        if not (math.isfinite(v) and math.isfinite(w)):
-            raise InputError('speed and yaw rate must be finite numbers (m/s, rad/s)')
-        flip = -1.0 if v < 0 else 1.0  # reverse: the fore-aft mirror image (module doc)
-        v, w = abs(v), w * flip
-        if v == 0 and w == 0:
-            zero = np.zeros(2)
-            return PointSolution(0.0, zero, zero.copy(), True, 0)
-        prob = self.problem(np.array([v]), np.array([w]))
-        from skidsteer_power.models.fess_point import newton_point, warm_alternatives
+        from skidsteer_power.models.fess_point import solve_point
 
-        guess = self._straight_guess(prob, initial_guess(prob))[0]
-        others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
-        last: dict[str, np.ndarray] = {}
-        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others, forces=last)
-        fx = last['fx'] if 'fx' in last else element_forces(prob, x[None, None, :])[0]
-        torque = prob.radius * (fx * prob.contact.wt[:, None]).sum(axis=(-2, -1))[0, 0]
-        slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
-        ok = converged and bool((np.abs(slip) <= SLIP_LIMIT).all()) and bool((prob.loads > 0).all())
-        return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
+        return solve_point(self, speed, yaw_rate, x0, tol)
 
     @cached_property
     def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -511,21 +493,6 @@ class FessSolver:
         slip = np.concatenate([[0.0], np.where(ok, sol.slip[:, 0], np.nan)])
         good = np.isfinite(s0) & np.isfinite(slip)
         return speeds[good], s0[good], slip[good]
-
-    def _straight_guess(self, prob: Problem, guess: np.ndarray) -> np.ndarray:
-        """``guess`` (1, 3) with s0 and the slips of straight running at this speed (the table):
-        s0 faded by V^2 / (V^2 + (w_z l / 2)^2) towards 0 for a spin (s0 = 0 by symmetry), both
-        sides' speeds raised by the straight-running slip."""
-        speeds, s0, slip = self.straight_table
-        if speeds.size < 2:
-            return guess
-        v, w = float(prob.speed[0]), float(prob.yaw[0])
-        half_span = 0.5 * prob.contact.length_scale * w
-        fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
-        out = guess.copy()
-        out[0, 0] = float(np.interp(v, speeds, s0)) * fade
-        out[0, 1:] = guess[0, 1:] / (1.0 - min(float(np.interp(v, speeds, slip)), 0.9))
-        return out
 
     def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
         """Re-solve failed points warm-started from the nearest converged point (in V and w_z scaled
