@@ -102,17 +102,20 @@ class Problem:
     @cached_property
     def turn_radius(self) -> np.ndarray:
         """(P,) signed R = V / w_z [m] (0 when spinning in place)."""
-        return self.speed / self.yaw
+        radius: np.ndarray = self.speed / self.yaw
+        return radius
 
     @cached_property
     def side_speed(self) -> np.ndarray:
         """(P, 2) ground speed of each side's centreline along x, V - w_z y_side [m/s]."""
-        return self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+        ground_speed: np.ndarray = self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+        return ground_speed
 
     @cached_property
     def rolling(self) -> np.ndarray:
         """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
-        return self.contact.resistance * np.sign(self.side_speed)
+        resistance: np.ndarray = self.contact.resistance * np.sign(self.side_speed)
+        return resistance
 
     @cached_property
     def side_y(self) -> np.ndarray:
@@ -123,13 +126,16 @@ class Problem:
     def centre_offset(self) -> np.ndarray:
         """(P, 1, 2, 1, 1) lateral distance of each side's centreline from the turning centre O = (0, R)
         [m]; R = V / w_z is finite because straight points run at STRAIGHT_YAW, 0 spinning in place."""
-        return self.side_y[None, None, :, None, None] - self.turn_radius[:, None, None, None, None]
+        radius = self.turn_radius[:, None, None, None, None]
+        offset: np.ndarray = self.side_y[None, None, :, None, None] - radius
+        return offset
 
     @cached_property
     def half_turn_rate(self) -> np.ndarray:
         """(P, 1, 2|1, G, N) w_z xi / 2 [m rad/s]: divided by the rim speed |omega| r it is half the
         angle an element has turned since it touched down (eqs. 6.3, 6.5)."""
-        return (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
+        rate: np.ndarray = (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
+        return rate
 
     @cached_property
     def element_x(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -152,7 +158,8 @@ class Problem:
     def omega_ref(self) -> np.ndarray:
         """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
         (scales the Newton steps and their trust region)."""
-        return np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
+        reference: np.ndarray = np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
+        return reference
 
 
 def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -282,7 +289,8 @@ def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -
     caps[:, 0] = 0.2 * problem.contact.length_scale
     caps[:, 1:] = 0.5 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[idx, None])
     ratio = np.max(np.abs(step) / caps, axis=1)
-    return step / np.maximum(ratio, 1.0)[:, None]
+    limited: np.ndarray = step / np.maximum(ratio, 1.0)[:, None]
+    return limited
 
 
 _UNKNOWNS = np.arange(3)
@@ -379,7 +387,8 @@ class TwistSolution:
     @property
     def power(self) -> np.ndarray:
         """(P, 2) mechanical power torque * omega [W]."""
-        return self.torque * self.omega
+        power: np.ndarray = self.torque * self.omega
+        return power
 
     @property
     def state(self) -> np.ndarray:
@@ -400,7 +409,8 @@ class PointSolution:
     @property
     def power(self) -> np.ndarray:
         """(2,) torque * omega [W]."""
-        return self.torque * self.omega
+        power: np.ndarray = self.torque * self.omega
+        return power
 
     @property
     def state(self) -> np.ndarray:

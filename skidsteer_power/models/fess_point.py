@@ -193,7 +193,8 @@ class PointKernel:
             self.rows([x[0], x[0]], [x[1], x[2]], x)
         assert self._last is not None
         qjx = self._last[1][:, 0]  # row 0 of each side: the state itself
-        return self.radius * np.vecdot(qjx, self._strength[2][:, 0])
+        torque: np.ndarray = self.radius * np.vecdot(qjx, self._strength[2][:, 0])
+        return torque
 
 
 def newton_point(
@@ -454,12 +455,16 @@ def solve_point(
 def _warm_start(kernel: PointKernel, cold: np.ndarray, warm: np.ndarray) -> np.ndarray | None:
     """The warm alternatives (:func:`warm_alternatives`) worth evaluating for this point, or None.
 
-    Only when this command AND the previous state are tight turns the same way (inner / outer side
-    speed below TIGHT_RATIO): elsewhere the physics guess starts Newton as well as the previous
-    state does (3-4 residual calls from either, measured on 200-command sequences of four vehicles),
-    so evaluating the alternatives would only cost time (issue 25: a warm start never costs more
-    than a cold one). In consecutive tight turns, where a cold solve takes 10-30 steps, the previous
-    state cut packbot_4wheel's random-walk steps from 12.4 to 9.2 per command (docs/PREDICTION.md)."""
+    Only for wheels, and only when this command AND the previous state are tight turns the same way
+    (inner / outer side speed below TIGHT_RATIO). Elsewhere the physics guess starts Newton as well
+    as the previous state does (3-4 residual calls from either), so evaluating the alternatives
+    would only cost time (issue 25: a warm start never costs more than a cold one). Measured on
+    200-command random walks (docs/PREDICTION.md, "Speed"): in consecutive tight turns, where a cold
+    solve takes 10-30 steps, the previous state cut packbot_4wheel's steps from 12.4 to 9.2 per
+    command and test_robot_6wheel's from 5.75 to 5.53, but raised both tracks' by 1-4 % (a track's
+    tight turns lie next to the pivot band, where the previous state is often on the other branch)."""
+    if kernel.problem.vehicle.is_tracked:
+        return None
     ss_l, ss_r = kernel.side_speed
     wl, wr = float(warm[1]), float(warm[2])
     if not (
