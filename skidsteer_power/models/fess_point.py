@@ -101,9 +101,9 @@ class PointKernel:
         self._last: tuple[State, np.ndarray, int] | None = None  # state x, q jx (2, k, E) of its rows
 
     def _positions(self, forward: list[bool], k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(x now, x at touch-down) of the elements of every row [m], (2, 1|k, E), and the lateral
-        force and moment weights (2, 2, 1|k, E) [N, N m]: a side turning backwards (omega < 0)
-        enters the contact at the rear (the mirrored contact, module doc of fess.py)."""
+        """x now - x at touch-down and x at touch-down of the elements of every row [m], (2, 1|k, E),
+        and the lateral force and moment weights (2, 2, 1|k, E) [N, N m]: a side turning backwards
+        (omega < 0) enters the contact at the rear (the mirrored contact, module doc of fess.py)."""
         key = (True,) if all(forward) else tuple(forward)
         cached = self._moment.get(key)
         if cached is None:
@@ -116,7 +116,7 @@ class PointKernel:
             lateral = self._strength[1]
             # sum M_z of the lateral forces: sum (x_now - s0) f_y w_y = sum x_now f_y w_y - s0 F_y
             weights = np.stack(np.broadcast_arrays(lateral, lateral * now))
-            cached = self._moment[key] = (now, entry, weights)
+            cached = self._moment[key] = (now - entry, entry, weights)
         return cached
 
     def rows(self, s0: list[float], omega: list[float], at: State | None = None) -> list[list[list[float]]]:
@@ -127,7 +127,7 @@ class PointKernel:
         k = len(omega) // 2
         r = self.radius
         trial = np.array([s0, [max(abs(o) * r, 1e-12) for o in omega]]).reshape(2, 2, k, 1)
-        now, entry, lateral = self._positions([o >= 0 for o in omega], k)
+        travel, entry, lateral = self._positions([o >= 0 for o in omega], k)
         # half the angle an element has turned since touch-down (eq. 6.3): w_z t / 2 with the time
         # in contact t = xi / (|omega| r) (eq. 6.5)
         half = self._half_rate / trial[1]
@@ -138,7 +138,7 @@ class PointKernel:
         xe = entry - trial[0]  # where the element touched down, relative to the turning centre
         dy = self._offset
         # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); x_k - x_e does not depend on s0
-        jx = (now - entry) + one_minus_cos * xe - dy * sin
+        jx = travel + one_minus_cos * xe - dy * sin
         jy = dy * one_minus_cos + xe * sin
         if self.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement
             jx *= self.longitudinal
@@ -158,13 +158,20 @@ class PointKernel:
         safe = q if q > 0 else 1.0  # at q = 0 (V = 0) both forces vanish whatever beta
         return force_x * (s0 * abs_w / safe), force_y * (abs_v / safe)
 
-    def combine(self, sums: list[list[list[float]]], s0: float, left: int, right: int) -> State:
+    def combine(
+        self,
+        sums: list[list[list[float]]],
+        s0: float,
+        left: int,
+        right: int,
+        cf: tuple[float, float] | None = None,
+    ) -> State:
         """Residuals of eq. 3.19 [N, N, N m] of the state at ``s0`` whose left side is row ``left``
-        and right side row ``right`` of ``sums`` (:meth:`rows`)."""
+        and right side row ``right`` of ``sums`` (:meth:`rows`); ``cf``: :meth:`centrifugal` at s0."""
         fx, fy, mz = sums
         net_l, net_r = fx[0][left] - self.rolling[0], fx[1][right] - self.rolling[1]
         lateral = fy[0][left] + fy[1][right]
-        cfx, cfy = self.centrifugal(s0)
+        cfx, cfy = self.centrifugal(s0) if cf is None else cf
         y_l, y_r = self.side_y
         return (
             net_l + net_r + cfx,  # sum F_x = 0
@@ -179,11 +186,12 @@ class PointKernel:
         s0, wl, wr = x
         s1 = s0 + h[0]
         sums = self.rows([s0, s1, s0, s0, s1, s0], [wl, wl, wl + h[1], wr, wr, wr + h[2]], x)
+        cf = self.centrifugal(s0)
         return [
-            self.combine(sums, s0, 0, 0),
+            self.combine(sums, s0, 0, 0, cf),
             self.combine(sums, s1, 1, 1),
-            self.combine(sums, s0, 2, 0),
-            self.combine(sums, s0, 0, 2),
+            self.combine(sums, s0, 2, 0, cf),
+            self.combine(sums, s0, 0, 2, cf),
         ]
 
     def torque(self, x: State) -> np.ndarray:
