@@ -423,7 +423,7 @@ class FessSolver:
 
     ``n`` is the number of elements per contact (eq. 6.5). Holding a solver avoids re-checking the
     vehicle on every call and keeps the single-wheel table warm; :meth:`solve_point` is the lean
-    single-point path for on-board use (under 1 ms for a track: benchmarks/bench_fess.py).
+    single-point path for on-board use (about 0.3 ms for a track: benchmarks/bench_fess.py).
     """
 
     def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
@@ -483,8 +483,10 @@ class FessSolver:
         """One operating point (V [m/s], w_z [rad/s]) on the lean path for on-board use.
 
         Same equations, solver and answers as :meth:`solve_twist` (test_fess_track.py compares
-        them) for one point, without the neighbour retries. ``x0`` = (s0, omega_left, omega_right) warm-starts
-        it, e.g. with the previous command's :attr:`PointSolution.state`.
+        them) for one point, without the neighbour retries (:mod:`~skidsteer_power.models.fess_point`).
+        ``x0`` = (s0, omega_left, omega_right) warm-starts it, e.g. with the previous command's
+        :attr:`PointSolution.state` (used where it can save steps: :func:`fess_point._warm_start
+        <skidsteer_power.models.fess_point._warm_start>`; elsewhere the same work as a cold solve).
         """
         from skidsteer_power.models.fess_point import solve_point
 

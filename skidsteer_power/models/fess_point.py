@@ -9,11 +9,11 @@ step, trust region and stopping rule are computed in Python floats.
 Why a second layout of the same residual (issue 25, docs/PREDICTION.md "Speed"): one point's
 arrays are tiny (2 sides x 41 elements for a track), so a residual call costs its number of numpy
 operations, not its number of elements. The batched residual spends about 60 operations on 5-D
-broadcasts; the kernel about 25 on 2-D rows. A row is one side at one (s0, omega): a side's
-elements depend only on s0 and that side's own speed, so the state and its three forward-difference
-perturbations of eq. 3.22 need three rows per side (not four states x two sides), and everything
-that does not depend on the trial state (element positions, the half turn rate of eq. 6.3, strength
-x area weights) is built once per command.
+broadcasts; the kernel about 25 on (side, row, element) arrays. A row is one side at one (s0,
+omega): a side's elements depend only on s0 and that side's own speed, so the state and its three
+forward-difference perturbations of eq. 3.22 need three rows per side (not four states x two
+sides), and everything that does not depend on the trial state (element positions, the half turn
+rate of eq. 6.3, strength x area weights) is built once per command.
 """
 
 from __future__ import annotations
@@ -469,8 +469,9 @@ def _warm_start(kernel: PointKernel, cold: np.ndarray, warm: np.ndarray) -> np.n
     would only cost time (issue 25: a warm start never costs more than a cold one). Measured on
     200-command random walks (docs/PREDICTION.md, "Speed"): in consecutive tight turns, where a cold
     solve takes 10-30 steps, the previous state cut packbot_4wheel's steps from 12.4 to 9.2 per
-    command and test_robot_6wheel's from 5.75 to 5.53, but raised both tracks' by 1-4 % (a track's
-    tight turns lie next to the pivot band, where the previous state is often on the other branch)."""
+    command and test_robot_6wheel's from 5.75 to 5.53, but raised both tracks' cost in residual
+    rows by 1-4 % (test_robot_track's steps 5.26 -> 5.34): a track's tight turns lie next to the
+    pivot band, where the previous state is often on the other branch."""
     if kernel.problem.vehicle.is_tracked:
         return None
     ss_l, ss_r = kernel.side_speed
