@@ -22,6 +22,7 @@ from skidsteer_power.vehicle import Vehicle, load_vehicle
 V = np.linspace(0.2, 1.5, 8)[:, None]
 R = np.geomspace(1.0, 500.0, 16)[None, :]
 SOILS = ('dry_sand', 'sandy_loam', 'clay')
+WARM_ROUNDS = 7  # _warm_vs_cold: rounds of cold / warm / cold over each 200-command sequence
 
 
 def _side_error(got: SteadyState, ref: SteadyState, mask: np.ndarray | None = None) -> float:
@@ -55,9 +56,11 @@ def _tracks(report: Report) -> None:
         t = best_time(functools.partial(fess.solve, track, dry, V, R, n=n), repeat=3)
         report.figure(f'track 8x16 map, n = {n} elements', t * 1e3, 'ms')
     solver = fess.FessSolver(track, dry)
-    cold = best_time(lambda: solver.solve_point(0.5, 0.25), repeat=5, number=50)
+    # single solves timed one by one, best of 250 (a block of 50 on a loaded 2-core machine is
+    # mostly the other processes' time slices)
+    cold = best_time(lambda: solver.solve_point(0.5, 0.25), repeat=250)
     x0 = solver.solve_point(0.5, 0.25).state
-    warm = best_time(lambda: solver.solve_point(0.52, 0.26, x0=x0), repeat=5, number=50)
+    warm = best_time(lambda: solver.solve_point(0.52, 0.26, x0=x0), repeat=250)
     batch1 = best_time(lambda: solver.solve_twist(0.5, 0.25), repeat=5, number=20)
     report.under('one online track solve, solve_point (cold start)', cold * 1e3, 'ms', 0.5)
     report.under('one online track solve, solve_point (warm start, next command)', warm * 1e3, 'ms', 0.5)
@@ -75,26 +78,37 @@ def _tracks(report: Report) -> None:
 def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
     """Issue 25: 200 random commands, and 200 of a joystick's random walk, solved cold and
     warm-started from the previous command's state (the robot's sequence); a warm start must never
-    cost more than a cold one."""
+    cost more than a cold one.
+
+    Paired timing: each round solves the sequence cold, warm and cold again, every solve timed on
+    its own; a command's time is its best over the rounds (the load drifts on a shared machine).
+    The two cold passes are the run's own noise: warm / cold meets its goal if it is at most 1 plus
+    their spread (A/A), as no finer difference can be resolved in that run."""
     rng = np.random.default_rng(0)
     sequences = {
         'random commands': np.column_stack([rng.uniform(0.1, 1.5, 200), rng.uniform(-1.0, 1.0, 200)]),
         'random walk': np.cumsum(rng.normal(0.0, 0.05, (200, 2)), axis=0) + np.array([0.5, 0.0]),
     }
 
-    def run(commands: np.ndarray, warm: bool) -> tuple[float, float]:
+    def run(commands: np.ndarray, warm: bool, best: np.ndarray) -> float:
         state, iterations = None, 0
-        start = time.perf_counter()
-        for v, w in commands:
+        for k, (v, w) in enumerate(commands):
+            start = time.perf_counter()
             point = solver.solve_point(v, w, x0=state if warm else None)
+            best[k] = min(best[k], time.perf_counter() - start)
             iterations += point.iterations
             state = point.state
-        return (time.perf_counter() - start) / len(commands), iterations / len(commands)
+        return iterations / len(commands)
 
     for name, commands in sequences.items():
-        (t_cold, it_cold), (t_warm, it_warm) = run(commands, False), run(commands, True)
-        (t_cold2, _), (t_warm2, _) = run(commands, False), run(commands, True)  # alternate: load drifts
-        t_cold, t_warm = min(t_cold, t_cold2), min(t_warm, t_warm2)
+        best = np.full((3, len(commands)), np.inf)  # cold, warm, cold again
+        for _ in range(WARM_ROUNDS):
+            it_cold = run(commands, False, best[0])
+            it_warm = run(commands, True, best[1])
+            run(commands, False, best[2])
+        t_cold_a, t_warm, t_cold_b = best.mean(axis=1)
+        t_cold = 0.5 * (t_cold_a + t_cold_b)
+        spread = abs(t_cold_a / t_cold_b - 1.0)
         report.figure(f'200 {name}: Newton iterations per cold solve', it_cold, '')
         report.figure(
             f'200 {name}: Newton iterations per warm solve',
@@ -105,8 +119,13 @@ def _warm_vs_cold(report: Report, solver: fess.FessSolver) -> None:
         )
         report.under(f'200 {name}: time per cold solve_point', t_cold * 1e3, 'ms', 0.5)
         report.under(f'200 {name}: time per warm solve_point', t_warm * 1e3, 'ms', 0.5)
+        report.figure(f"200 {name}: cold / cold again (the run's A/A spread)", t_cold_a / t_cold_b, 'x')
         report.ratio(
-            f'200 {name}: warm / cold time', t_warm, t_cold, goal='<= 1.1 (noise)', met=t_warm <= 1.1 * t_cold
+            f'200 {name}: warm / cold time',
+            t_warm,
+            t_cold,
+            goal='<= 1.0 (never costing more; +- the A/A spread)',
+            met=t_warm <= (1.0 + spread) * t_cold,
         )
     prob = solver.problem(np.array([0.5]), np.array([0.25]))
     guess = fess.initial_guess(prob)

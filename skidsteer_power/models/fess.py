@@ -33,7 +33,6 @@ that does not move over the ground (w_z y_side = V) makes no rut.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -103,17 +102,20 @@ class Problem:
     @cached_property
     def turn_radius(self) -> np.ndarray:
         """(P,) signed R = V / w_z [m] (0 when spinning in place)."""
-        return self.speed / self.yaw
+        radius: np.ndarray = self.speed / self.yaw
+        return radius
 
     @cached_property
     def side_speed(self) -> np.ndarray:
         """(P, 2) ground speed of each side's centreline along x, V - w_z y_side [m/s]."""
-        return self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+        ground_speed: np.ndarray = self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
+        return ground_speed
 
     @cached_property
     def rolling(self) -> np.ndarray:
         """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
-        return self.contact.resistance * np.sign(self.side_speed)
+        resistance: np.ndarray = self.contact.resistance * np.sign(self.side_speed)
+        return resistance
 
     @cached_property
     def side_y(self) -> np.ndarray:
@@ -124,13 +126,16 @@ class Problem:
     def centre_offset(self) -> np.ndarray:
         """(P, 1, 2, 1, 1) lateral distance of each side's centreline from the turning centre O = (0, R)
         [m]; R = V / w_z is finite because straight points run at STRAIGHT_YAW, 0 spinning in place."""
-        return self.side_y[None, None, :, None, None] - self.turn_radius[:, None, None, None, None]
+        radius = self.turn_radius[:, None, None, None, None]
+        offset: np.ndarray = self.side_y[None, None, :, None, None] - radius
+        return offset
 
     @cached_property
     def half_turn_rate(self) -> np.ndarray:
         """(P, 1, 2|1, G, N) w_z xi / 2 [m rad/s]: divided by the rim speed |omega| r it is half the
         angle an element has turned since it touched down (eqs. 6.3, 6.5)."""
-        return (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
+        rate: np.ndarray = (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
+        return rate
 
     @cached_property
     def element_x(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -153,7 +158,8 @@ class Problem:
     def omega_ref(self) -> np.ndarray:
         """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
         (scales the Newton steps and their trust region)."""
-        return np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
+        reference: np.ndarray = np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
+        return reference
 
 
 def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -283,7 +289,8 @@ def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -
     caps[:, 0] = 0.2 * problem.contact.length_scale
     caps[:, 1:] = 0.5 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[idx, None])
     ratio = np.max(np.abs(step) / caps, axis=1)
-    return step / np.maximum(ratio, 1.0)[:, None]
+    limited: np.ndarray = step / np.maximum(ratio, 1.0)[:, None]
+    return limited
 
 
 _UNKNOWNS = np.arange(3)
@@ -380,7 +387,8 @@ class TwistSolution:
     @property
     def power(self) -> np.ndarray:
         """(P, 2) mechanical power torque * omega [W]."""
-        return self.torque * self.omega
+        power: np.ndarray = self.torque * self.omega
+        return power
 
     @property
     def state(self) -> np.ndarray:
@@ -401,7 +409,8 @@ class PointSolution:
     @property
     def power(self) -> np.ndarray:
         """(2,) torque * omega [W]."""
-        return self.torque * self.omega
+        power: np.ndarray = self.torque * self.omega
+        return power
 
     @property
     def state(self) -> np.ndarray:
@@ -414,7 +423,7 @@ class FessSolver:
 
     ``n`` is the number of elements per contact (eq. 6.5). Holding a solver avoids re-checking the
     vehicle on every call and keeps the single-wheel table warm; :meth:`solve_point` is the lean
-    single-point path for on-board use (under 1 ms for a track: benchmarks/bench_fess.py).
+    single-point path for on-board use (about 0.3 ms for a track: benchmarks/bench_fess.py).
     """
 
     def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
@@ -474,29 +483,14 @@ class FessSolver:
         """One operating point (V [m/s], w_z [rad/s]) on the lean path for on-board use.
 
         Same equations, solver and answers as :meth:`solve_twist` (test_fess_track.py compares
-        them) for one point, without the neighbour retries. ``x0`` = (s0, omega_left, omega_right) warm-starts
-        it, e.g. with the previous command's :attr:`PointSolution.state`.
+        them) for one point, without the neighbour retries (:mod:`~skidsteer_power.models.fess_point`).
+        ``x0`` = (s0, omega_left, omega_right) warm-starts it, e.g. with the previous command's
+        :attr:`PointSolution.state` (used where it can save steps: :func:`fess_point._warm_start
+        <skidsteer_power.models.fess_point._warm_start>`; elsewhere the same work as a cold solve).
         """
-        v, w = float(speed), float(yaw_rate)
-        if not (math.isfinite(v) and math.isfinite(w)):
-            raise InputError('speed and yaw rate must be finite numbers (m/s, rad/s)')
-        flip = -1.0 if v < 0 else 1.0  # reverse: the fore-aft mirror image (module doc)
-        v, w = abs(v), w * flip
-        if v == 0 and w == 0:
-            zero = np.zeros(2)
-            return PointSolution(0.0, zero, zero.copy(), True, 0)
-        prob = self.problem(np.array([v]), np.array([w]))
-        from skidsteer_power.models.fess_point import newton_point, warm_alternatives
+        from skidsteer_power.models.fess_point import solve_point
 
-        guess = self._straight_guess(prob, initial_guess(prob))[0]
-        others = None if x0 is None else warm_alternatives(guess, np.asarray(x0, dtype=float) * flip)
-        last: dict[str, np.ndarray] = {}
-        x, _, converged, iterations = newton_point(prob, guess, tol, alternatives=others, forces=last)
-        fx = last['fx'] if 'fx' in last else element_forces(prob, x[None, None, :])[0]
-        torque = prob.radius * (fx * prob.contact.wt[:, None]).sum(axis=(-2, -1))[0, 0]
-        slip = _slip(prob.side_speed, x[None, 1:] * prob.radius)
-        ok = converged and bool((np.abs(slip) <= SLIP_LIMIT).all()) and bool((prob.loads > 0).all())
-        return PointSolution(x[0] * flip, x[1:] * flip, torque * flip, ok, iterations)
+        return solve_point(self, speed, yaw_rate, x0, tol)
 
     @cached_property
     def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -511,21 +505,6 @@ class FessSolver:
         slip = np.concatenate([[0.0], np.where(ok, sol.slip[:, 0], np.nan)])
         good = np.isfinite(s0) & np.isfinite(slip)
         return speeds[good], s0[good], slip[good]
-
-    def _straight_guess(self, prob: Problem, guess: np.ndarray) -> np.ndarray:
-        """``guess`` (1, 3) with s0 and the slips of straight running at this speed (the table):
-        s0 faded by V^2 / (V^2 + (w_z l / 2)^2) towards 0 for a spin (s0 = 0 by symmetry), both
-        sides' speeds raised by the straight-running slip."""
-        speeds, s0, slip = self.straight_table
-        if speeds.size < 2:
-            return guess
-        v, w = float(prob.speed[0]), float(prob.yaw[0])
-        half_span = 0.5 * prob.contact.length_scale * w
-        fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
-        out = guess.copy()
-        out[0, 0] = float(np.interp(v, speeds, s0)) * fade
-        out[0, 1:] = guess[0, 1:] / (1.0 - min(float(np.interp(v, speeds, slip)), 0.9))
-        return out
 
     def _retry_from_neighbours(self, prob: Problem, result: NewtonResult, tol: float) -> bool:
         """Re-solve failed points warm-started from the nearest converged point (in V and w_z scaled

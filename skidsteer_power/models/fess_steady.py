@@ -24,7 +24,8 @@ def to_steady_state(sol: TwistSolution, turn_radius: np.ndarray, solve_time: flo
     rows = np.arange(len(o))
 
     def pick(a: np.ndarray, side: np.ndarray) -> np.ndarray:
-        return a[rows, side]
+        picked: np.ndarray = a[rows, side]
+        return picked
 
     power = sol.power
     return SteadyState(

@@ -225,7 +225,8 @@ class SetpointSolver:
             caps = np.column_stack(
                 [np.full(len(idx), 0.2 * length), 0.5 * v_ref[todo][idx], 0.5 * w_ref[todo][idx]]
             )
-            return 1.0 / np.maximum(np.max(np.abs(dx) / caps, axis=1), 1.0)
+            fraction: np.ndarray = 1.0 / np.maximum(np.max(np.abs(dx) / caps, axis=1), 1.0)
+            return fraction
 
         fn = self._residual(spf[todo], straight[todo])
         steps = np.array([1e-7 * length, 1e-7, 1e-7])

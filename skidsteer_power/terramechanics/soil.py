@@ -49,17 +49,22 @@ def shear_fraction(terrain: Terrain, j: ArrayLike) -> FloatArray:
     (fully developed shear, e.g. a locked wheel at s = -1).
     """
     j = np.asarray(j, dtype=float)
-    a = np.abs(j)
+    return np.sign(j) * shear_fraction_magnitude(terrain, np.abs(j))
+
+
+def shear_fraction_magnitude(terrain: Terrain, a: FloatArray) -> FloatArray:
+    """tau / tau_max [-] at a shear displacement magnitude a = |j| >= 0 [m] (eqs. 2.3-2.5): the
+    fraction of :func:`shear_fraction` without the sign (FESS's one-point residual, whose |j| is a
+    hypot, saves the abs and sign per call)."""
     if terrain.shear_type == 'A':
-        frac = -np.expm1(-a / terrain.K)  # eq. 2.3
-    elif terrain.shear_type == 'B':
+        return -np.expm1(-a / terrain.K)  # eq. 2.3
+    if terrain.shear_type == 'B':
+        assert terrain.Kw is not None  # type B: validated by Terrain
         x = a / terrain.Kw
         with np.errstate(invalid='ignore', over='ignore'):
-            frac = np.where(np.isinf(x), 0.0, x * np.exp(1.0 - x))  # eq. 2.4
-    else:
-        assert terrain.Kr is not None and terrain.Kw is not None  # type C: both validated by Terrain
-        frac = _type_c_fraction(a, terrain.Kr, terrain.Kw)
-    return np.sign(j) * frac
+            return np.where(np.isinf(x), 0.0, x * np.exp(1.0 - x))  # eq. 2.4
+    assert terrain.Kr is not None and terrain.Kw is not None  # type C: both validated by Terrain
+    return _type_c_fraction(a, terrain.Kr, terrain.Kw)
 
 
 def _type_c_fraction(a: FloatArray, kr: float, kw: float) -> FloatArray:
