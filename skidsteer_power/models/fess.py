@@ -48,6 +48,7 @@ from skidsteer_power.models.fess_steady import reshape_state, to_steady_state
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult
 from skidsteer_power.terramechanics.soil import shear_fraction
+from skidsteer_power.vehicle import GRAVITY_M_S2
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -55,6 +56,8 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
+GUESS_FRICTION = 0.5  # [-] mu standing in for the unknown mu_t in Steeds' s0 guess (eq. 3.7)
+STEEDS_S0_SCALE = 1.0 / (2.0 * GUESS_FRICTION * GRAVITY_M_S2)  # [s^2/m]: s0 = V |w_z| l x this (eq. 3.7)
 DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
 FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
 MAX_HALVINGS = 12
@@ -253,11 +256,11 @@ def residual_and_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np
 def initial_guess(problem: Problem) -> np.ndarray:
     """x0 (P, 3): no-slip side speeds (eq. 3.21) and Steeds' s0 = V w_z l / (2 mu g) (eq. 3.7).
 
-    mu = 0.5 stands in for the unknown mu_t; s0 is kept inside a quarter of the contact span.
+    mu = GUESS_FRICTION stands in for the unknown mu_t; s0 is kept inside a quarter of the contact span.
     """
     r = problem.radius
     omega = problem.side_speed / r
-    s0 = problem.speed * np.abs(problem.yaw) * problem.contact.length_scale / (2 * 0.5 * 9.81)
+    s0 = problem.speed * np.abs(problem.yaw) * problem.contact.length_scale * STEEDS_S0_SCALE
     s0 = np.minimum(s0, 0.25 * problem.contact.length_scale)
     return np.column_stack([s0, omega])
 

@@ -28,6 +28,7 @@ from skidsteer_power.models.fess import (
     FORCE_TOL_N,
     MAX_HALVINGS,
     SLIP_LIMIT,
+    STEEDS_S0_SCALE,
     STRAIGHT_YAW,
     PointSolution,
     Problem,
@@ -352,7 +353,7 @@ def _pick_start(
         kernel.combine(sums, s0, 2, 0),
         kernel.combine(sums, s0, 0, 2),
     ]
-    weight = kernel.problem.vehicle.mass_kg * 9.81
+    weight = kernel.problem.vehicle.weight_N
     scale = (weight, weight * kernel.lateral_scale, weight * kernel.length)
     chosen, best = -1, _scaled_norm(fall[0], scale)
     for i, alt in enumerate(alts):
@@ -426,7 +427,7 @@ def first_guess(solver: FessSolver, kernel: PointKernel) -> State:
     omega_l, omega_r = kernel.side_speed[0] / r, kernel.side_speed[1] / r
     speeds, s0_table, slip_table = solver.straight_table
     if speeds.size < 2:
-        return (min(v * abs_w * length / (2 * 0.5 * 9.81), 0.25 * length), omega_l, omega_r)
+        return (min(v * abs_w * length * STEEDS_S0_SCALE, 0.25 * length), omega_l, omega_r)
     half_span = 0.5 * length * w
     fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
     raise_by = 1.0 - min(float(np.interp(v, speeds, slip_table)), 0.9)

@@ -43,6 +43,7 @@ from skidsteer_power.des.kinematics import side_speeds
 from skidsteer_power.errors import InputError
 from skidsteer_power.models.fess import (
     FORCE_TOL_N,
+    STEEDS_S0_SCALE,
     FessSolver,
     _outputs,
     residual,
@@ -185,7 +186,7 @@ class SetpointSolver:
         """(s0, V, w_z): the no-slip motion and the s0 guess of FESS (Steeds' eq. 3.7 form)."""
         motion = no_slip_motion(spf, self.radius, self.tread)
         length = self._length_scale()
-        s0 = motion[:, 0] * np.abs(motion[:, 1]) * length / (2 * 0.5 * 9.81)
+        s0 = motion[:, 0] * np.abs(motion[:, 1]) * length * STEEDS_S0_SCALE
         return np.column_stack([np.minimum(s0, 0.25 * length), motion])
 
     def _length_scale(self) -> float:
