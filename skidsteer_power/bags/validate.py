@@ -418,7 +418,7 @@ def with_other_commands(core: Any, inputs: Inputs, series: RunSeries) -> RunSeri
     the prediction of the last command ``core`` took at or before it (a command first when times
     tie) and whether that command is in force (``core.cmd_fresh``: its hold). The online columns,
     which the prediction does change, are left out. A second run over the readings cost validate
-    half its time (60,000 joint_states: 1.4 s of 5.4 s CPU).
+    a fifth of its time (60,000 joint_states: 1.4 s of 7.1 s CPU).
     """
     from skidsteer_power.estimator.core import RejectedInput
 
