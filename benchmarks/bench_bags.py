@@ -55,9 +55,11 @@ def _validate_throughput(report: Report, folder: Path) -> None:
     with open_bag(bag_path) as bag:
         messages = bag.message_count
         duration = bag.duration_s
-        start = time.perf_counter()
+        load_before = os.getloadavg()[0]
+        start, cpu_start = time.perf_counter(), time.process_time()
         summary = validate(bag, options)
-        wall = time.perf_counter() - start
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    load = f'1-minute load average {load_before:.1f} -> {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores'
     report.figure('validate, 10 min 100 Hz bag: messages', messages, 'msgs')
     report.figure('validate throughput (with report and plots)', messages / wall, 'msg/s')
     report.figure(
@@ -66,6 +68,10 @@ def _validate_throughput(report: Report, folder: Path) -> None:
         'x real',
         goal='>= 100x real time',
         met=duration / wall >= 100,
+        note=load,
+    )
+    report.figure(
+        'validate speed, CPU time of this process (with report and plots)', duration / cpu, 'x real'
     )
     report.figure('validate speed (estimator run only, no files)', summary['real_time_factor'], 'x real')
     del predictor, motion_predictor
@@ -140,6 +146,40 @@ def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndar
     return np.abs(delta - np.median(delta))
 
 
+def _sleep_probe(rate_hz: float, seconds: float) -> np.ndarray:
+    """Lateness [s] of plain timed waits (threading.Event.wait to each deadline, garbage collector
+    off as in the replay) at ``rate_hz``: the wake-up delay of this machine at this moment."""
+    import gc
+    import threading
+
+    event = threading.Event()
+    gc.disable()
+    try:
+        t0 = time.monotonic() + 0.05
+        late = []
+        for k in range(round(rate_hz * seconds)):
+            deadline = t0 + k / rate_hz
+            while (remaining := deadline - time.monotonic()) > 0:
+                event.wait(remaining)
+            late.append(time.monotonic() - deadline)
+    finally:
+        gc.enable()
+    return np.array(late)
+
+
+def _delivery_deviation(
+    log: list[tuple[str, float, float]], received: Stored, topics: list[str]
+) -> np.ndarray:
+    """|receive time - publish time| per message after removing the median [s] (the recorder's clock
+    and the replay's monotonic clock differ by a constant), matched per topic by position."""
+    published, got = [], []
+    for topic in topics:
+        published += [p for t, _, p in log if t == topic]
+        got += [m[1] / 1e9 for m in received if m[0] == topic]
+    delta = np.array(got, dtype=float) - np.array(published, dtype=float)
+    return np.abs(delta - np.median(delta))
+
+
 def _replay_figures(report: Report, folder: Path) -> None:
     import rclpy
     from rclpy.context import Context
@@ -180,8 +220,20 @@ def _replay_figures(report: Report, folder: Path) -> None:
 
         topics = ['/bench_timing_cmd', '/bench_timing_js']
         _string_bag(folder / 'timing.mcap', topics, 100, 10.0)
-        _, expected, received = _replay_against_recorder(
+        probe = _sleep_probe(200.0, 5.0)
+        report.figure(
+            'sleep-only probe, 200 Hz for 5 s just before (no publish, this process): max lateness',
+            float(probe.max()) * 1e3,
+            'ms',
+            note=f'p99 {np.percentile(probe, 99) * 1e3:.3f} ms, median {np.median(probe) * 1e3:.3f} ms: '
+            'what the machine adds to any timed wake-up',
+        )
+        load_before = os.getloadavg()[0]
+        timing, expected, received = _replay_against_recorder(
             folder / 'timing.mcap', folder / 'timing_rec.mcap', topics, context
+        )
+        load = (
+            f'1-minute load average {load_before:.1f} -> {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores'
         )
         errors = _timing_errors(expected, received, topics)
         if errors is None:
@@ -200,8 +252,24 @@ def _replay_figures(report: Report, folder: Path) -> None:
                 'ms',
                 goal='<= 5',
                 met=worst <= 0.005,
+                note=load,
             )
             report.figure('replay timing vs bag: p99 |error|', float(np.percentile(errors, 99)) * 1e3, 'ms')
+            # where the error arises: the replay loop's own lateness (publish - deadline, this process)
+            # and the delivery to the recorder (receive - publish, other process, median removed)
+            report.figure(
+                'replay timing run: publish lateness max (the replay loop)',
+                timing.max_late_s * 1e3,
+                'ms',
+                note=f'p99 {float(np.percentile(timing.late_s, 99)) * 1e3:.3f} ms',
+            )
+            delivery = _delivery_deviation(timing.log, received, topics)
+            report.figure(
+                'replay timing run: delivery to the recorder, max |deviation from median|',
+                float(delivery.max()) * 1e3,
+                'ms',
+                note=f'p99 {float(np.percentile(delivery, 99)) * 1e3:.3f} ms; {load}',
+            )
     finally:
         rclpy.try_shutdown(context=context)
 

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from skidsteer_power.bag_io.cdr_fixed import header_doubles, joint_state_doubles
 from skidsteer_power.bag_io.reader import BagReader
 from skidsteer_power.errors import InputError
 
@@ -89,6 +90,11 @@ def decode_joint_arrays(
         empty = np.zeros((0, k))
         return np.zeros(0), empty, empty.copy(), empty.copy(), np.zeros(0, bool)
     _check_type(bag, topic, ('sensor_msgs/msg/JointState',))
+    messages = list(bag.messages([topic]))
+    fast = joint_state_doubles([m.data for m in messages], names)
+    if fast is not None:
+        t_fast = np.array([m.timestamp_ns - t0_ns for m in messages], dtype=float) / NS
+        return t_fast, *fast, np.ones(len(messages), bool)
     t, present = [], []
     columns: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
     nan_row = np.full(k, np.nan)
@@ -121,14 +127,46 @@ def decode_planar_poses(bag: BagReader, topic: str, t0_ns: int) -> tuple[np.ndar
 
     The heading is the yaw of the orientation quaternion (REP 103: about z, + = left).
     """
+    t, xy, yaw, _ = decode_pose_twists(bag, topic, t0_ns)
+    return t, xy, yaw
+
+
+# doubles after the header of each pose type: strings in the header (Odometry: child_frame_id too),
+# float64 count (pose 7, covariance 36, twist 6 + 36)
+_POSE_LAYOUT = {
+    'nav_msgs/msg/Odometry': (2, 85),
+    'geometry_msgs/msg/PoseWithCovarianceStamped': (1, 43),
+    'geometry_msgs/msg/PoseStamped': (1, 7),
+}
+_ODOM_TWIST = (43, 48)  # linear.x, angular.z among an Odometry's doubles
+
+
+def _yaw(x: float, y: float, z: float, w: float) -> float:
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def decode_pose_twists(
+    bag: BagReader, topic: str, t0_ns: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """:func:`decode_planar_poses` and, for an Odometry, its twist: (n, 2) linear.x [m/s], angular.z
+    [rad/s] (None for the other pose types), read in one pass."""
     msgtype = bag.topics[topic].msgtype
+    odometry = msgtype == 'nav_msgs/msg/Odometry'
+    messages = list(bag.messages([topic]))
+    fast = header_doubles([m.data for m in messages], *_POSE_LAYOUT[msgtype])
+    if fast is not None:
+        t = np.array([m.timestamp_ns - t0_ns for m in messages], dtype=float) / NS
+        yaw = np.array([_yaw(*q) for q in fast[:, 3:7].tolist()], dtype=float)
+        return t, fast[:, :2].copy(), yaw, fast[:, list(_ODOM_TWIST)] if odometry else None
     nested = msgtype in ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/PoseWithCovarianceStamped')
-    t, rows = [], []
+    stamps, rows, twists = [], [], []
     for message, msg in bag.decoded(topic):
         pose = msg.pose.pose if nested else msg.pose
         q = pose.orientation
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-        t.append(message.timestamp_ns - t0_ns)
-        rows.append((pose.position.x, pose.position.y, yaw))
+        stamps.append(message.timestamp_ns - t0_ns)
+        rows.append((pose.position.x, pose.position.y, _yaw(q.x, q.y, q.z, q.w)))
+        if odometry:
+            twists.append((msg.twist.twist.linear.x, msg.twist.twist.angular.z))
     table = np.array(rows, dtype=float).reshape(-1, 3)
-    return np.array(t, dtype=float) / NS, table[:, :2], table[:, 2]
+    twist = np.array(twists, dtype=float).reshape(-1, 2) if odometry else None
+    return np.array(stamps, dtype=float) / NS, table[:, :2], table[:, 2], twist

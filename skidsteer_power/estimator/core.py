@@ -169,6 +169,7 @@ class EstimatorCore:
         self._implausible_s: float | None = None
         self._limit_of: BatteryModel | None = None  # the battery whose power limit is in _limit_W [W]
         self._limit_W = math.inf
+        self._uncorrected_bus: tuple[Prediction | None, float] = (None, 0.0)  # (prediction, its bus W)
 
     @property
     def battery(self) -> BatteryModel:
@@ -246,15 +247,17 @@ class EstimatorCore:
         corrected = self.corrected_torque_Nm()
         if corrected == p.motor_torque_Nm:  # adaptation off or not yet settled: the common case
             return p.bus_total_W
+        if self._uncorrected_bus[0] is not p:  # per prediction: a held command repeats it
+            self._uncorrected_bus = (p, self._bus_W(p, p.motor_torque_Nm))
+        return p.bus_total_W + self._bus_W(p, corrected) - self._uncorrected_bus[1]
+
+    def _bus_W(self, p: Prediction, torques: tuple[float, float]) -> float:
+        """Battery power [W] of motor ``torques`` [N m] at ``p``'s motor speeds."""
         pt = self.powertrain
-
-        def bus(torques: tuple[float, float]) -> float:
-            return sum(
-                bus_power(terminal_power(pt.motor, torque, omega), pt.amplifier, pt.regen_efficiency)
-                for torque, omega in zip(torques, p.motor_omega_rad_s, strict=True)
-            )
-
-        return p.bus_total_W + bus(corrected) - bus(p.motor_torque_Nm)
+        return sum(
+            bus_power(terminal_power(pt.motor, torque, omega), pt.amplifier, pt.regen_efficiency)
+            for torque, omega in zip(torques, p.motor_omega_rad_s, strict=True)
+        )
 
     def set_predictor(self, predictor: Predictor, now_s: float) -> Prediction | None:
         """Swap the predictor (a terrain change); re-predict the current command with it."""
