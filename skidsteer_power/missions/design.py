@@ -38,6 +38,7 @@ from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.perturbed import apply_powertrain
+from skidsteer_power.vehicle import TrackGear, Vehicle, WheelGear
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -58,33 +59,30 @@ def grid() -> list[dict[str, Any]]:
     return [dict(zip(keys, row, strict=True)) | {'index': k} for k, row in enumerate(rows)]
 
 
-def candidate_vehicle(c: dict[str, Any]) -> Any:
+def candidate_vehicle(c: dict[str, Any]) -> Vehicle:
     """The :class:`~skidsteer_power.vehicle.Vehicle` of one grid row, with the test robot's powertrain."""
-    from skidsteer_power.vehicle import Vehicle
-
-    common = {
-        'name': f'design-{c["index"]:03d}-{c["configuration"]}',
-        'mass_kg': c['mass_kg'],
-        'cg_height_m': CG_HEIGHT_M,
-        'tread_m': c['tread_m'],
-        'powertrain': {'preset': 'test_robot'},
-        'source': 'Table 8.4 design study grid; CG height assumed (Table 8.1)',
-    }
+    gear: TrackGear | WheelGear
     if c['configuration'] == 'track':
-        return Vehicle(
-            running_gear='track',
+        gear = TrackGear(
             track_length_m=c['length_or_wheelbase_m'],
             track_width_m=c['width_m'],
             sprocket_radius_m=c['radius_m'],
-            **common,
+        )
+    else:
+        gear = WheelGear(
+            n_wheels=int(c['configuration'][0]),
+            wheel_radius_m=c['radius_m'],
+            wheel_width_m=c['width_m'],
+            wheelbase_m=c['length_or_wheelbase_m'],
         )
     return Vehicle(
-        running_gear='wheel',
-        n_wheels=int(c['configuration'][0]),
-        wheel_radius_m=c['radius_m'],
-        wheel_width_m=c['width_m'],
-        wheelbase_m=c['length_or_wheelbase_m'],
-        **common,
+        name=f'design-{c["index"]:03d}-{c["configuration"]}',
+        gear=gear,
+        mass_kg=c['mass_kg'],
+        cg_height_m=CG_HEIGHT_M,
+        tread_m=c['tread_m'],
+        powertrain={'preset': 'test_robot'},
+        source='Table 8.4 design study grid; CG height assumed (Table 8.1)',
     )
 
 

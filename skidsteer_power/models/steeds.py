@@ -37,7 +37,7 @@ from skidsteer_power.models import loads
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.terramechanics import track as single_track
 from skidsteer_power.terramechanics.terrain import Terrain
-from skidsteer_power.vehicle import Vehicle
+from skidsteer_power.vehicle import TrackGear, Vehicle
 
 DEFAULT_MU_T = 0.5  # Table 3.1 (steel on concrete); Figure 3.3 plots several values
 
@@ -134,8 +134,9 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
     load_o, load_i = loads.side_loads(vehicle, points)
     safe_i = np.maximum(load_i, 0.0)
     b = vehicle.contact_width_m
-    if vehicle.is_tracked:
-        length = float(vehicle.track_length_m)  # type: ignore[arg-type]
+    gear = vehicle.gear
+    if isinstance(gear, TrackGear):
+        length = float(gear.track_length_m)
         rc_o = single_track.compaction_resistance(terrain, load_o, b, length)  # eq. 3.2
         rc_i = single_track.compaction_resistance(terrain, safe_i, b, length)
         sinkage = single_track.track_sinkage(terrain, load_o, b, length)
@@ -152,8 +153,8 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
         )
     from skidsteer_power.terramechanics import wheel as single_wheel
 
-    per_side = vehicle.wheels_per_side
-    r = vehicle.drive_radius_m
+    per_side = gear.wheels_per_side
+    r = gear.wheel_radius_m
     k = terrain.k_eq(b)
     z_o = single_wheel.bekker_wheel_sinkage(terrain, load_o / per_side, r, b)  # eq. 2.32
     z_i = single_wheel.bekker_wheel_sinkage(terrain, safe_i / per_side, r, b)
@@ -161,7 +162,7 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
     z_mean = 0.5 * (z_o + z_i)
     theta_f, _, theta_r = single_wheel.wheel_angles(terrain, z_mean, 0.0, r)
     chord = np.maximum(r * (np.sin(theta_f) - np.sin(theta_r)), 1e-6)
-    centres = np.asarray(vehicle.axle_positions_m())
+    centres = np.asarray(gear.axle_positions_m())
     lengths = np.repeat(chord[:, None], centres.size, axis=1)
     return Patches(
         centres,
@@ -172,7 +173,7 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
         rut * z_o ** (terrain.n + 1.0),
         rut * z_i ** (terrain.n + 1.0),
         z_o,
-        float(vehicle.wheelbase_m),  # type: ignore[arg-type]
+        float(gear.wheelbase_m),
     )
 
 
