@@ -45,9 +45,10 @@ from typing import Any
 
 import numpy as np
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.missions.energy import MapLoads
-from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route, Segment
+from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route
 
 JOULES_PER_WH = 3600.0
 MIN_CHORD_M = 1e-6  # [m] shorter chords are duplicate poses
