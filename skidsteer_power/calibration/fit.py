@@ -320,7 +320,8 @@ def select_identifiable(
         if basis.shape[1] == 0:
             return col
         coef, *_ = np.linalg.lstsq(basis, col, rcond=None)
-        return col - basis @ coef
+        remainder: np.ndarray = col - basis @ coef
+        return remainder
 
     pool = [n for n in fit if n in columns]
     while pool:
@@ -452,7 +453,8 @@ def calibrate(
         torque, _, ok = model.predict(_values(names, z))
         err = torque[fit_idx] - measured[fit_idx]
         err[~ok[fit_idx]] = FAILED_RESIDUAL_NM
-        return err.ravel()
+        flat: np.ndarray = err.ravel()
+        return flat
 
     sol = optimize.least_squares(
         residuals,

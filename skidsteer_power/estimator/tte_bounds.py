@@ -82,7 +82,8 @@ class TimeToEmptyBounds:
         counts = np.bincount(block)
         sums = np.bincount(block, weights=p)
         done = (counts > 0) & (np.arange(counts.size) < block.max())
-        return sums[done] / counts[done]
+        means: np.ndarray = sums[done] / counts[done]
+        return means
 
     def spread(self, means: np.ndarray | None = None) -> float:
         """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data);

@@ -91,7 +91,8 @@ class MissionResult:
 
     @property
     def turning(self) -> np.ndarray:
-        return np.isfinite(self.route.arrays()['turn_radius_m'])
+        turning: np.ndarray = np.isfinite(self.route.arrays()['turn_radius_m'])
+        return turning
 
     def _energy(self, power: np.ndarray, mask: np.ndarray | None = None) -> float:
         dt = self.duration_s

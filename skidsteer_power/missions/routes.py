@@ -160,7 +160,8 @@ def _synthetic_curvature(u: np.ndarray) -> np.ndarray:
     for centre, half_width, peak in _BENDS:
         x = (u - centre) / half_width
         shape += np.where(np.abs(x) < 1.0, peak * np.cos(0.5 * np.pi * x) ** 2, 0.0)
-    return shape / np.max(np.abs(shape)) / SEARCH_MIN_RADIUS_M
+    peak = float(np.max(np.abs(shape)))
+    return shape / peak / SEARCH_MIN_RADIUS_M
 
 
 MAX_TRACE_STEP_RAD = math.pi / 36

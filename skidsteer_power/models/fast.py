@@ -97,9 +97,8 @@ def _mu_t_from_balance(vehicle: Vehicle, terrain: Terrain, state: SteadyState) -
     half = 0.5 * vehicle.tread_m
     moment = (np.ravel(state.thrust_outer_N) - np.ravel(state.thrust_inner_N)) * half - (rto - rti) * half
     moment = moment + np.ravel(state.s0_m) * np.cos(beta) * fc
-    return (moment / (vehicle.weight_N * float(vehicle.tracks().track_length_m))).reshape(
-        np.shape(state.s0_m)
-    )
+    mu_t: np.ndarray = moment / (vehicle.weight_N * float(vehicle.tracks().track_length_m))
+    return mu_t.reshape(np.shape(state.s0_m))
 
 
 def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +155,8 @@ def slip_for_thrust(
     target = np.where(ok, thrust, 0.0)
 
     def residual(s: np.ndarray, w: np.ndarray, f: np.ndarray) -> np.ndarray:
-        return tractive_effort(terrain, w, width, length, np.clip(s, -1.0, 1.0)) - f
+        surplus: np.ndarray = tractive_effort(terrain, w, width, length, np.clip(s, -1.0, 1.0)) - f
+        return surplus
 
     res = elementwise.find_root(
         residual,

@@ -55,7 +55,8 @@ class Contact:
 
     @property
     def xi(self) -> np.ndarray:
-        return self.entry - self.fwd
+        xi: np.ndarray = self.entry - self.fwd
+        return xi
 
     def take(self, idx: np.ndarray) -> Contact:
         """The contacts of the operating points ``idx`` only."""

@@ -126,7 +126,8 @@ class Patches:
         u2 = u1 + self.lengths
         integral = 0.5 * (u2 * np.abs(u2) - u1 * np.abs(u1))
         load_per_patch = (self.load_o + self.load_i)[:, None] / self.count
-        return np.sum(load_per_patch / self.lengths * integral, axis=1)
+        moment: np.ndarray = np.sum(load_per_patch / self.lengths * integral, axis=1)
+        return moment
 
 
 def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoints) -> Patches:
@@ -181,7 +182,8 @@ def lateral_fraction(centres: np.ndarray, lengths: np.ndarray, s0: np.ndarray) -
     """Fraction of equally loaded patches (centres (k,), lengths (N, k) [m]) behind s0, minus ahead [-]."""
     start = centres[None, :] - 0.5 * lengths
     behind = np.clip((s0[:, None] - start) / lengths, 0.0, 1.0)
-    return np.mean(2.0 * behind - 1.0, axis=1)
+    fraction: np.ndarray = np.mean(2.0 * behind - 1.0, axis=1)
+    return fraction
 
 
 def lateral_offset(
@@ -199,7 +201,8 @@ def lateral_offset(
     def residual(s0: np.ndarray, goal: np.ndarray, chord: np.ndarray) -> np.ndarray:
         # find_root hands over flat arrays; every patch of a vehicle has the same chord
         lengths = np.repeat(chord.reshape(-1, 1), patches.count, axis=1)
-        return lateral_fraction(patches.centres, lengths, s0.reshape(-1)).reshape(s0.shape) - goal
+        gap: np.ndarray = lateral_fraction(patches.centres, lengths, s0.reshape(-1)).reshape(s0.shape) - goal
+        return gap
 
     res = elementwise.find_root(residual, (low, high), args=(target, patches.lengths[:, 0]))
     return np.where(points.straight, 0.0, res.x)
@@ -258,7 +261,8 @@ def thrust_slip(
     load = side_load / count
 
     def effort(s: np.ndarray, load: np.ndarray, length: np.ndarray, thrust: np.ndarray) -> np.ndarray:
-        return count * single_track.tractive_effort(terrain, load, b, length, s) - thrust
+        surplus: np.ndarray = count * single_track.tractive_effort(terrain, load, b, length, s) - thrust
+        return surplus
 
     lo, hi = -np.ones_like(thrust), np.ones_like(thrust)
     f_lo = effort(lo, load, length, thrust)

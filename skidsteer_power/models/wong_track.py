@@ -234,7 +234,8 @@ def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarra
             shrinking = dx[:, col] < -0.8 * x[:, col]
             alpha = np.where(shrinking, np.minimum(alpha, -0.8 * x[:, col] / dx[:, col]), alpha)
         step = np.maximum(np.abs(dx[:, 0]), quarter)
-        return np.minimum(alpha, quarter / step)
+        scale: np.ndarray = np.minimum(alpha, quarter / step)
+        return scale
 
     return limit
 

@@ -279,7 +279,8 @@ def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarra
             room = 0.95 * r - x[:, col]
             growing = dx[:, col] > 0.8 * room
             alpha = np.where(growing, np.minimum(alpha, 0.8 * room / dx[:, col]), alpha)
-        return np.minimum(alpha, quarter / np.maximum(np.abs(dx[:, 4]), quarter))
+        scale: np.ndarray = np.minimum(alpha, quarter / np.maximum(np.abs(dx[:, 4]), quarter))
+        return scale
 
     return limit
 

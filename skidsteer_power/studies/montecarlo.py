@@ -87,7 +87,10 @@ def mission_uncertainty(
 
 
 # ------------------------------------------------------------------------------------ design study
-def _design_task(job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]]) -> list[tuple]:
+def _design_task(
+    job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]],
+) -> list[tuple[int, float | None, bool]]:
+    """(candidate index, merit, usable) of one sample's design-grid chunk."""
     from skidsteer_power.missions.design import evaluate_chunk, score
 
     _sample, rows, terrain, model, pt_sample = job

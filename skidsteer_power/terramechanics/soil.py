@@ -24,7 +24,8 @@ def pressure_sinkage(terrain: Terrain, z: ArrayLike, b: ArrayLike) -> FloatArray
     """
     z = np.asarray(z, dtype=float)
     b = _positive(b, 'width b')
-    return terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
+    pressure: FloatArray = terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
+    return pressure
 
 
 def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -33,7 +34,8 @@ def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatA
     if np.any(~np.isfinite(p)) or np.any(p < 0):
         raise InputError('pressure must be finite and >= 0 Pa')
     b = _positive(b, 'width b')
-    return (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    sinkage: FloatArray = (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    return sinkage
 
 
 def shear_strength(terrain: Terrain, sigma: ArrayLike) -> FloatArray:
@@ -59,7 +61,8 @@ def shear_fraction(terrain: Terrain, j: ArrayLike) -> FloatArray:
     else:
         assert terrain.Kr is not None and terrain.Kw is not None  # type C: both validated by Terrain
         frac = _type_c_fraction(a, terrain.Kr, terrain.Kw)
-    return np.sign(j) * frac
+    signed: FloatArray = np.sign(j) * frac
+    return signed
 
 
 def _type_c_fraction(a: FloatArray, kr: float, kw: float) -> FloatArray:
