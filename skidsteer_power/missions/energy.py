@@ -32,6 +32,7 @@ from skidsteer_power.missions.routes import Route
 from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
 
 
 @dataclass
@@ -309,7 +310,9 @@ def _map_states(
     return map_axle_states(power_map, speed, radius)
 
 
-def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> dict[str, np.ndarray]:
+def map_axle_states(
+    power_map: ArrayPowerMapLike, speed: np.ndarray, radius: np.ndarray
+) -> dict[str, np.ndarray]:
     """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and the clamped and
     limited flags from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed
     radii [m]."""
@@ -326,7 +329,7 @@ def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> di
     }
 
 
-def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def state_powers(powertrain: PowertrainLike, axle: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Powers [W] at each steady state from its per-side axle torque and speed (:func:`map_axle_states`).
 
     ``left_W``, ``right_W`` and ``mechanical_W`` (their sum): motor shaft T_m w_m = terrain +
@@ -344,7 +347,9 @@ def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[st
     }
 
 
-def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) -> dict[str, float]:
+def route_energy_on_map(
+    route: Route, power_map: ArrayPowerMapLike, powertrain: PowertrainLike
+) -> dict[str, float]:
     """Energies [J] of driving ``route`` with the loads a ready ``power_map`` holds (the robot's own,
     no payload changes): the same state grouping, map query and powertrain as :func:`run_mission`.
 
@@ -360,8 +365,8 @@ def energy_on_map(
     speed_m_s: np.ndarray,
     turn_radius_m: np.ndarray,
     duration_s: np.ndarray,
-    power_map: Any,
-    powertrain: Powertrain,
+    power_map: ArrayPowerMapLike,
+    powertrain: PowertrainLike,
     terrain_scale: float = 1.0,
 ) -> dict[str, float]:
     """:func:`route_energy_on_map` of segments given as arrays: forward speed [m/s], signed turn radius
@@ -384,7 +389,11 @@ class MapLoads:
 
     @classmethod
     def of(
-        cls, speed_m_s: np.ndarray, turn_radius_m: np.ndarray, duration_s: np.ndarray, power_map: Any
+        cls,
+        speed_m_s: np.ndarray,
+        turn_radius_m: np.ndarray,
+        duration_s: np.ndarray,
+        power_map: ArrayPowerMapLike,
     ) -> MapLoads:
         """Segments as arrays: forward speed [m/s], signed turn radius [m] (inf: straight), duration [s]."""
         states, inverse = distinct_rows(np.column_stack([speed_m_s, turn_radius_m]).astype(float))
@@ -396,7 +405,7 @@ class MapLoads:
             int(np.sum(axle['limited'][inverse])),
         )
 
-    def energy(self, powertrain: Powertrain, terrain_scale: float = 1.0) -> dict[str, float]:
+    def energy(self, powertrain: PowertrainLike, terrain_scale: float = 1.0) -> dict[str, float]:
         """Energies [J] (:func:`route_energy_on_map`) with the axle torques times ``terrain_scale`` [-]."""
         axle = self.axle
         if terrain_scale != 1.0:
