@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.missions.routes import Route
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.studies.uncertainty import ParameterSpread, apply_powertrain, apply_terrain, draw
 
 PERCENTILES = (5, 50, 95)
@@ -47,7 +48,7 @@ def mission_uncertainty(
     vehicle: Any,
     terrain: Any,
     route: Route,
-    powertrain: Any,
+    powertrain: Powertrain,
     spread: ParameterSpread,
     *,
     samples: int,
@@ -121,7 +122,6 @@ def design_uncertainty(
     """
     from skidsteer_power.errors import InputError
     from skidsteer_power.missions.design import balanced_parts, grid
-    from skidsteer_power.powertrain import Powertrain
 
     sides = [n for n in spread.names if n.startswith(('left_', 'right_'))]
     if sides:
