@@ -142,7 +142,10 @@ def nominal_values(names: Sequence[str], terrain: Terrain, powertrain: Powertrai
         elif name == 'internal_scale':
             out.append(1.0)
         else:
-            side, coefficient = _SIDE_KEY.match(name).groups()  # type: ignore[union-attr]
+            side_key = _SIDE_KEY.match(name)
+            if side_key is None:
+                raise ConfigError(f'{name!r} is not a terrain or powertrain parameter')
+            side, coefficient = side_key.groups()
             total = powertrain.resistance(side).total
             out.append(total.viscous_Nm_s if coefficient == 'b' else total.coulomb_Nm)
     return np.asarray(out)
