@@ -28,7 +28,7 @@ import importlib
 import itertools
 import os
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,10 @@ from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.perturbed import apply_powertrain
 from skidsteer_power.vehicle import TrackGear, Vehicle, WheelGear
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.terramechanics.terrain import Terrain
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -125,12 +129,12 @@ def evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
 
 
 def design_study(
-    terrain: Any,
+    terrain: Terrain,
     *,
     model: str = 'fess',
     criterion: str = 'merit',
     workers: int | None = None,
-    engine: Any = None,
+    engine: Engine | None = None,
     configurations: tuple[str, ...] = CONFIGURATIONS,
 ) -> dict[str, Any]:
     """Evaluate the Table 8.4 grid on ``terrain``; returns candidates, best per configuration, criterion.
@@ -168,7 +172,7 @@ def design_study(
     }
 
 
-def score(evaluated: list[dict[str, Any]], terrain: Any) -> list[dict[str, Any]]:
+def score(evaluated: list[dict[str, Any]], terrain: Terrain) -> list[dict[str, Any]]:
     """Add max drawbar pull [N], its ratio to the weight [-] and the merit [1/W] to solved candidates."""
     dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
     for c, pull in zip(evaluated, dp, strict=True):

@@ -22,7 +22,7 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,10 @@ from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
+
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 
 @dataclass
@@ -201,7 +205,7 @@ class MissionResult:
         return out
 
 
-def with_payload(vehicle: Any, payload_kg: float) -> Any:
+def with_payload(vehicle: Vehicle, payload_kg: float) -> Vehicle:
     """The vehicle carrying ``payload_kg`` [kg] more, at its CG (ch. 8.2: only the weight changes)."""
     if payload_kg == 0:
         return vehicle
@@ -212,8 +216,8 @@ SOURCES = ('map', 'direct')
 
 
 def run_mission(
-    vehicle: Any,
-    terrain: Any,
+    vehicle: Vehicle,
+    terrain: Terrain,
     route: Route,
     *,
     source: str = 'map',
@@ -293,7 +297,7 @@ def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
 
 
 def _map_states(
-    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
+    vehicle: Vehicle, terrain: Terrain, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
 ) -> dict[str, np.ndarray]:
     from skidsteer_power.maps import PowerMap, load_or_build
 
@@ -423,7 +427,7 @@ class MapLoads:
 
 
 def _axle_states(
-    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, model: str
+    vehicle: Vehicle, terrain: Terrain, speed: np.ndarray, radius: np.ndarray, model: str
 ) -> dict[str, np.ndarray]:
     """Per-side axle torque [N m] and speed [rad/s], sinkage [m] and traction margin at (V, R)."""
     from skidsteer_power.models import solve

@@ -14,13 +14,18 @@ Percentiles are numpy's linear-interpolation percentiles of the samples (p05, p5
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from skidsteer_power.missions.routes import Route
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.studies.uncertainty import ParameterSpread, apply_powertrain, apply_terrain, draw
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 PERCENTILES = (5, 50, 95)
 MISSION_KEYS = ('energy_J', 'energy_battery_J', 'energy_terrain_J', 'energy_internal_J')
@@ -44,9 +49,9 @@ def _mission_task(job: tuple[Any, Any, Route, Any, str, str]) -> dict[str, float
 
 
 def mission_uncertainty(
-    engine: Any,
-    vehicle: Any,
-    terrain: Any,
+    engine: Engine,
+    vehicle: Vehicle,
+    terrain: Terrain,
     route: Route,
     powertrain: Powertrain,
     spread: ParameterSpread,
@@ -103,8 +108,8 @@ def _design_task(
 
 
 def design_uncertainty(
-    engine: Any,
-    terrain: Any,
+    engine: Engine,
+    terrain: Terrain,
     spread: ParameterSpread,
     *,
     samples: int,
