@@ -235,8 +235,8 @@ def _adaptation(report: Report) -> None:
     trace = run_commands(twin, [Segment(0.2, 0.0, 3.0), Segment(0.2, 0.1, 3.0), Segment(0.2, 0.0, 12.0)])
     core = _core(vehicle, PRESETS['dry_sand'])
     flags = feed_trace(core, trace)
-    assert vehicle.wheelbase_m is not None and vehicle.wheel_radius_m is not None  # a wheeled robot
-    front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
+    wheels = vehicle.wheels()  # a wheeled robot
+    front = trace.pose[:, 0] + 0.5 * wheels.wheelbase_m + wheels.wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
     before = [t for t in flags if t < onset]
     delay = (min(t for t in flags if t >= onset) - onset) if any(t >= onset for t in flags) else math.inf

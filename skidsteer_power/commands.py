@@ -45,16 +45,19 @@ class Segment:
     ) -> Segment:
         """A path piece: speed V > 0 [m/s] on a signed turning radius R [m] (+ left, - right, inf
         straight, |R| > 0) for ``length_m`` [m] or ``duration_s`` [s] (exactly one)."""
-        if (length_m is None) == (duration_s is None):
+        if length_m is not None and duration_s is None:
+            given = float(length_m)
+        elif duration_s is not None and length_m is None:
+            given = float(duration_s)
+        else:
             raise InputError('a segment needs exactly one of length_m and duration_s')
-        given = float(length_m if length_m is not None else duration_s)  # type: ignore[arg-type]
         if not (math.isfinite(given) and given > 0):
             raise InputError(f'segment length/duration must be finite and > 0, got {given}')
         if not (math.isfinite(speed_m_s) and speed_m_s > 0):
             raise InputError(f'segment speed must be finite and > 0 m/s, got {speed_m_s}')
         if turn_radius_m == 0 or math.isnan(turn_radius_m):
             raise InputError('segment turning radius must be non-zero (inf = straight)')
-        duration = duration_s if duration_s is not None else length_m / speed_m_s  # type: ignore[operator]
+        duration = duration_s if duration_s is not None else given / speed_m_s
         return cls(speed_m_s, speed_m_s / turn_radius_m, duration, payload_kg)
 
     @property

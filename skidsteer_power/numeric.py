@@ -30,7 +30,8 @@ def real(value: Real) -> Real:
 def sign(x: Real) -> Real:
     """-1, 0 or 1 by the sign of ``x``, NaN for NaN (``np.sign`` of an array)."""
     if isinstance(x, np.ndarray):
-        return np.sign(x)
+        signs: np.ndarray = np.sign(x)
+        return signs
     if x > 0.0:
         return 1.0
     if x < 0.0:

@@ -1,6 +1,7 @@
 """What the parts need of each other where they meet (typing.Protocol): a battery, a power map and a
 powertrain. The concrete classes are :class:`skidsteer_power.powertrain.Battery`,
-:class:`skidsteer_power.maps.PowerMap` and :class:`skidsteer_power.powertrain.Powertrain`; anything
+:class:`skidsteer_power.maps.PowerMap` (scalar and array queries) and
+:class:`skidsteer_power.powertrain.Powertrain`; anything
 with these members fits (a test double, a direct FESS map, another vehicle's drivetrain), and mypy
 checks each use against the protocol instead of ``Any``.
 """
@@ -12,12 +13,14 @@ from typing import TYPE_CHECKING, Protocol
 from skidsteer_power.numeric import Real
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from skidsteer_power.maps.power_map import MapQuery
     from skidsteer_power.powertrain.battery import BatteryConfig, BatteryState
     from skidsteer_power.powertrain.drivetrain import MotorPoint
     from skidsteer_power.powertrain.motor import AmplifierConstants, MotorConstants
 
-__all__ = ['BatteryModel', 'PowerMapLike', 'PowertrainLike']
+__all__ = ['ArrayPowerMapLike', 'BatteryModel', 'PowerMapLike', 'PowertrainLike']
 
 
 class BatteryModel(Protocol):
@@ -56,6 +59,13 @@ class PowerMapLike(Protocol):
     def query(self, speed: float, yaw_rate: float, /) -> MapQuery: ...
 
 
+class ArrayPowerMapLike(Protocol):
+    """A power map asked about many commands at once (arrays of V [m/s] and yaw rate [rad/s],
+    broadcast): a mission's or a planned path's segments."""
+
+    def query(self, speed: ArrayLike, yaw_rate: ArrayLike, /) -> MapQuery: ...
+
+
 class PowertrainLike(Protocol):
     """A skid-steer powertrain: reduction, motor, amplifier and the per-side power flow (eqs. 7.1-7.4)."""
 
@@ -81,6 +91,6 @@ if TYPE_CHECKING:
 
     def _concrete_classes_fit(
         battery: Battery, power_map: PowerMap, powertrain: Powertrain
-    ) -> tuple[BatteryModel, PowerMapLike, PowertrainLike]:
+    ) -> tuple[BatteryModel, PowerMapLike, ArrayPowerMapLike, PowertrainLike]:
         """Never called: mypy (``make lint``) checks here that the package's classes fit."""
-        return battery, power_map, powertrain
+        return battery, power_map, power_map, powertrain

@@ -1,7 +1,7 @@
 """Vehicle descriptions: a frozen dataclass, a validating YAML loader and a stable fingerprint.
 
-A vehicle file in ``config/vehicles/`` holds the fields of :class:`Vehicle` as flat keys (SI units,
-names carry the unit)::
+A vehicle file in ``config/vehicles/`` holds the fields of :class:`Vehicle` and of its running gear
+(:class:`TrackGear` or :class:`WheelGear`) as flat keys (SI units, names carry the unit)::
 
     name: chapter3_track
     source: Table 3.3 of the dissertation
@@ -23,142 +23,38 @@ names carry the unit)::
     max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
     max_yaw_rate_rad_s: 2.0
 
+In Python the running gear is one field, ``Vehicle.gear: TrackGear | WheelGear``; code that needs
+the fields of one kind narrows it (``isinstance``, ``match``, or :meth:`Vehicle.tracks` /
+:meth:`Vehicle.wheels`, which raise InputError for the other kind).
+
 Every problem raises :class:`~skidsteer_power.errors.ConfigError` naming the file and the field.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal
 
 import yaml
 
 from skidsteer_power import resources
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.terramechanics import ranges
 from skidsteer_power.terramechanics.ranges import Range
 
 GRAVITY_M_S2 = 9.81  # [m/s^2], the value used throughout the dissertation
 
-RUNNING_GEARS = ('track', 'wheel')
+RunningGear = Literal['track', 'wheel']
+RUNNING_GEARS: tuple[RunningGear, ...] = ('track', 'wheel')
 WHEEL_COUNTS = (4, 6)
-TRACK_FIELDS = ('track_length_m', 'track_width_m', 'sprocket_radius_m')
-WHEEL_FIELDS = ('n_wheels', 'wheel_radius_m', 'wheel_width_m', 'wheelbase_m')
 DEFAULT_MAX_SPEED_M_S = 1.5  # the dissertation's largest simulated speed (section 3.5) [m/s]
 DEFAULT_MAX_YAW_RATE_RAD_S = 2.0  # a spin in place of the test robots at full motor speed or less [rad/s]
-
-
-@dataclass(frozen=True)
-class Vehicle:
-    """A skid-steered vehicle (SI units). Validated on construction.
-
-    Attributes
-    ----------
-    name : identifier (file stem for shipped vehicles)
-    running_gear : 'track' or 'wheel'
-    mass_kg : total mass m [kg]
-    cg_height_m : height h of the centre of gravity [m] (load transfer, eq. 3.1)
-    tread_m : tread B, centre-to-centre distance of the two sides [m]
-    track_length_m : contact length l of each track [m] (tracks)
-    track_width_m : width b of each track [m] (tracks)
-    sprocket_radius_m : sprocket radius r [m] (tracks)
-    n_wheels : total number of wheels, 4 or 6 (wheels)
-    wheel_radius_m, wheel_width_m : wheel radius r and width b [m] (wheels)
-    wheelbase_m : front axle to rear axle wb [m] (wheels); a 6-wheel vehicle's middle axle is midway
-    yaw_inertia_kg_m2 : yaw moment of inertia about the CG [kg m^2] (optional; the dynamic twin uses
-        it, the steady models do not; default :attr:`yaw_inertia`)
-    powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
-    drivetrain : how its joint_states map to the sides (joint names, units), interpreted by
-        :class:`skidsteer_power.estimator.inputs.JointMap` (empty: the test robot's left_motor/right_motor)
-    source : where the numbers come from; flags assumed values
-    max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
-        maps cover it, commands beyond it are flagged ``clamped``
-    max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
-    track_longitudinal_shear_ratio : K_x / K [-] of a track (tracks only; default 1: Wong's
-        inextensible belt, eqs. 3.12-3.15): FESS's track shears the soil along the track as if the
-        shear deformation modulus K were K_x, across it as K (a compliant belt in series with the
-        soil; docs/PREDICTION_FIT.md). Only FESS reads it
-    """
-
-    name: str
-    running_gear: str
-    mass_kg: float
-    cg_height_m: float
-    tread_m: float
-    track_length_m: float | None = None
-    track_width_m: float | None = None
-    sprocket_radius_m: float | None = None
-    n_wheels: int | None = None
-    wheel_radius_m: float | None = None
-    wheel_width_m: float | None = None
-    wheelbase_m: float | None = None
-    yaw_inertia_kg_m2: float | None = None
-    powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
-    source: str = ''
-    drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
-    max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
-    max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
-    track_longitudinal_shear_ratio: float = 1.0
-
-    def __post_init__(self) -> None:
-        _validate(self)
-
-    @property
-    def weight_N(self) -> float:
-        """Weight W = m g [N]."""
-        return self.mass_kg * GRAVITY_M_S2
-
-    @property
-    def drive_radius_m(self) -> float:
-        """Sprocket radius (tracks) or wheel radius (wheels) r [m]."""
-        radius = self.sprocket_radius_m if self.is_tracked else self.wheel_radius_m
-        assert radius is not None  # guaranteed by validation
-        return radius
-
-    @property
-    def yaw_inertia(self) -> float:
-        """Yaw moment of inertia I_z [kg m^2]: ``yaw_inertia_kg_m2`` if given, else ASSUMED a uniform
-        box m (L^2 + W^2) / 12 of the overall footprint, L = contact length (tracks) or wheelbase
-        (wheels) + 2 r, W = tread + b (the dissertation gives no inertia)."""
-        if self.yaw_inertia_kg_m2 is not None:
-            return float(self.yaw_inertia_kg_m2)
-        span = self.track_length_m if self.is_tracked else self.wheelbase_m
-        length = float(span or 0.0) + 2.0 * self.drive_radius_m
-        width = self.tread_m + self.contact_width_m
-        return self.mass_kg * (length**2 + width**2) / 12.0
-
-    @property
-    def is_tracked(self) -> bool:
-        return self.running_gear == 'track'
-
-    @property
-    def contact_width_m(self) -> float:
-        """Track or wheel width b [m]."""
-        width = self.track_width_m if self.is_tracked else self.wheel_width_m
-        assert width is not None
-        return width
-
-    @property
-    def wheels_per_side(self) -> int:
-        """Wheels on each side (2 or 3); 0 for a tracked vehicle."""
-        return 0 if self.is_tracked else int(self.n_wheels or 0) // 2
-
-    def axle_positions_m(self) -> tuple[float, ...]:
-        """Longitudinal positions of the axles of one side, front first, from the centre [m]."""
-        if self.is_tracked:
-            return ()
-        half = 0.5 * float(self.wheelbase_m or 0.0)
-        return (half, -half) if self.wheels_per_side == 2 else (half, 0.0, -half)
-
-
-def _fail(vehicle_name: str, message: str) -> ConfigError:
-    return ConfigError(f'vehicle {vehicle_name!r}: {message}')
+DEFAULT_TRACK_LONGITUDINAL_SHEAR_RATIO = 1.0  # Wong's inextensible belt (eqs. 3.12-3.15) [-]
 
 
 def _field_ranges() -> dict[str, Range]:
@@ -180,68 +76,274 @@ def _field_ranges() -> dict[str, Range]:
     }
 
 
-def _check_positive(vehicle: Vehicle, name: str) -> None:
-    """``name`` is a finite number > 0 inside its physical range (:func:`_field_ranges`)."""
-    value = getattr(vehicle, name)
+def _check_positive(name: str, value: object) -> None:
+    """``value`` of field ``name`` is a finite number > 0 in its physical range (:func:`_field_ranges`)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _fail(vehicle.name, f'{name} must be a number, not {value!r}')
+        raise ConfigError(f'{name} must be a number, not {value!r}')
     if not math.isfinite(value) or value <= 0:
-        raise _fail(vehicle.name, f'{name} must be a finite number > 0, not {value!r}')
+        raise ConfigError(f'{name} must be a finite number > 0, not {value!r}')
     limits = _field_ranges()[name]
     if not limits.contains(value):
-        raise _fail(vehicle.name, f'{name} = {value:g} is outside its range {limits.text}')
+        raise ConfigError(f'{name} = {value:g} is outside its range {limits.text}')
+
+
+@dataclass(frozen=True)
+class TrackGear:
+    """One track on each side (SI units). Validated on construction.
+
+    Attributes
+    ----------
+    track_length_m : contact length l of each track [m]
+    track_width_m : width b of each track [m]
+    sprocket_radius_m : sprocket radius r [m]
+    track_longitudinal_shear_ratio : K_x / K [-] (default 1: Wong's inextensible belt, eqs.
+        3.12-3.15): FESS's track shears the soil along the track as if the shear deformation
+        modulus K were K_x, across it as K (a compliant belt in series with the soil;
+        docs/PREDICTION_FIT.md). Only FESS reads it
+    """
+
+    track_length_m: float
+    track_width_m: float
+    sprocket_radius_m: float
+    track_longitudinal_shear_ratio: float = DEFAULT_TRACK_LONGITUDINAL_SHEAR_RATIO
+
+    running_gear: ClassVar[RunningGear] = 'track'
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _check_positive(f.name, getattr(self, f.name))
+
+    @property
+    def drive_radius_m(self) -> float:
+        """Sprocket radius r [m]."""
+        return self.sprocket_radius_m
+
+    @property
+    def contact_width_m(self) -> float:
+        """Track width b [m]."""
+        return self.track_width_m
+
+
+@dataclass(frozen=True)
+class WheelGear:
+    """Two or three rigid wheels on each side, on equally spaced axles (SI units). Validated on construction.
+
+    Attributes
+    ----------
+    n_wheels : total number of wheels, 4 or 6
+    wheel_radius_m, wheel_width_m : wheel radius r and width b [m]
+    wheelbase_m : front axle to rear axle wb [m]; a 6-wheel vehicle's middle axle is midway
+    """
+
+    n_wheels: int
+    wheel_radius_m: float
+    wheel_width_m: float
+    wheelbase_m: float
+
+    running_gear: ClassVar[RunningGear] = 'wheel'
+
+    def __post_init__(self) -> None:
+        if self.n_wheels not in WHEEL_COUNTS or isinstance(self.n_wheels, bool):
+            raise ConfigError(f'n_wheels must be 4 or 6, not {self.n_wheels!r}')
+        for name in ('wheel_radius_m', 'wheel_width_m', 'wheelbase_m'):
+            _check_positive(name, getattr(self, name))
+        spacing = float(self.wheelbase_m) / (self.wheels_per_side - 1)
+        if spacing <= 2.0 * float(self.wheel_radius_m):
+            raise ConfigError(f'wheelbase_m ({self.wheelbase_m}) is too short: the wheels overlap')
+
+    @property
+    def drive_radius_m(self) -> float:
+        """Wheel radius r [m]."""
+        return self.wheel_radius_m
+
+    @property
+    def contact_width_m(self) -> float:
+        """Wheel width b [m]."""
+        return self.wheel_width_m
+
+    @property
+    def wheels_per_side(self) -> int:
+        """Wheels on each side (2 or 3)."""
+        return int(self.n_wheels) // 2
+
+    def axle_positions_m(self) -> tuple[float, ...]:
+        """Longitudinal positions of the axles of one side, front first, from the centre [m]."""
+        half = 0.5 * float(self.wheelbase_m)
+        return (half, -half) if self.wheels_per_side == 2 else (half, 0.0, -half)
+
+
+TRACK_FIELDS = tuple(f.name for f in fields(TrackGear))
+WHEEL_FIELDS = tuple(f.name for f in fields(WheelGear))
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A skid-steered vehicle (SI units). Validated on construction.
+
+    Attributes
+    ----------
+    name : identifier (file stem for shipped vehicles)
+    gear : the running gear, :class:`TrackGear` or :class:`WheelGear`
+    mass_kg : total mass m [kg]
+    cg_height_m : height h of the centre of gravity [m] (load transfer, eq. 3.1)
+    tread_m : tread B, centre-to-centre distance of the two sides [m]
+    yaw_inertia_kg_m2 : yaw moment of inertia about the CG [kg m^2] (optional; the dynamic twin uses
+        it, the steady models do not; default :attr:`yaw_inertia`)
+    powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
+    source : where the numbers come from; flags assumed values
+    drivetrain : how its joint_states map to the sides (joint names, units), interpreted by
+        :class:`skidsteer_power.estimator.inputs.JointMap` (empty: the test robot's left_motor/right_motor)
+    max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
+        maps cover it, commands beyond it are flagged ``clamped``
+    max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
+    """
+
+    name: str
+    gear: TrackGear | WheelGear
+    mass_kg: float
+    cg_height_m: float
+    tread_m: float
+    yaw_inertia_kg_m2: float | None = None
+    powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    source: str = ''
+    drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
+    max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ConfigError(f'vehicle name must be a non-empty string, not {self.name!r}')
+        try:
+            _validate(self)
+        except ConfigError as err:
+            raise _fail(self.name, str(err)) from None
+
+    @property
+    def running_gear(self) -> RunningGear:
+        """'track' or 'wheel' (the ``running_gear`` key of the vehicle file)."""
+        return self.gear.running_gear
+
+    @property
+    def is_tracked(self) -> bool:
+        return isinstance(self.gear, TrackGear)
+
+    @property
+    def weight_N(self) -> float:
+        """Weight W = m g [N]."""
+        return self.mass_kg * GRAVITY_M_S2
+
+    @property
+    def drive_radius_m(self) -> float:
+        """Sprocket radius (tracks) or wheel radius (wheels) r [m]."""
+        return self.gear.drive_radius_m
+
+    @property
+    def contact_width_m(self) -> float:
+        """Track or wheel width b [m]."""
+        return self.gear.contact_width_m
+
+    @property
+    def wheels_per_side(self) -> int:
+        """Wheels on each side (2 or 3); 0 for a tracked vehicle."""
+        return self.gear.wheels_per_side if isinstance(self.gear, WheelGear) else 0
+
+    def axle_positions_m(self) -> tuple[float, ...]:
+        """Longitudinal positions of one side's axles, front first, from the centre [m]; () for tracks."""
+        return self.gear.axle_positions_m() if isinstance(self.gear, WheelGear) else ()
+
+    @property
+    def yaw_inertia(self) -> float:
+        """Yaw moment of inertia I_z [kg m^2]: ``yaw_inertia_kg_m2`` if given, else ASSUMED a uniform
+        box m (L^2 + W^2) / 12 of the overall footprint, L = contact length (tracks) or wheelbase
+        (wheels) + 2 r, W = tread + b (the dissertation gives no inertia)."""
+        if self.yaw_inertia_kg_m2 is not None:
+            return float(self.yaw_inertia_kg_m2)
+        gear = self.gear
+        span = gear.track_length_m if isinstance(gear, TrackGear) else gear.wheelbase_m
+        length = float(span) + 2.0 * self.drive_radius_m
+        width = self.tread_m + self.contact_width_m
+        return self.mass_kg * (length**2 + width**2) / 12.0
+
+    def tracks(self) -> TrackGear:
+        """The running gear of a tracked vehicle; InputError if it runs on wheels."""
+        if isinstance(self.gear, TrackGear):
+            return self.gear
+        raise InputError(f'this needs a tracked vehicle; {self.name!r} has wheels')
+
+    def wheels(self) -> WheelGear:
+        """The running gear of a wheeled vehicle; InputError if it runs on tracks."""
+        if isinstance(self.gear, WheelGear):
+            return self.gear
+        raise InputError(f'this needs a wheeled vehicle; {self.name!r} has tracks')
+
+    def as_dict(self) -> dict[str, Any]:
+        """The flat fields of a vehicle file (:data:`FIELD_NAMES`; None: a field of the other running
+        gear). :func:`vehicle_from_dict` builds the same vehicle from it."""
+        flat: dict[str, Any] = dict.fromkeys(FIELD_NAMES)
+        flat.update({f.name: getattr(self, f.name) for f in fields(self) if f.name != 'gear'})
+        flat.update({f.name: getattr(self.gear, f.name) for f in fields(self.gear)})
+        flat['running_gear'] = self.running_gear
+        return flat
+
+
+FIELD_NAMES: tuple[str, ...] = (
+    'name',
+    'running_gear',
+    *(f.name for f in fields(Vehicle) if f.name not in ('name', 'gear')),
+    *TRACK_FIELDS,
+    *WHEEL_FIELDS,
+)
+"""The keys of a vehicle file."""
+
+
+def _fail(vehicle_name: str, message: str) -> ConfigError:
+    return ConfigError(f'vehicle {vehicle_name!r}: {message}')
 
 
 def _validate(vehicle: Vehicle) -> None:
-    if not isinstance(vehicle.name, str) or not vehicle.name:
-        raise ConfigError(f'vehicle name must be a non-empty string, not {vehicle.name!r}')
-    if vehicle.running_gear not in RUNNING_GEARS:
-        raise _fail(
-            vehicle.name, f'running_gear must be one of {RUNNING_GEARS}, not {vehicle.running_gear!r}'
-        )
+    """The vehicle's own fields and how they fit its running gear (ConfigError without the name)."""
+    if not isinstance(vehicle.gear, (TrackGear, WheelGear)):
+        raise ConfigError(f'gear must be a TrackGear or a WheelGear, not {type(vehicle.gear).__name__}')
     for name in ('mass_kg', 'cg_height_m', 'tread_m', 'max_speed_m_s', 'max_yaw_rate_rad_s'):
-        _check_positive(vehicle, name)
-    own, other = (TRACK_FIELDS, WHEEL_FIELDS) if vehicle.is_tracked else (WHEEL_FIELDS, TRACK_FIELDS)
-    for name in own:
-        if getattr(vehicle, name) is None:
-            raise _fail(vehicle.name, f'{name} is required for running_gear {vehicle.running_gear!r}')
-    for name in other:
-        if getattr(vehicle, name) is not None:
-            raise _fail(vehicle.name, f'{name} does not apply to running_gear {vehicle.running_gear!r}')
-    for name in own:
-        if name == 'n_wheels':
-            if vehicle.n_wheels not in WHEEL_COUNTS or isinstance(vehicle.n_wheels, bool):
-                raise _fail(vehicle.name, f'n_wheels must be 4 or 6, not {vehicle.n_wheels!r}')
-        else:
-            _check_positive(vehicle, name)
+        _check_positive(name, getattr(vehicle, name))
     if vehicle.tread_m <= vehicle.contact_width_m:
-        raise _fail(
-            vehicle.name,
-            f'tread_m ({vehicle.tread_m}) must exceed the track/wheel width ({vehicle.contact_width_m})',
+        raise ConfigError(
+            f'tread_m ({vehicle.tread_m}) must exceed the track/wheel width ({vehicle.contact_width_m})'
         )
-    if not vehicle.is_tracked:
-        assert vehicle.wheelbase_m is not None and vehicle.wheel_radius_m is not None  # checked above
-        spacing = float(vehicle.wheelbase_m) / (vehicle.wheels_per_side - 1)
-        if spacing <= 2.0 * float(vehicle.wheel_radius_m):
-            raise _fail(vehicle.name, f'wheelbase_m ({vehicle.wheelbase_m}) is too short: the wheels overlap')
     if vehicle.yaw_inertia_kg_m2 is not None:
-        _check_positive(vehicle, 'yaw_inertia_kg_m2')
-    _check_positive(vehicle, 'track_longitudinal_shear_ratio')
-    if not vehicle.is_tracked and vehicle.track_longitudinal_shear_ratio != 1.0:
-        raise _fail(vehicle.name, "track_longitudinal_shear_ratio does not apply to running_gear 'wheel'")
+        _check_positive('yaw_inertia_kg_m2', vehicle.yaw_inertia_kg_m2)
     if not isinstance(vehicle.powertrain, dict):
-        raise _fail(vehicle.name, f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
+        raise ConfigError(f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
     if not isinstance(vehicle.drivetrain, dict):
-        raise _fail(vehicle.name, f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
+        raise ConfigError(f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
     if not isinstance(vehicle.source, str):
-        raise _fail(vehicle.name, 'source must be a string')
+        raise ConfigError('source must be a string')
 
 
-FIELD_NAMES = tuple(f.name for f in dataclasses.fields(Vehicle))
+def _gear_from_fields(values: dict[str, Any]) -> TrackGear | WheelGear:
+    """The running gear named by ``values['running_gear']``, from (and removing) the gear keys of a
+    vehicle file's mapping; an absent or null key is missing."""
+    kind = values.pop('running_gear')
+    if kind not in RUNNING_GEARS:
+        raise ConfigError(f'running_gear must be one of {RUNNING_GEARS}, not {kind!r}')
+    given = {k: values.pop(k) for k in (*TRACK_FIELDS, *WHEEL_FIELDS) if k in values}
+    given = {k: v for k, v in given.items() if v is not None}
+    if kind == 'wheel' and given.get('track_longitudinal_shear_ratio') == 1.0:
+        del given['track_longitudinal_shear_ratio']  # the neutral value says nothing about wheels
+    gear_class: type[TrackGear] | type[WheelGear] = TrackGear if kind == 'track' else WheelGear
+    own = TRACK_FIELDS if kind == 'track' else WHEEL_FIELDS
+    for name in given:
+        if name not in own:
+            raise ConfigError(f'{name} does not apply to running_gear {kind!r}')
+    for f in fields(gear_class):
+        if f.name not in given and f.default is MISSING:
+            raise ConfigError(f'{f.name} is required for running_gear {kind!r}')
+    return gear_class(**given)
 
 
 def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
-    """Build a validated :class:`Vehicle` from a mapping (e.g. parsed YAML); ``origin`` names the source."""
+    """Build a validated :class:`Vehicle` from a mapping of the flat file keys (e.g. parsed YAML);
+    ``origin`` names the source."""
     if not isinstance(data, dict):
         raise ConfigError(
             f'{origin}: a vehicle file must hold a mapping of fields, not {type(data).__name__}'
@@ -258,9 +360,13 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
     for section in ('powertrain', 'drivetrain'):
         if values.get(section) is None:
             values[section] = {}
-    values['name'] = str(values['name'])
+    name = str(values.pop('name'))
     try:
-        return Vehicle(**values)
+        try:
+            gear = _gear_from_fields(values)
+        except ConfigError as err:
+            raise _fail(name, str(err)) from None
+        return Vehicle(name=name, gear=gear, **values)
     except ConfigError as err:
         raise ConfigError(f'{origin}: {err}') from None
 
@@ -314,15 +420,17 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
     the joint_states mapping, which changes no model result).
 
     Two vehicles with the same fingerprint give the same model results, so maps can be cached by it.
+    The digest is of the flat file fields (:meth:`Vehicle.as_dict`), so it does not depend on how
+    the Python class groups them.
     """
     payload = {
-        f.name: getattr(vehicle, f.name)
-        for f in dataclasses.fields(vehicle)
+        name: value
+        for name, value in vehicle.as_dict().items()
         # no steady-state physics: the envelope (maps key on it separately: maps.power_map.cache_path),
         # the inertia (the steady models ignore it) and the joint_states mapping
-        if f.name not in _NOT_FINGERPRINTED
+        if name not in _NOT_FINGERPRINTED
     }
-    if vehicle.track_longitudinal_shear_ratio == 1.0:
+    if payload['track_longitudinal_shear_ratio'] in (None, DEFAULT_TRACK_LONGITUDINAL_SHEAR_RATIO):
         del payload['track_longitudinal_shear_ratio']  # the default: fingerprints from before it stay
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):

@@ -102,7 +102,7 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     core = core_on(vehicle, PRESETS['dry_sand'])  # the estimator believes it is on dry sand
     flagged = feed_trace(core, trace)
     # the front wheels reach the patch when the CG is half a wheelbase plus a wheel radius short of it
-    front = trace.pose[:, 0] + 0.5 * vehicle.wheelbase_m + vehicle.wheel_radius_m
+    front = trace.pose[:, 0] + 0.5 * vehicle.wheels().wheelbase_m + vehicle.wheels().wheel_radius_m
     onset = float(trace.t[np.argmax(front >= 2.0)])
     assert flagged, 'the change to loam was never flagged'
     assert all(t >= onset for t in flagged), 'flagged before the robot reached the patch'

@@ -160,7 +160,9 @@ def test_track_belt_law_widens_the_turn_from_set_points_but_not_the_torque_at_a_
     commanded), while at a given motion the torques stay those of Wong's inextensible belt, the
     model ch. 7.3.4 found "validated by the experiments" at the measured motion."""
     track = load_vehicle('test_robot_track')
-    belt = dataclasses.replace(track, track_longitudinal_shear_ratio=1.0)  # Wong's, no belt law
+    belt = dataclasses.replace(
+        track, gear=dataclasses.replace(track.tracks(), track_longitudinal_shear_ratio=1.0)
+    )  # Wong's
     wide = CommandPredictor(track, sand).predict(0.1, 0.1).turn_radius[0]
     tight = CommandPredictor(belt, sand).predict(0.1, 0.1).turn_radius[0]
     assert wide > 1.25 * tight  # measured 1.48 against 1.11 m (R_real 1.44 m)

@@ -83,10 +83,11 @@ def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(nam
     solver = fess.FessSolver(vehicle, terrain, n=40)
     contact = solver.problem(np.array([0.1]), np.array([0.0])).contact
     x_front, x_rear = contact.fwd[0, 0, 0, 0], contact.fwd[0, 0, 0, -1]
-    area = vehicle.wheel_width_m * (x_front - x_rear)
-    per_wheel = terrain.c * area + vehicle.weight_N / vehicle.n_wheels * np.tan(terrain.phi)
+    wheels = vehicle.wheels()
+    area = wheels.wheel_width_m * (x_front - x_rear)
+    per_wheel = terrain.c * area + vehicle.weight_N / wheels.n_wheels * np.tan(terrain.phi)
     hand = vehicle.wheels_per_side * per_wheel
-    assert hand == pytest.approx(77.5 if vehicle.n_wheels == 4 else 78.4, abs=0.1)  # numbers above
+    assert hand == pytest.approx(77.5 if wheels.n_wheels == 4 else 78.4, abs=0.1)  # numbers above
     sol = solver.solve_twist(0.1, 0.0)
     assert sol.converged[0]
     capacity = np.abs(sol.thrust[0, 0]) / (1.0 - sol.traction_margin[0])  # margin = 1 - |F| / F_max
@@ -121,7 +122,10 @@ def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises()
     from skidsteer_power.terramechanics.terrain import load_terrain
 
     weak = dataclasses.replace(load_terrain('sandy_soil'), phi=math.radians(20.0), c=200.0)
-    small = dataclasses.replace(load_vehicle('test_robot_4wheel'), wheel_radius_m=0.08, wheel_width_m=0.05)
+    four = load_vehicle('test_robot_4wheel')
+    small = dataclasses.replace(
+        four, gear=dataclasses.replace(four.wheels(), wheel_radius_m=0.08, wheel_width_m=0.05)
+    )
     state = fess.solve(small, weak, [0.2, 0.2], [math.inf, 2.0])
     assert not state.converged.any() and np.isnan(state.torque_outer_Nm).all()
     assert state.speed_m_s.tolist() == [0.2, 0.2] and state.turn_radius_m.tolist() == [math.inf, 2.0]

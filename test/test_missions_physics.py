@@ -18,7 +18,7 @@ from skidsteer_power.errors import ConfigError
 from skidsteer_power.missions import Route, Segment, run_mission
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import TrackGear, load_vehicle
 
 KT = 0.114  # EC-45 torque constant [N m/A], Appendix B line 12
 G = 12.0  # 4.8:1 planetary x 2.5:1 roller chain, ch. 7.1.1
@@ -57,11 +57,11 @@ def test_packbot_files_match_table_8_1():
     track, four, six = (load_vehicle(f'packbot_{k}') for k in ('track', '4wheel', '6wheel'))
     for v in (track, four, six):  # Table 8.1 chassis parameters, shared by all three (ch. 8.1)
         assert (v.mass_kg, v.cg_height_m, v.tread_m) == (15.8, 0.08, 0.4)
-    assert (track.track_length_m, track.track_width_m, track.sprocket_radius_m) == (0.7, 0.074, 0.1)
+    assert track.gear == TrackGear(track_length_m=0.7, track_width_m=0.074, sprocket_radius_m=0.1)
     for v in (four, six):
-        assert (v.wheel_width_m, v.wheel_radius_m) == (0.074, 0.1)
-    assert (four.n_wheels, four.wheelbase_m) == (4, 0.7)  # 'Wheel Base (4-Wheel) 0.7'
-    assert six.n_wheels == 6
+        assert (v.wheels().wheel_width_m, v.wheels().wheel_radius_m) == (0.074, 0.1)
+    assert (four.wheels().n_wheels, four.wheels().wheelbase_m) == (4, 0.7)  # 'Wheel Base (4-Wheel) 0.7'
+    assert six.wheels().n_wheels == 6
     for v in (track, four, six):  # ch. 8.1: the test robot's powertrain for all three
         assert v.powertrain == {'preset': 'test_robot'}
 
@@ -72,10 +72,10 @@ def test_six_wheel_base_is_the_adjacent_axle_spacing():
     # Read as front-to-rear, adjacent 6-wheel axles would be 0.175 m apart, less than the 0.2 m wheel
     # diameter: the wheels would overlap. So front-to-rear is 2 x 0.35 = 0.7 m.
     six = load_vehicle('packbot_6wheel')
-    assert six.wheelbase_m == pytest.approx(2 * 0.35)
+    assert six.wheels().wheelbase_m == pytest.approx(2 * 0.35)
     assert six.axle_positions_m() == pytest.approx((0.35, 0.0, -0.35))
     with pytest.raises(ConfigError, match='overlap'):
-        dataclasses.replace(six, wheelbase_m=0.35)
+        dataclasses.replace(six.wheels(), wheelbase_m=0.35)
 
 
 def _internal_hand(side: str, omega_axle: float, running_gear: str, scale: float) -> float:

@@ -189,8 +189,8 @@ def test_joint_mapping_errors_are_clear():
 def test_public_robot_files_hold_their_published_dimensions(name, mass, tread, radius, wheelbase):
     vehicle = load_vehicle(name)
     assert vehicle.mass_kg == pytest.approx(mass, abs=0.006)
-    assert (vehicle.tread_m, vehicle.wheel_radius_m) == (tread, radius)
-    assert vehicle.wheelbase_m == pytest.approx(wheelbase, abs=5e-4)
+    assert (vehicle.tread_m, vehicle.wheels().wheel_radius_m) == (tread, radius)
+    assert vehicle.wheels().wheelbase_m == pytest.approx(wheelbase, abs=5e-4)
     assert 'ASSUMED' in vehicle.source and 'github' in vehicle.source.lower()
     assert len(factory.joint_map_for(vehicle).joints) == 4
 

@@ -101,7 +101,7 @@ def test_straight_track_agrees_with_the_single_track_equations():
     # steady straight running: each track's drawbar pull F_s - R_c = 0 (eq. 2.18) at load W/2
     twin, trace = _settled('test_robot_track', 0.2, 0.0, contact='classic')
     v = twin.vehicle
-    load, b, length = v.weight_N / 2, v.track_width_m, v.track_length_m
+    load, b, length = v.weight_N / 2, v.tracks().track_width_m, v.tracks().track_length_m
     rc = float(single_track.compaction_resistance(SAND_BIN, load, b, length))  # eq. 2.10
     slip = brentq(lambda s: float(single_track.tractive_effort(SAND_BIN, load, b, length, s)) - rc, 1e-9, 0.9)
     sprocket = twin.omega_m.mean() / twin.G
@@ -115,7 +115,10 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     # steady straight running: every wheel has zero drawbar pull at load W / n (eqs. 2.28-2.29)
     twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, contact='classic')
     v = twin.vehicle
-    ref = solve_wheel(SAND_BIN, v.weight_N / v.n_wheels, 0.0, v.wheel_radius_m, v.wheel_width_m)
+    wheels = v.wheels()
+    ref = solve_wheel(
+        SAND_BIN, v.weight_N / wheels.n_wheels, 0.0, wheels.wheel_radius_m, wheels.wheel_width_m
+    )
     sprocket = twin.omega_m.mean() / twin.G
     twin_slip = 1.0 - twin.vel[0] / (v.drive_radius_m * sprocket)
     assert twin_slip == pytest.approx(float(ref.slip), rel=0.02)

@@ -120,7 +120,8 @@ class CmdVelConsumer:
 
     def predict(self, s: Samples) -> np.ndarray:
         load = self.rate_speed * np.abs(s.speed_cmd) + self.rate_yaw * np.abs(s.yaw_cmd)
-        return np.maximum(load, self.idle_W)
+        power: np.ndarray = np.maximum(load, self.idle_W)
+        return power
 
 
 class IcrRlsPower:

@@ -47,6 +47,7 @@ from skidsteer_power.analysis.baselines import (
     energy_J,
 )
 from skidsteer_power.errors import InputError, SkidsteerError
+from skidsteer_power.vehicle import TrackGear
 
 MAX_BAGS = 16  # per list (training, hold-out, transfer)
 MAX_BAG_S = 3600.0  # longest bag [s]
@@ -320,10 +321,11 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
     train = concat(train_runs)
     train_envelope = envelope(train)
     linear, gazebo = LinearPower().fit(train), CmdVelConsumer().fit(train)
+    running_gear = vehicle.gear
     contact_x = (
-        np.linspace(-0.5, 0.5, 21) * float(vehicle.track_length_m or 0.0)
-        if vehicle.is_tracked
-        else np.array(vehicle.axle_positions_m())
+        np.linspace(-0.5, 0.5, 21) * float(running_gear.track_length_m)
+        if isinstance(running_gear, TrackGear)
+        else np.array(running_gear.axle_positions_m())
     )
     icr = IcrRlsPower(vehicle.tread_m, contact_x).fit(train)
 

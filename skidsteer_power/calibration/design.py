@@ -17,12 +17,15 @@ A parameter at a bound or held fixed is not in the design (it has no interval to
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
 
 from skidsteer_power.calibration.fit import PARAMS, CalibrationResult, Model, _from_z
+
+if TYPE_CHECKING:
+    from skidsteer_power.vehicle import Vehicle
 
 MAX_HOLDS = 4
 MIN_GAIN = 0.05  # a further hold must shrink the widest interval by at least this fraction
@@ -30,7 +33,7 @@ STEP_Z = 1e-3  # forward-difference step in z
 GRID = 7  # candidate values per axis
 
 
-def candidate_grid(vehicle: Any, max_speed_m_s: float = 1.0, max_yaw_rad_s: float = 1.0) -> np.ndarray:
+def candidate_grid(vehicle: Vehicle, max_speed_m_s: float = 1.0, max_yaw_rad_s: float = 1.0) -> np.ndarray:
     """(C, 2) candidate holds (V [m/s], yaw rate [rad/s]) inside the vehicle's command envelope."""
     speeds = np.linspace(0.05, min(vehicle.max_speed_m_s, max_speed_m_s), GRID)
     yaws = np.linspace(0.0, min(vehicle.max_yaw_rate_rad_s, max_yaw_rad_s), GRID)
@@ -45,7 +48,7 @@ def relative_width(result: CalibrationResult, name: str) -> float:
 
 
 def suggest_holds(
-    vehicle: Any, result: CalibrationResult, candidates: np.ndarray | None = None
+    vehicle: Vehicle, result: CalibrationResult, candidates: np.ndarray | None = None
 ) -> dict[str, Any]:
     """The holds that most shrink the widest interval of ``result`` (module doc)."""
     free = [n for n in result.names if n not in result.at_bound and result.ci95.get(n) is not None]
@@ -99,7 +102,7 @@ def suggest_holds(
 
 
 def _candidate_rows(
-    vehicle: Any, result: CalibrationResult, free: list[str], candidates: np.ndarray
+    vehicle: Vehicle, result: CalibrationResult, free: list[str], candidates: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """(C, 2, p) motor-torque derivatives [N m per z unit] at each candidate, and which solved."""
     model = Model(

@@ -11,15 +11,19 @@ from __future__ import annotations
 
 import math
 import types
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skidsteer_power.models.fess import FessSolver
+
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 
 class DirectFessMap:
     """``query(V [m/s], yaw rate [rad/s])`` with the fields MapPredictor reads, from FESS (ch. 6)."""
 
-    def __init__(self, vehicle: Any, terrain: Any) -> None:
+    def __init__(self, vehicle: Vehicle, terrain: Terrain) -> None:
         self.solver = FessSolver(vehicle, terrain)
 
     def query(self, speed_m_s: float, yaw_rate_rad_s: float) -> Any:

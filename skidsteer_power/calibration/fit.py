@@ -56,8 +56,11 @@ from scipy import optimize, stats
 from skidsteer_power.calibration.segments import Segment
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
+from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 from skidsteer_power.powertrain.motor import terminal_power
+from skidsteer_power.terramechanics.terrain import Terrain
+from skidsteer_power.vehicle import Vehicle
 
 RHO_WARN = 0.95
 SOLVE_TOL_N = 1e-6  # FESS equilibrium tolerance during the fit [N, N m]
@@ -118,9 +121,9 @@ def parse_fit_list(text: str) -> list[str]:
 class Model:
     """Predicted motor torque and speed of every segment for a set of parameter values."""
 
-    vehicle: Any
-    terrain: Any
-    powertrain: Any
+    vehicle: Vehicle
+    terrain: Terrain
+    powertrain: Powertrain
     speed: np.ndarray  # (S,) [m/s]: the measured motion, or the command with fit_at 'setpoints'
     yaw: np.ndarray  # (S,) [rad/s]
     fit_at: str = 'motion'
@@ -131,21 +134,26 @@ class Model:
         if name in TERRAIN_PARAMS:
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
         side, kind = name.split('_')
-        total = getattr(self.powertrain, side).total
+        total = self.powertrain.resistance(side).total
         return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
 
-    def with_values(self, values: dict[str, float]) -> tuple[Any, Any]:
+    def with_values(self, values: dict[str, float]) -> tuple[Terrain, Powertrain]:
         """(terrain, powertrain) with ``values`` (parameter units) substituted."""
-        terrain_fields = {k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS}
+        # the keys are Terrain's float fields named in TERRAIN_PARAMS
+        terrain_fields: dict[str, Any] = {
+            k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS
+        }
         terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
         powertrain = self.powertrain
-        sides = {}
-        for side in ('left', 'right'):
+
+        def side_with_values(side: str) -> SideResistance:
             b, c = values.get(f'{side}_b'), values.get(f'{side}_c')
-            if b is not None or c is not None:
-                sides[side] = scaled_side(getattr(powertrain, side), b, c)
-        if sides:
-            powertrain = dataclasses.replace(powertrain, **sides)
+            current = powertrain.resistance(side)
+            return current if b is None and c is None else scaled_side(current, b, c)
+
+        left, right = side_with_values('left'), side_with_values('right')
+        if left is not powertrain.left or right is not powertrain.right:
+            powertrain = dataclasses.replace(powertrain, left=left, right=right)
         return terrain, powertrain
 
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -159,7 +167,9 @@ class Model:
             nan = np.full((len(self.speed), 2), np.nan)
             return nan, nan.copy(), np.zeros(len(self.speed), dtype=bool)
 
-    def _predict_motion(self, terrain: Any, powertrain: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _predict_motion(
+        self, terrain: Terrain, powertrain: Powertrain
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As :meth:`predict`, FESS solved at the measured motion (``speed``, ``yaw``)."""
         sol = FessSolver(self.vehicle, terrain).solve_twist(
             self.speed, self.yaw, x0=self._warm, tol=SOLVE_TOL_N
@@ -174,7 +184,9 @@ class Model:
             omega[:, i] = point.motor_omega_rad_s
         return torque, omega, np.asarray(sol.converged)
 
-    def _predict_setpoints(self, terrain: Any, powertrain: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _predict_setpoints(
+        self, terrain: Terrain, powertrain: Powertrain
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As :meth:`predict` for commands (``speed``, ``yaw``) at their wheel speed set points, as
         :class:`CommandPredictor` predicts them (its dug-in answer where FESS has no steady state is
         the node's prediction too, so every segment counts as solved)."""
@@ -231,8 +243,8 @@ class CalibrationResult:
     holdout_energy_error_after: float
     residual_rms_Nm: float
     seconds: float
-    terrain: Any
-    powertrain: Any
+    terrain: Terrain
+    powertrain: Powertrain
     dropped: dict[str, int] = field(default_factory=dict)
     converged: bool = True
     measured_Nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (S, 2) per segment
@@ -320,7 +332,8 @@ def select_identifiable(
         if basis.shape[1] == 0:
             return col
         coef, *_ = np.linalg.lstsq(basis, col, rcond=None)
-        return col - basis @ coef
+        remainder: np.ndarray = col - basis @ coef
+        return remainder
 
     pool = [n for n in fit if n in columns]
     while pool:
@@ -379,9 +392,9 @@ def _rmse(err: np.ndarray) -> float:
 
 
 def calibrate(
-    vehicle: Any,
-    terrain: Any,
-    powertrain: Any,
+    vehicle: Vehicle,
+    terrain: Terrain,
+    powertrain: Powertrain,
     segments: Sequence[Segment],
     fit: Sequence[str] = DEFAULT_FIT,
     *,
@@ -452,7 +465,8 @@ def calibrate(
         torque, _, ok = model.predict(_values(names, z))
         err = torque[fit_idx] - measured[fit_idx]
         err[~ok[fit_idx]] = FAILED_RESIDUAL_NM
-        return err.ravel()
+        flat: np.ndarray = err.ravel()
+        return flat
 
     sol = optimize.least_squares(
         residuals,
@@ -555,7 +569,7 @@ def calibrate(
 
 
 def segment_model(
-    vehicle: Any, terrain: Any, powertrain: Any, segments: Sequence[Segment], fit_at: str
+    vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain, segments: Sequence[Segment], fit_at: str
 ) -> Model:
     """The :class:`Model` of ``segments``: at their commands ('setpoints') or measured motion ('motion')."""
     if fit_at == 'setpoints':
@@ -566,9 +580,9 @@ def segment_model(
 
 
 def setpoint_check(
-    vehicle: Any,
-    terrain: Any,
-    powertrain: Any,
+    vehicle: Vehicle,
+    terrain: Terrain,
+    powertrain: Powertrain,
     segments: Sequence[Segment],
     measured: np.ndarray,
     err_idx: np.ndarray,

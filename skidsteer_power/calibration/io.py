@@ -28,7 +28,7 @@ import datetime as _dt
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -36,6 +36,9 @@ import yaml
 from skidsteer_power.calibration.fit import INTERNAL_PARAMS, PARAMS, TERRAIN_PARAMS, CalibrationResult
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.terramechanics.terrain import load_terrain
+
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
 
 
 def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], list[list[float]]]:
@@ -74,7 +77,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
     return block
 
 
-def terrain_mapping(terrain: Any) -> dict[str, Any]:
+def terrain_mapping(terrain: Terrain) -> dict[str, Any]:
     """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``)."""
     data: dict[str, Any] = {
         'name': terrain.name,

@@ -28,6 +28,7 @@ import tempfile
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -389,7 +390,7 @@ class SimulatedDes:
         op = OpCode(opcode)
         self._advance()
         self.commands.append(CommandRecord(time.monotonic(), op, words))
-        handler = getattr(self, f'_op_{op.name.lower()}')
+        handler: Callable[[tuple[int, ...]], tuple[int, ...]] = getattr(self, f'_op_{op.name.lower()}')
         return handler(words)
 
     def _op_read_sys_status(self, words: tuple[int, ...]) -> tuple[int, ...]:

@@ -261,7 +261,7 @@ class DesLink:
         assert ser is not None
         try:
             while True:
-                data = ser.read(size)
+                data: bytes = ser.read(size)  # pyserial is untyped: read gives bytes
                 if data:
                     self.stats.bytes_received += len(data)
                     return data

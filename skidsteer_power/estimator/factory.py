@@ -63,7 +63,7 @@ motion FESS finds for them; issue 25) or 'twist' (the command taken as the motio
 def map_predictor(
     vehicle: Vehicle,
     terrain_name: str,
-    cache_dir: str | os.PathLike | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
     kinematics: str = 'setpoint',
 ) -> tuple[MapPredictor | SetpointPredictor, bool, str]:
     """A predictor for ``vehicle`` on the named terrain from its cached map, loaded from

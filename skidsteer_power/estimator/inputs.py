@@ -360,7 +360,7 @@ class RejectCounter:
     """
 
     period_s: float = 2.0
-    counts: Counter = field(default_factory=Counter)
+    counts: Counter[str] = field(default_factory=Counter)
     _last_warned: dict[str, float] = field(default_factory=dict)
 
     def reject(self, topic: str, now_s: float) -> bool:

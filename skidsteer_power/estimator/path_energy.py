@@ -44,10 +44,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.missions.energy import MapLoads
-from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route, Segment
+from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route
+from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
 
 JOULES_PER_WH = 3600.0
 MIN_CHORD_M = 1e-6  # [m] shorter chords are duplicate poses
@@ -125,7 +128,7 @@ class PathGeometry:
     def total_length_m(self) -> float:
         return float(np.sum(self.length_m))
 
-    def loads(self, speed_m_s: float, power_map: Any) -> MapLoads:
+    def loads(self, speed_m_s: float, power_map: ArrayPowerMapLike) -> MapLoads:
         """The map's loads on the pieces driven at ``speed_m_s`` [m/s]
         (:class:`~skidsteer_power.missions.energy.MapLoads`: the missions' energy code)."""
         _check_speed(speed_m_s)
@@ -194,7 +197,7 @@ class PlannedPath:
     The return is built from the reversed points by the same code, not derived from the forward
     pieces (reversed, radii negated): a derived one would differ where a turn is exactly pi."""
 
-    def __init__(self, x: Any, y: Any) -> None:
+    def __init__(self, x: ArrayLike, y: ArrayLike) -> None:
         xs, ys = np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
         self.poses_given = xs.size
         if xs.size > MAX_PATH_POSES:  # module doc, "Size"
@@ -207,19 +210,25 @@ class PlannedPath:
         self.there = PathGeometry.from_polyline(xs, ys)
         self.back = PathGeometry.from_polyline(xs[::-1], ys[::-1])
 
-    def loads(self, speed_m_s: float, power_map: Any) -> PathLoads:
+    def loads(self, speed_m_s: float, power_map: ArrayPowerMapLike) -> PathLoads:
         """The map's loads there and back at ``speed_m_s`` [m/s] (|speed| is driven both ways)."""
         speed = abs(float(speed_m_s))
         return PathLoads(speed, self.there.loads(speed, power_map), self.back.loads(speed, power_map))
 
     def energy(
-        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+        self,
+        speed_m_s: float,
+        power_map: ArrayPowerMapLike,
+        powertrain: PowertrainLike,
+        terrain_scale: float = 1.0,
     ) -> PathEnergy:
         """Battery energy there and back at ``speed_m_s`` [m/s] with the loads of ``power_map`` and
         ``powertrain``, axle torques times ``terrain_scale`` [-]."""
         return self.energy_from(self.loads(speed_m_s, power_map), powertrain, terrain_scale)
 
-    def energy_from(self, loads: PathLoads, powertrain: Any, terrain_scale: float = 1.0) -> PathEnergy:
+    def energy_from(
+        self, loads: PathLoads, powertrain: PowertrainLike, terrain_scale: float = 1.0
+    ) -> PathEnergy:
         """:meth:`energy` from what :meth:`loads` gave (the map is not queried again)."""
         there = loads.there.energy(powertrain, terrain_scale)
         back = loads.back.energy(powertrain, terrain_scale)
@@ -235,7 +244,12 @@ class PlannedPath:
 
 
 def path_energy(
-    x: Any, y: Any, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+    x: ArrayLike,
+    y: ArrayLike,
+    speed_m_s: float,
+    power_map: ArrayPowerMapLike,
+    powertrain: PowertrainLike,
+    terrain_scale: float = 1.0,
 ) -> PathEnergy:
     """Battery energy to drive the polyline (x, y) [m] at ``speed_m_s`` [m/s] and back along it
     (reversed path, driven forward), with the loads of ``power_map`` and ``powertrain`` and the axle
@@ -255,7 +269,7 @@ class PathTracker:
         self._key: tuple[Any, ...] | None = None
         self.energy: PathEnergy | None = None
 
-    def set_path(self, x: Any, y: Any) -> None:
+    def set_path(self, x: ArrayLike, y: ArrayLike) -> None:
         """A new plan [m]; an empty path clears it; InputError (and no path) for a bad one."""
         self.set_planned(None)
         if np.asarray(x).size:
@@ -266,10 +280,15 @@ class PathTracker:
         self.path, self._loads_key, self._loads, self._key, self.energy = path, None, None, None, None
 
     def evaluate(
-        self, speed_m_s: float, power_map: Any, powertrain: Any, terrain_scale: float = 1.0
+        self,
+        speed_m_s: float,
+        power_map: ArrayPowerMapLike | None,
+        powertrain: PowertrainLike | None,
+        terrain_scale: float = 1.0,
     ) -> PathEnergy | None:
-        """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, or speed 0)."""
-        if self.path is None or power_map is None or not speed_m_s:
+        """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, map or powertrain, or
+        speed 0)."""
+        if self.path is None or power_map is None or powertrain is None or not speed_m_s:
             return None
         loads_key = (abs(float(speed_m_s)), power_map)  # the objects, not their id(): no reuse mix-up
         if self._loads is None or not _same(loads_key, self._loads_key):

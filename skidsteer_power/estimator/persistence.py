@@ -61,14 +61,14 @@ def restored_tallies(state: dict[str, Any]) -> tuple[dict[str, float], dict[str,
     return battery, energy
 
 
-def save_state(path: str | os.PathLike, state: dict[str, Any]) -> None:
+def save_state(path: str | os.PathLike[str], state: dict[str, Any]) -> None:
     """Atomically write ``state`` (JSON-serializable) to ``path``, creating parent directories."""
     payload = json.dumps({'format_version': FORMAT_VERSION, **state}, indent=1, sort_keys=True)
     with atomic_file(path) as tmp:
         tmp.write(payload.encode('utf-8'))
 
 
-def load_state(path: str | os.PathLike) -> dict[str, Any] | None:
+def load_state(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     """Read a state written by :func:`save_state`; None if the file does not exist.
 
     Raises ConfigError for an unreadable, corrupt or foreign file (the caller decides whether to
@@ -97,7 +97,7 @@ def load_state(path: str | os.PathLike) -> dict[str, Any] | None:
     return state
 
 
-def quarantine(path: str | os.PathLike) -> Path:
+def quarantine(path: str | os.PathLike[str]) -> Path:
     """Move ``path`` aside to ``<path>.corrupt-<UTC time>`` (a free name); returns the new path."""
     source = Path(path)
     stamp = time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())
@@ -111,7 +111,7 @@ def quarantine(path: str | os.PathLike) -> Path:
 
 
 def load_or_quarantine(
-    path: str | os.PathLike, accept: Callable[[dict[str, Any]], None]
+    path: str | os.PathLike[str], accept: Callable[[dict[str, Any]], None]
 ) -> tuple[dict[str, Any] | None, str]:
     """Load the state at ``path`` and hand it to ``accept`` (which raises ConfigError to refuse it).
 

@@ -31,9 +31,10 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+
+from skidsteer_power.seams import BatteryModel
 
 Z90 = 1.2815515655446004  # standard normal quantile at 0.9
 
@@ -82,7 +83,8 @@ class TimeToEmptyBounds:
         counts = np.bincount(block)
         sums = np.bincount(block, weights=p)
         done = (counts > 0) & (np.arange(counts.size) < block.max())
-        return sums[done] / counts[done]
+        means: np.ndarray = sums[done] / counts[done]
+        return means
 
     def spread(self, means: np.ndarray | None = None) -> float:
         """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data);
@@ -92,7 +94,7 @@ class TimeToEmptyBounds:
             return self.settings.default_spread
         return float(means.std(ddof=1) / means.mean())
 
-    def bounds(self, battery: Any, power_W: float, model_spread: float = 0.0) -> tuple[float, float]:
+    def bounds(self, battery: BatteryModel, power_W: float, model_spread: float = 0.0) -> tuple[float, float]:
         """(p10, p90) time to empty [s] at filtered power ``power_W`` [W]; (inf, inf) when idle.
 
         ``model_spread`` : relative error of the prediction [-] (0 when the power is measured).

@@ -5,6 +5,7 @@ See :mod:`skidsteer_power.maps.power_map` for the grid, symmetry and small-radiu
 
 from __future__ import annotations
 
+from skidsteer_power.cache import default_cache_dir
 from skidsteer_power.errors import MapMismatchError
 from skidsteer_power.maps.power_map import (
     FIELDS,
@@ -13,10 +14,9 @@ from skidsteer_power.maps.power_map import (
     PowerMap,
     build_options,
     cache_path,
-    default_cache_dir,
     load_or_build,
-    terrain_fingerprint,
 )
+from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 
 __all__ = [
     'FIELDS',

@@ -46,4 +46,5 @@ def _refined_angles(n_psi: int, refine: int, length: float, r_min: float) -> np.
     extra = np.linspace(lo, hi, refine + 2)[1:-1]
     merged = np.unique(np.concatenate([base, extra, -extra]))
     gaps = np.diff(_angle_coordinate(merged))
-    return merged[np.concatenate([[True], gaps > 1e-9])]
+    distinct: np.ndarray = merged[np.concatenate([[True], gaps > 1e-9])]
+    return distinct

@@ -416,7 +416,7 @@ class PowerMap:
         if isinstance(speed, float) and isinstance(yaw_rate, float):  # per message: no numpy at all
             return self._query_scalar(speed, yaw_rate)
         if np.ndim(speed) == 0 and np.ndim(yaw_rate) == 0:
-            return self._query_scalar(float(speed), float(yaw_rate))  # type: ignore[arg-type]
+            return self._query_scalar(float(np.asarray(speed)), float(np.asarray(yaw_rate)))
         v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
         shape = v.shape
         v, w = v.ravel(), w.ravel()

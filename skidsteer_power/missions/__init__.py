@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from skidsteer_power.commands import Segment
 from skidsteer_power.missions.energy import MissionResult, run_mission
 from skidsteer_power.missions.routes import (
     Route,
-    Segment,
     patrol,
     read_route_csv,
     resolve_route,

@@ -28,7 +28,7 @@ import importlib
 import itertools
 import os
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,7 +38,11 @@ from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.perturbed import apply_powertrain
-from skidsteer_power.vehicle import GRAVITY_M_S2
+from skidsteer_power.vehicle import GRAVITY_M_S2, TrackGear, Vehicle, WheelGear
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.terramechanics.terrain import Terrain
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -59,33 +63,30 @@ def grid() -> list[dict[str, Any]]:
     return [dict(zip(keys, row, strict=True)) | {'index': k} for k, row in enumerate(rows)]
 
 
-def candidate_vehicle(c: dict[str, Any]) -> Any:
+def candidate_vehicle(c: dict[str, Any]) -> Vehicle:
     """The :class:`~skidsteer_power.vehicle.Vehicle` of one grid row, with the test robot's powertrain."""
-    from skidsteer_power.vehicle import Vehicle
-
-    common = {
-        'name': f'design-{c["index"]:03d}-{c["configuration"]}',
-        'mass_kg': c['mass_kg'],
-        'cg_height_m': CG_HEIGHT_M,
-        'tread_m': c['tread_m'],
-        'powertrain': {'preset': 'test_robot'},
-        'source': 'Table 8.4 design study grid; CG height assumed (Table 8.1)',
-    }
+    gear: TrackGear | WheelGear
     if c['configuration'] == 'track':
-        return Vehicle(
-            running_gear='track',
+        gear = TrackGear(
             track_length_m=c['length_or_wheelbase_m'],
             track_width_m=c['width_m'],
             sprocket_radius_m=c['radius_m'],
-            **common,
+        )
+    else:
+        gear = WheelGear(
+            n_wheels=int(c['configuration'][0]),
+            wheel_radius_m=c['radius_m'],
+            wheel_width_m=c['width_m'],
+            wheelbase_m=c['length_or_wheelbase_m'],
         )
     return Vehicle(
-        running_gear='wheel',
-        n_wheels=int(c['configuration'][0]),
-        wheel_radius_m=c['radius_m'],
-        wheel_width_m=c['width_m'],
-        wheelbase_m=c['length_or_wheelbase_m'],
-        **common,
+        name=f'design-{c["index"]:03d}-{c["configuration"]}',
+        gear=gear,
+        mass_kg=c['mass_kg'],
+        cg_height_m=CG_HEIGHT_M,
+        tread_m=c['tread_m'],
+        powertrain={'preset': 'test_robot'},
+        source='Table 8.4 design study grid; CG height assumed (Table 8.1)',
     )
 
 
@@ -128,12 +129,12 @@ def evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
 
 
 def design_study(
-    terrain: Any,
+    terrain: Terrain,
     *,
     model: str = 'fess',
     criterion: str = 'merit',
     workers: int | None = None,
-    engine: Any = None,
+    engine: Engine | None = None,
     configurations: tuple[str, ...] = CONFIGURATIONS,
 ) -> dict[str, Any]:
     """Evaluate the Table 8.4 grid on ``terrain``; returns candidates, best per configuration, criterion.
@@ -171,7 +172,7 @@ def design_study(
     }
 
 
-def score(evaluated: list[dict[str, Any]], terrain: Any) -> list[dict[str, Any]]:
+def score(evaluated: list[dict[str, Any]], terrain: Terrain) -> list[dict[str, Any]]:
     """Add max drawbar pull [N], its ratio to the weight [-] and the merit [1/W] to solved candidates."""
     dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
     for c, pull in zip(evaluated, dp, strict=True):

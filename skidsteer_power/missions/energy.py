@@ -22,7 +22,7 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,11 @@ from skidsteer_power.missions.routes import Route
 from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
+
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 
 @dataclass
@@ -91,7 +96,8 @@ class MissionResult:
 
     @property
     def turning(self) -> np.ndarray:
-        return np.isfinite(self.route.arrays()['turn_radius_m'])
+        turning: np.ndarray = np.isfinite(self.route.arrays()['turn_radius_m'])
+        return turning
 
     def _energy(self, power: np.ndarray, mask: np.ndarray | None = None) -> float:
         dt = self.duration_s
@@ -199,7 +205,7 @@ class MissionResult:
         return out
 
 
-def with_payload(vehicle: Any, payload_kg: float) -> Any:
+def with_payload(vehicle: Vehicle, payload_kg: float) -> Vehicle:
     """The vehicle carrying ``payload_kg`` [kg] more, at its CG (ch. 8.2: only the weight changes)."""
     if payload_kg == 0:
         return vehicle
@@ -210,8 +216,8 @@ SOURCES = ('map', 'direct')
 
 
 def run_mission(
-    vehicle: Any,
-    terrain: Any,
+    vehicle: Vehicle,
+    terrain: Terrain,
     route: Route,
     *,
     source: str = 'map',
@@ -291,7 +297,7 @@ def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
 
 
 def _map_states(
-    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
+    vehicle: Vehicle, terrain: Terrain, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
 ) -> dict[str, np.ndarray]:
     from skidsteer_power.maps import PowerMap, load_or_build
 
@@ -308,7 +314,9 @@ def _map_states(
     return map_axle_states(power_map, speed, radius)
 
 
-def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> dict[str, np.ndarray]:
+def map_axle_states(
+    power_map: ArrayPowerMapLike, speed: np.ndarray, radius: np.ndarray
+) -> dict[str, np.ndarray]:
     """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and the clamped and
     limited flags from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed
     radii [m]."""
@@ -325,7 +333,7 @@ def map_axle_states(power_map: Any, speed: np.ndarray, radius: np.ndarray) -> di
     }
 
 
-def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def state_powers(powertrain: PowertrainLike, axle: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Powers [W] at each steady state from its per-side axle torque and speed (:func:`map_axle_states`).
 
     ``left_W``, ``right_W`` and ``mechanical_W`` (their sum): motor shaft T_m w_m = terrain +
@@ -343,7 +351,9 @@ def state_powers(powertrain: Powertrain, axle: dict[str, np.ndarray]) -> dict[st
     }
 
 
-def route_energy_on_map(route: Route, power_map: Any, powertrain: Powertrain) -> dict[str, float]:
+def route_energy_on_map(
+    route: Route, power_map: ArrayPowerMapLike, powertrain: PowertrainLike
+) -> dict[str, float]:
     """Energies [J] of driving ``route`` with the loads a ready ``power_map`` holds (the robot's own,
     no payload changes): the same state grouping, map query and powertrain as :func:`run_mission`.
 
@@ -359,8 +369,8 @@ def energy_on_map(
     speed_m_s: np.ndarray,
     turn_radius_m: np.ndarray,
     duration_s: np.ndarray,
-    power_map: Any,
-    powertrain: Powertrain,
+    power_map: ArrayPowerMapLike,
+    powertrain: PowertrainLike,
     terrain_scale: float = 1.0,
 ) -> dict[str, float]:
     """:func:`route_energy_on_map` of segments given as arrays: forward speed [m/s], signed turn radius
@@ -383,7 +393,11 @@ class MapLoads:
 
     @classmethod
     def of(
-        cls, speed_m_s: np.ndarray, turn_radius_m: np.ndarray, duration_s: np.ndarray, power_map: Any
+        cls,
+        speed_m_s: np.ndarray,
+        turn_radius_m: np.ndarray,
+        duration_s: np.ndarray,
+        power_map: ArrayPowerMapLike,
     ) -> MapLoads:
         """Segments as arrays: forward speed [m/s], signed turn radius [m] (inf: straight), duration [s]."""
         states, inverse = distinct_rows(np.column_stack([speed_m_s, turn_radius_m]).astype(float))
@@ -395,7 +409,7 @@ class MapLoads:
             int(np.sum(axle['limited'][inverse])),
         )
 
-    def energy(self, powertrain: Powertrain, terrain_scale: float = 1.0) -> dict[str, float]:
+    def energy(self, powertrain: PowertrainLike, terrain_scale: float = 1.0) -> dict[str, float]:
         """Energies [J] (:func:`route_energy_on_map`) with the axle torques times ``terrain_scale`` [-]."""
         axle = self.axle
         if terrain_scale != 1.0:
@@ -413,7 +427,7 @@ class MapLoads:
 
 
 def _axle_states(
-    vehicle: Any, terrain: Any, speed: np.ndarray, radius: np.ndarray, model: str
+    vehicle: Vehicle, terrain: Terrain, speed: np.ndarray, radius: np.ndarray, model: str
 ) -> dict[str, np.ndarray]:
     """Per-side axle torque [N m] and speed [rad/s], sinkage [m] and traction margin at (V, R)."""
     from skidsteer_power.models import solve

@@ -24,32 +24,31 @@ from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.terramechanics.track import drawbar_pull as track_drawbar_pull
 from skidsteer_power.terramechanics.wheel import wheel_at_slip
+from skidsteer_power.vehicle import TrackGear, Vehicle, WheelGear
 
 TRACK_SLIPS = np.linspace(0.0, 1.0, 101)
 WHEEL_SLIPS = np.linspace(0.0, 0.99, 34)
 
 
-def max_drawbar_pull(vehicles: Sequence, terrain: Terrain) -> np.ndarray:
+def max_drawbar_pull(vehicles: Sequence[Vehicle], terrain: Terrain) -> np.ndarray:
     """Maximum straight-running drawbar pull [N] of each vehicle (see module doc), one array call
-    per running-gear type. ``vehicles`` are :class:`~skidsteer_power.vehicle.Vehicle` objects."""
+    per running-gear type."""
     out = np.empty(len(vehicles))
-    tracked = [k for k, v in enumerate(vehicles) if v.is_tracked]
-    wheeled = [k for k, v in enumerate(vehicles) if not v.is_tracked]
+    tracked = [(k, v.weight_N, v.gear) for k, v in enumerate(vehicles) if isinstance(v.gear, TrackGear)]
+    wheeled = [(k, v.weight_N, v.gear) for k, v in enumerate(vehicles) if isinstance(v.gear, WheelGear)]
     if tracked:
-        v = [vehicles[k] for k in tracked]
         rows, inverse = distinct_rows(
-            np.array([[x.weight_N / 2.0, x.track_width_m, x.track_length_m] for x in v])
+            np.array([[w / 2.0, g.track_width_m, g.track_length_m] for _, w, g in tracked])
         )
         load, width, length = (rows[:, k : k + 1] for k in range(3))
         dp = track_drawbar_pull(terrain, load, width, length, TRACK_SLIPS[None, :])
-        out[tracked] = 2.0 * dp.max(axis=1)[inverse]
+        out[[k for k, _, _ in tracked]] = 2.0 * dp.max(axis=1)[inverse]
     if wheeled:
-        v = [vehicles[k] for k in wheeled]
-        n = np.array([x.n_wheels for x in v], dtype=float)
+        n = np.array([g.n_wheels for _, _, g in wheeled], dtype=float)
         rows, inverse = distinct_rows(
-            np.array([[x.weight_N / x.n_wheels, x.wheel_radius_m, x.wheel_width_m] for x in v])
+            np.array([[w / g.n_wheels, g.wheel_radius_m, g.wheel_width_m] for _, w, g in wheeled])
         )
         load, radius, width = (rows[:, k : k + 1] for k in range(3))
         state = wheel_at_slip(terrain, load, WHEEL_SLIPS[None, :], radius, width)
-        out[wheeled] = n * np.asarray(state.Fx_N).max(axis=1)[inverse]
+        out[[k for k, _, _ in wheeled]] = n * np.asarray(state.Fx_N).max(axis=1)[inverse]
     return out

@@ -160,7 +160,8 @@ def _synthetic_curvature(u: np.ndarray) -> np.ndarray:
     for centre, half_width, peak in _BENDS:
         x = (u - centre) / half_width
         shape += np.where(np.abs(x) < 1.0, peak * np.cos(0.5 * np.pi * x) ** 2, 0.0)
-    return shape / np.max(np.abs(shape)) / SEARCH_MIN_RADIUS_M
+    peak = float(np.max(np.abs(shape)))
+    return shape / peak / SEARCH_MIN_RADIUS_M
 
 
 MAX_TRACE_STEP_RAD = math.pi / 36
@@ -258,15 +259,19 @@ def _segment(row: dict[str, str], path: object, line: int, default_speed: float 
         except ValueError:
             raise InputError(f'{path}:{line}: {key} is not a number: {text!r}') from None
 
+    def number_or(key: str, default: float) -> float:
+        value = number(key)
+        return default if value is None else value
+
     speed = number('speed_m_s', default_speed)
     if speed is None:
         raise InputError(f'{path}:{line}: no speed_m_s and no --speed given')
-    radius, payload = number('turn_radius_m', math.inf), number('payload_kg', 0.0)
+    radius, payload = number_or('turn_radius_m', math.inf), number_or('payload_kg', 0.0)
     try:
         FORWARD_SPEED_M_S.check(speed)  # the ranges of the command line (terramechanics.ranges)
-        if radius is not None and not math.isinf(radius) and radius != 0:
+        if not math.isinf(radius) and radius != 0:
             TURN_RADIUS_M.check(radius)
-        PAYLOAD_KG.check(payload)  # type: ignore[arg-type]
+        PAYLOAD_KG.check(payload)
         length, duration = number('length_m'), number('duration_s')
         if length is not None:
             LEG_LENGTH_M.check(length)  # a 1e300 m leg would give 1.9e302 J (issue 28)
@@ -274,10 +279,10 @@ def _segment(row: dict[str, str], path: object, line: int, default_speed: float 
             LEG_DURATION_S.check(duration)
         return Segment.along(
             speed_m_s=speed,
-            turn_radius_m=radius,  # type: ignore[arg-type]
+            turn_radius_m=radius,
             length_m=length,
             duration_s=duration,
-            payload_kg=payload,  # type: ignore[arg-type]
+            payload_kg=payload,
         )
     except InputError as err:
         raise InputError(f'{path}:{line}: {err}') from None

@@ -16,17 +16,20 @@ from __future__ import annotations
 import dataclasses
 import os
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skidsteer_power.errors import ConvergenceError
 from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route
 
+if TYPE_CHECKING:
+    from skidsteer_power.terramechanics.terrain import Terrain
+
 SOIL_PARAMETERS = ('n', 'kc', 'kphi', 'c', 'phi', 'K')
 METRICS = ('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m')
 
 
-def perturbed(terrain: Any, parameters: tuple[str, ...], factor: float) -> Any:
+def perturbed(terrain: Terrain, parameters: tuple[str, ...], factor: float) -> Terrain:
     """``terrain`` with each named parameter multiplied by ``factor`` [-]."""
     changes = {p: getattr(terrain, p) * factor for p in parameters}
     return dataclasses.replace(terrain, name=f'{terrain.name}*', **changes)
@@ -79,7 +82,7 @@ def derivatives(
 
 def sensitivity(
     vehicles: list[Any],
-    terrain: Any,
+    terrain: Terrain,
     route: Route,
     *,
     delta: float = 0.01,

@@ -17,7 +17,12 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.models.base import SteadyState
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import numpy.typing as npt
+
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 MODELS: dict[str, str] = {
     'steeds': 'skidsteer_power.models.steeds',  # chapter 3.2, closed form
@@ -31,8 +36,8 @@ __all__ = ['MODELS', 'SteadyState', 'solve']
 
 
 def solve(
-    vehicle: Any,
-    terrain: Any,
+    vehicle: Vehicle,
+    terrain: Terrain,
     speed: npt.ArrayLike,
     turn_radius: npt.ArrayLike,
     model: str = 'fess',
@@ -43,5 +48,5 @@ def solve(
         module_name = MODELS[model]
     except KeyError:
         raise InputError(f'unknown model {model!r}; choose one of {", ".join(MODELS)}') from None
-    module = importlib.import_module(module_name)
-    return module.solve(vehicle, terrain, speed, turn_radius, **options)
+    solve_model: Callable[..., SteadyState] = importlib.import_module(module_name).solve
+    return solve_model(vehicle, terrain, speed, turn_radius, **options)

@@ -89,7 +89,9 @@ def fit_track_shear_ratio(candidates: tuple[float, ...] = FIT_CANDIDATES) -> lis
     track = load_vehicle('test_robot_track')
     out = []
     for ratio in candidates:
-        trial = dataclasses.replace(track, track_longitudinal_shear_ratio=ratio)
+        trial = dataclasses.replace(
+            track, gear=dataclasses.replace(track.tracks(), track_longitudinal_shear_ratio=ratio)
+        )
         result = summary(check(TRACK_FIT_CELLS, vehicles={track.name: trial}))
         out.append((ratio, result['median_error'], result['max_error']))
     return out

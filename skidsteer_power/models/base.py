@@ -72,7 +72,8 @@ class SteadyState:
     @property
     def yaw_rate_rad_s(self) -> np.ndarray:
         """Yaw rate V / R [rad/s] (0 for straight running)."""
-        return np.asarray(self.speed_m_s) / np.asarray(self.turn_radius_m)
+        yaw_rate: np.ndarray = np.asarray(self.speed_m_s) / np.asarray(self.turn_radius_m)
+        return yaw_rate
 
     @property
     def outer_is_left(self) -> np.ndarray:
@@ -93,7 +94,8 @@ class SteadyState:
 
     @property
     def total_power_W(self) -> np.ndarray:
-        return np.asarray(self.power_outer_W) + np.asarray(self.power_inner_W)
+        total: np.ndarray = np.asarray(self.power_outer_W) + np.asarray(self.power_inner_W)
+        return total
 
     def as_dict(self) -> dict[str, np.ndarray]:
         """All array fields (and ``extra``) by name, for JSON output or npz storage."""

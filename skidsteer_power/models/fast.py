@@ -97,12 +97,14 @@ def _mu_t_from_balance(vehicle: Vehicle, terrain: Terrain, state: SteadyState) -
     half = 0.5 * vehicle.tread_m
     moment = (np.ravel(state.thrust_outer_N) - np.ravel(state.thrust_inner_N)) * half - (rto - rti) * half
     moment = moment + np.ravel(state.s0_m) * np.cos(beta) * fc
-    return (moment / (vehicle.weight_N * float(vehicle.track_length_m or 0.0))).reshape(np.shape(state.s0_m))
+    mu_t: np.ndarray = moment / (vehicle.weight_N * float(vehicle.tracks().track_length_m))
+    return mu_t.reshape(np.shape(state.s0_m))
 
 
 def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarray, np.ndarray]:
     lo, li = side_loads(vehicle, pts)
-    width, length = float(vehicle.track_width_m), float(vehicle.track_length_m)  # type: ignore[arg-type]
+    tracks = vehicle.tracks()
+    width, length = float(tracks.track_width_m), float(tracks.track_length_m)
     return (
         compaction_resistance(terrain, np.maximum(lo, 0), width, length),
         compaction_resistance(terrain, np.maximum(li, 0), width, length),
@@ -153,7 +155,8 @@ def slip_for_thrust(
     target = np.where(ok, thrust, 0.0)
 
     def residual(s: np.ndarray, w: np.ndarray, f: np.ndarray) -> np.ndarray:
-        return tractive_effort(terrain, w, width, length, np.clip(s, -1.0, 1.0)) - f
+        surplus: np.ndarray = tractive_effort(terrain, w, width, length, np.clip(s, -1.0, 1.0)) - f
+        return surplus
 
     res = elementwise.find_root(
         residual,
@@ -195,7 +198,8 @@ def solve(
     fc = vehicle.mass_kg * pts.centripetal_accel  # m V^2 / R
     beta = sideslip_angle(s0, pts)
     half = 0.5 * vehicle.tread_m
-    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    tracks = vehicle.tracks()
+    length, width = float(tracks.track_length_m), float(tracks.track_width_m)
     a1 = fc * np.sin(beta) + rto + rti  # eq. 5.2
     a2 = (vehicle.weight_N * length * mu_t + (rto - rti) * half - s0 * np.cos(beta) * fc) / half  # 5.2 (5.1)
     f_o, f_i = 0.5 * (a1 + a2), 0.5 * (a1 - a2)

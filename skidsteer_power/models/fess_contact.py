@@ -55,7 +55,8 @@ class Contact:
 
     @property
     def xi(self) -> np.ndarray:
-        return self.entry - self.fwd
+        xi: np.ndarray = self.entry - self.fwd
+        return xi
 
     def take(self, idx: np.ndarray) -> Contact:
         """The contacts of the operating points ``idx`` only."""
@@ -86,7 +87,8 @@ def _track_elements(length: float, width: float, n: int) -> tuple[np.ndarray, np
 
 def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
     """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N]."""
-    length, width = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    tracks = vehicle.tracks()
+    length, width = float(tracks.track_length_m), float(tracks.track_width_m)
     fwd, area = _track_elements(length, width, n)
     pressure = np.maximum(loads, 0.0) / (width * length)
     tau_max = (terrain.c + pressure * math.tan(terrain.phi))[:, :, None, None]  # eq. 2.2
@@ -104,7 +106,7 @@ def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
         resistance=compaction_resistance_unchecked(terrain, safe, width, length),
         sinkage=track_sinkage_unchecked(terrain, safe, width, length),
         length_scale=length,
-        longitudinal=1.0 / float(vehicle.track_longitudinal_shear_ratio),
+        longitudinal=1.0 / float(tracks.track_longitudinal_shear_ratio),
     )
 
 
@@ -148,7 +150,8 @@ def _free_wheel_table(
 
 def wheel_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
     """Flattened wheel contacts with quadratic normal stress (eqs. 6.8-6.11); side loads (P, 2) [N]."""
-    r, b = float(vehicle.wheel_radius_m), float(vehicle.wheel_width_m)  # type: ignore[arg-type]
+    wheels = vehicle.wheels()
+    r, b = float(wheels.wheel_radius_m), float(wheels.wheel_width_m)
     per_side = vehicle.wheels_per_side
     nominal = vehicle.weight_N / (2 * per_side)
     log_w, sink_tab, slip_tab = _free_wheel_table(terrain, r, b, nominal)
@@ -176,5 +179,5 @@ def wheel_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int)
         wt=rim,
         resistance=resistance,
         sinkage=np.where(loads > 0, z, 0.0),
-        length_scale=float(vehicle.wheelbase_m) + 2 * r,  # type: ignore[arg-type]
+        length_scale=float(wheels.wheelbase_m) + 2 * r,
     )

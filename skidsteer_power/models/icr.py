@@ -41,7 +41,7 @@ from skidsteer_power.models import loads, steeds
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, newton_solve
 from skidsteer_power.terramechanics.terrain import Terrain
-from skidsteer_power.vehicle import Vehicle
+from skidsteer_power.vehicle import TrackGear, Vehicle
 
 DEFAULT_MU = 1.12  # section 3.4, ref. [49]
 DEFAULT_RESOLUTION = (32, 3)  # Gauss-Legendre nodes along and across each patch
@@ -133,11 +133,8 @@ def solve(
 
     turning = ~points.straight
     n = points.speed.size
-    lead = (
-        0.25 * float(np.max(patches.lengths))
-        if vehicle.is_tracked
-        else 0.25 * float(vehicle.wheelbase_m or 0.0)
-    )
+    gear = vehicle.gear
+    lead = 0.25 * (float(np.max(patches.lengths)) if isinstance(gear, TrackGear) else float(gear.wheelbase_m))
     x0 = np.stack([np.full(n, lead), np.full(n, -1.1 * half_b), np.full(n, 1.1 * half_b)], axis=1)
     x = np.zeros((n, 3))
     converged = np.ones(n, dtype=bool)
@@ -184,7 +181,8 @@ def _state(
         margin = np.minimum(1.0 - np.abs(fxo) / (mu * patches.load_o), 1.0 - np.abs(fxi) / (mu * load_i))
     tipping = patches.load_i <= 0
     failure = np.select([tipping, ~converged], [2, 1], 0)
-    length = float(np.max(patches.lengths)) if vehicle.is_tracked else float(vehicle.wheelbase_m or 0.0)
+    gear = vehicle.gear
+    length = float(np.max(patches.lengths)) if isinstance(gear, TrackGear) else float(gear.wheelbase_m)
     state = loads.assemble_state(
         points,
         'icr',

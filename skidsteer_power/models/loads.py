@@ -41,12 +41,14 @@ class OperatingPoints:
     @property
     def straight(self) -> np.ndarray:
         """True where the vehicle runs straight (R = +-inf)."""
-        return np.isinf(self.radius)
+        straight: np.ndarray = np.isinf(self.radius)
+        return straight
 
     @property
     def centripetal_accel(self) -> np.ndarray:
         """V^2 / R [m/s^2] (0 for straight running)."""
-        return self.speed * self.yaw_rate
+        accel: np.ndarray = self.speed * self.yaw_rate
+        return accel
 
     def side_speeds(self, tread: float) -> tuple[np.ndarray, np.ndarray]:
         """Longitudinal speeds of the outer and inner side centrelines, (R +- B/2) yaw rate [m/s]."""
@@ -94,7 +96,8 @@ def centrifugal_force(vehicle: Vehicle, points: OperatingPoints) -> np.ndarray:
 
 def sideslip_angle(s0: np.ndarray, points: OperatingPoints) -> np.ndarray:
     """Side slip angle beta = atan(s0 / R) [rad] (below eq. 3.18); 0 for straight running."""
-    return np.arctan2(s0, points.radius)
+    beta: np.ndarray = np.arctan2(s0, points.radius)
+    return beta
 
 
 def slip_ratio(side_speed: np.ndarray, omega: np.ndarray, drive_radius: float) -> np.ndarray:
@@ -103,7 +106,8 @@ def slip_ratio(side_speed: np.ndarray, omega: np.ndarray, drive_radius: float) -
     with np.errstate(divide='ignore', invalid='ignore'):
         driving = (rim - side_speed) / rim
         braking = (rim - side_speed) / side_speed
-    return np.where(rim >= side_speed, driving, braking)
+    slip: np.ndarray = np.where(rim >= side_speed, driving, braking)
+    return slip
 
 
 def omega_for_slip(side_speed: np.ndarray, slip: np.ndarray, drive_radius: float) -> np.ndarray:

@@ -87,7 +87,8 @@ def newton_solve(
 
 
 def _done(f: np.ndarray, tol: float) -> np.ndarray:
-    return np.all(np.abs(f) < tol, axis=1)
+    done: np.ndarray = np.all(np.abs(f) < tol, axis=1)  # (M,) bool
+    return done
 
 
 def solve_linear(jac: np.ndarray, rhs: np.ndarray) -> np.ndarray:

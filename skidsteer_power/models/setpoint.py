@@ -49,6 +49,7 @@ from skidsteer_power.models.fess import (
     residual,
 )
 from skidsteer_power.models.newton import NewtonResult, newton_solve
+from skidsteer_power.vehicle import TrackGear
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -190,10 +191,10 @@ class SetpointSolver:
         return np.column_stack([np.minimum(s0, 0.25 * length), motion])
 
     def _length_scale(self) -> float:
-        veh = self.fess.vehicle
-        if veh.is_tracked:
-            return float(veh.track_length_m)  # type: ignore[arg-type]
-        return float(veh.wheelbase_m) + 2 * float(veh.wheel_radius_m)  # type: ignore[arg-type]
+        gear = self.fess.vehicle.gear
+        if isinstance(gear, TrackGear):
+            return float(gear.track_length_m)
+        return float(gear.wheelbase_m) + 2 * float(gear.wheel_radius_m)
 
     def _residual(
         self, spf: np.ndarray, straight: np.ndarray

@@ -37,7 +37,7 @@ from skidsteer_power.models import loads
 from skidsteer_power.models.base import SteadyState
 from skidsteer_power.terramechanics import track as single_track
 from skidsteer_power.terramechanics.terrain import Terrain
-from skidsteer_power.vehicle import Vehicle
+from skidsteer_power.vehicle import TrackGear, Vehicle
 
 DEFAULT_MU_T = 0.5  # Table 3.1 (steel on concrete); Figure 3.3 plots several values
 
@@ -126,7 +126,8 @@ class Patches:
         u2 = u1 + self.lengths
         integral = 0.5 * (u2 * np.abs(u2) - u1 * np.abs(u1))
         load_per_patch = (self.load_o + self.load_i)[:, None] / self.count
-        return np.sum(load_per_patch / self.lengths * integral, axis=1)
+        moment: np.ndarray = np.sum(load_per_patch / self.lengths * integral, axis=1)
+        return moment
 
 
 def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoints) -> Patches:
@@ -134,8 +135,9 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
     load_o, load_i = loads.side_loads(vehicle, points)
     safe_i = np.maximum(load_i, 0.0)
     b = vehicle.contact_width_m
-    if vehicle.is_tracked:
-        length = float(vehicle.track_length_m)  # type: ignore[arg-type]
+    gear = vehicle.gear
+    if isinstance(gear, TrackGear):
+        length = float(gear.track_length_m)
         rc_o = single_track.compaction_resistance(terrain, load_o, b, length)  # eq. 3.2
         rc_i = single_track.compaction_resistance(terrain, safe_i, b, length)
         sinkage = single_track.track_sinkage(terrain, load_o, b, length)
@@ -152,8 +154,8 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
         )
     from skidsteer_power.terramechanics import wheel as single_wheel
 
-    per_side = vehicle.wheels_per_side
-    r = vehicle.drive_radius_m
+    per_side = gear.wheels_per_side
+    r = gear.wheel_radius_m
     k = terrain.k_eq(b)
     z_o = single_wheel.bekker_wheel_sinkage(terrain, load_o / per_side, r, b)  # eq. 2.32
     z_i = single_wheel.bekker_wheel_sinkage(terrain, safe_i / per_side, r, b)
@@ -161,7 +163,7 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
     z_mean = 0.5 * (z_o + z_i)
     theta_f, _, theta_r = single_wheel.wheel_angles(terrain, z_mean, 0.0, r)
     chord = np.maximum(r * (np.sin(theta_f) - np.sin(theta_r)), 1e-6)
-    centres = np.asarray(vehicle.axle_positions_m())
+    centres = np.asarray(gear.axle_positions_m())
     lengths = np.repeat(chord[:, None], centres.size, axis=1)
     return Patches(
         centres,
@@ -172,7 +174,7 @@ def contact_patches(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingP
         rut * z_o ** (terrain.n + 1.0),
         rut * z_i ** (terrain.n + 1.0),
         z_o,
-        float(vehicle.wheelbase_m),  # type: ignore[arg-type]
+        float(gear.wheelbase_m),
     )
 
 
@@ -180,7 +182,8 @@ def lateral_fraction(centres: np.ndarray, lengths: np.ndarray, s0: np.ndarray) -
     """Fraction of equally loaded patches (centres (k,), lengths (N, k) [m]) behind s0, minus ahead [-]."""
     start = centres[None, :] - 0.5 * lengths
     behind = np.clip((s0[:, None] - start) / lengths, 0.0, 1.0)
-    return np.mean(2.0 * behind - 1.0, axis=1)
+    fraction: np.ndarray = np.mean(2.0 * behind - 1.0, axis=1)
+    return fraction
 
 
 def lateral_offset(
@@ -198,7 +201,8 @@ def lateral_offset(
     def residual(s0: np.ndarray, goal: np.ndarray, chord: np.ndarray) -> np.ndarray:
         # find_root hands over flat arrays; every patch of a vehicle has the same chord
         lengths = np.repeat(chord.reshape(-1, 1), patches.count, axis=1)
-        return lateral_fraction(patches.centres, lengths, s0.reshape(-1)).reshape(s0.shape) - goal
+        gap: np.ndarray = lateral_fraction(patches.centres, lengths, s0.reshape(-1)).reshape(s0.shape) - goal
+        return gap
 
     res = elementwise.find_root(residual, (low, high), args=(target, patches.lengths[:, 0]))
     return np.where(points.straight, 0.0, res.x)
@@ -257,7 +261,8 @@ def thrust_slip(
     load = side_load / count
 
     def effort(s: np.ndarray, load: np.ndarray, length: np.ndarray, thrust: np.ndarray) -> np.ndarray:
-        return count * single_track.tractive_effort(terrain, load, b, length, s) - thrust
+        surplus: np.ndarray = count * single_track.tractive_effort(terrain, load, b, length, s) - thrust
+        return surplus
 
     lo, hi = -np.ones_like(thrust), np.ones_like(thrust)
     f_lo = effort(lo, load, length, thrust)

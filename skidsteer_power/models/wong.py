@@ -20,5 +20,5 @@ def solve(
     vehicle: Vehicle, terrain: Terrain, speed: ArrayLike, turn_radius: ArrayLike, **options: Any
 ) -> SteadyState:
     """Steady state by Wong's theory for speed V [m/s] and signed turning radius R [m] (inf straight)."""
-    module = wong_track if vehicle.is_tracked else wong_wheel
-    return module.solve(vehicle, terrain, speed, turn_radius, **options)
+    solve_gear = wong_track.solve if vehicle.is_tracked else wong_wheel.solve
+    return solve_gear(vehicle, terrain, speed, turn_radius, **options)

@@ -149,7 +149,8 @@ class _Setup:
 def _setup(
     vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoints, resolution: tuple[int, int]
 ) -> _Setup:
-    length, b = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+    tracks = vehicle.tracks()
+    length, b = float(tracks.track_length_m), float(tracks.track_width_m)
     load_o, load_i = loads.side_loads(vehicle, points)
     safe_i = np.maximum(load_i, 0.0)
     return _Setup(
@@ -180,7 +181,7 @@ class SideForces:
 def side_forces(setup: _Setup, x: np.ndarray, idx: np.ndarray, outer: bool) -> SideForces:
     """Integrate the shear stress over one track (3.14, 3.16) for the iterates x (M, 3)."""
     v, grid, pts = setup.vehicle, setup.grid, setup.points
-    length, r, tread = float(v.track_length_m), v.drive_radius_m, v.tread_m  # type: ignore[arg-type]
+    length, r, tread = float(v.tracks().track_length_m), v.drive_radius_m, v.tread_m
     s0 = x[:, 0, None, None]
     omega = x[:, 1 if outer else 2, None, None]
     speed, yaw = pts.speed[idx, None, None], pts.yaw_rate[idx, None, None]
@@ -218,14 +219,14 @@ def equilibrium(setup: _Setup, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
 def initial_guess(vehicle: Vehicle, points: loads.OperatingPoints) -> np.ndarray:
     """x0 of eq. 3.21: s0 = l/4 (0 when straight), omega = (R +- B/2) yaw / r (no-slip speeds)."""
     v_o, v_i = points.side_speeds(vehicle.tread_m)
-    s0 = np.where(points.straight, 0.0, 0.25 * float(vehicle.track_length_m))  # type: ignore[arg-type]
+    s0 = np.where(points.straight, 0.0, 0.25 * float(vehicle.tracks().track_length_m))
     r = vehicle.drive_radius_m
     return np.stack([s0, v_o / r, v_i / r], axis=1)
 
 
 def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
     """Keep sprocket speeds positive (the contact time t needs omega > 0) and |ds0| <= l/4."""
-    quarter = 0.25 * float(vehicle.track_length_m)  # type: ignore[arg-type]
+    quarter = 0.25 * float(vehicle.tracks().track_length_m)
 
     def limit(x: np.ndarray, dx: np.ndarray, idx: np.ndarray) -> np.ndarray:
         alpha = np.ones(x.shape[0])
@@ -233,7 +234,8 @@ def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarra
             shrinking = dx[:, col] < -0.8 * x[:, col]
             alpha = np.where(shrinking, np.minimum(alpha, -0.8 * x[:, col] / dx[:, col]), alpha)
         step = np.maximum(np.abs(dx[:, 0]), quarter)
-        return np.minimum(alpha, quarter / step)
+        scale: np.ndarray = np.minimum(alpha, quarter / step)
+        return scale
 
     return limit
 
@@ -293,7 +295,8 @@ def _state(setup: _Setup, result: NewtonResult, converged: np.ndarray, failure: 
     outer, inner = side_forces(setup, x, idx, True), side_forces(setup, x, idx, False)
     r = v.drive_radius_m
     speed_o, speed_i = pts.side_speeds(v.tread_m)
-    length, b = float(v.track_length_m), float(v.track_width_m)  # type: ignore[arg-type]
+    tracks = v.tracks()
+    length, b = float(tracks.track_length_m), float(tracks.track_width_m)
     sinkage = single_track.track_sinkage(setup.terrain, setup.load_o, b, length)
     margin = np.minimum(1.0 - np.abs(outer.fx) / outer.strength, 1.0 - np.abs(inner.fx) / inner.strength)
     turning = outer.turning_moment + inner.turning_moment

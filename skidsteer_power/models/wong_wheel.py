@@ -247,23 +247,20 @@ def equilibrium(setup: _Setup, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
 
 def initial_guess(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoints) -> np.ndarray:
     """x0 of eq. 4.12 from the straight single-wheel solution (see module doc)."""
-    r, b = vehicle.drive_radius_m, vehicle.contact_width_m
+    wheels = vehicle.wheels()
+    r, b = wheels.wheel_radius_m, wheels.wheel_width_m
     try:
-        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), 0.0, r, b)
+        single = single_wheel.solve_wheel(terrain, vehicle.weight_N / wheels.n_wheels, 0.0, r, b)
         z0, s_0 = float(single.sinkage_m), float(single.slip)
     except ConvergenceError:
         z0 = min(
-            float(
-                single_wheel.bekker_wheel_sinkage(
-                    terrain, vehicle.weight_N / int(vehicle.n_wheels or 1), r, b
-                )
-            ),
+            float(single_wheel.bekker_wheel_sinkage(terrain, vehicle.weight_N / wheels.n_wheels, r, b)),
             0.5 * r,
         )
         s_0 = 0.2  # eqs. 2.31, 2.32
     v_o, v_i = points.side_speeds(vehicle.tread_m)
     n = points.speed.size
-    s0 = np.where(points.straight, 0.0, 0.25 * float(vehicle.wheelbase_m))  # type: ignore[arg-type]
+    s0 = np.where(points.straight, 0.0, 0.25 * float(wheels.wheelbase_m))
     scale = 1.0 / (r * (1.0 - s_0))
     return np.stack([v_o * scale, v_i * scale, np.full(n, z0), np.full(n, z0), s0], axis=1)
 
@@ -271,7 +268,7 @@ def initial_guess(vehicle: Vehicle, terrain: Terrain, points: loads.OperatingPoi
 def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
     """Keep axle speeds and sinkages positive, sinkages below 0.95 r, and |ds0| <= wb/4."""
     r = vehicle.drive_radius_m
-    quarter = 0.25 * float(vehicle.wheelbase_m)  # type: ignore[arg-type]
+    quarter = 0.25 * float(vehicle.wheels().wheelbase_m)
 
     def limit(x: np.ndarray, dx: np.ndarray, idx: np.ndarray) -> np.ndarray:
         alpha = np.ones(x.shape[0])
@@ -282,7 +279,8 @@ def _limit_step(vehicle: Vehicle) -> Callable[[np.ndarray, np.ndarray, np.ndarra
             room = 0.95 * r - x[:, col]
             growing = dx[:, col] > 0.8 * room
             alpha = np.where(growing, np.minimum(alpha, 0.8 * room / dx[:, col]), alpha)
-        return np.minimum(alpha, quarter / np.maximum(np.abs(dx[:, 4]), quarter))
+        scale: np.ndarray = np.minimum(alpha, quarter / np.maximum(np.abs(dx[:, 4]), quarter))
+        return scale
 
     return limit
 
@@ -353,7 +351,7 @@ def _state(setup: _Setup, x: np.ndarray, result: NewtonResult, failure: np.ndarr
         extra={
             'sinkage_outer_m': x[:, 2],
             'sinkage_inner_m': x[:, 3],
-            'mu_t': turning / (v.weight_N * float(v.wheelbase_m or 0.0)),  # eq. 3.27 with L = wheelbase
+            'mu_t': turning / (v.weight_N * float(v.wheels().wheelbase_m)),  # eq. 3.27 with L = wheelbase
             'turning_moment_Nm': turning,
             'saturation': (o.mobilised + i.mobilised) / (o.strength + i.strength),
             'longitudinal_outer_N': o.fx,

@@ -74,7 +74,8 @@ class Resistance:
     def power(self, motor_omega_rad_s: Real) -> Real:
         """Dissipated power b omega^2 + c |omega| [W] (eq. 7.2); never negative for b, c >= 0."""
         omega = real(motor_omega_rad_s)
-        return self.torque(omega) * omega
+        power: Real = self.torque(omega) * omega
+        return power
 
     def __add__(self, other: Resistance) -> Resistance:
         return Resistance(self.viscous_Nm_s + other.viscous_Nm_s, self.coulomb_Nm + other.coulomb_Nm)

@@ -213,7 +213,8 @@ def terminal_power(motor: MotorConstants, motor_torque_Nm: Real, motor_omega_rad
     """
     torque = real(motor_torque_Nm)
     current = torque / motor.torque_constant_Nm_A
-    return torque * real(motor_omega_rad_s) + motor.terminal_resistance_ohm * (current * current)
+    power: Real = torque * real(motor_omega_rad_s) + motor.terminal_resistance_ohm * (current * current)
+    return power
 
 
 def bus_power(

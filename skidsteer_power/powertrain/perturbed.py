@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 
+if TYPE_CHECKING:
+    from skidsteer_power.powertrain.drivetrain import Powertrain
 
-def apply_powertrain(powertrain: Any, sample: Mapping[str, float]) -> Any:
+
+def apply_powertrain(powertrain: Powertrain, sample: Mapping[str, float]) -> Powertrain:
     """``powertrain`` with the sample's powertrain parameters applied (module doc)."""
     scale = sample.get('internal_scale', 1.0)
     sides = {}

@@ -105,9 +105,11 @@ def _layouts(names: dict[str, str], path: object) -> list[tuple[str, str, float,
 
 
 def _number(text: str | None, path: object, row_no: int, column: str) -> float:
+    if text is None:  # a short row
+        raise InputError(f'{path}:{row_no}: {column} is not a number: None')
     try:
-        value = float(text)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
+        value = float(text)
+    except ValueError:
         raise InputError(f'{path}:{row_no}: {column} is not a number: {text!r}') from None
     if not math.isfinite(value):
         raise InputError(f'{path}:{row_no}: {column} is not finite')

@@ -14,12 +14,18 @@ Percentiles are numpy's linear-interpolation percentiles of the samples (p05, p5
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from skidsteer_power.missions.routes import Route
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.studies.uncertainty import ParameterSpread, apply_powertrain, apply_terrain, draw
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 PERCENTILES = (5, 50, 95)
 MISSION_KEYS = ('energy_J', 'energy_battery_J', 'energy_terrain_J', 'energy_internal_J')
@@ -43,11 +49,11 @@ def _mission_task(job: tuple[Any, Any, Route, Any, str, str]) -> dict[str, float
 
 
 def mission_uncertainty(
-    engine: Any,
-    vehicle: Any,
-    terrain: Any,
+    engine: Engine,
+    vehicle: Vehicle,
+    terrain: Terrain,
     route: Route,
-    powertrain: Any,
+    powertrain: Powertrain,
     spread: ParameterSpread,
     *,
     samples: int,
@@ -87,7 +93,10 @@ def mission_uncertainty(
 
 
 # ------------------------------------------------------------------------------------ design study
-def _design_task(job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]]) -> list[tuple]:
+def _design_task(
+    job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]],
+) -> list[tuple[int, float | None, bool]]:
+    """(candidate index, merit, usable) of one sample's design-grid chunk."""
     from skidsteer_power.missions.design import evaluate_chunk, score
 
     _sample, rows, terrain, model, pt_sample = job
@@ -99,8 +108,8 @@ def _design_task(job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float
 
 
 def design_uncertainty(
-    engine: Any,
-    terrain: Any,
+    engine: Engine,
+    terrain: Terrain,
     spread: ParameterSpread,
     *,
     samples: int,
@@ -118,7 +127,6 @@ def design_uncertainty(
     """
     from skidsteer_power.errors import InputError
     from skidsteer_power.missions.design import balanced_parts, grid
-    from skidsteer_power.powertrain import Powertrain
 
     sides = [n for n in spread.names if n.startswith(('left_', 'right_'))]
     if sides:

@@ -16,7 +16,7 @@ in its spread. Parameters with a zero spread are left out (they have no variance
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,10 @@ from skidsteer_power.studies.uncertainty import (
     clip,
     nominal_values,
 )
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.terramechanics.terrain import Terrain
 
 METRICS = ('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m')
 
@@ -43,9 +47,9 @@ def _task(job: tuple[Any, Any, Route, Any, str, str]) -> tuple[float, ...]:
 
 
 def sobol_indices(
-    engine: Any,
+    engine: Engine,
     vehicles: list[Any],
-    terrain: Any,
+    terrain: Terrain,
     route: Route,
     spread: ParameterSpread,
     *,

@@ -47,6 +47,7 @@ import numpy as np
 import yaml
 
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.perturbed import apply_powertrain as apply_powertrain  # its home (re-export)
 from skidsteer_power.terramechanics.terrain import _UNIT_KEYS, Terrain
 
@@ -129,7 +130,7 @@ class ParameterSpread:
         return out
 
 
-def nominal_values(names: Sequence[str], terrain: Terrain, powertrain: Any) -> np.ndarray:
+def nominal_values(names: Sequence[str], terrain: Terrain, powertrain: Powertrain) -> np.ndarray:
     """Nominal value of each parameter (SI) for ``terrain`` and ``powertrain``."""
     out = []
     for name in names:
@@ -141,7 +142,10 @@ def nominal_values(names: Sequence[str], terrain: Terrain, powertrain: Any) -> n
         elif name == 'internal_scale':
             out.append(1.0)
         else:
-            side, coefficient = _SIDE_KEY.match(name).groups()  # type: ignore[union-attr]
+            side_key = _SIDE_KEY.match(name)
+            if side_key is None:
+                raise ConfigError(f'{name!r} is not a terrain or powertrain parameter')
+            side, coefficient = side_key.groups()
             total = powertrain.resistance(side).total
             out.append(total.viscous_Nm_s if coefficient == 'b' else total.coulomb_Nm)
     return np.asarray(out)
@@ -157,7 +161,12 @@ def clip(names: Sequence[str], values: np.ndarray) -> np.ndarray:
 
 
 def draw(
-    spread: ParameterSpread, terrain: Terrain, powertrain: Any, n: int, seed: int, method: str = 'sobol'
+    spread: ParameterSpread,
+    terrain: Terrain,
+    powertrain: Powertrain,
+    n: int,
+    seed: int,
+    method: str = 'sobol',
 ) -> list[dict[str, float]]:
     """``n`` parameter sets (name -> SI value): nominal + delta, clipped (module doc)."""
     values = clip(
@@ -183,7 +192,7 @@ def _is_powertrain(name: str) -> bool:
 
 
 # ---------------------------------------------------------------------------------------- sources
-def default_spread(terrain: Terrain, powertrain: Any) -> ParameterSpread:
+def default_spread(terrain: Terrain, powertrain: Powertrain) -> ParameterSpread:
     """Independent :data:`DEFAULT_RELATIVE_SIGMA` around the nominal values (module doc, 3.)."""
     names = tuple(DEFAULT_RELATIVE_SIGMA)
     sigma = np.asarray([DEFAULT_RELATIVE_SIGMA[k] for k in names]) * np.abs(
@@ -192,7 +201,7 @@ def default_spread(terrain: Terrain, powertrain: Any) -> ParameterSpread:
     return ParameterSpread(names, np.diag(sigma**2), 'default sigmas (assumed; docs/STUDIES.md)')
 
 
-def spread_from_yaml(path: str | Path, terrain: Terrain, powertrain: Any) -> ParameterSpread:
+def spread_from_yaml(path: str | Path, terrain: Terrain, powertrain: Powertrain) -> ParameterSpread:
     """``--uncertainty FILE.yaml`` (module doc, 2.)."""
     data = _read_yaml(path)
     unknown = set(data) - {'terrain', 'powertrain'}

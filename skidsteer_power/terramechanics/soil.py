@@ -24,7 +24,8 @@ def pressure_sinkage(terrain: Terrain, z: ArrayLike, b: ArrayLike) -> FloatArray
     """
     z = np.asarray(z, dtype=float)
     b = check_length(b, 'width b')
-    return terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
+    pressure: FloatArray = terrain.k_eq(b) * np.maximum(z, 0.0) ** terrain.n
+    return pressure
 
 
 def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -33,7 +34,8 @@ def sinkage_for_pressure(terrain: Terrain, p: ArrayLike, b: ArrayLike) -> FloatA
     if np.any(~np.isfinite(p)) or np.any(p < 0):
         raise InputError('pressure must be finite and >= 0 Pa')
     b = check_length(b, 'width b')
-    return (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    sinkage: FloatArray = (p / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    return sinkage
 
 
 def shear_strength(terrain: Terrain, sigma: ArrayLike) -> FloatArray:
@@ -49,7 +51,8 @@ def shear_fraction(terrain: Terrain, j: ArrayLike) -> FloatArray:
     (fully developed shear, e.g. a locked wheel at s = -1).
     """
     j = np.asarray(j, dtype=float)
-    return np.sign(j) * shear_fraction_magnitude(terrain, np.abs(j))
+    signed: FloatArray = np.sign(j) * shear_fraction_magnitude(terrain, np.abs(j))
+    return signed
 
 
 def shear_fraction_magnitude(terrain: Terrain, a: FloatArray) -> FloatArray:
@@ -62,7 +65,8 @@ def shear_fraction_magnitude(terrain: Terrain, a: FloatArray) -> FloatArray:
         assert terrain.Kw is not None  # type B: validated by Terrain
         x = a / terrain.Kw
         with np.errstate(invalid='ignore', over='ignore'):
-            return np.where(np.isinf(x), 0.0, x * np.exp(1.0 - x))  # eq. 2.4
+            frac: FloatArray = np.where(np.isinf(x), 0.0, x * np.exp(1.0 - x))  # eq. 2.4
+        return frac
     assert terrain.Kr is not None and terrain.Kw is not None  # type C: both validated by Terrain
     return _type_c_fraction(a, terrain.Kr, terrain.Kw)
 

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import roots_legendre
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.numeric import Real
 from skidsteer_power.terramechanics.soil import FloatArray, check_length, shear_fraction
 from skidsteer_power.terramechanics.terrain import Terrain
 
@@ -51,10 +51,11 @@ def track_sinkage(terrain: Terrain, load: ArrayLike, width: ArrayLike, length: A
     return track_sinkage_unchecked(terrain, w, b, l)
 
 
-def track_sinkage_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) -> Any:  # noqa: E741
+def track_sinkage_unchecked(terrain: Terrain, w: FloatArray, b: Real, l: Real) -> FloatArray:  # noqa: E741
     """:func:`track_sinkage` for inputs the caller has checked (W >= 0 finite, b, l > 0): FESS's
     per-command contact (a tenth of a cold solve_point went to the checks)."""
-    return ((w / (b * l)) / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    sinkage: FloatArray = ((w / (b * l)) / terrain.k_eq(b)) ** (1.0 / terrain.n)
+    return sinkage
 
 
 def compaction_resistance(
@@ -65,11 +66,12 @@ def compaction_resistance(
     return compaction_resistance_unchecked(terrain, w, b, l)
 
 
-def compaction_resistance_unchecked(terrain: Terrain, w: Any, b: Any, l: Any) -> Any:  # noqa: E741
+def compaction_resistance_unchecked(terrain: Terrain, w: FloatArray, b: Real, l: Real) -> FloatArray:  # noqa: E741
     """:func:`compaction_resistance` for inputs the caller has checked (as
     :func:`track_sinkage_unchecked`)."""
     n = terrain.n
-    return b / ((n + 1.0) * terrain.k_eq(b) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
+    resistance: FloatArray = b / ((n + 1.0) * terrain.k_eq(b) ** (1.0 / n)) * (w / (b * l)) ** ((n + 1.0) / n)
+    return resistance
 
 
 def _mean_fraction(u: FloatArray) -> FloatArray:
@@ -110,7 +112,8 @@ def tractive_effort(
     t = 0.5 * (_GL_NODES + 1.0)
     j = np.asarray(j_rear)[..., None] * t
     mean = 0.5 * np.sum(_GL_WEIGHTS * shear_fraction(terrain, j), axis=-1)
-    return f_max * mean
+    effort: FloatArray = f_max * mean
+    return effort
 
 
 def drawbar_pull(

@@ -166,7 +166,8 @@ def bekker_wheel_sinkage(
     if n >= 3:
         raise InputError(f'eq. 2.32 needs a sinkage exponent n < 3, terrain {terrain.name!r} has {n:g}')
     k = terrain.k_eq(b)
-    return (3.0 * w / (b * (3.0 - n) * k * np.sqrt(2.0 * r))) ** (2.0 / (2.0 * n + 1.0))
+    sinkage: FloatArray = (3.0 * w / (b * (3.0 - n) * k * np.sqrt(2.0 * r))) ** (2.0 / (2.0 * n + 1.0))
+    return sinkage
 
 
 def sinkage_at_slip(

@@ -51,7 +51,8 @@ def slip_sinkage_factor(slip: np.ndarray) -> np.ndarray:
     total sinkage = K_j x static sinkage (M. Lyasko, "Slip sinkage effect in soil-vehicle
     mechanics", J. Terramechanics 47 (2010) 21-31), for a driven wheel (i >= 0; 1 when braking)."""
     i = np.minimum(np.maximum(slip, 0.0), 1.0)
-    return (1.0 + i) / (1.0 - 0.5 * i)
+    factor: np.ndarray = (1.0 + i) / (1.0 - 0.5 * i)
+    return factor
 
 
 def bulldozing_coefficients(terrain: Terrain) -> tuple[float, float]:

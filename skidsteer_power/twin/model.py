@@ -165,7 +165,13 @@ class Twin:
         self.max_sinkage_m = 0.0
         self.contact.reset()
         self.current_A = [0.0, 0.0]  # motor currents of the last step [A] (left, right)
-        self._last: tuple = (np.zeros(2), [0.0, 0.0], [0.0, 0.0], 0.0)  # (last)
+        # (last): axle torques [N m], bus and terminal powers [W] per side, sinkage [m]
+        self._last: tuple[list[float], list[float], list[float], float] = (
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            0.0,
+        )
 
     @property
     def last(self) -> StepOutput:

@@ -99,7 +99,9 @@ def radius_summary(cells: list[RadiusCell]) -> tuple[float, float]:
     return float(np.median(errors)), float(errors.max())
 
 
-def grid_mismatches(contact: str = 'extended', cells: list | None = None) -> tuple[int, list[tuple]]:
+def grid_mismatches(
+    contact: str = 'extended', cells: list[tuple[str, float, float, bool]] | None = None
+) -> tuple[int, list[tuple[str, float, float, bool]]]:
     """(cells checked, cells where the twin disagrees with Table 7.3 as (vehicle, V, yaw rate, real
     completed)); all 66 cells by default."""
     cells = table_7_3_cells() if cells is None else cells

@@ -19,10 +19,10 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
@@ -135,6 +135,14 @@ MIN_STEP_S = 1e-9
 """Shortest twin step taken [s] (a bag's time resolution, 1 ns): a command row ends within it."""
 
 
+_Sample = tuple[
+    float, tuple[float, float], np.ndarray, np.ndarray, tuple[float, float],
+    np.ndarray, np.ndarray, np.ndarray, float, float, float, float,
+]  # fmt: skip
+"""One sample of :func:`run_commands`: t, command, pose, twist, mean currents, axle torques, motor
+speeds and angles, bus voltage, mean bus current, bus energy, sinkage (the columns of :func:`_trace`)."""
+
+
 def run_commands(
     twin: Twin,
     commands: Sequence[Segment],
@@ -153,7 +161,7 @@ def run_commands(
     """
     full_dt = twin.dt
     period = max(1, round(1.0 / (rate_hz * full_dt))) * full_dt  # a whole number of full steps [s]
-    rows: list[tuple] = []
+    rows: list[_Sample] = []
     current_sum = [0.0, 0.0]
     bus_sum = 0.0
     weight = 0.0  # steps since the last sample, in full steps
@@ -230,7 +238,7 @@ def drive_until_empty(
     return traces, None
 
 
-def _trace(twin: Twin, rows: list[tuple]) -> TwinTrace:
+def _trace(twin: Twin, rows: list[_Sample]) -> TwinTrace:
     cols = list(zip(*rows, strict=True))
     arr = [np.array(c, dtype=float) for c in cols]
     t, cmd, pose, twist, current, axle, omega, theta, volt, bus, energy, sinkage = arr
@@ -300,7 +308,10 @@ def _message_counts(n: int) -> dict[str, int]:
 
 def _every() -> tuple[int, int, int]:
     """Samples between cmd_vel, odom and battery messages in the bag."""
-    return tuple(round(SENSOR_RATE_HZ / rate) for rate in (CMD_RATE_HZ, ODOM_RATE_HZ, BATTERY_RATE_HZ))  # type: ignore[return-value]
+    cmd, odom, battery = (
+        round(SENSOR_RATE_HZ / rate) for rate in (CMD_RATE_HZ, ODOM_RATE_HZ, BATTERY_RATE_HZ)
+    )
+    return cmd, odom, battery
 
 
 # ---------------------------------------------------------------------------------------------
@@ -348,16 +359,17 @@ def _capped(reader: Any, file: Path) -> Any:
 
 def _command_row(file: Path, line: int, row: dict[str, str]) -> tuple[float, float, float]:
     try:
-        values = tuple(float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
+        t_s, speed, yaw_rate = (float(row[k]) for k in ('t_s', 'speed_m_s', 'yaw_rate_rad_s'))
     except (TypeError, ValueError):
         raise InputError(f'{file}:{line}: t_s, speed_m_s, yaw_rate_rad_s must be numbers') from None
+    values = (t_s, speed, yaw_rate)
     if not all(math.isfinite(v) for v in values):
         raise InputError(f'{file}:{line}: values must be finite')
     try:
-        SIM_DURATION_S.check(max(values[0], 1e-9))  # t_s: a run beyond the limit stops here
+        SIM_DURATION_S.check(max(t_s, 1e-9))  # t_s: a run beyond the limit stops here
     except InputError as err:
         raise InputError(f'{file}:{line}: t_s: {err}') from None
-    return values  # type: ignore[return-value]
+    return values
 
 
 def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> list[Segment]:
@@ -384,9 +396,16 @@ def commands_from_bag(path: str | os.PathLike[str], topic: str = '/cmd_vel') -> 
     return segments
 
 
-def commands_from_route(route: object) -> list[Segment]:
+class RouteLike(Protocol):
+    """What the twin needs of a mission route (``missions.routes.Route``, a layer above the twin)."""
+
+    @property
+    def segments(self) -> Sequence[Segment]: ...
+
+
+def commands_from_route(route: RouteLike) -> list[Segment]:
     """A mission route (``missions.routes.Route``) as (V, yaw rate = V / R, duration) holds, then 1 s stop."""
-    return [*route.segments, Segment(0.0, 0.0, 1.0)]  # type: ignore[attr-defined]
+    return [*route.segments, Segment(0.0, 0.0, 1.0)]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -441,12 +460,17 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
     return Path(path)
 
 
-def _header(types: dict, stamp_ns: int, frame: str) -> Any:
+MessageClasses = Mapping[str, Any]
+"""A typestore's message classes by type name (rosbags ``Typestore.types``): rosbags makes them at
+run time from the message definitions, so their constructors have no static signature."""
+
+
+def _header(types: MessageClasses, stamp_ns: int, frame: str) -> Any:
     sec, nsec = divmod(int(stamp_ns), NS)
     return types['std_msgs/msg/Header'](types['builtin_interfaces/msg/Time'](sec, nsec), frame)
 
 
-def _odometry(types: dict, stamp_ns: int, pose: np.ndarray, twist: np.ndarray) -> object:
+def _odometry(types: MessageClasses, stamp_ns: int, pose: np.ndarray, twist: np.ndarray) -> object:
     half = float(pose[2]) / 2
     p = types['geometry_msgs/msg/Pose'](
         types['geometry_msgs/msg/Point'](float(pose[0]), float(pose[1]), 0.0),
@@ -464,7 +488,7 @@ def _odometry(types: dict, stamp_ns: int, pose: np.ndarray, twist: np.ndarray) -
     )
 
 
-def _battery(types: dict, stamp_ns: int, trace: TwinTrace, i: int) -> object:
+def _battery(types: MessageClasses, stamp_ns: int, trace: TwinTrace, i: int) -> object:
     msg = types['sensor_msgs/msg/BatteryState']
     nan = float('nan')
     return msg(

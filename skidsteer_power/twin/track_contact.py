@@ -44,7 +44,8 @@ class TrackContact(Contact):
     def __init__(self, vehicle: Vehicle, field: TerrainField, gear_ratio: float, *, extended: bool) -> None:
         super().__init__(field, vehicle.drive_radius_m, gear_ratio, 0.5 * vehicle.tread_m, extended=extended)
         self._longitudinal = 1.0 / TRACK_LONGITUDINAL_MODULUS if extended else 1.0  # K / K_x
-        length, b = float(vehicle.track_length_m), float(vehicle.track_width_m)  # type: ignore[arg-type]
+        tracks = vehicle.tracks()
+        length, b = float(tracks.track_length_m), float(tracks.track_width_m)
         n = TRACK_NODES
         dx = length / n
         x = 0.5 * length - dx * np.arange(n + 1)

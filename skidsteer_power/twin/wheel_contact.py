@@ -42,12 +42,13 @@ class WheelContact(Contact):
         super().__init__(field, vehicle.drive_radius_m, gear_ratio, 0.5 * vehicle.tread_m, extended=extended)
         self._weight_N = vehicle.weight_N
         self._patched = not field.uniform
-        nw = int(vehicle.n_wheels)  # type: ignore[arg-type]
+        wheels = vehicle.wheels()
+        nw = wheels.n_wheels
         axles = np.array(vehicle.axle_positions_m())
         self.wheel_side = np.repeat([0, 1], len(axles))
         self.wheel_x = np.tile(axles, 2)
         self.wheel_y = self.y_side[self.wheel_side]
-        self.width = float(vehicle.wheel_width_m)  # type: ignore[arg-type]
+        self.width = float(wheels.wheel_width_m)
         self.xi = np.linspace(0.0, 1.0, WHEEL_NODES + 1)
         trap = np.full(WHEEL_NODES + 1, 1.0 / WHEEL_NODES)
         trap[[0, -1]] *= 0.5
