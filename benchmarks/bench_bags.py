@@ -142,6 +142,7 @@ def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndar
 
 def _replay_figures(report: Report, folder: Path) -> None:
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
 
     context = Context()
@@ -203,7 +204,7 @@ def _replay_figures(report: Report, folder: Path) -> None:
             )
             report.figure('replay timing vs bag: p99 |error|', float(np.percentile(errors, 99)) * 1e3, 'ms')
     finally:
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
 
 
 def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, seconds: float = 3.0) -> None:
@@ -212,6 +213,7 @@ def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, secon
     import signal
 
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from std_msgs.msg import String
 
@@ -247,7 +249,7 @@ def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, secon
                 time.sleep(0.01)
         node.destroy_node()
     finally:
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
     worst = max(lost)
     report.figure(
         f'record killed by SIGKILL at {rate_hz:.0f} Hz: messages lost (worst of 3)',

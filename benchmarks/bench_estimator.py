@@ -231,11 +231,11 @@ class Load:
         return n
 
     def close(self) -> None:
-        import rclpy
+        import rclpy.utilities
 
         self.executor.shutdown()
         self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        rclpy.utilities.try_shutdown(context=self.context)
 
 
 def _stop(process: subprocess.Popen) -> None:

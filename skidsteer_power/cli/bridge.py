@@ -87,6 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
@@ -136,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
             bridge.close()
         executor.shutdown()
         node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
     summary = {'url': url, 'topics': topics, 'skipped': skipped, 'published': published, 'refused': refused}
     emit(summary, args.json)
     return 0

@@ -84,6 +84,7 @@ class _Counters:
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
+    import rclpy.utilities
     from geometry_msgs.msg import Twist
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if suite is not None:
             suite.shutdown()
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
         signals.close()
     if suite.failure:  # a thread of the suite died: the motors are stopped, the run is not a result
         print(f'skidsteer-power run: error: {suite.failure}; the suite stopped', file=sys.stderr)

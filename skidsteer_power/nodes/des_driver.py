@@ -64,6 +64,7 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -638,7 +639,7 @@ def make_driver(**kwargs: Any) -> DesDriver:
     try:
         node = DesDriver(**kwargs)
     except RCLError:
-        if rclpy.ok(context=context):
+        if rclpy.utilities.ok(context=context):
             raise
         raise ExternalShutdownException from None
     if node.params['autostart']:
@@ -646,7 +647,7 @@ def make_driver(**kwargs: Any) -> DesDriver:
             bring_up(node)
         except RCLError:
             node.destroy_node()
-            if rclpy.ok(context=context):
+            if rclpy.utilities.ok(context=context):
                 raise
             raise ExternalShutdownException from None
         except BaseException:

@@ -35,6 +35,7 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.executors import ExternalShutdownException
@@ -310,7 +311,7 @@ def _run(options: argparse.Namespace, ros_args: list[str] | None) -> int:
                 rate_hz=options.rate, vehicle=options.vehicle,
                 on_frame=lambda view: live.update(render(view), refresh=True),
             )  # fmt: skip
-            while rclpy.ok() and not node.done:
+            while rclpy.utilities.ok() and not node.done:
                 rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -321,7 +322,7 @@ def _run(options: argparse.Namespace, ros_args: list[str] | None) -> int:
             node.close()
             node.destroy_node()
             console.print(f'\nsaved what was shown to {csv_path}')
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     return 0
 
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import rclpy
 import rclpy.logging
+import rclpy.utilities
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -368,11 +369,11 @@ def _spin_until_stopped(
     except Exception:
         # an external shutdown (rclpy.shutdown from elsewhere) can invalidate the context while a
         # callback was publishing ("publisher's context is invalid"): that is the shutdown, not a failure
-        if rclpy.ok():
+        if rclpy.utilities.ok():
             raise
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     if exit_code:
         sys.exit(exit_code)
