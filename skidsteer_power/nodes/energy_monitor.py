@@ -32,7 +32,7 @@ import termios
 import time
 import tty
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 import rclpy.utilities
@@ -99,13 +99,17 @@ class EnergyMonitor(Node):
     :class:`KeyReader` for free mode; ``profile`` the case profile.
     """
 
+    if TYPE_CHECKING:  # rclpy 7 leaves it unannotated; its type
+
+        def destroy_node(self) -> None: ...
+
     def __init__(
         self,
         mode: str = 'view',
         *,
         profile: CaseProfile | None = None,
         keys: KeyReader | None = None,
-        csv_path: str | os.PathLike | None = None,
+        csv_path: str | os.PathLike[str] | None = None,
         on_frame: Callable[[MonitorView], None] | None = None,
         stamped: bool = False,
         rate_hz: float = 10.0,

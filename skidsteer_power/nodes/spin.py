@@ -9,7 +9,7 @@ import dataclasses
 import inspect
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 import rclpy.logging
@@ -28,6 +28,9 @@ from skidsteer_power.errors import SkidsteerError
 from skidsteer_power.nodes import rclpy_compat
 from skidsteer_power.nodes.rclpy_compat import _rclpy
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+
+if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
 
 
 class LeanExecutor(SingleThreadedExecutor):
@@ -278,6 +281,11 @@ class QuietNode(Node):
     them its CPU per input message fell by about a quarter, issue 18). A subscriber with an
     incompatible QoS or type still reports it on its side, and subscriptions keep their handlers.
     """
+
+    if TYPE_CHECKING:  # rclpy 7 leaves these unannotated; their types, for subclasses' calls
+
+        def get_logger(self) -> RcutilsLogger: ...
+        def destroy_node(self) -> None: ...
 
     def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
         quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
