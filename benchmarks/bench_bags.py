@@ -37,8 +37,9 @@ VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
 
 def _validate_throughput(report: Report, folder: Path) -> None:
     from skidsteer_power.bag_io import open_bag
-    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
+    from skidsteer_power.commands import Segment
     from skidsteer_power.estimator import factory
 
     # Ten minutes of the Table 7.3 commands (V 0.1/0.2 m/s, yaw rates 0-0.35 rad/s), 100 Hz.
@@ -304,7 +305,8 @@ def _salvage_figures(report: Report, folder: Path) -> None:
     """Salvage yield (messages recovered / written) for each damage case, on a bag from ``record``'s
     writer (8 s of /cmd_vel and /joint_states at 200 Hz, /odom at 10 Hz), and on the bundled bag."""
     from skidsteer_power.bag_io import open_bag
-    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
+    from skidsteer_power.commands import Segment
 
     made = folder / 'salvage_src.mcap'
     write_drive_bag(made, [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)], rate_hz=200, odom_hz=10)

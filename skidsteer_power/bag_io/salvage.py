@@ -291,7 +291,9 @@ def _record_end(
     ``indexed``: (channel, log time) the message index gives for a message at ``pos``, if any;
     ``limit``: where the next indexed message starts (a record running past it has a false length).
     """
-    opcode, length = _RECORD.unpack_from(buf, pos)
+    opcode: int
+    length: int
+    opcode, length = _RECORD.unpack_from(buf, pos)  # '<BQ': two ints
     body, end = pos + _RECORD.size, pos + _RECORD.size + length
     if opcode not in _IN_CHUNK or end > len(buf) or (not strict and limit is not None and end > limit):
         return None

@@ -21,8 +21,9 @@ import numpy as np
 from skidsteer_power.analysis.trace import CircleFit, fit_circle, mean_speed
 from skidsteer_power.errors import InputError
 from skidsteer_power.mocap.calibration import CameraCalibration
+from skidsteer_power.mocap.config import TargetConfig
 from skidsteer_power.mocap.plane import GroundPlane, check_image_size, pixels_to_plane
-from skidsteer_power.mocap.target import TargetConfig, TargetDetection, detect_target
+from skidsteer_power.mocap.target import TargetDetection, detect_target
 
 DEFAULT_SAMPLE_HZ = 5.0  # the text samples its 30 fps video at 5 Hz (Figure 7.28)
 IMAGE_SUFFIXES = frozenset({'.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff'})
