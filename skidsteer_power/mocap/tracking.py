@@ -14,6 +14,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -57,7 +58,7 @@ class TrackResult:
     fps: float
     sample_hz: float
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """The CLI's JSON payload (SI units)."""
         return {
             'radius_m': self.fit.radius_m,
@@ -74,7 +75,7 @@ class TrackResult:
         }
 
 
-def _natural_key(path: Path) -> list:
+def _natural_key(path: Path) -> list[int | str]:
     return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name)]
 
 
@@ -154,7 +155,7 @@ def _check_rates(fps: float, sample_hz: float) -> None:
 
 
 def open_frames(
-    source: str | os.PathLike, fps: float | None = None, sample_hz: float | None = None
+    source: str | os.PathLike[str], fps: float | None = None, sample_hz: float | None = None
 ) -> tuple[Iterator[Frame], float, float]:
     """Sampled frames of a video file or an image folder, with the frame rate and sample rate [Hz].
 
@@ -196,7 +197,7 @@ def target_on_plane(
 
 
 def track(
-    source: str | os.PathLike,
+    source: str | os.PathLike[str],
     calibration: CameraCalibration,
     plane: GroundPlane,
     *,
@@ -245,7 +246,7 @@ def track(
     )
 
 
-def write_trace_csv(path: str | os.PathLike, result: TrackResult) -> None:
+def write_trace_csv(path: str | os.PathLike[str], result: TrackResult) -> None:
     """Write the trace as CSV: frame, t_s, x_m, y_m (one row per detected sample)."""
     with open(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
