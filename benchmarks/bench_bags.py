@@ -72,7 +72,7 @@ def _validate_throughput(report: Report, folder: Path) -> None:
     del predictor, motion_predictor
 
 
-def _record_subprocess(out: Path, topics: list[str]) -> subprocess.Popen:
+def _record_subprocess(out: Path, topics: list[str]) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'record', '-o', str(out), *topics, '--json'],
         stdout=subprocess.PIPE,
@@ -125,11 +125,12 @@ def _string_bag(path: Path, topics: list[str], rate_hz: float, seconds: float) -
                 writer.write(conn, stamp, serialize_message(String(data=f'{k}:{i}:' + 'x' * 64)))
 
 
-def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndarray | None:
+def _timing_errors(expected: Stored, received: Stored, topics: list[str]) -> np.ndarray | None:
     """|recorded - bag| message times after removing the median offset [s], matched per topic by
     position; None if a topic lost, gained or changed a message (DDS pads the CDR to 4 bytes, so the
     stored bytes must be a prefix of the received ones)."""
-    bag_t, rec_t = [], []
+    bag_t: list[int] = []
+    rec_t: list[int] = []
     for topic in topics:
         sent = [m for m in expected if m[0] == topic]
         got = [m for m in received if m[0] == topic]
@@ -138,7 +139,8 @@ def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndar
         bag_t += [m[1] for m in sent]
         rec_t += [m[1] for m in got]
     delta = (np.array(rec_t, dtype=float) - np.array(bag_t, dtype=float)) / 1e9
-    return np.abs(delta - np.median(delta))
+    errors: np.ndarray = np.abs(delta - np.median(delta))  # numpy types it Any
+    return errors
 
 
 def _replay_figures(report: Report, folder: Path) -> None:

@@ -20,6 +20,7 @@ import dataclasses
 import math
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -63,11 +64,11 @@ def nearest_preset(terrain: Terrain) -> str:
     return min(PRESETS, key=lambda name: float(np.sqrt(np.mean(((key(PRESETS[name]) - ref) / scale) ** 2))))
 
 
-def table_7_3_drive(hold_s: float, pause_s: float, passes: int) -> list:
+def table_7_3_drive(hold_s: float, pause_s: float, passes: int) -> list[Segment]:
     return table_7_3_segments(hold_s, pause_s) * passes
 
 
-def twin_bag(path: Path, commands: list, seed: int) -> float:
+def twin_bag(path: Path, commands: Sequence[Segment], seed: int) -> float:
     """Simulate ``commands`` on the twin at :data:`TRUTH`; returns the simulated duration [s]."""
     twin = Twin(load_vehicle(VEHICLE), TRUTH, seed=seed)
     trace = run_commands(twin, commands)
