@@ -384,7 +384,7 @@ def _reason(err: BaseException) -> str:
     return str(err).strip() or type(err).__name__
 
 
-def message_count_of(info: Any) -> int | None:
+def message_count_of(info: object) -> int | None:
     """Message count from rosbag2 metadata (a dict as in metadata.yaml), None if absent."""
     if isinstance(info, dict):
         info = info.get('rosbag2_bagfile_information', info)
