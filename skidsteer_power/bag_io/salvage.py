@@ -29,7 +29,6 @@ import re
 import struct
 import zlib
 from dataclasses import dataclass, field
-from typing import Any
 
 import yaml
 from mcap.data_stream import ReadDataStream
