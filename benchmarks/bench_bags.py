@@ -37,8 +37,9 @@ VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
 
 def _validate_throughput(report: Report, folder: Path) -> None:
     from skidsteer_power.bag_io import open_bag
-    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
+    from skidsteer_power.commands import Segment
     from skidsteer_power.estimator import factory
 
     # Ten minutes of the Table 7.3 commands (V 0.1/0.2 m/s, yaw rates 0-0.35 rad/s), 100 Hz.
@@ -77,7 +78,7 @@ def _validate_throughput(report: Report, folder: Path) -> None:
     del predictor, motion_predictor
 
 
-def _record_subprocess(out: Path, topics: list[str]) -> subprocess.Popen:
+def _record_subprocess(out: Path, topics: list[str]) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'record', '-o', str(out), *topics, '--json'],
         stdout=subprocess.PIPE,
@@ -130,11 +131,12 @@ def _string_bag(path: Path, topics: list[str], rate_hz: float, seconds: float) -
                 writer.write(conn, stamp, serialize_message(String(data=f'{k}:{i}:' + 'x' * 64)))
 
 
-def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndarray | None:
+def _timing_errors(expected: Stored, received: Stored, topics: list[str]) -> np.ndarray | None:
     """|recorded - bag| message times after removing the median offset [s], matched per topic by
     position; None if a topic lost, gained or changed a message (DDS pads the CDR to 4 bytes, so the
     stored bytes must be a prefix of the received ones)."""
-    bag_t, rec_t = [], []
+    bag_t: list[int] = []
+    rec_t: list[int] = []
     for topic in topics:
         sent = [m for m in expected if m[0] == topic]
         got = [m for m in received if m[0] == topic]
@@ -143,7 +145,8 @@ def _timing_errors(expected: list, received: list, topics: list[str]) -> np.ndar
         bag_t += [m[1] for m in sent]
         rec_t += [m[1] for m in got]
     delta = (np.array(rec_t, dtype=float) - np.array(bag_t, dtype=float)) / 1e9
-    return np.abs(delta - np.median(delta))
+    errors: np.ndarray = np.abs(delta - np.median(delta))  # numpy types it Any
+    return errors
 
 
 def _sleep_probe(rate_hz: float, seconds: float) -> np.ndarray:
@@ -177,11 +180,13 @@ def _delivery_deviation(
         published += [p for t, _, p in log if t == topic]
         got += [m[1] / 1e9 for m in received if m[0] == topic]
     delta = np.array(got, dtype=float) - np.array(published, dtype=float)
-    return np.abs(delta - np.median(delta))
+    deviation: np.ndarray = np.abs(delta - np.median(delta))
+    return deviation
 
 
 def _replay_figures(report: Report, folder: Path) -> None:
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
 
     context = Context()
@@ -271,7 +276,7 @@ def _replay_figures(report: Report, folder: Path) -> None:
                 note=f'p99 {float(np.percentile(delivery, 99)) * 1e3:.3f} ms; {load}',
             )
     finally:
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
 
 
 def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, seconds: float = 3.0) -> None:
@@ -280,6 +285,7 @@ def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, secon
     import signal
 
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from std_msgs.msg import String
 
@@ -315,7 +321,7 @@ def _sigkill_figures(report: Report, folder: Path, rate_hz: float = 500.0, secon
                 time.sleep(0.01)
         node.destroy_node()
     finally:
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
     worst = max(lost)
     report.figure(
         f'record killed by SIGKILL at {rate_hz:.0f} Hz: messages lost (worst of 3)',
@@ -370,7 +376,8 @@ def _salvage_figures(report: Report, folder: Path) -> None:
     """Salvage yield (messages recovered / written) for each damage case, on a bag from ``record``'s
     writer (8 s of /cmd_vel and /joint_states at 200 Hz, /odom at 10 Hz), and on the bundled bag."""
     from skidsteer_power.bag_io import open_bag
-    from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
+    from skidsteer_power.commands import Segment
 
     made = folder / 'salvage_src.mcap'
     write_drive_bag(made, [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)], rate_hz=200, odom_hz=10)

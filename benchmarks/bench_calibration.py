@@ -20,15 +20,17 @@ import dataclasses
 import math
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from benchmarks.harness import Report
-from skidsteer_power.bag_io.synthetic import Segment, table_7_3_segments
+from skidsteer_power.bag_io.synthetic import table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.calibration.direct import feed_trace
+from skidsteer_power.commands import Segment
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, drive_until_empty, run_commands, write_bag
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -62,11 +64,11 @@ def nearest_preset(terrain: Terrain) -> str:
     return min(PRESETS, key=lambda name: float(np.sqrt(np.mean(((key(PRESETS[name]) - ref) / scale) ** 2))))
 
 
-def table_7_3_drive(hold_s: float, pause_s: float, passes: int) -> list:
+def table_7_3_drive(hold_s: float, pause_s: float, passes: int) -> list[Segment]:
     return table_7_3_segments(hold_s, pause_s) * passes
 
 
-def twin_bag(path: Path, commands: list, seed: int) -> float:
+def twin_bag(path: Path, commands: Sequence[Segment], seed: int) -> float:
     """Simulate ``commands`` on the twin at :data:`TRUTH`; returns the simulated duration [s]."""
     twin = Twin(load_vehicle(VEHICLE), TRUTH, seed=seed)
     trace = run_commands(twin, commands)

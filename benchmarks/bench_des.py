@@ -223,6 +223,7 @@ def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[floa
     import uuid
 
     import rclpy
+    import rclpy.utilities
     from geometry_msgs.msg import Twist
     from rclpy.context import Context
 
@@ -262,7 +263,7 @@ def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[floa
                 left.append(_zeroed_at(pair.left, t0) - t0 if clean else math.nan)
                 right.append(_zeroed_at(pair.right, t0) - t0 if clean else math.nan)
     finally:
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
     return left, right
 
 

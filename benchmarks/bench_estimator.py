@@ -70,7 +70,7 @@ Held = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 """A held command (V [m/s], yaw rate [rad/s]), its predicted motor speeds [rad/s] and torques [N m]."""
 
 
-def _start_echo(namespace: str, env: dict[str, str], stock: bool = False) -> subprocess.Popen:
+def _start_echo(namespace: str, env: dict[str, str], stock: bool = False) -> subprocess.Popen[str]:
     """benchmarks/echo_node.py: the same inputs, outputs and executor with no estimator (the floor);
     ``stock``: the same echo in plain rclpy (rclpy messages and executor)."""
     from skidsteer_power.nodes.spin import node_command
@@ -88,7 +88,7 @@ def _start_echo(namespace: str, env: dict[str, str], stock: bool = False) -> sub
 
 def _start_node(
     namespace: str, cache_dir: str, env: dict[str, str], cwd: str | None = None
-) -> subprocess.Popen:
+) -> subprocess.Popen[str]:
     from skidsteer_power.nodes.spin import node_command
 
     params = {'map_cache_dir': cache_dir, 'persist': 'false', 'cmd_vel_stamped': 'true', 'qos_depth': 1000}
@@ -108,7 +108,9 @@ def cdr_stamp_s(data: bytes) -> float:
     """The header stamp [s] of a serialized message that starts with std_msgs/Header (JointState,
     TwistStamped): after the 4-byte CDR encapsulation header, int32 sec and uint32 nanosec."""
     little = data[1] & 1  # encapsulation kind: CDR_BE 0, CDR_LE 1
-    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, 4)
+    sec: int
+    nanosec: int
+    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, 4)  # two ints
     return sec + 1e-9 * nanosec
 
 
@@ -231,14 +233,14 @@ class Load:
         return n
 
     def close(self) -> None:
-        import rclpy
+        import rclpy.utilities
 
         self.executor.shutdown()
         self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        rclpy.utilities.try_shutdown(context=self.context)
 
 
-def _stop(process: subprocess.Popen) -> None:
+def _stop(process: subprocess.Popen[str]) -> None:
     process.terminate()
     try:
         process.wait(timeout=10)
@@ -326,7 +328,7 @@ def _wait_outputs(load: Load) -> None:
 def _sustained(
     report: Report,
     load: Load,
-    node: subprocess.Popen,
+    node: subprocess.Popen[str],
     rate: float,
     mode: str,
     prefix: str = '',

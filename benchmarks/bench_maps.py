@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import time
+from typing import TypedDict
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
@@ -19,6 +20,22 @@ from skidsteer_power.terramechanics.terrain import PRESETS
 from skidsteer_power.vehicle import load_vehicle
 
 N_VECTOR = 1_000_000
+
+
+class AccuracyRow(TypedDict):
+    """One vehicle x terrain row of :func:`accuracy_table` (percentages of the larger side's value)."""
+
+    vehicle: str
+    terrain: str
+    build_s: float
+    flagged_pct: float
+    check_pct: float
+    torque_pct: float
+    speed_pct: float
+    power_pct: float
+    power_p99_pct: float
+    unsolved: int
+    worst: tuple[float, float]  # the command (V [m/s], yaw rate [rad/s]) of the largest power error
 
 
 def _build(report: Report) -> PowerMap:
@@ -110,7 +127,7 @@ def _accuracy(report: Report, m: PowerMap) -> None:
     report.figure('off-grid side torque vs direct FESS, max for |R| < 20 m', rel[turning].max() * 100, '%')
 
 
-def accuracy_table(points: int = 1000, seed: int = 7) -> list[dict]:
+def accuracy_table(points: int = 1000, seed: int = 7) -> list[AccuracyRow]:
     """Map vs direct FESS at ``points`` random off-grid commands in each shipped vehicle's envelope
     (0 <= V <= max speed, |yaw rate| <= max yaw rate), for every vehicle x terrain preset.
 
@@ -125,7 +142,7 @@ def accuracy_table(points: int = 1000, seed: int = 7) -> list[dict]:
     from skidsteer_power.terramechanics.terrain import PRESETS
     from skidsteer_power.vehicle import available_vehicles
 
-    rows = []
+    rows: list[AccuracyRow] = []
     rng = np.random.default_rng(seed)
     for name in available_vehicles():
         vehicle = load_vehicle(name)
@@ -166,7 +183,7 @@ def accuracy_table(points: int = 1000, seed: int = 7) -> list[dict]:
     return rows
 
 
-def markdown_table(rows: list[dict]) -> str:
+def markdown_table(rows: list[AccuracyRow]) -> str:
     """The docs/BENCHMARKS.md table of :func:`accuracy_table`."""
     lines = [
         '| vehicle | terrain | build [CPU s] | flagged [%] | of which by the cell check [%] '

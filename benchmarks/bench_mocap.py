@@ -17,8 +17,9 @@ import numpy as np
 from benchmarks.harness import Report, best_time
 from skidsteer_power.mocap import synthetic as syn
 from skidsteer_power.mocap.calibration import CameraCalibration
+from skidsteer_power.mocap.config import TargetConfig
 from skidsteer_power.mocap.plane import GroundPlane
-from skidsteer_power.mocap.target import TargetConfig, TargetDetection, detect_target
+from skidsteer_power.mocap.target import TargetDetection, detect_target
 from skidsteer_power.mocap.tracking import target_on_plane, track
 
 SIZE = (1920, 1080)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from benchmarks.harness import Report
@@ -84,7 +85,7 @@ def _path_energy(report: Report) -> None:
     )
 
 
-def _timed(func) -> float:  # type: ignore[no-untyped-def]
+def _timed(func: Callable[[], object]) -> float:
     start = time.perf_counter()
     func()
     return time.perf_counter() - start

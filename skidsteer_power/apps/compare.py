@@ -34,7 +34,7 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -48,6 +48,9 @@ from skidsteer_power.analysis.baselines import (
 )
 from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.vehicle import TrackGear
+
+if TYPE_CHECKING:
+    from skidsteer_power.bags.validate import BagPrediction, ValidateOptions
 
 MAX_BAGS = 16  # per list (training, hold-out, transfer)
 MAX_BAG_S = 3600.0  # longest bag [s]
@@ -118,13 +121,13 @@ class BagRun:
     segments: list[np.ndarray] = field(default_factory=list)
 
 
-def _validate_options(vehicle: str, terrain: str, cache: Any) -> Any:
+def _validate_options(vehicle: str, terrain: str, cache: str | Path | None) -> ValidateOptions:
     from skidsteer_power.bags.validate import ValidateOptions
 
     return ValidateOptions(vehicle, terrain, report_dir='.', plots=False, map_cache_dir=cache)
 
 
-def _predict(path: str, vehicle: str, terrain: str, cache: Any) -> Any:
+def _predict(path: str, vehicle: str, terrain: str, cache: str | Path | None) -> BagPrediction:
     from skidsteer_power.bag_io import open_bag
     from skidsteer_power.bags.validate import predict_bag
 
@@ -142,7 +145,7 @@ def _held(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     return out
 
 
-def bag_run(path: str, prediction: Any, drive_radius_m: float, gear_ratio: float) -> BagRun:
+def bag_run(path: str, prediction: BagPrediction, drive_radius_m: float, gear_ratio: float) -> BagRun:
     """The scored samples of a bag from validate's run over it (rows with a command in force and a
     measurement, as validate's metrics), with the command in force, the sprocket surface speeds
     (motor speed / G x r [m/s]) and the measured motion (ground truth if recorded, else odometry)."""
@@ -173,12 +176,13 @@ def bag_run(path: str, prediction: Any, drive_radius_m: float, gear_ratio: float
     return BagRun(path, samples, t, segments=[m for m in segments if m.any()])
 
 
-def fess_power(prediction: Any, online: bool) -> np.ndarray:
+def fess_power(prediction: BagPrediction, online: bool) -> np.ndarray:
     """FESS's predicted terminal power of both sides on the scored rows [W]; ``online``: corrected."""
     c = prediction.series.columns
     valid = (c['cmd_fresh'] > 0) & np.isfinite(c['measured_torque_left_Nm'])
     kind = 'online' if online else 'predicted'
-    return (c[f'{kind}_power_left_W'] + c[f'{kind}_power_right_W'])[valid]
+    both: np.ndarray = (c[f'{kind}_power_left_W'] + c[f'{kind}_power_right_W'])[valid]  # numpy: Any
+    return both
 
 
 def concat(runs: Sequence[BagRun]) -> Samples:

@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from skidsteer_power.bag_io.synthetic import TABLE_7_3_SETS, Segment, table_7_3_segments
+from skidsteer_power.bag_io.synthetic import TABLE_7_3_SETS, table_7_3_segments
+from skidsteer_power.commands import Segment
 from skidsteer_power.real_robot import APPENDIX_D_RADII
 
 CONFIGURATIONS = ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel')

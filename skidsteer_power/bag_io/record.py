@@ -143,6 +143,7 @@ def record(
     ``on_ready`` is called once the subscriptions to the topics found at start exist.
     """
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -175,7 +176,7 @@ def record(
         executor.shutdown()
         node.destroy_node()
         if own_context:
-            rclpy.try_shutdown(context=context)
+            rclpy.utilities.try_shutdown(context=context)
     return RecordResult(
         path=path,
         counts=dict(writer.counts),

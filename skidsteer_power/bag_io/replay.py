@@ -334,6 +334,7 @@ def replay(
 ) -> ReplayResult:
     """Replay ``bag`` on a node of its own; ``context`` None initialises (and shuts down) one here."""
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
 
@@ -347,4 +348,4 @@ def replay(
     finally:
         node.destroy_node()
         if own_context:
-            rclpy.try_shutdown(context=context)
+            rclpy.utilities.try_shutdown(context=context)

@@ -29,7 +29,6 @@ import re
 import struct
 import zlib
 from dataclasses import dataclass, field
-from typing import Any
 
 import yaml
 from mcap.data_stream import ReadDataStream
@@ -291,7 +290,9 @@ def _record_end(
     ``indexed``: (channel, log time) the message index gives for a message at ``pos``, if any;
     ``limit``: where the next indexed message starts (a record running past it has a false length).
     """
-    opcode, length = _RECORD.unpack_from(buf, pos)
+    opcode: int
+    length: int
+    opcode, length = _RECORD.unpack_from(buf, pos)  # '<BQ': two ints
     body, end = pos + _RECORD.size, pos + _RECORD.size + length
     if opcode not in _IN_CHUNK or end > len(buf) or (not strict and limit is not None and end > limit):
         return None
@@ -382,7 +383,7 @@ def _reason(err: BaseException) -> str:
     return str(err).strip() or type(err).__name__
 
 
-def message_count_of(info: Any) -> int | None:
+def message_count_of(info: object) -> int | None:
     """Message count from rosbag2 metadata (a dict as in metadata.yaml), None if absent."""
     if isinstance(info, dict):
         info = info.get('rosbag2_bagfile_information', info)

@@ -12,12 +12,18 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.commands import Segment
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import MsgType
+
+    MessageTypes: TypeAlias = dict[str, type[MsgType]]  # a typestore's classes by message type name
 
 NS = 1_000_000_000
 MotorArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -132,12 +138,14 @@ def write_drive_bag(
     return samples
 
 
-def _header(types: dict, stamp_ns: int, frame: str) -> object:
+def _header(types: MessageTypes, stamp_ns: int, frame: str) -> MsgType:
     sec, nsec = divmod(int(stamp_ns), NS)
     return types['std_msgs/msg/Header'](types['builtin_interfaces/msg/Time'](sec, nsec), frame)
 
 
-def _joint_state(types: dict, stamp_ns: int, omega: tuple, torque: tuple) -> object:
+def _joint_state(
+    types: MessageTypes, stamp_ns: int, omega: tuple[float, float], torque: tuple[float, float]
+) -> MsgType:
     return types['sensor_msgs/msg/JointState'](
         _header(types, stamp_ns, ''),
         ['left_motor', 'right_motor'],
@@ -147,7 +155,7 @@ def _joint_state(types: dict, stamp_ns: int, omega: tuple, torque: tuple) -> obj
     )
 
 
-def _odometry(types: dict, stamp_ns: int, s: DriveSamples, i: int) -> object:
+def _odometry(types: MessageTypes, stamp_ns: int, s: DriveSamples, i: int) -> MsgType:
     half = s.heading[i] / 2
     pose = types['geometry_msgs/msg/Pose'](
         types['geometry_msgs/msg/Point'](float(s.x[i]), float(s.y[i]), 0.0),

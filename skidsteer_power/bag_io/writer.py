@@ -208,10 +208,14 @@ class BagWriter:
             bag_dir = self.output
             file = bag_dir / f'{bag_dir.name}.mcap'
 
+        self._storage: _FlushingMcap | None = None
+
         def storage(path: Path, compression: CompressionMode) -> _FlushingMcap:
-            return _FlushingMcap(file, compression, chunk_size, flush_period_s)
+            self._storage = _FlushingMcap(file, compression, chunk_size, flush_period_s)
+            return self._storage
 
         self._writer = Writer(bag_dir, version=ROSBAG2_VERSION, storage_plugin=StoragePlugin.MCAP)
+        # rosbags types the plugin as a class; it only calls it with (path, compression)
         self._writer.STORAGE_PLUGINS = {StoragePlugin.MCAP: storage}  # type: ignore[dict-item]
         try:
             self._writer.open()
@@ -246,9 +250,8 @@ class BagWriter:
 
     def flush_if_due(self) -> None:
         """Write the chunk in progress if ``flush_period_s`` has passed (call from an idle loop)."""
-        storage = self._writer.storage
-        if storage is not None:
-            storage.flush_if_due()  # type: ignore[attr-defined]
+        if self._storage is not None:
+            self._storage.flush_if_due()
 
     def close(self) -> Path:
         """Write index and metadata, move the bag into place; returns the bag's path."""

@@ -146,4 +146,5 @@ def hold_ends(
             k = np.searchsorted(rest_t, cmd_t + MOVING_GRACE_S, side='left')
             first_rest = np.where(k < rest_t.size, rest_t[np.minimum(k, rest_t.size - 1)], math.inf)
             ends = np.minimum(ends, np.maximum(first_rest, cmd_t))
-    return np.maximum(ends, cmd_t)
+    held: np.ndarray = np.maximum(ends, cmd_t)  # numpy types it Any
+    return held

@@ -108,7 +108,7 @@ def online_summary(series: RunSeries, core: Any) -> dict[str, Any]:
     scaled by the online terrain scale k, as the path energy uses it; ``battery_energy_predicted_J``:
     the corrected battery energy; the adaptation's final state.
     """
-    from skidsteer_power.bags.validate import error_metrics
+    from skidsteer_power.bags.validate_metrics import error_metrics
 
     metrics = error_metrics(with_prediction(series, 'online_torque_{side}_Nm', 'online_power_{side}_W'))
     scaled = error_metrics(with_prediction(series, None, 'scaled_power_{side}_W'))

@@ -63,6 +63,7 @@ from skidsteer_power.bags.validate_metrics import (
 )
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
+from skidsteer_power.seams import BatteryModel
 
 LOG = logging.getLogger(__name__)
 
@@ -265,7 +266,7 @@ class WindowedBattery:
     the battery's state first flushes the open window, so what is read is up to date.
     """
 
-    def __init__(self, battery: Any, window_s: float = 0.2) -> None:
+    def __init__(self, battery: BatteryModel, window_s: float = 0.2) -> None:
         self._battery = battery
         self._window_s = window_s
         self._energy_J = 0.0
@@ -337,9 +338,6 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     order = np.lexsort((kinds, times))  # stable by time; a command first when stamps tie
     rejected = {'cmd_vel': 0, 'joint_states': 0}
     rows: list[tuple[float, ...]] = []
-    soc_of = (
-        (lambda b: b.soc_at_last_flush) if isinstance(core.battery, WindowedBattery) else (lambda b: b.soc)
-    )
     names = inputs.js_names
     # Python lists: per-row access to floats is several times faster than to numpy rows
     has_positions = inputs.js_position.shape[0] == inputs.js_t.size
@@ -379,7 +377,7 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
             row_hold.append(core.cmd_fresh.timeout_s if ends_list is None else ends_list[i] - now)
         else:
             row_hold.append(math.nan)
-        rows.append(_row(now, core.prediction, fresh, comparison, soc_of(core.battery)) + online)
+        rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery)) + online)
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
@@ -461,6 +459,11 @@ MEASURED_COLUMNS = (
 )
 
 
+def _soc(battery: BatteryModel) -> float:
+    """State of charge [-] for a row: a windowed battery's as of its last full window (no flush)."""
+    return battery.soc_at_last_flush if isinstance(battery, WindowedBattery) else battery.soc
+
+
 def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
     """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
     nan = math.nan
@@ -487,7 +490,8 @@ def stream_hold_ends(t: np.ndarray, cap_s: float) -> np.ndarray:
     """When each row of a stream sampled at times ``t`` [s] stops being in force: at the next row,
     at most ``cap_s`` [s] after it (a 5 Hz odometry held for a 0.5 s command hold would overlap the
     next four rows and count their energy 2.5 times)."""
-    return np.minimum(np.append(t[1:], math.inf), t + cap_s)
+    ends: np.ndarray = np.minimum(np.append(t[1:], math.inf), t + cap_s)  # numpy types it Any
+    return ends
 
 
 KINEMATICS = ('cmd', 'twist', 'odom', 'ground_truth')
@@ -541,9 +545,13 @@ def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None)
         ends = stream_hold_ends(motion[1].cmd_t, core.settings.cmd_timeout_s)
         motion = (motion[0], replace(motion[1], cmd_end=ends))
     from_command = options.kinematics in FROM_COMMAND
-    if not from_command and motion is None:
+    if from_command:
+        driven = inputs
+    elif motion is not None:
+        driven = motion[1]
+    else:
         raise InputError(f'--kinematics {options.kinematics}: {bag.path} has no such nav_msgs/Odometry twist')
-    series = run_estimator(core, inputs if from_command else motion[1])  # type: ignore[index]
+    series = run_estimator(core, driven)
     return BagPrediction(inputs, core, timing, motion, series)
 
 

@@ -7,9 +7,9 @@ import glob
 import logging
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.cli.common import _number, add_json_flag, add_msg_option, emit, print_json
+from skidsteer_power.cli.common import Subcommands, _number, add_json_flag, add_msg_option, emit, print_json
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     BAG_TIME_S,
@@ -19,6 +19,11 @@ from skidsteer_power.terramechanics.ranges import (
     REPLAY_RATE,
     SUBSCRIBER_WAIT_S,
 )
+
+if TYPE_CHECKING:
+    from skidsteer_power.bag_io.reader import BagReader
+    from skidsteer_power.bag_io.record import Recorder
+    from skidsteer_power.bags.validate import ValidateOptions
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
@@ -31,7 +36,7 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _open(args: argparse.Namespace) -> Any:
+def _open(args: argparse.Namespace) -> BagReader:
     """The bag after one full counting pass: without ``--salvage`` a damaged bag is one line and
     exit 2; with it the pass measures what is there (``messages_read``), so nothing unread is
     called complete."""
@@ -49,7 +54,7 @@ def _open(args: argparse.Namespace) -> Any:
     return bag
 
 
-def _integrity(bag: Any, undecodable: dict[str, int]) -> dict[str, Any]:
+def _integrity(bag: BagReader, undecodable: dict[str, int]) -> dict[str, Any]:
     """The bag's integrity keys, with ``undecodable`` (skipped messages per topic) merged in."""
     out = bag.integrity()
     for topic, count in undecodable.items():
@@ -69,7 +74,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     _log_to_stderr()
     stop = StopFlag()
 
-    def ready(recorder: Any) -> None:
+    def ready(recorder: Recorder) -> None:
         what = ', '.join(recorder.recorded) or 'none yet'
         print(f'recording to {args.output} (topics: {what}); Ctrl-C to stop', file=sys.stderr, flush=True)
 
@@ -137,7 +142,7 @@ def _is_fleet(args: argparse.Namespace) -> bool:
     )
 
 
-def _run_fleet(args: argparse.Namespace, shared: Any) -> int:
+def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
     """``validate`` in fleet mode (:mod:`skidsteer_power.apps.fleet`): ``shared`` holds the single-bag
     ValidateOptions."""
     from skidsteer_power.apps.fleet import expand, fmt, plan_jobs, read_manifest, validate_fleet
@@ -222,7 +227,7 @@ def _hold_float(text: str) -> float:
     return value
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     rec = subparsers.add_parser(
         'record',
         help='record topics into a rosbag2 MCAP bag (Ctrl-C/SIGTERM stop cleanly)',

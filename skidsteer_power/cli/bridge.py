@@ -22,7 +22,7 @@ import math
 import sys
 import time
 
-from skidsteer_power.cli.common import add_json_flag, emit
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
@@ -49,7 +49,7 @@ def _loopback(host: str) -> bool:
         return False
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     from skidsteer_power.nodes.foxglove_bridge import DEFAULT_PORT
 
     parser = subparsers.add_parser(
@@ -87,6 +87,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
+    import rclpy.utilities
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
@@ -136,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
             bridge.close()
         executor.shutdown()
         node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
     summary = {'url': url, 'topics': topics, 'skipped': skipped, 'published': published, 'refused': refused}
     emit(summary, args.json)
     return 0

@@ -20,12 +20,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, add_msg_option, emit, nonnegative_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'calibrate',
         help='fit terrain parameters (and internal resistance) to recorded drives; write a terrain YAML',

@@ -12,9 +12,12 @@ import math
 import os
 import sys
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
+
+Subcommands: TypeAlias = 'argparse._SubParsersAction[argparse.ArgumentParser]'
+"""What ``register(subparsers)`` of each command module is given (``add_parser`` makes a command)."""
 
 
 def _plain(value: Any) -> Any:

@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     from skidsteer_power.apps.compare import MAX_BAG_S, MAX_BAGS
 
     parser = subparsers.add_parser(

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.protocol import BAUD_CODES
 from skidsteer_power.des.transport import LinkTiming
@@ -23,7 +23,7 @@ def _baud(text: str) -> int:
     return value
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     des = subparsers.add_parser('des', help='talk to a maxon DES 70/10 amplifier over RS232')
     des_sub = des.add_subparsers(dest='des_command', metavar='ACTION', parser_class=type(des))
     probe = des_sub.add_parser(

@@ -17,6 +17,7 @@ import os
 import pkgutil
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from skidsteer_power import __version__
 from skidsteer_power.cli.common import native_stdout_to_stderr
@@ -29,7 +30,7 @@ EXIT_USAGE = 2
 class OneLineParser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line on stderr and exit code 2."""
 
-    def error(self, message: str) -> None:  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f'{self.prog}: error: {message}\n')
 
 

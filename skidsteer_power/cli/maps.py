@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.maps import PowerMap, cache_path
 from skidsteer_power.maps.power_map import DEFAULT_SHAPE
@@ -39,7 +39,7 @@ from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser('map', help='build or show FESS look-up maps over (speed, yaw rate)')
     sub = parser.add_subparsers(dest='map_command', metavar='ACTION', parser_class=type(parser))
     sub.required = True

@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     FORWARD_SPEED_M_S,
@@ -27,13 +27,13 @@ PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 MODEL_CHOICES = ('fess', 'wong', 'steeds', 'icr', 'fast')
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     _register_mission(subparsers)
     _register_sensitivity(subparsers)
     _register_design(subparsers)
 
 
-def _register_mission(subparsers: argparse._SubParsersAction) -> None:
+def _register_mission(subparsers: Subcommands) -> None:
     p = subparsers.add_parser(
         'mission',
         help='power and energy along a route (ch. 8.1, 8.2)',
@@ -70,7 +70,7 @@ def _register_mission(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_mission_cmd)
 
 
-def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
+def _register_sensitivity(subparsers: Subcommands) -> None:
     p = subparsers.add_parser(
         'sensitivity',
         help='soil-parameter sensitivity of a mission (ch. 8.2)',
@@ -105,7 +105,7 @@ def _register_sensitivity(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_sensitivity_cmd)
 
 
-def _register_design(subparsers: argparse._SubParsersAction) -> None:
+def _register_design(subparsers: Subcommands) -> None:
     from skidsteer_power.missions.design import CONFIGURATIONS, CRITERIA
 
     p = subparsers.add_parser(

@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from skidsteer_power.cli.common import add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.mocap.config import TargetConfig, parse_pattern
 
@@ -95,7 +95,7 @@ def _track(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'mocap', help='motion capture of a red target with one camera (chapter 7.3.3)'
     )

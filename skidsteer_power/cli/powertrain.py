@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from skidsteer_power.cli.common import add_json_flag, emit, nonnegative_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import COMPONENTS, components_from_stages, fit_internal
@@ -21,7 +21,7 @@ from skidsteer_power.powertrain.samples import read_bag, read_csv
 from skidsteer_power.vehicle import load_vehicle
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'fit-internal',
         help='fit internal-resistance coefficients b, c (eq. 7.1) to no-load speed/current runs',

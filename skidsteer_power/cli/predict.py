@@ -19,7 +19,7 @@ import argparse
 import math
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.maps.setpoint_map import SetpointQuery, load_or_build
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
 from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, SPEED_M_S
@@ -27,7 +27,7 @@ from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'predict',
         help='what the robot does for a command: FESS at its wheel speed set points',

@@ -20,7 +20,7 @@ import sys
 import time
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float, positive_float
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
 
@@ -28,7 +28,7 @@ EXIT_FAILURE = 1
 """Exit code when a thread or process of the suite died (2 is bad input, 0 a clean stop)."""
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'run', help='start power_estimator and des_driver (optionally against simulated amplifiers)'
     )
@@ -84,6 +84,7 @@ class _Counters:
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
+    import rclpy.utilities
     from geometry_msgs.msg import Twist
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if suite is not None:
             suite.shutdown()
-        rclpy.try_shutdown(context=context)
+        rclpy.utilities.try_shutdown(context=context)
         signals.close()
     if suite.failure:  # a thread of the suite died: the motors are stopped, the run is not a result
         print(f'skidsteer-power run: error: {suite.failure}; the suite stopped', file=sys.stderr)

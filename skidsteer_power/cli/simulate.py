@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from skidsteer_power.cli.common import add_json_flag, emit
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, LEAD_IN_S, SEED, SIM_DURATION_S
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     p = subparsers.add_parser(
         'simulate',
         help='run the digital twin (its own terrain, not the estimator) and record a bag',

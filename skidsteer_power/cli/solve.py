@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power import models
-from skidsteer_power.cli.common import add_json_flag, emit
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     FORWARD_SPEED_M_S,
@@ -54,7 +54,7 @@ def _resolution(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     parser = subparsers.add_parser(
         'solve',
         help='steady skid-steering state of a vehicle (Steeds, ICR, Wong, fast, FESS)',

@@ -18,7 +18,7 @@ import argparse
 import dataclasses
 from typing import Any
 
-from skidsteer_power.cli.common import add_json_flag, emit, finite_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     DEFAULT_TRACK_HEIGHT_M,
@@ -66,7 +66,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
     add_json_flag(parser)
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: Subcommands) -> None:
     track = subparsers.add_parser('track', help='single track on deformable terrain (eqs. 2.6-2.18)')
     _common(track)
     track.add_argument('--length', required=True, type=LENGTH_M.arg(), help=LENGTH_M.help('contact length l'))

@@ -11,6 +11,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -49,7 +50,7 @@ class CameraCalibration:
         """(fx, fy) [px]."""
         return float(self.camera_matrix[0, 0]), float(self.camera_matrix[1, 1])
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """Plain numbers for the CLI (px, dimensionless coefficients)."""
         k1, k2, _, _, k3 = (float(v) for v in self.dist_coeffs)
         return {
@@ -77,7 +78,7 @@ def board_points(pattern: tuple[int, int], square_size_m: float) -> np.ndarray:
     return np.column_stack([grid, np.zeros(len(grid))])
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a colour image (BGR, uint8); InputError if missing or unreadable."""
     path = Path(path)
     if not path.is_file():
@@ -105,7 +106,7 @@ def _check_square_size(square_size_m: float) -> None:
 
 
 def calibrate_camera(
-    images: Sequence[str | os.PathLike],
+    images: Sequence[str | os.PathLike[str]],
     square_size_m: float,
     pattern: tuple[int, int],
     *,
@@ -162,7 +163,7 @@ def undistort_image(image: np.ndarray, calibration: CameraCalibration) -> np.nda
     return cv2.undistort(image, calibration.camera_matrix, calibration.dist_coeffs)
 
 
-def save_calibration(path: str | os.PathLike, calibration: CameraCalibration) -> None:
+def save_calibration(path: str | os.PathLike[str], calibration: CameraCalibration) -> None:
     """Write the calibration as YAML (plain lists; units in the keys)."""
     document = {
         'kind': YAML_KIND,
@@ -178,7 +179,7 @@ def save_calibration(path: str | os.PathLike, calibration: CameraCalibration) ->
     Path(path).write_text(yaml.safe_dump(document, sort_keys=False))
 
 
-def load_calibration(path: str | os.PathLike) -> CameraCalibration:
+def load_calibration(path: str | os.PathLike[str]) -> CameraCalibration:
     """Read a calibration written by :func:`save_calibration`; ConfigError if malformed."""
     path = Path(path)
     if not path.is_file():

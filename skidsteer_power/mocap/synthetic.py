@@ -88,13 +88,15 @@ def render(
     u, v = np.meshgrid(cols, rows)
     big_x, big_y = pixel_rays_to_plane(camera, rvec, tvec, u.ravel(), v.ravel())
     colours = texture(big_x, big_y).reshape(y1 - y0, supersample, x1 - x0, supersample, 3)
-    return np.clip(colours.mean(axis=(1, 3)) + 0.5, 0, 255).astype(np.uint8)
+    image: np.ndarray = np.clip(colours.mean(axis=(1, 3)) + 0.5, 0, 255).astype(np.uint8)  # numpy: Any
+    return image
 
 
 def _hash_noise(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
     h = (ix * 73856093) ^ (iy * 19349663) ^ (seed * 83492791)
     h = (h ^ (h >> 13)) * 1274126177
-    return ((h ^ (h >> 16)) & 0xFFFF) / 65535.0
+    noise: np.ndarray = ((h ^ (h >> 16)) & 0xFFFF) / 65535.0  # numpy types integer ^ as Any
+    return noise
 
 
 def sand(cell_m: float = 0.004, seed: int = 1) -> Texture:

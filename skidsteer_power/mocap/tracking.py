@@ -14,6 +14,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -21,8 +22,9 @@ import numpy as np
 from skidsteer_power.analysis.trace import CircleFit, fit_circle, mean_speed
 from skidsteer_power.errors import InputError
 from skidsteer_power.mocap.calibration import CameraCalibration
+from skidsteer_power.mocap.config import TargetConfig
 from skidsteer_power.mocap.plane import GroundPlane, check_image_size, pixels_to_plane
-from skidsteer_power.mocap.target import TargetConfig, TargetDetection, detect_target
+from skidsteer_power.mocap.target import TargetDetection, detect_target
 
 DEFAULT_SAMPLE_HZ = 5.0  # the text samples its 30 fps video at 5 Hz (Figure 7.28)
 IMAGE_SUFFIXES = frozenset({'.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff'})
@@ -56,7 +58,7 @@ class TrackResult:
     fps: float
     sample_hz: float
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """The CLI's JSON payload (SI units)."""
         return {
             'radius_m': self.fit.radius_m,
@@ -73,7 +75,7 @@ class TrackResult:
         }
 
 
-def _natural_key(path: Path) -> list:
+def _natural_key(path: Path) -> list[int | str]:
     return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name)]
 
 
@@ -153,7 +155,7 @@ def _check_rates(fps: float, sample_hz: float) -> None:
 
 
 def open_frames(
-    source: str | os.PathLike, fps: float | None = None, sample_hz: float | None = None
+    source: str | os.PathLike[str], fps: float | None = None, sample_hz: float | None = None
 ) -> tuple[Iterator[Frame], float, float]:
     """Sampled frames of a video file or an image folder, with the frame rate and sample rate [Hz].
 
@@ -195,7 +197,7 @@ def target_on_plane(
 
 
 def track(
-    source: str | os.PathLike,
+    source: str | os.PathLike[str],
     calibration: CameraCalibration,
     plane: GroundPlane,
     *,
@@ -244,7 +246,7 @@ def track(
     )
 
 
-def write_trace_csv(path: str | os.PathLike, result: TrackResult) -> None:
+def write_trace_csv(path: str | os.PathLike[str], result: TrackResult) -> None:
     """Write the trace as CSV: frame, t_s, x_m, y_m (one row per detected sample)."""
     with open(path, 'w', newline='') as stream:
         writer = csv.writer(stream)

@@ -62,9 +62,10 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -88,6 +89,9 @@ from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.vehicle import load_vehicle
+
+if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
 
 NODE_NAME = 'des_driver'
 _WARN_PERIOD_S = 5.0
@@ -212,6 +216,14 @@ def _traceback_logged(transition: Callable[..., Any]) -> Callable[..., Any]:
 class DesDriver(LifecycleNode):
     """Two DES amplifiers behind ``cmd_vel`` / ``joint_states`` / ``diagnostics`` (managed node)."""
 
+    if TYPE_CHECKING:  # rclpy 7 leaves these unannotated; their types
+
+        def get_logger(self) -> RcutilsLogger: ...
+        def trigger_configure(self) -> TransitionCallbackReturn: ...
+        def trigger_activate(self) -> TransitionCallbackReturn: ...
+        def trigger_deactivate(self) -> TransitionCallbackReturn: ...
+        def trigger_cleanup(self) -> TransitionCallbackReturn: ...
+
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         declare(self, PARAMETERS)  # a value out of its range: one ConfigError
@@ -275,7 +287,7 @@ class DesDriver(LifecycleNode):
     @property
     def state_label(self) -> str:
         """The lifecycle state: 'unconfigured', 'inactive', 'active', 'finalized', ..."""
-        return self._state_machine.current_state[1]
+        return str(self._state_machine.current_state[1])  # (id, label) in rclpy's state machine
 
     # -- lifecycle ------------------------------------------------------------------------------
 
@@ -606,7 +618,7 @@ class DesDriver(LifecycleNode):
 
     def destroy_node(self) -> None:
         self._teardown()
-        super().destroy_node()
+        LifecycleNode.destroy_node(self)  # its one base (spelled out: rclpy leaves it unannotated)
 
 
 def _log_refused(node: Any, request: Any, err: Exception) -> None:
@@ -645,7 +657,7 @@ def make_driver(**kwargs: Any) -> DesDriver:
     try:
         node = DesDriver(**kwargs)
     except RCLError:
-        if rclpy.ok(context=context):
+        if rclpy.utilities.ok(context=context):
             raise
         raise ExternalShutdownException from None
     if node.params['autostart']:
@@ -653,7 +665,7 @@ def make_driver(**kwargs: Any) -> DesDriver:
             bring_up(node)
         except RCLError:
             node.destroy_node()
-            if rclpy.ok(context=context):
+            if rclpy.utilities.ok(context=context):
                 raise
             raise ExternalShutdownException from None
         except BaseException:

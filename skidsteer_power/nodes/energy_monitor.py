@@ -32,9 +32,10 @@ import termios
 import time
 import tty
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.executors import ExternalShutdownException
@@ -98,13 +99,17 @@ class EnergyMonitor(Node):
     :class:`KeyReader` for free mode; ``profile`` the case profile.
     """
 
+    if TYPE_CHECKING:  # rclpy 7 leaves it unannotated; its type
+
+        def destroy_node(self) -> None: ...
+
     def __init__(
         self,
         mode: str = 'view',
         *,
         profile: CaseProfile | None = None,
         keys: KeyReader | None = None,
-        csv_path: str | os.PathLike | None = None,
+        csv_path: str | os.PathLike[str] | None = None,
         on_frame: Callable[[MonitorView], None] | None = None,
         stamped: bool = False,
         rate_hz: float = 10.0,
@@ -310,7 +315,7 @@ def _run(options: argparse.Namespace, ros_args: list[str] | None) -> int:
                 rate_hz=options.rate, vehicle=options.vehicle,
                 on_frame=lambda view: live.update(render(view), refresh=True),
             )  # fmt: skip
-            while rclpy.ok() and not node.done:
+            while rclpy.utilities.ok() and not node.done:
                 rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -321,7 +326,7 @@ def _run(options: argparse.Namespace, ros_args: list[str] | None) -> int:
             node.close()
             node.destroy_node()
             console.print(f'\nsaved what was shown to {csv_path}')
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     return 0
 
 

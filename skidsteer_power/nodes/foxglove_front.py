@@ -24,8 +24,13 @@ import logging
 import threading
 from collections.abc import Sequence
 from http import HTTPStatus
-from typing import Any
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
+
+if TYPE_CHECKING:
+    from websockets.asyncio.client import ClientConnection
+    from websockets.asyncio.server import Server, ServerConnection
+    from websockets.http11 import Request, Response
 
 LOG = logging.getLogger(__name__)
 
@@ -69,20 +74,21 @@ class FrontDoor:
             raise
         self.port = int(self._server.sockets[0].getsockname()[1])
 
-    async def _start(self, host: str, port: int) -> Any:
+    async def _start(self, host: str, port: int) -> Server:
         from websockets.asyncio.server import serve
+        from websockets.typing import Subprotocol
 
         return await serve(
             self._relay,
             host,
             port,
-            subprotocols=list(SUBPROTOCOLS),  # type: ignore[arg-type]
+            subprotocols=[Subprotocol(name) for name in SUBPROTOCOLS],
             process_request=self._check_origin,
             compression=None,
             max_size=MAX_CLIENT_FRAME_BYTES,
         )
 
-    def _check_origin(self, connection: Any, request: Any) -> Any:
+    def _check_origin(self, connection: ServerConnection, request: Request) -> Response | None:
         origin = request.headers.get('Origin')
         if origin_allowed(origin, self.allowed_origins):
             return None
@@ -90,20 +96,23 @@ class FrontDoor:
         LOG.warning('refused a Foxglove client from Origin %s (allow it with --allow-origin)', origin)
         return connection.respond(HTTPStatus.FORBIDDEN, f'Origin {origin} is not allowed\n')
 
-    async def _relay(self, client: Any) -> None:
+    async def _relay(self, client: ServerConnection) -> None:
         from websockets.asyncio.client import connect
         from websockets.exceptions import ConnectionClosed
+        from websockets.typing import Subprotocol
 
         self.connections += 1
         try:
             async with connect(
                 self.upstream_url,
-                subprotocols=[UPSTREAM_SUBPROTOCOL],  # type: ignore[list-item]
+                subprotocols=[Subprotocol(UPSTREAM_SUBPROTOCOL)],
                 compression=None,
                 max_size=None,
             ) as upstream:
 
-                async def pump(source: Any, sink: Any) -> None:
+                async def pump(
+                    source: ServerConnection | ClientConnection, sink: ServerConnection | ClientConnection
+                ) -> None:
                     try:
                         async for frame in source:
                             await sink.send(frame)

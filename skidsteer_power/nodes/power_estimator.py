@@ -97,9 +97,10 @@ from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
-from skidsteer_power.estimator.inputs import InputLimits
+from skidsteer_power.estimator.inputs import InputLimits, JointMap
 from skidsteer_power.estimator.odometry import PredictedOdometry
 from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
+from skidsteer_power.estimator.prediction import Prediction, Predictor
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -250,7 +251,7 @@ def battery_state_message(fields: dict[str, Any]) -> BatteryState:
 class PowerEstimator(QuietNode):
     """Predicts per-side power from cmd_vel, measures it from joint_states, tracks the battery."""
 
-    def __init__(self, predictor: Any = None, **node_kwargs: Any) -> None:
+    def __init__(self, predictor: Predictor | None = None, **node_kwargs: Any) -> None:
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
@@ -308,7 +309,7 @@ class PowerEstimator(QuietNode):
             limits=limits,
         )
 
-    def _joint_map(self, p: dict[str, Any]) -> Any:
+    def _joint_map(self, p: dict[str, Any]) -> JointMap:
         return factory.joint_map_for(
             self.vehicle,
             left=p['left_joints'],
@@ -319,7 +320,7 @@ class PowerEstimator(QuietNode):
             torque_constant_Nm_A=p['joint_torque_constant_Nm_A'] or None,
         )
 
-    def _make_predictor(self, terrain: str, cache_dir: str) -> Any:
+    def _make_predictor(self, terrain: str, cache_dir: str) -> Predictor:
         started = time.monotonic()
         predictor, built, path = factory.map_predictor(
             self.vehicle, terrain, cache_dir or None, self.kinematics
@@ -471,12 +472,12 @@ class PowerEstimator(QuietNode):
             )
 
     # --- outputs ------------------------------------------------------------------------------
-    def _publish_predicted(self, prediction: Any, sec: int, nanosec: int) -> None:
+    def _publish_predicted(self, prediction: Prediction, sec: int, nanosec: int) -> None:
         velocity = (*prediction.motor_omega_rad_s, *prediction.axle_omega_rad_s)
         effort = (*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm)
         self.pub_predicted.publish(self._predicted_wire.pack(sec, nanosec, velocity, effort))
 
-    def _publish_predicted_motion(self, prediction: Any, now: float, stamp: Any) -> None:
+    def _publish_predicted_motion(self, prediction: Prediction, now: float, stamp: Any) -> None:
         """The dead reckoning of ``odom/predicted`` takes this command's predicted motion at once;
         ``power/predicted_twist`` goes out with the figures (``figure_period_s``, the newest
         command's stamp), as a message per command would cost the 1 kHz budget of issue 18."""
@@ -484,7 +485,7 @@ class PowerEstimator(QuietNode):
             self.odometry.set_twist(prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s, now)
         self._predicted_twist_stamp = stamp
 
-    def _publish_predicted_twist(self, prediction: Any) -> None:
+    def _publish_predicted_twist(self, prediction: Prediction) -> None:
         speed, yaw_rate = prediction.achieved_speed_m_s, prediction.achieved_yaw_rate_rad_s
         twist = TwistStamped()
         twist.header.stamp, twist.header.frame_id = self._predicted_twist_stamp, 'base_link'

@@ -9,10 +9,11 @@ import dataclasses
 import inspect
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 import rclpy.logging
+import rclpy.utilities
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -27,6 +28,9 @@ from skidsteer_power.errors import SkidsteerError
 from skidsteer_power.nodes import rclpy_compat
 from skidsteer_power.nodes.rclpy_compat import _rclpy
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+
+if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
 
 
 class LeanExecutor(SingleThreadedExecutor):
@@ -278,6 +282,11 @@ class QuietNode(Node):
     incompatible QoS or type still reports it on its side, and subscriptions keep their handlers.
     """
 
+    if TYPE_CHECKING:  # rclpy 7 leaves these unannotated; their types, for subclasses' calls
+
+        def get_logger(self) -> RcutilsLogger: ...
+        def destroy_node(self) -> None: ...
+
     def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
         quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
         return super().create_publisher(*args, event_callbacks=quiet, **kwargs)
@@ -368,11 +377,11 @@ def _spin_until_stopped(
     except Exception:
         # an external shutdown (rclpy.shutdown from elsewhere) can invalidate the context while a
         # callback was publishing ("publisher's context is invalid"): that is the shutdown, not a failure
-        if rclpy.ok():
+        if rclpy.utilities.ok():
             raise
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     if exit_code:
         sys.exit(exit_code)

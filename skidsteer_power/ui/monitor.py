@@ -137,7 +137,7 @@ class CaseProfile:
 CASE_COLUMNS = ('duration_s', 'speed_m_s', 'yaw_rate_rad_s')
 
 
-def load_case_csv(path: str | os.PathLike) -> CaseProfile:
+def load_case_csv(path: str | os.PathLike[str]) -> CaseProfile:
     """Read a case profile: CSV with header ``duration_s,speed_m_s,yaw_rate_rad_s`` (SI units).
 
     Raises InputError naming the file and line for anything malformed.
@@ -370,7 +370,7 @@ def csv_row(view: MonitorView, time_s: float) -> list[str]:
 class CsvLog:
     """Appends what the monitor shows to a CSV file (header first), flushed row by row."""
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._handle = self.path.open('w', newline='', encoding='utf-8')
