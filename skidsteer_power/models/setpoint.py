@@ -54,6 +54,8 @@ from skidsteer_power.vehicle import TrackGear
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from skidsteer_power.models.fess import Problem, TwistSolution
+
 SETPOINT_MAX_ITERATIONS = 60
 CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set points
 # Past half a revolution of the body while an element crosses the contact (eqs. 6.3, 6.5), eq. 6.6's
@@ -311,7 +313,10 @@ class SetpointSolver:
             contact_length=np.array(contact_length, dtype=float),
         )
 
-    def _fess_outputs(self, x: np.ndarray, spf: np.ndarray, converged: np.ndarray, rest: np.ndarray):  # type: ignore[no-untyped-def]
+    def _fess_outputs(
+        self, x: np.ndarray, spf: np.ndarray, converged: np.ndarray, rest: np.ndarray
+    ) -> tuple[TwistSolution, Problem]:
+        """FESS's outputs at states x (P, 3) = (s0, V, w_z) and set points spf, and their problem."""
         prob = self.fess.problem(x[:, 1], x[:, 2])
         state = np.column_stack([x[:, 0], spf])
         res = NewtonResult(state, np.zeros_like(state), converged.copy(), np.zeros(len(x), dtype=int))
