@@ -9,6 +9,8 @@ from __future__ import annotations
 import time
 import uuid
 
+import pytest
+
 from skidsteer_power.des.simulator import SimulatedPair
 
 
@@ -109,7 +111,7 @@ class Harness:
                 return True
         return predicate()
 
-    def call(self, client, request, timeout_s: float = 10.0):
+    def call(self, client, request: pytest.FixtureRequest, timeout_s: float = 10.0):
         """Call a service through DDS and spin until the answer arrives."""
         assert client.wait_for_service(timeout_sec=timeout_s)
         future = client.call_async(request)

@@ -240,7 +240,7 @@ def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> Non
 
 
 def test_real_sqlite3_bag_reads_with_unknown_types_skipped(
-    neato_bag, caplog: pytest.LogCaptureFixture
+    neato_bag: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     with caplog.at_level(logging.WARNING), open_bag(neato_bag) as bag:
         # Counts from ../shared/realbags/README.md.

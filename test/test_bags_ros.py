@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.record import Recorder, record
@@ -76,7 +77,9 @@ def _contents(path: Path) -> list[tuple[str, bytes]]:
         return [(m.topic, m.data) for m in bag.messages()]
 
 
-def test_record_replay_record_keeps_every_message_byte_identical_and_in_order(ros_context, tmp_path):
+def test_record_replay_record_keeps_every_message_byte_identical_and_in_order(
+    ros_context: Context, tmp_path: Path
+) -> None:
     from geometry_msgs.msg import Twist
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -140,7 +143,9 @@ def _string_bag(path: Path, topic: str, n: int, spacing_ns: int) -> list[bytes]:
     return data
 
 
-def test_replay_publishes_at_or_after_each_deadline_in_bag_order(ros_context, tmp_path):
+def test_replay_publishes_at_or_after_each_deadline_in_bag_order(
+    ros_context: Context, tmp_path: Path
+) -> None:
     import rclpy
 
     topic = _unique('timed')
@@ -157,7 +162,7 @@ def test_replay_publishes_at_or_after_each_deadline_in_bag_order(ros_context, tm
     assert result.counts == {topic: 40}
 
 
-def test_start_duration_and_topics_select_the_window(ros_context, tmp_path):
+def test_start_duration_and_topics_select_the_window(ros_context: Context, tmp_path: Path) -> None:
     import rclpy
 
     topic = _unique('window')
@@ -172,7 +177,7 @@ def test_start_duration_and_topics_select_the_window(ros_context, tmp_path):
     assert seen == [START_NS + i * 10_000_000 for i in range(20, 50)]
 
 
-def test_loop_and_clock(ros_context, tmp_path):
+def test_loop_and_clock(ros_context: Context, tmp_path: Path) -> None:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
@@ -218,7 +223,9 @@ def _cli(*args: str) -> list[str]:
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp_path, signum):
+def test_signal_stops_recording_cleanly_without_losing_messages(
+    ros_context: Context, tmp_path: Path, signum
+) -> None:
     import rclpy
     from std_msgs.msg import String
 
@@ -255,7 +262,9 @@ def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp
     assert not (tmp_path / 'sig.mcap.partial').exists()
 
 
-def test_real_bag_replays_through_the_cli_byte_for_byte(neato_bag, ros_context, tmp_path):
+def test_real_bag_replays_through_the_cli_byte_for_byte(
+    neato_bag: Path, ros_context: Context, tmp_path: Path
+) -> None:
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
@@ -296,7 +305,9 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(neato_bag, ros_context, 
     assert received == expected
 
 
-def test_real_bag_replay_skips_types_without_python_support_with_a_warning(neato_bag, ros_context):
+def test_real_bag_replay_skips_types_without_python_support_with_a_warning(
+    neato_bag: Path, ros_context: Context
+) -> None:
     import rclpy
 
     node = rclpy.create_node('bag_real_skipper', context=ros_context)

@@ -56,7 +56,7 @@ def _colcon() -> Path:
 
 
 @pytest.fixture(scope='module')
-def workspace(tmp_path_factory) -> Path:
+def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A colcon workspace with this package built and installed (ament_python, copied sources)."""
     colcon = _colcon()
     ws = tmp_path_factory.mktemp('colcon_ws')
@@ -91,7 +91,7 @@ def add_ros_wheels_share(venv: Path) -> None:
         shutil.copy2(xml, venv / 'share' / xml.parent.name / 'package.xml')
 
 
-def test_ros_doc_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path):
+def test_ros_doc_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path: Path) -> None:
     """docs/ROS.md's colcon recipe makes its venv the way this test does; with the ROS wheels in that
     venv, colcon sees only this package there, and without COLCON_IGNORE it would see them all."""
     colcon = _colcon()
@@ -124,7 +124,7 @@ def in_workspace(ws: Path, argv: list[str]) -> list[str]:
     return ['bash', '-c', f'source {ws}/install/setup.bash && exec {command}']
 
 
-def test_colcon_installs_the_executables_config_and_ament_marker(workspace):
+def test_colcon_installs_the_executables_config_and_ament_marker(workspace: Path) -> None:
     for exe in ('power_estimator', 'des_driver', 'energy_monitor', 'skidsteer-power'):
         assert installed(workspace, 'lib', 'skidsteer_power', exe).is_file(), exe
     share = installed(workspace, 'share', 'skidsteer_power')
@@ -178,7 +178,7 @@ def activate_if_managed(node, executor, fqn: str = '/des_driver', timeout_s: flo
     return True
 
 
-def test_installed_nodes_start_with_installed_params_and_publish(workspace, tmp_path):
+def test_installed_nodes_start_with_installed_params_and_publish(workspace: Path, tmp_path: Path) -> None:
     params = installed(workspace, 'share', 'skidsteer_power', 'config', 'estimator.yaml')
     exe = installed(workspace, 'lib', 'skidsteer_power')
     env = {**os.environ, 'ROS_DOMAIN_ID': os.environ['ROS_DOMAIN_ID']}

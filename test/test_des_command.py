@@ -28,27 +28,27 @@ LIMIT_RPM = (1.5 + 2.0 * 0.426 / 2) / 0.1 * 12 * 60 / (2 * math.pi)
 any_float = st.floats(allow_nan=True, allow_infinity=True)
 
 
-def test_non_finite_twist_is_rejected():
+def test_non_finite_twist_is_rejected() -> None:
     for v, w in ((math.nan, 0.0), (0.0, math.inf), (-math.inf, 1.0)):
         with pytest.raises(InputError, match='non-finite'):
             limit_twist(v, w, LIMITS)
 
 
-def test_finite_twist_is_clamped_per_axis():
+def test_finite_twist_is_clamped_per_axis() -> None:
     checked = limit_twist(1e308, -1e9, LIMITS)
     assert (checked.linear_m_s, checked.yaw_rate_rad_s, checked.clamped) == (1.5, -2.0, True)
     checked = limit_twist(0.2, 0.1, LIMITS)
     assert (checked.linear_m_s, checked.yaw_rate_rad_s, checked.clamped) == (0.2, 0.1, False)
 
 
-def test_limits_must_be_positive_and_finite():
+def test_limits_must_be_positive_and_finite() -> None:
     with pytest.raises(ConfigError, match='max_speed_m_s'):
         CommandLimits(max_speed_m_s=math.inf)
     with pytest.raises(ConfigError, match='max_accel_m_s2'):
         CommandLimits(max_accel_m_s2=0.0)
 
 
-def test_kinematics_refuses_non_finite_and_overflowing_twists():
+def test_kinematics_refuses_non_finite_and_overflowing_twists() -> None:
     kw = {'tread_m': 0.426, 'drive_radius_m': 0.1, 'gear_ratio': 12.0, 'max_rpm': 4000.0}
     with pytest.raises(InputError):
         twist_to_motor_rpm(math.nan, 0.0, **kw)
@@ -56,7 +56,7 @@ def test_kinematics_refuses_non_finite_and_overflowing_twists():
         twist_to_motor_rpm(1e308, 0.0, **kw)  # 1e308 * 120 / RPM is inf: never a NaN set point
 
 
-def test_slew_limiter_ramps_at_the_limits():
+def test_slew_limiter_ramps_at_the_limits() -> None:
     slew = SlewLimiter(LIMITS)
     slew.reset(0.0)
     # 0.05 s at 1 m/s^2 and 4 rad/s^2: 0.05 m/s and 0.2 rad/s.
@@ -66,7 +66,7 @@ def test_slew_limiter_ramps_at_the_limits():
 
 
 @given(v=any_float, w=any_float)
-def test_every_set_point_is_a_bounded_integer(v, w):
+def test_every_set_point_is_a_bounded_integer(v, w) -> None:
     clock = Clock()
     command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, max_rpm=4000.0, clock=clock)
     for side in ('left', 'right'):
@@ -82,7 +82,7 @@ def test_every_set_point_is_a_bounded_integer(v, w):
             assert isinstance(rpm, int) and abs(rpm) <= LIMIT_RPM + 1
 
 
-def test_drive_command_stop_conditions():
+def test_drive_command_stop_conditions() -> None:
     clock = Clock()
     command = DriveCommand(0.2, geometry=GEOMETRY, limits=LIMITS, active=False, clock=clock)
     command.set_twist(0.2, 0.0)
@@ -106,7 +106,7 @@ def test_drive_command_stop_conditions():
     assert command.wanted_rpm('left') == 0 and command.timed_out()  # watchdog
 
 
-def test_opting_out_of_stop_both_keeps_the_other_side():
+def test_opting_out_of_stop_both_keeps_the_other_side() -> None:
     clock = Clock()
     command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, stop_both_on_link_loss=False, clock=clock)
     command.link_up('left')
@@ -116,7 +116,7 @@ def test_opting_out_of_stop_both_keeps_the_other_side():
     assert command.wanted_rpm('left') > 0 and command.wanted_rpm('right') == 0  # right never connected
 
 
-def test_rpm_targets_are_capped_at_the_motor_limit():
+def test_rpm_targets_are_capped_at_the_motor_limit() -> None:
     command = DriveCommand(1.0, max_rpm=1e9)
     assert command.max_rpm == MAX_MOTOR_RPM == pytest.approx(10000.0)  # Appendix B line 23
     command.link_up('left')
@@ -126,7 +126,7 @@ def test_rpm_targets_are_capped_at_the_motor_limit():
     assert command.wanted_rpm('right') == 0 and command.nonfinite_setpoints == 1
 
 
-def test_a_stalled_poller_counts_as_a_lost_link():
+def test_a_stalled_poller_counts_as_a_lost_link() -> None:
     clock = Clock()
     command = DriveCommand(10.0, geometry=GEOMETRY, limits=LIMITS, stall_timeout_s=0.1, clock=clock)
     command.link_up('left')

@@ -26,6 +26,7 @@ import pytest
 from des_harness import Harness
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rclpy.context import Context
 
 from skidsteer_power.des.protocol import DesErrorFlags
 from skidsteer_power.des.simulator import Fault, SimulatedPair
@@ -210,7 +211,7 @@ def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: tuple) -> No
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(steps=st.lists(step, min_size=1, max_size=7))
-def test_no_motor_turns_without_a_fresh_valid_command(ros_context, steps):
+def test_no_motor_turns_without_a_fresh_valid_command(ros_context: Context, steps) -> None:
     with SimulatedPair(38400) as pair:
         h = Harness(
             ros_context,

@@ -9,9 +9,11 @@ import subprocess
 import sys
 import time
 import uuid
+from pathlib import Path
 
 import pytest
 from des_harness import Harness
+from rclpy.context import Context
 
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
 from skidsteer_power.des.simulator import Fault, SimulatedPair
@@ -35,13 +37,13 @@ def pair():
 
 
 @pytest.fixture
-def harness(ros_context, pair):
+def harness(ros_context: Context, pair):
     h = Harness(ros_context, pair)
     yield h
     h.close()
 
 
-def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
+def test_cmd_vel_to_setpoints_to_joint_states(harness, pair) -> None:
     harness.twist = (0.2, 0.5)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (LEFT_RPM, RIGHT_RPM)
@@ -83,7 +85,9 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
         assert moved > 0 and moved == pytest.approx(integral, rel=0.1)
 
 
-def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_motor_vehicle):
+def test_published_effort_uses_the_vehicles_motor(
+    ros_context: Context, pair, strong_motor_vehicle: Path
+) -> None:
     """effort = K_t I with the K_t of the vehicle's powertrain (here 0.228 N m/A = 2 x the EC-45's
     0.114, Appendix B line 12), not a built-in EC-45."""
     vehicle = strong_motor_vehicle
@@ -103,7 +107,7 @@ def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_moto
         harness.close()
 
 
-def test_twist_stamped_by_parameter(ros_context, pair):
+def test_twist_stamped_by_parameter(ros_context: Context, pair) -> None:
     h = Harness(ros_context, pair, twist_stamped=True)
     try:
         h.twist = (0.2, 0.5)
@@ -114,7 +118,7 @@ def test_twist_stamped_by_parameter(ros_context, pair):
         h.close()
 
 
-def test_watchdog_stops_the_motors(harness, pair):
+def test_watchdog_stops_the_motors(harness, pair) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     harness.twist = None  # cmd_vel stops
@@ -127,7 +131,7 @@ def test_watchdog_stops_the_motors(harness, pair):
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
+def test_amplifier_error_stops_both_sides_until_cleared(harness, pair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
 
@@ -155,7 +159,7 @@ def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
     assert harness.spin_until(lambda: harness.side_diag('left')[0].level == DiagnosticStatus.OK)
 
 
-def test_lost_port_is_reported_and_reopened(harness, pair):
+def test_lost_port_is_reported_and_reopened(harness, pair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     harness.twist = (0.2, 0.0)
@@ -176,7 +180,7 @@ def test_lost_port_is_reported_and_reopened(harness, pair):
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_silent_amplifier_is_reported_and_reconnected(harness, pair):
+def test_silent_amplifier_is_reported_and_reconnected(harness, pair) -> None:
     from skidsteer_power.des.simulator import Fault
 
     harness.twist = (0.2, 0.0)
@@ -200,7 +204,7 @@ ENDING_SIGNALS = [
 
 
 @pytest.mark.parametrize('signum', ENDING_SIGNALS, ids=signal_name)
-def test_every_ending_signal_zeroes_speed_then_disables(ros_context, pair, signum):
+def test_every_ending_signal_zeroes_speed_then_disables(ros_context: Context, pair, signum) -> None:
     """Before issue 28 only SIGINT and SIGTERM did: SIGHUP, SIGQUIT, SIGUSR1 ... ended des_driver
     with both amplifiers enabled and turning."""
     from geometry_msgs.msg import Twist
@@ -248,7 +252,7 @@ def test_every_ending_signal_zeroes_speed_then_disables(ros_context, pair, signu
 
 
 @pytest.mark.parametrize('signum', [signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1], ids=signal_name)
-def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path, signum):
+def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path: Path, signum) -> None:
     """``run --left-port --right-port`` (the suite against the amplifiers on the given ports, here the
     simulated pair): before issue 28 a SIGHUP left 344 rpm on the motors."""
     command = [
@@ -273,7 +277,7 @@ def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path, s
         proc.wait()
 
 
-def test_bad_parameters_are_one_clear_error(ros_context, pair):
+def test_bad_parameters_are_one_clear_error(ros_context: Context, pair) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.errors import ConfigError
@@ -304,7 +308,7 @@ def both_zero(pair) -> bool:
     return pair.left.speed_setpoint_rpm == 0 and pair.right.speed_setpoint_rpm == 0
 
 
-def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair):
+def test_lifecycle_transitions_through_the_lifecycle_services(ros_context: Context, pair) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False)
@@ -341,7 +345,7 @@ def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair)
         h.close()
 
 
-def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
+def test_configure_fails_cleanly_without_an_amplifier(ros_context: Context, pair) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False, configure_timeout_s=1.0)
@@ -355,7 +359,9 @@ def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
         h.close()
 
 
-def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair, monkeypatch):
+def test_clear_faults_service_reports_what_it_could_not_clear(
+    ros_context: Context, pair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from std_srvs.srv import Trigger
 
     h = Harness(ros_context, pair, activate=False)
@@ -386,7 +392,7 @@ def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair,
         h.close()
 
 
-def test_huge_and_non_finite_commands(harness, pair):
+def test_huge_and_non_finite_commands(harness, pair) -> None:
     harness.twist = (1e308, 0.0)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (CLAMPED_RPM, -CLAMPED_RPM),
@@ -414,7 +420,7 @@ def test_huge_and_non_finite_commands(harness, pair):
 
 
 @pytest.mark.parametrize('stop_both', [True, False])
-def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
+def test_one_side_link_lost_stops_both_sides(ros_context: Context, pair, stop_both) -> None:
     h = Harness(ros_context, pair, stop_both_on_link_loss=stop_both)
     try:
         h.twist = (0.2, 0.0)
@@ -435,7 +441,9 @@ def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
         h.close()
 
 
-def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, monkeypatch):
+def test_poller_exception_zeroes_disables_reports_and_restarts(
+    harness, pair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     harness.twist = (0.2, 0.0)
@@ -475,11 +483,11 @@ def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, mo
     assert status.level == DiagnosticStatus.ERROR and 'restarted after a poller fault' in status.message
 
 
-def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch):
+def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch: pytest.MonkeyPatch) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
 
-    def broken_set_twist(*args):
+    def broken_set_twist(*args) -> None:
         raise RuntimeError('injected bug in the cmd_vel callback')
 
     monkeypatch.setattr(harness.driver.command, 'set_twist', broken_set_twist)
@@ -488,7 +496,7 @@ def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch)
     assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
 
 
-def test_geometry_comes_from_the_vehicle_file(ros_context, pair, tmp_path):
+def test_geometry_comes_from_the_vehicle_file(ros_context: Context, pair, tmp_path: Path) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.nodes.des_driver import DesDriver

@@ -8,9 +8,11 @@ request/offer rules), so the driver reads best effort, which matches both, and h
 from __future__ import annotations
 
 import uuid
+from pathlib import Path
 
 import pytest
 from des_harness import Harness
+from rclpy.context import Context
 
 from skidsteer_power.des.simulator import SimulatedPair
 
@@ -23,7 +25,7 @@ def pair():
         yield sims
 
 
-def _best_effort_teleop(harness: Harness, ns: str):
+def _best_effort_teleop(harness: Harness, ns: str) -> None:
     """A best-effort cmd_vel publisher at 20 Hz on the harness's node (as teleop_twist_joy's)."""
     from geometry_msgs.msg import Twist
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -40,7 +42,7 @@ def _best_effort_teleop(harness: Harness, ns: str):
     harness.node.create_timer(0.05, publish)
 
 
-def test_best_effort_cmd_vel_drives(ros_context, pair):
+def test_best_effort_cmd_vel_drives(ros_context: Context, pair) -> None:
     ns = f'/t{uuid.uuid4().hex[:8]}'
     h = Harness(ros_context, pair, namespace=ns)
     try:
@@ -51,7 +53,7 @@ def test_best_effort_cmd_vel_drives(ros_context, pair):
         h.close()
 
 
-def test_reliability_override_is_honoured(ros_context, pair):
+def test_reliability_override_is_honoured(ros_context: Context, pair) -> None:
     """With ``reliability: reliable`` forced, the best-effort writer no longer matches: the motors stay
     at zero while a reliable writer (the harness's own) still drives."""
     ns = f'/t{uuid.uuid4().hex[:8]}'
@@ -71,7 +73,7 @@ def test_reliability_override_is_honoured(ros_context, pair):
         h.close()
 
 
-def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context, pair, tmp_path):
+def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context: Context, pair, tmp_path: Path) -> None:
     """The driver's "no fresh data" joint_states (a silent amplifier: NaN in position, velocity and
     effort of that side) reach a real power_estimator over DDS: counted as no data, never rejected;
     the driver's good messages before it are used (measured power)."""
@@ -103,7 +105,7 @@ def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context, pair, tmp_
         h.close()
 
 
-def test_parameter_file_matches_the_node_and_is_read(tmp_path, pair):
+def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, pair) -> None:
     """config/des_driver.yaml (installed by setup.py, passed by the launch file) lists every parameter
     with the node's default; a node started with a --params-file takes its values."""
     from pathlib import Path

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -124,7 +125,7 @@ def test_no_motor_past_its_no_load_speed(sand) -> None:
 
 @pytest.mark.parametrize('form', [['--direct'], []])
 def test_predict_cli_keys_and_bad_input(
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path, form: list[str]
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path, form: list[str]
 ) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))  # the map form builds its map here
     argv = ['predict', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--speed', '0.1', *form]

@@ -22,10 +22,12 @@ import sys
 import threading
 import time
 import uuid
+from pathlib import Path
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -41,7 +43,7 @@ SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']
 
 
 @pytest.fixture
-def estimator_graph(ros_context, tmp_path):
+def estimator_graph(ros_context: Context, tmp_path: Path):
     namespace = f'fox_{uuid.uuid4().hex[:8]}'
     estimator = PowerEstimator(
         FixedPowerPredictor(80.0),
@@ -82,7 +84,7 @@ def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
     pytest.fail(f'bridge did not start: {"".join(seen)}')
 
 
-def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
+def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph) -> None:
     ns = estimator_graph
     wanted = {f'/{ns}/power/predicted_left_w': 'std_msgs/msg/Float64',
               f'/{ns}/battery/state': 'sensor_msgs/msg/BatteryState'}  # fmt: skip
@@ -143,7 +145,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
     assert set(report['topics']) == {*wanted, f'/{ns}/power/summary'} and not report['skipped']
 
 
-def test_bad_port_is_one_clear_error():
+def test_bad_port_is_one_clear_error() -> None:
     run = subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--port', '70000'],
         capture_output=True, text=True, timeout=60, env={**os.environ},
@@ -151,7 +153,7 @@ def test_bad_port_is_one_clear_error():
     assert run.returncode == 2 and 'port must be 0..65535' in run.stderr and 'Traceback' not in run.stderr
 
 
-def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
+def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics() -> None:
     """config/foxglove/operator_layout.json is foxglove-sdk layout output (python -m
     skidsteer_power.ui.foxglove_layout), and every topic a panel reads is one the suite publishes
     (odometry comes from the robot's own odometry source)."""
@@ -168,7 +170,7 @@ def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
     assert used <= published and {'/power/predicted_left_w', '/power/measured_right_w'} <= used
 
 
-def test_latched_topics_reach_the_bridge_and_others_match_any_publisher(ros_context):
+def test_latched_topics_reach_the_bridge_and_others_match_any_publisher(ros_context: Context) -> None:
     """A transient-local message published before the bridge starts still reaches its channel; a
     best-effort (sensor-data) publisher matches too. In-process bridge (real rclpy + foxglove-sdk)."""
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data

@@ -22,6 +22,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from rclpy.context import Context
 from websockets.exceptions import InvalidStatus
 from websockets.sync import client as websockets_sync  # requirements.txt
 
@@ -34,7 +35,7 @@ CLIENT_DATA = struct.Struct('<BI')  # client message data: opcode 0x01, client c
 
 
 @pytest.fixture
-def bridge_node(ros_context):
+def bridge_node(ros_context: Context):
     """A node spun by an executor in a thread, to host an in-process bridge."""
     import threading
 
@@ -52,7 +53,7 @@ def bridge_node(ros_context):
     node.destroy_node()
 
 
-def test_origin_policy():
+def test_origin_policy() -> None:
     assert origin_allowed(None, ())
     assert origin_allowed('http://localhost:8080', ()) and origin_allowed('http://127.0.0.1', ())
     assert origin_allowed('http://[::1]:3000', ())
@@ -62,7 +63,7 @@ def test_origin_policy():
     assert not origin_allowed('http://localhost.evil.example', ())
 
 
-def test_default_host_is_loopback_and_origins_are_checked(bridge_node):
+def test_default_host_is_loopback_and_origins_are_checked(bridge_node) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     bridge = FoxgloveBridge(
@@ -82,7 +83,7 @@ def test_default_host_is_loopback_and_origins_are_checked(bridge_node):
         bridge.close()
 
 
-def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node):
+def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node) -> None:
     import foxglove
 
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
@@ -108,7 +109,7 @@ def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node):
         server.stop()
 
 
-def test_host_0000_warns(tmp_path):
+def test_host_0000_warns(tmp_path: Path) -> None:
     run = subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--host', '0.0.0.0', '--port', '0',
          '--duration', '0.5', '--topics', '/none', '--allow-publish', 'cmd_vel'],
@@ -125,7 +126,7 @@ def test_host_0000_warns(tmp_path):
 
 
 @pytest.fixture
-def driver(ros_context):
+def driver(ros_context: Context):
     from des_harness import Harness
 
     from skidsteer_power.des.simulator import SimulatedPair
@@ -151,7 +152,7 @@ def twist_cdr(speed_m_s: float) -> bytes:
 CLAMPED_RPM = 1.5 / 0.1 * 12 * 60 / (2 * 3.141592653589793)
 
 
-def test_client_publishing_reaches_des_driver_and_its_checks(driver):
+def test_client_publishing_reaches_des_driver_and_its_checks(driver) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     harness, pair, ns = driver
@@ -192,7 +193,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(driver):
 
 
 @pytest.fixture(scope='session')
-def npm_client(tmp_path_factory) -> Path:
+def npm_client(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder with @foxglove/ws-protocol and ws installed from the npm registry (skipped, with the
     reason, where node or npm is absent)."""
     node, npm = shutil.which('node'), shutil.which('npm')
@@ -211,7 +212,7 @@ def npm_client(tmp_path_factory) -> Path:
     return folder
 
 
-def test_the_npm_foxglove_client_subscribes_and_drives(npm_client, driver):
+def test_the_npm_foxglove_client_subscribes_and_drives(npm_client: Path, driver) -> None:
     """@foxglove/ws-protocol 0.8.0 (what Lichtblick and older Foxglove use), offering only
     foxglove.websocket.v1: it is served, decodes joint_states' channel, and its Teleop-style Twist
     (0.3 m/s) drives the simulated amplifiers through des_driver."""

@@ -43,7 +43,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_validate_counts_the_huge_message_as_rejected(huge_bag, tmp_path):
+def test_validate_counts_the_huge_message_as_rejected(huge_bag: Path, tmp_path: Path) -> None:
     run = _cli(
         'validate', str(huge_bag), '--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--report',
         str(tmp_path / 'rep'), '--map-cache', str(tmp_path / 'maps'), '--no-plots', '--json',
@@ -55,7 +55,7 @@ def test_validate_counts_the_huge_message_as_rejected(huge_bag, tmp_path):
     assert summary['messages']['joint_states'] == 9 * RATE_HZ  # 9 s of PLAN at 20 Hz: every one read
 
 
-def test_calibration_drops_the_huge_message_and_keeps_the_segment(huge_bag):
+def test_calibration_drops_the_huge_message_and_keeps_the_segment(huge_bag: Path) -> None:
     recording = read_recording(huge_bag)
     assert recording.js_t.size == 9 * RATE_HZ - 1  # all but the huge one
     segments, _ = find_segments(recording, SegmentOptions(settle_s=1.5))
@@ -64,7 +64,7 @@ def test_calibration_drops_the_huge_message_and_keeps_the_segment(huge_bag):
         assert seg.motor_torque_Nm == pytest.approx((0.1, 0.1))
 
 
-def test_calibrate_cli_gives_a_result_or_one_line(huge_bag, tmp_path):
+def test_calibrate_cli_gives_a_result_or_one_line(huge_bag: Path, tmp_path: Path) -> None:
     run = _cli(
         'calibrate', str(huge_bag), '--vehicle', 'test_robot_track', '--terrain', 'dry_sand',
         '--out-terrain', str(tmp_path / 't.yaml'), '--json',

@@ -99,7 +99,7 @@ def test_mismatch_and_bad_input_give_one_line_and_exit_2(
 
 
 def test_solve_fess_and_fast_keep_the_contract(
-    capsys: pytest.CaptureFixture[str], tmp_path, monkeypatch
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))
     keys = set(SOLVE_KEYS)  # DESIGN.md's solve --json contract

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,14 +26,14 @@ def track_sensitivity(sandy):
     return sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=2)
 
 
-def test_sensitivity_cases_and_parallel_equals_serial(track_sensitivity, sandy):
+def test_sensitivity_cases_and_parallel_equals_serial(track_sensitivity, sandy) -> None:
     changes = track_sensitivity['results']['packbot_track']['changes_percent']
     assert set(changes) == {f'{p}{s}' for p in SOIL_PARAMETERS for s in '+-'} | {'all+', 'all-'}
     serial = sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=1)
     assert serial['results'] == track_sensitivity['results']
 
 
-def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity):
+def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity) -> None:
     # eq. 2.6: z0 = (p / (kc/b + kphi))^(1/n); +1 % kphi on Table 8.2's sandy soil, b = 0.074 m
     k0 = 900 / 0.074 + 1523400
     k1 = 900 / 0.074 + 1.01 * 1523400
@@ -45,7 +46,7 @@ def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity):
     assert changes['phi+']['drawbar_pull_ratio'] > 0
 
 
-def test_sensitivity_cli(tmp_path, capsys):
+def test_sensitivity_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     png = tmp_path / 'sens.png'
     argv = ['sensitivity', '--vehicle', 'packbot_6wheel', '--route', 'patrol', '--workers', '1',
             '--plot', str(png), '--json']  # fmt: skip
@@ -63,7 +64,7 @@ def test_sensitivity_cli(tmp_path, capsys):
     assert exit_.value.code == 2
 
 
-def test_grid_is_table_8_4():
+def test_grid_is_table_8_4() -> None:
     rows = grid()
     assert len(rows) == 729  # 3^6
     assert {r['configuration'] for r in rows} == {'track', '4-wheel', '6-wheel'}
@@ -75,7 +76,9 @@ def test_grid_is_table_8_4():
 
 
 @pytest.mark.slow
-def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
+def test_design_study_deterministic_and_chapter_8_3(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], sandy
+) -> None:
     png = tmp_path / 'design.png'
     assert main(['design-study', '--plot', str(png), '--json']) == 0
     first = json.loads(capsys.readouterr().out)
@@ -114,7 +117,7 @@ def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
     assert ratio['track'] > max(ratio['4-wheel'], ratio['6-wheel'])
 
 
-def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases():
+def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases() -> None:
     from skidsteer_power.missions.sensitivity import derivatives
 
     base = dict.fromkeys(('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m'), 100.0)
@@ -127,7 +130,7 @@ def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases():
     assert derivatives(base, None, dict.fromkeys(base, 99.0), 0.01)['energy_J']['status'] == 'failed'
 
 
-def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
+def test_sensitivity_reports_smooth_derivatives(track_sensitivity) -> None:
     derivs = track_sensitivity['results']['packbot_track']['derivatives']
     assert set(derivs) == {*SOIL_PARAMETERS, 'all'}
     # eq. 2.6 above: sinkage falls with kphi, about -0.90 % per % (central difference)
@@ -135,7 +138,7 @@ def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
     assert derivs['kphi']['max_sinkage_m']['derivative'] == pytest.approx(-0.9, abs=0.02)
 
 
-def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_study():
+def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_study() -> None:
     """A sampled soil can be too weak for a small wheel to roll free: on sandy_soil with phi = 20 deg
     and c = 200 Pa no slip in [-1, 1] gives a 0.08 m x 0.05 m wheel zero drawbar pull (eq. 2.29 has no
     root; FESS's free-wheel load table, models/fess.py, cannot be built). The candidate is reported

@@ -10,12 +10,15 @@ from __future__ import annotations
 import math
 import time
 import uuid
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -30,7 +33,7 @@ from skidsteer_power.powertrain import Battery
 class Rig:
     """A power_estimator in its own namespace plus a probe node that publishes and records."""
 
-    def __init__(self, context, tmp_path, predictor=None, **params) -> None:
+    def __init__(self, context, tmp_path: Path, predictor=None, **params) -> None:
         self.context = context
         self.namespace = f'pe_{uuid.uuid4().hex[:8]}'
         self.tmp_path = tmp_path
@@ -137,7 +140,7 @@ def drive_measured(rig: Rig, seconds: float, rate_hz: float = 10.0) -> None:
         rig.joint_state(t, (300.0, 300.0), (0.228, 0.228))
 
 
-def test_energy_from_measured_power_matches_the_closed_form(rig_factory):
+def test_energy_from_measured_power_matches_the_closed_form(rig_factory: Callable[..., Rig]) -> None:
     """Both motors at 300 rad/s and Kt I = 0.228 N m (I = 2 A): bus power per side
     (0.228 x 300 + 0.710 x 2^2) / 0.92 = 77.43478 W (EC-45 Appendix B, DES 70/10 Appendix A; the hand
     calculation of test_measured_power_by_hand), 154.8696 W in all. Samples at 10 Hz on sim time from
@@ -159,7 +162,7 @@ def test_energy_from_measured_power_matches_the_closed_form(rig_factory):
     assert battery.percentage < 1.0 and battery.voltage > 40.0
 
 
-def test_energy_state_survives_a_restart(rig_factory, tmp_path):
+def test_energy_state_survives_a_restart(rig_factory: Callable[..., Rig], tmp_path: Path) -> None:
     rig = rig_factory(FixedPowerPredictor(999.0), use_sim_time=True, save_period_s=100.0)
     rig.set_clock(0.0)
     drive_measured(rig, 5.0)
@@ -178,7 +181,7 @@ def test_energy_state_survives_a_restart(rig_factory, tmp_path):
     assert rig.node.core.energy.energy_J == pytest.approx(energy)
 
 
-def test_periodic_save_writes_the_file(rig_factory, tmp_path):
+def test_periodic_save_writes_the_file(rig_factory: Callable[..., Rig], tmp_path: Path) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), save_period_s=0.1)
     rig.command(0.2, 0.0)
     rig.spin_until(lambda: (tmp_path / 'energy.json').exists())
@@ -190,7 +193,7 @@ def test_periodic_save_writes_the_file(rig_factory, tmp_path):
 @pytest.mark.parametrize(
     ('speed', 'yaw_rate'), [(math.nan, 0.0), (0.1, math.inf), (-math.inf, 0.0), (40.0, 0.0), (0.1, 1e4)]
 )
-def test_bad_cmd_vel_is_rejected_and_counted(rig_factory, speed, yaw_rate):
+def test_bad_cmd_vel_is_rejected_and_counted(rig_factory: Callable[..., Rig], speed, yaw_rate) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.command(speed, yaw_rate)
     rig.spin_until(lambda: rig.node.core.rejects.counts['cmd_vel'] == 1)
@@ -213,7 +216,9 @@ def test_bad_cmd_vel_is_rejected_and_counted(rig_factory, speed, yaw_rate):
         (['left_motor', 'right_motor'], [], []),
     ],
 )
-def test_bad_joint_states_are_rejected_and_counted(rig_factory, names, velocity, effort):
+def test_bad_joint_states_are_rejected_and_counted(
+    rig_factory: Callable[..., Rig], names, velocity, effort
+) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.pub_joint.publish(JointState(name=names, velocity=velocity, effort=effort))
     rig.spin_until(lambda: rig.node.core.rejects.counts['joint_states'] == 1)
@@ -228,7 +233,7 @@ def stamp_s(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def test_stale_inputs_are_flagged(rig_factory):
+def test_stale_inputs_are_flagged(rig_factory: Callable[..., Rig]) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), use_sim_time=True, diagnostics_period_s=0.1)
     rig.set_clock(1.0)
     rig.command(0.2, 0.0)
@@ -251,7 +256,9 @@ def test_stale_inputs_are_flagged(rig_factory):
     assert values['energy_source'] == 'none' and values['cmd_vel_stale'] == 'true'
 
 
-def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(rig_factory, tmp_path):
+def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(
+    rig_factory: Callable[..., Rig], tmp_path: Path
+) -> None:
     (tmp_path / 'energy.json').write_text('{"format_version": 1, "vehicle": "packbot_track", "battery": {}}')
     rig = rig_factory(FixedPowerPredictor(80.0), initial_soc=0.5)
     assert rig.node.core.battery.soc == 0.5  # not restored: the file belongs to another vehicle
@@ -266,7 +273,7 @@ def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(rig_f
     [('cmd_timeout_s', -1.0, 'cmd_timeout_s must be'), ('save_period_s', 0.0, 'save_period_s must be > 0'),
      ('vehicle', 'no_such_robot', 'no_such_robot'), ('max_speed_m_s', math.nan, 'max_speed_m_s')],
 )  # fmt: skip
-def test_bad_start_parameters_are_one_clear_error(ros_context, name, value, match):
+def test_bad_start_parameters_are_one_clear_error(ros_context: Context, name, value, match) -> None:
     from skidsteer_power.errors import SkidsteerError
 
     with pytest.raises(SkidsteerError, match=match):

@@ -10,10 +10,12 @@ import os
 import time
 import uuid
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rich.console import Console
@@ -25,7 +27,7 @@ from skidsteer_power.ui.monitor import CaseProfile, render
 
 
 @pytest.fixture
-def graph(ros_context, tmp_path_factory):
+def graph(ros_context: Context, tmp_path_factory: pytest.TempPathFactory):
     namespace = f'mon_{uuid.uuid4().hex[:8]}'
     cache = str(tmp_path_factory.mktemp('maps'))
     estimator = PowerEstimator(
@@ -67,7 +69,9 @@ def frame_recorder() -> tuple[list[str], Callable[[object], None]]:
     return frames, draw
 
 
-def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, ros_context):
+def test_case_mode_drives_the_profile_and_logs_what_it_showed(
+    graph, tmp_path: Path, ros_context: Context
+) -> None:
     namespace, estimator, executor, add = graph
     frames, draw = frame_recorder()
 
@@ -91,7 +95,7 @@ def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, r
     assert driving and any(r['predicted_right_W'] not in ('nan', '') for r in driving)
 
 
-def test_free_mode_arrow_keys_publish_cmd_vel(graph, tmp_path, ros_context):
+def test_free_mode_arrow_keys_publish_cmd_vel(graph, tmp_path: Path, ros_context: Context) -> None:
     namespace, estimator, executor, add = graph
     master, slave = os.openpty()
     keys = KeyReader(slave)
@@ -114,13 +118,13 @@ def test_free_mode_arrow_keys_publish_cmd_vel(graph, tmp_path, ros_context):
         os.close(slave)
 
 
-def test_view_mode_publishes_nothing(graph, ros_context):
+def test_view_mode_publishes_nothing(graph, ros_context: Context) -> None:
     namespace, _, _, add = graph
     monitor = add(EnergyMonitor('view', namespace=namespace, context=ros_context))
     assert not hasattr(monitor, 'pub_cmd')
 
 
-def test_command_line_profiles(tmp_path):
+def test_command_line_profiles(tmp_path: Path) -> None:
     args = build_parser().parse_args(
         ['--mode', 'case', '--speed', '0.2', '--yaw-rate', '0.35', '--duration', '3']
     )
@@ -130,7 +134,9 @@ def test_command_line_profiles(tmp_path):
     assert profile_from_args(args).duration_s == 2.0
 
 
-def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tmp_path, ros_context):
+def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(
+    graph, tmp_path: Path, ros_context: Context
+) -> None:
     """The header and the CSV show the command on cmd_vel, whoever sends it (was: always +0.00 in view
     mode); when the suite stops, what is left on screen is marked stale."""
     namespace, estimator, executor, add = graph
@@ -163,7 +169,7 @@ def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tm
     assert any(r['speed_cmd_m_s'] == '0.2' for r in rows)
 
 
-def test_view_mode_takes_the_path_energy_topics(ros_context):
+def test_view_mode_takes_the_path_energy_topics(ros_context: Context) -> None:
     """energy/path_required_wh and energy/path_margin_wh (nodes/path_hook.py) land in the view as sent."""
     from std_msgs.msg import Float64
 
@@ -190,7 +196,9 @@ def test_view_mode_takes_the_path_energy_topics(ros_context):
             node.destroy_node()
 
 
-def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(graph, ros_context):
+def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(
+    graph, ros_context: Context
+) -> None:
     """energy/time_to_empty_p10_s and _p90_s of a real power_estimator reach the battery panel
     ("time to empty H:MM:SS (p10 H:MM:SS - p90 H:MM:SS)", the values the estimator published); when
     the estimator stops, the terrain / internal power line is marked stale, not only dimmed."""
@@ -224,7 +232,9 @@ def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(grap
     monitor.close()
 
 
-def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, strong_motor_vehicle):
+def test_view_turns_effort_into_current_with_the_vehicles_motor(
+    ros_context: Context, strong_motor_vehicle: Path
+) -> None:
     """joint_states effort = K_t I (des_driver); the monitor divides by the K_t of --vehicle's motor:
     0.228 N m/A (an override of the EC-45's 0.114, Appendix B line 12), so 0.456 N m is 2 A."""
     from sensor_msgs.msg import JointState
@@ -253,7 +263,7 @@ def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, str
             node.destroy_node()
 
 
-def test_view_shows_the_corrected_online_figure(ros_context, tmp_path):
+def test_view_shows_the_corrected_online_figure(ros_context: Context, tmp_path: Path) -> None:
     """Issue 27: the monitor shows the estimate power_estimator corrects online, over real DDS on sim
     time. The predictor says 0.1 N m per motor at 12 rad/s (test_estimator_core.FixedPowerPredictor,
     30 W per side); the motors measure 0.13 N m, so after the 1 s settle the correction maps 0.1 to

@@ -12,9 +12,11 @@ import signal
 import subprocess
 import time
 import uuid
+from pathlib import Path
 
 import pytest
 import rclpy
+from rclpy.context import Context
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -44,7 +46,7 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
     ticks = [0]
     calls = [0]
 
-    def on_trigger(request, response):
+    def on_trigger(request: pytest.FixtureRequest, response):
         calls[0] += 1
         response.success = True
         return response
@@ -80,7 +82,7 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
         node.destroy_node()
 
 
-def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
+def test_lean_executor_runs_everything_once_without_waking_itself(ros_context: Context) -> None:
     received, ticks, calls, success, triggers = _exercise(ros_context, LeanExecutor)
     assert received == [float(i) for i in range(N_MESSAGES)]  # each once, in order
     assert ticks >= 3 and calls == 1 and success
@@ -104,7 +106,7 @@ def _lean_node(context, name: str):
         node.destroy_node()
 
 
-def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context):
+def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context: Context) -> None:
     with _lean_node(ros_context, 'plan') as (node, executor):
         pub = node.create_publisher(Float64, 'x', 10)
         first: list[float] = []
@@ -137,7 +139,7 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         assert len(executor._plan.by_pointer['subscription']) == 1
 
 
-def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context):
+def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context: Context) -> None:
     with _lean_node(ros_context, 'events') as (node, executor):
         incompatible: list[object] = []
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -161,7 +163,7 @@ def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros
             _spin_until(executor, lambda: False)
 
 
-def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
+def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context: Context) -> None:
     with _lean_node(ros_context, 'coro') as (node, executor):
         received: list[float] = []
 
@@ -176,7 +178,7 @@ def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
         assert executor._plan is None  # rclpy's executor served it
 
 
-def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):
+def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context: Context) -> None:
     received: list[float] = []
     dispatched = [0]  # how often the executor called the subscription's callback
     batched = Batched(lambda m: received.append(m.data), batch=8)
@@ -204,7 +206,7 @@ def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_cont
 
 
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
-def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, stop):
+def test_power_estimator_main_answers_and_exits_cleanly(ros_context: Context, tmp_path: Path, stop) -> None:
     ns = f'main_{uuid.uuid4().hex[:8]}'
     params = {'map_cache_dir': tmp_path, 'persist': 'false', 'vehicle': 'test_robot_track'}
     argv = node_command('skidsteer_power.nodes.power_estimator', ns, params)
@@ -241,7 +243,7 @@ def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, s
 # --------------------------------------------------------------------------- rclpy compatibility
 
 
-def test_the_installed_rclpy_has_every_internal_we_use(ros_context):
+def test_the_installed_rclpy_has_every_internal_we_use(ros_context: Context) -> None:
     from skidsteer_power.nodes import rclpy_compat
 
     support = rclpy_compat.check()
@@ -253,14 +255,16 @@ def test_the_installed_rclpy_has_every_internal_we_use(ros_context):
     assert not support.lean_executor(object())  # an executor without rclpy's attributes
 
 
-def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(ros_context, monkeypatch):
+def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(
+    ros_context: Context, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from skidsteer_power.nodes import rclpy_compat
 
     missing = rclpy_compat.RclpySupport('99.0.0', tested=False, wait_set=False, change_state_handler=False)
     monkeypatch.setattr(rclpy_compat, 'check', lambda: missing)
 
     class Counted(LeanExecutor):
-        def __init__(self, **kwargs):
+        def __init__(self, **kwargs) -> None:
             super().__init__(**kwargs)
             assert not self.lean  # the stock path
 
@@ -294,7 +298,7 @@ def _ask_transition(context, node_class, transition_id: int):
         node.destroy_node()
 
 
-def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_context):
+def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_context: Context) -> None:
     from lifecycle_msgs.msg import Transition
     from rclpy._rclpy_pybind11 import RCLError
     from rclpy.lifecycle import LifecycleNode
@@ -312,7 +316,7 @@ def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_c
     assert _ask_transition(ros_context, Refusing, Transition.TRANSITION_CONFIGURE).success is True
 
 
-def test_without_the_handler_the_node_class_stays_stock_rclpy(monkeypatch):
+def test_without_the_handler_the_node_class_stays_stock_rclpy(monkeypatch: pytest.MonkeyPatch) -> None:
     from rclpy.lifecycle import LifecycleNode
 
     from skidsteer_power.nodes import rclpy_compat

@@ -11,6 +11,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
+from rclpy.context import Context
 from std_msgs.msg import Float64
 from test_nodes_estimator import Rig
 
@@ -51,7 +52,7 @@ def track_map():
     return PowerMap.build(vehicle, load_terrain('dry_sand')), Powertrain.for_vehicle(vehicle), vehicle
 
 
-def test_polyline_keeps_length_and_heading_change():
+def test_polyline_keeps_length_and_heading_change() -> None:
     """A quarter circle of R = 2 m sampled every 5 degrees: the route's length is the polyline's
     (18 chords of 2 * 2 sin(2.5 deg)), its total turn pi/2 (one half chord each end straight)."""
     angle = np.radians(np.arange(0, 91, 5))
@@ -67,7 +68,7 @@ def test_polyline_keeps_length_and_heading_change():
     assert all(r > 0 for r in radii)  # left turn (REP 103)
 
 
-def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
+def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map) -> None:
     power_map, powertrain, vehicle = track_map
     x = np.array([0.0, 1.0, 1.0, 2.0, 5.0])
     route = route_from_polyline(x, np.zeros(5), SPEED)
@@ -80,7 +81,7 @@ def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
     assert energy.return_J == pytest.approx(straight, rel=1e-12)
 
 
-def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map):
+def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map) -> None:
     """Maps flag turns tighter than 2 x tread as ``limited`` (maps module doc): a half circle of
     R = 0.3 m (< 2 x 0.426 m for the test robot's track) is counted there and back; a straight
     path has no flagged segment."""
@@ -105,7 +106,9 @@ class CountingMap:
         return self.power_map.query(speed, yaw_rate)
 
 
-def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(tmp_path, track_map):
+def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(
+    tmp_path: Path, track_map
+) -> None:
     """While the adaptation learns, the terrain scale moves on every estimator tick: the tracker keeps
     the map's loads and reruns only the powertrain, with the same energies as a fresh computation."""
     power_map, powertrain, _ = track_map
@@ -128,12 +131,12 @@ def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_sc
 @pytest.mark.parametrize(
     ('x', 'y', 'speed'), [([0.0], [0.0], 0.3), ([0, 0], [0, 0], 0.3), ([0, 1], [0, 0], 0.0)]
 )
-def test_bad_paths_are_input_errors(x, y, speed):
+def test_bad_paths_are_input_errors(x, y, speed) -> None:
     with pytest.raises(InputError):
         route_from_polyline(x, y, speed)
 
 
-def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(tmp_path, track_map):
+def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(tmp_path: Path, track_map) -> None:
     """Pure check of the polyline approximation: the route sampled at 4 points per metre."""
     power_map, powertrain, vehicle = track_map
     csv = tmp_path / 'route.csv'
@@ -156,11 +159,11 @@ def _path_msg(xy: np.ndarray) -> Path:
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory):
     return str(tmp_path_factory.mktemp('maps'))
 
 
-def _rig_with_path_topics(ros_context, tmp_path, cache_dir, **params):
+def _rig_with_path_topics(ros_context: Context, tmp_path: Path, cache_dir, **params):
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand', **params)
     for topic in ('energy/path_required_wh', 'energy/path_margin_wh'):
         rig.received[topic] = []
@@ -170,7 +173,9 @@ def _rig_with_path_topics(ros_context, tmp_path, cache_dir, **params):
     return rig
 
 
-def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir, capsys):
+def test_live_path_energy_equals_mission_route(
+    ros_context: Context, tmp_path: Path, cache_dir, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Real rclpy: a Path published on ``plan`` gives ``mission --route FILE.csv``'s battery energy to
     1 % (measured: -0.03 % with a pose every 0.25 m, -0.04 % every 1 m with arcs sampled at most every
     5 degrees: the chords cut the arcs short), and the margin is remaining - there - back - reserve."""
@@ -196,7 +201,9 @@ def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir,
         rig.close()
 
 
-def test_negative_margin_warns_and_speed_follows_the_command(ros_context, tmp_path, cache_dir):
+def test_negative_margin_warns_and_speed_follows_the_command(
+    ros_context: Context, tmp_path: Path, cache_dir
+) -> None:
     rig = _rig_with_path_topics(ros_context, tmp_path, cache_dir, path_reserve_wh=1e6)
     try:
         xy = np.column_stack([np.linspace(0, 10, 41), np.zeros(41)])
@@ -220,14 +227,14 @@ def test_negative_margin_warns_and_speed_follows_the_command(ros_context, tmp_pa
         rig.close()
 
 
-def test_negative_reserve_is_refused(ros_context, tmp_path, cache_dir):
+def test_negative_reserve_is_refused(ros_context: Context, tmp_path: Path, cache_dir) -> None:
     from skidsteer_power.errors import ConfigError
 
     with pytest.raises(ConfigError, match='path_reserve_wh'):
         Rig(ros_context, tmp_path, map_cache_dir=cache_dir, path_reserve_wh=-1.0)
 
 
-def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
+def test_monitor_shows_the_path_energy_and_flags_a_shortfall() -> None:
     from rich.console import Console
 
     from skidsteer_power.ui.monitor import MonitorView, render
@@ -241,7 +248,7 @@ def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
 
 
 # --- the online terrain scale in the path energy (issue 19 with issue 15's adaptation) ------------
-def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path):
+def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path: Path) -> None:
     """The estimator's map is for dry sand; the twin (independent physics, docs/TWIN.md) drives on clay.
     The twin first drives the Table 7.3 sets (4 s holds, 1 s stops); its joint_states and commands
     go through the estimator core, whose terrain scale carries over between commands. Then the twin
@@ -280,7 +287,9 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     assert abs(corrected / truth - 1) < 0.25 * abs(plain / truth - 1)
 
 
-def test_live_path_energy_applies_the_published_terrain_scale(ros_context, tmp_path, cache_dir):
+def test_live_path_energy_applies_the_published_terrain_scale(
+    ros_context: Context, tmp_path: Path, cache_dir
+) -> None:
     """Real rclpy on sim time: joint_states whose terrain torque is 1.5 x the predicted one (the
     internal torque as predicted: measured = predicted internal + 1.5 x predicted terrain, a hand
     construction), over two alternating commands. ``power/correction`` publishes terrain_scale 1.5

@@ -6,11 +6,12 @@ from __future__ import annotations
 import time
 
 import rclpy
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 
 
-def test_message_crosses_between_two_nodes(ros_context):
+def test_message_crosses_between_two_nodes(ros_context: Context) -> None:
     talker = rclpy.create_node('smoke_talker', context=ros_context)
     listener = rclpy.create_node('smoke_listener', context=ros_context)
     received: list[str] = []

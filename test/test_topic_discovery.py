@@ -9,6 +9,7 @@ import time
 import uuid
 
 import pytest
+from rclpy.context import Context
 
 from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics
 from skidsteer_power.errors import InputError
@@ -55,7 +56,7 @@ def _wait_for(predicate, timeout_s: float = 20.0) -> None:
         time.sleep(0.05)
 
 
-def test_a_new_publisher_is_discovered_once_with_its_type(ros_context):
+def test_a_new_publisher_is_discovered_once_with_its_type(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import Float64, String
 
@@ -78,7 +79,7 @@ def test_a_new_publisher_is_discovered_once_with_its_type(ros_context):
         listener.destroy_node()
 
 
-def test_named_topics_only_and_graph_topics_when_named(ros_context):
+def test_named_topics_only_and_graph_topics_when_named(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import String
 
@@ -95,7 +96,7 @@ def test_named_topics_only_and_graph_topics_when_named(ros_context):
         node.destroy_node()
 
 
-def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(ros_context):
+def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import Float64, String
 
@@ -126,6 +127,6 @@ def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(r
         node.destroy_node()
 
 
-def test_absolute_topic_adds_the_root_slash_once():
+def test_absolute_topic_adds_the_root_slash_once() -> None:
     assert absolute_topic('cmd_vel') == '/cmd_vel'
     assert absolute_topic('/cmd_vel') == '/cmd_vel'
