@@ -300,7 +300,7 @@ BUNDLED = Path(__file__).resolve().parents[1] / 'bags'
 
 
 @pytest.fixture(scope='module')
-def bundled_maps(tmp_path_factory: pytest.TempPathFactory):
+def bundled_maps(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp('maps')
 
 
@@ -314,7 +314,7 @@ def _validate_bundled(name, vehicle, terrain, report, maps, odom='/ground_truth/
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'])
 def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(
-    tmp_path: Path, bundled_maps, vehicle
+    tmp_path: Path, bundled_maps: Path, vehicle
 ) -> None:
     """The bundled bags are recordings of the digital twin (bags/README.md), not of the estimator's
     own model: there is no /power/predicted to reproduce; the estimator is compared with the twin's
@@ -338,7 +338,7 @@ def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(
 
 
 def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(
-    tmp_path: Path, bundled_maps
+    tmp_path: Path, bundled_maps: Path
 ) -> None:
     """test_robot_4wheel_dry_sand.mcap was driven on clay (bags/README.md): predicting with the
     terrain its name says gives a far larger energy error than with its true terrain."""
@@ -351,7 +351,7 @@ def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(
     assert wrong_error > 3 * right_error
 
 
-def test_set_points_predict_the_twins_wider_turns(tmp_path: Path, bundled_maps) -> None:
+def test_set_points_predict_the_twins_wider_turns(tmp_path: Path, bundled_maps: Path) -> None:
     """Issue 25: --kinematics cmd predicts at the wheel speed set points, twist takes the command as
     the motion. Reference: the twin's ground-truth circles (a model that does not use FESS; DESIGN.md).
     Per segment the set-point prediction's radius must be nearer the twin's than the commanded one,

@@ -21,6 +21,7 @@ import pytest
 import yaml
 
 from skidsteer_power.calibration import (
+    CalibrationResult,
     SegmentOptions,
     calibrate,
     calibrate_bags,
@@ -41,11 +42,11 @@ TORQUE_SHARE = 0.4  # the hand-made bound case: measured torques scaled to 40 %
 
 
 @pytest.fixture(scope='module')
-def fit():
+def fit() -> CalibrationResult:
     return calibrate_bags([BAG], VEHICLE, 'sand_bin')[0]
 
 
-def calibrate_scaled(share: float):
+def calibrate_scaled(share: float) -> CalibrationResult:
     """Calibration from sand_bin of the bag's segments with the measured torques times ``share``."""
     vehicle = factory.load_vehicle_config(VEHICLE)
     powertrain = factory.powertrain_for(vehicle)
@@ -58,7 +59,7 @@ def calibrate_scaled(share: float):
 
 
 @pytest.fixture(scope='module')
-def pinned():
+def pinned() -> CalibrationResult:
     return calibrate_scaled(TORQUE_SHARE)
 
 
@@ -78,7 +79,9 @@ def test_bound_hits_by_hand() -> None:
     assert hits == {'n': 'upper', 'phi': 'lower'}
 
 
-def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(pinned, tmp_path: Path) -> None:
+def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(
+    pinned: CalibrationResult, tmp_path: Path
+) -> None:
     fit = pinned
     payload = fit.as_json()
     phi = payload['parameters']['phi']
@@ -98,7 +101,7 @@ def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(pinned, tmp_path
     assert block['at_bound'] == ['phi'] and 'phi' not in block['parameters']
 
 
-def test_suggested_holds_shrink_the_widest_interval(fit) -> None:
+def test_suggested_holds_shrink_the_widest_interval(fit: CalibrationResult) -> None:
     vehicle = factory.load_vehicle_config(VEHICLE)
     suggestion = suggest_holds(vehicle, fit)
     widest = suggestion['widest_parameter']

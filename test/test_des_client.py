@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -32,13 +33,13 @@ TIMING = LinkTiming(ack_timeout_s=0.3, reply_timeout_s=0.3, retries=2)
 
 
 @pytest.fixture
-def sim():
+def sim() -> Iterator[SimulatedDes]:
     with SimulatedDes(38400) as simulator:
         yield simulator
 
 
 @pytest.fixture
-def amp(sim):
+def amp(sim: SimulatedDes) -> Iterator[DesAmplifier]:
     with DesAmplifier.open(sim.port, 38400, timing=TIMING) as amplifier:
         yield amplifier
 
@@ -67,13 +68,13 @@ def test_exception_tree() -> None:
         assert issubclass(cls, DesLinkError)
 
 
-def test_the_port_is_a_real_pty_behind_a_symlink(sim, amp) -> None:
+def test_the_port_is_a_real_pty_behind_a_symlink(sim: SimulatedDes, amp: DesAmplifier) -> None:
     assert os.path.islink(sim.port)
     assert os.path.realpath(sim.port).startswith('/dev/pts/')
     assert amp.link.is_open
 
 
-def test_read_version(amp) -> None:
+def test_read_version(amp: DesAmplifier) -> None:
     version = amp.read_version()
     assert (
         version.software,
@@ -83,7 +84,7 @@ def test_read_version(amp) -> None:
     ) == SIM_VERSION
 
 
-def test_status_after_power_up_and_enable(sim, amp) -> None:
+def test_status_after_power_up_and_enable(sim: SimulatedDes, amp: DesAmplifier) -> None:
     status = amp.read_status()
     assert Status.ENABLED not in status and status.power_stage == 'off'
     amp.enable()
@@ -94,7 +95,7 @@ def test_status_after_power_up_and_enable(sim, amp) -> None:
     assert sim.commands_of(OpCode.ENABLE)[-1].words == (0,)
 
 
-def test_set_velocity_and_read_it_back(sim, amp) -> None:
+def test_set_velocity_and_read_it_back(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     amp.set_velocity(-1500)
     assert sim.speed_setpoint_rpm == -1500
@@ -105,7 +106,7 @@ def test_set_velocity_and_read_it_back(sim, amp) -> None:
     assert amp.read_current() < 0  # driving backwards against friction needs negative current
 
 
-def test_set_current_and_read_it(sim, amp) -> None:
+def test_set_current_and_read_it(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     amp.set_current(800)
     assert sim.current_mode and sim.current_setpoint_ma == 800
@@ -114,7 +115,7 @@ def test_set_current_and_read_it(sim, amp) -> None:
     assert amp.read_velocity().actual_rpm > 0
 
 
-def test_current_through_op_code_0x29(sim) -> None:
+def test_current_through_op_code_0x29(sim: SimulatedDes) -> None:
     config = DesConfig(current_source='is_must')
     with DesAmplifier.open(sim.port, 38400, config=config, timing=TIMING) as amp:
         amp.enable()
@@ -123,7 +124,7 @@ def test_current_through_op_code_0x29(sim) -> None:
     assert sim.commands_of(OpCode.READ_CURRENT_IS_MUST)
 
 
-def test_stop_motion_toggles(sim, amp) -> None:
+def test_stop_motion_toggles(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     amp.set_velocity(1000)
     amp.stop_motion()
@@ -133,14 +134,14 @@ def test_stop_motion_toggles(sim, amp) -> None:
     assert amp.read_velocity().setpoint_rpm == 1000
 
 
-def test_set_point_out_of_int16_range(amp) -> None:
+def test_set_point_out_of_int16_range(amp: DesAmplifier) -> None:
     with pytest.raises(InputError, match='int16'):
         amp.set_velocity(40000)
     with pytest.raises(InputError, match='int16'):
         amp.set_current(-40000)
 
 
-def test_parameters_read_set_save_reset(sim, amp) -> None:
+def test_parameters_read_set_save_reset(sim: SimulatedDes, amp: DesAmplifier) -> None:
     assert amp.read_parameter(Param.ENCODER_RESOLUTION) == 2048  # ch. 7.1.2: 2048 pulses per turn
     amp.set_parameter(Param.MAX_SPEED_RPM, 5000)
     assert amp.read_parameter(Param.MAX_SPEED_RPM) == 5000
@@ -165,12 +166,12 @@ def test_lword_parameter_round_trip(low_first) -> None:
         assert amp.read_parameter(Param.SPEED_P, lword=True) == 70000
 
 
-def test_unknown_parameter_is_refused_with_nak(amp) -> None:
+def test_unknown_parameter_is_refused_with_nak(amp: DesAmplifier) -> None:
     with pytest.raises(DesNak, match='refused'):
         amp.read_parameter(99)
 
 
-def test_encoder_counter_advances_with_the_motor(sim, amp) -> None:
+def test_encoder_counter_advances_with_the_motor(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     amp.set_velocity(60)  # 1 rev/s = 8192 quadrature counts/s (2048 lines x 4)
     assert wait_for(lambda: abs(amp.read_velocity().actual_rpm - 60) <= 2)
@@ -181,7 +182,7 @@ def test_encoder_counter_advances_with_the_motor(sim, amp) -> None:
     assert 0 < moved < 8192  # forward, less than one turn in well under a second
 
 
-def test_errors_read_clear_and_fault_exception(sim, amp) -> None:
+def test_errors_read_clear_and_fault_exception(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     assert amp.read_errors() == DesErrorFlags(0)
     sim.raise_error(DesErrorFlags.OVER_CURRENT)
@@ -195,7 +196,7 @@ def test_errors_read_clear_and_fault_exception(sim, amp) -> None:
     amp.raise_for_errors()
 
 
-def test_reset_restores_power_up_state(sim, amp) -> None:
+def test_reset_restores_power_up_state(sim: SimulatedDes, amp: DesAmplifier) -> None:
     amp.enable()
     amp.set_velocity(500)
     amp.reset()
@@ -206,14 +207,14 @@ def test_reset_restores_power_up_state(sim, amp) -> None:
 # -- every fault kind ---------------------------------------------------------------------------
 
 
-def test_dropped_command_is_retried(sim) -> None:
+def test_dropped_command_is_retried(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.1, retries=1) as amp:
         sim.inject(Fault.DROP)
         assert amp.read_status() is not None
         assert amp.link.stats.timeouts == 1 and amp.link.stats.retries == 1
 
 
-def test_dropped_command_without_retries_times_out(sim) -> None:
+def test_dropped_command_without_retries_times_out(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.1, retries=0) as amp:
         sim.inject(Fault.DROP)
         with pytest.raises(DesTimeout, match='no acknowledge of op code 0x01'):
@@ -221,7 +222,7 @@ def test_dropped_command_without_retries_times_out(sim) -> None:
         assert amp.read_status() is not None  # the next one goes through
 
 
-def test_nak_is_retried_or_raised(sim) -> None:
+def test_nak_is_retried_or_raised(sim: SimulatedDes) -> None:
     with open_amp(sim, retries=1) as amp:
         sim.inject(Fault.NAK)
         amp.read_errors()
@@ -232,7 +233,7 @@ def test_nak_is_retried_or_raised(sim) -> None:
             amp.read_errors()
 
 
-def test_corrupt_reply_is_refused_and_repeated(sim) -> None:
+def test_corrupt_reply_is_refused_and_repeated(sim: SimulatedDes) -> None:
     with open_amp(sim, retries=0, ack_timeout_s=0.3, reply_timeout_s=0.3) as amp:
         sim.inject(Fault.CORRUPT_CRC)
         assert amp.read_parameter(Param.POLE_PAIRS) == 2  # Appendix B line 29: 2 pole pairs
@@ -251,7 +252,7 @@ def test_corrupt_reply_without_repeat_raises_crc_error() -> None:
             assert amp.read_status() is not None
 
 
-def test_short_delay_is_tolerated_long_delay_times_out(sim) -> None:
+def test_short_delay_is_tolerated_long_delay_times_out(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.3, reply_timeout_s=0.3, retries=0) as amp:
         sim.inject(Fault.DELAY, delay_s=0.05)
         amp.read_status()
@@ -263,7 +264,7 @@ def test_short_delay_is_tolerated_long_delay_times_out(sim) -> None:
         assert amp.link.stats.flushed_bytes >= 1
 
 
-def test_silent_amplifier_times_out_until_it_answers_again(sim) -> None:
+def test_silent_amplifier_times_out_until_it_answers_again(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.05, retries=1) as amp:
         sim.inject(Fault.SILENT, count=-1)
         with pytest.raises(DesTimeout):
@@ -273,7 +274,7 @@ def test_silent_amplifier_times_out_until_it_answers_again(sim) -> None:
         assert amp.read_status() is not None
 
 
-def test_closed_port_raises_port_error_and_reopens(sim) -> None:
+def test_closed_port_raises_port_error_and_reopens(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.3, reply_timeout_s=0.3) as amp:
         amp.read_status()
         sim.close_port()
@@ -287,7 +288,7 @@ def test_closed_port_raises_port_error_and_reopens(sim) -> None:
         assert amp.read_version().software == SIM_VERSION[0]
 
 
-def test_garbage_on_the_line_is_flushed(sim) -> None:
+def test_garbage_on_the_line_is_flushed(sim: SimulatedDes) -> None:
     with open_amp(sim, ack_timeout_s=0.3, reply_timeout_s=0.3) as amp:
         sim.send_raw(b'\x13\x37garbage')  # bytes the host did not ask for
         time.sleep(0.05)
@@ -306,7 +307,7 @@ def test_unopened_link_refuses() -> None:
 # -- CLI ----------------------------------------------------------------------------------------
 
 
-def test_cli_probe_json(sim, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_probe_json(sim: SimulatedDes, capsys: pytest.CaptureFixture[str]) -> None:
     sim.enabled = True
     sim.speed_setpoint_rpm = 1200
     assert wait_for(lambda: abs(sim.speed_rpm - 1200) < 5)
@@ -326,7 +327,9 @@ def test_cli_probe_bad_port_is_one_line(capsys: pytest.CaptureFixture[str]) -> N
     assert err.count('\n') == 1 and 'cannot open DES port' in err
 
 
-def test_cli_probe_silent_amplifier_is_one_line(sim, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_probe_silent_amplifier_is_one_line(
+    sim: SimulatedDes, capsys: pytest.CaptureFixture[str]
+) -> None:
     sim.inject(Fault.SILENT, count=-1)
     assert cli_main(['des', 'probe', '--port', sim.port, '--timeout', '0.05']) == 2
     err = capsys.readouterr().err

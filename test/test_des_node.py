@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -31,19 +32,19 @@ LEFT_RPM, RIGHT_RPM = 107, -351
 
 
 @pytest.fixture
-def pair():
+def pair() -> Iterator[SimulatedPair]:
     with SimulatedPair(38400) as sims:
         yield sims
 
 
 @pytest.fixture
-def harness(ros_context: Context, pair):
+def harness(ros_context: Context, pair: SimulatedPair) -> Iterator[Harness]:
     h = Harness(ros_context, pair)
     yield h
     h.close()
 
 
-def test_cmd_vel_to_setpoints_to_joint_states(harness, pair) -> None:
+def test_cmd_vel_to_setpoints_to_joint_states(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (0.2, 0.5)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (LEFT_RPM, RIGHT_RPM)
@@ -86,7 +87,7 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair) -> None:
 
 
 def test_published_effort_uses_the_vehicles_motor(
-    ros_context: Context, pair, strong_motor_vehicle: Path
+    ros_context: Context, pair: SimulatedPair, strong_motor_vehicle: Path
 ) -> None:
     """effort = K_t I with the K_t of the vehicle's powertrain (here 0.228 N m/A = 2 x the EC-45's
     0.114, Appendix B line 12), not a built-in EC-45."""
@@ -107,7 +108,7 @@ def test_published_effort_uses_the_vehicles_motor(
         harness.close()
 
 
-def test_twist_stamped_by_parameter(ros_context: Context, pair) -> None:
+def test_twist_stamped_by_parameter(ros_context: Context, pair: SimulatedPair) -> None:
     h = Harness(ros_context, pair, twist_stamped=True)
     try:
         h.twist = (0.2, 0.5)
@@ -118,7 +119,7 @@ def test_twist_stamped_by_parameter(ros_context: Context, pair) -> None:
         h.close()
 
 
-def test_watchdog_stops_the_motors(harness, pair) -> None:
+def test_watchdog_stops_the_motors(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     harness.twist = None  # cmd_vel stops
@@ -131,7 +132,7 @@ def test_watchdog_stops_the_motors(harness, pair) -> None:
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_amplifier_error_stops_both_sides_until_cleared(harness, pair) -> None:
+def test_amplifier_error_stops_both_sides_until_cleared(harness: Harness, pair: SimulatedPair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
 
@@ -159,7 +160,7 @@ def test_amplifier_error_stops_both_sides_until_cleared(harness, pair) -> None:
     assert harness.spin_until(lambda: harness.side_diag('left')[0].level == DiagnosticStatus.OK)
 
 
-def test_lost_port_is_reported_and_reopened(harness, pair) -> None:
+def test_lost_port_is_reported_and_reopened(harness: Harness, pair: SimulatedPair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     harness.twist = (0.2, 0.0)
@@ -180,7 +181,7 @@ def test_lost_port_is_reported_and_reopened(harness, pair) -> None:
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_silent_amplifier_is_reported_and_reconnected(harness, pair) -> None:
+def test_silent_amplifier_is_reported_and_reconnected(harness: Harness, pair: SimulatedPair) -> None:
     from skidsteer_power.des.simulator import Fault
 
     harness.twist = (0.2, 0.0)
@@ -204,7 +205,9 @@ ENDING_SIGNALS = [
 
 
 @pytest.mark.parametrize('signum', ENDING_SIGNALS, ids=signal_name)
-def test_every_ending_signal_zeroes_speed_then_disables(ros_context: Context, pair, signum) -> None:
+def test_every_ending_signal_zeroes_speed_then_disables(
+    ros_context: Context, pair: SimulatedPair, signum
+) -> None:
     """Before issue 28 only SIGINT and SIGTERM did: SIGHUP, SIGQUIT, SIGUSR1 ... ended des_driver
     with both amplifiers enabled and turning."""
     from geometry_msgs.msg import Twist
@@ -252,7 +255,9 @@ def test_every_ending_signal_zeroes_speed_then_disables(ros_context: Context, pa
 
 
 @pytest.mark.parametrize('signum', [signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1], ids=signal_name)
-def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path: Path, signum) -> None:
+def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(
+    pair: SimulatedPair, tmp_path: Path, signum
+) -> None:
     """``run --left-port --right-port`` (the suite against the amplifiers on the given ports, here the
     simulated pair): before issue 28 a SIGHUP left 344 rpm on the motors."""
     command = [
@@ -277,7 +282,7 @@ def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path: P
         proc.wait()
 
 
-def test_bad_parameters_are_one_clear_error(ros_context: Context, pair) -> None:
+def test_bad_parameters_are_one_clear_error(ros_context: Context, pair: SimulatedPair) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.errors import ConfigError
@@ -304,11 +309,13 @@ FIRST_STEP_MAX_RPM = 115
 # 0.1 / 0.1 * 12 = 12 rad/s = 114.6 rpm is the largest first set point after a stop.
 
 
-def both_zero(pair) -> bool:
+def both_zero(pair: SimulatedPair) -> bool:
     return pair.left.speed_setpoint_rpm == 0 and pair.right.speed_setpoint_rpm == 0
 
 
-def test_lifecycle_transitions_through_the_lifecycle_services(ros_context: Context, pair) -> None:
+def test_lifecycle_transitions_through_the_lifecycle_services(
+    ros_context: Context, pair: SimulatedPair
+) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False)
@@ -345,7 +352,7 @@ def test_lifecycle_transitions_through_the_lifecycle_services(ros_context: Conte
         h.close()
 
 
-def test_configure_fails_cleanly_without_an_amplifier(ros_context: Context, pair) -> None:
+def test_configure_fails_cleanly_without_an_amplifier(ros_context: Context, pair: SimulatedPair) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False, configure_timeout_s=1.0)
@@ -360,7 +367,7 @@ def test_configure_fails_cleanly_without_an_amplifier(ros_context: Context, pair
 
 
 def test_clear_faults_service_reports_what_it_could_not_clear(
-    ros_context: Context, pair, monkeypatch: pytest.MonkeyPatch
+    ros_context: Context, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from std_srvs.srv import Trigger
 
@@ -392,7 +399,7 @@ def test_clear_faults_service_reports_what_it_could_not_clear(
         h.close()
 
 
-def test_huge_and_non_finite_commands(harness, pair) -> None:
+def test_huge_and_non_finite_commands(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (1e308, 0.0)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (CLAMPED_RPM, -CLAMPED_RPM),
@@ -420,7 +427,7 @@ def test_huge_and_non_finite_commands(harness, pair) -> None:
 
 
 @pytest.mark.parametrize('stop_both', [True, False])
-def test_one_side_link_lost_stops_both_sides(ros_context: Context, pair, stop_both) -> None:
+def test_one_side_link_lost_stops_both_sides(ros_context: Context, pair: SimulatedPair, stop_both) -> None:
     h = Harness(ros_context, pair, stop_both_on_link_loss=stop_both)
     try:
         h.twist = (0.2, 0.0)
@@ -442,7 +449,7 @@ def test_one_side_link_lost_stops_both_sides(ros_context: Context, pair, stop_bo
 
 
 def test_poller_exception_zeroes_disables_reports_and_restarts(
-    harness, pair, monkeypatch: pytest.MonkeyPatch
+    harness: Harness, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
@@ -483,7 +490,9 @@ def test_poller_exception_zeroes_disables_reports_and_restarts(
     assert status.level == DiagnosticStatus.ERROR and 'restarted after a poller fault' in status.message
 
 
-def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_exception_in_a_callback_zeroes_and_disables(
+    harness: Harness, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
 
@@ -496,7 +505,9 @@ def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch:
     assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
 
 
-def test_geometry_comes_from_the_vehicle_file(ros_context: Context, pair, tmp_path: Path) -> None:
+def test_geometry_comes_from_the_vehicle_file(
+    ros_context: Context, pair: SimulatedPair, tmp_path: Path
+) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.nodes.des_driver import DesDriver

@@ -8,6 +8,7 @@ request/offer rules), so the driver reads best effort, which matches both, and h
 from __future__ import annotations
 
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -20,7 +21,7 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
-def pair():
+def pair() -> Iterator[SimulatedPair]:
     with SimulatedPair(38400) as sims:
         yield sims
 
@@ -42,7 +43,7 @@ def _best_effort_teleop(harness: Harness, ns: str) -> None:
     harness.node.create_timer(0.05, publish)
 
 
-def test_best_effort_cmd_vel_drives(ros_context: Context, pair) -> None:
+def test_best_effort_cmd_vel_drives(ros_context: Context, pair: SimulatedPair) -> None:
     ns = f'/t{uuid.uuid4().hex[:8]}'
     h = Harness(ros_context, pair, namespace=ns)
     try:
@@ -53,7 +54,7 @@ def test_best_effort_cmd_vel_drives(ros_context: Context, pair) -> None:
         h.close()
 
 
-def test_reliability_override_is_honoured(ros_context: Context, pair) -> None:
+def test_reliability_override_is_honoured(ros_context: Context, pair: SimulatedPair) -> None:
     """With ``reliability: reliable`` forced, the best-effort writer no longer matches: the motors stay
     at zero while a reliable writer (the harness's own) still drives."""
     ns = f'/t{uuid.uuid4().hex[:8]}'
@@ -73,7 +74,9 @@ def test_reliability_override_is_honoured(ros_context: Context, pair) -> None:
         h.close()
 
 
-def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context: Context, pair, tmp_path: Path) -> None:
+def test_estimator_counts_the_drivers_no_data_as_no_data(
+    ros_context: Context, pair: SimulatedPair, tmp_path: Path
+) -> None:
     """The driver's "no fresh data" joint_states (a silent amplifier: NaN in position, velocity and
     effort of that side) reach a real power_estimator over DDS: counted as no data, never rejected;
     the driver's good messages before it are used (measured power)."""
@@ -105,7 +108,7 @@ def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context: Context, p
         h.close()
 
 
-def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, pair) -> None:
+def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, pair: SimulatedPair) -> None:
     """config/des_driver.yaml (installed by setup.py, passed by the launch file) lists every parameter
     with the node's default; a node started with a --params-file takes its values."""
     from pathlib import Path

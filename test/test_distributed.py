@@ -9,6 +9,7 @@ import json
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -38,7 +39,7 @@ def _stop(processes: list[subprocess.Popen]) -> None:
 
 
 @pytest.fixture(scope='module')
-def scheduler(tmp_path_factory: pytest.TempPathFactory):
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """tcp:// address of a scheduler with two single-threaded workers (separate processes)."""
     from dask.distributed import Client
 
@@ -86,7 +87,7 @@ def _design(capsys: pytest.CaptureFixture[str], *extra):
 
 
 def test_design_study_on_a_cluster_equals_the_local_one(
-    scheduler, capsys: pytest.CaptureFixture[str]
+    scheduler: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     remote = _design(capsys, '--scheduler', scheduler)
     assert '2 worker' in remote['uncertainty']['engine'] and scheduler in remote['uncertainty']['engine']
@@ -102,7 +103,7 @@ def test_design_study_on_a_cluster_equals_the_local_one(
 
 
 def test_fleet_validation_on_a_cluster_reports_every_bag(
-    scheduler, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    scheduler: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bags = tmp_path / 'bags'
     bags.mkdir()

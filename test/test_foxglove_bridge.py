@@ -22,6 +22,7 @@ import sys
 import threading
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -43,7 +44,7 @@ SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']
 
 
 @pytest.fixture
-def estimator_graph(ros_context: Context, tmp_path: Path):
+def estimator_graph(ros_context: Context, tmp_path: Path) -> Iterator[str]:
     namespace = f'fox_{uuid.uuid4().hex[:8]}'
     estimator = PowerEstimator(
         FixedPowerPredictor(80.0),
@@ -84,7 +85,7 @@ def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
     pytest.fail(f'bridge did not start: {"".join(seen)}')
 
 
-def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph) -> None:
+def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph: str) -> None:
     ns = estimator_graph
     wanted = {f'/{ns}/power/predicted_left_w': 'std_msgs/msg/Float64',
               f'/{ns}/battery/state': 'sensor_msgs/msg/BatteryState'}  # fmt: skip

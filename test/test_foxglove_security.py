@@ -19,14 +19,23 @@ import struct
 import subprocess
 import sys
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 from rclpy.context import Context
+from rclpy.node import Node
 from websockets.exceptions import InvalidStatus
 from websockets.sync import client as websockets_sync  # requirements.txt
 
 from skidsteer_power.nodes.foxglove_front import origin_allowed
+
+if TYPE_CHECKING:
+    from des_harness import Harness
+
+    from skidsteer_power.des.simulator import SimulatedPair
+
 
 pytestmark = pytest.mark.ros
 CLIENT_JS = Path(__file__).resolve().parent / 'foxglove_npm' / 'client.js'
@@ -35,7 +44,7 @@ CLIENT_DATA = struct.Struct('<BI')  # client message data: opcode 0x01, client c
 
 
 @pytest.fixture
-def bridge_node(ros_context: Context):
+def bridge_node(ros_context: Context) -> Iterator[Node]:
     """A node spun by an executor in a thread, to host an in-process bridge."""
     import threading
 
@@ -63,7 +72,7 @@ def test_origin_policy() -> None:
     assert not origin_allowed('http://localhost.evil.example', ())
 
 
-def test_default_host_is_loopback_and_origins_are_checked(bridge_node) -> None:
+def test_default_host_is_loopback_and_origins_are_checked(bridge_node: Node) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     bridge = FoxgloveBridge(
@@ -83,7 +92,7 @@ def test_default_host_is_loopback_and_origins_are_checked(bridge_node) -> None:
         bridge.close()
 
 
-def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node) -> None:
+def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node: Node) -> None:
     import foxglove
 
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
@@ -126,7 +135,7 @@ def test_host_0000_warns(tmp_path: Path) -> None:
 
 
 @pytest.fixture
-def driver(ros_context: Context):
+def driver(ros_context: Context) -> Iterator[tuple[Harness, SimulatedPair, str]]:
     from des_harness import Harness
 
     from skidsteer_power.des.simulator import SimulatedPair
@@ -152,7 +161,9 @@ def twist_cdr(speed_m_s: float) -> bytes:
 CLAMPED_RPM = 1.5 / 0.1 * 12 * 60 / (2 * 3.141592653589793)
 
 
-def test_client_publishing_reaches_des_driver_and_its_checks(driver) -> None:
+def test_client_publishing_reaches_des_driver_and_its_checks(
+    driver: tuple[Harness, SimulatedPair, str],
+) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     harness, pair, ns = driver
@@ -212,7 +223,9 @@ def npm_client(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def test_the_npm_foxglove_client_subscribes_and_drives(npm_client: Path, driver) -> None:
+def test_the_npm_foxglove_client_subscribes_and_drives(
+    npm_client: Path, driver: tuple[Harness, SimulatedPair, str]
+) -> None:
     """@foxglove/ws-protocol 0.8.0 (what Lichtblick and older Foxglove use), offering only
     foxglove.websocket.v1: it is served, decodes joint_states' channel, and its Teleop-style Twist
     (0.3 m/s) drives the simulated amplifiers through des_driver."""

@@ -209,11 +209,11 @@ PACKBOT = load_vehicle('packbot_4wheel')
 
 
 @pytest.fixture(scope='module')
-def packbot_map():
+def packbot_map() -> PowerMap:
     return PowerMap.build(PACKBOT, PRESETS['sandy_soil'], shape=(6, 41))
 
 
-def test_map_spans_the_vehicles_declared_envelope(packbot_map) -> None:
+def test_map_spans_the_vehicles_declared_envelope(packbot_map: PowerMap) -> None:
     # vehicle.py: max_speed_m_s 1.5 m/s, max_yaw_rate_rad_s 2.0 rad/s unless the file says otherwise
     assert packbot_map.meta['max_speed_m_s'] == PACKBOT.max_speed_m_s == 1.5
     assert packbot_map.meta['max_yaw_rate_rad_s'] == PACKBOT.max_yaw_rate_rad_s == 2.0
@@ -223,7 +223,7 @@ def test_map_spans_the_vehicles_declared_envelope(packbot_map) -> None:
     assert beyond.clamped.all()  # outside the envelope: never silently clamped
 
 
-def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map) -> None:
+def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map: PowerMap) -> None:
     r_min = 2.0 * PACKBOT.tread_m  # module doc: the small-radius limit
     q = packbot_map.query(np.array([0.0, 0.1, 0.5]), np.array([1.0, 1.0, 0.1]))  # R = 0, 0.1, 5 m
     assert q.limited.tolist() == [True, r_min > 0.1, False]
@@ -231,7 +231,7 @@ def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map) -> N
     assert packbot_map.query(0.0, 1.0).limited
 
 
-def test_mirrored_commands_give_mirrored_answers(packbot_map) -> None:
+def test_mirrored_commands_give_mirrored_answers(packbot_map: PowerMap) -> None:
     rng = np.random.default_rng(5)
     v, w = rng.uniform(-1.5, 1.5, 200), rng.uniform(-2.0, 2.0, 200)
     a, b = packbot_map.query(v, w), packbot_map.query(v, -w)
@@ -244,7 +244,7 @@ def test_mirrored_commands_give_mirrored_answers(packbot_map) -> None:
     assert spin_l.total_power_W == pytest.approx(spin_r.total_power_W, rel=1e-9)
 
 
-def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map) -> None:
+def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map: PowerMap) -> None:
     w = np.linspace(1.0, 2.0, 201)
     q = packbot_map.query(np.zeros_like(w), w)
     for torque in (q.torque_left_Nm, q.torque_right_Nm):

@@ -13,26 +13,26 @@ import pytest
 from skidsteer_power.cli.main import main
 from skidsteer_power.errors import InputError
 from skidsteer_power.missions import Segment, patrol, read_route_csv, run_mission, search_retrieve
-from skidsteer_power.missions.energy import with_payload
+from skidsteer_power.missions.energy import MissionResult, with_payload
 from skidsteer_power.missions.mobility import max_drawbar_pull
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')  # Table 8.2
 
 
 @pytest.fixture(scope='module')
-def lete():
+def lete() -> Terrain:
     return load_terrain('lete_sand')  # Table 8.3
 
 
 @pytest.fixture(scope='module')
-def patrol_results(sandy):
+def patrol_results(sandy: Terrain) -> dict[str, MissionResult]:
     route = patrol()
     return {name: run_mission(load_vehicle(name), sandy, route) for name in PACKBOTS}
 
@@ -64,7 +64,7 @@ def test_search_retrieve_route_matches_chapter_8_2() -> None:
     assert np.max(np.abs(np.diff(k))) < 0.5 * np.max(np.abs(k))
 
 
-def test_energy_is_integral_of_power(patrol_results) -> None:
+def test_energy_is_integral_of_power(patrol_results: dict[str, MissionResult]) -> None:
     for res in patrol_results.values():
         tr = res.trace(samples_per_segment=3)
         for power, energy in (('power_W', res.energy_J), ('power_battery_W', res.energy_battery_J)):
@@ -73,21 +73,21 @@ def test_energy_is_integral_of_power(patrol_results) -> None:
         assert tr['energy_J'][-1] == pytest.approx(res.energy_J, rel=1e-12)
 
 
-def test_internal_plus_terrain_is_total(patrol_results) -> None:
+def test_internal_plus_terrain_is_total(patrol_results: dict[str, MissionResult]) -> None:
     for res in patrol_results.values():
         assert res.energy_internal_J + res.energy_terrain_J == pytest.approx(res.energy_J, rel=1e-12)
         np.testing.assert_allclose(res.power_internal_W + res.power_terrain_W, res.power_W, rtol=1e-12)
         assert np.all(res.power_internal_W >= 0)
 
 
-def test_battery_power_never_below_mechanical(patrol_results) -> None:
+def test_battery_power_never_below_mechanical(patrol_results: dict[str, MissionResult]) -> None:
     """Regenerative braking can only return what the sides give back, less losses."""
     for res in patrol_results.values():
         assert np.all(res.power_battery_W >= res.power_W - 1e-12)
         assert res.energy_battery_J > res.energy_J
 
 
-def test_track_straight_power_is_mostly_internal(patrol_results) -> None:
+def test_track_straight_power_is_mostly_internal(patrol_results: dict[str, MissionResult]) -> None:
     # ch. 7.2.3 / Figure 7.14: the track dominates the internal loss; on straight runs at 0.2 m/s the
     # terrain takes little, so the tracked Packbot's straight-line power is mostly internal.
     res = patrol_results['packbot_track']
@@ -95,7 +95,9 @@ def test_track_straight_power_is_mostly_internal(patrol_results) -> None:
     assert np.all(res.power_internal_W[straight] > 0.5 * res.power_W[straight])
 
 
-def test_four_wheel_power_rises_far_more_in_turns_than_track(patrol_results) -> None:
+def test_four_wheel_power_rises_far_more_in_turns_than_track(
+    patrol_results: dict[str, MissionResult],
+) -> None:
     # ch. 8.1/8.2: "power consumption increases sharply for the 4-wheeled SUGV at sharp turns"
     def rise(name):
         res = patrol_results[name]
@@ -105,7 +107,9 @@ def test_four_wheel_power_rises_far_more_in_turns_than_track(patrol_results) -> 
     assert rise('packbot_4wheel') > rise('packbot_6wheel')
 
 
-def test_mobility_ranking_chapter_8(patrol_results, sandy, lete) -> None:
+def test_mobility_ranking_chapter_8(
+    patrol_results: dict[str, MissionResult], sandy: Terrain, lete: Terrain
+) -> None:
     # ch. 8.1: the track has "lower sinkage and larger drawbar pull"; the 6-wheel beats the 4-wheel
     # ("larger drawbar pull, smaller sinkage and lower power/energy consumption").
     r = patrol_results
@@ -125,7 +129,7 @@ def test_mobility_ranking_chapter_8(patrol_results, sandy, lete) -> None:
     assert np.all(dp_loaded / (weights + 98.1) < dp_sandy / weights)
 
 
-def test_track_drawbar_pull_hand_calculation(sandy) -> None:
+def test_track_drawbar_pull_hand_calculation(sandy: Terrain) -> None:
     """Eq. 2.11/2.17 at s = 1 for the Packbot track (Table 8.1, Table 8.2)."""
     v = load_vehicle('packbot_track')
     w = 15.8 * 9.81 / 2
@@ -137,7 +141,7 @@ def test_track_drawbar_pull_hand_calculation(sandy) -> None:
     assert max_drawbar_pull([v], sandy)[0] == pytest.approx(2 * (f_s - r_c), rel=1e-9)
 
 
-def test_map_and_direct_agree_on_patrol(sandy, patrol_results) -> None:
+def test_map_and_direct_agree_on_patrol(sandy: Terrain, patrol_results: dict[str, MissionResult]) -> None:
     # the map interpolates FESS solutions between grid nodes; straight running is a grid line (yaw 0),
     # so the straight segments agree to solver tolerance and the whole mission to the interpolation
     # error of the turns (well under 1 %)
@@ -148,7 +152,7 @@ def test_map_and_direct_agree_on_patrol(sandy, patrol_results) -> None:
     assert direct.energy_J == pytest.approx(mapped.energy_J, rel=1e-2)
 
 
-def test_payload_raises_energy_and_sinkage(sandy) -> None:
+def test_payload_raises_energy_and_sinkage(sandy: Terrain) -> None:
     route = search_retrieve(step_m=2.0)
     res = run_mission(load_vehicle('packbot_6wheel'), sandy, route)
     out, back = res.legs()
@@ -157,7 +161,7 @@ def test_payload_raises_energy_and_sinkage(sandy) -> None:
     assert back['max_sinkage_m'] > out['max_sinkage_m']
 
 
-def test_route_csv(tmp_path: Path, sandy) -> None:
+def test_route_csv(tmp_path: Path, sandy: Terrain) -> None:
     path = tmp_path / 'route.csv'
     path.write_text(
         'length_m,duration_s,speed_m_s,turn_radius_m,payload_kg\n10,,0.3,inf,0\n,20,0.2,-2,5\n5,,,,\n'

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,28 +13,30 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.missions.design import design_study, grid
 from skidsteer_power.missions.routes import patrol
 from skidsteer_power.missions.sensitivity import SOIL_PARAMETERS, sensitivity
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')
 
 
 @pytest.fixture(scope='module')
-def track_sensitivity(sandy):
+def track_sensitivity(sandy: Terrain) -> dict[str, Any]:
     return sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=2)
 
 
-def test_sensitivity_cases_and_parallel_equals_serial(track_sensitivity, sandy) -> None:
+def test_sensitivity_cases_and_parallel_equals_serial(
+    track_sensitivity: dict[str, Any], sandy: Terrain
+) -> None:
     changes = track_sensitivity['results']['packbot_track']['changes_percent']
     assert set(changes) == {f'{p}{s}' for p in SOIL_PARAMETERS for s in '+-'} | {'all+', 'all-'}
     serial = sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=1)
     assert serial['results'] == track_sensitivity['results']
 
 
-def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity) -> None:
+def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity: dict[str, Any]) -> None:
     # eq. 2.6: z0 = (p / (kc/b + kphi))^(1/n); +1 % kphi on Table 8.2's sandy soil, b = 0.074 m
     k0 = 900 / 0.074 + 1523400
     k1 = 900 / 0.074 + 1.01 * 1523400
@@ -77,7 +80,7 @@ def test_grid_is_table_8_4() -> None:
 
 @pytest.mark.slow
 def test_design_study_deterministic_and_chapter_8_3(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], sandy
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], sandy: Terrain
 ) -> None:
     png = tmp_path / 'design.png'
     assert main(['design-study', '--plot', str(png), '--json']) == 0
@@ -130,7 +133,7 @@ def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases() -> None:
     assert derivatives(base, None, dict.fromkeys(base, 99.0), 0.01)['energy_J']['status'] == 'failed'
 
 
-def test_sensitivity_reports_smooth_derivatives(track_sensitivity) -> None:
+def test_sensitivity_reports_smooth_derivatives(track_sensitivity: dict[str, Any]) -> None:
     derivs = track_sensitivity['results']['packbot_track']['derivatives']
     assert set(derivs) == {*SOIL_PARAMETERS, 'all'}
     # eq. 2.6 above: sinkage falls with kphi, about -0.90 % per % (central difference)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import TypedDict
 
 import cv2
 import numpy as np
@@ -22,6 +23,8 @@ import yaml
 from skidsteer_power.cli.main import main
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.mocap import (
+    CameraCalibration,
+    GroundPlane,
     TargetConfig,
     TargetDetection,
     TargetMiss,
@@ -38,6 +41,18 @@ from skidsteer_power.mocap import (
 from skidsteer_power.mocap import synthetic as syn
 from skidsteer_power.mocap.target import target_mask
 from skidsteer_power.mocap.tracking import open_frames
+
+
+class Scene(TypedDict):
+    """The files of the synthetic experiment (the ``scene`` fixture)."""
+
+    root: Path
+    calibration_images: list[Path]
+    plane_image: Path
+    video: Path
+    folder: Path
+    n_frames: int
+
 
 CAMERA = syn.SyntheticCamera(
     camera_matrix=np.array([[520.0, 0.0, 322.0], [0.0, 520.0, 238.0], [0.0, 0.0, 1.0]]),
@@ -91,7 +106,7 @@ VIEW = syn.look_at(np.array([0.7, 0.125, -1.3]), np.array([0.2, 0.125, 0.0]), np
 
 
 @pytest.fixture(scope='module')
-def scene(tmp_path_factory: pytest.TempPathFactory):
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     """Files of the synthetic experiment: calibration images, plane image, video, image folder."""
     root = tmp_path_factory.mktemp('mocap')
     board = syn.checkerboard(PATTERN, SQUARE_M)
@@ -137,19 +152,19 @@ def scene(tmp_path_factory: pytest.TempPathFactory):
 
 
 @pytest.fixture(scope='module')
-def calibration(scene):
+def calibration(scene: Scene) -> CameraCalibration:
     return calibrate_camera(scene['calibration_images'], SQUARE_M, PATTERN)
 
 
 @pytest.fixture(scope='module')
-def plane(scene, calibration):
+def plane(scene: Scene, calibration: CameraCalibration) -> GroundPlane:
     return estimate_ground_plane(cv2.imread(str(scene['plane_image'])), calibration, PATTERN, SQUARE_M)
 
 
 # -- calibration -------------------------------------------------------------------------------------
 
 
-def test_calibration_recovers_the_camera(calibration) -> None:
+def test_calibration_recovers_the_camera(calibration: CameraCalibration) -> None:
     fx, fy = calibration.focal_px
     assert fx == pytest.approx(520.0, rel=0.01)
     assert fy == pytest.approx(520.0, rel=0.01)
@@ -181,13 +196,13 @@ def big_facing_board() -> np.ndarray:
     )
 
 
-def test_undistortion_straightens_the_board(calibration) -> None:
+def test_undistortion_straightens_the_board(calibration: CameraCalibration) -> None:
     image = big_facing_board()
     assert worst_row_bend_px(image) > 2.0
     assert worst_row_bend_px(undistort_image(image, calibration)) < 0.5
 
 
-def test_cli_undistort(tmp_path: Path, calibration) -> None:
+def test_cli_undistort(tmp_path: Path, calibration: CameraCalibration) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
     cv2.imwrite(str(tmp_path / 'board.png'), big_facing_board())
@@ -198,7 +213,7 @@ def test_cli_undistort(tmp_path: Path, calibration) -> None:
 
 
 def test_cli_undistort_bad_output_name(
-    tmp_path: Path, calibration, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
 ) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
@@ -209,7 +224,7 @@ def test_cli_undistort_bad_output_name(
     assert 'could not write' in capsys.readouterr().err
 
 
-def test_calibration_yaml_round_trip(tmp_path: Path, calibration) -> None:
+def test_calibration_yaml_round_trip(tmp_path: Path, calibration: CameraCalibration) -> None:
     path = tmp_path / 'camera.yaml'
     save_calibration(path, calibration)
     loaded = load_calibration(path)
@@ -227,7 +242,7 @@ def test_no_corners_is_a_clear_error(tmp_path: Path) -> None:
         calibrate_camera([blank] * 3, SQUARE_M, PATTERN)
 
 
-def test_wrong_pattern_rejects_images(scene) -> None:
+def test_wrong_pattern_rejects_images(scene: Scene) -> None:
     with pytest.raises(InputError, match=r'7x6 inner corners found in 0 of 8'):
         calibrate_camera(scene['calibration_images'], SQUARE_M, (7, 6))
 
@@ -266,7 +281,7 @@ def test_missing_calibration_file(tmp_path: Path) -> None:
 # -- ground plane and target -------------------------------------------------------------------------
 
 
-def test_ground_plane_maps_pixels_to_metres(calibration, plane) -> None:
+def test_ground_plane_maps_pixels_to_metres(calibration: CameraCalibration, plane: GroundPlane) -> None:
     # Project known plane points with the TRUE camera, map them back with the estimated one.
     truth = np.array([[0.0, 0.0, 0.0], [0.4, 0.25, 0.0], [0.7, -0.3, 0.0], [-0.3, 0.6, 0.0]])
     pixels, _ = cv2.projectPoints(truth, *VIEW, CAMERA.camera_matrix, CAMERA.dist_coeffs)
@@ -276,14 +291,14 @@ def test_ground_plane_maps_pixels_to_metres(calibration, plane) -> None:
     assert plane.camera_height_m == pytest.approx(1.3, rel=0.01)
 
 
-def test_plane_without_board_is_a_clear_error(calibration) -> None:
+def test_plane_without_board_is_a_clear_error(calibration: CameraCalibration) -> None:
     with pytest.raises(InputError, match='no 9x6 checkerboard found in the plane image'):
         estimate_ground_plane(
             syn.render(CAMERA, *VIEW, syn.sand(), supersample=1), calibration, PATTERN, SQUARE_M
         )
 
 
-def test_plane_image_of_another_size_is_refused(calibration) -> None:
+def test_plane_image_of_another_size_is_refused(calibration: CameraCalibration) -> None:
     with pytest.raises(InputError, match='calibrated at 640x480'):
         estimate_ground_plane(np.zeros((240, 320, 3), np.uint8), calibration, PATTERN, SQUARE_M)
 
@@ -335,7 +350,9 @@ def check_run(result, *, expected_samples: int, video_frames_per_index: int = 1)
     assert [index * video_frames_per_index for index, _ in result.skipped] == [NO_TARGET_FRAME]
 
 
-def test_track_video_sampled_at_5_hz(scene, calibration, plane) -> None:
+def test_track_video_sampled_at_5_hz(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     result = track(scene['video'], calibration, plane, sample_hz=SAMPLE_HZ)
     assert result.fps == pytest.approx(FPS)
     # frames 0, 6, ..., 150 are sampled (26), the one at frame 60 has no target
@@ -343,28 +360,32 @@ def test_track_video_sampled_at_5_hz(scene, calibration, plane) -> None:
     check_run(result, expected_samples=25)
 
 
-def test_track_image_folder(scene, calibration, plane) -> None:
+def test_track_image_folder(scene: Scene, calibration: CameraCalibration, plane: GroundPlane) -> None:
     result = track(scene['folder'], calibration, plane, fps=SAMPLE_HZ)
     # the folder holds every 6th video frame, so frame 60 of the video is image 10
     check_run(result, expected_samples=25, video_frames_per_index=6)
 
 
-def test_folder_needs_fps(scene, calibration, plane) -> None:
+def test_folder_needs_fps(scene: Scene, calibration: CameraCalibration, plane: GroundPlane) -> None:
     with pytest.raises(InputError, match='pass --fps'):
         track(scene['folder'], calibration, plane)
 
 
-def test_sample_rate_above_frame_rate_is_refused(scene, calibration, plane) -> None:
+def test_sample_rate_above_frame_rate_is_refused(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     with pytest.raises(InputError, match='at most the frame rate'):
         track(scene['video'], calibration, plane, sample_hz=60.0)
 
 
-def test_too_few_detections_is_a_clear_error(scene, calibration, plane) -> None:
+def test_too_few_detections_is_a_clear_error(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     with pytest.raises(InputError, match='target found in 0 of'):
         track(scene['video'], calibration, plane, target=TargetConfig(min_area_px=5000))
 
 
-def test_missing_source(tmp_path: Path, calibration, plane) -> None:
+def test_missing_source(tmp_path: Path, calibration: CameraCalibration, plane: GroundPlane) -> None:
     with pytest.raises(InputError, match='not found'):
         track(tmp_path / 'nothing.avi', calibration, plane)
 
@@ -380,7 +401,7 @@ def run_cli(argv: list[str]) -> int:
         return int(stop.code)
 
 
-def test_cli_calibrate_then_track(scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_calibrate_then_track(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     argv = ['mocap', 'calibrate', *map(str, scene['calibration_images']), '--square-size', '0.05',
             '--pattern', '9x6', '--out', str(calibration_file), '--json']  # fmt: skip
@@ -430,7 +451,7 @@ def test_cli_errors_are_one_line(
 
 
 def test_cli_plane_size_mismatch(
-    scene, tmp_path: Path, calibration, capsys: pytest.CaptureFixture[str]
+    scene: Scene, tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
 ) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
@@ -449,7 +470,7 @@ def test_cli_plane_size_mismatch(
     assert 'calibrated at 640x480' in capsys.readouterr().err
 
 
-def test_k3_is_fitted_only_on_request(scene) -> None:
+def test_k3_is_fitted_only_on_request(scene: Scene) -> None:
     with_k3 = calibrate_camera(scene['calibration_images'], SQUARE_M, PATTERN, use_k3=True)
     assert with_k3.dist_coeffs[4] != 0.0
     assert with_k3.focal_px[0] == pytest.approx(520.0, rel=0.01)
@@ -472,7 +493,9 @@ def test_folder_images_in_natural_order(tmp_path: Path) -> None:
     assert [int(frame.image[0, 0, 0]) for frame in frames] == [1, 2, 10]
 
 
-def test_unreadable_video_is_a_clear_error(tmp_path: Path, calibration, plane) -> None:
+def test_unreadable_video_is_a_clear_error(
+    tmp_path: Path, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     bogus = tmp_path / 'run.avi'
     bogus.write_text('not a video')
     with pytest.raises(InputError, match='cannot open video'):
@@ -480,7 +503,7 @@ def test_unreadable_video_is_a_clear_error(tmp_path: Path, calibration, plane) -
 
 
 def test_cli_track_table_output(
-    scene, tmp_path: Path, calibration, capsys: pytest.CaptureFixture[str]
+    scene: Scene, tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
 ) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)

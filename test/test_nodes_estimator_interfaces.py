@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,7 @@ from std_srvs.srv import Trigger
 from test_estimator_core import FixedPowerPredictor
 from test_nodes_estimator import Rig, drive_measured
 
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -33,10 +35,10 @@ MEASURED_SIDE_W = 0.228 * 300 + 0.710 * 4
 
 
 @pytest.fixture
-def rigs(ros_context: Context, tmp_path: Path):
-    made = []
+def rigs(ros_context: Context, tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    made: list[Rig] = []
 
-    def make(predictor=None, **params):
+    def make(predictor: Predictor | None = None, **params: object) -> Rig:
         made.append(Rig(ros_context, tmp_path, predictor, **params))
         return made[-1]
 
@@ -54,7 +56,7 @@ def call_trigger(rig: Rig, name: str) -> Trigger.Response:
 
 
 def test_reset_energy_fills_the_battery_zeroes_the_tallies_and_rewrites_the_state(
-    rigs, tmp_path: Path
+    rigs: Callable[..., Rig], tmp_path: Path
 ) -> None:
     rig = rigs(FixedPowerPredictor(999.0), use_sim_time=True, save_period_s=100.0)
     rig.set_clock(0.0)
@@ -89,7 +91,7 @@ def _publish_until_used(rig: Rig, publisher, velocity: float) -> None:
     raise AssertionError(f'joint_states at {velocity} rad/s never used')
 
 
-def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs) -> None:
+def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False)
     best_effort = rig.probe.create_publisher(JointState, 'joint_states', qos_profile_sensor_data)
     reliable = rig.probe.create_publisher(JointState, 'joint_states', QoSProfile(depth=10))
@@ -105,7 +107,7 @@ def _subscription_reliability(rig: Rig, topic: str) -> ReliabilityPolicy:
     return info.qos_profile.reliability
 
 
-def test_subscriptions_are_best_effort_unless_overridden(rigs) -> None:
+def test_subscriptions_are_best_effort_unless_overridden(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False)
     rig.spin_until(lambda: rig.probe.get_subscriptions_info_by_topic(f'/{rig.namespace}/joint_states'))
     assert _subscription_reliability(rig, 'joint_states') == ReliabilityPolicy.BEST_EFFORT
@@ -122,7 +124,7 @@ def test_subscriptions_are_best_effort_unless_overridden(rigs) -> None:
     assert _subscription_reliability(rig, 'joint_states') == ReliabilityPolicy.RELIABLE
 
 
-def test_named_figures_per_message_and_summary_by_key(rigs) -> None:
+def test_named_figures_per_message_and_summary_by_key(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, publish_period_s=0.05)
     figures: dict[str, list[float]] = {}
     for topic, _ in (*COMMAND_FIGURES, *MEASUREMENT_FIGURES):
@@ -146,7 +148,7 @@ def test_named_figures_per_message_and_summary_by_key(rigs) -> None:
     assert summary['measured_left_W'] == figures['power/measured_left_w'][-1]  # repr: exact
 
 
-def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs) -> None:
+def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs: Callable[..., Rig]) -> None:
     # sim time: the figure timer (figure_period_s = 1 s) fires only when the test moves the clock
     rig = rigs(FixedPowerPredictor(80.0), persist=False, use_sim_time=True, figure_period_s=1.0)
     figures: list[float] = []
@@ -171,7 +173,7 @@ def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs) -> No
     rig.spin_until(lambda: len(figures) == 2)
 
 
-def test_battery_state_follows_the_message_conventions(rigs) -> None:
+def test_battery_state_follows_the_message_conventions(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, publish_period_s=0.05)
     rig.spin_until(lambda: rig.received['battery/state'])
     idle = rig.received['battery/state'][-1]
@@ -189,7 +191,7 @@ def test_battery_state_follows_the_message_conventions(rigs) -> None:
     assert -1.7 < driving.current < -1.5
 
 
-def test_sensor_data_outputs_by_parameter(rigs) -> None:
+def test_sensor_data_outputs_by_parameter(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, output_qos='sensor_data')
     topic = f'/{rig.namespace}/power/predicted'
     rig.spin_until(lambda: rig.probe.get_publishers_info_by_topic(topic))

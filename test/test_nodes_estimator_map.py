@@ -4,6 +4,7 @@ and TwistStamped), reverse and spin in place, and a run-time terrain change."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -20,12 +21,12 @@ from skidsteer_power.vehicle import load_vehicle
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory: pytest.TempPathFactory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
 @pytest.fixture
-def rig(ros_context: Context, tmp_path: Path, cache_dir):
+def rig(ros_context: Context, tmp_path: Path, cache_dir: str) -> Iterator[Rig]:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand')
     yield rig
     rig.close()
@@ -37,7 +38,7 @@ def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
 
 
 @pytest.mark.parametrize(('speed', 'yaw_rate'), [(0.2, 0.1), (-0.2, 0.1), (0.0, 0.5), (0.1, -0.35)])
-def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate) -> None:
+def test_cmd_vel_round_trip(rig: Rig, cache_dir: str, speed, yaw_rate) -> None:
     """Forward, reverse, spin in place and a right turn all answer at once with the map's values."""
     rig.command(speed, yaw_rate)
     rig.received['power/summary'].clear()
@@ -65,7 +66,7 @@ def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate) -> None:
     assert math.isnan(summary['measured_battery_W'])  # no joint_states yet
 
 
-def test_twist_stamped_keeps_the_stamp(ros_context: Context, tmp_path: Path, cache_dir) -> None:
+def test_twist_stamped_keeps_the_stamp(ros_context: Context, tmp_path: Path, cache_dir: str) -> None:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, cmd_vel_stamped=True)
     try:
         rig.command(0.2, 0.0, stamp=Time(sec=1234, nanosec=5678))
@@ -79,7 +80,7 @@ def test_twist_stamped_keeps_the_stamp(ros_context: Context, tmp_path: Path, cac
         rig.close()
 
 
-def test_terrain_changes_at_run_time(rig, cache_dir) -> None:
+def test_terrain_changes_at_run_time(rig: Rig, cache_dir: str) -> None:
     rig.command(0.2, 0.1)
     rig.spin_until(lambda: rig.received['power/predicted'])
     on_sand = list(rig.received['power/predicted'][-1].effort)
@@ -96,18 +97,18 @@ def test_terrain_changes_at_run_time(rig, cache_dir) -> None:
     assert on_clay != pytest.approx(on_sand)
 
 
-def test_unknown_terrain_is_refused_and_the_map_kept(rig) -> None:
+def test_unknown_terrain_is_refused_and_the_map_kept(rig: Rig) -> None:
     result = rig.node.set_parameters([Parameter('terrain', value='lava_field')])[0]
     assert not result.successful and 'lava_field' in result.reason
     assert rig.node.get_parameter('terrain').value == 'dry_sand' and rig.node.terrain_name == 'dry_sand'
 
 
-def test_start_only_parameters_are_read_only_at_run_time(rig) -> None:
+def test_start_only_parameters_are_read_only_at_run_time(rig: Rig) -> None:
     result = rig.node.set_parameters([Parameter('vehicle', value='packbot_track')])[0]
     assert not result.successful and 'read at start only' in result.reason
 
 
-def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, cache_dir) -> None:
+def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, cache_dir: str) -> None:
     """config/estimator.yaml lists every parameter with the node's default; a node started with a
     --params-file (here with terrain changed to clay) takes its values."""
     import yaml
@@ -131,7 +132,7 @@ def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, cache_dir) 
         rclpy.try_shutdown(context=context)
 
 
-def test_predicted_twist_and_odometry(rig, cache_dir) -> None:
+def test_predicted_twist_and_odometry(rig: Rig, cache_dir: str) -> None:
     """Issue 25: power/predicted_twist carries the motion the set-point prediction expects (reference:
     the same map's SetpointPredictor), odom/predicted dead-reckons it, ~/reset_odometry restarts it."""
     from geometry_msgs.msg import TwistStamped

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -23,7 +24,7 @@ from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route, Segment, _trace, read_route_csv
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 SPEED = 0.3  # [m/s]
 # A route with left and right arcs of 1.5 m and 3 m radius between straights (CSV rows, SI units).
@@ -47,7 +48,7 @@ def _poses(route: Route, spacing_m: float) -> np.ndarray:
 
 
 @pytest.fixture(scope='module')
-def track_map():
+def track_map() -> tuple[PowerMap, Powertrain, Vehicle]:
     vehicle = load_vehicle('test_robot_track')
     return PowerMap.build(vehicle, load_terrain('dry_sand')), Powertrain.for_vehicle(vehicle), vehicle
 
@@ -68,7 +69,9 @@ def test_polyline_keeps_length_and_heading_change() -> None:
     assert all(r > 0 for r in radii)  # left turn (REP 103)
 
 
-def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map) -> None:
+def test_straight_path_is_one_straight_state_and_duplicates_dropped(
+    track_map: tuple[PowerMap, Powertrain, Vehicle],
+) -> None:
     power_map, powertrain, vehicle = track_map
     x = np.array([0.0, 1.0, 1.0, 2.0, 5.0])
     route = route_from_polyline(x, np.zeros(5), SPEED)
@@ -81,7 +84,9 @@ def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map) -
     assert energy.return_J == pytest.approx(straight, rel=1e-12)
 
 
-def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map) -> None:
+def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(
+    track_map: tuple[PowerMap, Powertrain, Vehicle],
+) -> None:
     """Maps flag turns tighter than 2 x tread as ``limited`` (maps module doc): a half circle of
     R = 0.3 m (< 2 x 0.426 m for the test robot's track) is counted there and back; a straight
     path has no flagged segment."""
@@ -107,7 +112,7 @@ class CountingMap:
 
 
 def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(
-    tmp_path: Path, track_map
+    tmp_path: pathlib.Path, track_map: tuple[PowerMap, Powertrain, Vehicle]
 ) -> None:
     """While the adaptation learns, the terrain scale moves on every estimator tick: the tracker keeps
     the map's loads and reruns only the powertrain, with the same energies as a fresh computation."""
@@ -136,7 +141,9 @@ def test_bad_paths_are_input_errors(x, y, speed) -> None:
         route_from_polyline(x, y, speed)
 
 
-def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(tmp_path: Path, track_map) -> None:
+def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(
+    tmp_path: pathlib.Path, track_map: tuple[PowerMap, Powertrain, Vehicle]
+) -> None:
     """Pure check of the polyline approximation: the route sampled at 4 points per metre."""
     power_map, powertrain, vehicle = track_map
     csv = tmp_path / 'route.csv'
@@ -159,11 +166,11 @@ def _path_msg(xy: np.ndarray) -> Path:
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory: pytest.TempPathFactory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
-def _rig_with_path_topics(ros_context: Context, tmp_path: Path, cache_dir, **params):
+def _rig_with_path_topics(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, **params):
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand', **params)
     for topic in ('energy/path_required_wh', 'energy/path_margin_wh'):
         rig.received[topic] = []
@@ -174,7 +181,7 @@ def _rig_with_path_topics(ros_context: Context, tmp_path: Path, cache_dir, **par
 
 
 def test_live_path_energy_equals_mission_route(
-    ros_context: Context, tmp_path: Path, cache_dir, capsys: pytest.CaptureFixture[str]
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Real rclpy: a Path published on ``plan`` gives ``mission --route FILE.csv``'s battery energy to
     1 % (measured: -0.03 % with a pose every 0.25 m, -0.04 % every 1 m with arcs sampled at most every
@@ -202,7 +209,7 @@ def test_live_path_energy_equals_mission_route(
 
 
 def test_negative_margin_warns_and_speed_follows_the_command(
-    ros_context: Context, tmp_path: Path, cache_dir
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
 ) -> None:
     rig = _rig_with_path_topics(ros_context, tmp_path, cache_dir, path_reserve_wh=1e6)
     try:
@@ -227,7 +234,7 @@ def test_negative_margin_warns_and_speed_follows_the_command(
         rig.close()
 
 
-def test_negative_reserve_is_refused(ros_context: Context, tmp_path: Path, cache_dir) -> None:
+def test_negative_reserve_is_refused(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str) -> None:
     from skidsteer_power.errors import ConfigError
 
     with pytest.raises(ConfigError, match='path_reserve_wh'):
@@ -248,7 +255,7 @@ def test_monitor_shows_the_path_energy_and_flags_a_shortfall() -> None:
 
 
 # --- the online terrain scale in the path energy (issue 19 with issue 15's adaptation) ------------
-def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path: Path) -> None:
+def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path: pathlib.Path) -> None:
     """The estimator's map is for dry sand; the twin (independent physics, docs/TWIN.md) drives on clay.
     The twin first drives the Table 7.3 sets (4 s holds, 1 s stops); its joint_states and commands
     go through the estimator core, whose terrain scale carries over between commands. Then the twin
@@ -288,7 +295,7 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
 
 
 def test_live_path_energy_applies_the_published_terrain_scale(
-    ros_context: Context, tmp_path: Path, cache_dir
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
 ) -> None:
     """Real rclpy on sim time: joint_states whose terrain torque is 1.5 x the predicted one (the
     internal torque as predicted: measured = predicted internal + 1.5 x predicted terrain, a hand

@@ -4,6 +4,7 @@ decimated on a worker thread, and the 5 Hz battery tick keeps running. Real rclp
 
 from __future__ import annotations
 
+import pathlib
 import struct
 import time
 
@@ -121,12 +122,12 @@ def test_a_long_smooth_path_is_decimated_and_keeps_its_length() -> None:
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory: pytest.TempPathFactory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
 def test_a_1e5_pose_plan_leaves_the_battery_tick_running(
-    ros_context: Context, tmp_path: Path, cache_dir
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
 ) -> None:
     """battery/state at 5 Hz keeps arriving while the node reads a 1e5-pose plan, and the path energy
     arrives: that of the same curve given as 2001 poses (no decimation), to 1 %. No gap of 2 s is a

@@ -44,7 +44,7 @@ def test_shipped_terrain_file_by_name() -> None:
 
 
 @pytest.fixture
-def ament_prefix(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+def ament_prefix(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """An install prefix as colcon lays it out, with the source tree hidden from the resolver."""
     prefix = tmp_path / 'install'
     marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'skidsteer_power'
@@ -61,7 +61,7 @@ def ament_prefix(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     return config
 
 
-def test_colcon_share_directory_is_found_through_the_ament_index(ament_prefix) -> None:
+def test_colcon_share_directory_is_found_through_the_ament_index(ament_prefix: Path) -> None:
     assert resources.ament_share_dir() == ament_prefix.parent
     assert resources.config_roots()[0] == ament_prefix
     assert available_vehicles() == ['installed_only']

@@ -16,20 +16,20 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.studies import uncertainty as u
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')
 
 
 @pytest.fixture(scope='module')
-def pt():
+def pt() -> Powertrain:
     return Powertrain.default_test_robot('track')
 
 
-def test_default_sigmas_are_relative_to_the_nominal(sandy, pt) -> None:
+def test_default_sigmas_are_relative_to_the_nominal(sandy: Terrain, pt: Powertrain) -> None:
     spread = u.default_spread(sandy, pt)
     sigma = spread.sigma
     # Table 8.2: kphi 1523.4 kN/m^(n+2), phi 30 deg; defaults 10 % and 5 %
@@ -38,7 +38,9 @@ def test_default_sigmas_are_relative_to_the_nominal(sandy, pt) -> None:
     assert sigma['internal_scale'] == pytest.approx(0.10)
 
 
-def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(tmp_path: Path, sandy, pt) -> None:
+def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(
+    tmp_path: Path, sandy: Terrain, pt: Powertrain
+) -> None:
     path = tmp_path / 'u.yaml'
     path.write_text(
         'terrain:\n  kphi_kN: {sigma: 100}\n  phi_deg: {sigma: 1.5}\n  n: 0.02\n'
@@ -88,7 +90,7 @@ def test_bad_calibration_covariance_is_a_config_error(tmp_path: Path, cov, match
         u.spread_from_calibration(_calibrated_file(tmp_path, cov))
 
 
-def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy, pt) -> None:
+def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy: Terrain, pt: Powertrain) -> None:
     cov = np.array([[0.04, 0.03], [0.03, 0.04]]) * np.outer([1523400, 0.5236], [1523400, 0.5236])
     spread = u.ParameterSpread(('kphi', 'phi'), cov, 'test')
     a = u.draw(spread, sandy, pt, 512, seed=3)
@@ -102,7 +104,7 @@ def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy, pt) -> Non
     assert n.min() == u.BOUNDS['n'][0] and n.max() == u.BOUNDS['n'][1]
 
 
-def test_internal_scale_scales_internal_power_exactly(pt) -> None:
+def test_internal_scale_scales_internal_power_exactly(pt: Powertrain) -> None:
     doubled = u.apply_powertrain(pt, {'internal_scale': 2.0})
     omega = np.array([10.0, 300.0])
     for side in ('left', 'right'):

@@ -334,7 +334,7 @@ def test_live_coupling_moves_the_twin_with_the_amplifiers_motor_speeds() -> None
 
 
 @pytest.fixture(scope='module')
-def turning_bag(tmp_path_factory: pytest.TempPathFactory):
+def turning_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     folder = tmp_path_factory.mktemp('kinematics')
     trace = run_commands(
         Twin(load_vehicle('test_robot_4wheel'), SAND_BIN), [Segment(0.0, 0.0, 1.0), Segment(0.2, 0.2, 5.0)]
@@ -342,7 +342,7 @@ def turning_bag(tmp_path_factory: pytest.TempPathFactory):
     return write_bag(trace, folder / 'turn.mcap'), folder
 
 
-def test_validate_kinematics_predicts_from_the_motion(turning_bag) -> None:
+def test_validate_kinematics_predicts_from_the_motion(turning_bag: tuple[Path, Path]) -> None:
     from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
