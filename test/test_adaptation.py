@@ -213,7 +213,9 @@ def test_correction_fields_are_named_with_units() -> None:
 
 # --- the node ------------------------------------------------------------------------------------
 @pytest.mark.parametrize('enabled', [True, False])
-def test_node_publishes_the_correction_and_the_bounds(ros_context: Context, tmp_path: Path, enabled) -> None:
+def test_node_publishes_the_correction_and_the_bounds(
+    ros_context: Context, tmp_path: Path, enabled: bool
+) -> None:
     """power_estimator over real DDS on sim time: the predictor says 0.1 N m per motor at 12 rad/s
     (test_estimator_core.FixedPowerPredictor); the motors measure 0.13 N m. After the 1 s settle and
     1 s warm-up the published correction maps 0.1 to 0.13 (adaptation on), or stays 1 / 0 (off)."""

@@ -75,7 +75,7 @@ def _validate(bag: Path, tmp_path: Path, *extra: str) -> list[str]:
 
 @pytest.mark.parametrize('case', ['chunk header zeroed', '4 KB zeroed mid-chunk', '100 bytes flipped'])
 def test_damaged_bag_without_salvage_is_one_line_and_exit_2(
-    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], case
+    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
 ) -> None:
     bag = _damaged(intact, tmp_path, case)
     assert main(_validate(bag, tmp_path)) == 2
@@ -118,7 +118,11 @@ def test_4kb_zeroed_mid_chunk_salvage_recovers_every_intact_message(
 @pytest.mark.parametrize('salvage', [(), ('--salvage',)], ids=['plain', 'salvage'])
 @pytest.mark.parametrize('command', ['validate', 'replay'])
 def test_magic_only_mcap_is_one_clear_error(
-    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], salvage, command
+    intact: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    salvage: tuple[()] | tuple[str],
+    command: str,
 ) -> None:
     bag = _damaged(intact, tmp_path, 'magic only')
     argv = _validate(bag, tmp_path, *salvage) if command == 'validate' else ['replay', str(bag), *salvage]

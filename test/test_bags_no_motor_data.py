@@ -63,7 +63,7 @@ def predictor() -> MapPredictor:
 
 @pytest.mark.parametrize('kinematics', ['odom', 'ground_truth'])
 def test_motion_prediction_does_not_depend_on_motor_data(
-    tmp_path: Path, predictor: MapPredictor, kinematics
+    tmp_path: Path, predictor: MapPredictor, kinematics: str
 ) -> None:
     """Predicted terminal energy from the measured twist: the twin bag with and without joint_states
     and battery agree (before: each 10 Hz odometry row held for the 0.5 s command hold, ~5x)."""

@@ -224,7 +224,7 @@ def _cli(*args: str) -> list[str]:
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
 def test_signal_stops_recording_cleanly_without_losing_messages(
-    ros_context: Context, tmp_path: Path, signum
+    ros_context: Context, tmp_path: Path, signum: signal.Signals
 ) -> None:
     import rclpy
     from std_msgs.msg import String

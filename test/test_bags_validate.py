@@ -314,7 +314,7 @@ def _validate_bundled(name, vehicle, terrain, report, maps, odom='/ground_truth/
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'])
 def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(
-    tmp_path: Path, bundled_maps: Path, vehicle
+    tmp_path: Path, bundled_maps: Path, vehicle: str
 ) -> None:
     """The bundled bags are recordings of the digital twin (bags/README.md), not of the estimator's
     own model: there is no /power/predicted to reproduce; the estimator is compared with the twin's

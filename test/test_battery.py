@@ -67,7 +67,7 @@ def test_time_to_empty_hand_check_against_ideal_source() -> None:
 
 @pytest.mark.parametrize('soc', [1.0, 0.8, 0.37, 0.06])
 @pytest.mark.parametrize('power', [5.0, 150.0, 900.0])
-def test_closed_form_time_to_empty_equals_numerical_quadrature(soc, power) -> None:
+def test_closed_form_time_to_empty_equals_numerical_quadrature(soc: float, power: float) -> None:
     """The closed form (module doc) against scipy's adaptive quadrature of the same integral,
     t = integral_{SOC_empty}^{SOC} Q / i(P, SOC') dSOC' with i from the equivalent circuit."""
     from scipy.integrate import quad

@@ -170,7 +170,9 @@ def test_calibrated_terrain_works_in_solve(calibrated: tuple[dict, Path]) -> Non
         (['--odom-topic', '/nope'], 'no odometry or pose topic /nope'),
     ],
 )
-def test_bad_arguments_give_one_line_and_exit_2(twin_bag: Path, tmp_path: Path, extra, match) -> None:
+def test_bad_arguments_give_one_line_and_exit_2(
+    twin_bag: Path, tmp_path: Path, extra: list[str], match: str
+) -> None:
     argv = ['calibrate', str(twin_bag), '--vehicle', VEHICLE, '--terrain', 'dry_sand']
     code, _, err = run_cli([*argv, '--out-terrain', str(tmp_path / 'o.yaml'), *extra])
     assert code == 2

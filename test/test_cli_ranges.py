@@ -81,7 +81,7 @@ def _set(argv: list[str], option: str, value: str) -> list[str]:
     ],
 )
 def test_an_input_outside_its_range_is_one_line_and_exit_2(
-    capsys: pytest.CaptureFixture[str], base, option, value, match
+    capsys: pytest.CaptureFixture[str], base, option: str, value: str, match: str
 ) -> None:
     import re
 
@@ -99,7 +99,7 @@ def test_ranges_are_documented_in_help(capsys: pytest.CaptureFixture[str]) -> No
 
 @pytest.mark.parametrize(('base', 'limit_option'), [(TRACK, '--height'), (WHEEL, '--radius')])
 def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(
-    capsys: pytest.CaptureFixture[str], base, limit_option
+    capsys: pytest.CaptureFixture[str], base, limit_option: str
 ) -> None:
     """The sinkage is computed first; just above it the answer stands, just below it is an error."""
     heavy = _set(base, '--load', '3000')
@@ -115,7 +115,7 @@ def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(
 
 @pytest.mark.parametrize('speed', ['1.6', '3', '10'])
 def test_mission_speed_beyond_the_power_map_is_an_error_not_a_clamp(
-    capsys: pytest.CaptureFixture[str], speed
+    capsys: pytest.CaptureFixture[str], speed: str
 ) -> None:
     line = _one_line_error(capsys, _set(MISSION, '--speed', speed))
     assert f'speed {float(speed):g} m/s is beyond the power map' in line and '--direct' in line
@@ -131,7 +131,7 @@ def test_mission_speed_inside_the_power_map_runs(capsys: pytest.CaptureFixture[s
     [('1e5', 'inf', True), ('1e5', '1', False), ('1e5', '-2', False), ('100', '0.5', True)],
 )
 def test_route_sampling_is_bounded_by_steps_not_length(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], length, radius, ok
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], length: str, radius: str, ok: bool
 ) -> None:
     """A straight segment of the longest leg (1e5 m; a 1e12 m one once exhausted memory, and is now
     outside the leg range) is one step; an arc needs one step per 5 degrees of turn, and a route
@@ -160,7 +160,7 @@ def test_route_sampling_is_bounded_by_steps_not_length(
      ('10,0.2,inf,1e7', 'payload = 1e\\+07 kg is outside')],
 )  # fmt: skip
 def test_route_csv_rows_have_the_same_ranges(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], row, match
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], row: str, match: str
 ) -> None:
     import re
 

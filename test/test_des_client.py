@@ -155,7 +155,7 @@ def test_parameters_read_set_save_reset(sim: SimulatedDes, amp: DesAmplifier) ->
 
 
 @pytest.mark.parametrize('low_first', [True, False])
-def test_lword_parameter_round_trip(low_first) -> None:
+def test_lword_parameter_round_trip(low_first: bool) -> None:
     config = DesConfig(lword_low_word_first=low_first)
     with (
         SimulatedDes(38400, config=config) as sim,

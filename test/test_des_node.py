@@ -256,7 +256,7 @@ def test_every_ending_signal_zeroes_speed_then_disables(
 
 @pytest.mark.parametrize('signum', [signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1], ids=signal_name)
 def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(
-    pair: SimulatedPair, tmp_path: Path, signum
+    pair: SimulatedPair, tmp_path: Path, signum: signal.Signals
 ) -> None:
     """``run --left-port --right-port`` (the suite against the amplifiers on the given ports, here the
     simulated pair): before issue 28 a SIGHUP left 344 rpm on the motors."""
@@ -427,7 +427,9 @@ def test_huge_and_non_finite_commands(harness: Harness, pair: SimulatedPair) -> 
 
 
 @pytest.mark.parametrize('stop_both', [True, False])
-def test_one_side_link_lost_stops_both_sides(ros_context: Context, pair: SimulatedPair, stop_both) -> None:
+def test_one_side_link_lost_stops_both_sides(
+    ros_context: Context, pair: SimulatedPair, stop_both: bool
+) -> None:
     h = Harness(ros_context, pair, stop_both_on_link_loss=stop_both)
     try:
         h.twist = (0.2, 0.0)

@@ -81,12 +81,12 @@ def test_empty_and_oversized_frames_are_refused() -> None:
 
 
 @pytest.mark.parametrize(('value', 'word'), [(0, 0), (1, 1), (-1, 0xFFFF), (-32768, 0x8000), (65535, 0xFFFF)])
-def test_word_conversion(value, word) -> None:
+def test_word_conversion(value: int, word: int) -> None:
     assert to_word(value) == word
 
 
 @pytest.mark.parametrize('value', [-32769, 65536])
-def test_word_out_of_range(value) -> None:
+def test_word_out_of_range(value: int) -> None:
     with pytest.raises(ValueError, match='16-bit'):
         to_word(value)
 
@@ -98,7 +98,7 @@ def test_int16_round_trip(value) -> None:
 
 @pytest.mark.parametrize('low_first', [True, False])
 @given(value=st.integers(-0x8000_0000, 0x7FFF_FFFF))
-def test_lword_round_trip_in_both_orders(low_first, value) -> None:
+def test_lword_round_trip_in_both_orders(low_first: bool, value) -> None:
     config = DesConfig(lword_low_word_first=low_first)
     words = split_lword(value, config)
     assert join_lword(words, config, signed=True) == value
@@ -272,5 +272,5 @@ def test_twist_to_motor_rpm_saturation_keeps_the_ratio() -> None:
         (0, 30000, 95536.0, 95536),  # more than a whole wrap between readings: 30000 + 65536
     ],
 )
-def test_unwrap_counter(previous, current, expected, delta) -> None:
+def test_unwrap_counter(previous: int, current: int, expected: float, delta: int) -> None:
     assert unwrap_counter(previous, current, expected) == delta

@@ -80,13 +80,13 @@ def make_core(battery_W: float = 100.0, **settings) -> EstimatorCore:
         (0.1, -1e6, 'angular.z = -1e\\+06 rad/s exceeds'),
     ],
 )
-def test_bad_command_is_rejected_with_its_reason(speed, yaw, match) -> None:
+def test_bad_command_is_rejected_with_its_reason(speed: float, yaw: float, match: str) -> None:
     with pytest.raises(InputError, match=match):
         check_command(speed, yaw, LIMITS)
 
 
 @pytest.mark.parametrize(('speed', 'yaw'), [(0.2, 0.0), (-0.2, 0.1), (0.0, 0.35), (0.0, 0.0)])
-def test_plausible_commands_pass_unchanged(speed, yaw) -> None:
+def test_plausible_commands_pass_unchanged(speed: float, yaw: float) -> None:
     """Reverse (V < 0) and spinning in place (V = 0, r != 0) are valid commands."""
     assert check_command(speed, yaw, LIMITS) == (speed, yaw)
 
@@ -105,7 +105,9 @@ def test_plausible_commands_pass_unchanged(speed, yaw) -> None:
         (['left_motor', 'right_motor'], [1e308, 1e308], [0.1, 0.1], 'left_motor velocity = 1e\\+308'),
     ],
 )
-def test_bad_joint_state_is_rejected_with_its_reason(names, velocity, effort, match) -> None:
+def test_bad_joint_state_is_rejected_with_its_reason(
+    names: list[str], velocity: list[float], effort: list[float], match: str
+) -> None:
     with pytest.raises(InputError, match=match):
         check_joint_state(names, velocity, effort, LIMITS)
 

@@ -58,7 +58,7 @@ def test_an_impossible_reading_is_skipped_counted_and_flagged_never_fatal() -> N
 
 
 @pytest.mark.parametrize('battery_W', [2e4, -2e4, math.nan])
-def test_an_impossible_prediction_is_clamped_and_counted(battery_W) -> None:
+def test_an_impossible_prediction_is_clamped_and_counted(battery_W: float) -> None:
     core = make_core(battery_W)
     core.on_command(0.2, 0.0, 0.0)
     core.tick(0.4)  # would raise 'battery cannot deliver' without the clamp
@@ -118,7 +118,7 @@ def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path:
 
 @pytest.mark.parametrize('capacity', ['10', '1e308'])
 def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(
-    tmp_path: Path, capacity
+    tmp_path: Path, capacity: str
 ) -> None:
     """A state file carrying a battery configuration (the old format did) keeps its tallies only:
     capacity_Ah 10 once made the test robot's battery 449.7 Wh, 1e308 inf Wh."""

@@ -102,7 +102,7 @@ def test_elements_study_converges() -> None:
 
 
 @pytest.mark.parametrize('terrain_name', ['dry_sand', 'sandy_loam', 'clay'])
-def test_torque_within_3_percent_of_wong_on_the_8x16_grid(terrain_name) -> None:
+def test_torque_within_3_percent_of_wong_on_the_8x16_grid(terrain_name: str) -> None:
     """Section 6.4 / Figures 6.6-6.8: FESS matches Wong's track model. Tolerance 3 % of the larger
     side torque at each point (the inner torque crosses zero at large R, where a relative error of
     that side alone is meaningless)."""
@@ -140,7 +140,7 @@ def test_dispatch_through_models_solve_and_bad_input() -> None:
 
 
 @pytest.mark.parametrize('vehicle_name', ['chapter3_track', 'test_robot_6wheel'])
-def test_lean_point_solver_equals_the_batched_solver(vehicle_name) -> None:
+def test_lean_point_solver_equals_the_batched_solver(vehicle_name: str) -> None:
     solver = fess.FessSolver(load_vehicle(vehicle_name), PRESETS['sandy_loam'], n=20)
     v = [0.5, 0.5, 0.0, -0.7, 1.2, 0.0]
     w = [0.25, 0.0, 1.0, 0.3, -0.05, 0.0]

@@ -51,7 +51,7 @@ def test_six_wheels_solve_and_mirror() -> None:
 
 
 @pytest.mark.parametrize('terrain_name', ['dry_sand', 'sandy_loam', 'clay'])
-def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name) -> None:
+def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name: str) -> None:
     """Section 6.4 / Figures 6.9-6.11: close at big radii. 5 speeds x the 13 radii >= 2 m of the
     8 x 16 grid (R = 1 ... 500 m, geometric) keep the test fast; benchmarks/bench_fess.py reports the
     full grid and the small-radius differences. Tolerance: 10 % of the larger side torque."""
@@ -69,7 +69,7 @@ def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name
 
 
 @pytest.mark.parametrize('name', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(name) -> None:
+def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(name: str) -> None:
     """The available thrust behind the traction margin is F_max = c A + W tan(phi) (eqs. 2.2 / 2.12)
     summed over EVERY wheel of a side (it once summed a single wheel, so a 6-wheel robot of the same
     weight reported a third of its capacity). Hand check, sand_bin (Table 7.2: c = 200 Pa, phi = 27

@@ -230,7 +230,7 @@ def test_mission_cli_counts_limited_segments_apart_from_clamped(
         (['--direct', '', '--route', 'search-retrieve'], 'did not converge|R ='),
     ],
 )
-def test_mission_cli_errors(argv, message, capsys: pytest.CaptureFixture[str]) -> None:
+def test_mission_cli_errors(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     base = {'--vehicle': 'packbot_track', '--terrain': 'sandy_soil', '--route': 'patrol'}
     for flag, value in zip(argv[::2], argv[1::2], strict=True):
         base[flag] = value

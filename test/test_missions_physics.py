@@ -88,7 +88,7 @@ def _internal_hand(side: str, omega_axle: float, running_gear: str, scale: float
 
 
 @pytest.mark.parametrize('name', ['packbot_track', 'packbot_6wheel'])
-def test_internal_power_is_eq_7_2_at_motor_speed(name, sandy: Terrain, short_route: Route) -> None:
+def test_internal_power_is_eq_7_2_at_motor_speed(name: str, sandy: Terrain, short_route: Route) -> None:
     """Internal power of each mission state is eq. 7.2 at w_m = 12 w_axle: chain for both, track term
     only for tracks (ch. 7.2.3), Table 7.1 as torques (the project's reading, internal.py)."""
     vehicle = load_vehicle(name)

@@ -248,7 +248,7 @@ def test_wrong_pattern_rejects_images(scene: Scene) -> None:
 
 
 @pytest.mark.parametrize('text', ['9by6', '9x', '1x6', 'x', '', '9x6x2', '-9x6'])
-def test_bad_pattern_string(text) -> None:
+def test_bad_pattern_string(text: str) -> None:
     with pytest.raises(InputError, match='bad pattern'):
         parse_pattern(text)
 
@@ -266,7 +266,7 @@ def test_pattern_string() -> None:
         (': [\n', ConfigError),
     ],
 )
-def test_bad_calibration_file(tmp_path: Path, content, error) -> None:
+def test_bad_calibration_file(tmp_path: Path, content: str, error) -> None:
     path = tmp_path / 'bad.yaml'
     path.write_text(content)
     with pytest.raises(error, match=r'bad\.yaml'):
@@ -440,7 +440,11 @@ def test_cli_calibrate_then_track(scene: Scene, tmp_path: Path, capsys: pytest.C
     ],
 )  # fmt: skip
 def test_cli_errors_are_one_line(
-    argv, message, capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    argv: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.chdir(tmp_path)
     assert run_cli(argv) == 2

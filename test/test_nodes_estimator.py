@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -26,6 +27,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
 from test_estimator_core import FixedPowerPredictor
 
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 from skidsteer_power.powertrain import Battery
 
@@ -33,13 +35,15 @@ from skidsteer_power.powertrain import Battery
 class Rig:
     """A power_estimator in its own namespace plus a probe node that publishes and records."""
 
-    def __init__(self, context, tmp_path: Path, predictor=None, **params) -> None:
+    def __init__(
+        self, context: Context, tmp_path: Path, predictor: Predictor | None = None, **params: object
+    ) -> None:
         self.context = context
         self.namespace = f'pe_{uuid.uuid4().hex[:8]}'
         self.tmp_path = tmp_path
         self.executor = SingleThreadedExecutor(context=context)
         self.probe = rclpy.create_node(f'probe_{self.namespace}', namespace=self.namespace, context=context)
-        self.received: dict[str, list] = {}
+        self.received: dict[str, list[Any]] = {}
         for topic, kind in (
             ('power/predicted', JointState),
             ('power/summary', DiagnosticArray),
@@ -55,14 +59,23 @@ class Rig:
         self.pub_joint = self.probe.create_publisher(JointState, 'joint_states', 100)
         self.pub_clock = self.probe.create_publisher(Clock, '/clock', 10)
         self.executor.add_node(self.probe)
-        self.node = None
+        self._node: PowerEstimator | None = None
         self.start(predictor, **params)
 
-    def start(self, predictor=None, **params) -> PowerEstimator:
-        defaults = {'state_file': str(self.tmp_path / 'energy.json'), 'publish_period_s': 0.05}
+    @property
+    def node(self) -> PowerEstimator:
+        """The running estimator (between start and stop)."""
+        assert self._node is not None, 'the estimator is stopped'
+        return self._node
+
+    def start(self, predictor: Predictor | None = None, **params: object) -> PowerEstimator:
+        defaults: dict[str, object] = {
+            'state_file': str(self.tmp_path / 'energy.json'),
+            'publish_period_s': 0.05,
+        }
         defaults.update(params)
         overrides = [Parameter(k, value=v) for k, v in defaults.items()]
-        self.node = PowerEstimator(
+        self._node = PowerEstimator(
             predictor, namespace=self.namespace, context=self.context, parameter_overrides=overrides
         )
         self.executor.add_node(self.node)
@@ -77,15 +90,15 @@ class Rig:
     def stop(self) -> None:
         self.executor.remove_node(self.node)
         self.node.destroy_node()
-        self.node = None
+        self._node = None
 
     def close(self) -> None:
-        if self.node is not None:
+        if self._node is not None:
             self.stop()
         self.executor.shutdown()
         self.probe.destroy_node()
 
-    def spin_until(self, condition, timeout_s: float = 10.0) -> None:
+    def spin_until(self, condition: Callable[[], object], timeout_s: float = 10.0) -> None:
         deadline = time.monotonic() + timeout_s
         while not condition():
             if time.monotonic() > deadline:
@@ -98,7 +111,9 @@ class Rig:
         self.pub_clock.publish(Clock(clock=stamp))
         self.spin_until(lambda: abs(self.node.now_s() - t_s) < 1e-6)
 
-    def run_clock(self, start_s: float, condition, step_s: float = 0.05, limit_s: float = 30.0) -> float:
+    def run_clock(
+        self, start_s: float, condition: Callable[[], object], step_s: float = 0.05, limit_s: float = 30.0
+    ) -> float:
         """Advance sim time from ``start_s`` in steps (timers fire as it moves) until ``condition``;
         returns the time reached."""
         t = start_s
@@ -111,12 +126,12 @@ class Rig:
             t += step_s
         return t
 
-    def joint_state(self, t_s: float, velocity, effort) -> None:
+    def joint_state(self, t_s: float, velocity: Sequence[float], effort: Sequence[float]) -> None:
         msg = JointState(name=['left_motor', 'right_motor'], velocity=list(velocity), effort=list(effort))
         self.pub_joint.publish(msg)
         self.spin_until(lambda: self.node.core.joint_fresh.last_s == pytest.approx(t_s, abs=1e-9))
 
-    def command(self, speed: float, yaw_rate: float, stamp=None) -> None:
+    def command(self, speed: float, yaw_rate: float, stamp: Time | None = None) -> None:
         twist = Twist()
         twist.linear.x, twist.angular.z = speed, yaw_rate
         if not self.stamped:
@@ -193,7 +208,9 @@ def test_periodic_save_writes_the_file(rig_factory: Callable[..., Rig], tmp_path
 @pytest.mark.parametrize(
     ('speed', 'yaw_rate'), [(math.nan, 0.0), (0.1, math.inf), (-math.inf, 0.0), (40.0, 0.0), (0.1, 1e4)]
 )
-def test_bad_cmd_vel_is_rejected_and_counted(rig_factory: Callable[..., Rig], speed, yaw_rate) -> None:
+def test_bad_cmd_vel_is_rejected_and_counted(
+    rig_factory: Callable[..., Rig], speed: float, yaw_rate: float
+) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.command(speed, yaw_rate)
     rig.spin_until(lambda: rig.node.core.rejects.counts['cmd_vel'] == 1)
@@ -217,7 +234,7 @@ def test_bad_cmd_vel_is_rejected_and_counted(rig_factory: Callable[..., Rig], sp
     ],
 )
 def test_bad_joint_states_are_rejected_and_counted(
-    rig_factory: Callable[..., Rig], names, velocity, effort
+    rig_factory: Callable[..., Rig], names: list[str], velocity, effort
 ) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.pub_joint.publish(JointState(name=names, velocity=velocity, effort=effort))
@@ -273,7 +290,9 @@ def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(
     [('cmd_timeout_s', -1.0, 'cmd_timeout_s must be'), ('save_period_s', 0.0, 'save_period_s must be > 0'),
      ('vehicle', 'no_such_robot', 'no_such_robot'), ('max_speed_m_s', math.nan, 'max_speed_m_s')],
 )  # fmt: skip
-def test_bad_start_parameters_are_one_clear_error(ros_context: Context, name, value, match) -> None:
+def test_bad_start_parameters_are_one_clear_error(
+    ros_context: Context, name: str, value: float | str, match: str
+) -> None:
     from skidsteer_power.errors import SkidsteerError
 
     with pytest.raises(SkidsteerError, match=match):

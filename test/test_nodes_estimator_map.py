@@ -38,7 +38,7 @@ def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
 
 
 @pytest.mark.parametrize(('speed', 'yaw_rate'), [(0.2, 0.1), (-0.2, 0.1), (0.0, 0.5), (0.1, -0.35)])
-def test_cmd_vel_round_trip(rig: Rig, cache_dir: str, speed, yaw_rate) -> None:
+def test_cmd_vel_round_trip(rig: Rig, cache_dir: str, speed: float, yaw_rate: float) -> None:
     """Forward, reverse, spin in place and a right turn all answer at once with the map's values."""
     rig.command(speed, yaw_rate)
     rig.received['power/summary'].clear()

@@ -206,7 +206,9 @@ def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_cont
 
 
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
-def test_power_estimator_main_answers_and_exits_cleanly(ros_context: Context, tmp_path: Path, stop) -> None:
+def test_power_estimator_main_answers_and_exits_cleanly(
+    ros_context: Context, tmp_path: Path, stop: signal.Signals
+) -> None:
     ns = f'main_{uuid.uuid4().hex[:8]}'
     params = {'map_cache_dir': tmp_path, 'persist': 'false', 'vehicle': 'test_robot_track'}
     argv = node_command('skidsteer_power.nodes.power_estimator', ns, params)

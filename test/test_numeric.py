@@ -40,7 +40,7 @@ def test_distinct_rows_is_numpy_unique_over_rows() -> None:
 
 
 @pytest.mark.parametrize('columns', [1, 3])
-def test_distinct_rows_of_any_width(columns) -> None:
+def test_distinct_rows_of_any_width(columns: int) -> None:
     rows, inverse = distinct_rows(np.zeros((0, columns)))
     assert rows.shape == (0, columns) and inverse.size == 0
     table = np.repeat(np.arange(4.0 * columns).reshape(4, columns), 3, axis=0)[::-1]

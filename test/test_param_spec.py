@@ -35,7 +35,7 @@ def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry) ->
 
 
 @pytest.mark.parametrize('value', ['', 'true', 'on', 'No', '1.5', '~', 'a: b', "it's", '/dev/ttyUSB0', 'x y'])
-def test_yaml_value_round_trips_strings_yaml_would_read_as_something_else(value) -> None:
+def test_yaml_value_round_trips_strings_yaml_would_read_as_something_else(value: str) -> None:
     assert yaml.safe_load(f'k: {yaml_value(value)}')['k'] == value
 
 

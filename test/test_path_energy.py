@@ -136,7 +136,9 @@ def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_sc
 @pytest.mark.parametrize(
     ('x', 'y', 'speed'), [([0.0], [0.0], 0.3), ([0, 0], [0, 0], 0.3), ([0, 1], [0, 0], 0.0)]
 )
-def test_bad_paths_are_input_errors(x, y, speed) -> None:
+def test_bad_paths_are_input_errors(
+    x: list[float] | list[int], y: list[float] | list[int], speed: float
+) -> None:
     with pytest.raises(InputError):
         route_from_polyline(x, y, speed)
 

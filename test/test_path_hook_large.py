@@ -86,7 +86,7 @@ def _rclpy_path(xy: np.ndarray, frames: list[str]) -> bytes:
 
 @pytest.mark.parametrize('frames', [['map'], ['', 'odom', 'a_longer_frame_name']])
 @pytest.mark.parametrize('n', [0, 1, 2, 9])
-def test_path_xy_reads_what_rclpy_serializes(frames, n) -> None:
+def test_path_xy_reads_what_rclpy_serializes(frames: list[str], n: int) -> None:
     xy = np.random.default_rng(n).normal(size=(n, 2))
     x, y = path_xy(_rclpy_path(xy, frames))
     assert np.array_equal(x, xy[:, 0]) and np.array_equal(y, xy[:, 1])

@@ -187,7 +187,9 @@ def test_joint_mapping_errors_are_clear() -> None:
         ('leo_rover', 6.5, 0.358, 0.065, 2 * 0.15256),
     ],
 )
-def test_public_robot_files_hold_their_published_dimensions(name, mass, tread, radius, wheelbase) -> None:
+def test_public_robot_files_hold_their_published_dimensions(
+    name: str, mass: float, tread: float, radius: float, wheelbase: float
+) -> None:
     vehicle = load_vehicle(name)
     assert vehicle.mass_kg == pytest.approx(mass, abs=0.006)
     assert (vehicle.tread_m, vehicle.wheel_radius_m) == (tread, radius)

@@ -187,7 +187,7 @@ def test_side_currents_config_errors() -> None:
 @pytest.mark.ros
 @pytest.mark.parametrize('installed', [True, False])
 def test_power_estimator_node_takes_effort_from_a_current_topic(
-    rig_factory: Callable[..., Rig], tmp_path: Path, installed
+    rig_factory: Callable[..., Rig], tmp_path: Path, installed: bool
 ) -> None:
     """Real rclpy and DDS. husky_msgs and clearpath_platform_msgs are not installed here, so the node
     is given the husky file with its side_currents pointed at std_msgs/Float64MultiArray

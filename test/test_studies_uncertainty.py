@@ -85,7 +85,9 @@ def test_calibration_covariance_is_read_in_the_terrain_files_units(tmp_path: Pat
     ('cov', 'match'),
     [([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1]], 'positive semi-definite'), ([[1.0]], '3 x 3')],
 )
-def test_bad_calibration_covariance_is_a_config_error(tmp_path: Path, cov, match) -> None:
+def test_bad_calibration_covariance_is_a_config_error(
+    tmp_path: Path, cov: list[list[float] | list[int]] | list[list[float]], match: str
+) -> None:
     with pytest.raises(ConfigError, match=match):
         u.spread_from_calibration(_calibrated_file(tmp_path, cov))
 

@@ -106,7 +106,9 @@ def test_run_simulate_cli_reports_a_falling_battery(tmp_path: Path) -> None:
         (('--duration', '-1'), 'duration = -1 s is outside its range'),
     ],
 )
-def test_run_bad_arguments_give_one_line(tmp_path: Path, args, match) -> None:
+def test_run_bad_arguments_give_one_line(
+    tmp_path: Path, args: tuple[str, str, str, str, str] | tuple[str, str], match: str
+) -> None:
     result = run_cli(*args, '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
@@ -114,7 +116,9 @@ def test_run_bad_arguments_give_one_line(tmp_path: Path, args, match) -> None:
 
 
 @pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
-def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(tmp_path: Path, signum) -> None:
+def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(
+    tmp_path: Path, signum: signal.Signals
+) -> None:
     """SIGTERM, or SIGINT even when inherited as ignored (a background job of a script), ends the
     suite cleanly: the JSON summary is printed and the energy state is saved (nothing accumulated is
     lost)."""

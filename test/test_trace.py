@@ -25,7 +25,7 @@ def circle_points(cx: float, cy: float, r: float, start: float, stop: float, n: 
         (-0.5, 0.25, 50.0, 0.05),  # nearly straight: 2.5 m of a 50 m circle
     ],
 )
-def test_exact_circle_is_recovered(cx, cy, r, arc) -> None:
+def test_exact_circle_is_recovered(cx: float, cy: float, r: float, arc: float) -> None:
     x, y = circle_points(cx, cy, r, 0.3, 0.3 + arc, 25)
     fit = fit_circle(x, y)
     assert isinstance(fit, CircleFit)
@@ -74,7 +74,7 @@ def test_noisy_short_arc_stays_close() -> None:
         ([0.0, 1.0, 2.0], [0.0, 1.0], 'differ in length'),
     ],
 )
-def test_degenerate_input_is_a_clear_error(x, y, message) -> None:
+def test_degenerate_input_is_a_clear_error(x, y, message: str) -> None:
     with pytest.raises(InputError, match=message):
         fit_circle(x, y)
 
@@ -102,7 +102,7 @@ def test_mean_speed_on_a_circle_is_the_chord_length_over_time() -> None:
         ([0.0, math.inf, 3.0], 'finite'),
     ],
 )
-def test_mean_speed_bad_times(t, message) -> None:
+def test_mean_speed_bad_times(t: list[float], message: str) -> None:
     with pytest.raises(InputError, match=message):
         mean_speed(t, [0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
 

@@ -73,7 +73,7 @@ def test_importing_and_running_the_twin_loads_neither_fess_nor_maps() -> None:
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel'])
-def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle) -> None:
+def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle: str) -> None:
     # start, turn, reverse-steer, stop: bus energy = terrain work + internal losses + kinetic change
     twin = Twin(load_vehicle(vehicle), SAND_BIN)
     commands = [
@@ -111,7 +111,7 @@ def test_straight_track_agrees_with_the_single_track_equations() -> None:
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle) -> None:
+def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle: str) -> None:
     # steady straight running: every wheel has zero drawbar pull at load W / n (eqs. 2.28-2.29)
     twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, contact='classic')
     v = twin.vehicle
@@ -128,7 +128,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle) -> None:
     ('vehicle', 'model'),
     [('test_robot_track', wong_track), ('test_robot_4wheel', wong_wheel), ('test_robot_6wheel', wong_wheel)],
 )
-def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, model) -> None:
+def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle: str, model) -> None:
     # The twin turns less than commanded (slip); Wong's theory (ch. 3 tracks, ch. 4 wheels) solved at
     # the twin's actual speed and radius must give its sprocket/axle torques and speeds.
     # Tolerance 1 %: the twin discretizes the patches differently (32 trapezoid intervals along a
@@ -149,7 +149,7 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle) -> None:
+def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle: str) -> None:
     # ch. 7.3.4, Table 7.3 (skidsteer_power.real_robot): the test robot completed 0.1 m/s up to
     # 0.2 rad/s and 0.2 m/s up to 0.35 rad/s, and got stuck "because of the large sinkage" at
     # 0.1 m/s, 0.25-0.35 rad/s (the empty cells). A bounded subset; all 66 cells are in
@@ -171,7 +171,7 @@ def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(veh
     [('test_robot_track', 0.2, 0.02, 17.48), ('test_robot_6wheel', 0.2, 0.25, 1.62)],
 )
 def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(
-    vehicle, speed, yaw_rate, radius_real
+    vehicle: str, speed: float, yaw_rate: float, radius_real: float
 ) -> None:
     # Appendix D (skidsteer_power.real_robot.APPENDIX_D_RADII); the track's longitudinal shear modulus
     # was fitted to the track's 0.1 m/s cells only, so these two are a check. Goal of issue 26:

@@ -29,7 +29,7 @@ def _rows(period_s: float, duration_s: float) -> list[Segment]:
 
 
 @pytest.mark.parametrize('period_s', [0.5e-3, 3e-3])
-def test_short_and_off_grid_rows_drive_like_one_row(period_s) -> None:
+def test_short_and_off_grid_rows_drive_like_one_row(period_s: float) -> None:
     one = run_commands(_twin(), [Segment(SPEED, YAW, 1.5)])
     rows = run_commands(_twin(), _rows(period_s, 1.5))
     assert rows.duration_s == pytest.approx(1.5, abs=1e-9)

@@ -127,7 +127,7 @@ def test_case_file(tmp_path: Path) -> None:
         ('duration_s,speed_m_s,yaw_rate_rad_s\n1,nan,0\n', 'finite'),
     ],
 )
-def test_bad_case_file(tmp_path: Path, text, match) -> None:
+def test_bad_case_file(tmp_path: Path, text: str, match: str) -> None:
     path = tmp_path / 'case.csv'
     path.write_text(text)
     with pytest.raises(InputError, match=match):
