@@ -8,7 +8,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import TypedDict, Unpack
 
 import pytest
 
@@ -44,18 +45,27 @@ def amp(sim: SimulatedDes) -> Iterator[DesAmplifier]:
         yield amplifier
 
 
-def open_amp(sim: SimulatedDes, **timing: float) -> DesAmplifier:
+class Timing(TypedDict, total=False):
+    """Keyword arguments of LinkTiming."""
+
+    ack_timeout_s: float
+    reply_timeout_s: float
+    slack_s: float
+    retries: int
+
+
+def open_amp(sim: SimulatedDes, **timing: Unpack[Timing]) -> DesAmplifier:
     return DesAmplifier.open(sim.port, sim.baudrate, config=sim.config, timing=LinkTiming(**timing))
 
 
-def wait_for(predicate, timeout_s: float = 5.0, period_s: float = 0.02) -> bool:
+def wait_for(predicate: Callable[[], object], timeout_s: float = 5.0, period_s: float = 0.02) -> bool:
     """Poll ``predicate`` until true or the deadline (a wait, not a timing assertion)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if predicate():
             return True
         time.sleep(period_s)
-    return predicate()
+    return bool(predicate())
 
 
 # -- every command ------------------------------------------------------------------------------
@@ -343,7 +353,8 @@ def test_cli_des_sim_prints_ports_and_stops_on_sigint() -> None:
         text=True,
     )
     try:
-        lines = []
+        lines: list[str] = []
+        assert proc.stdout is not None
         while not lines or lines[-1] != '}\n':
             lines.append(proc.stdout.readline())
         ports = json.loads(''.join(lines))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from des_harness import Harness
@@ -58,12 +59,8 @@ def test_reliability_override_is_honoured(ros_context: Context, pair: SimulatedP
     """With ``reliability: reliable`` forced, the best-effort writer no longer matches: the motors stay
     at zero while a reliable writer (the harness's own) still drives."""
     ns = f'/t{uuid.uuid4().hex[:8]}'
-    h = Harness(
-        ros_context,
-        pair,
-        namespace=ns,
-        **{f'qos_overrides.{ns}/cmd_vel.subscription.reliability': 'reliable'},
-    )
+    qos: dict[str, Any] = {f'qos_overrides.{ns}/cmd_vel.subscription.reliability': 'reliable'}
+    h = Harness(ros_context, pair, namespace=ns, **qos)
     try:
         _best_effort_teleop(h, ns)
         assert not h.spin_until(lambda: pair.left.speed_setpoint_rpm != 0, timeout_s=1.5)

@@ -61,7 +61,7 @@ def test_crc_worked_example_read_sys_status() -> None:
 
 
 @given(st.integers(0, 0xFF), words_strategy)
-def test_direct_crc_equals_maxon_wordwise_routine(opcode, words) -> None:
+def test_direct_crc_equals_maxon_wordwise_routine(opcode: int, words: tuple[int, ...]) -> None:
     augmented = [(opcode << 8) | (len(words) - 1), *words, 0x0000]
     assert frame_crc(opcode, words) == maxon_wordwise_crc(augmented)
 
@@ -92,13 +92,13 @@ def test_word_out_of_range(value: int) -> None:
 
 
 @given(st.integers(-0x8000, 0x7FFF))
-def test_int16_round_trip(value) -> None:
+def test_int16_round_trip(value: int) -> None:
     assert to_int16(to_word(value)) == value
 
 
 @pytest.mark.parametrize('low_first', [True, False])
 @given(value=st.integers(-0x8000_0000, 0x7FFF_FFFF))
-def test_lword_round_trip_in_both_orders(low_first: bool, value) -> None:
+def test_lword_round_trip_in_both_orders(low_first: bool, value: int) -> None:
     config = DesConfig(lword_low_word_first=low_first)
     words = split_lword(value, config)
     assert join_lword(words, config, signed=True) == value
@@ -149,7 +149,8 @@ def reply(words: tuple[int, ...]) -> bytes:
 
 
 def decode_all(decoder: FrameDecoder) -> tuple[list[object], list[DesLinkError]]:
-    events, errors = [], []
+    events: list[object] = []
+    errors: list[DesLinkError] = []
     while True:
         try:
             event = decoder.next_event()
@@ -162,7 +163,7 @@ def decode_all(decoder: FrameDecoder) -> tuple[list[object], list[DesLinkError]]
 
 
 @pytest.mark.parametrize('op', list(OpCode))
-def test_decoder_round_trip_every_command(op) -> None:
+def test_decoder_round_trip_every_command(op: OpCode) -> None:
     decoder = FrameDecoder(frozenset(int(o) for o in OpCode))
     decoder.feed(bytes((op,)) + encode_body(op, (1, 0xBEEF)))
     events, errors = decode_all(decoder)
@@ -210,7 +211,7 @@ def test_decoder_rejects_impossible_length_then_resynchronizes() -> None:
 
 @settings(max_examples=300)
 @given(st.binary(max_size=300), st.lists(st.integers(1, 40), max_size=20))
-def test_decoder_fuzz_only_protocol_errors_and_always_ends(data, chunk_sizes) -> None:
+def test_decoder_fuzz_only_protocol_errors_and_always_ends(data: bytes, chunk_sizes: list[int]) -> None:
     decoder = FrameDecoder(frozenset(int(o) for o in OpCode) | {REPLY_OPCODE})
     position, calls = 0, 0
     chunks = [*chunk_sizes, len(data)]
@@ -232,7 +233,9 @@ garbage = st.binary(max_size=20).map(lambda b: bytes(x for x in b if x != REPLY_
 
 
 @given(st.lists(st.tuples(garbage, words_strategy), min_size=1, max_size=6), garbage)
-def test_decoder_recovers_every_frame_between_garbage(parts, tail) -> None:
+def test_decoder_recovers_every_frame_between_garbage(
+    parts: list[tuple[bytes, tuple[int, ...]]], tail: bytes
+) -> None:
     stream = b''.join(g + reply(w) for g, w in parts) + tail
     decoder = FrameDecoder()
     decoder.feed(stream)

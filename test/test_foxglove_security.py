@@ -28,6 +28,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from websockets.exceptions import InvalidStatus
 from websockets.sync import client as websockets_sync  # requirements.txt
+from websockets.typing import Origin, Subprotocol
 
 from skidsteer_power.nodes.foxglove_front import origin_allowed
 
@@ -82,10 +83,14 @@ def test_default_host_is_loopback_and_origins_are_checked(bridge_node: Node) -> 
         assert bridge.front._server.sockets[0].getsockname()[0] == '127.0.0.1'
         url = f'ws://127.0.0.1:{bridge.port}'
         with pytest.raises(InvalidStatus) as refused:
-            websockets_sync.connect(url, subprotocols=['foxglove.sdk.v1'], origin='https://evil.example')
+            websockets_sync.connect(
+                url, subprotocols=[Subprotocol('foxglove.sdk.v1')], origin=Origin('https://evil.example')
+            )
         assert refused.value.response.status_code == 403
-        for origin in (None, 'http://localhost:8080', 'https://app.foxglove.dev'):
-            with websockets_sync.connect(url, subprotocols=['foxglove.sdk.v1'], origin=origin) as ws:
+        for origin in (None, Origin('http://localhost:8080'), Origin('https://app.foxglove.dev')):
+            with websockets_sync.connect(
+                url, subprotocols=[Subprotocol('foxglove.sdk.v1')], origin=origin
+            ) as ws:
                 assert json.loads(ws.recv(timeout=10))['op'] == 'serverInfo'
         assert bridge.front.refused == 1
     finally:
@@ -100,7 +105,7 @@ def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node: N
     bridge = FoxgloveBridge(bridge_node, port=0, topics=['/none'])
     try:
         with websockets_sync.connect(
-            f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1']
+            f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
         ) as ws:
             assert ws.subprotocol == 'foxglove.websocket.v1'
             info = json.loads(ws.recv(timeout=10))
@@ -112,7 +117,9 @@ def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node: N
     server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
     try:
         with pytest.raises(InvalidStatus) as refused:
-            websockets_sync.connect(f'ws://127.0.0.1:{server.port}', subprotocols=['foxglove.websocket.v1'])
+            websockets_sync.connect(
+                f'ws://127.0.0.1:{server.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
+            )
         assert refused.value.response.status_code == 400
     finally:
         server.stop()
@@ -172,7 +179,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(
     )
     try:
         with websockets_sync.connect(
-            f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1']
+            f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
         ) as ws:
             info = json.loads(ws.recv(timeout=10))
             assert 'clientPublish' in info['capabilities'] and 'cdr' in info['supportedEncodings']
@@ -197,6 +204,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(
             assert 0 < pair.left.speed_setpoint_rpm <= CLAMPED_RPM + 1
             # the client stops sending: the driver's watchdog stops the motors
             assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm == 0)
+        assert bridge.client_publish is not None
         assert bridge.client_publish.refused == 1  # the channel on /other
         assert set(bridge.client_publish.published) == {f'{ns}/cmd_vel'}
     finally:
@@ -241,8 +249,13 @@ def test_the_npm_foxglove_client_subscribes_and_drives(
         proc = subprocess.Popen(
             argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=npm_client
         )
-        moved = []
-        harness.spin_until(lambda: moved.append(pair.left.speed_setpoint_rpm) or proc.poll() is not None, 40)
+        moved: list[int] = []
+
+        def record_until_done() -> bool:
+            moved.append(pair.left.speed_setpoint_rpm)
+            return proc.poll() is not None
+
+        harness.spin_until(record_until_done, 40)
         out, err = proc.communicate(timeout=30)
     finally:
         bridge.close()
