@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from rclpy.context import Context
 
-from skidsteer_power.bag_io.synthetic import Segment
 from skidsteer_power.calibration.direct import DirectFessMap, feed_trace
+from skidsteer_power.commands import Segment
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.core import EstimatorCore
 from skidsteer_power.estimator.prediction import MapPredictor

@@ -19,8 +19,9 @@ from mcap.reader import make_reader
 
 from skidsteer_power.bag_io.reader import open_bag
 from skidsteer_power.bag_io.salvage import salvage_mcap
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 RUNS = [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)]
 RECORD_OVERHEAD = 1 + 8 + 22  # opcode, length, channel/sequence/log time/publish time [bytes]

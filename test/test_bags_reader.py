@@ -273,7 +273,7 @@ def test_real_bag_unknown_types_decode_with_definitions_from_the_readme(
     assert {b.left_front for b in bumps} <= {0, 1}
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', *args], capture_output=True, text=True, timeout=120
     )

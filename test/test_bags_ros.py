@@ -18,7 +18,8 @@ import pytest
 from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bag_io.record import Recorder, record
+from skidsteer_power.bag_io.reader import BagMessage
+from skidsteer_power.bag_io.record import Recorder, RecordResult, record
 from skidsteer_power.bag_io.replay import Replayer, ReplayOptions, deadlines
 from skidsteer_power.bag_io.synthetic import START_NS
 from skidsteer_power.bag_io.writer import BagWriter
@@ -38,7 +39,7 @@ class BackgroundRecording:
         self.stop = StopFlag()
         self.ready = threading.Event()
         self.recorder: Recorder | None = None
-        self.result = None
+        self.result: RecordResult | None = None
         self.error: BaseException | None = None
 
         def on_ready(recorder: Recorder) -> None:
@@ -56,12 +57,13 @@ class BackgroundRecording:
         self.thread.start()
         assert self.ready.wait(20), 'recorder did not start'
 
-    def finish(self):
+    def finish(self) -> RecordResult:
         self.stop.set('test')
         self.thread.join(30)
         assert not self.thread.is_alive(), 'recorder did not stop'
         if self.error is not None:
             raise self.error
+        assert self.result is not None
         return self.result
 
 
@@ -186,25 +188,29 @@ def test_loop_and_clock(ros_context: Context, tmp_path: Path) -> None:
     _string_bag(tmp_path / 'l.mcap', topic, 20, 10_000_000)  # 0.19 s of bag
     listener = rclpy.create_node('bag_clock_listener', context=ros_context)
     clocks: list[int] = []
-    listener.create_subscription(
-        Clock, '/clock', lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec), 100
-    )
+
+    def on_clock(m: Clock) -> None:
+        clocks.append(m.clock.sec * 10**9 + m.clock.nanosec)
+
+    listener.create_subscription(Clock, '/clock', on_clock, 100)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(listener)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     node = rclpy.create_node('bag_loop_replayer', context=ros_context)
     stop = StopFlag()
-    published = []
+    published: list[int] = []
 
-    def count(message) -> None:
+    def count(message: BagMessage) -> None:
         published.append(message.timestamp_ns)
         if len(published) == 60:
             stop.set('test')
 
     with open_bag(tmp_path / 'l.mcap') as bag:
         replayer = Replayer(bag, node, ReplayOptions(loop=True, clock=True, clock_hz=100.0))
-        _wait_for(lambda: replayer._clock_pub.get_subscription_count() > 0)
+        clock_pub = replayer._clock_pub
+        assert clock_pub is not None
+        _wait_for(lambda: clock_pub.get_subscription_count() > 0)
         result = replayer.run(stop, on_message=count)
     time.sleep(0.2)
     executor.shutdown()
@@ -242,6 +248,7 @@ def test_signal_stops_recording_cleanly_without_losing_messages(
     )
     try:
         _wait_for(lambda: pub.get_subscription_count() > 0 or proc.poll() is not None, timeout=30)
+        assert proc.stderr is not None
         assert proc.poll() is None, proc.stderr.read()
         for i in range(300):  # as fast as possible, then the signal at once
             pub.publish(String(data=f'm{i}'))

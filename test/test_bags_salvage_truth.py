@@ -14,13 +14,15 @@ import logging
 import shutil
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from skidsteer_power.bag_io.reader import open_bag
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 VALIDATE = ['--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--no-plots', '--json']
 
@@ -62,7 +64,7 @@ def _copy(src: Path, out: Path, *, storage: str = 'mcap', spoil: int | None = No
 
 def _validate(
     capsys: pytest.CaptureFixture[str], bag: Path, report: Path, *extra: str
-) -> tuple[int, dict, str]:
+) -> tuple[int, dict[str, Any], str]:
     try:
         code = main(['validate', str(bag), *VALIDATE, '--report', str(report), *extra])
     except SystemExit as exit_:

@@ -8,15 +8,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import DriveSamples, MotorArrays, write_drive_bag
 from skidsteer_power.bags.validate import (
     ValidateOptions,
     WindowedBattery,
@@ -26,6 +28,7 @@ from skidsteer_power.bags.validate import (
     run_estimator,
     validate,
 )
+from skidsteer_power.commands import Segment
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
 
@@ -42,10 +45,10 @@ def predictor() -> MapPredictor:
     return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
 
 
-def _predicted_motors(predictor: MapPredictor):
+def _predicted_motors(predictor: MapPredictor) -> Callable[[DriveSamples], MotorArrays]:
     """joint_states equal to the prediction for each sample's command: measured == predicted."""
 
-    def motors(samples):
+    def motors(samples: DriveSamples) -> MotorArrays:
         points = [
             predictor.predict(float(v), float(r))
             for v, r in zip(samples.speed, samples.yaw_rate, strict=True)
@@ -57,7 +60,7 @@ def _predicted_motors(predictor: MapPredictor):
     return motors
 
 
-def _options(tmp_path: Path, **kw) -> ValidateOptions:
+def _options(tmp_path: Path, **kw: Any) -> ValidateOptions:
     return ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', **kw)
 
 
@@ -92,7 +95,7 @@ def test_measurements_equal_to_predictions_give_zero_error(tmp_path: Path, predi
 def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predictor: MapPredictor) -> None:
     base = _predicted_motors(predictor)
 
-    def offset(samples):
+    def offset(samples: DriveSamples) -> MotorArrays:
         wl, wr, tl, tr = base(samples)
         return wl, wr, tl + 0.05, tr  # left motor reads 0.05 N m more than predicted
 
@@ -201,7 +204,7 @@ def test_windowed_battery_matches_per_input_integration(tmp_path: Path, predicto
     assert windowed.soc == pytest.approx(exact.soc, abs=1e-9)
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', *args], capture_output=True, text=True, timeout=300
     )
@@ -304,7 +307,9 @@ def bundled_maps(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp('maps')
 
 
-def _validate_bundled(name, vehicle, terrain, report, maps, odom='/ground_truth/odom'):
+def _validate_bundled(
+    name: str, vehicle: str, terrain: str, report: Path, maps: Path, odom: str = '/ground_truth/odom'
+) -> dict[str, Any]:
     bag_path = BUNDLED / name
     assert bag_path.exists(), f'bundled bag missing: {bag_path} (make it with bags/make_bundled_bags.sh)'
     options = ValidateOptions(vehicle, terrain, report, odom_topic=odom, map_cache_dir=maps, plots=False)

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 DASK = str(Path(sys.executable).with_name('dask'))
 

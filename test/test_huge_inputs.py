@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bag_io.synthetic import Segment, motor_speeds, write_drive_bag
+from skidsteer_power.bag_io.synthetic import motor_speeds, write_drive_bag
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
+from skidsteer_power.commands import Segment
 
 HUGE = 9e307  # finite; two of them sum to inf (float max 1.797e308)
 PLAN = [Segment(0.2, 0.0, 4.0), Segment(0.0, 0.0, 1.0), Segment(0.1, 0.2, 4.0)]
@@ -37,7 +38,7 @@ def huge_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', *args], capture_output=True, text=True, timeout=300
     )

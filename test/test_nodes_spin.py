@@ -12,13 +12,16 @@ import signal
 import subprocess
 import time
 import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from rclpy.context import Context
-from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -29,14 +32,16 @@ from skidsteer_power.nodes.spin import Batched, LeanExecutor, node_command
 N_MESSAGES = 50
 
 
-def _spin_until(executor, condition, timeout_s: float = 10.0) -> None:
+def _spin_until(executor: Executor, condition: Callable[[], object], timeout_s: float = 10.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
         assert time.monotonic() < deadline, 'condition not met within the time limit'
         executor.spin_once(timeout_sec=0.01)
 
 
-def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]:
+def _exercise(
+    context: Context, executor_type: Callable[..., Executor]
+) -> tuple[list[float], int, int, bool, int]:
     """Publish N_MESSAGES, run a timer and a service on ``executor_type``; returns (received values,
     timer ticks, service calls, the response's success, the executor's guard triggers while the
     messages and timer ticks were handled)."""
@@ -46,12 +51,15 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
     ticks = [0]
     calls = [0]
 
-    def on_trigger(request: pytest.FixtureRequest, response):
+    def on_trigger(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         calls[0] += 1
         response.success = True
         return response
 
-    node.create_subscription(Float64, 'x', lambda m: received.append(m.data), 100)
+    def on_x(m: Float64) -> None:
+        received.append(m.data)
+
+    node.create_subscription(Float64, 'x', on_x, 100)
     node.create_timer(0.01, lambda: ticks.__setitem__(0, ticks[0] + 1))
     node.create_service(Trigger, 'go', on_trigger)
     pub = node.create_publisher(Float64, 'x', 100)
@@ -94,7 +102,7 @@ def test_lean_executor_runs_everything_once_without_waking_itself(ros_context: C
 
 
 @contextlib.contextmanager
-def _lean_node(context, name: str):
+def _lean_node(context: Context, name: str) -> Iterator[tuple[Node, LeanExecutor]]:
     """A node spun by a LeanExecutor of its own; both shut down afterwards."""
     node = rclpy.create_node(name, namespace=f'{name}_{uuid.uuid4().hex[:8]}', context=context)
     executor = LeanExecutor(context=context)
@@ -141,7 +149,7 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
 
 def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context: Context) -> None:
     with _lean_node(ros_context, 'events') as (node, executor):
-        incompatible: list[object] = []
+        incompatible: list[QoSRequestedIncompatibleQoSInfo] = []
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         callbacks = SubscriptionEventCallbacks(incompatible_qos=incompatible.append)
@@ -232,6 +240,7 @@ def test_power_estimator_main_answers_and_exits_cleanly(
         _spin_until(executor, answered)
         assert list(measured[-1].velocity) == [300.0, 300.0]  # echoed after the side mapping
         proc.send_signal(stop)
+        assert proc.stderr is not None
         assert proc.wait(timeout=15) == 0, proc.stderr.read()
         assert 'Traceback' not in proc.stderr.read()
     finally:
@@ -266,7 +275,7 @@ def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(
     monkeypatch.setattr(rclpy_compat, 'check', lambda: missing)
 
     class Counted(LeanExecutor):
-        def __init__(self, **kwargs) -> None:
+        def __init__(self, **kwargs: Any) -> None:
             super().__init__(**kwargs)
             assert not self.lean  # the stock path
 
@@ -276,8 +285,9 @@ def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(
     assert triggers >= 2 * N_MESSAGES  # rclpy's own executor: it wakes itself around each callback
 
 
-def _ask_transition(context, node_class, transition_id: int):
-    """Ask a fresh ``node_class`` node for a lifecycle transition over real DDS; (answer, node)."""
+def _ask_transition(context: Context, node_class: Callable[..., Node], transition_id: int) -> Any:
+    """Ask a fresh ``node_class`` node for a lifecycle transition over real DDS; the ChangeState
+    response (Any: rclpy's Future.result is unannotated)."""
     from lifecycle_msgs.srv import ChangeState
 
     ns = f'lc_{uuid.uuid4().hex[:8]}'

@@ -78,7 +78,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     assert odom and odom[-1].pose.pose.orientation.z > truth[-1].pose.pose.orientation.z > 0.0
 
 
-def run_cli(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+def run_cli(*args: str, env_extra: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, **(env_extra or {})}
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'run', *args],
