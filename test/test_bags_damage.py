@@ -37,7 +37,9 @@ def intact(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _first_chunk(path: Path) -> tuple[int, int, int]:
     """(chunk start, chunk length, records start) of the first chunk, from the summary."""
     with path.open('rb') as stream:
-        index = make_reader(stream).get_summary().chunk_indexes[0]
+        summary = make_reader(stream).get_summary()
+        assert summary is not None
+        index = summary.chunk_indexes[0]
     return (
         index.chunk_start_offset,
         index.chunk_length,

@@ -53,6 +53,7 @@ def test_sigkill_during_recording_loses_at_most_about_a_second(ros_context: Cont
     try:
         deadline = time.monotonic() + 30
         while pub.get_subscription_count() == 0:
+            assert proc.stderr is not None
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
             time.sleep(0.01)
         time.sleep(0.3)  # let the recorder's reader finish matching (see replay.MATCH_SETTLE_S)

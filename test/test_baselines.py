@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 
 from skidsteer_power.analysis.baselines import CmdVelConsumer, IcrRlsPower, LinearPower, Samples, energy_J
 
 
-def _samples(speed_cmd, yaw_cmd, power, weight=None, **kw) -> Samples:
-    speed_cmd, yaw_cmd, power = (np.asarray(x, dtype=float) for x in (speed_cmd, yaw_cmd, power))
-    weight = np.ones_like(speed_cmd) if weight is None else np.asarray(weight, dtype=float)
-    return Samples(weight, speed_cmd, yaw_cmd, power, **kw)
+def _samples(
+    speed_cmd: ArrayLike, yaw_cmd: ArrayLike, power: ArrayLike, weight: ArrayLike | None = None, **kw: Any
+) -> Samples:
+    speed, yaw, power_W = (np.asarray(x, dtype=float) for x in (speed_cmd, yaw_cmd, power))
+    weight_s = np.ones_like(speed) if weight is None else np.asarray(weight, dtype=float)
+    return Samples(weight_s, speed, yaw, power_W, **kw)
 
 
 def test_linear_fit_recovers_the_coefficients_of_exact_data() -> None:

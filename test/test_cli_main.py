@@ -3,6 +3,7 @@ a reader that goes away (``... --json | head``) ends the command quietly."""
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 import sys
 
@@ -15,9 +16,10 @@ from skidsteer_power.errors import InputError
 def _patched(monkeypatch: pytest.MonkeyPatch, exc: Exception) -> None:
     real = cli_main.build_parser
 
-    def build_parser():
+    def build_parser() -> argparse.ArgumentParser:
         parser = real()
         (commands,) = (a for a in parser._actions if a.dest == 'command')
+        assert isinstance(commands.choices, dict)
         commands.choices['terrains'].set_defaults(func=lambda args: (_ for _ in ()).throw(exc))
         return parser
 

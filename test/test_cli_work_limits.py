@@ -185,7 +185,7 @@ def _subparser(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> argpar
 
 @pytest.mark.parametrize(('path', 'option', 'limits'), WORK_OPTIONS)
 def test_work_options_show_their_range_in_help(
-    capsys: pytest.CaptureFixture[str], path, option, limits
+    capsys: pytest.CaptureFixture[str], path: tuple[str, ...], option: str, limits: ranges.Range
 ) -> None:
     with pytest.raises(SystemExit):
         main([*path, '--help'])

@@ -32,7 +32,8 @@ from pathlib import Path
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import BatteryState, JointState
 
@@ -146,7 +147,9 @@ def test_colcon_installs_the_executables_config_and_ament_marker(workspace: Path
     assert Path(config) == share / 'config'
 
 
-def activate_if_managed(node, executor, fqn: str = '/des_driver', timeout_s: float = 20.0) -> bool:
+def activate_if_managed(
+    node: Node, executor: Executor, fqn: str = '/des_driver', timeout_s: float = 20.0
+) -> bool:
     """Configure and activate the node ``fqn`` if it is managed (lifecycle); True if it was.
 
     A plain node has no ``<fqn>/change_state`` service and publishes on its own. Waits up to
@@ -184,7 +187,7 @@ def test_installed_nodes_start_with_installed_params_and_publish(workspace: Path
     env = {**os.environ, 'ROS_DOMAIN_ID': os.environ['ROS_DOMAIN_ID']}
     namespace = f'colcon_{uuid.uuid4().hex[:6]}'
     remap = ['-r', f'__ns:=/{namespace}']
-    procs: list[subprocess.Popen] = []
+    procs: list[subprocess.Popen[str]] = []
     with SimulatedPair() as sims:
         estimator = in_workspace(workspace, [str(exe / 'power_estimator'), '--ros-args', '--params-file',
                                              str(params), *remap, '-p', f'map_cache_dir:={tmp_path / "maps"}',

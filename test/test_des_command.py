@@ -66,7 +66,7 @@ def test_slew_limiter_ramps_at_the_limits() -> None:
 
 
 @given(v=any_float, w=any_float)
-def test_every_set_point_is_a_bounded_integer(v, w) -> None:
+def test_every_set_point_is_a_bounded_integer(v: float, w: float) -> None:
     clock = Clock()
     command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, max_rpm=4000.0, clock=clock)
     for side in ('left', 'right'):

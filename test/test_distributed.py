@@ -11,6 +11,7 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -24,10 +25,11 @@ DASK = str(Path(sys.executable).with_name('dask'))
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
+        port: int = s.getsockname()[1]
+        return port
 
 
-def _stop(processes: list[subprocess.Popen]) -> None:
+def _stop(processes: list[subprocess.Popen[bytes]]) -> None:
     for p in processes:
         if p.poll() is None:
             p.terminate()
@@ -47,7 +49,7 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     work = tmp_path_factory.mktemp('dask')
     port = _free_port()
     address = f'tcp://127.0.0.1:{port}'
-    quiet = {'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL, 'cwd': work}
+    quiet: dict[str, Any] = {'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL, 'cwd': work}
     processes = [
         subprocess.Popen(
             [DASK, 'scheduler', '--host', '127.0.0.1', '--port', str(port), '--no-dashboard'], **quiet
@@ -81,10 +83,11 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         _stop(processes)
 
 
-def _design(capsys: pytest.CaptureFixture[str], *extra):
+def _design(capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, Any]:
     argv = ['design-study', '--configuration', 'track', '--samples', '3', '--seed', '7', '--json']
     assert main([*argv, *extra]) == 0
-    return json.loads(capsys.readouterr().out)
+    design: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return design
 
 
 def test_design_study_on_a_cluster_equals_the_local_one(

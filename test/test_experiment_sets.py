@@ -12,7 +12,7 @@ import pytest
 from skidsteer_power.apps import experiment_sets as job
 
 
-def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict:
+def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict[str, object]:
     return {'twin_torque_Nm': list(twin), 'fess_motion_torque_Nm': list(fess), 'stuck': stuck}
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skidsteer_power.bag_io.synthetic import motor_speeds, write_drive_bag
+from skidsteer_power.bag_io.synthetic import DriveSamples, MotorArrays, motor_speeds, write_drive_bag
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
 from skidsteer_power.commands import Segment
 
@@ -22,7 +22,7 @@ PLAN = [Segment(0.2, 0.0, 4.0), Segment(0.0, 0.0, 1.0), Segment(0.1, 0.2, 4.0)]
 RATE_HZ = 20
 
 
-def _huge_in_the_middle(samples):
+def _huge_in_the_middle(samples: DriveSamples) -> MotorArrays:
     """Kinematic speeds (tread 0.4 m, radius 0.1 m, G 12: write_drive_bag's defaults), 0.1 N m
     everywhere but one message of [9e307, 9e307] N m in the first segment."""
     left_w, right_w = motor_speeds(samples, 0.4, 0.1, 12.0)

@@ -98,13 +98,13 @@ def test_design_study_deterministic_and_chapter_8_3(
         assert best['merit'] == max(c['merit'] for c in eligible)
     # ch. 8.3: driving straight, wheel base and tread do not change a wheeled design's power and
     # mobility, nor tread a tracked design's (Figure 8.16 has fewer distinct points)
-    groups: dict[tuple, list[float]] = {}
+    groups: dict[tuple[object, ...], list[float]] = {}
     for c in first['candidates']:
         if c['converged']:
-            key = (c['configuration'], c['mass_kg'], c['width_m'], c['radius_m'])
+            group: tuple[object, ...] = (c['configuration'], c['mass_kg'], c['width_m'], c['radius_m'])
             if c['configuration'] == 'track':
-                key += (c['length_or_wheelbase_m'],)
-            groups.setdefault(key, []).append(c['power_straight_W'])
+                group += (c['length_or_wheelbase_m'],)
+            groups.setdefault(group, []).append(c['power_straight_W'])
     for powers in groups.values():
         assert np.ptp(powers) <= 1e-4 * max(powers)
     # turning: some 4-wheel designs consume more than every track design (ch. 8.3)

@@ -221,6 +221,6 @@ def test_motor_presets_and_overrides_from_the_powertrain_file() -> None:
         (3, 'preset name or a mapping'),
     ],
 )
-def test_bad_motor_entries_are_one_config_error(motor, message: str) -> None:
+def test_bad_motor_entries_are_one_config_error(motor: object, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Powertrain.from_config({'preset': 'test_robot', 'motor': motor})

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ KT = 0.114  # EC-45 torque constant, Appendix B line 12
 STAGES = {'motor': (0.0001, 0.0617), 'gear_train': (0.00008, 0.0177), 'track': (0.00012, 0.6489)}
 
 
-def _cumulative():
+def _cumulative() -> Iterator[tuple[str, float, float]]:
     a = b = 0.0
     for stage, (da, db) in STAGES.items():
         a += da
@@ -76,7 +77,7 @@ def test_fit_internal_uses_the_vehicles_motor(
     assert main(['fit-internal', str(path), '--vehicle', str(tmp_path / 'none.yaml')]) == 2
 
 
-def _write_bag(path, samples) -> None:
+def _write_bag(path: Path, samples: Iterable[tuple[float, float, float, float]]) -> None:
     store = get_typestore(Stores.ROS2_JAZZY)
     JointState = store.types['sensor_msgs/msg/JointState']
     Header = store.types['std_msgs/msg/Header']

@@ -8,6 +8,7 @@ real ament_index_python.
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -76,7 +77,7 @@ def test_no_ament_index_and_no_source_tree_says_where_it_looked(
 ) -> None:
     monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
     monkeypatch.setattr(resources, '_SOURCE_CONFIG', tmp_path / 'no_source_tree')
-    monkeypatch.setattr(resources.sys, 'prefix', str(tmp_path))
+    monkeypatch.setattr(sys, 'prefix', str(tmp_path))  # the module resources reads sys.prefix from
     assert resources.ament_share_dir() is None
     with pytest.raises(ConfigError, match=r'shipped: none \(searched no config folder found\)'):
         load_vehicle('test_robot_track')

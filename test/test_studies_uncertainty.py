@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -55,7 +57,9 @@ def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(
         u.spread_from_yaml(path, sandy, pt)
 
 
-def _calibrated_file(tmp_path: Path, cov, names=('kphi', 'phi', 'n')):
+def _calibrated_file(
+    tmp_path: Path, cov: list[list[float]], names: Sequence[str] = ('kphi', 'phi', 'n')
+) -> Path:
     data = {
         'name': 'calibrated',
         'n': 1.1,
@@ -115,10 +119,11 @@ def test_internal_scale_scales_internal_power_exactly(pt: Powertrain) -> None:
     assert totals.resistance('left').total.coulomb_Nm == 0.5 and totals.right == pt.right
 
 
-def _mission(capsys: pytest.CaptureFixture[str], *extra):
+def _mission(capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, Any]:
     argv = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', 'patrol']
     assert main([*argv, '--no-cache', '--json', *extra]) == 0
-    return json.loads(capsys.readouterr().out)
+    mission: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return mission
 
 
 def test_mission_samples_on_a_local_cluster(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import time
 import uuid
+from collections.abc import Callable, Sequence
 
 import pytest
 from rclpy.context import Context
+from rclpy.node import Node
 
 from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics
 from skidsteer_power.errors import InputError
@@ -38,7 +40,9 @@ class Seen:
         self.skipped[name] = reason
 
 
-def _discover_until(node, wanted, seen: Seen, done, timeout_s: float = 20.0) -> None:
+def _discover_until(
+    node: Node, wanted: Sequence[str], seen: Seen, done: Callable[[], object], timeout_s: float = 20.0
+) -> None:
     """Discover as the recorder's timer does, until ``done()`` (DDS discovery takes a moment)."""
     end = time.monotonic() + timeout_s
     while True:
@@ -49,7 +53,7 @@ def _discover_until(node, wanted, seen: Seen, done, timeout_s: float = 20.0) -> 
         time.sleep(0.05)
 
 
-def _wait_for(predicate, timeout_s: float = 20.0) -> None:
+def _wait_for(predicate: Callable[[], object], timeout_s: float = 20.0) -> None:
     end = time.monotonic() + timeout_s
     while not predicate():
         assert time.monotonic() < end, 'timed out waiting for the ROS graph'

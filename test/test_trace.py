@@ -11,7 +11,9 @@ from skidsteer_power.analysis.trace import CircleFit, fit_circle, mean_speed
 from skidsteer_power.errors import InputError
 
 
-def circle_points(cx: float, cy: float, r: float, start: float, stop: float, n: int) -> tuple:
+def circle_points(
+    cx: float, cy: float, r: float, start: float, stop: float, n: int
+) -> tuple[np.ndarray, np.ndarray]:
     angles = np.linspace(start, stop, n)
     return cx + r * np.cos(angles), cy + r * np.sin(angles)
 
@@ -74,7 +76,7 @@ def test_noisy_short_arc_stays_close() -> None:
         ([0.0, 1.0, 2.0], [0.0, 1.0], 'differ in length'),
     ],
 )
-def test_degenerate_input_is_a_clear_error(x, y, message: str) -> None:
+def test_degenerate_input_is_a_clear_error(x: list[float], y: list[float], message: str) -> None:
     with pytest.raises(InputError, match=message):
         fit_circle(x, y)
 

@@ -8,6 +8,8 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.models import wong_track, wong_wheel
 from skidsteer_power.terramechanics import load_terrain, solve_wheel
 from skidsteer_power.terramechanics import track as single_track
+from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.twin import (
     Segment,
     Twin,
@@ -27,13 +30,21 @@ from skidsteer_power.twin import (
     run_commands,
     write_bag,
 )
+from skidsteer_power.twin.sensors import TwinTrace
 from skidsteer_power.vehicle import load_vehicle
 
 TWIN_DIR = Path(__file__).resolve().parents[1] / 'skidsteer_power' / 'twin'
 SAND_BIN = load_terrain('sand_bin')
 
 
-def _settled(vehicle: str, speed: float, yaw_rate: float, seconds: float = 7.0, terrain=SAND_BIN, **options):
+def _settled(
+    vehicle: str,
+    speed: float,
+    yaw_rate: float,
+    seconds: float = 7.0,
+    terrain: Terrain = SAND_BIN,
+    **options: Any,
+) -> tuple[Twin, TwinTrace]:
     twin = Twin(load_vehicle(vehicle), terrain, **options)
     trace = run_commands(twin, [Segment(speed, yaw_rate, seconds)])
     return twin, trace
@@ -128,7 +139,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle: str) -> 
     ('vehicle', 'model'),
     [('test_robot_track', wong_track), ('test_robot_4wheel', wong_wheel), ('test_robot_6wheel', wong_wheel)],
 )
-def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle: str, model) -> None:
+def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle: str, model: ModuleType) -> None:
     # The twin turns less than commanded (slip); Wong's theory (ch. 3 tracks, ch. 4 wheels) solved at
     # the twin's actual speed and radius must give its sprocket/axle torques and speeds.
     # Tolerance 1 %: the twin discretizes the patches differently (32 trapezoid intervals along a
@@ -386,7 +397,7 @@ def _rise_time(t: np.ndarray, speed: np.ndarray) -> float:
     return float(t[np.argmax(speed >= 0.9 * speed[-1])])
 
 
-def _live_step_response(configure: bool, seconds: float = 2.0):
+def _live_step_response(configure: bool, seconds: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The live path without ptys: two simulated-amplifier motor models (des/simulator.MotorModel,
     0.5 ms explicit steps as SimulatedDes runs them) loaded by the twin through TwinCoupling."""
     from skidsteer_power.des.kinematics import RPM

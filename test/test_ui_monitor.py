@@ -9,6 +9,7 @@ import math
 import os
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 from rich.console import Console
@@ -28,6 +29,9 @@ from skidsteer_power.ui.monitor import (
     render,
 )
 
+if TYPE_CHECKING:
+    from skidsteer_power.nodes.energy_monitor import KeyReader
+
 
 def screen(view: MonitorView) -> str:
     console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
@@ -35,7 +39,7 @@ def screen(view: MonitorView) -> str:
     return console.export_text()
 
 
-def full_view(**changes) -> MonitorView:
+def full_view(**changes: object) -> MonitorView:
     summary = {
         'predicted_left_W': 41.25, 'predicted_right_W': 12.5, 'measured_left_W': 44.0,
         'measured_right_W': 11.0, 'error_left_W': 2.75, 'error_right_W': -1.5, 'terrain_W': 30.0,
@@ -145,7 +149,7 @@ def test_csv_log_writes_what_was_shown(tmp_path: Path) -> None:
     assert rows[0]['measured_left_W'] == '44' and rows[0]['speed_cmd_m_s'] == '0.2'
 
 
-def read_keys_until(reader, count: int) -> list[str]:
+def read_keys_until(reader: KeyReader, count: int) -> list[str]:
     """Poll the non-blocking reader (the pty delivers bytes asynchronously) until ``count`` keys came."""
     keys: list[str] = []
     deadline = time.monotonic() + 5.0
