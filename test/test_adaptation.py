@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -21,8 +22,8 @@ from skidsteer_power.estimator.core import EstimatorCore
 from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.estimator.tte_bounds import Z90, BoundSettings, TimeToEmptyBounds
 from skidsteer_power.powertrain import Battery, Powertrain
-from skidsteer_power.terramechanics.terrain import PRESETS
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 VEHICLE = 'test_robot_4wheel'
 DT = 0.02  # 50 Hz joint_states, as the des_driver and the twin publish
@@ -86,7 +87,7 @@ def test_bad_settings_are_config_errors() -> None:
 
 
 # --- the twin: a sand -> loam patch -------------------------------------------------------------
-def core_on(vehicle, terrain, battery=None) -> EstimatorCore:
+def core_on(vehicle: Vehicle, terrain: Terrain, battery: Battery | None = None) -> EstimatorCore:
     pt = Powertrain.for_vehicle(vehicle)
     predictor = MapPredictor(DirectFessMap(vehicle, terrain), pt)
     return EstimatorCore(predictor, battery or Battery.from_config(pt.battery), pt)
@@ -113,6 +114,7 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     last = trace.t >= trace.t[-1] - 2.0
     measured = trace.joint_effort_Nm[last].mean(axis=0)
     assert np.array(core.corrected_torque_Nm()) == pytest.approx(measured, rel=0.02)
+    assert core.prediction is not None
     assert abs(core.prediction.motor_torque_Nm[0] / measured[0] - 1) > 0.2
 
 
@@ -228,7 +230,7 @@ def test_node_publishes_the_correction_and_the_bounds(
         ros_context, tmp_path, FixedPowerPredictor(60.0), use_sim_time=True, persist=False, adaptation=enabled
     )
     try:
-        got: dict[str, list] = {'power/correction': [], 'p10': [], 'p90': []}
+        got: dict[str, list[Any]] = {'power/correction': [], 'p10': [], 'p90': []}  # ROS messages
         rig.probe.create_subscription(JointState, 'power/correction', got['power/correction'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p10_s', got['p10'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p90_s', got['p90'].append, 10)
@@ -236,7 +238,11 @@ def test_node_publishes_the_correction_and_the_bounds(
             t = k * 0.05
             rig.set_clock(t)
             rig.command(0.2, 0.0)
-            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            def command_seen(t: float = t) -> bool:
+                return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            rig.spin_until(command_seen)
             rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
         count = len(got['power/correction'])
         rig.run_clock(3.05, lambda: len(got['power/correction']) > count and got['p90'])

@@ -10,6 +10,7 @@ import json
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -60,7 +61,7 @@ class FixedPowerPredictor:
         )
 
 
-def make_core(battery_W: float = 100.0, **settings) -> EstimatorCore:
+def make_core(battery_W: float = 100.0, **settings: Any) -> EstimatorCore:
     return EstimatorCore(
         FixedPowerPredictor(battery_W),
         Battery.default_test_robot(),
@@ -261,6 +262,7 @@ def test_prediction_error_is_measured_minus_predicted() -> None:
     core = make_core(battery_W=60.0)
     core.on_command(0.2, 0.0, 0.0)
     comparison = core.on_joint_state(['left_motor', 'right_motor'], [240.0, 240.0], [0.2, 0.3], 0.01)
+    assert comparison is not None
     # FixedPowerPredictor: motor torque 0.1 N m, terminal power 30 W per side
     assert comparison.torque_error_Nm == pytest.approx((0.1, 0.2))
     assert comparison.power_error_W[0] == pytest.approx(comparison.measured.electrical_W[0] - 30.0)
@@ -303,7 +305,9 @@ def test_state_round_trips_through_a_file(tmp_path: Path) -> None:
     path = tmp_path / 'sub' / 'energy.json'
     save_state(path, core.state_dict())
     restored = make_core()
-    restored.restore(load_state(path))
+    state = load_state(path)
+    assert state is not None
+    restored.restore(state)
     assert restored.battery.remaining_wh == pytest.approx(core.battery.remaining_wh, rel=1e-12)
     assert restored.battery.remaining_wh < Battery.default_test_robot().remaining_wh
     assert restored.energy.energy_J['predicted'] == pytest.approx(150.0 * 10.0)
@@ -314,13 +318,14 @@ def test_failed_write_leaves_the_old_state(tmp_path: Path, monkeypatch: pytest.M
     path = tmp_path / 'energy.json'
     save_state(path, {'x': 1})
 
-    def broken_fsync(fd) -> None:
+    def broken_fsync(fd: int) -> None:
         raise OSError(5, 'disk gone')
 
     monkeypatch.setattr(os, 'fsync', broken_fsync)
     with pytest.raises(OSError, match='disk gone'):
         save_state(path, {'x': 2})
-    assert load_state(path)['x'] == 1
+    state = load_state(path)
+    assert state is not None and state['x'] == 1
     assert [p.name for p in tmp_path.iterdir()] == ['energy.json']
 
 

@@ -94,7 +94,7 @@ DAMAGED = {
 
 
 @pytest.mark.parametrize('content', DAMAGED.values(), ids=DAMAGED.keys())
-def test_a_damaged_state_file_is_moved_aside_with_one_warning(tmp_path: Path, content) -> None:
+def test_a_damaged_state_file_is_moved_aside_with_one_warning(tmp_path: Path, content: bytes) -> None:
     path = tmp_path / 'energy.json'
     path.write_bytes(content)
     core = make_core()
@@ -172,7 +172,7 @@ def test_node_survives_an_impossible_reading_and_saves_on_a_short_run(
 
 @pytest.mark.parametrize('content', DAMAGED.values(), ids=DAMAGED.keys())
 def test_node_starts_fresh_from_a_damaged_state_file(
-    rig_factory: Callable[..., Rig], tmp_path: Path, capfd: pytest.CaptureFixture[str], content
+    rig_factory: Callable[..., Rig], tmp_path: Path, capfd: pytest.CaptureFixture[str], content: bytes
 ) -> None:
     (tmp_path / 'energy.json').write_bytes(content)
     rig = rig_factory(FixedPowerPredictor(80.0), initial_soc=0.5)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,7 @@ from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
@@ -34,6 +35,8 @@ from skidsteer_power.powertrain import Battery
 
 class Rig:
     """A power_estimator in its own namespace plus a probe node that publishes and records."""
+
+    pub_path: Publisher  # nav_msgs/Path on plan: set by the path-energy tests that publish plans
 
     def __init__(
         self, context: Context, tmp_path: Path, predictor: Predictor | None = None, **params: object
@@ -126,7 +129,7 @@ class Rig:
             t += step_s
         return t
 
-    def joint_state(self, t_s: float, velocity: Sequence[float], effort: Sequence[float]) -> None:
+    def joint_state(self, t_s: float, velocity: Iterable[float], effort: Iterable[float]) -> None:
         msg = JointState(name=['left_motor', 'right_motor'], velocity=list(velocity), effort=list(effort))
         self.pub_joint.publish(msg)
         self.spin_until(lambda: self.node.core.joint_fresh.last_s == pytest.approx(t_s, abs=1e-9))
@@ -202,7 +205,8 @@ def test_periodic_save_writes_the_file(rig_factory: Callable[..., Rig], tmp_path
     rig.spin_until(lambda: (tmp_path / 'energy.json').exists())
     from skidsteer_power.estimator.persistence import load_state
 
-    assert load_state(tmp_path / 'energy.json')['vehicle'] == 'test_robot_track'
+    state = load_state(tmp_path / 'energy.json')
+    assert state is not None and state['vehicle'] == 'test_robot_track'
 
 
 @pytest.mark.parametrize(
@@ -234,7 +238,7 @@ def test_bad_cmd_vel_is_rejected_and_counted(
     ],
 )
 def test_bad_joint_states_are_rejected_and_counted(
-    rig_factory: Callable[..., Rig], names: list[str], velocity, effort
+    rig_factory: Callable[..., Rig], names: list[str], velocity: list[float], effort: list[float]
 ) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.pub_joint.publish(JointState(name=names, velocity=velocity, effort=effort))
@@ -246,8 +250,8 @@ def test_bad_joint_states_are_rejected_and_counted(
     assert values['rejected_joint_states'] == '1' and values['energy_source'] == 'none'
 
 
-def stamp_s(msg) -> float:
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+def stamp_s(msg: DiagnosticArray) -> float:
+    return float(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
 
 def test_stale_inputs_are_flagged(rig_factory: Callable[..., Rig]) -> None:
@@ -257,7 +261,7 @@ def test_stale_inputs_are_flagged(rig_factory: Callable[..., Rig]) -> None:
     rig.spin_until(lambda: rig.received['power/predicted'])
     diagnostics = rig.received['diagnostics']
 
-    def published_after(t_s: float):
+    def published_after(t_s: float) -> Callable[[], bool]:
         return lambda: any(stamp_s(m) > t_s for m in diagnostics)
 
     rig.run_clock(1.05, published_after(1.01), step_s=0.01, limit_s=0.3)

@@ -13,6 +13,7 @@ import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
@@ -78,7 +79,7 @@ def _joint_states(velocity: float) -> JointState:
     return JointState(name=['left_motor', 'right_motor'], velocity=[velocity] * 2, effort=[0.228] * 2)
 
 
-def _publish_until_used(rig: Rig, publisher, velocity: float) -> None:
+def _publish_until_used(rig: Rig, publisher: Publisher, velocity: float) -> None:
     def used() -> bool:
         comparison = rig.node.core.comparison
         return comparison is not None and comparison.measured.omega_rad_s[0] == velocity
@@ -104,7 +105,8 @@ def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs: Ca
 def _subscription_reliability(rig: Rig, topic: str) -> ReliabilityPolicy:
     infos = rig.probe.get_subscriptions_info_by_topic(f'/{rig.namespace}/{topic}')
     (info,) = [i for i in infos if i.node_name == 'power_estimator']
-    return info.qos_profile.reliability
+    reliability: ReliabilityPolicy = info.qos_profile.reliability
+    return reliability
 
 
 def test_subscriptions_are_best_effort_unless_overridden(rigs: Callable[..., Rig]) -> None:
@@ -129,7 +131,11 @@ def test_named_figures_per_message_and_summary_by_key(rigs: Callable[..., Rig]) 
     figures: dict[str, list[float]] = {}
     for topic, _ in (*COMMAND_FIGURES, *MEASUREMENT_FIGURES):
         figures[topic] = []
-        rig.probe.create_subscription(Float64, topic, lambda m, t=topic: figures[t].append(m.data), 10)
+
+        def on_figure(m: Float64, t: str = topic) -> None:
+            figures[t].append(m.data)
+
+        rig.probe.create_subscription(Float64, topic, on_figure, 10)
     rig.command(0.2, 0.0)
     rig.spin_until(lambda: all(figures[t] for t, _ in COMMAND_FIGURES))
     rig.pub_joint.publish(_joint_states(300.0))
@@ -152,7 +158,11 @@ def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs: Calla
     # sim time: the figure timer (figure_period_s = 1 s) fires only when the test moves the clock
     rig = rigs(FixedPowerPredictor(80.0), persist=False, use_sim_time=True, figure_period_s=1.0)
     figures: list[float] = []
-    rig.probe.create_subscription(Float64, 'power/predicted_battery_w', lambda m: figures.append(m.data), 100)
+
+    def on_figure(m: Float64) -> None:
+        figures.append(m.data)
+
+    rig.probe.create_subscription(Float64, 'power/predicted_battery_w', on_figure, 100)
     rig.set_clock(0.0)
     for i in range(20):
         rig.command(0.01 * (i + 1), 0.0)

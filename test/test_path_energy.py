@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import pathlib
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,11 +18,14 @@ from std_msgs.msg import Float64
 from test_nodes_estimator import Rig
 
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.path_energy import PathTracker, path_energy, route_from_polyline
+from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.maps.power_map import MapQuery
 from skidsteer_power.missions.energy import run_mission
-from skidsteer_power.missions.routes import Route, Segment, _trace, read_route_csv
+from skidsteer_power.missions.routes import Route, _trace, read_route_csv
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -106,7 +110,7 @@ class CountingMap:
     def __init__(self, power_map: PowerMap) -> None:
         self.power_map, self.queries = power_map, 0
 
-    def query(self, speed, yaw_rate):
+    def query(self, speed: float, yaw_rate: float) -> MapQuery:
         self.queries += 1
         return self.power_map.query(speed, yaw_rate)
 
@@ -172,7 +176,7 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
-def _rig_with_path_topics(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, **params):
+def _rig_with_path_topics(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, **params: Any) -> Rig:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand', **params)
     for topic in ('energy/path_required_wh', 'energy/path_margin_wh'):
         rig.received[topic] = []
@@ -202,6 +206,7 @@ def test_live_path_energy_equals_mission_route(
         required = rig.received['energy/path_required_wh'][-1].data
         assert required == pytest.approx(mission_wh, rel=0.01)
         energy = rig.node.path_energy.tracker.energy
+        assert energy is not None
         margin = rig.received['energy/path_margin_wh'][-1].data
         remaining = rig.node.core.battery.remaining_wh  # full battery, no driving: unchanged
         assert margin == pytest.approx(remaining - required - energy.return_wh - 1.5, rel=1e-9)
@@ -221,9 +226,10 @@ def test_negative_margin_warns_and_speed_follows_the_command(
         assert not rig.received['energy/path_required_wh']  # no speed yet: nothing published
         rig.command(0.4, 0.0)
         rig.spin_until(lambda: rig.received['energy/path_required_wh'])
-        assert rig.node.path_energy.tracker.energy.speed_m_s == 0.4
+        energy = rig.node.path_energy.tracker.energy
+        assert energy is not None and energy.speed_m_s == 0.4
 
-        def warned():
+        def warned() -> bool:
             return any(
                 s.name.endswith('path energy') and s.level == DiagnosticStatus.WARN
                 for a in rig.received['diagnostics']
@@ -270,7 +276,6 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     from skidsteer_power.calibration.direct import feed_trace
     from skidsteer_power.estimator.core import EstimatorCore
     from skidsteer_power.estimator.path_energy import PlannedPath
-    from skidsteer_power.estimator.prediction import MapPredictor
     from skidsteer_power.powertrain import Battery
     from skidsteer_power.terramechanics.terrain import PRESETS
     from skidsteer_power.twin import Twin, commands_from_route, run_commands
@@ -312,15 +317,20 @@ def test_live_path_energy_applies_the_published_terrain_scale(
         ros_context, tmp_path, cache_dir, path_speed_m_s=SPEED, use_sim_time=True, persist=False
     )
     try:
-        corrections: list = []
+        corrections: list[Any] = []  # power/correction JointState messages
         rig.probe.create_subscription(JointState, 'power/correction', corrections.append, 10)
         t = 0.0
         for command in ((SPEED, 0.0), (SPEED, 0.2), (SPEED, 0.0)):
             for _ in range(50):  # 2.5 s at 20 Hz: 1 s settle, then 1.5 s settled
                 rig.set_clock(t)
                 rig.command(*command)
-                rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+                def command_seen(t: float = t) -> bool:
+                    return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+                rig.spin_until(command_seen)
                 p = rig.node.core.prediction
+                assert p is not None
                 gear = rig.node.core.powertrain.gear_ratio
                 terrain = np.array(p.terrain_torque_Nm) / gear
                 measured = np.array(p.motor_torque_Nm) - terrain + 1.5 * terrain

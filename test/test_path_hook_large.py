@@ -158,6 +158,7 @@ def test_a_1e5_pose_plan_leaves_the_battery_tick_running(
         tracker.set_path(coarse[:, 0], coarse[:, 1])
         power_map = rig.node.core.predictor.power_map
         reference = tracker.evaluate(SPEED, power_map, Powertrain.for_vehicle(vehicle), 1.0)
+        assert reference is not None
         assert required[-1].data == pytest.approx(reference.required_wh, rel=0.01)
     finally:
         rig.close()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -79,13 +80,13 @@ def write_husky_bag(
                     effort=np.zeros(0),
                 )
                 writer.write(js, t_ns + 1000, store.serialize_cdr(msg, 'sensor_msgs/msg/JointState'))
-            if vendor_conn is not None and k % 10 == 0 and k * 0.01 < status_s:
+            if vendor_conn is not None and vendor is not None and k % 10 == 0 and k * 0.01 < status_s:
                 writer.write(
                     vendor_conn, t_ns + 500, store.serialize_cdr(_vendor_msg(types, vendor, header), vendor)
                 )
 
 
-def _vendor_msg(types: dict, vendor: str, header: object) -> object:
+def _vendor_msg(types: dict[str, Any], vendor: str, header: object) -> object:
     if vendor == HUSKY:
         fields = {f: 0.0 for f in (
             'ros_control_loop_freq', 'mcu_and_user_port_current', 'battery_voltage', 'left_driver_voltage',
@@ -125,7 +126,7 @@ def expected_side(current_A: float) -> tuple[float, float]:
 
 @pytest.mark.parametrize('vendor', [HUSKY, POWER])
 def test_validate_measures_power_from_the_vendor_currents(
-    tmp_path: Path, predictor: MapPredictor, vendor
+    tmp_path: Path, predictor: MapPredictor, vendor: str
 ) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, vendor, status_s=5.0)
@@ -228,6 +229,7 @@ def test_power_estimator_node_takes_effort_from_a_current_topic(
 
         rig.spin_until(measured)
         expected = [expected_side(i)[0] for i in CURRENT_A]
+        assert core.comparison is not None
         assert core.comparison.measured.torque_Nm == pytest.approx(expected, rel=1e-6)
     else:
         for _ in range(5):
