@@ -14,8 +14,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import load_msg_definitions, open_bag
 from skidsteer_power.bag_io.reader import BagDamageError
-from skidsteer_power.bag_io.synthetic import START_NS, Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import START_NS, write_drive_bag
 from skidsteer_power.bag_io.writer import BagWriter
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 
 STORE = get_typestore(Stores.ROS2_JAZZY)

@@ -81,7 +81,7 @@ def _set(argv: list[str], option: str, value: str) -> list[str]:
     ],
 )
 def test_an_input_outside_its_range_is_one_line_and_exit_2(
-    capsys: pytest.CaptureFixture[str], base, option: str, value: str, match: str
+    capsys: pytest.CaptureFixture[str], base: list[str], option: str, value: str, match: str
 ) -> None:
     import re
 
@@ -99,7 +99,7 @@ def test_ranges_are_documented_in_help(capsys: pytest.CaptureFixture[str]) -> No
 
 @pytest.mark.parametrize(('base', 'limit_option'), [(TRACK, '--height'), (WHEEL, '--radius')])
 def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(
-    capsys: pytest.CaptureFixture[str], base, limit_option: str
+    capsys: pytest.CaptureFixture[str], base: list[str], limit_option: str
 ) -> None:
     """The sinkage is computed first; just above it the answer stands, just below it is an error."""
     heavy = _set(base, '--load', '3000')

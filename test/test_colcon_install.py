@@ -28,6 +28,7 @@ import sys
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -203,7 +204,7 @@ def test_installed_nodes_start_with_installed_params_and_publish(workspace: Path
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         try:
-            received: dict[str, list] = {}
+            received: dict[str, list[Any]] = {}  # ROS messages by topic
             qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
             for topic, kind in (('joint_states', JointState), ('power/predicted', JointState),
                                 ('power/measured', JointState), ('battery/state', BatteryState)):  # fmt: skip

@@ -24,6 +24,7 @@ import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -34,13 +35,14 @@ from rclpy.parameter import Parameter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from test_estimator_core import FixedPowerPredictor
 from websockets.sync import client as websockets_sync  # requirements.txt
+from websockets.typing import Subprotocol
 
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 
 MESSAGE_DATA = struct.Struct('<BIQ')  # opcode 0x01, subscription id, log time [ns]
 # What the Foxglove app offers; the bridge picks the first (foxglove-sdk's name for protocol v1) and
 # also serves clients offering only the second (test_foxglove_security.py).
-SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']
+SUBPROTOCOLS = [Subprotocol('foxglove.sdk.v1'), Subprotocol('foxglove.websocket.v1')]
 
 
 @pytest.fixture
@@ -69,10 +71,11 @@ def estimator_graph(ros_context: Context, tmp_path: Path) -> Iterator[str]:
     estimator.destroy_node()
 
 
-def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
+def start_bridge(topics: list[str]) -> tuple[subprocess.Popen[str], str]:
     argv = [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--host', '127.0.0.1', '--port', '0']
     proc = subprocess.Popen([*argv, '--topics', *topics, '--json'], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
+    assert proc.stderr is not None
     seen = []  # 'serving ws://127.0.0.1:PORT' (stderr with --json), after any DDS log lines
     for line in proc.stderr:
         if line.startswith('serving ws://'):
@@ -93,7 +96,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph: 
     try:
         with websockets_sync.connect(url, subprotocols=SUBPROTOCOLS, open_timeout=20) as ws:
             assert ws.subprotocol == 'foxglove.sdk.v1'
-            channels: dict[str, dict] = {}
+            channels: dict[str, dict[str, Any]] = {}  # advertised channels (JSON) by topic
             deadline = time.monotonic() + 30
             while not set(wanted) <= set(channels):
                 assert time.monotonic() < deadline, f'advertised only {sorted(channels)}'
@@ -110,7 +113,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph: 
                 subscriptions[k] = channel
             ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
                 {'id': k, 'channelId': c['id']} for k, c in subscriptions.items()]}))  # fmt: skip
-            decoded: dict[str, list] = {c['topic']: [] for c in subscriptions.values()}
+            decoded: dict[str, list[Any]] = {c['topic']: [] for c in subscriptions.values()}
             while not all(len(v) >= 2 for v in decoded.values()):
                 assert time.monotonic() < deadline, {k: len(v) for k, v in decoded.items()}
                 frame = ws.recv(timeout=30)

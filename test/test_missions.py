@@ -99,7 +99,7 @@ def test_four_wheel_power_rises_far_more_in_turns_than_track(
     patrol_results: dict[str, MissionResult],
 ) -> None:
     # ch. 8.1/8.2: "power consumption increases sharply for the 4-wheeled SUGV at sharp turns"
-    def rise(name):
+    def rise(name: str) -> float:
         res = patrol_results[name]
         return res.mean_power(turning=True) / res.mean_power(turning=False)
 
@@ -235,6 +235,7 @@ def test_mission_cli_errors(argv: list[str], message: str, capsys: pytest.Captur
     for flag, value in zip(argv[::2], argv[1::2], strict=True):
         base[flag] = value
     args = ['mission', '--no-cache', *[x for kv in base.items() for x in kv if x]]
+    code: int | str | None
     try:
         code = main(args)
     except SystemExit as exc:  # argparse rejects a bad value itself, still one line and exit 2

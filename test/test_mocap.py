@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import TypedDict
+from typing import TypedDict, overload
 
 import cv2
 import numpy as np
@@ -28,6 +28,7 @@ from skidsteer_power.mocap import (
     TargetConfig,
     TargetDetection,
     TargetMiss,
+    TrackResult,
     calibrate_camera,
     detect_target,
     estimate_ground_plane,
@@ -72,7 +73,15 @@ SAMPLE_HZ = 5.0
 NO_TARGET_FRAME = 60  # a sampled frame (every 6th at 30 fps -> 5 Hz) with the disc hidden
 
 
-def disc_position(t_s: np.ndarray | float) -> tuple:
+@overload
+def disc_position(t_s: float) -> tuple[float, float]: ...
+
+
+@overload
+def disc_position(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def disc_position(t_s: np.ndarray | float) -> tuple[np.ndarray | float, np.ndarray | float]:
     """True centre of the disc on the plane [m] at time t [s]."""
     angle = PHASE0_RAD + SPEED_M_S / RADIUS_M * np.asarray(t_s)
     return CENTRE_M[0] + RADIUS_M * np.cos(angle), CENTRE_M[1] + RADIUS_M * np.sin(angle)
@@ -266,7 +275,7 @@ def test_pattern_string() -> None:
         (': [\n', ConfigError),
     ],
 )
-def test_bad_calibration_file(tmp_path: Path, content: str, error) -> None:
+def test_bad_calibration_file(tmp_path: Path, content: str, error: type[Exception]) -> None:
     path = tmp_path / 'bad.yaml'
     path.write_text(content)
     with pytest.raises(error, match=r'bad\.yaml'):
@@ -335,7 +344,7 @@ def test_bad_target_config() -> None:
 # -- tracking ----------------------------------------------------------------------------------------
 
 
-def check_run(result, *, expected_samples: int, video_frames_per_index: int = 1) -> None:
+def check_run(result: TrackResult, *, expected_samples: int, video_frames_per_index: int = 1) -> None:
     truth_x, truth_y = disc_position(result.time_s)
     error = np.hypot(result.xy_m[:, 0] - truth_x, result.xy_m[:, 1] - truth_y)
     assert error.max() < 0.005  # trace within 5 mm

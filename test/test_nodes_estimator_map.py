@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -15,6 +16,7 @@ from rclpy.parameter import Parameter
 from test_nodes_estimator import Rig
 
 from skidsteer_power.estimator.factory import map_predictor
+from skidsteer_power.estimator.prediction import Prediction
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_from_key_values
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 from skidsteer_power.vehicle import load_vehicle
@@ -32,7 +34,7 @@ def rig(ros_context: Context, tmp_path: Path, cache_dir: str) -> Iterator[Rig]:
     rig.close()
 
 
-def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
+def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float) -> Prediction:
     predictor, _, _ = map_predictor(load_vehicle('test_robot_track'), terrain, cache_dir)
     return predictor.predict(speed, yaw_rate)
 
@@ -139,8 +141,8 @@ def test_predicted_twist_and_odometry(rig: Rig, cache_dir: str) -> None:
     from nav_msgs.msg import Odometry
     from std_srvs.srv import Trigger
 
-    twists: list = []
-    odoms: list = []
+    twists: list[Any] = []  # TwistStamped messages
+    odoms: list[Any] = []  # Odometry messages
     rig.probe.create_subscription(TwistStamped, 'power/predicted_twist', twists.append, 10)
     rig.probe.create_subscription(Odometry, 'odom/predicted', odoms.append, 100)
     rig.spin_until(lambda: rig.node.pub_predicted_twist.get_subscription_count() > 0)

@@ -7,6 +7,7 @@ import pytest
 import yaml
 
 from skidsteer_power.nodes import param_files
+from skidsteer_power.nodes.param_files import NodeParams
 from skidsteer_power.nodes.param_spec import (
     ParamSpec,
     descriptor,
@@ -25,7 +26,7 @@ def test_shipped_parameter_files_and_doc_tables_are_the_specs_rendering() -> Non
 
 
 @pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
-def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry) -> None:
+def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry: NodeParams) -> None:
     """Independent of the renderer: the YAML parser reads back every default, type included."""
     shipped = yaml.safe_load((param_files.ROOT / entry.yaml_file).read_text(encoding='utf-8'))
     values = shipped[entry.node]['ros__parameters']

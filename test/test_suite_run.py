@@ -13,6 +13,7 @@ import sys
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -53,7 +54,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     try:
         deadline = time.monotonic() + 60.0
         next_command = 0.0
-        moving = []
+        moving: list[Any] = []  # JointState messages
         while time.monotonic() < deadline and (len(moving) < 20 or len(battery) < 10 or len(truth) < 20):
             if time.monotonic() >= next_command:
                 publisher.publish(command)
@@ -78,7 +79,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     assert odom and odom[-1].pose.pose.orientation.z > truth[-1].pose.pose.orientation.z > 0.0
 
 
-def run_cli(*args: str, env_extra: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+def run_cli(*args: str, env_extra: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, **(env_extra or {})}
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'run', *args],

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection
 
 import pytest
 from rclpy.context import Context
@@ -41,7 +41,7 @@ class Seen:
 
 
 def _discover_until(
-    node: Node, wanted: Sequence[str], seen: Seen, done: Callable[[], object], timeout_s: float = 20.0
+    node: Node, wanted: Collection[str], seen: Seen, done: Callable[[], object], timeout_s: float = 20.0
 ) -> None:
     """Discover as the recorder's timer does, until ``done()`` (DDS discovery takes a moment)."""
     end = time.monotonic() + timeout_s
