@@ -69,13 +69,15 @@ def _exercise(
     try:
         _spin_until(executor, lambda: pub.get_subscription_count() > 0 and client.service_is_ready())
         triggers = [0]
-        trigger = executor._guard.trigger  # count the executor's self wake-ups from here on
+        trigger: Callable[[], None] = (
+            executor._guard.trigger
+        )  # count the executor's self wake-ups from here on
 
         def counted() -> None:
             triggers[0] += 1
             trigger()
 
-        executor._guard.trigger = counted
+        executor._guard.trigger = counted  # type: ignore[method-assign]  # a counting wrapper, on purpose
         for i in range(N_MESSAGES):
             pub.publish(Float64(data=float(i)))
         _spin_until(executor, lambda: len(received) >= N_MESSAGES and ticks[0] >= 3)
@@ -118,7 +120,11 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
     with _lean_node(ros_context, 'plan') as (node, executor):
         pub = node.create_publisher(Float64, 'x', 10)
         first: list[float] = []
-        sub = node.create_subscription(Float64, 'x', lambda m: first.append(m.data), 10)
+
+        def on_first(m: Float64) -> None:
+            first.append(m.data)
+
+        sub = node.create_subscription(Float64, 'x', on_first, 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.0))
         _spin_until(executor, lambda: first == [1.0])
@@ -127,16 +133,25 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         plan = executor._plan
         for value in (2.0, 3.0):
             pub.publish(Float64(data=value))
-            _spin_until(executor, lambda v=value: first[-1] == v)
+
+            def arrived(v: float = value) -> bool:
+                return first[-1] == v
+
+            _spin_until(executor, arrived)
             assert executor._plan is plan  # the same wait set served every message
         # a new entity while spinning: planned in and served
         second: list[float] = []
-        node.create_subscription(Float64, 'x', lambda m: second.append(m.data), 10)
+
+        def on_second(m: Float64) -> None:
+            second.append(m.data)
+
+        node.create_subscription(Float64, 'x', on_second, 10)
         _spin_until(executor, lambda: pub.get_subscription_count() == 2)
         pub.publish(Float64(data=4.0))
         _spin_until(executor, lambda: first[-1] == 4.0 and second == [4.0])  # both served
         _spin_until(executor, lambda: executor._plan is not None)
-        assert len(executor._plan.by_pointer['subscription']) == 2
+        plan_now = executor._plan
+        assert plan_now is not None and len(plan_now.by_pointer['subscription']) == 2
         # an entity gone: planned out, its handle released (destroyed), the rest still served
         node.destroy_subscription(sub)
         _spin_until(executor, lambda: pub.get_subscription_count() == 1)
@@ -144,7 +159,8 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         _spin_until(executor, lambda: second == [4.0, 5.0])
         assert first[-1] == 4.0
         _spin_until(executor, lambda: executor._plan is not None)
-        assert len(executor._plan.by_pointer['subscription']) == 1
+        plan_now = executor._plan
+        assert plan_now is not None and len(plan_now.by_pointer['subscription']) == 1
 
 
 def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context: Context) -> None:
@@ -178,7 +194,8 @@ def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context: Context) 
         async def on_message(msg: Float64) -> None:
             received.append(msg.data)
 
-        node.create_subscription(Float64, 'x', on_message, 10)
+        # rclpy awaits a coroutine callback; its annotation says the callback returns None
+        node.create_subscription(Float64, 'x', on_message, 10)  # type: ignore[arg-type]
         pub = node.create_publisher(Float64, 'x', 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.5))

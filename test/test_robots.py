@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 from conftest import REQUIRE_SHARED_ENV, shared_path
+from numpy.typing import ArrayLike
 from rclpy.context import Context
 from rosbags.typesys import Stores, get_typestore
 
@@ -24,8 +27,12 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, MapPredictor, factory
 from skidsteer_power.estimator.core import LEVEL_WARN
 from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.vehicle import load_vehicle
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Msg  # the typestore's message protocol (declared for type checkers)
 
 NS = 1_000_000_000
 START_NS = 1_700_000_000 * NS
@@ -59,7 +66,7 @@ def _twist(v: float, w: float) -> bytes:
     )
 
 
-def _header(t_s: float) -> object:
+def _header(t_s: float) -> Msg:
     sec, nsec = divmod(START_NS + round(t_s * NS), NS)
     return T['std_msgs/msg/Header'](T['builtin_interfaces/msg/Time'](sec, nsec), '')
 
@@ -80,7 +87,9 @@ def _odom(t_s: float, x: float, y: float, yaw: float) -> bytes:
     return STORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry')
 
 
-def _joint_state(t_s: float, names, position, velocity, effort) -> bytes:
+def _joint_state(
+    t_s: float, names: Sequence[str], position: ArrayLike, velocity: ArrayLike, effort: ArrayLike
+) -> bytes:
     msg = T['sensor_msgs/msg/JointState'](
         _header(t_s),
         list(names),
@@ -91,7 +100,12 @@ def _joint_state(t_s: float, names, position, velocity, effort) -> bytes:
     return STORE.serialize_cdr(msg, 'sensor_msgs/msg/JointState')
 
 
-def _write(path: Path, commands, odom=(), joints=()) -> Path:
+def _write(
+    path: Path,
+    commands: Sequence[tuple[float, float, float]],
+    odom: Sequence[tuple[float, float, float, float]] = (),
+    joints: Sequence[tuple[float, Sequence[str], ArrayLike, ArrayLike, ArrayLike]] = (),
+) -> Path:
     """A bag of (t, V, yaw) commands, (t, x, y, yaw) odometry and (t, names, pos, vel, effort) joints."""
     with BagWriter(path) as writer:
         cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
@@ -101,11 +115,15 @@ def _write(path: Path, commands, odom=(), joints=()) -> Path:
         events += [(row[0], 1, _odom(*row)) for row in odom]
         events += [(row[0], 2, _joint_state(*row)) for row in joints]
         for t, kind, data in sorted(events, key=lambda e: (e[0], e[1])):
-            writer.write((cmd, od, js)[kind], START_NS + round(t * NS), data)
+            connection = (cmd, od, js)[kind]
+            assert connection is not None  # a kind of event exists only where its topic was added
+            writer.write(connection, START_NS + round(t * NS), data)
     return path
 
 
-def _validate(path: Path, tmp_path: Path, predictor, vehicle='test_robot_track', **options) -> dict:
+def _validate(
+    path: Path, tmp_path: Path, predictor: Predictor, vehicle: str = 'test_robot_track', **options: Any
+) -> dict[str, Any]:
     options.setdefault('plots', False)
     opts = ValidateOptions(vehicle=vehicle, terrain=TERRAIN, report_dir=tmp_path / 'report', **options)
     with open_bag(path) as bag:
@@ -139,7 +157,9 @@ def test_four_wheel_joints_at_the_wheel_in_newton_metres_become_motor_equivalent
     ]
     velocity = [2.2, 1.0, 1.8, 1.2]  # rad/s at each wheel
     effort = [4.0, 3.0, 5.0, 6.0]  # N m at each wheel
-    omega, torque = reader.read(names, [], velocity, effort, 0.0)
+    read = reader.read(names, [], velocity, effort, 0.0)
+    assert read is not None
+    omega, torque = read
     assert omega == pytest.approx((12 * (1.0 + 1.2) / 2, 12 * (1.8 + 2.2) / 2), rel=1e-12)
     assert torque == pytest.approx(((3.0 + 6.0) / 12, (5.0 + 4.0) / 12), rel=1e-12)
 
@@ -149,7 +169,9 @@ def test_current_effort_at_the_motor_uses_the_torque_constant_and_inverted_joint
         left=('l',), right=('r',), effort_is='current', torque_constant_Nm_A=0.05, inverted=('r',)
     )
     reader = JointReader(joint_map, 12.0, 0.114, LIMITS)
-    omega, torque = reader.read(['l', 'r'], [], [100.0, -100.0], [2.0, -3.0], 0.0)
+    read = reader.read(['l', 'r'], [], [100.0, -100.0], [2.0, -3.0], 0.0)
+    assert read is not None
+    omega, torque = read
     assert omega == (100.0, 100.0)
     assert torque == pytest.approx((0.05 * 2.0, 0.05 * 3.0), rel=1e-12)  # T = Kt I
 
@@ -158,7 +180,9 @@ def test_speed_from_positions_when_no_velocity_is_published() -> None:
     joint_map = JointMap(left=('l',), right=('r',), location='wheel', interfaces=('position', 'effort'))
     reader = JointReader(joint_map, 10.0, 0.114, LIMITS)
     assert reader.read(['l', 'r'], [0.0, 0.0], [], [1.0, 1.0], 0.0) is None  # needs two samples
-    omega, _ = reader.read(['l', 'r'], [0.5, 1.0], [], [1.0, 1.0], 0.5)
+    read = reader.read(['l', 'r'], [0.5, 1.0], [], [1.0, 1.0], 0.5)
+    assert read is not None
+    omega, _ = read
     assert omega == pytest.approx((10 * 1.0, 10 * 2.0))  # (0.5 rad / 0.5 s) x 10, (1 / 0.5) x 10
 
 
