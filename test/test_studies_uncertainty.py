@@ -58,7 +58,7 @@ def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(
 
 
 def _calibrated_file(
-    tmp_path: Path, cov: list[list[float]], names: Sequence[str] = ('kphi', 'phi', 'n')
+    tmp_path: Path, cov: Sequence[Sequence[float]], names: Sequence[str] = ('kphi', 'phi', 'n')
 ) -> Path:
     data = {
         'name': 'calibrated',
