@@ -144,8 +144,10 @@ def test_route_sampling_is_bounded_by_steps_not_length(
         return
     route = read_route_csv(csv)
     turned = float(length) / abs(float(radius))  # heading change [rad]
-    assert len(route.xy) == 1 + max(1, int(np.ceil(turned / (np.pi / 36))))
-    end = route.xy[-1]
+    xy = route.xy
+    assert xy is not None
+    assert len(xy) == 1 + max(1, int(np.ceil(turned / (np.pi / 36))))
+    end = xy[-1]
     if radius == 'inf':
         assert end == pytest.approx([float(length), 0.0])
     else:  # exact on the circle: chord 2 R sin(turned / 2) from the start

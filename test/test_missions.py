@@ -44,6 +44,7 @@ def test_patrol_route_matches_chapter_8_1() -> None:
     assert route.length_m - route.turning_length_m == pytest.approx(123.0, abs=0.05)
     assert {abs(s.turn_radius_m) for s in route.segments if s.is_turning} == {1.0}  # "turning radius is 1 m"
     assert all(s.speed_m_s == 0.2 for s in route.segments)  # "constant value of 0.2 m/s"
+    assert route.xy is not None
     x, y = route.xy[:, 0], route.xy[:, 1]
     assert np.ptp(x) <= 15.0 and np.ptp(y) <= 22.0  # fits the 15 m x 22 m area
 

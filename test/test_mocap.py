@@ -139,7 +139,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
         return np.clip(image + noise.normal(0, 2.0, image.shape), 0, 255).astype(np.uint8)
 
     video = root / 'run.avi'
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), FPS, CAMERA.image_size)
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*'MJPG'), FPS, CAMERA.image_size)
     assert writer.isOpened()
     n_frames = int(DURATION_S * FPS) + 1
     folder = root / 'frames'
@@ -218,7 +218,9 @@ def test_cli_undistort(tmp_path: Path, calibration: CameraCalibration) -> None:
     argv = ['mocap', 'undistort', str(tmp_path / 'board.png'), '--calibration', str(calibration_file),
             '--out', str(tmp_path / 'straight.png')]  # fmt: skip
     assert run_cli(argv) == 0
-    assert worst_row_bend_px(cv2.imread(str(tmp_path / 'straight.png'))) < 0.5
+    straight = cv2.imread(str(tmp_path / 'straight.png'))
+    assert straight is not None
+    assert worst_row_bend_px(straight) < 0.5
 
 
 def test_cli_undistort_bad_output_name(
@@ -407,7 +409,8 @@ def run_cli(argv: list[str]) -> int:
     try:
         return main(argv)
     except SystemExit as stop:
-        return int(stop.code)
+        assert isinstance(stop.code, int), stop.code
+        return stop.code
 
 
 def test_cli_calibrate_then_track(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
