@@ -53,7 +53,8 @@ def calibrate_scaled(share: float) -> CalibrationResult:
     options = SegmentOptions()
     segments, _ = find_segments(read_recording(BAG, options), options, powertrain.motor)
     scaled = [
-        dataclasses.replace(s, motor_torque_Nm=tuple(share * t for t in s.motor_torque_Nm)) for s in segments
+        dataclasses.replace(s, motor_torque_Nm=(share * s.motor_torque_Nm[0], share * s.motor_torque_Nm[1]))
+        for s in segments
     ]
     return calibrate(vehicle, load_terrain('sand_bin'), powertrain, scaled)
 
