@@ -8,12 +8,20 @@ from __future__ import annotations
 
 import os
 import random
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 100)))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 import pytest
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from test_nodes_estimator import Rig
+
+    from skidsteer_power.estimator.prediction import Predictor
 
 SHARED_DIR = Path(__file__).resolve().parents[1].parent / 'shared'
 """``../shared`` beside the repository: the dissertation text and real recordings made by others."""
@@ -46,7 +54,7 @@ def neato_bag() -> Path:
 
 
 @pytest.fixture
-def ros_context():
+def ros_context() -> Iterator[Context]:
     """An initialised rclpy context of its own, shut down after the test."""
     import rclpy
     from rclpy.context import Context
@@ -60,14 +68,14 @@ def ros_context():
 
 
 @pytest.fixture
-def rig_factory(ros_context, tmp_path):
+def rig_factory(ros_context: Context, tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """Makes power_estimator rigs (test_nodes_estimator.Rig: the node and a probe over real DDS),
     closed after the test."""
     from test_nodes_estimator import Rig
 
-    rigs = []
+    rigs: list[Rig] = []
 
-    def make(predictor=None, **params):
+    def make(predictor: Predictor | None = None, **params: object) -> Rig:
         rigs.append(Rig(ros_context, tmp_path, predictor, **params))
         return rigs[-1]
 
@@ -77,7 +85,7 @@ def rig_factory(ros_context, tmp_path):
 
 
 @pytest.fixture
-def strong_motor_vehicle(tmp_path) -> Path:
+def strong_motor_vehicle(tmp_path: Path) -> Path:
     """test_robot_track with its powertrain's motor overridden to K_t = 0.228 N m/A (2 x the EC-45's
     0.114, Appendix B line 12) and a max. speed of 5000 rpm = 523.6 rad/s (half the EC-45's 10 000,
     line 23, as a doubled K_t halves the speed constant): a vehicle file whose motor differs from the

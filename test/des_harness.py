@@ -8,8 +8,17 @@ from __future__ import annotations
 
 import time
 import uuid
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.des.simulator import SimulatedPair
+from skidsteer_power.des.simulator import SimulatedDes, SimulatedPair
+
+if TYPE_CHECKING:
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.client import Client
+    from rclpy.context import Context
+
+    from skidsteer_power.des.poller import DriveCommand
 
 
 class Clock:
@@ -22,15 +31,23 @@ class Clock:
         return self.now
 
 
+def enabled(sim: SimulatedDes) -> bool:
+    """``sim.enabled``, read through a call: the driver changes it while the test spins, which mypy's
+    narrowing of the attribute after an earlier ``assert not sim.enabled`` cannot see."""
+    return sim.enabled
+
+
 class Harness:
     """The driver node, a test node publishing cmd_vel and recording outputs, one executor."""
 
-    def __init__(self, context, pair: SimulatedPair, activate: bool = True, **overrides) -> None:
+    def __init__(
+        self, context: Context, pair: SimulatedPair, activate: bool = True, **overrides: Any
+    ) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist, TwistStamped
         from lifecycle_msgs.srv import ChangeState, GetState
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.lifecycle import TransitionCallbackReturn
+        from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
         from rclpy.node import Node
         from rclpy.parameter import Parameter
         from sensor_msgs.msg import JointState
@@ -70,8 +87,9 @@ class Harness:
         self.executor.add_node(self.driver)
         self.executor.add_node(self.node)
         if activate:
-            assert self.driver.trigger_configure() == TransitionCallbackReturn.SUCCESS
-            assert self.driver.trigger_activate() == TransitionCallbackReturn.SUCCESS
+            lifecycle: LifecycleNode = self.driver  # rclpy's triggers are unannotated (untyped_calls_exclude)
+            assert lifecycle.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            assert lifecycle.trigger_activate() == TransitionCallbackReturn.SUCCESS
 
     def _publish_cmd(self) -> None:
         if self.twist is not None:
@@ -92,35 +110,47 @@ class Harness:
 
         request = ChangeState.Request()
         request.transition.id = transition_id
-        return self.call(self.change_client, request).success
+        return bool(self.call(self.change_client, request).success)
 
     def state(self) -> str:
         """The driver's lifecycle state label through ~/get_state."""
         from lifecycle_msgs.srv import GetState
 
-        return self.call(self.state_client, GetState.Request()).current_state.label
+        return str(self.call(self.state_client, GetState.Request()).current_state.label)
 
-    def spin_until(self, predicate, timeout_s: float = 8.0) -> bool:
+    def spin_until(self, predicate: Callable[[], object], timeout_s: float = 8.0) -> bool:
         """Spin until ``predicate()`` holds or the deadline passes (a wait, not a timing assertion)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.02)
             if predicate():
                 return True
-        return predicate()
+        return bool(predicate())
 
-    def call(self, client, request, timeout_s: float = 10.0):
-        """Call a service through DDS and spin until the answer arrives."""
+    def call(self, client: Client, request: object, timeout_s: float = 10.0) -> Any:
+        """Call a service through DDS and spin until the answer arrives: the service type's Response
+        (Any: rclpy's Future.result is unannotated)."""
         assert client.wait_for_service(timeout_sec=timeout_s)
         future = client.call_async(request)
         assert self.spin_until(future.done, timeout_s)
         return future.result()
 
-    def side_diag(self, side: str):
+    def side_diag(self, side: str) -> tuple[DiagnosticStatus | None, dict[str, str]]:
         """(latest DiagnosticStatus of one amplifier, its values as a dict), or (None, {})."""
         return self.diag(f'des_driver: {side} amplifier')
 
-    def diag(self, name: str):
+    def drive_command(self) -> DriveCommand:
+        """The driver's DriveCommand (it exists once the driver is configured)."""
+        assert self.driver.command is not None, 'the driver is not configured'
+        return self.driver.command
+
+    def side_status(self, side: str) -> DiagnosticStatus:
+        """The latest DiagnosticStatus of one amplifier (an AssertionError while there is none)."""
+        status, _ = self.side_diag(side)
+        assert status is not None, f'no diagnostics of the {side} amplifier yet'
+        return status
+
+    def diag(self, name: str) -> tuple[DiagnosticStatus | None, dict[str, str]]:
         for array in reversed(self.diags):
             for status in array.status:
                 if status.name == name:

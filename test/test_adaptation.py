@@ -8,19 +8,22 @@ real rclpy and DDS.
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from rclpy.context import Context
 
-from skidsteer_power.bag_io.synthetic import Segment
 from skidsteer_power.calibration.direct import DirectFessMap, feed_trace
+from skidsteer_power.commands import Segment
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, TorqueAdaptation
 from skidsteer_power.estimator.core import EstimatorCore
 from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.estimator.tte_bounds import Z90, BoundSettings, TimeToEmptyBounds
 from skidsteer_power.powertrain import Battery, Powertrain
-from skidsteer_power.terramechanics.terrain import PRESETS
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 VEHICLE = 'test_robot_4wheel'
 DT = 0.02  # 50 Hz joint_states, as the des_driver and the twin publish
@@ -31,7 +34,7 @@ def feed(adapt: TorqueAdaptation, t: float, pred, meas, omega=(24.0, 24.0)) -> b
 
 
 # --- the RLS correction --------------------------------------------------------------------------
-def test_correction_converges_on_each_command():
+def test_correction_converges_on_each_command() -> None:
     """Measured = 1.25 x predicted + 0.03 N m on both sides, over alternating commands: within each
     command's 3 s (1 s settle, then settled samples) the corrected prediction reaches the measured
     torque 1.25 T + 0.03 to within the noise (sigma 2 mN m), and no command change is a terrain change."""
@@ -50,7 +53,7 @@ def test_correction_converges_on_each_command():
     assert adapt.state().terrain_changes == 0
 
 
-def test_no_flag_on_three_minutes_of_steady_noise_and_a_flag_on_a_step():
+def test_no_flag_on_three_minutes_of_steady_noise_and_a_flag_on_a_step() -> None:
     adapt = TorqueAdaptation()
     rng = np.random.default_rng(7)
     adapt.on_command((0.2, 0.0), 0.0)
@@ -67,7 +70,7 @@ def test_no_flag_on_three_minutes_of_steady_noise_and_a_flag_on_a_step():
     assert adapt.state().scale == (1.0, 1.0)  # restarted
 
 
-def test_adaptation_off_changes_nothing():
+def test_adaptation_off_changes_nothing() -> None:
     adapt = TorqueAdaptation(AdaptationSettings(enabled=False))
     adapt.on_command((0.2, 0.0), 0.0)
     for k in range(200):
@@ -76,7 +79,7 @@ def test_adaptation_off_changes_nothing():
     assert adapt.state().scale == (1.0, 1.0) and adapt.state().samples == 0
 
 
-def test_bad_settings_are_config_errors():
+def test_bad_settings_are_config_errors() -> None:
     from skidsteer_power.errors import ConfigError
 
     with pytest.raises(ConfigError, match='memory_s'):
@@ -84,13 +87,13 @@ def test_bad_settings_are_config_errors():
 
 
 # --- the twin: a sand -> loam patch -------------------------------------------------------------
-def core_on(vehicle, terrain, battery=None) -> EstimatorCore:
+def core_on(vehicle: Vehicle, terrain: Terrain, battery: Battery | None = None) -> EstimatorCore:
     pt = Powertrain.for_vehicle(vehicle)
     predictor = MapPredictor(DirectFessMap(vehicle, terrain), pt)
     return EstimatorCore(predictor, battery or Battery.from_config(pt.battery), pt)
 
 
-def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges():
+def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges() -> None:
     from skidsteer_power.twin import Twin, run_commands
     from skidsteer_power.twin.terrain_field import Patch
 
@@ -111,10 +114,11 @@ def test_sand_to_loam_patch_is_flagged_within_5_s_and_the_correction_converges()
     last = trace.t >= trace.t[-1] - 2.0
     measured = trace.joint_effort_Nm[last].mean(axis=0)
     assert np.array(core.corrected_torque_Nm()) == pytest.approx(measured, rel=0.02)
+    assert core.prediction is not None
     assert abs(core.prediction.motor_torque_Nm[0] / measured[0] - 1) > 0.2
 
 
-def test_corrected_battery_power_by_hand():
+def test_corrected_battery_power_by_hand() -> None:
     """The correction reaches the battery forecast through the motor and amplifier: per side, the
     corrected torque T = a T_pred + b at the predicted motor speed w gives the terminal power
     T w + R (T / K_t)^2 (EC-45, Appendix B: K_t = 0.114 N m/A, R = 0.710 ohm, the powertrain file's
@@ -142,7 +146,7 @@ def test_corrected_battery_power_by_hand():
 
 
 # --- time-to-empty bounds -------------------------------------------------------------------------
-def test_block_means_by_hand():
+def test_block_means_by_hand() -> None:
     """Samples every 1 s from t = 3 s, power = t [W], 10 s blocks from the first sample: blocks
     3-12 s and 13-22 s are complete, 23-25 s is still filling. Means by hand: (3 + ... + 12) / 10 =
     7.5 W and (13 + ... + 22) / 10 = 17.5 W. The window (300 s) drops nothing here."""
@@ -155,7 +159,7 @@ def test_block_means_by_hand():
     assert len(bounds.block_means()) == 3
 
 
-def test_bounds_follow_the_documented_formula():
+def test_bounds_follow_the_documented_formula() -> None:
     """Constant power: block spread 0 and block mean = P, so with model spread s the bounds are the
     battery's time at P (1 +- z90 s); before three blocks the default spread applies."""
     battery = Battery.default_test_robot(soc=0.5)
@@ -171,7 +175,7 @@ def test_bounds_follow_the_documented_formula():
     assert bounds.bounds(battery, 0.0) == (math.inf, math.inf)
 
 
-def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
+def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run() -> None:
     """The twin drives a varied Table 7.3 pattern from a nearly empty battery until it is empty; the
     estimator (its own battery model, measured joint_states power) gives p10/p90 once a second
     once three 4 s blocks of power are in: the twin's actual time to empty lies between them
@@ -204,14 +208,16 @@ def test_p10_p90_contain_the_twins_actual_time_to_empty_in_a_drain_run():
     assert sum(results) >= 0.8 * len(results)  # an 80 % band, checked at every segment's end
 
 
-def test_correction_fields_are_named_with_units():
+def test_correction_fields_are_named_with_units() -> None:
     assert len(CORRECTION_FIELDS) == len(set(CORRECTION_FIELDS)) == 12
     assert 'offset_left_Nm' in CORRECTION_FIELDS and 'scale_right' in CORRECTION_FIELDS
 
 
 # --- the node ------------------------------------------------------------------------------------
 @pytest.mark.parametrize('enabled', [True, False])
-def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, enabled):
+def test_node_publishes_the_correction_and_the_bounds(
+    ros_context: Context, tmp_path: Path, enabled: bool
+) -> None:
     """power_estimator over real DDS on sim time: the predictor says 0.1 N m per motor at 12 rad/s
     (test_estimator_core.FixedPowerPredictor); the motors measure 0.13 N m. After the 1 s settle and
     1 s warm-up the published correction maps 0.1 to 0.13 (adaptation on), or stays 1 / 0 (off)."""
@@ -224,7 +230,7 @@ def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, ena
         ros_context, tmp_path, FixedPowerPredictor(60.0), use_sim_time=True, persist=False, adaptation=enabled
     )
     try:
-        got: dict[str, list] = {'power/correction': [], 'p10': [], 'p90': []}
+        got: dict[str, list[Any]] = {'power/correction': [], 'p10': [], 'p90': []}  # ROS messages
         rig.probe.create_subscription(JointState, 'power/correction', got['power/correction'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p10_s', got['p10'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p90_s', got['p90'].append, 10)
@@ -232,7 +238,11 @@ def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, ena
             t = k * 0.05
             rig.set_clock(t)
             rig.command(0.2, 0.0)
-            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            def command_seen(t: float = t) -> bool:
+                return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            rig.spin_until(command_seen)
             rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
         count = len(got['power/correction'])
         rig.run_clock(3.05, lambda: len(got['power/correction']) > count and got['p90'])
@@ -254,7 +264,7 @@ def test_node_publishes_the_correction_and_the_bounds(ros_context, tmp_path, ena
 
 
 # --- the terrain scale: carries over between commands --------------------------------------------
-def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrain_change():
+def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrain_change() -> None:
     """Hand-made data: the internal torque is 0.05 N m, the terrain needs 1.6 x the predicted terrain
     torque, on two alternating commands. The per-side correction restarts on each new command, the
     terrain scale k = S_xy / S_xx = 1.6 exactly (noise-free, through the origin) and holds across
@@ -298,7 +308,7 @@ def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrai
     assert adapt.terrain_scale() == 1.0 and adapt.state().terrain_scale_evidence_s == 0.0
 
 
-def test_terrain_scale_is_off_with_the_adaptation():
+def test_terrain_scale_is_off_with_the_adaptation() -> None:
     adapt = TorqueAdaptation(AdaptationSettings(enabled=False))
     adapt.on_command((0.2, 0.0), 0.0)
     for k in range(200):

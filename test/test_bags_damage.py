@@ -19,15 +19,16 @@ from mcap.reader import make_reader
 
 from skidsteer_power.bag_io.reader import open_bag
 from skidsteer_power.bag_io.salvage import salvage_mcap
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 RUNS = [Segment(0.1, 0.0, 4.0), Segment(0.1, 0.2, 4.0)]
 RECORD_OVERHEAD = 1 + 8 + 22  # opcode, length, channel/sequence/log time/publish time [bytes]
 
 
 @pytest.fixture(scope='module')
-def intact(tmp_path_factory) -> Path:
+def intact(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp('damage') / 'intact.mcap'
     write_drive_bag(path, RUNS, rate_hz=200, odom_hz=10)
     return path
@@ -36,7 +37,9 @@ def intact(tmp_path_factory) -> Path:
 def _first_chunk(path: Path) -> tuple[int, int, int]:
     """(chunk start, chunk length, records start) of the first chunk, from the summary."""
     with path.open('rb') as stream:
-        index = make_reader(stream).get_summary().chunk_indexes[0]
+        summary = make_reader(stream).get_summary()
+        assert summary is not None
+        index = summary.chunk_indexes[0]
     return (
         index.chunk_start_offset,
         index.chunk_length,
@@ -74,7 +77,9 @@ def _validate(bag: Path, tmp_path: Path, *extra: str) -> list[str]:
 
 
 @pytest.mark.parametrize('case', ['chunk header zeroed', '4 KB zeroed mid-chunk', '100 bytes flipped'])
-def test_damaged_bag_without_salvage_is_one_line_and_exit_2(intact, tmp_path, capsys, case):
+def test_damaged_bag_without_salvage_is_one_line_and_exit_2(
+    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
+) -> None:
     bag = _damaged(intact, tmp_path, case)
     assert main(_validate(bag, tmp_path)) == 2
     captured = capsys.readouterr()
@@ -82,7 +87,9 @@ def test_damaged_bag_without_salvage_is_one_line_and_exit_2(intact, tmp_path, ca
     assert len(lines) == 1 and str(bag) in lines[0] and '--salvage' in lines[0] and not captured.out
 
 
-def test_zeroed_chunk_header_salvage_recovers_every_message(intact, tmp_path, capsys):
+def test_zeroed_chunk_header_salvage_recovers_every_message(
+    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """The summary's chunk index locates the chunk whose header is gone; its records are intact."""
     bag = _damaged(intact, tmp_path, 'chunk header zeroed')
     assert main(_validate(bag, tmp_path, '--salvage')) == 0
@@ -94,7 +101,9 @@ def test_zeroed_chunk_header_salvage_recovers_every_message(intact, tmp_path, ca
         assert [(m.topic, m.timestamp_ns, m.data) for m in salvaged.messages()] == _messages(intact)
 
 
-def test_4kb_zeroed_mid_chunk_salvage_recovers_every_intact_message(intact, tmp_path, capsys):
+def test_4kb_zeroed_mid_chunk_salvage_recovers_every_intact_message(
+    intact: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Only messages touching the 4096 zeroed bytes may be lost: at most 4096 / (smallest record) + 2."""
     bag = _damaged(intact, tmp_path, '4 KB zeroed mid-chunk')
     assert main(_validate(bag, tmp_path, '--salvage')) == 0
@@ -111,7 +120,13 @@ def test_4kb_zeroed_mid_chunk_salvage_recovers_every_intact_message(intact, tmp_
 
 @pytest.mark.parametrize('salvage', [(), ('--salvage',)], ids=['plain', 'salvage'])
 @pytest.mark.parametrize('command', ['validate', 'replay'])
-def test_magic_only_mcap_is_one_clear_error(intact, tmp_path, capsys, salvage, command):
+def test_magic_only_mcap_is_one_clear_error(
+    intact: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    salvage: tuple[()] | tuple[str],
+    command: str,
+) -> None:
     bag = _damaged(intact, tmp_path, 'magic only')
     argv = _validate(bag, tmp_path, *salvage) if command == 'validate' else ['replay', str(bag), *salvage]
     assert main(argv) == 2
@@ -120,7 +135,7 @@ def test_magic_only_mcap_is_one_clear_error(intact, tmp_path, capsys, salvage, c
     assert 'MCAP' in lines[-1] or 'salvage' in lines[-1] or 'truncated' in lines[-1]
 
 
-def test_salvage_of_flipped_bytes_returns_only_written_messages(intact, tmp_path):
+def test_salvage_of_flipped_bytes_returns_only_written_messages(intact: Path, tmp_path: Path) -> None:
     bag = _damaged(intact, tmp_path, '100 bytes flipped')
     found = salvage_mcap(bag.read_bytes())
     written = _messages(intact)
@@ -131,7 +146,9 @@ def test_salvage_of_flipped_bytes_returns_only_written_messages(intact, tmp_path
     assert recovered <= stamps and len(recovered) >= len(written) - 100  # at most one lost per flip
 
 
-def test_replay_salvage_of_flipped_bytes_skips_and_counts_undecodable_messages(intact, tmp_path):
+def test_replay_salvage_of_flipped_bytes_skips_and_counts_undecodable_messages(
+    intact: Path, tmp_path: Path
+) -> None:
     """A real `replay --salvage` subprocess: no RCLError traceback; messages rclpy cannot deserialize
     are skipped and counted."""
     bag = _damaged(intact, tmp_path, '100 bytes flipped')
@@ -149,7 +166,9 @@ def test_replay_salvage_of_flipped_bytes_skips_and_counts_undecodable_messages(i
     assert out['message_count'] + skipped == out['messages_read'] <= written
 
 
-def test_sqlite_bag_missing_rows_is_measured_against_its_metadata(tmp_path, capsys):
+def test_sqlite_bag_missing_rows_is_measured_against_its_metadata(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """rosbag2 sqlite3: metadata.yaml counts the messages; rows lost from the database are missing."""
     import sqlite3
 

@@ -62,7 +62,9 @@ def predictor() -> MapPredictor:
 
 
 @pytest.mark.parametrize('kinematics', ['odom', 'ground_truth'])
-def test_motion_prediction_does_not_depend_on_motor_data(tmp_path, predictor, kinematics):
+def test_motion_prediction_does_not_depend_on_motor_data(
+    tmp_path: Path, predictor: MapPredictor, kinematics: str
+) -> None:
     """Predicted terminal energy from the measured twist: the twin bag with and without joint_states
     and battery agree (before: each 10 Hz odometry row held for the 0.5 s command hold, ~5x)."""
     stripped = tmp_path / 'stripped.mcap'
@@ -82,7 +84,9 @@ def test_motion_prediction_does_not_depend_on_motor_data(tmp_path, predictor, ki
     assert summary['battery']['energy_predicted_J'] >= energy['stripped']
 
 
-def test_foreign_profile_with_ros2_schemas_is_read_with_a_warning(tmp_path, caplog):
+def test_foreign_profile_with_ros2_schemas_is_read_with_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     copy = tmp_path / 'empty_profile.mcap'
     copy_mcap(TWIN_BAG, copy, profile='')
     with caplog.at_level(logging.WARNING), open_bag(copy) as bag:
@@ -94,7 +98,7 @@ def test_foreign_profile_with_ros2_schemas_is_read_with_a_warning(tmp_path, capl
     assert "profile is ''" in caplog.text
 
 
-def test_foreign_profile_with_other_encodings_is_one_clear_error(tmp_path):
+def test_foreign_profile_with_other_encodings_is_one_clear_error(tmp_path: Path) -> None:
     path = tmp_path / 'json.mcap'
     with path.open('wb') as g:
         writer = Writer(g)
@@ -107,7 +111,7 @@ def test_foreign_profile_with_other_encodings_is_one_clear_error(tmp_path):
         open_bag(path)
 
 
-def test_on_change_period_is_that_of_distinct_commands():
+def test_on_change_period_is_that_of_distinct_commands() -> None:
     """An on-change publisher sends a stop and the new command 0.27 ms apart every 5 s: the period
     of distinct commands is 5 s (before: the median of 0.27 ms and 5 s intervals)."""
     t, cmd = [], []
@@ -123,7 +127,7 @@ def _segment(radius_m: float, speed_m_s: float, duration_s: float) -> TraceSegme
     return TraceSegment(0.0, duration_s, speed_m_s, 0.0, math.inf, 30, radius_m, 0.0, 0.0, 0.001, speed_m_s)
 
 
-def test_circles_are_drawn_only_for_turns():
+def test_circles_are_drawn_only_for_turns() -> None:
     # 0.1 m/s for 3 s on Table 7.3's 1 m circle: 0.3 rad swept (a turn)
     assert is_turn(_segment(1.0, 0.1, 3.0))
     # 0.2 m/s for 10 s, fitted radius 300 m: 2 m / 300 m = 0.0067 rad (a straight run)
@@ -132,7 +136,7 @@ def test_circles_are_drawn_only_for_turns():
     assert 2.0 / 300.0 < MIN_TURN_RAD < 0.3
 
 
-def test_clamped_time_spans():
+def test_clamped_time_spans() -> None:
     t = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
     flag = np.array([False, True, True, False, True])
     hold = np.array([1.0, 1.0, 0.5, 1.0, np.nan])

@@ -14,8 +14,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import load_msg_definitions, open_bag
 from skidsteer_power.bag_io.reader import BagDamageError
-from skidsteer_power.bag_io.synthetic import START_NS, Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import START_NS, write_drive_bag
 from skidsteer_power.bag_io.writer import BagWriter
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
@@ -240,7 +241,7 @@ def test_vectorized_twist_decoding_matches_the_type_store(tmp_path: Path) -> Non
 
 
 def test_real_sqlite3_bag_reads_with_unknown_types_skipped(
-    neato_bag, caplog: pytest.LogCaptureFixture
+    neato_bag: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     with caplog.at_level(logging.WARNING), open_bag(neato_bag) as bag:
         # Counts from ../shared/realbags/README.md.
@@ -273,7 +274,7 @@ def test_real_bag_unknown_types_decode_with_definitions_from_the_readme(
     assert {b.left_front for b in bumps} <= {0, 1}
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', *args], capture_output=True, text=True, timeout=120
     )

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from mcap.records import Channel, Header, Schema
 from mcap.stream_reader import StreamReader
+from rclpy.context import Context
 
 from skidsteer_power.bag_io.reader import open_bag
 
@@ -35,7 +36,7 @@ def clean_shm_zombies() -> None:
         subprocess.run([tool, 'shm', 'clean'], capture_output=True, timeout=60, check=False)
 
 
-def test_sigkill_during_recording_loses_at_most_about_a_second(ros_context, tmp_path):
+def test_sigkill_during_recording_loses_at_most_about_a_second(ros_context: Context, tmp_path: Path) -> None:
     import rclpy
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import String
@@ -52,6 +53,7 @@ def test_sigkill_during_recording_loses_at_most_about_a_second(ros_context, tmp_
     try:
         deadline = time.monotonic() + 30
         while pub.get_subscription_count() == 0:
+            assert proc.stderr is not None
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
             time.sleep(0.01)
         time.sleep(0.3)  # let the recorder's reader finish matching (see replay.MATCH_SETTLE_S)
@@ -79,7 +81,7 @@ def test_sigkill_during_recording_loses_at_most_about_a_second(ros_context, tmp_
     assert published - len(got) <= ALLOWED_LOSS_S * RATE_HZ, (published, len(got))
 
 
-def test_native_stdout_goes_to_stderr_so_json_stays_clean():
+def test_native_stdout_goes_to_stderr_so_json_stays_clean() -> None:
     """Fast DDS logs with std::cout (fd 1); the CLI sends fd 1 to stderr while a command runs and
     keeps Python's stdout for its own output (cli.common.native_stdout_to_stderr)."""
     code = (

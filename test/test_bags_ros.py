@@ -15,9 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bag_io.record import Recorder, record
+from skidsteer_power.bag_io.reader import BagMessage
+from skidsteer_power.bag_io.record import Recorder, RecordResult, record
 from skidsteer_power.bag_io.replay import Replayer, ReplayOptions, deadlines
 from skidsteer_power.bag_io.synthetic import START_NS
 from skidsteer_power.bag_io.writer import BagWriter
@@ -37,7 +39,7 @@ class BackgroundRecording:
         self.stop = StopFlag()
         self.ready = threading.Event()
         self.recorder: Recorder | None = None
-        self.result = None
+        self.result: RecordResult | None = None
         self.error: BaseException | None = None
 
         def on_ready(recorder: Recorder) -> None:
@@ -55,12 +57,13 @@ class BackgroundRecording:
         self.thread.start()
         assert self.ready.wait(20), 'recorder did not start'
 
-    def finish(self):
+    def finish(self) -> RecordResult:
         self.stop.set('test')
         self.thread.join(30)
         assert not self.thread.is_alive(), 'recorder did not stop'
         if self.error is not None:
             raise self.error
+        assert self.result is not None
         return self.result
 
 
@@ -76,7 +79,9 @@ def _contents(path: Path) -> list[tuple[str, bytes]]:
         return [(m.topic, m.data) for m in bag.messages()]
 
 
-def test_record_replay_record_keeps_every_message_byte_identical_and_in_order(ros_context, tmp_path):
+def test_record_replay_record_keeps_every_message_byte_identical_and_in_order(
+    ros_context: Context, tmp_path: Path
+) -> None:
     from geometry_msgs.msg import Twist
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -140,7 +145,9 @@ def _string_bag(path: Path, topic: str, n: int, spacing_ns: int) -> list[bytes]:
     return data
 
 
-def test_replay_publishes_at_or_after_each_deadline_in_bag_order(ros_context, tmp_path):
+def test_replay_publishes_at_or_after_each_deadline_in_bag_order(
+    ros_context: Context, tmp_path: Path
+) -> None:
     import rclpy
 
     topic = _unique('timed')
@@ -157,7 +164,7 @@ def test_replay_publishes_at_or_after_each_deadline_in_bag_order(ros_context, tm
     assert result.counts == {topic: 40}
 
 
-def test_start_duration_and_topics_select_the_window(ros_context, tmp_path):
+def test_start_duration_and_topics_select_the_window(ros_context: Context, tmp_path: Path) -> None:
     import rclpy
 
     topic = _unique('window')
@@ -172,7 +179,7 @@ def test_start_duration_and_topics_select_the_window(ros_context, tmp_path):
     assert seen == [START_NS + i * 10_000_000 for i in range(20, 50)]
 
 
-def test_loop_and_clock(ros_context, tmp_path):
+def test_loop_and_clock(ros_context: Context, tmp_path: Path) -> None:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
@@ -181,25 +188,29 @@ def test_loop_and_clock(ros_context, tmp_path):
     _string_bag(tmp_path / 'l.mcap', topic, 20, 10_000_000)  # 0.19 s of bag
     listener = rclpy.create_node('bag_clock_listener', context=ros_context)
     clocks: list[int] = []
-    listener.create_subscription(
-        Clock, '/clock', lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec), 100
-    )
+
+    def on_clock(m: Clock) -> None:
+        clocks.append(m.clock.sec * 10**9 + m.clock.nanosec)
+
+    listener.create_subscription(Clock, '/clock', on_clock, 100)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(listener)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     node = rclpy.create_node('bag_loop_replayer', context=ros_context)
     stop = StopFlag()
-    published = []
+    published: list[int] = []
 
-    def count(message) -> None:
+    def count(message: BagMessage) -> None:
         published.append(message.timestamp_ns)
         if len(published) == 60:
             stop.set('test')
 
     with open_bag(tmp_path / 'l.mcap') as bag:
         replayer = Replayer(bag, node, ReplayOptions(loop=True, clock=True, clock_hz=100.0))
-        _wait_for(lambda: replayer._clock_pub.get_subscription_count() > 0)
+        clock_pub = replayer._clock_pub
+        assert clock_pub is not None
+        _wait_for(lambda: clock_pub.get_subscription_count() > 0)
         result = replayer.run(stop, on_message=count)
     time.sleep(0.2)
     executor.shutdown()
@@ -218,7 +229,9 @@ def _cli(*args: str) -> list[str]:
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp_path, signum):
+def test_signal_stops_recording_cleanly_without_losing_messages(
+    ros_context: Context, tmp_path: Path, signum: signal.Signals
+) -> None:
     import rclpy
     from std_msgs.msg import String
 
@@ -235,6 +248,7 @@ def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp
     )
     try:
         _wait_for(lambda: pub.get_subscription_count() > 0 or proc.poll() is not None, timeout=30)
+        assert proc.stderr is not None
         assert proc.poll() is None, proc.stderr.read()
         for i in range(300):  # as fast as possible, then the signal at once
             pub.publish(String(data=f'm{i}'))
@@ -255,7 +269,9 @@ def test_signal_stops_recording_cleanly_without_losing_messages(ros_context, tmp
     assert not (tmp_path / 'sig.mcap.partial').exists()
 
 
-def test_real_bag_replays_through_the_cli_byte_for_byte(neato_bag, ros_context, tmp_path):
+def test_real_bag_replays_through_the_cli_byte_for_byte(
+    neato_bag: Path, ros_context: Context, tmp_path: Path
+) -> None:
     import rclpy
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
@@ -296,7 +312,9 @@ def test_real_bag_replays_through_the_cli_byte_for_byte(neato_bag, ros_context, 
     assert received == expected
 
 
-def test_real_bag_replay_skips_types_without_python_support_with_a_warning(neato_bag, ros_context):
+def test_real_bag_replay_skips_types_without_python_support_with_a_warning(
+    neato_bag: Path, ros_context: Context
+) -> None:
     import rclpy
 
     node = rclpy.create_node('bag_real_skipper', context=ros_context)

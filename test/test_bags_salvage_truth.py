@@ -14,19 +14,21 @@ import logging
 import shutil
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from skidsteer_power.bag_io.reader import open_bag
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 VALIDATE = ['--vehicle', 'test_robot_track', '--terrain', 'dry_sand', '--no-plots', '--json']
 
 
 @pytest.fixture(scope='module')
-def drive(tmp_path_factory) -> Path:
+def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp('truth') / 'drive.mcap'
     write_drive_bag(path, [Segment(0.1, 0.0, 3.0), Segment(0.1, 0.2, 2.0)], rate_hz=50, odom_hz=10)
     return path
@@ -60,7 +62,9 @@ def _copy(src: Path, out: Path, *, storage: str = 'mcap', spoil: int | None = No
     return out
 
 
-def _validate(capsys, bag: Path, report: Path, *extra: str) -> tuple[int, dict, str]:
+def _validate(
+    capsys: pytest.CaptureFixture[str], bag: Path, report: Path, *extra: str
+) -> tuple[int, dict[str, Any], str]:
     try:
         code = main(['validate', str(bag), *VALIDATE, '--report', str(report), *extra])
     except SystemExit as exit_:
@@ -69,7 +73,9 @@ def _validate(capsys, bag: Path, report: Path, *extra: str) -> tuple[int, dict, 
     return code, (json.loads(captured.out) if code == 0 else {}), captured.err
 
 
-def test_a_sqlite_bag_with_half_its_rows_deleted_is_not_complete(drive, tmp_path, capsys):
+def test_a_sqlite_bag_with_half_its_rows_deleted_is_not_complete(
+    drive: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bag = _copy(drive, tmp_path / 'sq', storage='sqlite3')
     with sqlite3.connect(bag / 'sq.db3') as db:
         db.execute('DELETE FROM messages WHERE id % 2 = 0')
@@ -84,7 +90,9 @@ def test_a_sqlite_bag_with_half_its_rows_deleted_is_not_complete(drive, tmp_path
     assert out['messages_read'] == held
 
 
-def test_validate_salvage_skips_and_counts_an_undecodable_message(drive, tmp_path, capsys):
+def test_validate_salvage_skips_and_counts_an_undecodable_message(
+    drive: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bag = _copy(drive, tmp_path / 'spoilt.mcap', spoil=40)
     code, _, err = _validate(capsys, bag, tmp_path / 'r1')
     lines = err.strip().splitlines()
@@ -95,7 +103,9 @@ def test_validate_salvage_skips_and_counts_an_undecodable_message(drive, tmp_pat
     assert out['messages_read'] == out['messages_expected']  # every message was read, one not decoded
 
 
-def test_fleet_rows_carry_completeness(drive, tmp_path, capsys):
+def test_fleet_rows_carry_completeness(
+    drive: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     raw = drive.read_bytes()
     folder = tmp_path / 'bags'
     folder.mkdir()
@@ -128,7 +138,9 @@ def test_fleet_rows_carry_completeness(drive, tmp_path, capsys):
     assert 'INCOMPLETE' in (tmp_path / 'fleet' / 'summary.md').read_text()
 
 
-def test_a_healthy_bag_with_a_protobuf_channel_is_read_without_it(tmp_path, caplog):
+def test_a_healthy_bag_with_a_protobuf_channel_is_read_without_it(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -158,7 +170,9 @@ def test_a_healthy_bag_with_a_protobuf_channel_is_read_without_it(tmp_path, capl
     assert any('skipping /p (protobuf)' in r.getMessage() for r in caplog.records)
 
 
-def test_only_commands_with_salvage_suggest_it(drive, tmp_path, capsys):
+def test_only_commands_with_salvage_suggest_it(
+    drive: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     raw = drive.read_bytes()
     cut = tmp_path / 'cut.mcap'
     cut.write_bytes(raw[: len(raw) // 2])
@@ -175,7 +189,7 @@ def test_only_commands_with_salvage_suggest_it(drive, tmp_path, capsys):
         assert len(lines) == 1 and 'truncated or corrupt' in lines[0] and 'salvage' not in lines[0], lines
 
 
-def test_mission_plot_reports_the_file_it_wrote(tmp_path, capsys):
+def test_mission_plot_reports_the_file_it_wrote(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     base = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', 'patrol',
             '--cache-dir', str(tmp_path / 'cache'), '--json']  # fmt: skip
     assert main([*base, '--plot', str(tmp_path / 'energy')]) == 0

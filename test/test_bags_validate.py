@@ -8,14 +8,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import DriveSamples, MotorArrays, write_drive_bag
 from skidsteer_power.bags.validate import (
     ValidateOptions,
     WindowedBattery,
@@ -25,6 +28,7 @@ from skidsteer_power.bags.validate import (
     run_estimator,
     validate,
 )
+from skidsteer_power.commands import Segment
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
 
@@ -41,10 +45,10 @@ def predictor() -> MapPredictor:
     return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
 
 
-def _predicted_motors(predictor: MapPredictor):
+def _predicted_motors(predictor: MapPredictor) -> Callable[[DriveSamples], MotorArrays]:
     """joint_states equal to the prediction for each sample's command: measured == predicted."""
 
-    def motors(samples):
+    def motors(samples: DriveSamples) -> MotorArrays:
         points = [
             predictor.predict(float(v), float(r))
             for v, r in zip(samples.speed, samples.yaw_rate, strict=True)
@@ -56,11 +60,11 @@ def _predicted_motors(predictor: MapPredictor):
     return motors
 
 
-def _options(tmp_path: Path, **kw) -> ValidateOptions:
+def _options(tmp_path: Path, **kw: Any) -> ValidateOptions:
     return ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', **kw)
 
 
-def test_measurements_equal_to_predictions_give_zero_error(tmp_path, predictor):
+def test_measurements_equal_to_predictions_give_zero_error(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 'p.mcap', RUNS, rate_hz=20, motors=_predicted_motors(predictor))
     with open_bag(tmp_path / 'p.mcap') as bag:
         summary = validate(bag, _options(tmp_path, plots=False), predictor)
@@ -88,10 +92,10 @@ def test_measurements_equal_to_predictions_give_zero_error(tmp_path, predictor):
     assert abs(online['energy_error_pct']) < 1e-6
 
 
-def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path, predictor):
+def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predictor: MapPredictor) -> None:
     base = _predicted_motors(predictor)
 
-    def offset(samples):
+    def offset(samples: DriveSamples) -> MotorArrays:
         wl, wr, tl, tr = base(samples)
         return wl, wr, tl + 0.05, tr  # left motor reads 0.05 N m more than predicted
 
@@ -111,7 +115,7 @@ def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path, predictor):
     assert abs(online['metrics']['energy_error_pct']) < abs(m['energy_error_pct'])
 
 
-def test_trace_analysis_recovers_commanded_radius_and_speed(tmp_path, predictor):
+def test_trace_analysis_recovers_commanded_radius_and_speed(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 't.mcap', RUNS, rate_hz=20, odom_hz=10)
     with open_bag(tmp_path / 't.mcap') as bag:
         summary = validate(bag, _options(tmp_path, plots=False), predictor)
@@ -130,7 +134,7 @@ def test_trace_analysis_recovers_commanded_radius_and_speed(tmp_path, predictor)
         assert s['speed_m_s'] == pytest.approx(0.1, rel=2e-5)
 
 
-def test_command_segments_split_on_change_and_on_pauses():
+def test_command_segments_split_on_change_and_on_pauses() -> None:
     t = np.array([0.0, 0.1, 0.2, 0.3, 2.0, 2.1, 2.2, 2.3])
     cmd = np.array([[0.1, 0.0]] * 2 + [[0.1, 0.2]] * 2 + [[0.1, 0.2]] * 4)
     # Change at 0.2 s; a 1.7 s pause ends the second run at its last command + 1 s.
@@ -142,7 +146,9 @@ def test_command_segments_split_on_change_and_on_pauses():
     assert command_segments(t, cmd, 1.0, 1.05) == [(0.2, 1.3, 0.1, 0.2), (2.0, 3.3, 0.1, 0.2)]
 
 
-def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(tmp_path, predictor):
+def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(
+    tmp_path: Path, predictor: MapPredictor
+) -> None:
     write_drive_bag(tmp_path / 'n.mcap', [Segment(0.1, 0.1, 5.0)], rate_hz=10, joint_states=False)
     with open_bag(tmp_path / 'n.mcap') as bag:
         summary = validate(bag, _options(tmp_path), predictor)
@@ -159,7 +165,7 @@ def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(tmp_path
     assert summary['segments'][0]['radius_m'] == pytest.approx(1.0, rel=1e-9)
 
 
-def test_report_files_csv_json_markdown_and_plots(tmp_path, predictor):
+def test_report_files_csv_json_markdown_and_plots(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 'r.mcap', RUNS, rate_hz=20)
     with open_bag(tmp_path / 'r.mcap') as bag:
         summary = validate(bag, _options(tmp_path), predictor)
@@ -184,7 +190,7 @@ def test_report_files_csv_json_markdown_and_plots(tmp_path, predictor):
     assert (report / 'segments.csv').read_text().count('\n') == 1 + 3
 
 
-def test_windowed_battery_matches_per_input_integration(tmp_path, predictor):
+def test_windowed_battery_matches_per_input_integration(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 'b.mcap', RUNS, rate_hz=50, motors=_predicted_motors(predictor))
     options = _options(tmp_path)
     with open_bag(tmp_path / 'b.mcap') as bag:
@@ -198,13 +204,13 @@ def test_windowed_battery_matches_per_input_integration(tmp_path, predictor):
     assert windowed.soc == pytest.approx(exact.soc, abs=1e-9)
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', *args], capture_output=True, text=True, timeout=300
     )
 
 
-def test_cli_validate_json_and_clear_errors(tmp_path):
+def test_cli_validate_json_and_clear_errors(tmp_path: Path) -> None:
     write_drive_bag(tmp_path / 'c.mcap', RUNS, rate_hz=10)
     common = ['--terrain', TERRAIN, '--report', str(tmp_path / 'rep'), '--map-cache', str(tmp_path / 'maps')]
     run = _cli('validate', str(tmp_path / 'c.mcap'), '--vehicle', VEHICLE, *common, '--no-plots', '--json')
@@ -221,7 +227,9 @@ def test_cli_validate_json_and_clear_errors(tmp_path):
     )
 
 
-def test_real_bag_validates_with_trace_analysis_from_odom(neato_bag, tmp_path, predictor):
+def test_real_bag_validates_with_trace_analysis_from_odom(
+    neato_bag: Path, tmp_path: Path, predictor: MapPredictor
+) -> None:
     with open_bag(neato_bag, warn_unknown=False) as bag:
         summary = validate(bag, _options(tmp_path), predictor)
     assert summary['has_motor_data'] is False and summary['pose_topic'] == '/odom'
@@ -241,7 +249,9 @@ def test_real_bag_validates_with_trace_analysis_from_odom(neato_bag, tmp_path, p
 
 
 @pytest.mark.ros
-def test_validate_reproduces_what_the_live_node_published(ros_context, tmp_path, predictor):
+def test_validate_reproduces_what_the_live_node_published(
+    ros_context: Context, tmp_path: Path, predictor: MapPredictor
+) -> None:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -293,11 +303,13 @@ BUNDLED = Path(__file__).resolve().parents[1] / 'bags'
 
 
 @pytest.fixture(scope='module')
-def bundled_maps(tmp_path_factory):
+def bundled_maps(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp('maps')
 
 
-def _validate_bundled(name, vehicle, terrain, report, maps, odom='/ground_truth/odom'):
+def _validate_bundled(
+    name: str, vehicle: str, terrain: str, report: Path, maps: Path, odom: str = '/ground_truth/odom'
+) -> dict[str, Any]:
     bag_path = BUNDLED / name
     assert bag_path.exists(), f'bundled bag missing: {bag_path} (make it with bags/make_bundled_bags.sh)'
     options = ValidateOptions(vehicle, terrain, report, odom_topic=odom, map_cache_dir=maps, plots=False)
@@ -306,7 +318,9 @@ def _validate_bundled(name, vehicle, terrain, report, maps, odom='/ground_truth/
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'])
-def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(tmp_path, bundled_maps, vehicle):
+def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(
+    tmp_path: Path, bundled_maps: Path, vehicle: str
+) -> None:
     """The bundled bags are recordings of the digital twin (bags/README.md), not of the estimator's
     own model: there is no /power/predicted to reproduce; the estimator is compared with the twin's
     joint_states, and the ground-truth odometry gives a circle fit for every Table 7.3 set."""
@@ -328,7 +342,9 @@ def test_bundled_twin_bag_validates_with_motor_data_and_circle_fits(tmp_path, bu
         assert all(s['radius_m'] > s['radius_cmd_m'] for s in turning)
 
 
-def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(tmp_path, bundled_maps):
+def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(
+    tmp_path: Path, bundled_maps: Path
+) -> None:
     """test_robot_4wheel_dry_sand.mcap was driven on clay (bags/README.md): predicting with the
     terrain its name says gives a far larger energy error than with its true terrain."""
     vehicle = 'test_robot_4wheel'
@@ -340,7 +356,7 @@ def test_the_mislabelled_bundled_bag_shows_what_a_wrong_terrain_looks_like(tmp_p
     assert wrong_error > 3 * right_error
 
 
-def test_set_points_predict_the_twins_wider_turns(tmp_path, bundled_maps):
+def test_set_points_predict_the_twins_wider_turns(tmp_path: Path, bundled_maps: Path) -> None:
     """Issue 25: --kinematics cmd predicts at the wheel speed set points, twist takes the command as
     the motion. Reference: the twin's ground-truth circles (a model that does not use FESS; DESIGN.md).
     Per segment the set-point prediction's radius must be nearer the twin's than the commanded one,

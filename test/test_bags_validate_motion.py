@@ -16,11 +16,11 @@ from skidsteer_power.bags.validate import (
     PREDICTED_COLUMNS,
     ValidateOptions,
     build_core,
-    error_metrics,
     predict_bag,
     run_estimator,
     with_other_commands,
 )
+from skidsteer_power.bags.validate_metrics import error_metrics
 
 BUNDLED = Path(__file__).resolve().parents[1] / 'bags' / 'test_robot_track_sand_bin.mcap'
 

@@ -13,7 +13,7 @@ from skidsteer_power.powertrain import Battery
 from skidsteer_power.powertrain.motor import DES_70_10
 
 
-def test_test_robot_pack_is_12s_5ah_within_des_supply_range():
+def test_test_robot_pack_is_12s_5ah_within_des_supply_range() -> None:
     bat = Battery.default_test_robot()
     cfg = bat.config
     assert cfg.cells_in_series == 12
@@ -24,7 +24,7 @@ def test_test_robot_pack_is_12s_5ah_within_des_supply_range():
     assert cfg.ocv(0.0) / 2 < DES_70_10.min_supply_V
 
 
-def test_remaining_energy_is_ocv_integral():
+def test_remaining_energy_is_ocv_integral() -> None:
     bat = Battery.default_test_robot()
     soc = np.linspace(0, 1, 100001)
     expected = np.trapezoid(bat.config.ocv(soc), soc) * bat.config.capacity_C / 3600
@@ -32,7 +32,7 @@ def test_remaining_energy_is_ocv_integral():
     assert 200 < bat.remaining_wh < 260  # ~ 12 cells x 3.8 V x 5 Ah = 228 Wh
 
 
-def test_curve_pieces_are_the_table_points_inside_the_range():
+def test_curve_pieces_are_the_table_points_inside_the_range() -> None:
     """config/batteries/test_robot.yaml's OCV table bends at SoC 0, 0.05, 0.1, 0.2, ..., 0.9, 1."""
     cfg = Battery.default_test_robot().config
     assert cfg.pieces(0.0, 0.73).tolist() == [0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.73]
@@ -41,7 +41,7 @@ def test_curve_pieces_are_the_table_points_inside_the_range():
     assert cfg.pieces(0.4, 0.4).tolist() == [0.4]
 
 
-def test_constant_power_drain_empties_at_computed_time():
+def test_constant_power_drain_empties_at_computed_time() -> None:
     bat = Battery.default_test_robot(soc=0.8)
     power = 150.0
     t_empty = bat.time_to_empty_s(power)
@@ -57,7 +57,7 @@ def test_constant_power_drain_empties_at_computed_time():
     assert bat.state.drawn_J == pytest.approx(power * t_empty, rel=1e-3)
 
 
-def test_time_to_empty_hand_check_against_ideal_source():
+def test_time_to_empty_hand_check_against_ideal_source() -> None:
     """With tiny resistance the time is (OCV energy) / P (energy balance)."""
     bat = Battery.from_config({'preset': 'test_robot', 'cell_resistance_ohm': 1e-9})
     assert bat.time_to_empty_s(100.0) == pytest.approx(bat.remaining_wh * 3600 / 100.0, rel=1e-6)
@@ -67,7 +67,7 @@ def test_time_to_empty_hand_check_against_ideal_source():
 
 @pytest.mark.parametrize('soc', [1.0, 0.8, 0.37, 0.06])
 @pytest.mark.parametrize('power', [5.0, 150.0, 900.0])
-def test_closed_form_time_to_empty_equals_numerical_quadrature(soc, power):
+def test_closed_form_time_to_empty_equals_numerical_quadrature(soc: float, power: float) -> None:
     """The closed form (module doc) against scipy's adaptive quadrature of the same integral,
     t = integral_{SOC_empty}^{SOC} Q / i(P, SOC') dSOC' with i from the equivalent circuit."""
     from scipy.integrate import quad
@@ -87,7 +87,7 @@ def test_closed_form_time_to_empty_equals_numerical_quadrature(soc, power):
     assert bat.time_to_empty_s(power) == pytest.approx(expected, rel=1e-9)
 
 
-def test_time_to_empty_refuses_a_power_the_pack_cannot_deliver():
+def test_time_to_empty_refuses_a_power_the_pack_cannot_deliver() -> None:
     bat = Battery.default_test_robot(soc=0.5)
     v_empty = float(bat.config.ocv(bat.config.soc_empty))
     too_much = 1.01 * v_empty**2 / (4 * bat.config.resistance_ohm)  # beyond max power at empty
@@ -95,7 +95,7 @@ def test_time_to_empty_refuses_a_power_the_pack_cannot_deliver():
         bat.time_to_empty_s(too_much)
 
 
-def test_regeneration_charges_but_not_above_full():
+def test_regeneration_charges_but_not_above_full() -> None:
     bat = Battery.default_test_robot(soc=0.5)
     bat.step(-50.0, 60.0)
     assert bat.soc > 0.5
@@ -105,7 +105,7 @@ def test_regeneration_charges_but_not_above_full():
     assert bat.time_to_empty_s(-10.0) == math.inf
 
 
-def test_distance_to_empty_and_terminal_voltage():
+def test_distance_to_empty_and_terminal_voltage() -> None:
     bat = Battery.default_test_robot()
     assert bat.distance_to_empty_m(50.0, 0.5) == pytest.approx(bat.time_to_empty_s(50.0) * 0.5)
     bat.step(200.0, 1.0)
@@ -115,7 +115,7 @@ def test_distance_to_empty_and_terminal_voltage():
     assert bat.state.current_A * bat.state.voltage_V == pytest.approx(200.0, rel=1e-9)
 
 
-def test_round_trip_through_json():
+def test_round_trip_through_json() -> None:
     bat = Battery.default_test_robot(soc=0.9)
     bat.step(80.0, 120.0)
     restored = Battery.from_dict(json.loads(json.dumps(bat.to_dict())))
@@ -124,7 +124,7 @@ def test_round_trip_through_json():
     assert restored.config == bat.config
 
 
-def test_bad_battery_inputs():
+def test_bad_battery_inputs() -> None:
     with pytest.raises(ConfigError, match='state of charge'):
         Battery.default_test_robot(soc=1.5)
     with pytest.raises(ConfigError, match='ocv_curve'):

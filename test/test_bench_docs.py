@@ -12,7 +12,7 @@ FESS = [
 MAPS = [Figure('maps: vectorized queries', 3.8e6, '1/s')]
 
 
-def test_rows_carry_section_goal_value_and_met():
+def test_rows_carry_section_goal_value_and_met() -> None:
     table = goal_table([('fess', FESS), ('maps', MAPS)], RUN)
     assert table.splitlines() == [
         '| benchmark | figure | goal | measured | met | run |',
@@ -25,13 +25,13 @@ def test_rows_carry_section_goal_value_and_met():
     ]
 
 
-def test_a_pipe_in_a_name_does_not_split_the_row():
+def test_a_pipe_in_a_name_does_not_split_the_row() -> None:
     table = goal_table([('des', [Figure('des: a | b', 1.0, 'ms')])], RUN)
     assert '| des | a \\| b | - | 1 ms | - |' in table
     assert existing_rows(f'{BEGIN}\n{table}\n{END}') == {'des': [table.splitlines()[2]]}
 
 
-def test_the_hand_written_text_stays_and_a_partial_run_keeps_other_areas():
+def test_the_hand_written_text_stays_and_a_partial_run_keeps_other_areas() -> None:
     doc = '# Benchmarks\n\nHand-written history.\n'
     first = update_doc(doc, [('fess', FESS), ('maps', MAPS)], RUN)
     assert first.startswith(doc) and first.count(BEGIN) == 1 and first.rstrip().endswith(END)
@@ -45,7 +45,7 @@ def test_the_hand_written_text_stays_and_a_partial_run_keeps_other_areas():
     assert '0 goal(s) missed in this table.' in second
 
 
-def test_a_named_table_replaces_only_its_own_block():
+def test_a_named_table_replaces_only_its_own_block() -> None:
     begin, end = '<!-- benchmarks:map-accuracy:begin -->', '<!-- benchmarks:map-accuracy:end -->'
     doc = f'Prose.\n{begin}\n| old |\n{end}\nGoal text.\n'
     new = replace_named(doc, 'map-accuracy', '| new |', RUN)

@@ -12,17 +12,20 @@ import io
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import yaml
 
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.calibration.fit import select_identifiable
 from skidsteer_power.calibration.io import read_calibration
+from skidsteer_power.calibration.segments import Segment as SteadySegment
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
 from skidsteer_power.cli.main import main
-from skidsteer_power.terramechanics.terrain import PRESETS, load_terrain
+from skidsteer_power.commands import Segment
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain, load_terrain
 
 VEHICLE = 'test_robot_4wheel'
 TRUTH = PRESETS['dry_sand'].__class__(
@@ -68,7 +71,7 @@ def run_cli(argv: list[str]) -> tuple[int, str, str]:
 
 
 @pytest.fixture(scope='module')
-def calibrated(twin_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, Path]:
+def calibrated(twin_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], Path]:
     out = tmp_path_factory.mktemp('cal') / 'my_sand.yaml'
     code, stdout, stderr = run_cli(
         [
@@ -87,7 +90,7 @@ def calibrated(twin_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> tupl
     return json.loads(stdout), out
 
 
-def test_json_has_the_issue_keys_and_parameter_entries(calibrated):
+def test_json_has_the_issue_keys_and_parameter_entries(calibrated: tuple[dict[str, Any], Path]) -> None:
     payload, _ = calibrated
     assert set(payload) >= ISSUE_KEYS
     for entry in payload['parameters'].values():
@@ -96,7 +99,7 @@ def test_json_has_the_issue_keys_and_parameter_entries(calibrated):
     assert payload['segments_holdout'] == 3  # round(0.3 * 9), split by segment
 
 
-def test_fit_recovers_the_twins_torque_behaviour(calibrated):
+def test_fit_recovers_the_twins_torque_behaviour(calibrated: tuple[dict[str, Any], Path]) -> None:
     """Issue goal: hold-out energy error <= 5 % after calibration; dry sand is far off before
     (+12 % since the twin digs and bulldozes, issue 14; +20 % or more before that)."""
     p, _ = calibrated
@@ -107,7 +110,9 @@ def test_fit_recovers_the_twins_torque_behaviour(calibrated):
     assert p['torque_rmse_after_Nm'] < p['torque_rmse_before_Nm'] / 2
 
 
-def test_kc_is_reported_non_identifiable_and_left_at_its_start(calibrated):
+def test_kc_is_reported_non_identifiable_and_left_at_its_start(
+    calibrated: tuple[dict[str, Any], Path],
+) -> None:
     """k_c enters only through kc / b + kphi (eq. 2.1). Hand calculation for the start (dry sand) and
     the 0.074 m wheel: kc / b = 900 / 0.074 = 12 162 against kphi = 1 523 400, so a 10 % change of kc
     changes k_eq by 0.1 x 12 162 / 1 535 562 = 0.08 %: invisible in the torque."""
@@ -118,7 +123,9 @@ def test_kc_is_reported_non_identifiable_and_left_at_its_start(calibrated):
     assert kc['value'] == pytest.approx(900.0)
 
 
-def test_fitted_values_lie_inside_their_intervals_and_are_written(calibrated):
+def test_fitted_values_lie_inside_their_intervals_and_are_written(
+    calibrated: tuple[dict[str, Any], Path],
+) -> None:
     payload, path = calibrated
     terrain = load_terrain(path)  # the calibrated file is a terrain file like any other
     fitted = {n: e for n, e in payload['parameters'].items() if e['fitted'] and not e['at_bound']}
@@ -146,7 +153,7 @@ def test_fitted_values_lie_inside_their_intervals_and_are_written(calibrated):
         assert values[k] == pytest.approx(fitted[name]['value'])
 
 
-def test_calibrated_terrain_works_in_solve(calibrated):
+def test_calibrated_terrain_works_in_solve(calibrated: tuple[dict[str, Any], Path]) -> None:
     _, path = calibrated
     code, out, err = run_cli(
         [
@@ -170,7 +177,9 @@ def test_calibrated_terrain_works_in_solve(calibrated):
         (['--odom-topic', '/nope'], 'no odometry or pose topic /nope'),
     ],
 )
-def test_bad_arguments_give_one_line_and_exit_2(twin_bag, tmp_path, extra, match):
+def test_bad_arguments_give_one_line_and_exit_2(
+    twin_bag: Path, tmp_path: Path, extra: list[str], match: str
+) -> None:
     argv = ['calibrate', str(twin_bag), '--vehicle', VEHICLE, '--terrain', 'dry_sand']
     code, _, err = run_cli([*argv, '--out-terrain', str(tmp_path / 'o.yaml'), *extra])
     assert code == 2
@@ -178,7 +187,7 @@ def test_bad_arguments_give_one_line_and_exit_2(twin_bag, tmp_path, extra, match
     assert err.count('\n') == 1 and 'Traceback' not in err
 
 
-def test_missing_bag_and_bag_without_motor_data(tmp_path):
+def test_missing_bag_and_bag_without_motor_data(tmp_path: Path) -> None:
     code, _, err = run_cli(
         [
             *('calibrate', str(tmp_path / 'none.mcap'), '--vehicle', VEHICLE, '--terrain', 'dry_sand'),
@@ -204,7 +213,7 @@ def test_missing_bag_and_bag_without_motor_data(tmp_path):
     assert code == 2 and 'no /joint_states topic' in err
 
 
-def test_segments_are_the_settled_moving_commands(tmp_path):
+def test_segments_are_the_settled_moving_commands(tmp_path: Path) -> None:
     """Synthetic ideal drive (bag_io/synthetic.py): odometry twist = command, so the measured motion of
     each segment is its command; stops are dropped, and each window starts settle_s after the change."""
     bag = tmp_path / 'ideal.mcap'
@@ -220,7 +229,7 @@ def test_segments_are_the_settled_moving_commands(tmp_path):
         assert seg.motor_torque_Nm == pytest.approx((0.1, 0.1))  # the synthetic bag's constant effort
 
 
-def test_a_parameter_the_others_explain_is_not_selected():
+def test_a_parameter_the_others_explain_is_not_selected() -> None:
     """Orthogonalization: b's effect is exactly 2 x a's, so once a is in, b adds nothing."""
     a = np.array([1.0, 2.0, 3.0, 4.0])
     columns = {'a': a, 'b': 2.0 * a, 'c': np.array([1.0, -1.0, 1.0, -1.0]), 'd': np.full(4, 1e-6)}
@@ -230,7 +239,7 @@ def test_a_parameter_the_others_explain_is_not_selected():
     assert min(unexplained['a'], unexplained['b']) < 1e-9
 
 
-def test_internal_resistance_of_the_bundled_track_bag(tmp_path):
+def test_internal_resistance_of_the_bundled_track_bag(tmp_path: Path) -> None:
     """The bundled twin bag of the tracked robot (bags/README.md) was driven with the Table 7.1
     drivetrain, whose Coulomb terms sum per side to 0.0617 + 0.0177 + 0.0448 + 0.6489 = 0.7731 N m
     (left) and 0.0499 + 0.0248 + 0.0497 + 0.6314 = 0.7558 N m (right). The fit of ``internal`` finds
@@ -270,7 +279,9 @@ def test_internal_resistance_of_the_bundled_track_bag(tmp_path):
     assert 'left_c' in terrain_block['powertrain_parameters']
 
 
-def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(twin_bag, tmp_path):
+def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
+    twin_bag: Path, tmp_path: Path
+) -> None:
     """calibrate reads joint_states through the vehicle file's drivetrain mapping (issue 16), as the
     estimator and validate do. The twin bag's two motor joints (effort Kt I at the motor, N m) are
     re-written as a ros2_control robot's four wheel joints (config/drivetrains/ros2_control_4wheel):
@@ -316,13 +327,13 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
 
 
 @pytest.fixture(scope='module')
-def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list:
+def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list[SteadySegment]:
     """Steady segments of a second twin bag (same terrain, seed 5) with commands the training bag
     never drove, inside its envelope: the hold-out the calibration never sees."""
     from skidsteer_power.twin import Twin, run_commands, write_bag
     from skidsteer_power.vehicle import load_vehicle
 
-    commands = []
+    commands: list[Segment] = []
     for speed, yaw in ((0.15, 0.0), (0.15, 0.08), (0.15, 0.15), (0.15, 0.25), (0.12, 0.03), (0.18, 0.12)):
         commands += [Segment(speed, yaw, 3.5), Segment(0.0, 0.0, 0.5)]
     path = tmp_path_factory.mktemp('holdout') / 'holdout.mcap'
@@ -333,7 +344,7 @@ def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list:
     return segments
 
 
-def command_energy_error(terrain, segments) -> float:
+def command_energy_error(terrain: Terrain, segments: list[SteadySegment]) -> float:
     """Signed energy error [-] of the set-point prediction from each segment's command (as the node
     predicts) against the twin's measured motor terminal energy."""
     from skidsteer_power.calibration.fit import setpoint_check
@@ -348,7 +359,9 @@ def command_energy_error(terrain, segments) -> float:
     return check['holdout_energy_error']
 
 
-def test_calibrating_never_worsens_the_prediction_from_the_command(calibrated, holdout_segments):
+def test_calibrating_never_worsens_the_prediction_from_the_command(
+    calibrated: tuple[dict[str, Any], Path], holdout_segments: list[SteadySegment]
+) -> None:
     """Issue 27: calibrate fits what the node predicts (the torques at the set points of each
     command), so the hold-out prediction from the command is no worse after than before. Reference:
     the twin's measured motor power on a bag the fit never read (FESS is not in the twin)."""
@@ -368,7 +381,9 @@ def test_calibrating_never_worsens_the_prediction_from_the_command(calibrated, h
     print(f'hold-out bag from the command: before {before:+.2%}, after {after:+.2%}')
 
 
-def test_fit_at_the_motion_stays_available(twin_bag, tmp_path, holdout_segments):
+def test_fit_at_the_motion_stays_available(
+    twin_bag: Path, tmp_path: Path, holdout_segments: list[SteadySegment]
+) -> None:
     """``--fit-at motion`` solves the segments at the measured motion (the twin's ground truth); its
     terrain then predicts the commands through the set points, reported in ``setpoints``."""
     out = tmp_path / 'motion.yaml'

@@ -21,6 +21,7 @@ import pytest
 import yaml
 
 from skidsteer_power.calibration import (
+    CalibrationResult,
     SegmentOptions,
     calibrate,
     calibrate_bags,
@@ -41,28 +42,29 @@ TORQUE_SHARE = 0.4  # the hand-made bound case: measured torques scaled to 40 %
 
 
 @pytest.fixture(scope='module')
-def fit():
+def fit() -> CalibrationResult:
     return calibrate_bags([BAG], VEHICLE, 'sand_bin')[0]
 
 
-def calibrate_scaled(share: float):
+def calibrate_scaled(share: float) -> CalibrationResult:
     """Calibration from sand_bin of the bag's segments with the measured torques times ``share``."""
     vehicle = factory.load_vehicle_config(VEHICLE)
     powertrain = factory.powertrain_for(vehicle)
     options = SegmentOptions()
     segments, _ = find_segments(read_recording(BAG, options), options, powertrain.motor)
     scaled = [
-        dataclasses.replace(s, motor_torque_Nm=tuple(share * t for t in s.motor_torque_Nm)) for s in segments
+        dataclasses.replace(s, motor_torque_Nm=(share * s.motor_torque_Nm[0], share * s.motor_torque_Nm[1]))
+        for s in segments
     ]
     return calibrate(vehicle, load_terrain('sand_bin'), powertrain, scaled)
 
 
 @pytest.fixture(scope='module')
-def pinned():
+def pinned() -> CalibrationResult:
     return calibrate_scaled(TORQUE_SHARE)
 
 
-def test_a_trial_terrain_without_any_contact_solution_does_not_end_the_fit():
+def test_a_trial_terrain_without_any_contact_solution_does_not_end_the_fit() -> None:
     """With the torques at 150 % the optimizer tries a terrain on which a lightly loaded wheel cannot
     reach zero drawbar pull (FESS raises ConvergenceError there; it used to end calibrate with a
     traceback): that trial counts as unsolved and the fit goes on to a better terrain."""
@@ -71,14 +73,16 @@ def test_a_trial_terrain_without_any_contact_solution_does_not_end_the_fit():
     assert all(math.isfinite(v) for v in result.values.values())
 
 
-def test_bound_hits_by_hand():
+def test_bound_hits_by_hand() -> None:
     lower, upper = np.array([0.2, 5.0, -np.inf]), np.array([2.0, 50.0, 3.0])
     # n at 2.0 (upper), phi at 5.00001 (within 1e-4 x 5 of the lower), z3 free (lower bound -inf)
     hits = bound_hits(['n', 'phi', 'kphi'], np.array([2.0, 5.00001, -40.0]), lower, upper)
     assert hits == {'n': 'upper', 'phi': 'lower'}
 
 
-def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(pinned, tmp_path):
+def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(
+    pinned: CalibrationResult, tmp_path: Path
+) -> None:
     fit = pinned
     payload = fit.as_json()
     phi = payload['parameters']['phi']
@@ -98,7 +102,7 @@ def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(pinned, tmp_path
     assert block['at_bound'] == ['phi'] and 'phi' not in block['parameters']
 
 
-def test_suggested_holds_shrink_the_widest_interval(fit):
+def test_suggested_holds_shrink_the_widest_interval(fit: CalibrationResult) -> None:
     vehicle = factory.load_vehicle_config(VEHICLE)
     suggestion = suggest_holds(vehicle, fit)
     widest = suggestion['widest_parameter']

@@ -3,6 +3,7 @@ a reader that goes away (``... --json | head``) ends the command quietly."""
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 import sys
 
@@ -15,28 +16,31 @@ from skidsteer_power.errors import InputError
 def _patched(monkeypatch: pytest.MonkeyPatch, exc: Exception) -> None:
     real = cli_main.build_parser
 
-    def build_parser():
+    def build_parser() -> argparse.ArgumentParser:
         parser = real()
         (commands,) = (a for a in parser._actions if a.dest == 'command')
+        assert isinstance(commands.choices, dict)
         commands.choices['terrains'].set_defaults(func=lambda args: (_ for _ in ()).throw(exc))
         return parser
 
     monkeypatch.setattr(cli_main, 'build_parser', build_parser)
 
 
-def test_project_error_is_one_line_and_exit_2(monkeypatch, capsys):
+def test_project_error_is_one_line_and_exit_2(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     _patched(monkeypatch, InputError('speed must be > 0'))
     assert cli_main.main(['terrains']) == 2
     assert capsys.readouterr().err == 'skidsteer-power: error: speed must be > 0\n'
 
 
-def test_a_bug_shows_its_traceback(monkeypatch):
+def test_a_bug_shows_its_traceback(monkeypatch: pytest.MonkeyPatch) -> None:
     _patched(monkeypatch, ValueError('math domain error'))  # not a user error: must not be swallowed
     with pytest.raises(ValueError, match='math domain error'):
         cli_main.main(['terrains'])
 
 
-def test_closed_stdout_pipe_exits_quietly():
+def test_closed_stdout_pipe_exits_quietly() -> None:
     code = (
         'import os, sys\n'
         'r, w = os.pipe(); os.close(r); os.dup2(w, 1)\n'  # the reader is gone, as after `| head`

@@ -7,6 +7,7 @@ Ranges: skidsteer_power.terramechanics.ranges. The CLI runs in-process (``cli.ma
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,14 +65,16 @@ def _set(argv: list[str], option: str, value: str) -> list[str]:
         (MISSION, '--payload-kg', '1e9', 'payload = 1e\\+09 kg is outside'),
     ],
 )
-def test_an_input_outside_its_range_is_one_line_and_exit_2(capsys, base, option, value, match):
+def test_an_input_outside_its_range_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], base: list[str], option: str, value: str, match: str
+) -> None:
     import re
 
     line = one_line_error(capsys, _set(base, option, value))
     assert re.search(match, line), line
 
 
-def test_ranges_are_documented_in_help(capsys):
+def test_ranges_are_documented_in_help(capsys: pytest.CaptureFixture[str]) -> None:
     for command in ('track', 'wheel', 'solve', 'mission'):
         with pytest.raises(SystemExit):
             main([command, '--help'])
@@ -80,7 +83,9 @@ def test_ranges_are_documented_in_help(capsys):
 
 
 @pytest.mark.parametrize(('base', 'limit_option'), [(TRACK, '--height'), (WHEEL, '--radius')])
-def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(capsys, base, limit_option):
+def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(
+    capsys: pytest.CaptureFixture[str], base: list[str], limit_option: str
+) -> None:
     """The sinkage is computed first; just above it the answer stands, just below it is an error."""
     heavy = _set(base, '--load', '3000')
     assert main([*_set(heavy, limit_option, '1.5'), '--json']) == 0
@@ -94,12 +99,14 @@ def test_sinkage_beyond_track_height_or_wheel_radius_is_an_error(capsys, base, l
 
 
 @pytest.mark.parametrize('speed', ['1.6', '3', '10'])
-def test_mission_speed_beyond_the_power_map_is_an_error_not_a_clamp(capsys, speed):
+def test_mission_speed_beyond_the_power_map_is_an_error_not_a_clamp(
+    capsys: pytest.CaptureFixture[str], speed: str
+) -> None:
     line = one_line_error(capsys, _set(MISSION, '--speed', speed))
     assert f'speed {float(speed):g} m/s is beyond the power map' in line and '--direct' in line
 
 
-def test_mission_speed_inside_the_power_map_runs(capsys):
+def test_mission_speed_inside_the_power_map_runs(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([*_set(MISSION, '--speed', '1.5'), '--json']) == 0
     assert json.loads(capsys.readouterr().out)['clamped_segments'] == 0
 
@@ -108,7 +115,9 @@ def test_mission_speed_inside_the_power_map_runs(capsys):
     ('length', 'radius', 'ok'),
     [('1e5', 'inf', True), ('1e5', '1', False), ('1e5', '-2', False), ('100', '0.5', True)],
 )
-def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length, radius, ok):
+def test_route_sampling_is_bounded_by_steps_not_length(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], length: str, radius: str, ok: bool
+) -> None:
     """A straight segment of the longest leg (1e5 m; a 1e12 m one once exhausted memory, and is now
     outside the leg range) is one step; an arc needs one step per 5 degrees of turn, and a route
     needing more than MAX_TRACE_STEPS is one clear error."""
@@ -120,8 +129,10 @@ def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length,
         return
     route = read_route_csv(csv)
     turned = float(length) / abs(float(radius))  # heading change [rad]
-    assert len(route.xy) == 1 + max(1, int(np.ceil(turned / (np.pi / 36))))
-    end = route.xy[-1]
+    xy = route.xy
+    assert xy is not None
+    assert len(xy) == 1 + max(1, int(np.ceil(turned / (np.pi / 36))))
+    end = xy[-1]
     if radius == 'inf':
         assert end == pytest.approx([float(length), 0.0])
     else:  # exact on the circle: chord 2 R sin(turned / 2) from the start
@@ -135,7 +146,9 @@ def test_route_sampling_is_bounded_by_steps_not_length(tmp_path, capsys, length,
     [('10,100,inf,0', 'speed = 100 m/s is outside'), ('10,0.2,1e-6,0', 'turn radius = 1e-06 m is outside'),
      ('10,0.2,inf,1e7', 'payload = 1e\\+07 kg is outside')],
 )  # fmt: skip
-def test_route_csv_rows_have_the_same_ranges(tmp_path, capsys, row, match):
+def test_route_csv_rows_have_the_same_ranges(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], row: str, match: str
+) -> None:
     import re
 
     csv = tmp_path / 'route.csv'

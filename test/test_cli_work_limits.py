@@ -121,7 +121,9 @@ def _cases(tmp: Path) -> list[tuple[list[str], str]]:
     ]
 
 
-def test_each_input_beyond_its_work_limit_is_one_line_and_exit_2(tmp_path, capsys):
+def test_each_input_beyond_its_work_limit_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     failures = []
     for argv, match in _cases(tmp_path):
         line = one_line_error(capsys, argv)
@@ -168,7 +170,9 @@ def _subparser(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> argpar
 
 
 @pytest.mark.parametrize(('path', 'option', 'limits'), WORK_OPTIONS)
-def test_work_options_show_their_range_in_help(capsys, path, option, limits):
+def test_work_options_show_their_range_in_help(
+    capsys: pytest.CaptureFixture[str], path: tuple[str, ...], option: str, limits: ranges.Range
+) -> None:
     with pytest.raises(SystemExit):
         main([*path, '--help'])
     text = ' '.join(capsys.readouterr().out.split())
@@ -177,7 +181,7 @@ def test_work_options_show_their_range_in_help(capsys, path, option, limits):
     assert f'range {limits.text}' in (action.help or '')
 
 
-def test_local_workers_are_capped_at_the_cores(capsys):
+def test_local_workers_are_capped_at_the_cores(capsys: pytest.CaptureFixture[str]) -> None:
     from skidsteer_power.distributed.engine import Engine
 
     cores = os.cpu_count() or 1
@@ -187,7 +191,7 @@ def test_local_workers_are_capped_at_the_cores(capsys):
     Engine(workers=cores)  # not entered: no cluster started
 
 
-def test_a_route_csv_is_read_row_by_row_and_stops_at_the_point_cap(tmp_path):
+def test_a_route_csv_is_read_row_by_row_and_stops_at_the_point_cap(tmp_path: Path) -> None:
     """The row after the cap is garbage: reading stops at the cap before parsing it."""
     path = tmp_path / 'many.csv'
     with path.open('w') as handle:
@@ -198,7 +202,9 @@ def test_a_route_csv_is_read_row_by_row_and_stops_at_the_point_cap(tmp_path):
         read_route_csv(path)
 
 
-def test_an_oversized_route_or_command_csv_is_refused_unread(tmp_path, capsys):
+def test_an_oversized_route_or_command_csv_is_refused_unread(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     big = tmp_path / 'big.csv'
     with big.open('wb') as handle:
         handle.truncate(ranges.ROUTE_CSV_BYTES + 1)  # sparse: no disk used
@@ -208,7 +214,7 @@ def test_an_oversized_route_or_command_csv_is_refused_unread(tmp_path, capsys):
     assert 'bytes; at most' in line
 
 
-def test_vehicle_numbers_are_range_checked_when_loading(tmp_path):
+def test_vehicle_numbers_are_range_checked_when_loading(tmp_path: Path) -> None:
     text = (Path(__file__).resolve().parents[1] / 'config/vehicles/test_robot_track.yaml').read_text()
     cases = [
         ('mass_kg', '1.0e+300', 'mass_kg = 1e\\+300 is outside its range \\(0, 10000\\] kg'),
@@ -222,7 +228,7 @@ def test_vehicle_numbers_are_range_checked_when_loading(tmp_path):
             load_vehicle(path)
 
 
-def test_simulate_reports_progress_over_the_whole_run():
+def test_simulate_reports_progress_over_the_whole_run() -> None:
     from skidsteer_power.terramechanics import load_terrain
     from skidsteer_power.twin import Segment, Twin, run_commands
 

@@ -28,11 +28,13 @@ import sys
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import BatteryState, JointState
 
@@ -56,7 +58,7 @@ def _colcon() -> Path:
 
 
 @pytest.fixture(scope='module')
-def workspace(tmp_path_factory) -> Path:
+def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A colcon workspace with this package built and installed (ament_python, copied sources)."""
     colcon = _colcon()
     ws = tmp_path_factory.mktemp('colcon_ws')
@@ -91,7 +93,7 @@ def add_ros_wheels_share(venv: Path) -> None:
         shutil.copy2(xml, venv / 'share' / xml.parent.name / 'package.xml')
 
 
-def test_ros_doc_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path):
+def test_ros_doc_recipe_is_the_one_tested_and_colcon_ignores_the_venv(tmp_path: Path) -> None:
     """docs/ROS.md's colcon recipe makes its venv the way this test does; with the ROS wheels in that
     venv, colcon sees only this package there, and without COLCON_IGNORE it would see them all."""
     colcon = _colcon()
@@ -124,7 +126,7 @@ def in_workspace(ws: Path, argv: list[str]) -> list[str]:
     return ['bash', '-c', f'source {ws}/install/setup.bash && exec {command}']
 
 
-def test_colcon_installs_the_executables_config_and_ament_marker(workspace):
+def test_colcon_installs_the_executables_config_and_ament_marker(workspace: Path) -> None:
     for exe in ('power_estimator', 'des_driver', 'energy_monitor', 'skidsteer-power'):
         assert installed(workspace, 'lib', 'skidsteer_power', exe).is_file(), exe
     share = installed(workspace, 'share', 'skidsteer_power')
@@ -146,7 +148,9 @@ def test_colcon_installs_the_executables_config_and_ament_marker(workspace):
     assert Path(config) == share / 'config'
 
 
-def activate_if_managed(node, executor, fqn: str = '/des_driver', timeout_s: float = 20.0) -> bool:
+def activate_if_managed(
+    node: Node, executor: Executor, fqn: str = '/des_driver', timeout_s: float = 20.0
+) -> bool:
     """Configure and activate the node ``fqn`` if it is managed (lifecycle); True if it was.
 
     A plain node has no ``<fqn>/change_state`` service and publishes on its own. Waits up to
@@ -178,13 +182,13 @@ def activate_if_managed(node, executor, fqn: str = '/des_driver', timeout_s: flo
     return True
 
 
-def test_installed_nodes_start_with_installed_params_and_publish(workspace, tmp_path):
+def test_installed_nodes_start_with_installed_params_and_publish(workspace: Path, tmp_path: Path) -> None:
     params = installed(workspace, 'share', 'skidsteer_power', 'config', 'estimator.yaml')
     exe = installed(workspace, 'lib', 'skidsteer_power')
     env = {**os.environ, 'ROS_DOMAIN_ID': os.environ['ROS_DOMAIN_ID']}
     namespace = f'colcon_{uuid.uuid4().hex[:6]}'
     remap = ['-r', f'__ns:=/{namespace}']
-    procs: list[subprocess.Popen] = []
+    procs: list[subprocess.Popen[str]] = []
     with SimulatedPair() as sims:
         estimator = in_workspace(workspace, [str(exe / 'power_estimator'), '--ros-args', '--params-file',
                                              str(params), *remap, '-p', f'map_cache_dir:={tmp_path / "maps"}',
@@ -200,7 +204,7 @@ def test_installed_nodes_start_with_installed_params_and_publish(workspace, tmp_
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         try:
-            received: dict[str, list] = {}
+            received: dict[str, list[Any]] = {}  # ROS messages by topic
             qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
             for topic, kind in (('joint_states', JointState), ('power/predicted', JointState),
                                 ('power/measured', JointState), ('battery/state', BatteryState)):  # fmt: skip

@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ SAND_BIN = str(BUNDLED / 'test_robot_4wheel_sand_bin.mcap')
 ON_CLAY = str(BUNDLED / 'test_robot_4wheel_dry_sand.mcap')  # the twin drove it on clay (bags/README.md)
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'compare', *args],
         capture_output=True,
@@ -29,7 +30,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope='module')
-def result(tmp_path_factory) -> dict:
+def result(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """Train on the sand_bin bag, hold the same bag out (same range by construction), transfer to
     the bag driven on clay with the clay terrain file and no new data."""
     folder = tmp_path_factory.mktemp('compare')
@@ -37,10 +38,11 @@ def result(tmp_path_factory) -> dict:
                '--vehicle', VEHICLE, '--terrain', 'sand_bin', '--work-dir', str(folder / 'work'),
                '--map-cache', str(folder / 'maps'), '--plot', str(folder / 'plot'), '--json')  # fmt: skip
     assert run.returncode == 0, run.stderr
-    return json.loads(run.stdout)
+    loaded: dict[str, Any] = json.loads(run.stdout)
+    return loaded
 
 
-def test_every_model_is_scored_on_every_split(result):
+def test_every_model_is_scored_on_every_split(result: dict[str, Any]) -> None:
     assert set(result['splits']) == {'same_range', 'transfer'}
     for split in result['splits'].values():
         assert set(split['models']) == set(MODELS)
@@ -56,13 +58,13 @@ def test_every_model_is_scored_on_every_split(result):
     assert result['calibration']['fit_at'] == 'setpoints'
 
 
-def test_linear_baseline_on_its_own_training_bag_has_zero_energy_error(result):
+def test_linear_baseline_on_its_own_training_bag_has_zero_energy_error(result: dict[str, Any]) -> None:
     """Weighted least squares with an intercept: the intercept's normal equation is
     sum w (P - P_fit) = 0, i.e. the fitted energy equals the measured one on the training samples."""
     assert abs(result['splits']['same_range']['models']['linear']['energy_error_pct']) < 1e-6
 
 
-def test_transfer_uses_the_new_terrain_for_fess_and_keeps_the_baselines(result):
+def test_transfer_uses_the_new_terrain_for_fess_and_keeps_the_baselines(result: dict[str, Any]) -> None:
     transfer = result['splits']['transfer']['models']
     # FESS with the transfer terrain is the open-loop prediction validate makes with --terrain clay
     # (-11 % in bags/README.md); the baselines keep sand_bin coefficients: far off on clay
@@ -72,7 +74,7 @@ def test_transfer_uses_the_new_terrain_for_fess_and_keeps_the_baselines(result):
     assert set(result['goal']) == {'same_range', 'transfer'}
 
 
-def test_bad_input_is_one_line_and_exit_2(tmp_path):
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path) -> None:
     transfer = ['--holdout', SAND_BIN, '--transfer', ON_CLAY]
     cases = [
         [SAND_BIN],  # nothing held out
@@ -87,15 +89,29 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path):
         assert len(run.stderr.strip().splitlines()) == 1 and 'Traceback' not in run.stderr
 
 
-def _run(speed, yaw, power, weight, segments):
-    arrays = [np.asarray(x, dtype=float) for x in (weight, speed, yaw, power)]
-    samples = Samples(*arrays, side_speed=np.zeros((len(speed), 2)), speed=arrays[1], yaw=arrays[2])
+def _run(
+    speed: list[float],
+    yaw: list[float],
+    power: list[float],
+    weight: list[float],
+    segments: list[list[bool]],
+) -> BagRun:
+    weight_s, speed_cmd, yaw_cmd, power_W = (np.asarray(x, dtype=float) for x in (weight, speed, yaw, power))
+    samples = Samples(
+        weight_s,
+        speed_cmd,
+        yaw_cmd,
+        power_W,
+        side_speed=np.zeros((len(speed), 2)),
+        speed=speed_cmd,
+        yaw=yaw_cmd,
+    )
     return BagRun(
         'x', samples, np.arange(len(speed), dtype=float), segments=[np.asarray(m) for m in segments]
     )
 
 
-def test_envelope_and_extrapolation_share_by_hand():
+def test_envelope_and_extrapolation_share_by_hand() -> None:
     train = _run([0.1, 0.2, 0.0], [0.0, 0.35, 0.0], [1, 2, 0.5], [1, 1, 1], [])
     limits = envelope(train.samples)
     assert limits == {'max_speed_m_s': 0.2, 'max_yaw_rate_rad_s': 0.35}
@@ -107,7 +123,7 @@ def test_envelope_and_extrapolation_share_by_hand():
     assert outside_share(_run([0.21], [0.0], [1], [1], []).samples, limits) == 0.0
 
 
-def test_scores_by_hand():
+def test_scores_by_hand() -> None:
     # measured 10 W for 1 s and 20 W for 1 s (two segments); predicted 12 W and 18 W:
     # energy 30 J vs 30 J (0 %); RMSE sqrt((4 + 4) / 2) = 2 W; segments +20 % and -10 %: median 15 %
     run = _run([0.1, 0.2], [0.0, 0.0], [10.0, 20.0], [1.0, 1.0], [[True, False], [False, True]])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import pytest
 from des_harness import Clock
@@ -31,27 +32,27 @@ LIMIT_RPM = (1.5 + 2.0 * 0.426 / 2) / 0.1 * 12 * 60 / (2 * math.pi)
 any_float = st.floats(allow_nan=True, allow_infinity=True)
 
 
-def test_non_finite_twist_is_rejected():
+def test_non_finite_twist_is_rejected() -> None:
     for v, w in ((math.nan, 0.0), (0.0, math.inf), (-math.inf, 1.0)):
         with pytest.raises(InputError, match='non-finite'):
             limit_twist(v, w, LIMITS)
 
 
-def test_finite_twist_is_clamped_per_axis():
+def test_finite_twist_is_clamped_per_axis() -> None:
     checked = limit_twist(1e308, -1e9, LIMITS)
     assert (checked.linear_m_s, checked.yaw_rate_rad_s, checked.clamped) == (1.5, -2.0, True)
     checked = limit_twist(0.2, 0.1, LIMITS)
     assert (checked.linear_m_s, checked.yaw_rate_rad_s, checked.clamped) == (0.2, 0.1, False)
 
 
-def test_limits_must_be_positive_and_finite():
+def test_limits_must_be_positive_and_finite() -> None:
     with pytest.raises(ConfigError, match='max_speed_m_s'):
         CommandLimits(max_speed_m_s=math.inf)
     with pytest.raises(ConfigError, match='max_accel_m_s2'):
         CommandLimits(max_accel_m_s2=0.0)
 
 
-def test_kinematics_refuses_non_finite_and_overflowing_twists():
+def test_kinematics_refuses_non_finite_and_overflowing_twists() -> None:
     kw = {'tread_m': 0.426, 'drive_radius_m': 0.1, 'gear_ratio': 12.0, 'max_rpm': 4000.0}
     with pytest.raises(InputError):
         twist_to_motor_rpm(math.nan, 0.0, **kw)
@@ -59,7 +60,7 @@ def test_kinematics_refuses_non_finite_and_overflowing_twists():
         twist_to_motor_rpm(1e308, 0.0, **kw)  # 1e308 * 120 / RPM is inf: never a NaN set point
 
 
-def test_slew_limiter_ramps_at_the_limits():
+def test_slew_limiter_ramps_at_the_limits() -> None:
     slew = SlewLimiter(LIMITS)
     slew.reset(0.0)
     # 0.05 s at 1 m/s^2 and 4 rad/s^2: 0.05 m/s and 0.2 rad/s.
@@ -69,7 +70,7 @@ def test_slew_limiter_ramps_at_the_limits():
 
 
 @given(v=any_float, w=any_float)
-def test_every_set_point_is_a_bounded_integer(v, w):
+def test_every_set_point_is_a_bounded_integer(v: float, w: float) -> None:
     clock = Clock()
     command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, max_rpm=4000.0, clock=clock)
     for side in ('left', 'right'):
@@ -85,7 +86,7 @@ def test_every_set_point_is_a_bounded_integer(v, w):
             assert isinstance(rpm, int) and abs(rpm) <= LIMIT_RPM + 1
 
 
-def test_drive_command_stop_conditions():
+def test_drive_command_stop_conditions() -> None:
     clock = Clock()
     command = DriveCommand(0.2, geometry=GEOMETRY, limits=LIMITS, active=False, clock=clock)
     command.set_twist(0.2, 0.0)
@@ -109,7 +110,7 @@ def test_drive_command_stop_conditions():
     assert command.wanted_rpm('left') == 0 and command.timed_out()  # watchdog
 
 
-def test_opting_out_of_stop_both_keeps_the_other_side():
+def test_opting_out_of_stop_both_keeps_the_other_side() -> None:
     clock = Clock()
     command = DriveCommand(1.0, geometry=GEOMETRY, limits=LIMITS, stop_both_on_link_loss=False, clock=clock)
     command.link_up('left')
@@ -119,7 +120,7 @@ def test_opting_out_of_stop_both_keeps_the_other_side():
     assert command.wanted_rpm('left') > 0 and command.wanted_rpm('right') == 0  # right never connected
 
 
-def test_rpm_targets_are_capped_at_the_motor_limit():
+def test_rpm_targets_are_capped_at_the_motor_limit() -> None:
     command = DriveCommand(1.0, max_rpm=1e9)  # the default: the test robot's motor, the EC-45
     assert command.max_rpm == command.motor_limit_rpm == pytest.approx(10000.0)  # Appendix B line 23
     command.link_up('left')
@@ -129,7 +130,7 @@ def test_rpm_targets_are_capped_at_the_motor_limit():
     assert command.wanted_rpm('right') == 0 and command.nonfinite_setpoints == 1
 
 
-def test_the_vehicles_motor_sets_the_set_point_limit(strong_motor_vehicle):
+def test_the_vehicles_motor_sets_the_set_point_limit(strong_motor_vehicle: Path) -> None:
     """A vehicle whose motor allows 5000 rpm (the fixture) caps the set points there, not at the
     EC-45's 10 000 rpm; a requested max_rpm below the motor's limit stays."""
     motor = Powertrain.for_vehicle(load_vehicle(str(strong_motor_vehicle))).motor
@@ -142,7 +143,7 @@ def test_the_vehicles_motor_sets_the_set_point_limit(strong_motor_vehicle):
     assert DriveCommand(1.0, max_rpm=4000.0, motor=motor).max_rpm == 4000.0
 
 
-def test_the_amplifier_caps_a_fast_motor():
+def test_the_amplifier_caps_a_fast_motor() -> None:
     """The DES 70/10 runs at most 25 000 rpm with one pole pair (Appendix A), 25 000 / p with p:
     a 2-pole-pair motor allowed 20 000 rpm gets 12 500 rpm, a 1-pole-pair one 20 000 rpm."""
     fast = dataclasses.replace(EC45, max_speed_rad_s=20000 * 2 * math.pi / 60)
@@ -150,7 +151,7 @@ def test_the_amplifier_caps_a_fast_motor():
     assert set_point_limit_rpm(dataclasses.replace(fast, pole_pairs=1)) == pytest.approx(20000.0)
 
 
-def test_a_stalled_poller_counts_as_a_lost_link():
+def test_a_stalled_poller_counts_as_a_lost_link() -> None:
     clock = Clock()
     command = DriveCommand(10.0, geometry=GEOMETRY, limits=LIMITS, stall_timeout_s=0.1, clock=clock)
     command.link_up('left')

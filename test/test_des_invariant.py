@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable
+from typing import Any
 
 import pytest
 from des_harness import Harness
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rclpy.context import Context
 
 from skidsteer_power.des.protocol import DesErrorFlags
 from skidsteer_power.des.simulator import Fault, SimulatedPair
@@ -49,6 +52,8 @@ number = st.one_of(
     st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, 1e9]),
     st.floats(-3.0, 3.0),
 )
+Step = tuple[Any, ...]
+"""One drawn step: (kind, *arguments); the arguments' types depend on the kind (see ``step``)."""
 step = st.one_of(
     st.tuples(st.just('twist'), number, number, st.integers(1, 4)),
     st.tuples(st.just('silence'), st.floats(0.0, 0.6)),
@@ -92,7 +97,7 @@ class Oracle:
         return now - self.valid_until > CMD_TIMEOUT_S + STALE_MARGIN_S
 
 
-def polled_twice(h: Harness, sides) -> bool:
+def polled_twice(h: Harness, sides: Iterable[str]) -> bool:
     """Spin until each reachable side has completed two poll cycles (a wait, not a timing check)."""
     marks = {s: h.driver.pollers[s].sample.sequence for s in sides if s in h.driver.pollers}
     return h.spin_until(
@@ -134,7 +139,7 @@ def check(h: Harness, pair: SimulatedPair, oracle: Oracle, what: str) -> None:
             assert not sim.enabled, f'{what}: {side} enabled while {oracle.state}'
 
 
-def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: tuple) -> None:
+def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: Step) -> None:
     sims = {'left': pair.left, 'right': pair.right}
     kind = item[0]
     if kind == 'twist':
@@ -160,13 +165,13 @@ def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: tuple) -> No
             oracle.errors.add(side)
             if oracle.state in ('active', 'inactive') and side not in oracle.broken | oracle.transient:
                 # The status word is read every 5th poll: the latch must follow within a bounded time.
-                assert h.spin_until(lambda: side in h.driver.command.halted_by, timeout_s=3.0)
+                assert h.spin_until(lambda: side in h.drive_command().halted_by, timeout_s=3.0)
         else:
             sim.inject({'drop': Fault.DROP, 'nak': Fault.NAK, 'crc': Fault.CORRUPT_CRC}[fault], 3)
             oracle.transient.add(side)
         if side in oracle.broken and oracle.state in ('active', 'inactive'):
             # The driver must notice a dead link within a bounded time (here: generously 3 s).
-            assert h.spin_until(lambda: side in h.driver.command.links_down, timeout_s=3.0)
+            assert h.spin_until(lambda: side in h.drive_command().links_down, timeout_s=3.0)
     elif kind == 'repair':
         for sim in sims.values():
             sim.clear_faults()
@@ -174,7 +179,7 @@ def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: tuple) -> No
         oracle.broken.clear()
         oracle.transient.clear()
         if oracle.state in ('active', 'inactive'):  # both links back within a bounded time
-            assert h.spin_until(lambda: not h.driver.command.links_down, timeout_s=5.0)
+            assert h.spin_until(lambda: not h.drive_command().links_down, timeout_s=5.0)
     elif kind == 'transition':
         before = oracle.state
         ok = h.transition(item[1])
@@ -210,7 +215,7 @@ def run_step(h: Harness, pair: SimulatedPair, oracle: Oracle, item: tuple) -> No
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(steps=st.lists(step, min_size=1, max_size=7))
-def test_no_motor_turns_without_a_fresh_valid_command(ros_context, steps):
+def test_no_motor_turns_without_a_fresh_valid_command(ros_context: Context, steps: list[Step]) -> None:
     with SimulatedPair(38400) as pair:
         h = Harness(
             ros_context,

@@ -9,9 +9,14 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
-from des_harness import Harness
+from des_harness import Harness, enabled
+from rclpy.context import Context
+from rclpy.lifecycle import LifecycleNode
 
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
 from skidsteer_power.des.simulator import Fault, SimulatedPair
@@ -29,30 +34,30 @@ LEFT_RPM, RIGHT_RPM = 107, -351
 
 
 @pytest.fixture
-def pair():
+def pair() -> Iterator[SimulatedPair]:
     with SimulatedPair(38400) as sims:
         yield sims
 
 
 @pytest.fixture
-def harness(ros_context, pair):
+def harness(ros_context: Context, pair: SimulatedPair) -> Iterator[Harness]:
     h = Harness(ros_context, pair)
     yield h
     h.close()
 
 
-def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
+def test_cmd_vel_to_setpoints_to_joint_states(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (0.2, 0.5)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (LEFT_RPM, RIGHT_RPM)
     )
-    assert pair.left.enabled and pair.right.enabled
+    assert enabled(pair.left) and enabled(pair.right)
 
-    def settled():
+    def settled() -> bool:
         if not harness.joints:
             return False
         v = harness.joints[-1].velocity
-        return abs(v[0] - LEFT_RPM * RPM) < 0.3 and abs(v[1] + RIGHT_RPM * RPM) < 0.3
+        return bool(abs(v[0] - LEFT_RPM * RPM) < 0.3 and abs(v[1] + RIGHT_RPM * RPM) < 0.3)
 
     assert harness.spin_until(settled)
     msg = harness.joints[-1]
@@ -83,7 +88,9 @@ def test_cmd_vel_to_setpoints_to_joint_states(harness, pair):
         assert moved > 0 and moved == pytest.approx(integral, rel=0.1)
 
 
-def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_motor_vehicle):
+def test_published_effort_uses_the_vehicles_motor(
+    ros_context: Context, pair: SimulatedPair, strong_motor_vehicle: Path
+) -> None:
     """effort = K_t I with the K_t of the vehicle's powertrain (here 0.228 N m/A = 2 x the EC-45's
     0.114, Appendix B line 12), not a built-in EC-45."""
     vehicle = strong_motor_vehicle
@@ -103,7 +110,9 @@ def test_published_effort_uses_the_vehicles_motor(ros_context, pair, strong_moto
         harness.close()
 
 
-def test_max_motor_rpm_above_the_vehicles_motor_is_refused(ros_context, pair, strong_motor_vehicle):
+def test_max_motor_rpm_above_the_vehicles_motor_is_refused(
+    ros_context: Context, pair: SimulatedPair, strong_motor_vehicle: Path
+) -> None:
     """6000 rpm is within the EC-45's 10 000 rpm but above the fixture motor's 5000 rpm: the node
     refuses to start with one clear error naming that limit (no amplifier is touched)."""
     from skidsteer_power.errors import ConfigError
@@ -113,7 +122,7 @@ def test_max_motor_rpm_above_the_vehicles_motor_is_refused(ros_context, pair, st
     assert pair.left.speed_setpoint_rpm == 0 and not pair.left.enabled
 
 
-def test_twist_stamped_by_parameter(ros_context, pair):
+def test_twist_stamped_by_parameter(ros_context: Context, pair: SimulatedPair) -> None:
     h = Harness(ros_context, pair, twist_stamped=True)
     try:
         h.twist = (0.2, 0.5)
@@ -124,7 +133,7 @@ def test_twist_stamped_by_parameter(ros_context, pair):
         h.close()
 
 
-def test_watchdog_stops_the_motors(harness, pair):
+def test_watchdog_stops_the_motors(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     harness.twist = None  # cmd_vel stops
@@ -132,12 +141,12 @@ def test_watchdog_stops_the_motors(harness, pair):
         lambda: pair.left.speed_setpoint_rpm == 0 and pair.right.speed_setpoint_rpm == 0
     )
     assert harness.spin_until(lambda: harness.side_diag('left')[1].get('watchdog_zero') == 'True')
-    assert pair.left.enabled  # stopped, not disabled: the next cmd_vel drives again
+    assert enabled(pair.left)  # stopped, not disabled: the next cmd_vel drives again
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
+def test_amplifier_error_stops_both_sides_until_cleared(harness: Harness, pair: SimulatedPair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
 
@@ -148,33 +157,34 @@ def test_amplifier_error_stops_both_sides_until_cleared(harness, pair):
         lambda: pair.right.speed_setpoint_rpm == 0 and pair.left.speed_setpoint_rpm == 0
     )
 
-    def fault_reported():
+    def fault_reported() -> bool:
         status, values = harness.side_diag('left')
         return status is not None and 'OVER_CURRENT' in values['errors'] and values['fault_latched'] == 'True'
 
     assert harness.spin_until(fault_reported)
-    assert harness.side_diag('left')[0].level == DiagnosticStatus.ERROR
-    assert not pair.left.enabled
+    assert harness.side_status('left').level == DiagnosticStatus.ERROR
+    assert not enabled(pair.left)
     # cmd_vel keeps coming, but the latch holds: still stopped after a while.
     harness.spin_until(lambda: False, timeout_s=0.5)
     assert pair.right.speed_setpoint_rpm == 0
     answer = harness.call(harness.clear_client, Trigger.Request())
     assert answer.success, answer.message
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
-    assert pair.left.errors == DesErrorFlags(0) and pair.left.enabled
-    assert harness.spin_until(lambda: harness.side_diag('left')[0].level == DiagnosticStatus.OK)
+    assert pair.left.errors == DesErrorFlags(0) and enabled(pair.left)
+    assert harness.spin_until(lambda: harness.side_status('left').level == DiagnosticStatus.OK)
 
 
-def test_lost_port_is_reported_and_reopened(harness, pair):
+def test_lost_port_is_reported_and_reopened(harness: Harness, pair: SimulatedPair) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: bool(harness.joints) and not math.isnan(harness.joints[-1].velocity[0]))
     pair.left.close_port()
     assert harness.spin_until(
-        lambda: 'port lost' in (harness.side_diag('left')[0].message if harness.diags else '')
+        lambda: 'port lost' in (harness.side_status('left').message if harness.diags else '')
     )
     status, values = harness.side_diag('left')
+    assert status is not None
     assert status.level == DiagnosticStatus.ERROR and values['connected'] == 'False'
     assert harness.spin_until(lambda: math.isnan(harness.joints[-1].velocity[0]))
     assert not math.isnan(harness.joints[-1].velocity[1])  # the other side keeps reporting
@@ -186,14 +196,14 @@ def test_lost_port_is_reported_and_reopened(harness, pair):
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
 
 
-def test_silent_amplifier_is_reported_and_reconnected(harness, pair):
+def test_silent_amplifier_is_reported_and_reconnected(harness: Harness, pair: SimulatedPair) -> None:
     from skidsteer_power.des.simulator import Fault
 
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.right.speed_setpoint_rpm < 0)
     pair.right.inject(Fault.SILENT, count=-1)
     assert harness.spin_until(
-        lambda: 'not answering' in (harness.side_diag('right')[0].message if harness.diags else '')
+        lambda: 'not answering' in (harness.side_status('right').message if harness.diags else '')
     )
     assert harness.side_diag('right')[1]['connected'] == 'False'
     assert harness.spin_until(lambda: math.isnan(harness.joints[-1].velocity[1]))
@@ -210,7 +220,9 @@ ENDING_SIGNALS = [
 
 
 @pytest.mark.parametrize('signum', ENDING_SIGNALS, ids=signal_name)
-def test_every_ending_signal_zeroes_speed_then_disables(ros_context, pair, signum):
+def test_every_ending_signal_zeroes_speed_then_disables(
+    ros_context: Context, pair: SimulatedPair, signum: int
+) -> None:
     """Before issue 28 only SIGINT and SIGTERM did: SIGHUP, SIGQUIT, SIGUSR1 ... ended des_driver
     with both amplifiers enabled and turning."""
     from geometry_msgs.msg import Twist
@@ -258,7 +270,9 @@ def test_every_ending_signal_zeroes_speed_then_disables(ros_context, pair, signu
 
 
 @pytest.mark.parametrize('signum', [signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1], ids=signal_name)
-def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path, signum):
+def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(
+    pair: SimulatedPair, tmp_path: Path, signum: signal.Signals
+) -> None:
     """``run --left-port --right-port`` (the suite against the amplifiers on the given ports, here the
     simulated pair): before issue 28 a SIGHUP left 344 rpm on the motors."""
     command = [
@@ -283,7 +297,7 @@ def test_run_on_hardware_ports_zeroes_and_disables_on_a_signal(pair, tmp_path, s
         proc.wait()
 
 
-def test_bad_parameters_are_one_clear_error(ros_context, pair):
+def test_bad_parameters_are_one_clear_error(ros_context: Context, pair: SimulatedPair) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.errors import ConfigError
@@ -310,11 +324,13 @@ FIRST_STEP_MAX_RPM = 115
 # 0.1 / 0.1 * 12 = 12 rad/s = 114.6 rpm is the largest first set point after a stop.
 
 
-def both_zero(pair) -> bool:
+def both_zero(pair: SimulatedPair) -> bool:
     return pair.left.speed_setpoint_rpm == 0 and pair.right.speed_setpoint_rpm == 0
 
 
-def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair):
+def test_lifecycle_transitions_through_the_lifecycle_services(
+    ros_context: Context, pair: SimulatedPair
+) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False)
@@ -327,14 +343,14 @@ def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair)
         assert h.spin_until(lambda: bool(h.joints))  # the amplifiers are read while inactive
         h.twist = (0.2, 0.0)
         h.spin_until(lambda: False, timeout_s=0.5)  # cmd_vel flows, but inactive ignores it
-        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+        assert both_zero(pair) and not enabled(pair.left) and not enabled(pair.right)
         assert h.transition(Transition.TRANSITION_ACTIVATE)
         assert h.state() == 'active'
         assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
-        assert pair.left.enabled and pair.right.enabled
+        assert enabled(pair.left) and enabled(pair.right)
         assert h.transition(Transition.TRANSITION_DEACTIVATE)
         # At the moment the transition answers: zero speed and power stages off on both sides.
-        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+        assert both_zero(pair) and not enabled(pair.left) and not enabled(pair.right)
         assert h.state() == 'inactive'
         h.spin_until(lambda: False, timeout_s=0.3)
         assert both_zero(pair)  # cmd_vel still flowing changes nothing
@@ -346,12 +362,12 @@ def test_lifecycle_transitions_through_the_lifecycle_services(ros_context, pair)
         assert h.spin_until(lambda: pair.left.speed_setpoint_rpm > 0)
         assert h.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
         assert h.state() == 'finalized'
-        assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+        assert both_zero(pair) and not enabled(pair.left) and not enabled(pair.right)
     finally:
         h.close()
 
 
-def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
+def test_configure_fails_cleanly_without_an_amplifier(ros_context: Context, pair: SimulatedPair) -> None:
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair, activate=False, configure_timeout_s=1.0)
@@ -365,15 +381,18 @@ def test_configure_fails_cleanly_without_an_amplifier(ros_context, pair):
         h.close()
 
 
-def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair, monkeypatch):
+def test_clear_faults_service_reports_what_it_could_not_clear(
+    ros_context: Context, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from std_srvs.srv import Trigger
 
     h = Harness(ros_context, pair, activate=False)
     try:
         answer = h.call(h.clear_client, Trigger.Request())
         assert not answer.success and 'not configured' in answer.message
-        h.driver.trigger_configure()
-        h.driver.trigger_activate()
+        lifecycle: LifecycleNode = h.driver  # rclpy's triggers are unannotated (untyped_calls_exclude)
+        lifecycle.trigger_configure()
+        lifecycle.trigger_activate()
         pair.right.raise_error(DesErrorFlags.OVER_CURRENT)
         assert h.spin_until(lambda: h.side_diag('right')[1].get('fault_latched') == 'True')
         # A fault that persists (the amplifier ignores the clear, as an over-temperature would):
@@ -381,22 +400,22 @@ def test_clear_faults_service_reports_what_it_could_not_clear(ros_context, pair,
             m.setattr(pair.right, '_op_clear_error', lambda words: ())
             answer = h.call(h.clear_client, Trigger.Request())
         assert not answer.success and 'still latched: right (OVER_CURRENT' in answer.message
-        assert not pair.right.enabled and pair.left.speed_setpoint_rpm == 0
+        assert not enabled(pair.right) and pair.left.speed_setpoint_rpm == 0
         # An unreachable side is reported, and its request is not left pending for later.
         pair.left.close_port()
-        assert h.spin_until(lambda: 'left' in h.driver.command.links_down)
+        assert h.spin_until(lambda: 'left' in h.drive_command().links_down)
         answer = h.call(h.clear_client, Trigger.Request())
         assert not answer.success
         pair.left.reopen_port()
-        assert h.spin_until(lambda: not h.driver.command.links_down)
+        assert h.spin_until(lambda: not h.drive_command().links_down)
         answer = h.call(h.clear_client, Trigger.Request())
         assert answer.success, answer.message
-        assert pair.right.errors == DesErrorFlags(0) and pair.right.enabled
+        assert pair.right.errors == DesErrorFlags(0) and enabled(pair.right)
     finally:
         h.close()
 
 
-def test_huge_and_non_finite_commands(harness, pair):
+def test_huge_and_non_finite_commands(harness: Harness, pair: SimulatedPair) -> None:
     harness.twist = (1e308, 0.0)
     assert harness.spin_until(
         lambda: (pair.left.speed_setpoint_rpm, pair.right.speed_setpoint_rpm) == (CLAMPED_RPM, -CLAMPED_RPM),
@@ -406,7 +425,7 @@ def test_huge_and_non_finite_commands(harness, pair):
     assert 0 < moving[0] <= FIRST_STEP_MAX_RPM  # a ramp, not a step to 1719 rpm
     assert all(w <= CLAMPED_RPM for w in moving)
 
-    def command_diag():
+    def command_diag() -> dict[str, str]:
         return harness.diag('des_driver: command')[1]
 
     assert harness.spin_until(lambda: int(command_diag().get('cmd_vel_clamped', 0)) > 0)
@@ -424,7 +443,9 @@ def test_huge_and_non_finite_commands(harness, pair):
 
 
 @pytest.mark.parametrize('stop_both', [True, False])
-def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
+def test_one_side_link_lost_stops_both_sides(
+    ros_context: Context, pair: SimulatedPair, stop_both: bool
+) -> None:
     h = Harness(ros_context, pair, stop_both_on_link_loss=stop_both)
     try:
         h.twist = (0.2, 0.0)
@@ -433,7 +454,7 @@ def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
         assert h.spin_until(lambda: h.side_diag('left')[1].get('connected') == 'False')
         if stop_both:
             assert h.spin_until(lambda: pair.right.speed_setpoint_rpm == 0)
-            assert h.spin_until(lambda: 'link down: left' in h.side_diag('right')[0].message)
+            assert h.spin_until(lambda: 'link down: left' in h.side_status('right').message)
             h.spin_until(lambda: False, timeout_s=0.3)
             assert pair.right.speed_setpoint_rpm == 0  # stays stopped although cmd_vel keeps coming
         else:
@@ -445,16 +466,18 @@ def test_one_side_link_lost_stops_both_sides(ros_context, pair, stop_both):
         h.close()
 
 
-def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, monkeypatch):
+def test_poller_exception_zeroes_disables_reports_and_restarts(
+    harness: Harness, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
     amp = harness.driver.pollers['left'].amp
     real_read_current = amp.read_current
-    raised = []
+    raised: list[float] = []
 
-    def read_current_with_a_bug(*args, **kwargs):
+    def read_current_with_a_bug(*args: Any, **kwargs: Any) -> Any:
         if not raised:
             raised.append(time.monotonic())
             raise ZeroDivisionError('injected bug')
@@ -464,6 +487,7 @@ def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, mo
     marks = {side: len(sim.commands) for side, sim in (('left', pair.left), ('right', pair.right))}
     assert harness.spin_until(lambda: harness.side_diag('left')[1].get('poller_faults') == '1')
     status, values = harness.side_diag('left')
+    assert status is not None
     assert (
         status.level == DiagnosticStatus.ERROR
         and 'ZeroDivisionError: injected bug' in values['last_poller_fault']
@@ -472,33 +496,38 @@ def test_poller_exception_zeroes_disables_reports_and_restarts(harness, pair, mo
     left_log = [(c.opcode, c.words) for c in list(pair.left.commands)[marks['left'] :]]
     assert left_log.index((OpCode.SET_VELOCITY, (0,))) < left_log.index((OpCode.ENABLE, (0,)))
 
-    def right_zeroed():
+    def right_zeroed() -> bool:
         new = list(pair.right.commands)[marks['right'] :]
         return (OpCode.SET_VELOCITY, (0,)) in [(c.opcode, c.words) for c in new]
 
     assert harness.spin_until(right_zeroed)
     # Restarted: driving again on the fresh command, with the fault still counted and shown as ERROR.
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
-    assert pair.left.enabled and harness.driver.pollers['left'].alive
+    assert enabled(pair.left) and harness.driver.pollers['left'].alive
     assert harness.spin_until(lambda: harness.side_diag('left')[1].get('connected') == 'True')
     status, values = harness.side_diag('left')
+    assert status is not None
     assert status.level == DiagnosticStatus.ERROR and 'restarted after a poller fault' in status.message
 
 
-def test_exception_in_a_callback_zeroes_and_disables(harness, pair, monkeypatch):
+def test_exception_in_a_callback_zeroes_and_disables(
+    harness: Harness, pair: SimulatedPair, monkeypatch: pytest.MonkeyPatch
+) -> None:
     harness.twist = (0.2, 0.0)
     assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0)
 
-    def broken_set_twist(*args):
+    def broken_set_twist(*args: object) -> None:
         raise RuntimeError('injected bug in the cmd_vel callback')
 
     monkeypatch.setattr(harness.driver.command, 'set_twist', broken_set_twist)
     with pytest.raises(RuntimeError, match='injected bug'):
         harness.spin_until(lambda: False, timeout_s=5.0)
-    assert both_zero(pair) and not pair.left.enabled and not pair.right.enabled
+    assert both_zero(pair) and not enabled(pair.left) and not enabled(pair.right)
 
 
-def test_geometry_comes_from_the_vehicle_file(ros_context, pair, tmp_path):
+def test_geometry_comes_from_the_vehicle_file(
+    ros_context: Context, pair: SimulatedPair, tmp_path: Path
+) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.nodes.des_driver import DesDriver

@@ -8,9 +8,13 @@ request/offer rules), so the driver reads best effort, which matches both, and h
 from __future__ import annotations
 
 import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
 from des_harness import Harness
+from rclpy.context import Context
 
 from skidsteer_power.des.simulator import SimulatedPair
 
@@ -18,12 +22,12 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
-def pair():
+def pair() -> Iterator[SimulatedPair]:
     with SimulatedPair(38400) as sims:
         yield sims
 
 
-def _best_effort_teleop(harness: Harness, ns: str):
+def _best_effort_teleop(harness: Harness, ns: str) -> None:
     """A best-effort cmd_vel publisher at 20 Hz on the harness's node (as teleop_twist_joy's)."""
     from geometry_msgs.msg import Twist
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -40,7 +44,7 @@ def _best_effort_teleop(harness: Harness, ns: str):
     harness.node.create_timer(0.05, publish)
 
 
-def test_best_effort_cmd_vel_drives(ros_context, pair):
+def test_best_effort_cmd_vel_drives(ros_context: Context, pair: SimulatedPair) -> None:
     ns = f'/t{uuid.uuid4().hex[:8]}'
     h = Harness(ros_context, pair, namespace=ns)
     try:
@@ -51,16 +55,12 @@ def test_best_effort_cmd_vel_drives(ros_context, pair):
         h.close()
 
 
-def test_reliability_override_is_honoured(ros_context, pair):
+def test_reliability_override_is_honoured(ros_context: Context, pair: SimulatedPair) -> None:
     """With ``reliability: reliable`` forced, the best-effort writer no longer matches: the motors stay
     at zero while a reliable writer (the harness's own) still drives."""
     ns = f'/t{uuid.uuid4().hex[:8]}'
-    h = Harness(
-        ros_context,
-        pair,
-        namespace=ns,
-        **{f'qos_overrides.{ns}/cmd_vel.subscription.reliability': 'reliable'},
-    )
+    qos: dict[str, Any] = {f'qos_overrides.{ns}/cmd_vel.subscription.reliability': 'reliable'}
+    h = Harness(ros_context, pair, namespace=ns, **qos)
     try:
         _best_effort_teleop(h, ns)
         assert not h.spin_until(lambda: pair.left.speed_setpoint_rpm != 0, timeout_s=1.5)
@@ -71,7 +71,9 @@ def test_reliability_override_is_honoured(ros_context, pair):
         h.close()
 
 
-def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context, pair, tmp_path):
+def test_estimator_counts_the_drivers_no_data_as_no_data(
+    ros_context: Context, pair: SimulatedPair, tmp_path: Path
+) -> None:
     """The driver's "no fresh data" joint_states (a silent amplifier: NaN in position, velocity and
     effort of that side) reach a real power_estimator over DDS: counted as no data, never rejected;
     the driver's good messages before it are used (measured power)."""
@@ -103,7 +105,7 @@ def test_estimator_counts_the_drivers_no_data_as_no_data(ros_context, pair, tmp_
         h.close()
 
 
-def test_parameter_file_matches_the_node_and_is_read(tmp_path, pair):
+def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, pair: SimulatedPair) -> None:
     """config/des_driver.yaml (installed by setup.py, passed by the launch file) lists every parameter
     with the node's default; a node started with a --params-file takes its values."""
     from pathlib import Path

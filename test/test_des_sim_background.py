@@ -15,7 +15,7 @@ import subprocess
 import sys
 
 
-def test_des_sim_in_the_background_stops_on_sigint_and_removes_its_ports():
+def test_des_sim_in_the_background_stops_on_sigint_and_removes_its_ports() -> None:
     proc = subprocess.Popen(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'des-sim', '--count', '2', '--json'],
         stdout=subprocess.PIPE,
@@ -23,7 +23,8 @@ def test_des_sim_in_the_background_stops_on_sigint_and_removes_its_ports():
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
     )
     try:
-        lines = []
+        lines: list[str] = []
+        assert proc.stdout is not None
         while not lines or lines[-1] != '}\n':
             line = proc.stdout.readline()
             assert line, 'des-sim exited before printing its ports'

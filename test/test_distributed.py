@@ -9,12 +9,15 @@ import json
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from skidsteer_power.bag_io.synthetic import Segment, write_drive_bag
+from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 
 DASK = str(Path(sys.executable).with_name('dask'))
 
@@ -22,10 +25,11 @@ DASK = str(Path(sys.executable).with_name('dask'))
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
+        port: int = s.getsockname()[1]
+        return port
 
 
-def _stop(processes: list[subprocess.Popen]) -> None:
+def _stop(processes: list[subprocess.Popen[bytes]]) -> None:
     for p in processes:
         if p.poll() is None:
             p.terminate()
@@ -38,14 +42,14 @@ def _stop(processes: list[subprocess.Popen]) -> None:
 
 
 @pytest.fixture(scope='module')
-def scheduler(tmp_path_factory):
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """tcp:// address of a scheduler with two single-threaded workers (separate processes)."""
     from dask.distributed import Client
 
     work = tmp_path_factory.mktemp('dask')
     port = _free_port()
     address = f'tcp://127.0.0.1:{port}'
-    quiet = {'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL, 'cwd': work}
+    quiet: dict[str, Any] = {'stdout': subprocess.DEVNULL, 'stderr': subprocess.DEVNULL, 'cwd': work}
     processes = [
         subprocess.Popen(
             [DASK, 'scheduler', '--host', '127.0.0.1', '--port', str(port), '--no-dashboard'], **quiet
@@ -79,13 +83,16 @@ def scheduler(tmp_path_factory):
         _stop(processes)
 
 
-def _design(capsys, *extra):
+def _design(capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, Any]:
     argv = ['design-study', '--configuration', 'track', '--samples', '3', '--seed', '7', '--json']
     assert main([*argv, *extra]) == 0
-    return json.loads(capsys.readouterr().out)
+    design: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return design
 
 
-def test_design_study_on_a_cluster_equals_the_local_one(scheduler, capsys):
+def test_design_study_on_a_cluster_equals_the_local_one(
+    scheduler: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     remote = _design(capsys, '--scheduler', scheduler)
     assert '2 worker' in remote['uncertainty']['engine'] and scheduler in remote['uncertainty']['engine']
     local = _design(capsys, '--workers', '2')
@@ -99,7 +106,9 @@ def test_design_study_on_a_cluster_equals_the_local_one(scheduler, capsys):
     assert remote['n_candidates'] == 243  # 3^5 track candidates of Table 8.4
 
 
-def test_fleet_validation_on_a_cluster_reports_every_bag(scheduler, tmp_path, capsys):
+def test_fleet_validation_on_a_cluster_reports_every_bag(
+    scheduler: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bags = tmp_path / 'bags'
     bags.mkdir()
     # 2 s straight at 0.2 m/s, then 2 s at 0.1 m/s turning: 0.4 + 0.2 = 0.6 m of path (odometry)
@@ -125,14 +134,14 @@ def test_fleet_validation_on_a_cluster_reports_every_bag(scheduler, tmp_path, ca
     assert 'FAILED' in (out / 'summary.md').read_text()
 
 
-def test_unreachable_scheduler_is_one_clear_error(capsys):
+def test_unreachable_scheduler_is_one_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
     argv = ['design-study', '--configuration', 'track', '--samples', '1', '--scheduler']
     assert main([*argv, f'tcp://127.0.0.1:{_free_port()}']) == 2
     err = capsys.readouterr().err
     assert 'cannot reach the Dask scheduler' in err and err.count('\n') == 1
 
 
-def test_a_small_map_runs_in_this_process_without_a_cluster():
+def test_a_small_map_runs_in_this_process_without_a_cluster() -> None:
     """Issue 28: 30 mission samples took 63 s wall and 30 s of system time on a LocalCluster; a
     handful of light tasks now runs as a loop here, and no process is started."""
     from skidsteer_power.distributed.engine import IN_PROCESS_MAX_TASKS, Engine
@@ -144,7 +153,7 @@ def test_a_small_map_runs_in_this_process_without_a_cluster():
         assert not engine.in_process(IN_PROCESS_MAX_TASKS + 1) and not engine.in_process(2, heavy=True)
 
 
-def test_local_workers_run_one_blas_thread_and_glibc_default_malloc():
+def test_local_workers_run_one_blas_thread_and_glibc_default_malloc() -> None:
     """Each LocalCluster worker gets OMP/MKL/OPENBLAS_NUM_THREADS = 1 before it starts, and not
     Dask's default MALLOC_TRIM_THRESHOLD_ (which made numpy's temporaries fresh mmaps: 4.5 s of
     system time for 8 samples in one process instead of 0.16 s)."""

@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import math
 import os
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -59,7 +61,7 @@ class FixedPowerPredictor:
         )
 
 
-def make_core(battery_W: float = 100.0, **settings) -> EstimatorCore:
+def make_core(battery_W: float = 100.0, **settings: Any) -> EstimatorCore:
     return EstimatorCore(
         FixedPowerPredictor(battery_W),
         Battery.default_test_robot(),
@@ -79,13 +81,13 @@ def make_core(battery_W: float = 100.0, **settings) -> EstimatorCore:
         (0.1, -1e6, 'angular.z = -1e\\+06 rad/s exceeds'),
     ],
 )
-def test_bad_command_is_rejected_with_its_reason(speed, yaw, match):
+def test_bad_command_is_rejected_with_its_reason(speed: float, yaw: float, match: str) -> None:
     with pytest.raises(InputError, match=match):
         check_command(speed, yaw, LIMITS)
 
 
 @pytest.mark.parametrize(('speed', 'yaw'), [(0.2, 0.0), (-0.2, 0.1), (0.0, 0.35), (0.0, 0.0)])
-def test_plausible_commands_pass_unchanged(speed, yaw):
+def test_plausible_commands_pass_unchanged(speed: float, yaw: float) -> None:
     """Reverse (V < 0) and spinning in place (V = 0, r != 0) are valid commands."""
     assert check_command(speed, yaw, LIMITS) == (speed, yaw)
 
@@ -104,19 +106,21 @@ def test_plausible_commands_pass_unchanged(speed, yaw):
         (['left_motor', 'right_motor'], [1e308, 1e308], [0.1, 0.1], 'left_motor velocity = 1e\\+308'),
     ],
 )
-def test_bad_joint_state_is_rejected_with_its_reason(names, velocity, effort, match):
+def test_bad_joint_state_is_rejected_with_its_reason(
+    names: list[str], velocity: list[float], effort: list[float], match: str
+) -> None:
     with pytest.raises(InputError, match=match):
         check_joint_state(names, velocity, effort, LIMITS)
 
 
-def test_joint_state_is_read_by_name_not_position():
+def test_joint_state_is_read_by_name_not_position() -> None:
     omega, torque = check_joint_state(
         ['right_motor', 'x', 'left_motor'], [2.0, 9.0, 1.0], [0.2, 0.0, 0.1], LIMITS
     )
     assert omega == (1.0, 2.0) and torque == (0.1, 0.2)
 
 
-def test_one_reader_follows_the_joint_names_of_every_message():
+def test_one_reader_follows_the_joint_names_of_every_message() -> None:
     """The reader keeps where the joints were while the names stay the same; a message with another
     order, or without a joint, is read by its own names."""
     reader = JointReader(TEST_ROBOT_JOINTS, 1.0, 1.0, LIMITS)
@@ -136,12 +140,12 @@ def test_one_reader_follows_the_joint_names_of_every_message():
     )
 
 
-def test_limits_must_be_positive():
+def test_limits_must_be_positive() -> None:
     with pytest.raises(InputError, match='max_speed_m_s'):
         InputLimits(max_speed_m_s=0.0)
 
 
-def test_reject_counter_counts_every_rejection_but_warns_once_per_period():
+def test_reject_counter_counts_every_rejection_but_warns_once_per_period() -> None:
     counter = RejectCounter(period_s=2.0)
     warned = [counter.reject('cmd_vel', t) for t in (0.0, 0.5, 1.9, 2.0, 2.1)]
     assert warned == [True, False, False, True, False]
@@ -149,7 +153,7 @@ def test_reject_counter_counts_every_rejection_but_warns_once_per_period():
     assert counter.reject('joint_states', 0.1) is True  # topics are throttled separately
 
 
-def test_freshness():
+def test_freshness() -> None:
     fresh = Freshness(timeout_s=0.5)
     assert not fresh.is_fresh(0.0) and fresh.age_s(0.0) == math.inf
     fresh.mark(1.0)
@@ -157,7 +161,7 @@ def test_freshness():
 
 
 # --- measured power -----------------------------------------------------------------------------
-def test_measured_power_by_hand():
+def test_measured_power_by_hand() -> None:
     """EC-45 (Appendix B): Kt = 0.114 N m/A, R = 0.710 ohm; DES 70/10 efficiency 0.92 (Appendix A).
 
     Left motoring: omega 300 rad/s, Kt I = 0.228 N m -> I = 2 A, Kt I omega = 68.4 W,
@@ -174,7 +178,7 @@ def test_measured_power_by_hand():
 
 
 # --- energy integration -------------------------------------------------------------------------
-def test_constant_measured_power_drains_the_analytic_energy():
+def test_constant_measured_power_drains_the_analytic_energy() -> None:
     """100 W at the bus for 10 s is 1000 J at the terminals. The battery's open-circuit energy falls by
     that plus its I^2 R loss: I = 2P / (V + sqrt(V^2 - 4RP)) with V = 12 x 4.20 V = 50.4 V (full 12S
     LiPo, config/batteries/test_robot.yaml) and R = 12 x 4 mOhm = 0.048 ohm gives I = 1.98789 A, so the
@@ -197,7 +201,7 @@ def test_constant_measured_power_drains_the_analytic_energy():
     assert start_wh - battery.remaining_wh == pytest.approx((1000.0 + current**2 * r * 10.0) / 3600, rel=1e-4)
 
 
-def test_sources_switch_when_measured_data_stops():
+def test_sources_switch_when_measured_data_stops() -> None:
     """Measured 50 W at 10 Hz until t = 1.9 s, predicted 80 W at 10 Hz until 4.9 s, timeouts 0.5 s:
     measured covers [0, 2.4] -> 120 J; predicted covers [2.4, 5.4] -> 240 J; nothing after 5.4 s."""
     tracker = EnergyTracker(Battery.default_test_robot(), measured_timeout_s=0.5, predicted_timeout_s=0.5)
@@ -213,7 +217,7 @@ def test_sources_switch_when_measured_data_stops():
     assert tracker.energy_J['predicted'] == pytest.approx(240.0)
 
 
-def test_time_to_empty_is_inf_at_rest_and_finite_under_load():
+def test_time_to_empty_is_inf_at_rest_and_finite_under_load() -> None:
     tracker = EnergyTracker(Battery.default_test_robot(), filter_s=0.0)
     tracker.advance(0.0)
     assert tracker.time_to_empty_s() == math.inf
@@ -224,7 +228,7 @@ def test_time_to_empty_is_inf_at_rest_and_finite_under_load():
 
 
 # --- core ---------------------------------------------------------------------------------------
-def test_core_rejects_and_counts_bad_inputs():
+def test_core_rejects_and_counts_bad_inputs() -> None:
     core = make_core(warn_period_s=10.0)
     with pytest.raises(RejectedInput) as first:
         core.on_command(math.nan, 0.0, 0.0)
@@ -240,7 +244,7 @@ def test_core_rejects_and_counts_bad_inputs():
     assert core.prediction is None and level == 1  # nothing accepted: both inputs stale
 
 
-def test_core_names_the_energy_source_and_stale_inputs():
+def test_core_names_the_energy_source_and_stale_inputs() -> None:
     core = make_core(battery_W=60.0)
     core.on_command(0.2, 0.0, 0.0)
     assert core.diagnostics(0.1)[2]['energy_source'] == 'predicted'
@@ -254,16 +258,17 @@ def test_core_names_the_energy_source_and_stale_inputs():
     )
 
 
-def test_prediction_error_is_measured_minus_predicted():
+def test_prediction_error_is_measured_minus_predicted() -> None:
     core = make_core(battery_W=60.0)
     core.on_command(0.2, 0.0, 0.0)
     comparison = core.on_joint_state(['left_motor', 'right_motor'], [240.0, 240.0], [0.2, 0.3], 0.01)
+    assert comparison is not None
     # FixedPowerPredictor: motor torque 0.1 N m, terminal power 30 W per side
     assert comparison.torque_error_Nm == pytest.approx((0.1, 0.2))
     assert comparison.power_error_W[0] == pytest.approx(comparison.measured.electrical_W[0] - 30.0)
 
 
-def test_traction_warning_follows_the_margin():
+def test_traction_warning_follows_the_margin() -> None:
     core = EstimatorCore(
         FixedPowerPredictor(50.0, traction_margin=0.05),
         Battery.default_test_robot(),
@@ -275,7 +280,7 @@ def test_traction_warning_follows_the_margin():
     assert 'get stuck' in core.diagnostics(0.1)[1]
 
 
-def test_summary_has_every_field_in_order():
+def test_summary_has_every_field_in_order() -> None:
     core = make_core()
     core.on_command(0.1, 0.0, 0.0)
     values = summary_values(core, 0.0)
@@ -286,13 +291,13 @@ def test_summary_has_every_field_in_order():
     assert named['energy_source'] == 1.0  # predicted
 
 
-def test_settings_are_validated():
+def test_settings_are_validated() -> None:
     with pytest.raises(ConfigError, match='cmd_timeout_s'):
         EstimatorSettings(cmd_timeout_s=-1.0)
 
 
 # --- persistence --------------------------------------------------------------------------------
-def test_state_round_trips_through_a_file(tmp_path):
+def test_state_round_trips_through_a_file(tmp_path: Path) -> None:
     core = make_core(battery_W=150.0)
     for k in range(100):
         core.on_command(0.2, 0.0, k * 0.1)
@@ -300,28 +305,31 @@ def test_state_round_trips_through_a_file(tmp_path):
     path = tmp_path / 'sub' / 'energy.json'
     save_state(path, core.state_dict())
     restored = make_core()
-    restored.restore(load_state(path))
+    state = load_state(path)
+    assert state is not None
+    restored.restore(state)
     assert restored.battery.remaining_wh == pytest.approx(core.battery.remaining_wh, rel=1e-12)
     assert restored.battery.remaining_wh < Battery.default_test_robot().remaining_wh
     assert restored.energy.energy_J['predicted'] == pytest.approx(150.0 * 10.0)
     assert [p.name for p in path.parent.iterdir()] == ['energy.json']  # no temporary file left
 
 
-def test_failed_write_leaves_the_old_state(tmp_path, monkeypatch):
+def test_failed_write_leaves_the_old_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / 'energy.json'
     save_state(path, {'x': 1})
 
-    def broken_fsync(fd):
+    def broken_fsync(fd: int) -> None:
         raise OSError(5, 'disk gone')
 
     monkeypatch.setattr(os, 'fsync', broken_fsync)
     with pytest.raises(OSError, match='disk gone'):
         save_state(path, {'x': 2})
-    assert load_state(path)['x'] == 1
+    state = load_state(path)
+    assert state is not None and state['x'] == 1
     assert [p.name for p in tmp_path.iterdir()] == ['energy.json']
 
 
-def test_missing_state_is_none_and_bad_state_is_a_config_error(tmp_path):
+def test_missing_state_is_none_and_bad_state_is_a_config_error(tmp_path: Path) -> None:
     assert load_state(tmp_path / 'none.json') is None
     (tmp_path / 'torn.json').write_text('{"format_version": 1, "batt')
     with pytest.raises(ConfigError, match='not valid JSON'):

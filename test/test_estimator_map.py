@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from skidsteer_power.estimator.factory import map_predictor
@@ -9,21 +11,21 @@ from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import GEAR_RATIO, Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 
 @pytest.fixture(scope='module')
-def vehicle():
+def vehicle() -> Vehicle:
     return load_vehicle('test_robot_track')
 
 
 @pytest.fixture(scope='module')
-def predictor(vehicle):
+def predictor(vehicle: Vehicle) -> MapPredictor:
     power_map = PowerMap.build(vehicle, load_terrain('dry_sand'), shape=(6, 11))
     return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description='test map')
 
 
-def test_prediction_adds_the_powertrain_to_the_map(predictor):
+def test_prediction_adds_the_powertrain_to_the_map(predictor: MapPredictor) -> None:
     """Eqs. 7.1-7.4 via Powertrain.motor_side: motor speed = 12 x axle speed (7.1.1), motor torque =
     axle torque / 12 + internal resistance at the motor shaft."""
     p = predictor.predict(0.2, 0.1)
@@ -48,7 +50,7 @@ def test_prediction_adds_the_powertrain_to_the_map(predictor):
     assert not p.clamped
 
 
-def test_reverse_is_the_mirrored_forward_solution(predictor):
+def test_reverse_is_the_mirrored_forward_solution(predictor: MapPredictor) -> None:
     """Backing at (-V, r) = forward at (V, r) seen turned 180 degrees: sides swap, speeds and torques
     change sign, terrain power does not (prediction module docstring)."""
     fwd, rev = predictor.predict(0.2, 0.1), predictor.predict(-0.2, 0.1)
@@ -60,36 +62,36 @@ def test_reverse_is_the_mirrored_forward_solution(predictor):
     assert all(w > 0 for w in rev.internal_W)
 
 
-def test_spin_in_place_drives_the_sides_in_opposite_directions(predictor):
+def test_spin_in_place_drives_the_sides_in_opposite_directions(predictor: MapPredictor) -> None:
     p = predictor.predict(0.0, 0.5)
     assert p.axle_omega_rad_s[0] < 0 < p.axle_omega_rad_s[1]  # + yaw rate = left turn (REP 103)
     assert p.bus_total_W > 0 and p.traction_margin < 1
 
 
-def test_rest_draws_nothing(predictor):
+def test_rest_draws_nothing(predictor: MapPredictor) -> None:
     p = predictor.predict(0.0, 0.0)
     assert p.terrain_W == (0.0, 0.0) and p.internal_W == (0.0, 0.0) and p.bus_total_W == 0.0
 
 
-def test_tighter_turns_leave_less_traction(predictor):
+def test_tighter_turns_leave_less_traction(predictor: MapPredictor) -> None:
     """Chapter 7.3.4: on dry sand the robot got stuck when the turning radius was small. The margin
     must fall as the yaw rate grows at V = 0.2 m/s (Table 7.3's second row)."""
     margins = [predictor.predict(0.2, r).traction_margin for r in (0.0, 0.1, 0.35)]
     assert margins[0] > margins[1] > margins[2]
 
 
-def test_commands_beyond_the_map_are_flagged(predictor):
+def test_commands_beyond_the_map_are_flagged(predictor: MapPredictor) -> None:
     assert predictor.predict(3.0, 0.0).clamped
 
 
-def test_factory_builds_and_caches_the_map(vehicle, tmp_path):
+def test_factory_builds_and_caches_the_map(vehicle: Vehicle, tmp_path: Path) -> None:
     first, built, where = map_predictor(vehicle, 'dry_sand', tmp_path)
     second, built_again, _ = map_predictor(vehicle, 'dry_sand', tmp_path)
     assert built and not built_again and where.startswith(str(tmp_path))
     assert second.predict(0.2, 0.1).bus_total_W == pytest.approx(first.predict(0.2, 0.1).bus_total_W)
 
 
-def test_the_default_predictor_works_at_the_set_points(tmp_path):
+def test_the_default_predictor_works_at_the_set_points(tmp_path: Path) -> None:
     """Issue 25: a command is a pair of wheel speed set points. Reference: the direct set-point solve
     (CommandPredictor, test_fess_setpoint.py) at a node of the set-point map, where the map is exact."""
     from skidsteer_power.estimator.prediction import SetpointPredictor

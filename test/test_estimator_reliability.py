@@ -18,10 +18,14 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
+from rclpy.context import Context
 from sensor_msgs.msg import JointState
 from test_estimator_core import FixedPowerPredictor, make_core
+from test_nodes_estimator import Rig
 
 from skidsteer_power.estimator.core import IMPLAUSIBLE_WARN_S, RejectedInput
 from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
@@ -32,11 +36,11 @@ LIMIT_W = (12 * 3.27) ** 2 / (4 * 12 * 0.004)  # 8019.7 W, by hand (module docst
 NAMES = ['left_motor', 'right_motor']
 
 
-def test_battery_power_bound_by_hand():
+def test_battery_power_bound_by_hand() -> None:
     assert Battery.default_test_robot().max_power_W() == pytest.approx(LIMIT_W, rel=1e-9)
 
 
-def test_an_impossible_reading_is_skipped_counted_and_flagged_never_fatal():
+def test_an_impossible_reading_is_skipped_counted_and_flagged_never_fatal() -> None:
     core = make_core(100.0)
     core.on_joint_state(NAMES, (300.0, 300.0), (0.228, 0.228), 0.0)  # 154.9 W: plausible
     with pytest.raises(RejectedInput, match='implausible reading skipped: battery-side power 14569 W'):
@@ -54,7 +58,7 @@ def test_an_impossible_reading_is_skipped_counted_and_flagged_never_fatal():
 
 
 @pytest.mark.parametrize('battery_W', [2e4, -2e4, math.nan])
-def test_an_impossible_prediction_is_clamped_and_counted(battery_W):
+def test_an_impossible_prediction_is_clamped_and_counted(battery_W: float) -> None:
     core = make_core(battery_W)
     core.on_command(0.2, 0.0, 0.0)
     core.tick(0.4)  # would raise 'battery cannot deliver' without the clamp
@@ -90,7 +94,7 @@ DAMAGED = {
 
 
 @pytest.mark.parametrize('content', DAMAGED.values(), ids=DAMAGED.keys())
-def test_a_damaged_state_file_is_moved_aside_with_one_warning(tmp_path, content):
+def test_a_damaged_state_file_is_moved_aside_with_one_warning(tmp_path: Path, content: bytes) -> None:
     path = tmp_path / 'energy.json'
     path.write_bytes(content)
     core = make_core()
@@ -101,7 +105,7 @@ def test_a_damaged_state_file_is_moved_aside_with_one_warning(tmp_path, content)
     assert str(path) in warning and str(moved[0]) in warning and '\n' not in warning
 
 
-def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path):
+def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path: Path) -> None:
     path = tmp_path / 'energy.json'
     assert load_or_quarantine(path, make_core().restore) == (None, '')
     saved = make_core()
@@ -113,7 +117,9 @@ def test_a_good_state_file_is_restored_and_a_missing_one_is_no_warning(tmp_path)
 
 
 @pytest.mark.parametrize('capacity', ['10', '1e308'])
-def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(tmp_path, capacity):
+def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(
+    tmp_path: Path, capacity: str
+) -> None:
     """A state file carrying a battery configuration (the old format did) keeps its tallies only:
     capacity_Ah 10 once made the test robot's battery 449.7 Wh, 1e308 inf Wh."""
     path = tmp_path / 'energy.json'
@@ -131,7 +137,7 @@ def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(tmp
     assert core.battery.state.drawn_J == 50.0 and core.battery.state.elapsed_s == 10.0
 
 
-def test_the_state_file_keeps_tallies_only(tmp_path):
+def test_the_state_file_keeps_tallies_only(tmp_path: Path) -> None:
     core = make_core()
     saved = core.state_dict()
     assert set(saved['battery']) == {'state'} and set(saved['battery']['state']) == {
@@ -145,7 +151,9 @@ def test_the_state_file_keeps_tallies_only(tmp_path):
 # (fixture rig_factory: test/conftest.py)
 
 
-def test_node_survives_an_impossible_reading_and_saves_on_a_short_run(rig_factory, tmp_path):
+def test_node_survives_an_impossible_reading_and_saves_on_a_short_run(
+    rig_factory: Callable[..., Rig], tmp_path: Path
+) -> None:
     """Wall clock, default 10 s save period: the run is far shorter, the file must still appear."""
     rig = rig_factory(FixedPowerPredictor(80.0), save_period_s=10.0)
     msg = JointState(name=NAMES, velocity=list(IMPOSSIBLE[0]), effort=list(IMPOSSIBLE[1]))
@@ -163,7 +171,9 @@ def test_node_survives_an_impossible_reading_and_saves_on_a_short_run(rig_factor
 
 
 @pytest.mark.parametrize('content', DAMAGED.values(), ids=DAMAGED.keys())
-def test_node_starts_fresh_from_a_damaged_state_file(rig_factory, tmp_path, capfd, content):
+def test_node_starts_fresh_from_a_damaged_state_file(
+    rig_factory: Callable[..., Rig], tmp_path: Path, capfd: pytest.CaptureFixture[str], content: bytes
+) -> None:
     (tmp_path / 'energy.json').write_bytes(content)
     rig = rig_factory(FixedPowerPredictor(80.0), initial_soc=0.5)
     assert rig.node.core.battery.soc == 0.5  # fresh, as the parameters say
@@ -177,7 +187,9 @@ def test_node_starts_fresh_from_a_damaged_state_file(rig_factory, tmp_path, capf
 
 # --- the suite under `run` -----------------------------------------------------------------------
 @pytest.mark.slow
-def test_run_survives_an_impossible_reading_and_a_garbage_state_file(ros_context, tmp_path):
+def test_run_survives_an_impossible_reading_and_a_garbage_state_file(
+    ros_context: Context, tmp_path: Path
+) -> None:
     """``run --simulate`` for a few seconds (shorter than the 10 s save period) with a garbage state
     file, while this process publishes the impossible reading: no traceback, one warning naming the
     file, exit 0 on SIGTERM, a valid state file afterwards and the garbage kept aside."""

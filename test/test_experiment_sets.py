@@ -5,17 +5,18 @@ comparison is a median of |error| per side, and the radius table shows commanded
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
 from skidsteer_power.apps import experiment_sets as job
 
 
-def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict:
+def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict[str, object]:
     return {'twin_torque_Nm': list(twin), 'fess_motion_torque_Nm': list(fess), 'stuck': stuck}
 
 
-def test_torque_error_is_the_median_of_absolute_errors_per_side():
+def test_torque_error_is_the_median_of_absolute_errors_per_side() -> None:
     # left: +10 %, -20 %, +30 % -> |.| median 20 % (the signed median would be +10 %);
     # right: -10 %, +10 %, -10 % -> 10 % (signed: -10 %). The stuck set and the small torque are left out.
     sets = [
@@ -30,7 +31,7 @@ def test_torque_error_is_the_median_of_absolute_errors_per_side():
     assert right == pytest.approx(10.0)
 
 
-def test_radius_table_shows_command_real_robot_twin_and_fess_from_set_points():
+def test_radius_table_shows_command_real_robot_twin_and_fess_from_set_points() -> None:
     assert job.real_radius('test_robot_6wheel', 0.2, 0.25) == 1.62  # Appendix D
     assert job.real_radius('test_robot_4wheel', 0.2, 0.25) is None  # the text gives none
     rows = [
@@ -50,7 +51,7 @@ def test_radius_table_shows_command_real_robot_twin_and_fess_from_set_points():
     assert 'median |R_FESS / R_real - 1| 10.0 %' in table  # 1.458 / 1.62 = 0.90
 
 
-def test_set_point_radius_is_fess_from_the_set_points():
+def test_set_point_radius_is_fess_from_the_set_points() -> None:
     # the real robot's 6-wheel cell at 0.2 m/s, 0.2 rad/s turned on 1.92 m (Appendix D), not the
     # commanded 1 m; FESS from the set points (nothing fitted to the wheels) gives it within 15 %
     # (measured 1.92 m), and is CommandPredictor's own answer (the same direct solve)
@@ -65,7 +66,7 @@ def test_set_point_radius_is_fess_from_the_set_points():
     assert radius == float(pred.turn_radius[0])
 
 
-def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path):
+def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path: Path) -> None:
     # ch. 7.3.4 compared torques with FESS AT the measured motion. The main job's "FESS from twin
     # motion" must be that (the (V, yaw rate) map), not the set-point map reading the motion as a
     # command (which predicts a wider, slipping turn with 25-30 % less torque on the track).

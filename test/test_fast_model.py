@@ -4,6 +4,7 @@ from Wong's model, and agreement with Wong's model itself."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,12 +19,12 @@ TRACK = load_vehicle('chapter3_track')
 
 
 @pytest.fixture(autouse=True)
-def _private_cache(tmp_path, monkeypatch):
+def _private_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))
     fast.turning_tables.cache_clear()
 
 
-def test_eq_5_2_by_hand_at_one_point():
+def test_eq_5_2_by_hand_at_one_point() -> None:
     """A1 = m V^2/R sin(beta) + R_to + R_ti; A2 = (W L mu_t + (R_to - R_ti) B/2 - s0 cos(beta)
     m V^2/R) 2/B (5.1; the printed + in 5.2 is a typo); F_o,i = (A1 +- A2)/2; T = F r."""
     terrain = PRESETS['dry_sand']
@@ -56,7 +57,7 @@ def test_eq_5_2_by_hand_at_one_point():
     assert float(state.omega_outer_rad_s) == pytest.approx(v_outer / (0.1 * (1 - float(state.slip_outer))))
 
 
-def test_straight_running_needs_only_compaction_resistance():
+def test_straight_running_needs_only_compaction_resistance() -> None:
     terrain = PRESETS['clay']
     state = fast.solve(TRACK, terrain, 0.6, np.inf)
     rc = float(compaction_resistance(terrain, TRACK.weight_N / 2, 0.07, 0.7))
@@ -64,7 +65,7 @@ def test_straight_running_needs_only_compaction_resistance():
     assert float(state.thrust_inner_N) == pytest.approx(rc, rel=1e-6)
 
 
-def test_slip_for_thrust_inverts_eq_2_17_both_ways():
+def test_slip_for_thrust_inverts_eq_2_17_both_ways() -> None:
     terrain = PRESETS['sandy_loam']
     load = np.full(4, 147.0)
     slips = np.array([-0.5, -0.05, 0.02, 0.4])
@@ -76,7 +77,7 @@ def test_slip_for_thrust_inverts_eq_2_17_both_ways():
     assert not ok[0]
 
 
-def test_tables_come_from_wong_and_match_it():
+def test_tables_come_from_wong_and_match_it() -> None:
     """Figure 5.2: the fast model reproduces Wong's torques closely (here within 5 % of the larger
     side torque over 4 speeds x 6 radii); mu_t and s0 in the tables are Wong's own."""
     terrain = PRESETS['dry_sand']
@@ -93,7 +94,7 @@ def test_tables_come_from_wong_and_match_it():
     assert np.max(np.abs(got.torque_inner_Nm - ref.torque_inner_Nm) / scale) < 0.05
 
 
-def test_tables_are_cached_on_disk(tmp_path):
+def test_tables_are_cached_on_disk(tmp_path: Path) -> None:
     terrain = PRESETS['clay']
     fast.turning_tables(TRACK, terrain, 'fess')
     assert len(list(tmp_path.glob('fast_*_fess_*.npz'))) == 1
@@ -102,7 +103,7 @@ def test_tables_are_cached_on_disk(tmp_path):
     assert again.mu_t.shape == (8, 17)
 
 
-def test_wheels_and_bad_sources_are_refused():
+def test_wheels_and_bad_sources_are_refused() -> None:
     with pytest.raises(InputError, match='tracked'):
         fast.solve(load_vehicle('chapter4_4wheel'), PRESETS['clay'], 0.5, 2.0)
     with pytest.raises(InputError, match='wong or fess'):

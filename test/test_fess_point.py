@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from skidsteer_power.models import fess, fess_point
-from skidsteer_power.terramechanics.terrain import PRESETS, load_terrain
+from skidsteer_power.terramechanics.terrain import PRESETS, Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 SAND = PRESETS['dry_sand']
@@ -30,7 +30,9 @@ TYPE_C = dataclasses.replace(SAND, shear_type='C', Kw=0.02, Kr=0.6)
     ],
 )
 @pytest.mark.parametrize(('speed', 'yaw'), [(0.5, 0.25), (0.3, -0.8), (0.0, 0.6), (0.7, 0.0)])
-def test_kernel_residual_equals_the_batched_residual(vehicle_name, terrain, speed, yaw):
+def test_kernel_residual_equals_the_batched_residual(
+    vehicle_name: str, terrain: Terrain, speed: float, yaw: float
+) -> None:
     solver = fess.FessSolver(load_vehicle(vehicle_name), terrain)
     problem = fess_point.point_problem(solver, speed, yaw)
     batch_problem = solver.problem(np.array([speed]), np.array([yaw]))
@@ -52,7 +54,7 @@ def test_kernel_residual_equals_the_batched_residual(vehicle_name, terrain, spee
     assert kernel.torque(states[-1]) == pytest.approx(torque, rel=1e-12, abs=1e-12)
 
 
-def test_solve3_equals_numpy_and_gives_zero_when_singular():
+def test_solve3_equals_numpy_and_gives_zero_when_singular() -> None:
     rng = np.random.default_rng(2)
     for _ in range(50):
         a, b = rng.normal(size=(3, 3)), rng.normal(size=3)
@@ -62,7 +64,7 @@ def test_solve3_equals_numpy_and_gives_zero_when_singular():
     assert fess_point._solve3(singular, (1.0, 2.0, 3.0)) == (0.0, 0.0, 0.0)
 
 
-def test_a_warm_start_does_a_cold_solve_unless_it_can_save_steps():
+def test_a_warm_start_does_a_cold_solve_unless_it_can_save_steps() -> None:
     # a track: the warm solve IS the cold solve, whatever the previous state (same steps, same answer)
     track = fess.FessSolver(load_vehicle('chapter3_track'), SAND)
     previous = track.solve_point(0.2, 0.9).state  # a tight turn

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,18 +23,18 @@ from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
 from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.real_robot import APPENDIX_D_RADII
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 VEHICLES = ('test_robot_track', 'test_robot_6wheel')
 
 
 @pytest.fixture(scope='module')
-def sand():
+def sand() -> Terrain:
     return load_terrain('sand_bin')
 
 
-def _solver(name: str, sand) -> SetpointSolver:
+def _solver(name: str, sand: Terrain) -> SetpointSolver:
     return SetpointSolver(FessSolver(load_vehicle(name), sand))
 
 
@@ -51,7 +52,7 @@ def test_setpoints_are_the_drivers_kinematics() -> None:
 
 
 @pytest.mark.parametrize('name', VEHICLES)
-def test_spin_is_symmetric_both_ways(name: str, sand) -> None:
+def test_spin_is_symmetric_both_ways(name: str, sand: Terrain) -> None:
     sol = _solver(name, sand).solve(np.array([[-2.0, 2.0], [2.0, -2.0]]))
     assert not sol.limited.any()
     np.testing.assert_allclose(sol.speed, 0.0, atol=1e-9)  # spinning in place
@@ -62,7 +63,7 @@ def test_spin_is_symmetric_both_ways(name: str, sand) -> None:
 
 
 @pytest.mark.parametrize('name', VEHICLES)
-def test_round_trip_through_the_forward_solve(name: str, sand) -> None:
+def test_round_trip_through_the_forward_solve(name: str, sand: Terrain) -> None:
     fess = FessSolver(load_vehicle(name), sand)
     v = np.array([0.1, 0.3, -0.2, 0.05, 0.0])
     w = np.array([0.1, -0.5, 0.3, 0.0, 0.3])
@@ -76,7 +77,7 @@ def test_round_trip_through_the_forward_solve(name: str, sand) -> None:
 
 
 @pytest.mark.parametrize('name', VEHICLES)
-def test_continuous_across_spin_straight_and_reverse(name: str, sand) -> None:
+def test_continuous_across_spin_straight_and_reverse(name: str, sand: Terrain) -> None:
     solver = _solver(name, sand)
     # the mean set point swept through 0 at a fixed difference (spin -> forward, reverse -> spin)
     mean = np.linspace(-0.2, 0.2, 41)
@@ -95,14 +96,14 @@ def test_continuous_across_spin_straight_and_reverse(name: str, sand) -> None:
         assert jumps.max() < 5 * np.median(jumps) + 1e-6
 
 
-def test_reverse_is_the_mirror_image(sand) -> None:
+def test_reverse_is_the_mirror_image(sand: Terrain) -> None:
     sol = _solver('test_robot_6wheel', sand).solve(np.array([[0.6, 1.4], [-1.4, -0.6]]))
     assert sol.speed[1] == pytest.approx(-sol.speed[0], rel=1e-9)
     assert sol.yaw_rate[1] == pytest.approx(sol.yaw_rate[0], rel=1e-9)  # same circle, driven backwards
     np.testing.assert_allclose(sol.torque[1], -sol.torque[0][::-1], rtol=1e-6)
 
 
-def test_current_limit_is_never_exceeded(sand) -> None:
+def test_current_limit_is_never_exceeded(sand: Terrain) -> None:
     vehicle = load_vehicle('test_robot_6wheel')
     assert Powertrain.for_vehicle(vehicle).current_limit_A == 10.0  # config/powertrains/test_robot.yaml
     weak = Powertrain.from_config({'preset': 'test_robot', 'current_limit_A': 2.0}, 'wheel')
@@ -114,7 +115,7 @@ def test_current_limit_is_never_exceeded(sand) -> None:
     assert np.all(np.abs(full.current) > 2.0) and not full.limited.any()
 
 
-def test_no_motor_past_its_no_load_speed(sand) -> None:
+def test_no_motor_past_its_no_load_speed(sand: Terrain) -> None:
     pred = CommandPredictor(load_vehicle('test_robot_track'), sand).predict([5.0], [1.0])
     motor_rad_s = np.abs(pred.setpoint) * 12.0  # 12:1 reduction (ch. 7.1.1)
     # EC-45: 84 rpm/V (Appendix B) at the 12S pack's full 50.4 V (config/batteries/test_robot.yaml)
@@ -124,7 +125,7 @@ def test_no_motor_past_its_no_load_speed(sand) -> None:
 
 @pytest.mark.parametrize('form', [['--direct'], []])
 def test_predict_cli_keys_and_bad_input(
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path, form: list[str]
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path, form: list[str]
 ) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))  # the map form builds its map here
     argv = ['predict', '--vehicle', 'test_robot_track', '--terrain', 'sand_bin', '--speed', '0.1', *form]
@@ -154,7 +155,7 @@ def test_appendix_d_subset_beats_the_commanded_radius() -> None:
     assert rows[2].error < 0.15  # six wheels, 0.2 m/s, 0.2 rad/s: measured 1.92 m
 
 
-def test_track_belt_law_widens_the_turn_from_set_points_but_not_the_torque_at_a_motion(sand) -> None:
+def test_track_belt_law_widens_the_turn_from_set_points_but_not_the_torque_at_a_motion(sand: Terrain) -> None:
     """K_x = 4 K (a compliant belt in series with the soil) lets each track slip more for the same
     thrust: from set points the turn widens (Appendix D: the real track turned on 1.44 m at 1 m
     commanded), while at a given motion the torques stay those of Wong's inextensible belt, the
@@ -173,7 +174,7 @@ def test_track_belt_law_widens_the_turn_from_set_points_but_not_the_torque_at_a_
     assert float(with_law.slip_outer) > 2.0 * float(without.slip_outer)  # the belt's compliance slips
 
 
-def test_a_routes_commands_give_back_its_motion(sand) -> None:
+def test_a_routes_commands_give_back_its_motion(sand: Terrain) -> None:
     """Mission energy reports, per route segment, the set points that produce its (V, R) and the
     command the driver turns into them; predicting from that command must give the route's motion
     back (reference: the route itself; the mission's set points are FESS's side speeds there)."""

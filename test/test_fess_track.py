@@ -21,7 +21,7 @@ GRID_V = np.linspace(0.2, 1.5, 8)[:, None]
 GRID_R = np.geomspace(1.0, 500.0, 16)[None, :]
 
 
-def test_eq_6_6_displacement_matches_the_printed_rotation_with_yaw_rate():
+def test_eq_6_6_displacement_matches_the_printed_rotation_with_yaw_rate() -> None:
     """Element k of the outer track: ||(l/2 - s0 - k l/n, -R - B/2) - Rot (l/2 - s0, -R - B/2)||
     with the rotation angle k w_z l / (n omega r) (eq. 6.6, phi read as the yaw rate)."""
     solver = fess.FessSolver(TRACK, PRESETS['dry_sand'], n=10)
@@ -40,7 +40,7 @@ def test_eq_6_6_displacement_matches_the_printed_rotation_with_yaw_rate():
         assert jy[0, 0, 1, 0, k] == pytest.approx(expected[1], abs=1e-12)
 
 
-def test_straight_running_thrust_equals_compaction_resistance_and_eq_2_17():
+def test_straight_running_thrust_equals_compaction_resistance_and_eq_2_17() -> None:
     """Straight: each track's thrust balances its compaction resistance (eq. 2.10, eq. 3.18 with
     R = inf), and FESS's thrust at the solved slip equals the closed form of eq. 2.17."""
     terrain = PRESETS['sandy_loam']
@@ -56,7 +56,7 @@ def test_straight_running_thrust_equals_compaction_resistance_and_eq_2_17():
     assert sol.s0[0] == pytest.approx(0.7 / 6, abs=0.01)  # R -> inf limit: lateral forces cancel at l/6
 
 
-def test_mirror_symmetries_left_right_and_reverse():
+def test_mirror_symmetries_left_right_and_reverse() -> None:
     solver = fess.FessSolver(TRACK, PRESETS['clay'], n=20)
     sol = solver.solve_twist([0.6, 0.6, -0.6], [0.4, -0.4, 0.4])
     left, right, back = (sol.torque[i] for i in range(3))
@@ -67,7 +67,7 @@ def test_mirror_symmetries_left_right_and_reverse():
     assert sol.power[2] == pytest.approx(sol.power[0][::-1], rel=1e-6)
 
 
-def test_batched_equals_single_point_solves():
+def test_batched_equals_single_point_solves() -> None:
     solver = fess.FessSolver(TRACK, PRESETS['dry_sand'], n=20)
     v = np.array([0.3, 1.0, 1.4])
     w = np.array([0.3, -0.05, 0.0])
@@ -77,7 +77,7 @@ def test_batched_equals_single_point_solves():
         assert one.torque[0] == pytest.approx(batch.torque[k], rel=1e-5, abs=1e-6)
 
 
-def test_solution_satisfies_equilibrium_3_18():
+def test_solution_satisfies_equilibrium_3_18() -> None:
     solver = fess.FessSolver(TRACK, PRESETS['sandy_loam'], n=30)
     sol = solver.solve_twist([0.5, 1.2], [0.5, -0.1])
     prob = solver.problem(np.array([0.5, 1.2]), np.array([0.5, -0.1]))
@@ -85,7 +85,7 @@ def test_solution_satisfies_equilibrium_3_18():
     assert np.all(np.abs(res) < fess.FORCE_TOL_N)
 
 
-def test_rest_gives_zero_and_spin_in_place_is_antisymmetric():
+def test_rest_gives_zero_and_spin_in_place_is_antisymmetric() -> None:
     sol = fess.FessSolver(TRACK, PRESETS['dry_sand'], n=20).solve_twist([0.0, 0.0], [0.0, 1.0])
     assert sol.converged.all()
     assert sol.torque[0] == pytest.approx([0.0, 0.0])
@@ -93,7 +93,7 @@ def test_rest_gives_zero_and_spin_in_place_is_antisymmetric():
     assert sol.torque[1, 0] == pytest.approx(-sol.torque[1, 1], abs=1e-4)
 
 
-def test_elements_study_converges():
+def test_elements_study_converges() -> None:
     """Trapezoidal sums over n elements: torque changes < 1 % from n = 20 to n = 160."""
     v, r = np.array([0.5, 1.0]), np.array([1.5, 20.0])
     coarse = fess.solve(TRACK, PRESETS['clay'], v, r, n=20)
@@ -102,7 +102,7 @@ def test_elements_study_converges():
 
 
 @pytest.mark.parametrize('terrain_name', ['dry_sand', 'sandy_loam', 'clay'])
-def test_torque_within_3_percent_of_wong_on_the_8x16_grid(terrain_name):
+def test_torque_within_3_percent_of_wong_on_the_8x16_grid(terrain_name: str) -> None:
     """Section 6.4 / Figures 6.6-6.8: FESS matches Wong's track model. Tolerance 3 % of the larger
     side torque at each point (the inner torque crosses zero at large R, where a relative error of
     that side alone is meaningless)."""
@@ -116,7 +116,7 @@ def test_torque_within_3_percent_of_wong_on_the_8x16_grid(terrain_name):
     assert got.s0_m == pytest.approx(ref.s0_m, rel=0.01)
 
 
-def test_failures_are_reported_not_dropped():
+def test_failures_are_reported_not_dropped() -> None:
     # 3 m/s around a 0.5 m radius on dry sand: 18 m/s^2, no steady state (tips / outruns traction)
     state = fess.solve(TRACK, PRESETS['dry_sand'], [0.5, 3.0], [2.0, 0.5])
     assert state.converged.tolist() == [True, False]
@@ -125,7 +125,7 @@ def test_failures_are_reported_not_dropped():
         fess.solve(TRACK, PRESETS['dry_sand'], 3.0, 0.5)
 
 
-def test_dispatch_through_models_solve_and_bad_input():
+def test_dispatch_through_models_solve_and_bad_input() -> None:
     state = solve_any(TRACK, PRESETS['clay'], 0.5, -3.0, model='fess')
     assert state.outer_is_left and state.converged
     assert state.side('torque', 'left') == pytest.approx(state.torque_outer_Nm)
@@ -140,7 +140,7 @@ def test_dispatch_through_models_solve_and_bad_input():
 
 
 @pytest.mark.parametrize('vehicle_name', ['chapter3_track', 'test_robot_6wheel'])
-def test_lean_point_solver_equals_the_batched_solver(vehicle_name):
+def test_lean_point_solver_equals_the_batched_solver(vehicle_name: str) -> None:
     solver = fess.FessSolver(load_vehicle(vehicle_name), PRESETS['sandy_loam'], n=20)
     v = [0.5, 0.5, 0.0, -0.7, 1.2, 0.0]
     w = [0.25, 0.0, 1.0, 0.3, -0.05, 0.0]

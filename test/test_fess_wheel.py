@@ -17,7 +17,7 @@ WHEELED = load_vehicle('chapter4_4wheel')  # section 4.2: Table 3.3 with 4 wheel
 SIX = load_vehicle('test_robot_6wheel')
 
 
-def test_contact_uses_the_free_wheel_geometry_and_quadratic_stress():
+def test_contact_uses_the_free_wheel_geometry_and_quadratic_stress() -> None:
     """Each wheel's contact comes from the single-wheel model at zero drawbar pull (eq. 2.28) and its
     normal stress from the quadratic approximation (eqs. 6.8-6.10)."""
     terrain = PRESETS['dry_sand']
@@ -36,7 +36,7 @@ def test_contact_uses_the_free_wheel_geometry_and_quadratic_stress():
     assert sigma == pytest.approx(expected, rel=1e-6, abs=1e-6)
 
 
-def test_straight_running_wheels_balance_their_resistance():
+def test_straight_running_wheels_balance_their_resistance() -> None:
     sol = fess.FessSolver(WHEELED, PRESETS['clay'], n=30).solve_twist(0.5, 0.0)
     prob = fess.FessSolver(WHEELED, PRESETS['clay'], n=30).problem(np.array([0.5]), np.array([0.0]))
     assert sol.converged[0]
@@ -44,14 +44,14 @@ def test_straight_running_wheels_balance_their_resistance():
     assert sol.torque[0, 0] == pytest.approx(sol.torque[0, 1], rel=1e-6)
 
 
-def test_six_wheels_solve_and_mirror():
+def test_six_wheels_solve_and_mirror() -> None:
     sol = fess.FessSolver(SIX, PRESETS['sandy_loam'], n=20).solve_twist([0.4, 0.4], [0.2, -0.2])
     assert sol.converged.all()
     assert sol.torque[1] == pytest.approx(sol.torque[0][::-1], rel=1e-6)
 
 
 @pytest.mark.parametrize('terrain_name', ['dry_sand', 'sandy_loam', 'clay'])
-def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name):
+def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name: str) -> None:
     """Section 6.4 / Figures 6.9-6.11: close at big radii. 5 speeds x the 13 radii >= 2 m of the
     8 x 16 grid (R = 1 ... 500 m, geometric) keep the test fast; benchmarks/bench_fess.py reports the
     full grid and the small-radius differences. Tolerance: 10 % of the larger side torque."""
@@ -69,7 +69,7 @@ def test_within_10_percent_of_the_chapter_4_model_for_r_at_least_2m(terrain_name
 
 
 @pytest.mark.parametrize('name', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(name):
+def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(name: str) -> None:
     """The available thrust behind the traction margin is F_max = c A + W tan(phi) (eqs. 2.2 / 2.12)
     summed over EVERY wheel of a side (it once summed a single wheel, so a 6-wheel robot of the same
     weight reported a third of its capacity). Hand check, sand_bin (Table 7.2: c = 200 Pa, phi = 27
@@ -94,7 +94,7 @@ def test_straight_running_capacity_is_mohr_coulomb_over_all_wheels_of_a_side(nam
     assert capacity == pytest.approx(hand, rel=0.03)
 
 
-def test_four_and_six_wheels_of_equal_weight_have_equal_capacity_and_drive_table_7_3_turns():
+def test_four_and_six_wheels_of_equal_weight_have_equal_capacity_and_drive_table_7_3_turns() -> None:
     """Same mass and wheels: F_max = c A + W tan(phi) hardly depends on how the weight is split over
     the axles, so the two capacities agree within 5 %. Table 7.3: both wheeled robots ran on the sand
     bin at 0.1 m/s up to 0.2 rad/s and at 0.2 m/s up to 0.35 rad/s (only smaller radii stuck), so
@@ -111,7 +111,7 @@ def test_four_and_six_wheels_of_equal_weight_have_equal_capacity_and_drive_table
     assert caps[1] == pytest.approx(caps[0], rel=0.05)
 
 
-def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises():
+def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises() -> None:
     """On sandy_soil with phi = 20 deg and c = 200 Pa no slip in [-1, 1] gives a 0.08 m x 0.05 m wheel
     zero drawbar pull (eq. 2.29 has no root), so FESS's free-wheel table cannot be built: a batch
     marks every point unsolved (NaN, converged False), a single point raises."""
@@ -133,7 +133,7 @@ def test_a_batch_on_soil_too_weak_to_roll_free_is_unsolved_and_a_scalar_raises()
         fess.solve(small, weak, 0.2, math.inf)
 
 
-def test_free_wheel_table_on_a_soil_with_sinkage_exponent_3_or_more():
+def test_free_wheel_table_on_a_soil_with_sinkage_exponent_3_or_more() -> None:
     """Eq. 2.32's first guess needs n < 3; on a stiffer-exponent soil (a user's terrain: validation
     allows any n > 0) the table comes from the bracketed solve, as solve_wheel does, and agrees
     with solve_wheel at every load; a FESS wheel solve there runs instead of raising."""

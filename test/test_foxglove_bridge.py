@@ -22,26 +22,31 @@ import sys
 import threading
 import time
 import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from test_estimator_core import FixedPowerPredictor
 from websockets.sync import client as websockets_sync  # requirements.txt
+from websockets.typing import Subprotocol
 
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 
 MESSAGE_DATA = struct.Struct('<BIQ')  # opcode 0x01, subscription id, log time [ns]
 # What the Foxglove app offers; the bridge picks the first (foxglove-sdk's name for protocol v1) and
 # also serves clients offering only the second (test_foxglove_security.py).
-SUBPROTOCOLS = ['foxglove.sdk.v1', 'foxglove.websocket.v1']
+SUBPROTOCOLS = [Subprotocol('foxglove.sdk.v1'), Subprotocol('foxglove.websocket.v1')]
 
 
 @pytest.fixture
-def estimator_graph(ros_context, tmp_path):
+def estimator_graph(ros_context: Context, tmp_path: Path) -> Iterator[str]:
     namespace = f'fox_{uuid.uuid4().hex[:8]}'
     estimator = PowerEstimator(
         FixedPowerPredictor(80.0),
@@ -66,10 +71,11 @@ def estimator_graph(ros_context, tmp_path):
     estimator.destroy_node()
 
 
-def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
+def start_bridge(topics: list[str]) -> tuple[subprocess.Popen[str], str]:
     argv = [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--host', '127.0.0.1', '--port', '0']
     proc = subprocess.Popen([*argv, '--topics', *topics, '--json'], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
+    assert proc.stderr is not None
     seen = []  # 'serving ws://127.0.0.1:PORT' (stderr with --json), after any DDS log lines
     for line in proc.stderr:
         if line.startswith('serving ws://'):
@@ -82,7 +88,7 @@ def start_bridge(topics: list[str]) -> tuple[subprocess.Popen, str]:
     pytest.fail(f'bridge did not start: {"".join(seen)}')
 
 
-def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
+def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph: str) -> None:
     ns = estimator_graph
     wanted = {f'/{ns}/power/predicted_left_w': 'std_msgs/msg/Float64',
               f'/{ns}/battery/state': 'sensor_msgs/msg/BatteryState'}  # fmt: skip
@@ -90,7 +96,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
     try:
         with websockets_sync.connect(url, subprotocols=SUBPROTOCOLS, open_timeout=20) as ws:
             assert ws.subprotocol == 'foxglove.sdk.v1'
-            channels: dict[str, dict] = {}
+            channels: dict[str, dict[str, Any]] = {}  # advertised channels (JSON) by topic
             deadline = time.monotonic() + 30
             while not set(wanted) <= set(channels):
                 assert time.monotonic() < deadline, f'advertised only {sorted(channels)}'
@@ -107,7 +113,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
                 subscriptions[k] = channel
             ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
                 {'id': k, 'channelId': c['id']} for k, c in subscriptions.items()]}))  # fmt: skip
-            decoded: dict[str, list] = {c['topic']: [] for c in subscriptions.values()}
+            decoded: dict[str, list[Any]] = {c['topic']: [] for c in subscriptions.values()}
             while not all(len(v) >= 2 for v in decoded.values()):
                 assert time.monotonic() < deadline, {k: len(v) for k, v in decoded.items()}
                 frame = ws.recv(timeout=30)
@@ -143,7 +149,7 @@ def test_a_foxglove_client_receives_and_decodes_power_messages(estimator_graph):
     assert set(report['topics']) == {*wanted, f'/{ns}/power/summary'} and not report['skipped']
 
 
-def test_bad_port_is_one_clear_error():
+def test_bad_port_is_one_clear_error() -> None:
     run = subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--port', '70000'],
         capture_output=True, text=True, timeout=60, env={**os.environ},
@@ -151,7 +157,7 @@ def test_bad_port_is_one_clear_error():
     assert run.returncode == 2 and 'port must be 0..65535' in run.stderr and 'Traceback' not in run.stderr
 
 
-def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
+def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics() -> None:
     """config/foxglove/operator_layout.json is foxglove-sdk layout output (python -m
     skidsteer_power.ui.foxglove_layout), and every topic a panel reads is one the suite publishes
     (odometry comes from the robot's own odometry source)."""
@@ -168,7 +174,7 @@ def test_the_shipped_layout_is_the_generated_one_and_reads_published_topics():
     assert used <= published and {'/power/predicted_left_w', '/power/measured_right_w'} <= used
 
 
-def test_latched_topics_reach_the_bridge_and_others_match_any_publisher(ros_context):
+def test_latched_topics_reach_the_bridge_and_others_match_any_publisher(ros_context: Context) -> None:
     """A transient-local message published before the bridge starts still reaches its channel; a
     best-effort (sensor-data) publisher matches too. In-process bridge (real rclpy + foxglove-sdk)."""
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data

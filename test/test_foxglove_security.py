@@ -19,13 +19,24 @@ import struct
 import subprocess
 import sys
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+from rclpy.context import Context
+from rclpy.node import Node
 from websockets.exceptions import InvalidStatus
 from websockets.sync import client as websockets_sync  # requirements.txt
+from websockets.typing import Origin, Subprotocol
 
 from skidsteer_power.nodes.foxglove_front import origin_allowed
+
+if TYPE_CHECKING:
+    from des_harness import Harness
+
+    from skidsteer_power.des.simulator import SimulatedPair
+
 
 pytestmark = pytest.mark.ros
 CLIENT_JS = Path(__file__).resolve().parent / 'foxglove_npm' / 'client.js'
@@ -34,7 +45,7 @@ CLIENT_DATA = struct.Struct('<BI')  # client message data: opcode 0x01, client c
 
 
 @pytest.fixture
-def bridge_node(ros_context):
+def bridge_node(ros_context: Context) -> Iterator[Node]:
     """A node spun by an executor in a thread, to host an in-process bridge."""
     import threading
 
@@ -52,7 +63,7 @@ def bridge_node(ros_context):
     node.destroy_node()
 
 
-def test_origin_policy():
+def test_origin_policy() -> None:
     assert origin_allowed(None, ())
     assert origin_allowed('http://localhost:8080', ()) and origin_allowed('http://127.0.0.1', ())
     assert origin_allowed('http://[::1]:3000', ())
@@ -62,7 +73,7 @@ def test_origin_policy():
     assert not origin_allowed('http://localhost.evil.example', ())
 
 
-def test_default_host_is_loopback_and_origins_are_checked(bridge_node):
+def test_default_host_is_loopback_and_origins_are_checked(bridge_node: Node) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     bridge = FoxgloveBridge(
@@ -72,17 +83,21 @@ def test_default_host_is_loopback_and_origins_are_checked(bridge_node):
         assert bridge.front._server.sockets[0].getsockname()[0] == '127.0.0.1'
         url = f'ws://127.0.0.1:{bridge.port}'
         with pytest.raises(InvalidStatus) as refused:
-            websockets_sync.connect(url, subprotocols=['foxglove.sdk.v1'], origin='https://evil.example')
+            websockets_sync.connect(
+                url, subprotocols=[Subprotocol('foxglove.sdk.v1')], origin=Origin('https://evil.example')
+            )
         assert refused.value.response.status_code == 403
-        for origin in (None, 'http://localhost:8080', 'https://app.foxglove.dev'):
-            with websockets_sync.connect(url, subprotocols=['foxglove.sdk.v1'], origin=origin) as ws:
+        for origin in (None, Origin('http://localhost:8080'), Origin('https://app.foxglove.dev')):
+            with websockets_sync.connect(
+                url, subprotocols=[Subprotocol('foxglove.sdk.v1')], origin=origin
+            ) as ws:
                 assert json.loads(ws.recv(timeout=10))['op'] == 'serverInfo'
         assert bridge.front.refused == 1
     finally:
         bridge.close()
 
 
-def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node):
+def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node: Node) -> None:
     import foxglove
 
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
@@ -90,7 +105,7 @@ def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node):
     bridge = FoxgloveBridge(bridge_node, port=0, topics=['/none'])
     try:
         with websockets_sync.connect(
-            f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1']
+            f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
         ) as ws:
             assert ws.subprotocol == 'foxglove.websocket.v1'
             info = json.loads(ws.recv(timeout=10))
@@ -102,13 +117,15 @@ def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node):
     server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
     try:
         with pytest.raises(InvalidStatus) as refused:
-            websockets_sync.connect(f'ws://127.0.0.1:{server.port}', subprotocols=['foxglove.websocket.v1'])
+            websockets_sync.connect(
+                f'ws://127.0.0.1:{server.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
+            )
         assert refused.value.response.status_code == 400
     finally:
         server.stop()
 
 
-def test_host_0000_warns(tmp_path):
+def test_host_0000_warns(tmp_path: Path) -> None:
     run = subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'bridge', '--host', '0.0.0.0', '--port', '0',
          '--duration', '0.5', '--topics', '/none', '--allow-publish', 'cmd_vel'],
@@ -125,7 +142,7 @@ def test_host_0000_warns(tmp_path):
 
 
 @pytest.fixture
-def driver(ros_context):
+def driver(ros_context: Context) -> Iterator[tuple[Harness, SimulatedPair, str]]:
     from des_harness import Harness
 
     from skidsteer_power.des.simulator import SimulatedPair
@@ -151,7 +168,9 @@ def twist_cdr(speed_m_s: float) -> bytes:
 CLAMPED_RPM = 1.5 / 0.1 * 12 * 60 / (2 * 3.141592653589793)
 
 
-def test_client_publishing_reaches_des_driver_and_its_checks(driver):
+def test_client_publishing_reaches_des_driver_and_its_checks(
+    driver: tuple[Harness, SimulatedPair, str],
+) -> None:
     from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
 
     harness, pair, ns = driver
@@ -160,7 +179,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(driver):
     )
     try:
         with websockets_sync.connect(
-            f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1']
+            f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.websocket.v1')]
         ) as ws:
             info = json.loads(ws.recv(timeout=10))
             assert 'clientPublish' in info['capabilities'] and 'cdr' in info['supportedEncodings']
@@ -185,6 +204,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(driver):
             assert 0 < pair.left.speed_setpoint_rpm <= CLAMPED_RPM + 1
             # the client stops sending: the driver's watchdog stops the motors
             assert harness.spin_until(lambda: pair.left.speed_setpoint_rpm == 0)
+        assert bridge.client_publish is not None
         assert bridge.client_publish.refused == 1  # the channel on /other
         assert set(bridge.client_publish.published) == {f'{ns}/cmd_vel'}
     finally:
@@ -192,7 +212,7 @@ def test_client_publishing_reaches_des_driver_and_its_checks(driver):
 
 
 @pytest.fixture(scope='session')
-def npm_client(tmp_path_factory) -> Path:
+def npm_client(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder with @foxglove/ws-protocol and ws installed from the npm registry (skipped, with the
     reason, where node or npm is absent)."""
     node, npm = shutil.which('node'), shutil.which('npm')
@@ -211,7 +231,9 @@ def npm_client(tmp_path_factory) -> Path:
     return folder
 
 
-def test_the_npm_foxglove_client_subscribes_and_drives(npm_client, driver):
+def test_the_npm_foxglove_client_subscribes_and_drives(
+    npm_client: Path, driver: tuple[Harness, SimulatedPair, str]
+) -> None:
     """@foxglove/ws-protocol 0.8.0 (what Lichtblick and older Foxglove use), offering only
     foxglove.websocket.v1: it is served, decodes joint_states' channel, and its Teleop-style Twist
     (0.3 m/s) drives the simulated amplifiers through des_driver."""
@@ -227,8 +249,13 @@ def test_the_npm_foxglove_client_subscribes_and_drives(npm_client, driver):
         proc = subprocess.Popen(
             argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=npm_client
         )
-        moved = []
-        harness.spin_until(lambda: moved.append(pair.left.speed_setpoint_rpm) or proc.poll() is not None, 40)
+        moved: list[int] = []
+
+        def record_until_done() -> bool:
+            moved.append(pair.left.speed_setpoint_rpm)
+            return proc.poll() is not None
+
+        harness.spin_until(record_until_done, 40)
         out, err = proc.communicate(timeout=30)
     finally:
         bridge.close()

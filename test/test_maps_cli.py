@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from test_models_solve_cli import KEYS as SOLVE_KEYS
@@ -33,9 +34,10 @@ BUILD = [
 ]
 
 
-def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> dict:
+def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> dict[str, Any]:
     assert main([*argv, '--json']) == 0
-    return json.loads(capsys.readouterr().out)
+    loaded: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return loaded
 
 
 def test_build_to_file_then_show_and_query(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -99,7 +101,7 @@ def test_mismatch_and_bad_input_give_one_line_and_exit_2(
 
 
 def test_solve_fess_and_fast_keep_the_contract(
-    capsys: pytest.CaptureFixture[str], tmp_path, monkeypatch
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))
     keys = set(SOLVE_KEYS)  # DESIGN.md's solve --json contract

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,7 +27,7 @@ def small_map() -> PowerMap:
     return PowerMap.build(TRACK, DRY, shape=(6, 15), n=20, refine=0)
 
 
-def test_build_covers_the_box_and_reports_its_points(small_map):
+def test_build_covers_the_box_and_reports_its_points(small_map: PowerMap) -> None:
     assert small_map.converged.all()
     assert small_map.radial[-1] == pytest.approx(math.sqrt(2) * 1.5)
     assert small_map.length_m == pytest.approx(0.75)  # 1.5 m/s / 2 rad/s
@@ -35,7 +36,7 @@ def test_build_covers_the_box_and_reports_its_points(small_map):
     assert set(small_map.values) == set(FIELDS)
 
 
-def test_grid_nodes_reproduce_direct_fess(small_map):
+def test_grid_nodes_reproduce_direct_fess(small_map: PowerMap) -> None:
     i, j = 3, 9
     s, psi = small_map.radial[i], small_map.angles[j]
     v, w = s * math.cos(psi), s * math.sin(psi) / small_map.length_m
@@ -47,7 +48,7 @@ def test_grid_nodes_reproduce_direct_fess(small_map):
     assert q.power_right_W == pytest.approx(direct.power[0, 1], rel=1e-9)
 
 
-def test_off_grid_interpolation_within_1_percent_of_direct_fess():
+def test_off_grid_interpolation_within_1_percent_of_direct_fess() -> None:
     """Issue 5 accuracy goal, on the default 16 x 101 grid: the mechanical power (what the estimator
     integrates) within 1 % of direct FESS at 150 random off-grid commands outside the small-radius
     limit. (Side torques near straight running, where they are tiny, are reported in
@@ -65,7 +66,7 @@ def test_off_grid_interpolation_within_1_percent_of_direct_fess():
     assert err.max() < 0.01
 
 
-def test_scalar_and_vector_queries_agree_with_scipy(small_map):
+def test_scalar_and_vector_queries_agree_with_scipy(small_map: PowerMap) -> None:
     v = np.array([0.0, 0.3, 0.77, 1.2, 1.49])
     w = np.array([0.5, -1.3, 0.01, 0.0, 1.9])
     q = small_map.query(v, w)
@@ -84,7 +85,7 @@ def test_scalar_and_vector_queries_agree_with_scipy(small_map):
         assert one.clamped == bool(q.clamped[k])
 
 
-def test_outside_the_grid_is_clamped_and_flagged(small_map):
+def test_outside_the_grid_is_clamped_and_flagged(small_map: PowerMap) -> None:
     q = small_map.query(np.array([1.0, 5.0]), np.array([0.0, 0.0]))
     assert q.clamped.tolist() == [False, True]
     edge = small_map.query(small_map.radial[-1], 0.0)
@@ -93,7 +94,7 @@ def test_outside_the_grid_is_clamped_and_flagged(small_map):
     assert bad.clamped and math.isnan(bad.torque_left_Nm)
 
 
-def test_reverse_spin_and_rest(small_map):
+def test_reverse_spin_and_rest(small_map: PowerMap) -> None:
     fwd = small_map.query(0.6, 0.4)
     back = small_map.query(-0.6, 0.4)  # 180-degree symmetry: sides swap, speed and torque flip
     assert back.torque_left_Nm == pytest.approx(-fwd.torque_right_Nm)
@@ -107,7 +108,7 @@ def test_reverse_spin_and_rest(small_map):
     assert rest.torque_left_Nm[0] == 0.0 and rest.power_right_W[0] == 0.0
 
 
-def test_save_load_round_trip_and_mismatches(small_map, tmp_path):
+def test_save_load_round_trip_and_mismatches(small_map: PowerMap, tmp_path: Path) -> None:
     path = small_map.save(tmp_path / 'm.npz')
     back = PowerMap.load(path, TRACK, DRY)
     assert back.query(0.5, 0.2).power_left_W == pytest.approx(small_map.query(0.5, 0.2).power_left_W)
@@ -128,7 +129,9 @@ def test_save_load_round_trip_and_mismatches(small_map, tmp_path):
         PowerMap.load(tmp_path / 'junk.npz')
 
 
-def test_load_or_build_caches_and_rebuilds_stale_maps(tmp_path, monkeypatch):
+def test_load_or_build_caches_and_rebuilds_stale_maps(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv('SKIDSTEER_POWER_CACHE', str(tmp_path))
     calls = []
     monkeypatch.setattr(pm, 'DEFAULT_SHAPE', (4, 9))
@@ -147,7 +150,7 @@ def test_load_or_build_caches_and_rebuilds_stale_maps(tmp_path, monkeypatch):
     assert built and third.meta['terrain_fingerprint'] != 'someone-else'
 
 
-def test_wheeled_map_flags_unconverged_cells():
+def test_wheeled_map_flags_unconverged_cells() -> None:
     wheeled = PowerMap.build(load_vehicle('packbot_4wheel'), DRY, shape=(4, 9), n=12)
     assert wheeled.meta['failed_points'] == int((~wheeled.converged).sum())
     failed = np.argwhere(~wheeled.converged[1:]) + np.array(
@@ -162,7 +165,7 @@ def test_wheeled_map_flags_unconverged_cells():
         assert q.limited  # no steady state there: the traction limit, a physics limit
 
 
-def test_cell_check_flags_what_stays_above_the_accuracy_goal():
+def test_cell_check_flags_what_stays_above_the_accuracy_goal() -> None:
     """Issue 18: chapter4_4wheel on clay was 9.4 % off direct FESS at unflagged points (V > 1 m/s in
     turns of 1-2.5 x the limit radius, slip rising steeply towards the traction limit). The default
     map checks every cell it could answer unflagged at the cell's centre against FESS and flags the
@@ -186,13 +189,13 @@ def test_cell_check_flags_what_stays_above_the_accuracy_goal():
         assert power_map.query(float(v[k]), float(w[k])).limited == bool(q.limited[k])
 
 
-def test_a_map_file_keeps_its_cell_check(tmp_path, small_map):
+def test_a_map_file_keeps_its_cell_check(tmp_path: Path, small_map: PowerMap) -> None:
     saved = PowerMap.load(small_map.save(tmp_path / 'm.npz'), TRACK, DRY)
     np.testing.assert_array_equal(saved.cell_error, small_map.cell_error)
     assert np.isnan(small_map.cell_error[:, -1]).all()  # spinning in place: every query is limited
 
 
-def test_interface_keywords_speeds_and_yaw_rates_set_the_box():
+def test_interface_keywords_speeds_and_yaw_rates_set_the_box() -> None:
     m = PowerMap.build(
         TRACK, PRESETS['clay'], speeds=np.linspace(0.0, 1.0, 4), yaw_rates=np.linspace(-0.5, 0.5, 5)
     )
@@ -206,11 +209,11 @@ PACKBOT = load_vehicle('packbot_4wheel')
 
 
 @pytest.fixture(scope='module')
-def packbot_map():
+def packbot_map() -> PowerMap:
     return PowerMap.build(PACKBOT, PRESETS['sandy_soil'], shape=(6, 41))
 
 
-def test_map_spans_the_vehicles_declared_envelope(packbot_map):
+def test_map_spans_the_vehicles_declared_envelope(packbot_map: PowerMap) -> None:
     # vehicle.py: max_speed_m_s 1.5 m/s, max_yaw_rate_rad_s 2.0 rad/s unless the file says otherwise
     assert packbot_map.meta['max_speed_m_s'] == PACKBOT.max_speed_m_s == 1.5
     assert packbot_map.meta['max_yaw_rate_rad_s'] == PACKBOT.max_yaw_rate_rad_s == 2.0
@@ -220,7 +223,7 @@ def test_map_spans_the_vehicles_declared_envelope(packbot_map):
     assert beyond.clamped.all()  # outside the envelope: never silently clamped
 
 
-def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map):
+def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map: PowerMap) -> None:
     r_min = 2.0 * PACKBOT.tread_m  # module doc: the small-radius limit
     q = packbot_map.query(np.array([0.0, 0.1, 0.5]), np.array([1.0, 1.0, 0.1]))  # R = 0, 0.1, 5 m
     assert q.limited.tolist() == [True, r_min > 0.1, False]
@@ -228,7 +231,7 @@ def test_tight_turns_and_spins_are_flagged_limited_not_clamped(packbot_map):
     assert packbot_map.query(0.0, 1.0).limited
 
 
-def test_mirrored_commands_give_mirrored_answers(packbot_map):
+def test_mirrored_commands_give_mirrored_answers(packbot_map: PowerMap) -> None:
     rng = np.random.default_rng(5)
     v, w = rng.uniform(-1.5, 1.5, 200), rng.uniform(-2.0, 2.0, 200)
     a, b = packbot_map.query(v, w), packbot_map.query(v, -w)
@@ -241,7 +244,7 @@ def test_mirrored_commands_give_mirrored_answers(packbot_map):
     assert spin_l.total_power_W == pytest.approx(spin_r.total_power_W, rel=1e-9)
 
 
-def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map):
+def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map: PowerMap) -> None:
     w = np.linspace(1.0, 2.0, 201)
     q = packbot_map.query(np.zeros_like(w), w)
     for torque in (q.torque_left_Nm, q.torque_right_Nm):
@@ -250,7 +253,7 @@ def test_spin_in_place_torques_are_continuous_in_yaw_rate(packbot_map):
         assert np.abs(np.diff(torque)).max() < 0.02 * span
 
 
-def test_cache_key_holds_the_options_and_the_physics_code(tmp_path):
+def test_cache_key_holds_the_options_and_the_physics_code(tmp_path: Path) -> None:
     from skidsteer_power.cache import physics_files
 
     default = cache_path(PACKBOT, DRY, tmp_path)
@@ -264,7 +267,7 @@ def test_cache_key_holds_the_options_and_the_physics_code(tmp_path):
     assert {'vehicle.py', 'terrain.py', 'base.py', 'fess.py', 'power_map.py', 'interpolation.py'} <= names
 
 
-def test_writers_of_one_cache_file_at_once_each_rename_a_whole_file(tmp_path):
+def test_writers_of_one_cache_file_at_once_each_rename_a_whole_file(tmp_path: Path) -> None:
     """Two Dask workers can build and save the same map at the same moment: each writes its own
     temporary file, so the target is always one writer's whole file and no temporary file is left
     (a shared temporary name let the first rename take the second writer's file from under it)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,42 +13,43 @@ import pytest
 from skidsteer_power.cli.main import main
 from skidsteer_power.errors import InputError
 from skidsteer_power.missions import Segment, patrol, read_route_csv, run_mission, search_retrieve
-from skidsteer_power.missions.energy import with_payload
+from skidsteer_power.missions.energy import MissionResult, with_payload
 from skidsteer_power.missions.mobility import max_drawbar_pull
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')  # Table 8.2
 
 
 @pytest.fixture(scope='module')
-def lete():
+def lete() -> Terrain:
     return load_terrain('lete_sand')  # Table 8.3
 
 
 @pytest.fixture(scope='module')
-def patrol_results(sandy):
+def patrol_results(sandy: Terrain) -> dict[str, MissionResult]:
     route = patrol()
     return {name: run_mission(load_vehicle(name), sandy, route) for name in PACKBOTS}
 
 
-def test_patrol_route_matches_chapter_8_1():
+def test_patrol_route_matches_chapter_8_1() -> None:
     route = patrol()
     assert route.length_m == pytest.approx(154.4)  # "total mission distance is 154.4 meters"
     assert route.turning_length_m == pytest.approx(31.4, abs=0.05)  # "20% (31.4 meters) is turning"
     assert route.length_m - route.turning_length_m == pytest.approx(123.0, abs=0.05)
     assert {abs(s.turn_radius_m) for s in route.segments if s.is_turning} == {1.0}  # "turning radius is 1 m"
     assert all(s.speed_m_s == 0.2 for s in route.segments)  # "constant value of 0.2 m/s"
+    assert route.xy is not None
     x, y = route.xy[:, 0], route.xy[:, 1]
     assert np.ptp(x) <= 15.0 and np.ptp(y) <= 22.0  # fits the 15 m x 22 m area
 
 
-def test_search_retrieve_route_matches_chapter_8_2():
+def test_search_retrieve_route_matches_chapter_8_2() -> None:
     route = search_retrieve()
     assert route.synthetic
     assert route.length_m == pytest.approx(271.95)  # "total travel distance is 271.95 meters"
@@ -63,7 +65,7 @@ def test_search_retrieve_route_matches_chapter_8_2():
     assert np.max(np.abs(np.diff(k))) < 0.5 * np.max(np.abs(k))
 
 
-def test_energy_is_integral_of_power(patrol_results):
+def test_energy_is_integral_of_power(patrol_results: dict[str, MissionResult]) -> None:
     for res in patrol_results.values():
         tr = res.trace(samples_per_segment=3)
         for power, energy in (('power_W', res.energy_J), ('power_battery_W', res.energy_battery_J)):
@@ -72,21 +74,21 @@ def test_energy_is_integral_of_power(patrol_results):
         assert tr['energy_J'][-1] == pytest.approx(res.energy_J, rel=1e-12)
 
 
-def test_internal_plus_terrain_is_total(patrol_results):
+def test_internal_plus_terrain_is_total(patrol_results: dict[str, MissionResult]) -> None:
     for res in patrol_results.values():
         assert res.energy_internal_J + res.energy_terrain_J == pytest.approx(res.energy_J, rel=1e-12)
         np.testing.assert_allclose(res.power_internal_W + res.power_terrain_W, res.power_W, rtol=1e-12)
         assert np.all(res.power_internal_W >= 0)
 
 
-def test_battery_power_never_below_mechanical(patrol_results):
+def test_battery_power_never_below_mechanical(patrol_results: dict[str, MissionResult]) -> None:
     """Regenerative braking can only return what the sides give back, less losses."""
     for res in patrol_results.values():
         assert np.all(res.power_battery_W >= res.power_W - 1e-12)
         assert res.energy_battery_J > res.energy_J
 
 
-def test_track_straight_power_is_mostly_internal(patrol_results):
+def test_track_straight_power_is_mostly_internal(patrol_results: dict[str, MissionResult]) -> None:
     # ch. 7.2.3 / Figure 7.14: the track dominates the internal loss; on straight runs at 0.2 m/s the
     # terrain takes little, so the tracked Packbot's straight-line power is mostly internal.
     res = patrol_results['packbot_track']
@@ -94,9 +96,11 @@ def test_track_straight_power_is_mostly_internal(patrol_results):
     assert np.all(res.power_internal_W[straight] > 0.5 * res.power_W[straight])
 
 
-def test_four_wheel_power_rises_far_more_in_turns_than_track(patrol_results):
+def test_four_wheel_power_rises_far_more_in_turns_than_track(
+    patrol_results: dict[str, MissionResult],
+) -> None:
     # ch. 8.1/8.2: "power consumption increases sharply for the 4-wheeled SUGV at sharp turns"
-    def rise(name):
+    def rise(name: str) -> float:
         res = patrol_results[name]
         return res.mean_power(turning=True) / res.mean_power(turning=False)
 
@@ -104,7 +108,9 @@ def test_four_wheel_power_rises_far_more_in_turns_than_track(patrol_results):
     assert rise('packbot_4wheel') > rise('packbot_6wheel')
 
 
-def test_mobility_ranking_chapter_8(patrol_results, sandy, lete):
+def test_mobility_ranking_chapter_8(
+    patrol_results: dict[str, MissionResult], sandy: Terrain, lete: Terrain
+) -> None:
     # ch. 8.1: the track has "lower sinkage and larger drawbar pull"; the 6-wheel beats the 4-wheel
     # ("larger drawbar pull, smaller sinkage and lower power/energy consumption").
     r = patrol_results
@@ -124,7 +130,7 @@ def test_mobility_ranking_chapter_8(patrol_results, sandy, lete):
     assert np.all(dp_loaded / (weights + 98.1) < dp_sandy / weights)
 
 
-def test_track_drawbar_pull_hand_calculation(sandy):
+def test_track_drawbar_pull_hand_calculation(sandy: Terrain) -> None:
     """Eq. 2.11/2.17 at s = 1 for the Packbot track (Table 8.1, Table 8.2)."""
     v = load_vehicle('packbot_track')
     w = 15.8 * 9.81 / 2
@@ -136,7 +142,7 @@ def test_track_drawbar_pull_hand_calculation(sandy):
     assert max_drawbar_pull([v], sandy)[0] == pytest.approx(2 * (f_s - r_c), rel=1e-9)
 
 
-def test_map_and_direct_agree_on_patrol(sandy, patrol_results):
+def test_map_and_direct_agree_on_patrol(sandy: Terrain, patrol_results: dict[str, MissionResult]) -> None:
     # the map interpolates FESS solutions between grid nodes; straight running is a grid line (yaw 0),
     # so the straight segments agree to solver tolerance and the whole mission to the interpolation
     # error of the turns (well under 1 %)
@@ -147,7 +153,7 @@ def test_map_and_direct_agree_on_patrol(sandy, patrol_results):
     assert direct.energy_J == pytest.approx(mapped.energy_J, rel=1e-2)
 
 
-def test_payload_raises_energy_and_sinkage(sandy):
+def test_payload_raises_energy_and_sinkage(sandy: Terrain) -> None:
     route = search_retrieve(step_m=2.0)
     res = run_mission(load_vehicle('packbot_6wheel'), sandy, route)
     out, back = res.legs()
@@ -156,7 +162,7 @@ def test_payload_raises_energy_and_sinkage(sandy):
     assert back['max_sinkage_m'] > out['max_sinkage_m']
 
 
-def test_route_csv(tmp_path, sandy):
+def test_route_csv(tmp_path: Path, sandy: Terrain) -> None:
     path = tmp_path / 'route.csv'
     path.write_text(
         'length_m,duration_s,speed_m_s,turn_radius_m,payload_kg\n10,,0.3,inf,0\n,20,0.2,-2,5\n5,,,,\n'
@@ -173,7 +179,7 @@ def test_route_csv(tmp_path, sandy):
         Segment.along(0.2, length_m=1.0, duration_s=1.0)
 
 
-def test_mission_cli_json_and_plot(tmp_path, capsys):
+def test_mission_cli_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     png = tmp_path / 'mission.png'
     argv = ['mission', '--vehicle', 'packbot_track', '--terrain', 'sandy_soil', '--route', 'patrol',
             '--speed', '0.2', '--no-cache', '--plot', str(png), '--json']  # fmt: skip
@@ -188,7 +194,7 @@ def test_mission_cli_json_and_plot(tmp_path, capsys):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
 
 
-def test_mission_cli_csv_route_with_cache(tmp_path, capsys):
+def test_mission_cli_csv_route_with_cache(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / 'r.csv'
     path.write_text('length_m,turn_radius_m\n4,inf\n3.14159,1\n')
     argv = ['mission', '--vehicle', 'packbot_6wheel', '--terrain', 'lete_sand', '--route', str(path),
@@ -201,7 +207,9 @@ def test_mission_cli_csv_route_with_cache(tmp_path, capsys):
     assert first['distance_m'] == pytest.approx(7.14159)
 
 
-def test_mission_cli_counts_limited_segments_apart_from_clamped(tmp_path, capsys):
+def test_mission_cli_counts_limited_segments_apart_from_clamped(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A turn of radius 0.5 m is tighter than the map's small-radius limit (2 x tread = 0.852 m for
     test_robot_track): the map answers it at the limit radius and flags it ``limited``, which the
     summary counts apart from ``clamped`` (outside the envelope; never here at 0.2 m/s)."""
@@ -223,11 +231,12 @@ def test_mission_cli_counts_limited_segments_apart_from_clamped(tmp_path, capsys
         (['--direct', '', '--route', 'search-retrieve'], 'did not converge|R ='),
     ],
 )
-def test_mission_cli_errors(argv, message, capsys):
+def test_mission_cli_errors(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     base = {'--vehicle': 'packbot_track', '--terrain': 'sandy_soil', '--route': 'patrol'}
     for flag, value in zip(argv[::2], argv[1::2], strict=True):
         base[flag] = value
     args = ['mission', '--no-cache', *[x for kv in base.items() for x in kv if x]]
+    code: int | str | None
     try:
         code = main(args)
     except SystemExit as exc:  # argparse rejects a bad value itself, still one line and exit 2

@@ -17,7 +17,7 @@ import pytest
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.missions import Route, Segment, run_mission
 from skidsteer_power.powertrain import Powertrain
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import TrackGear, load_vehicle
 
 KT = 0.114  # EC-45 torque constant [N m/A], Appendix B line 12
@@ -40,12 +40,12 @@ TABLE_7_1 = {
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')  # Table 8.2
 
 
 @pytest.fixture(scope='module')
-def short_route():
+def short_route() -> Route:
     """10 m straight and a 180-degree U-turn of R = 1 m at 0.2 m/s (the ch. 8.1 patrol's two states)."""
     return Route(
         'straight+uturn',
@@ -53,7 +53,7 @@ def short_route():
     )
 
 
-def test_packbot_files_match_table_8_1():
+def test_packbot_files_match_table_8_1() -> None:
     track, four, six = (load_vehicle(f'packbot_{k}') for k in ('track', '4wheel', '6wheel'))
     for v in (track, four, six):  # Table 8.1 chassis parameters, shared by all three (ch. 8.1)
         assert (v.mass_kg, v.cg_height_m, v.tread_m) == (15.8, 0.08, 0.4)
@@ -66,7 +66,7 @@ def test_packbot_files_match_table_8_1():
         assert v.powertrain == {'preset': 'test_robot'}
 
 
-def test_six_wheel_base_is_the_adjacent_axle_spacing():
+def test_six_wheel_base_is_the_adjacent_axle_spacing() -> None:
     # Table 8.1: 'Axle Base 0.35' for a 0.7 m track and 'Wheel Base (6-Wheel) 0.35': on a 0.7 m track
     # with 0.1 m sprockets 0.35 m can only be the spacing of adjacent axles (three axles per side).
     # Read as front-to-rear, adjacent 6-wheel axles would be 0.175 m apart, less than the 0.2 m wheel
@@ -88,7 +88,7 @@ def _internal_hand(side: str, omega_axle: float, running_gear: str, scale: float
 
 
 @pytest.mark.parametrize('name', ['packbot_track', 'packbot_6wheel'])
-def test_internal_power_is_eq_7_2_at_motor_speed(name, sandy, short_route):
+def test_internal_power_is_eq_7_2_at_motor_speed(name: str, sandy: Terrain, short_route: Route) -> None:
     """Internal power of each mission state is eq. 7.2 at w_m = 12 w_axle: chain for both, track term
     only for tracks (ch. 7.2.3), Table 7.1 as torques (the project's reading, internal.py)."""
     vehicle = load_vehicle(name)
@@ -109,7 +109,7 @@ def test_internal_power_is_eq_7_2_at_motor_speed(name, sandy, short_route):
     assert result.power_internal_W[0] == pytest.approx(straight, rel=0.2)
 
 
-def test_mission_energy_is_both_sides_signed_times_duration(sandy, short_route):
+def test_mission_energy_is_both_sides_signed_times_duration(sandy: Terrain, short_route: Route) -> None:
     """Energy = sum over segments of (P_left + P_right) x length / V; the inner track brakes in the
     1 m turn and its (negative) power is credited: the DES 70/10 is 4-quadrant and 'can absorb power
     from the motor when the vehicle is performing regenerative braking' (ch. 7.1.2)."""
@@ -132,7 +132,7 @@ def test_mission_energy_is_both_sides_signed_times_duration(sandy, short_route):
     assert result.energy_internal_J + result.energy_terrain_J == pytest.approx(result.energy_J, rel=1e-12)
 
 
-def test_table_7_1_reading_scales_only_the_internal_energy(sandy, short_route):
+def test_table_7_1_reading_scales_only_the_internal_energy(sandy: Terrain, short_route: Route) -> None:
     """The alternative reading (Table 7.1 as motor currents, A s/rad and A) is the project's literal
     eq. 7.1 reading (N m s/rad, N m) times K_t: internal energy x K_t, terrain energy unchanged.
     This is the basis of the comparison of readings in docs/PHYSICS_NOTES.md (the only model input

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,28 +13,30 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.missions.design import design_study, grid
 from skidsteer_power.missions.routes import patrol
 from skidsteer_power.missions.sensitivity import SOIL_PARAMETERS, sensitivity
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')
 
 
 @pytest.fixture(scope='module')
-def track_sensitivity(sandy):
+def track_sensitivity(sandy: Terrain) -> dict[str, Any]:
     return sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=2)
 
 
-def test_sensitivity_cases_and_parallel_equals_serial(track_sensitivity, sandy):
+def test_sensitivity_cases_and_parallel_equals_serial(
+    track_sensitivity: dict[str, Any], sandy: Terrain
+) -> None:
     changes = track_sensitivity['results']['packbot_track']['changes_percent']
     assert set(changes) == {f'{p}{s}' for p in SOIL_PARAMETERS for s in '+-'} | {'all+', 'all-'}
     serial = sensitivity([load_vehicle('packbot_track')], sandy, patrol(), workers=1)
     assert serial['results'] == track_sensitivity['results']
 
 
-def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity):
+def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity: dict[str, Any]) -> None:
     # eq. 2.6: z0 = (p / (kc/b + kphi))^(1/n); +1 % kphi on Table 8.2's sandy soil, b = 0.074 m
     k0 = 900 / 0.074 + 1523400
     k1 = 900 / 0.074 + 1.01 * 1523400
@@ -45,7 +49,7 @@ def test_sensitivity_sinkage_to_kphi_hand_calculation(track_sensitivity):
     assert changes['phi+']['drawbar_pull_ratio'] > 0
 
 
-def test_sensitivity_cli(tmp_path, capsys):
+def test_sensitivity_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     png = tmp_path / 'sens.png'
     argv = ['sensitivity', '--vehicle', 'packbot_6wheel', '--route', 'patrol', '--workers', '1',
             '--plot', str(png), '--json']  # fmt: skip
@@ -63,7 +67,7 @@ def test_sensitivity_cli(tmp_path, capsys):
     assert exit_.value.code == 2
 
 
-def test_grid_is_table_8_4():
+def test_grid_is_table_8_4() -> None:
     rows = grid()
     assert len(rows) == 729  # 3^6
     assert {r['configuration'] for r in rows} == {'track', '4-wheel', '6-wheel'}
@@ -75,7 +79,9 @@ def test_grid_is_table_8_4():
 
 
 @pytest.mark.slow
-def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
+def test_design_study_deterministic_and_chapter_8_3(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], sandy: Terrain
+) -> None:
     png = tmp_path / 'design.png'
     assert main(['design-study', '--plot', str(png), '--json']) == 0
     first = json.loads(capsys.readouterr().out)
@@ -92,13 +98,13 @@ def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
         assert best['merit'] == max(c['merit'] for c in eligible)
     # ch. 8.3: driving straight, wheel base and tread do not change a wheeled design's power and
     # mobility, nor tread a tracked design's (Figure 8.16 has fewer distinct points)
-    groups: dict[tuple, list[float]] = {}
+    groups: dict[tuple[object, ...], list[float]] = {}
     for c in first['candidates']:
         if c['converged']:
-            key = (c['configuration'], c['mass_kg'], c['width_m'], c['radius_m'])
+            group: tuple[object, ...] = (c['configuration'], c['mass_kg'], c['width_m'], c['radius_m'])
             if c['configuration'] == 'track':
-                key += (c['length_or_wheelbase_m'],)
-            groups.setdefault(key, []).append(c['power_straight_W'])
+                group += (c['length_or_wheelbase_m'],)
+            groups.setdefault(group, []).append(c['power_straight_W'])
     for powers in groups.values():
         assert np.ptp(powers) <= 1e-4 * max(powers)
     # turning: some 4-wheel designs consume more than every track design (ch. 8.3)
@@ -114,7 +120,7 @@ def test_design_study_deterministic_and_chapter_8_3(tmp_path, capsys, sandy):
     assert ratio['track'] > max(ratio['4-wheel'], ratio['6-wheel'])
 
 
-def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases():
+def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases() -> None:
     from skidsteer_power.missions.sensitivity import derivatives
 
     base = dict.fromkeys(('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m'), 100.0)
@@ -127,7 +133,7 @@ def test_sensitivity_derivative_is_central_and_flags_non_smooth_cases():
     assert derivatives(base, None, dict.fromkeys(base, 99.0), 0.01)['energy_J']['status'] == 'failed'
 
 
-def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
+def test_sensitivity_reports_smooth_derivatives(track_sensitivity: dict[str, Any]) -> None:
     derivs = track_sensitivity['results']['packbot_track']['derivatives']
     assert set(derivs) == {*SOIL_PARAMETERS, 'all'}
     # eq. 2.6 above: sinkage falls with kphi, about -0.90 % per % (central difference)
@@ -135,7 +141,7 @@ def test_sensitivity_reports_smooth_derivatives(track_sensitivity):
     assert derivs['kphi']['max_sinkage_m']['derivative'] == pytest.approx(-0.9, abs=0.02)
 
 
-def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_study():
+def test_a_wheel_that_cannot_roll_free_is_an_unsolved_candidate_not_a_failed_study() -> None:
     """A sampled soil can be too weak for a small wheel to roll free: on sandy_soil with phi = 20 deg
     and c = 200 Pa no slip in [-1, 1] gives a 0.08 m x 0.05 m wheel zero drawbar pull (eq. 2.29 has no
     root; FESS's free-wheel load table, models/fess.py, cannot be built). The candidate is reported

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
+from typing import TypedDict, overload
 
 import cv2
 import numpy as np
@@ -21,9 +23,12 @@ import yaml
 from skidsteer_power.cli.main import main
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.mocap import (
+    CameraCalibration,
+    GroundPlane,
     TargetConfig,
     TargetDetection,
     TargetMiss,
+    TrackResult,
     calibrate_camera,
     detect_target,
     estimate_ground_plane,
@@ -37,6 +42,18 @@ from skidsteer_power.mocap import (
 from skidsteer_power.mocap import synthetic as syn
 from skidsteer_power.mocap.target import target_mask
 from skidsteer_power.mocap.tracking import open_frames
+
+
+class Scene(TypedDict):
+    """The files of the synthetic experiment (the ``scene`` fixture)."""
+
+    root: Path
+    calibration_images: list[Path]
+    plane_image: Path
+    video: Path
+    folder: Path
+    n_frames: int
+
 
 CAMERA = syn.SyntheticCamera(
     camera_matrix=np.array([[520.0, 0.0, 322.0], [0.0, 520.0, 238.0], [0.0, 0.0, 1.0]]),
@@ -56,7 +73,15 @@ SAMPLE_HZ = 5.0
 NO_TARGET_FRAME = 60  # a sampled frame (every 6th at 30 fps -> 5 Hz) with the disc hidden
 
 
-def disc_position(t_s: np.ndarray | float) -> tuple:
+@overload
+def disc_position(t_s: float) -> tuple[float, float]: ...
+
+
+@overload
+def disc_position(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def disc_position(t_s: np.ndarray | float) -> tuple[np.ndarray | float, np.ndarray | float]:
     """True centre of the disc on the plane [m] at time t [s]."""
     angle = PHASE0_RAD + SPEED_M_S / RADIUS_M * np.asarray(t_s)
     return CENTRE_M[0] + RADIUS_M * np.cos(angle), CENTRE_M[1] + RADIUS_M * np.sin(angle)
@@ -90,7 +115,7 @@ VIEW = syn.look_at(np.array([0.7, 0.125, -1.3]), np.array([0.2, 0.125, 0.0]), np
 
 
 @pytest.fixture(scope='module')
-def scene(tmp_path_factory):
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     """Files of the synthetic experiment: calibration images, plane image, video, image folder."""
     root = tmp_path_factory.mktemp('mocap')
     board = syn.checkerboard(PATTERN, SQUARE_M)
@@ -114,7 +139,7 @@ def scene(tmp_path_factory):
         return np.clip(image + noise.normal(0, 2.0, image.shape), 0, 255).astype(np.uint8)
 
     video = root / 'run.avi'
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), FPS, CAMERA.image_size)
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*'MJPG'), FPS, CAMERA.image_size)
     assert writer.isOpened()
     n_frames = int(DURATION_S * FPS) + 1
     folder = root / 'frames'
@@ -136,19 +161,19 @@ def scene(tmp_path_factory):
 
 
 @pytest.fixture(scope='module')
-def calibration(scene):
+def calibration(scene: Scene) -> CameraCalibration:
     return calibrate_camera(scene['calibration_images'], SQUARE_M, PATTERN)
 
 
 @pytest.fixture(scope='module')
-def plane(scene, calibration):
+def plane(scene: Scene, calibration: CameraCalibration) -> GroundPlane:
     return estimate_ground_plane(cv2.imread(str(scene['plane_image'])), calibration, PATTERN, SQUARE_M)
 
 
 # -- calibration -------------------------------------------------------------------------------------
 
 
-def test_calibration_recovers_the_camera(calibration):
+def test_calibration_recovers_the_camera(calibration: CameraCalibration) -> None:
     fx, fy = calibration.focal_px
     assert fx == pytest.approx(520.0, rel=0.01)
     assert fy == pytest.approx(520.0, rel=0.01)
@@ -180,23 +205,27 @@ def big_facing_board() -> np.ndarray:
     )
 
 
-def test_undistortion_straightens_the_board(calibration):
+def test_undistortion_straightens_the_board(calibration: CameraCalibration) -> None:
     image = big_facing_board()
     assert worst_row_bend_px(image) > 2.0
     assert worst_row_bend_px(undistort_image(image, calibration)) < 0.5
 
 
-def test_cli_undistort(tmp_path, calibration):
+def test_cli_undistort(tmp_path: Path, calibration: CameraCalibration) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
     cv2.imwrite(str(tmp_path / 'board.png'), big_facing_board())
     argv = ['mocap', 'undistort', str(tmp_path / 'board.png'), '--calibration', str(calibration_file),
             '--out', str(tmp_path / 'straight.png')]  # fmt: skip
     assert run_cli(argv) == 0
-    assert worst_row_bend_px(cv2.imread(str(tmp_path / 'straight.png'))) < 0.5
+    straight = cv2.imread(str(tmp_path / 'straight.png'))
+    assert straight is not None
+    assert worst_row_bend_px(straight) < 0.5
 
 
-def test_cli_undistort_bad_output_name(tmp_path, calibration, capsys):
+def test_cli_undistort_bad_output_name(
+    tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
+) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
     cv2.imwrite(str(tmp_path / 'board.png'), np.zeros((480, 640, 3), np.uint8))
@@ -206,7 +235,7 @@ def test_cli_undistort_bad_output_name(tmp_path, calibration, capsys):
     assert 'could not write' in capsys.readouterr().err
 
 
-def test_calibration_yaml_round_trip(tmp_path, calibration):
+def test_calibration_yaml_round_trip(tmp_path: Path, calibration: CameraCalibration) -> None:
     path = tmp_path / 'camera.yaml'
     save_calibration(path, calibration)
     loaded = load_calibration(path)
@@ -217,25 +246,25 @@ def test_calibration_yaml_round_trip(tmp_path, calibration):
     assert loaded.square_size_m == SQUARE_M
 
 
-def test_no_corners_is_a_clear_error(tmp_path):
+def test_no_corners_is_a_clear_error(tmp_path: Path) -> None:
     blank = tmp_path / 'sand.png'
     cv2.imwrite(str(blank), syn.render(CAMERA, *VIEW, syn.sand(), supersample=1))
     with pytest.raises(InputError, match='found in 0 of 3 images'):
         calibrate_camera([blank] * 3, SQUARE_M, PATTERN)
 
 
-def test_wrong_pattern_rejects_images(scene):
+def test_wrong_pattern_rejects_images(scene: Scene) -> None:
     with pytest.raises(InputError, match=r'7x6 inner corners found in 0 of 8'):
         calibrate_camera(scene['calibration_images'], SQUARE_M, (7, 6))
 
 
 @pytest.mark.parametrize('text', ['9by6', '9x', '1x6', 'x', '', '9x6x2', '-9x6'])
-def test_bad_pattern_string(text):
+def test_bad_pattern_string(text: str) -> None:
     with pytest.raises(InputError, match='bad pattern'):
         parse_pattern(text)
 
 
-def test_pattern_string():
+def test_pattern_string() -> None:
     assert parse_pattern('9x6') == (9, 6)
     assert parse_pattern(' 7X5 ') == (7, 5)
 
@@ -248,14 +277,14 @@ def test_pattern_string():
         (': [\n', ConfigError),
     ],
 )
-def test_bad_calibration_file(tmp_path, content, error):
+def test_bad_calibration_file(tmp_path: Path, content: str, error: type[Exception]) -> None:
     path = tmp_path / 'bad.yaml'
     path.write_text(content)
     with pytest.raises(error, match=r'bad\.yaml'):
         load_calibration(path)
 
 
-def test_missing_calibration_file(tmp_path):
+def test_missing_calibration_file(tmp_path: Path) -> None:
     with pytest.raises(InputError, match='not found'):
         load_calibration(tmp_path / 'none.yaml')
 
@@ -263,7 +292,7 @@ def test_missing_calibration_file(tmp_path):
 # -- ground plane and target -------------------------------------------------------------------------
 
 
-def test_ground_plane_maps_pixels_to_metres(calibration, plane):
+def test_ground_plane_maps_pixels_to_metres(calibration: CameraCalibration, plane: GroundPlane) -> None:
     # Project known plane points with the TRUE camera, map them back with the estimated one.
     truth = np.array([[0.0, 0.0, 0.0], [0.4, 0.25, 0.0], [0.7, -0.3, 0.0], [-0.3, 0.6, 0.0]])
     pixels, _ = cv2.projectPoints(truth, *VIEW, CAMERA.camera_matrix, CAMERA.dist_coeffs)
@@ -273,19 +302,19 @@ def test_ground_plane_maps_pixels_to_metres(calibration, plane):
     assert plane.camera_height_m == pytest.approx(1.3, rel=0.01)
 
 
-def test_plane_without_board_is_a_clear_error(calibration):
+def test_plane_without_board_is_a_clear_error(calibration: CameraCalibration) -> None:
     with pytest.raises(InputError, match='no 9x6 checkerboard found in the plane image'):
         estimate_ground_plane(
             syn.render(CAMERA, *VIEW, syn.sand(), supersample=1), calibration, PATTERN, SQUARE_M
         )
 
 
-def test_plane_image_of_another_size_is_refused(calibration):
+def test_plane_image_of_another_size_is_refused(calibration: CameraCalibration) -> None:
     with pytest.raises(InputError, match='calibrated at 640x480'):
         estimate_ground_plane(np.zeros((240, 320, 3), np.uint8), calibration, PATTERN, SQUARE_M)
 
 
-def test_target_detected_and_sand_rejected():
+def test_target_detected_and_sand_rejected() -> None:
     rvec, tvec = VIEW
     background = syn.render(CAMERA, rvec, tvec, syn.sand(), supersample=1)
     frame = syn.render_disc_frame(background, CAMERA, rvec, tvec, syn.sand(), (0.3, 0.2), DISC_RADIUS_M)
@@ -299,7 +328,7 @@ def test_target_detected_and_sand_rejected():
     assert 'no target pixels' in miss.reason
 
 
-def test_small_or_elongated_blob_is_refused():
+def test_small_or_elongated_blob_is_refused() -> None:
     image = np.full((100, 100, 3), (128, 178, 194), np.uint8)
     image[40:43, 40:43] = (35, 30, 200)
     assert 'px <' in detect_target(image, TargetConfig(min_area_px=30)).reason
@@ -307,7 +336,7 @@ def test_small_or_elongated_blob_is_refused():
     assert 'not round' in detect_target(image, TargetConfig()).reason
 
 
-def test_bad_target_config():
+def test_bad_target_config() -> None:
     with pytest.raises(ConfigError, match='red_min'):
         TargetConfig(red_min=300)
     with pytest.raises(ConfigError, match='min_roundness'):
@@ -317,7 +346,7 @@ def test_bad_target_config():
 # -- tracking ----------------------------------------------------------------------------------------
 
 
-def check_run(result, *, expected_samples: int, video_frames_per_index: int = 1) -> None:
+def check_run(result: TrackResult, *, expected_samples: int, video_frames_per_index: int = 1) -> None:
     truth_x, truth_y = disc_position(result.time_s)
     error = np.hypot(result.xy_m[:, 0] - truth_x, result.xy_m[:, 1] - truth_y)
     assert error.max() < 0.005  # trace within 5 mm
@@ -332,7 +361,9 @@ def check_run(result, *, expected_samples: int, video_frames_per_index: int = 1)
     assert [index * video_frames_per_index for index, _ in result.skipped] == [NO_TARGET_FRAME]
 
 
-def test_track_video_sampled_at_5_hz(scene, calibration, plane):
+def test_track_video_sampled_at_5_hz(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     result = track(scene['video'], calibration, plane, sample_hz=SAMPLE_HZ)
     assert result.fps == pytest.approx(FPS)
     # frames 0, 6, ..., 150 are sampled (26), the one at frame 60 has no target
@@ -340,28 +371,32 @@ def test_track_video_sampled_at_5_hz(scene, calibration, plane):
     check_run(result, expected_samples=25)
 
 
-def test_track_image_folder(scene, calibration, plane):
+def test_track_image_folder(scene: Scene, calibration: CameraCalibration, plane: GroundPlane) -> None:
     result = track(scene['folder'], calibration, plane, fps=SAMPLE_HZ)
     # the folder holds every 6th video frame, so frame 60 of the video is image 10
     check_run(result, expected_samples=25, video_frames_per_index=6)
 
 
-def test_folder_needs_fps(scene, calibration, plane):
+def test_folder_needs_fps(scene: Scene, calibration: CameraCalibration, plane: GroundPlane) -> None:
     with pytest.raises(InputError, match='pass --fps'):
         track(scene['folder'], calibration, plane)
 
 
-def test_sample_rate_above_frame_rate_is_refused(scene, calibration, plane):
+def test_sample_rate_above_frame_rate_is_refused(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     with pytest.raises(InputError, match='at most the frame rate'):
         track(scene['video'], calibration, plane, sample_hz=60.0)
 
 
-def test_too_few_detections_is_a_clear_error(scene, calibration, plane):
+def test_too_few_detections_is_a_clear_error(
+    scene: Scene, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     with pytest.raises(InputError, match='target found in 0 of'):
         track(scene['video'], calibration, plane, target=TargetConfig(min_area_px=5000))
 
 
-def test_missing_source(tmp_path, calibration, plane):
+def test_missing_source(tmp_path: Path, calibration: CameraCalibration, plane: GroundPlane) -> None:
     with pytest.raises(InputError, match='not found'):
         track(tmp_path / 'nothing.avi', calibration, plane)
 
@@ -374,10 +409,11 @@ def run_cli(argv: list[str]) -> int:
     try:
         return main(argv)
     except SystemExit as stop:
-        return int(stop.code)
+        assert isinstance(stop.code, int), stop.code
+        return stop.code
 
 
-def test_cli_calibrate_then_track(scene, tmp_path, capsys):
+def test_cli_calibrate_then_track(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     argv = ['mocap', 'calibrate', *map(str, scene['calibration_images']), '--square-size', '0.05',
             '--pattern', '9x6', '--out', str(calibration_file), '--json']  # fmt: skip
@@ -415,7 +451,13 @@ def test_cli_calibrate_then_track(scene, tmp_path, capsys):
          'calibration file not found'),
     ],
 )  # fmt: skip
-def test_cli_errors_are_one_line(argv, message, capsys, tmp_path, monkeypatch):
+def test_cli_errors_are_one_line(
+    argv: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     monkeypatch.chdir(tmp_path)
     assert run_cli(argv) == 2
     err = capsys.readouterr().err
@@ -424,7 +466,9 @@ def test_cli_errors_are_one_line(argv, message, capsys, tmp_path, monkeypatch):
     assert 'Traceback' not in err
 
 
-def test_cli_plane_size_mismatch(scene, tmp_path, calibration, capsys):
+def test_cli_plane_size_mismatch(
+    scene: Scene, tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
+) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
     small = tmp_path / 'small.png'
@@ -442,13 +486,13 @@ def test_cli_plane_size_mismatch(scene, tmp_path, calibration, capsys):
     assert 'calibrated at 640x480' in capsys.readouterr().err
 
 
-def test_k3_is_fitted_only_on_request(scene):
+def test_k3_is_fitted_only_on_request(scene: Scene) -> None:
     with_k3 = calibrate_camera(scene['calibration_images'], SQUARE_M, PATTERN, use_k3=True)
     assert with_k3.dist_coeffs[4] != 0.0
     assert with_k3.focal_px[0] == pytest.approx(520.0, rel=0.01)
 
 
-def test_sampling_picks_the_frame_nearest_each_instant(tmp_path):
+def test_sampling_picks_the_frame_nearest_each_instant(tmp_path: Path) -> None:
     # 10 images at 10 frames/s sampled at 4 Hz: instants 0, 0.25, 0.5, 0.75 s; the nearest frames
     # (ties to the earlier one) are 0 (0 s), 2 (0.2 s), 5 (0.5 s) and 7 (0.7 s).
     for index in range(10):
@@ -458,21 +502,25 @@ def test_sampling_picks_the_frame_nearest_each_instant(tmp_path):
     assert [frame.index for frame in frames] == [0, 2, 5, 7]
 
 
-def test_folder_images_in_natural_order(tmp_path):
+def test_folder_images_in_natural_order(tmp_path: Path) -> None:
     for index in (10, 2, 1):
         cv2.imwrite(str(tmp_path / f'img_{index}.png'), np.full((4, 4, 3), index, np.uint8))
     frames, _, _ = open_frames(tmp_path, fps=1.0)
     assert [int(frame.image[0, 0, 0]) for frame in frames] == [1, 2, 10]
 
 
-def test_unreadable_video_is_a_clear_error(tmp_path, calibration, plane):
+def test_unreadable_video_is_a_clear_error(
+    tmp_path: Path, calibration: CameraCalibration, plane: GroundPlane
+) -> None:
     bogus = tmp_path / 'run.avi'
     bogus.write_text('not a video')
     with pytest.raises(InputError, match='cannot open video'):
         track(bogus, calibration, plane)
 
 
-def test_cli_track_table_output(scene, tmp_path, calibration, capsys):
+def test_cli_track_table_output(
+    scene: Scene, tmp_path: Path, calibration: CameraCalibration, capsys: pytest.CaptureFixture[str]
+) -> None:
     calibration_file = tmp_path / 'camera.yaml'
     save_calibration(calibration_file, calibration)
     argv = ['mocap', 'track', str(scene['folder']), '--calibration', str(calibration_file), '--plane',
@@ -483,7 +531,7 @@ def test_cli_track_table_output(scene, tmp_path, calibration, capsys):
     assert lines['samples'] == ['25']
 
 
-def test_target_mask_is_the_rgb_and_saturation_thresholds():
+def test_target_mask_is_the_rgb_and_saturation_thresholds() -> None:
     # Brute force over the whole image: R >= 120, G <= 100, B <= 100 and HSV S >= 120 (OpenCV's
     # 8-bit S = 255 (max - min) / max), on random colours plus a red patch.
     rng = np.random.default_rng(2)
@@ -496,7 +544,7 @@ def test_target_mask_is_the_rgb_and_saturation_thresholds():
     np.testing.assert_array_equal(target_mask(image, TargetConfig()) > 0, expected)
 
 
-def test_disc_cut_by_the_border_is_refused():
+def test_disc_cut_by_the_border_is_refused() -> None:
     image = np.full((100, 100, 3), (128, 178, 194), np.uint8)
     cv2.circle(image, (3, 50), 15, (35, 30, 200), -1)
     assert 'border' in detect_target(image, TargetConfig()).reason

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from typing import Any
 
 import pytest
 
@@ -24,9 +25,10 @@ KEYS = (
 )
 
 
-def _solve(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
+def _solve(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, Any]:
     assert main(['solve', *argv, '--json']) == 0
-    return json.loads(capsys.readouterr().out)
+    loaded: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return loaded
 
 
 @pytest.mark.parametrize('model', sorted(models.MODELS))

@@ -17,7 +17,9 @@ RADII = np.logspace(0.0, np.log10(500.0), 16)
 SPEEDS = np.linspace(0.1, 1.5, 8)[:, None]
 
 
-def _ground_frame_displacement(x, y, s0, omega, speed, radius, length, r):
+def _ground_frame_displacement(
+    x: float, y: float, s0: float, omega: float, speed: float, radius: float, length: float, r: float
+) -> np.ndarray:
     """Shear displacement by following the element on the ground (independent of the sinc forms).
 
     Hull pose at time t: heading a = yaw t about the fixed turning centre O; CG at Rot(a) (-s0, -R)
@@ -27,7 +29,7 @@ def _ground_frame_displacement(x, y, s0, omega, speed, radius, length, r):
     t = (length / 2 - x) / (r * omega)
     a = yaw * t
 
-    def rot(angle, vec):
+    def rot(angle: float, vec: np.ndarray) -> np.ndarray:
         c, s = np.cos(angle), np.sin(angle)
         return np.array([c * vec[0] - s * vec[1], s * vec[0] + c * vec[1]])
 

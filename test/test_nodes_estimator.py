@@ -10,19 +10,25 @@ from __future__ import annotations
 import math
 import time
 import uuid
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
 from test_estimator_core import FixedPowerPredictor
 
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 from skidsteer_power.powertrain import Battery
 
@@ -30,13 +36,17 @@ from skidsteer_power.powertrain import Battery
 class Rig:
     """A power_estimator in its own namespace plus a probe node that publishes and records."""
 
-    def __init__(self, context, tmp_path, predictor=None, **params) -> None:
+    pub_path: Publisher  # nav_msgs/Path on plan: set by the path-energy tests that publish plans
+
+    def __init__(
+        self, context: Context, tmp_path: Path, predictor: Predictor | None = None, **params: object
+    ) -> None:
         self.context = context
         self.namespace = f'pe_{uuid.uuid4().hex[:8]}'
         self.tmp_path = tmp_path
         self.executor = SingleThreadedExecutor(context=context)
         self.probe = rclpy.create_node(f'probe_{self.namespace}', namespace=self.namespace, context=context)
-        self.received: dict[str, list] = {}
+        self.received: dict[str, list[Any]] = {}
         for topic, kind in (
             ('power/predicted', JointState),
             ('power/summary', DiagnosticArray),
@@ -52,14 +62,23 @@ class Rig:
         self.pub_joint = self.probe.create_publisher(JointState, 'joint_states', 100)
         self.pub_clock = self.probe.create_publisher(Clock, '/clock', 10)
         self.executor.add_node(self.probe)
-        self.node = None
+        self._node: PowerEstimator | None = None
         self.start(predictor, **params)
 
-    def start(self, predictor=None, **params) -> PowerEstimator:
-        defaults = {'state_file': str(self.tmp_path / 'energy.json'), 'publish_period_s': 0.05}
+    @property
+    def node(self) -> PowerEstimator:
+        """The running estimator (between start and stop)."""
+        assert self._node is not None, 'the estimator is stopped'
+        return self._node
+
+    def start(self, predictor: Predictor | None = None, **params: object) -> PowerEstimator:
+        defaults: dict[str, object] = {
+            'state_file': str(self.tmp_path / 'energy.json'),
+            'publish_period_s': 0.05,
+        }
         defaults.update(params)
         overrides = [Parameter(k, value=v) for k, v in defaults.items()]
-        self.node = PowerEstimator(
+        self._node = PowerEstimator(
             predictor, namespace=self.namespace, context=self.context, parameter_overrides=overrides
         )
         self.executor.add_node(self.node)
@@ -74,15 +93,15 @@ class Rig:
     def stop(self) -> None:
         self.executor.remove_node(self.node)
         self.node.destroy_node()
-        self.node = None
+        self._node = None
 
     def close(self) -> None:
-        if self.node is not None:
+        if self._node is not None:
             self.stop()
         self.executor.shutdown()
         self.probe.destroy_node()
 
-    def spin_until(self, condition, timeout_s: float = 10.0) -> None:
+    def spin_until(self, condition: Callable[[], object], timeout_s: float = 10.0) -> None:
         deadline = time.monotonic() + timeout_s
         while not condition():
             if time.monotonic() > deadline:
@@ -95,7 +114,9 @@ class Rig:
         self.pub_clock.publish(Clock(clock=stamp))
         self.spin_until(lambda: abs(self.node.now_s() - t_s) < 1e-6)
 
-    def run_clock(self, start_s: float, condition, step_s: float = 0.05, limit_s: float = 30.0) -> float:
+    def run_clock(
+        self, start_s: float, condition: Callable[[], object], step_s: float = 0.05, limit_s: float = 30.0
+    ) -> float:
         """Advance sim time from ``start_s`` in steps (timers fire as it moves) until ``condition``;
         returns the time reached."""
         t = start_s
@@ -108,12 +129,12 @@ class Rig:
             t += step_s
         return t
 
-    def joint_state(self, t_s: float, velocity, effort) -> None:
+    def joint_state(self, t_s: float, velocity: Iterable[float], effort: Iterable[float]) -> None:
         msg = JointState(name=['left_motor', 'right_motor'], velocity=list(velocity), effort=list(effort))
         self.pub_joint.publish(msg)
         self.spin_until(lambda: self.node.core.joint_fresh.last_s == pytest.approx(t_s, abs=1e-9))
 
-    def command(self, speed: float, yaw_rate: float, stamp=None) -> None:
+    def command(self, speed: float, yaw_rate: float, stamp: Time | None = None) -> None:
         twist = Twist()
         twist.linear.x, twist.angular.z = speed, yaw_rate
         if not self.stamped:
@@ -137,7 +158,7 @@ def drive_measured(rig: Rig, seconds: float, rate_hz: float = 10.0) -> None:
         rig.joint_state(t, (300.0, 300.0), (0.228, 0.228))
 
 
-def test_energy_from_measured_power_matches_the_closed_form(rig_factory):
+def test_energy_from_measured_power_matches_the_closed_form(rig_factory: Callable[..., Rig]) -> None:
     """Both motors at 300 rad/s and Kt I = 0.228 N m (I = 2 A): bus power per side
     (0.228 x 300 + 0.710 x 2^2) / 0.92 = 77.43478 W (EC-45 Appendix B, DES 70/10 Appendix A; the hand
     calculation of test_measured_power_by_hand), 154.8696 W in all. Samples at 10 Hz on sim time from
@@ -159,7 +180,7 @@ def test_energy_from_measured_power_matches_the_closed_form(rig_factory):
     assert battery.percentage < 1.0 and battery.voltage > 40.0
 
 
-def test_energy_state_survives_a_restart(rig_factory, tmp_path):
+def test_energy_state_survives_a_restart(rig_factory: Callable[..., Rig], tmp_path: Path) -> None:
     rig = rig_factory(FixedPowerPredictor(999.0), use_sim_time=True, save_period_s=100.0)
     rig.set_clock(0.0)
     drive_measured(rig, 5.0)
@@ -178,19 +199,22 @@ def test_energy_state_survives_a_restart(rig_factory, tmp_path):
     assert rig.node.core.energy.energy_J == pytest.approx(energy)
 
 
-def test_periodic_save_writes_the_file(rig_factory, tmp_path):
+def test_periodic_save_writes_the_file(rig_factory: Callable[..., Rig], tmp_path: Path) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), save_period_s=0.1)
     rig.command(0.2, 0.0)
     rig.spin_until(lambda: (tmp_path / 'energy.json').exists())
     from skidsteer_power.estimator.persistence import load_state
 
-    assert load_state(tmp_path / 'energy.json')['vehicle'] == 'test_robot_track'
+    state = load_state(tmp_path / 'energy.json')
+    assert state is not None and state['vehicle'] == 'test_robot_track'
 
 
 @pytest.mark.parametrize(
     ('speed', 'yaw_rate'), [(math.nan, 0.0), (0.1, math.inf), (-math.inf, 0.0), (40.0, 0.0), (0.1, 1e4)]
 )
-def test_bad_cmd_vel_is_rejected_and_counted(rig_factory, speed, yaw_rate):
+def test_bad_cmd_vel_is_rejected_and_counted(
+    rig_factory: Callable[..., Rig], speed: float, yaw_rate: float
+) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.command(speed, yaw_rate)
     rig.spin_until(lambda: rig.node.core.rejects.counts['cmd_vel'] == 1)
@@ -213,7 +237,9 @@ def test_bad_cmd_vel_is_rejected_and_counted(rig_factory, speed, yaw_rate):
         (['left_motor', 'right_motor'], [], []),
     ],
 )
-def test_bad_joint_states_are_rejected_and_counted(rig_factory, names, velocity, effort):
+def test_bad_joint_states_are_rejected_and_counted(
+    rig_factory: Callable[..., Rig], names: list[str], velocity: list[float], effort: list[float]
+) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), diagnostics_period_s=0.05)
     rig.pub_joint.publish(JointState(name=names, velocity=velocity, effort=effort))
     rig.spin_until(lambda: rig.node.core.rejects.counts['joint_states'] == 1)
@@ -224,18 +250,18 @@ def test_bad_joint_states_are_rejected_and_counted(rig_factory, names, velocity,
     assert values['rejected_joint_states'] == '1' and values['energy_source'] == 'none'
 
 
-def stamp_s(msg) -> float:
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+def stamp_s(msg: DiagnosticArray) -> float:
+    return float(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
 
-def test_stale_inputs_are_flagged(rig_factory):
+def test_stale_inputs_are_flagged(rig_factory: Callable[..., Rig]) -> None:
     rig = rig_factory(FixedPowerPredictor(80.0), use_sim_time=True, diagnostics_period_s=0.1)
     rig.set_clock(1.0)
     rig.command(0.2, 0.0)
     rig.spin_until(lambda: rig.received['power/predicted'])
     diagnostics = rig.received['diagnostics']
 
-    def published_after(t_s: float):
+    def published_after(t_s: float) -> Callable[[], bool]:
         return lambda: any(stamp_s(m) > t_s for m in diagnostics)
 
     rig.run_clock(1.05, published_after(1.01), step_s=0.01, limit_s=0.3)
@@ -251,7 +277,9 @@ def test_stale_inputs_are_flagged(rig_factory):
     assert values['energy_source'] == 'none' and values['cmd_vel_stale'] == 'true'
 
 
-def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(rig_factory, tmp_path):
+def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(
+    rig_factory: Callable[..., Rig], tmp_path: Path
+) -> None:
     (tmp_path / 'energy.json').write_text('{"format_version": 1, "vehicle": "packbot_track", "battery": {}}')
     rig = rig_factory(FixedPowerPredictor(80.0), initial_soc=0.5)
     assert rig.node.core.battery.soc == 0.5  # not restored: the file belongs to another vehicle
@@ -267,7 +295,9 @@ def test_a_foreign_or_torn_state_file_is_reported_and_a_fresh_battery_used(rig_f
      ('save_period_s', 0.0, 'save_period_s must be within 0.1 .. 86400'),
      ('vehicle', 'no_such_robot', 'no_such_robot'), ('max_speed_m_s', math.nan, 'max_speed_m_s')],
 )  # fmt: skip
-def test_bad_start_parameters_are_one_clear_error(ros_context, name, value, match):
+def test_bad_start_parameters_are_one_clear_error(
+    ros_context: Context, name: str, value: float | str, match: str
+) -> None:
     from skidsteer_power.errors import SkidsteerError
 
     with pytest.raises(SkidsteerError, match=match):

@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 import rclpy
+from rclpy.context import Context
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
@@ -17,6 +21,7 @@ from std_srvs.srv import Trigger
 from test_estimator_core import FixedPowerPredictor
 from test_nodes_estimator import Rig, drive_measured
 
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -31,10 +36,10 @@ MEASURED_SIDE_W = 0.228 * 300 + 0.710 * 4
 
 
 @pytest.fixture
-def rigs(ros_context, tmp_path):
-    made = []
+def rigs(ros_context: Context, tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    made: list[Rig] = []
 
-    def make(predictor=None, **params):
+    def make(predictor: Predictor | None = None, **params: object) -> Rig:
         made.append(Rig(ros_context, tmp_path, predictor, **params))
         return made[-1]
 
@@ -51,7 +56,9 @@ def call_trigger(rig: Rig, name: str) -> Trigger.Response:
     return future.result()
 
 
-def test_reset_energy_fills_the_battery_zeroes_the_tallies_and_rewrites_the_state(rigs, tmp_path):
+def test_reset_energy_fills_the_battery_zeroes_the_tallies_and_rewrites_the_state(
+    rigs: Callable[..., Rig], tmp_path: Path
+) -> None:
     rig = rigs(FixedPowerPredictor(999.0), use_sim_time=True, save_period_s=100.0)
     rig.set_clock(0.0)
     drive_measured(rig, 5.0)
@@ -72,7 +79,7 @@ def _joint_states(velocity: float) -> JointState:
     return JointState(name=['left_motor', 'right_motor'], velocity=[velocity] * 2, effort=[0.228] * 2)
 
 
-def _publish_until_used(rig: Rig, publisher, velocity: float) -> None:
+def _publish_until_used(rig: Rig, publisher: Publisher, velocity: float) -> None:
     def used() -> bool:
         comparison = rig.node.core.comparison
         return comparison is not None and comparison.measured.omega_rad_s[0] == velocity
@@ -85,7 +92,7 @@ def _publish_until_used(rig: Rig, publisher, velocity: float) -> None:
     raise AssertionError(f'joint_states at {velocity} rad/s never used')
 
 
-def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs):
+def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False)
     best_effort = rig.probe.create_publisher(JointState, 'joint_states', qos_profile_sensor_data)
     reliable = rig.probe.create_publisher(JointState, 'joint_states', QoSProfile(depth=10))
@@ -98,10 +105,11 @@ def test_best_effort_and_reliable_joint_states_publishers_are_both_used(rigs):
 def _subscription_reliability(rig: Rig, topic: str) -> ReliabilityPolicy:
     infos = rig.probe.get_subscriptions_info_by_topic(f'/{rig.namespace}/{topic}')
     (info,) = [i for i in infos if i.node_name == 'power_estimator']
-    return info.qos_profile.reliability
+    reliability: ReliabilityPolicy = info.qos_profile.reliability
+    return reliability
 
 
-def test_subscriptions_are_best_effort_unless_overridden(rigs):
+def test_subscriptions_are_best_effort_unless_overridden(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False)
     rig.spin_until(lambda: rig.probe.get_subscriptions_info_by_topic(f'/{rig.namespace}/joint_states'))
     assert _subscription_reliability(rig, 'joint_states') == ReliabilityPolicy.BEST_EFFORT
@@ -118,12 +126,16 @@ def test_subscriptions_are_best_effort_unless_overridden(rigs):
     assert _subscription_reliability(rig, 'joint_states') == ReliabilityPolicy.RELIABLE
 
 
-def test_named_figures_per_message_and_summary_by_key(rigs):
+def test_named_figures_per_message_and_summary_by_key(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, publish_period_s=0.05)
     figures: dict[str, list[float]] = {}
     for topic, _ in (*COMMAND_FIGURES, *MEASUREMENT_FIGURES):
         figures[topic] = []
-        rig.probe.create_subscription(Float64, topic, lambda m, t=topic: figures[t].append(m.data), 10)
+
+        def on_figure(m: Float64, t: str = topic) -> None:
+            figures[t].append(m.data)
+
+        rig.probe.create_subscription(Float64, topic, on_figure, 10)
     rig.command(0.2, 0.0)
     rig.spin_until(lambda: all(figures[t] for t, _ in COMMAND_FIGURES))
     rig.pub_joint.publish(_joint_states(300.0))
@@ -142,11 +154,15 @@ def test_named_figures_per_message_and_summary_by_key(rigs):
     assert summary['measured_left_W'] == figures['power/measured_left_w'][-1]  # repr: exact
 
 
-def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs):
+def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs: Callable[..., Rig]) -> None:
     # sim time: the figure timer (figure_period_s = 1 s) fires only when the test moves the clock
     rig = rigs(FixedPowerPredictor(80.0), persist=False, use_sim_time=True, figure_period_s=1.0)
     figures: list[float] = []
-    rig.probe.create_subscription(Float64, 'power/predicted_battery_w', lambda m: figures.append(m.data), 100)
+
+    def on_figure(m: Float64) -> None:
+        figures.append(m.data)
+
+    rig.probe.create_subscription(Float64, 'power/predicted_battery_w', on_figure, 100)
     rig.set_clock(0.0)
     for i in range(20):
         rig.command(0.01 * (i + 1), 0.0)
@@ -167,7 +183,7 @@ def test_figures_are_the_latest_value_per_timer_tick_not_per_message(rigs):
     rig.spin_until(lambda: len(figures) == 2)
 
 
-def test_battery_state_follows_the_message_conventions(rigs):
+def test_battery_state_follows_the_message_conventions(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, publish_period_s=0.05)
     rig.spin_until(lambda: rig.received['battery/state'])
     idle = rig.received['battery/state'][-1]
@@ -185,7 +201,7 @@ def test_battery_state_follows_the_message_conventions(rigs):
     assert -1.7 < driving.current < -1.5
 
 
-def test_sensor_data_outputs_by_parameter(rigs):
+def test_sensor_data_outputs_by_parameter(rigs: Callable[..., Rig]) -> None:
     rig = rigs(FixedPowerPredictor(80.0), persist=False, output_qos='sensor_data')
     topic = f'/{rig.namespace}/power/predicted'
     rig.spin_until(lambda: rig.probe.get_publishers_info_by_topic(topic))
@@ -193,7 +209,7 @@ def test_sensor_data_outputs_by_parameter(rigs):
     assert info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
 
 
-def test_bad_qos_parameters_are_one_clear_error(ros_context):
+def test_bad_qos_parameters_are_one_clear_error(ros_context: Context) -> None:
     from skidsteer_power.errors import ConfigError
     from skidsteer_power.nodes.power_estimator import PowerEstimator
 
@@ -207,7 +223,7 @@ def test_bad_qos_parameters_are_one_clear_error(ros_context):
     assert rclpy.ok(context=ros_context)
 
 
-def test_battery_fields_status_follows_the_current_sign():
+def test_battery_fields_status_follows_the_current_sign() -> None:
     """Pure: drawing power discharges (current < 0 by the message's convention), regenerating
     charges (current > 0), nothing drawn is neither; unknown quantities are NaN, never 0."""
     from skidsteer_power.estimator.factory import battery_message_fields

@@ -4,39 +4,43 @@ and TwistStamped), reverse and spin in place, and a run-time terrain change."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
+from rclpy.context import Context
 from rclpy.parameter import Parameter
 from test_nodes_estimator import Rig
 
 from skidsteer_power.estimator.factory import map_predictor
+from skidsteer_power.estimator.prediction import Prediction
 from skidsteer_power.estimator.summary import SUMMARY_FIELDS, summary_from_key_values
 from skidsteer_power.nodes.power_estimator import PowerEstimator
 from skidsteer_power.vehicle import load_vehicle
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
 @pytest.fixture
-def rig(ros_context, tmp_path, cache_dir):
+def rig(ros_context: Context, tmp_path: Path, cache_dir: str) -> Iterator[Rig]:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand')
     yield rig
     rig.close()
 
 
-def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float):
+def expected(cache_dir: str, terrain: str, speed: float, yaw_rate: float) -> Prediction:
     predictor, _, _ = map_predictor(load_vehicle('test_robot_track'), terrain, cache_dir)
     return predictor.predict(speed, yaw_rate)
 
 
 @pytest.mark.parametrize(('speed', 'yaw_rate'), [(0.2, 0.1), (-0.2, 0.1), (0.0, 0.5), (0.1, -0.35)])
-def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate):
+def test_cmd_vel_round_trip(rig: Rig, cache_dir: str, speed: float, yaw_rate: float) -> None:
     """Forward, reverse, spin in place and a right turn all answer at once with the map's values."""
     rig.command(speed, yaw_rate)
     rig.received['power/summary'].clear()
@@ -64,7 +68,7 @@ def test_cmd_vel_round_trip(rig, cache_dir, speed, yaw_rate):
     assert math.isnan(summary['measured_battery_W'])  # no joint_states yet
 
 
-def test_twist_stamped_keeps_the_stamp(ros_context, tmp_path, cache_dir):
+def test_twist_stamped_keeps_the_stamp(ros_context: Context, tmp_path: Path, cache_dir: str) -> None:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, cmd_vel_stamped=True)
     try:
         rig.command(0.2, 0.0, stamp=Time(sec=1234, nanosec=5678))
@@ -78,7 +82,7 @@ def test_twist_stamped_keeps_the_stamp(ros_context, tmp_path, cache_dir):
         rig.close()
 
 
-def test_terrain_changes_at_run_time(rig, cache_dir):
+def test_terrain_changes_at_run_time(rig: Rig, cache_dir: str) -> None:
     rig.command(0.2, 0.1)
     rig.spin_until(lambda: rig.received['power/predicted'])
     on_sand = list(rig.received['power/predicted'][-1].effort)
@@ -95,18 +99,18 @@ def test_terrain_changes_at_run_time(rig, cache_dir):
     assert on_clay != pytest.approx(on_sand)
 
 
-def test_unknown_terrain_is_refused_and_the_map_kept(rig):
+def test_unknown_terrain_is_refused_and_the_map_kept(rig: Rig) -> None:
     result = rig.node.set_parameters([Parameter('terrain', value='lava_field')])[0]
     assert not result.successful and 'lava_field' in result.reason
     assert rig.node.get_parameter('terrain').value == 'dry_sand' and rig.node.terrain_name == 'dry_sand'
 
 
-def test_start_only_parameters_are_read_only_at_run_time(rig):
+def test_start_only_parameters_are_read_only_at_run_time(rig: Rig) -> None:
     result = rig.node.set_parameters([Parameter('vehicle', value='packbot_track')])[0]
     assert not result.successful and 'read at start only' in result.reason
 
 
-def test_parameter_file_matches_the_node_and_is_read(tmp_path, cache_dir):
+def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, cache_dir: str) -> None:
     """config/estimator.yaml lists every parameter with the node's default; a node started with a
     --params-file (here with terrain changed to clay) takes its values."""
     import yaml
@@ -130,15 +134,15 @@ def test_parameter_file_matches_the_node_and_is_read(tmp_path, cache_dir):
         rclpy.try_shutdown(context=context)
 
 
-def test_predicted_twist_and_odometry(rig, cache_dir):
+def test_predicted_twist_and_odometry(rig: Rig, cache_dir: str) -> None:
     """Issue 25: power/predicted_twist carries the motion the set-point prediction expects (reference:
     the same map's SetpointPredictor), odom/predicted dead-reckons it, ~/reset_odometry restarts it."""
     from geometry_msgs.msg import TwistStamped
     from nav_msgs.msg import Odometry
     from std_srvs.srv import Trigger
 
-    twists: list = []
-    odoms: list = []
+    twists: list[Any] = []  # TwistStamped messages
+    odoms: list[Any] = []  # Odometry messages
     rig.probe.create_subscription(TwistStamped, 'power/predicted_twist', twists.append, 10)
     rig.probe.create_subscription(Odometry, 'odom/predicted', odoms.append, 100)
     rig.spin_until(lambda: rig.node.pub_predicted_twist.get_subscription_count() > 0)

@@ -9,23 +9,39 @@ import math
 import os
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Protocol, TypeVar
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rich.console import Console
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.nodes.energy_monitor import EnergyMonitor, KeyReader, build_parser, profile_from_args
 from skidsteer_power.nodes.power_estimator import PowerEstimator
-from skidsteer_power.ui.monitor import CaseProfile, render
+from skidsteer_power.ui.monitor import CaseProfile, MonitorView, render
+
+N = TypeVar('N', bound=Node)
+
+
+class AddNode(Protocol):
+    """The graph's ``add``: spins ``node`` with the estimator and destroys it after the test."""
+
+    def __call__(self, node: N) -> N: ...
+
+
+Graph = tuple[str, PowerEstimator, SingleThreadedExecutor, AddNode]
+"""(namespace, the estimator, the executor spinning both, add)."""
 
 
 @pytest.fixture
-def graph(ros_context, tmp_path_factory):
+def graph(ros_context: Context, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Graph]:
     namespace = f'mon_{uuid.uuid4().hex[:8]}'
     cache = str(tmp_path_factory.mktemp('maps'))
     estimator = PowerEstimator(
@@ -35,9 +51,9 @@ def graph(ros_context, tmp_path_factory):
     )  # fmt: skip
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(estimator)
-    nodes = [estimator]
+    nodes: list[Node] = [estimator]
 
-    def add(node):
+    def add(node: N) -> N:
         nodes.append(node)
         executor.add_node(node)
         return node
@@ -48,18 +64,18 @@ def graph(ros_context, tmp_path_factory):
         node.destroy_node()
 
 
-def spin_until(executor, condition, timeout_s: float = 20.0) -> None:
+def spin_until(executor: Executor, condition: Callable[[], object], timeout_s: float = 20.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
         assert time.monotonic() < deadline, 'condition not met within the time limit'
         executor.spin_once(timeout_sec=0.01)
 
 
-def frame_recorder() -> tuple[list[str], Callable[[object], None]]:
+def frame_recorder() -> tuple[list[str], Callable[[MonitorView], None]]:
     """(frames, draw): ``draw`` renders a MonitorView as plain text (110 columns) into ``frames``."""
     frames: list[str] = []
 
-    def draw(view: object) -> None:
+    def draw(view: MonitorView) -> None:
         console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
         console.print(render(view))
         frames.append(console.export_text())
@@ -67,7 +83,9 @@ def frame_recorder() -> tuple[list[str], Callable[[object], None]]:
     return frames, draw
 
 
-def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, ros_context):
+def test_case_mode_drives_the_profile_and_logs_what_it_showed(
+    graph: Graph, tmp_path: Path, ros_context: Context
+) -> None:
     namespace, estimator, executor, add = graph
     frames, draw = frame_recorder()
 
@@ -86,12 +104,13 @@ def test_case_mode_drives_the_profile_and_logs_what_it_showed(graph, tmp_path, r
     assert any(f'{prediction.electrical_W[1]:.1f}' in f for f in shown)  # predicted right-side power
     with (tmp_path / 'shown.csv').open() as handle:
         rows = list(csv.DictReader(handle))
+    assert monitor.csv is not None
     assert len(rows) == monitor.csv.rows == len(frames)
     driving = [r for r in rows if r['speed_cmd_m_s'] == '0.2']
     assert driving and any(r['predicted_right_W'] not in ('nan', '') for r in driving)
 
 
-def test_free_mode_arrow_keys_publish_cmd_vel(graph, tmp_path, ros_context):
+def test_free_mode_arrow_keys_publish_cmd_vel(graph: Graph, tmp_path: Path, ros_context: Context) -> None:
     namespace, estimator, executor, add = graph
     master, slave = os.openpty()
     keys = KeyReader(slave)
@@ -114,23 +133,27 @@ def test_free_mode_arrow_keys_publish_cmd_vel(graph, tmp_path, ros_context):
         os.close(slave)
 
 
-def test_view_mode_publishes_nothing(graph, ros_context):
+def test_view_mode_publishes_nothing(graph: Graph, ros_context: Context) -> None:
     namespace, _, _, add = graph
     monitor = add(EnergyMonitor('view', namespace=namespace, context=ros_context))
     assert not hasattr(monitor, 'pub_cmd')
 
 
-def test_command_line_profiles(tmp_path):
+def test_command_line_profiles(tmp_path: Path) -> None:
     args = build_parser().parse_args(
         ['--mode', 'case', '--speed', '0.2', '--yaw-rate', '0.35', '--duration', '3']
     )
-    assert profile_from_args(args).steps == (Segment(0.2, 0.35, 3.0),)
+    profile = profile_from_args(args)
+    assert profile is not None and profile.steps == (Segment(0.2, 0.35, 3.0),)
     (tmp_path / 'c.csv').write_text('duration_s,speed_m_s,yaw_rate_rad_s\n2,0.1,0\n')
     args = build_parser().parse_args(['--mode', 'case', '--case-file', str(tmp_path / 'c.csv')])
-    assert profile_from_args(args).duration_s == 2.0
+    profile = profile_from_args(args)
+    assert profile is not None and profile.duration_s == 2.0
 
 
-def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tmp_path, ros_context):
+def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(
+    graph: Graph, tmp_path: Path, ros_context: Context
+) -> None:
     """The header and the CSV show the command on cmd_vel, whoever sends it (was: always +0.00 in view
     mode); when the suite stops, what is left on screen is marked stale."""
     namespace, estimator, executor, add = graph
@@ -163,7 +186,7 @@ def test_view_mode_shows_the_command_on_the_topic_and_greys_stale_data(graph, tm
     assert any(r['speed_cmd_m_s'] == '0.2' for r in rows)
 
 
-def test_view_mode_takes_the_path_energy_topics(ros_context):
+def test_view_mode_takes_the_path_energy_topics(ros_context: Context) -> None:
     """energy/path_required_wh and energy/path_margin_wh (nodes/path_hook.py) land in the view as sent."""
     from std_msgs.msg import Float64
 
@@ -190,7 +213,9 @@ def test_view_mode_takes_the_path_energy_topics(ros_context):
             node.destroy_node()
 
 
-def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(graph, ros_context):
+def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(
+    graph: Graph, ros_context: Context
+) -> None:
     """energy/time_to_empty_p10_s and _p90_s of a real power_estimator reach the battery panel
     ("time to empty H:MM:SS (p10 H:MM:SS - p90 H:MM:SS)", the values the estimator published); when
     the estimator stops, the terrain / internal power line is marked stale, not only dimmed."""
@@ -224,7 +249,9 @@ def test_view_shows_the_time_to_empty_band_and_marks_the_terrain_line_stale(grap
     monitor.close()
 
 
-def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, strong_motor_vehicle):
+def test_view_turns_effort_into_current_with_the_vehicles_motor(
+    ros_context: Context, strong_motor_vehicle: Path
+) -> None:
     """joint_states effort = K_t I (des_driver); the monitor divides by the K_t of --vehicle's motor:
     0.228 N m/A (an override of the EC-45's 0.114, Appendix B line 12), so 0.456 N m is 2 A."""
     from sensor_msgs.msg import JointState
@@ -253,7 +280,7 @@ def test_view_turns_effort_into_current_with_the_vehicles_motor(ros_context, str
             node.destroy_node()
 
 
-def test_view_shows_the_corrected_online_figure(ros_context, tmp_path):
+def test_view_shows_the_corrected_online_figure(ros_context: Context, tmp_path: Path) -> None:
     """Issue 27: the monitor shows the estimate power_estimator corrects online, over real DDS on sim
     time. The predictor says 0.1 N m per motor at 12 rad/s (test_estimator_core.FixedPowerPredictor,
     30 W per side); the motors measure 0.13 N m, so after the 1 s settle the correction maps 0.1 to
@@ -275,7 +302,11 @@ def test_view_shows_the_corrected_online_figure(ros_context, tmp_path):
             t = k * 0.05
             rig.set_clock(t)
             rig.command(0.2, 0.0)
-            rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            def command_seen(t: float = t) -> bool:
+                return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            rig.spin_until(command_seen)
             rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
 
         def corrected_shown() -> bool:
@@ -290,5 +321,6 @@ def test_view_shows_the_corrected_online_figure(ros_context, tmp_path):
         rig.spin_until(lambda: any('corrected (online) [W]' in f and '2.5' in f for f in frames))
     finally:
         rig.executor.remove_node(monitor)
-        monitor.destroy_node()
+        node: Node = monitor  # rclpy's Node.destroy_node is unannotated (untyped_calls_exclude)
+        node.destroy_node()
         rig.close()

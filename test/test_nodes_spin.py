@@ -12,11 +12,16 @@ import signal
 import subprocess
 import time
 import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
-from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -27,14 +32,16 @@ from skidsteer_power.nodes.spin import Batched, LeanExecutor, node_command
 N_MESSAGES = 50
 
 
-def _spin_until(executor, condition, timeout_s: float = 10.0) -> None:
+def _spin_until(executor: Executor, condition: Callable[[], object], timeout_s: float = 10.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
         assert time.monotonic() < deadline, 'condition not met within the time limit'
         executor.spin_once(timeout_sec=0.01)
 
 
-def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]:
+def _exercise(
+    context: Context, executor_type: Callable[..., Executor]
+) -> tuple[list[float], int, int, bool, int]:
     """Publish N_MESSAGES, run a timer and a service on ``executor_type``; returns (received values,
     timer ticks, service calls, the response's success, the executor's guard triggers while the
     messages and timer ticks were handled)."""
@@ -44,12 +51,15 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
     ticks = [0]
     calls = [0]
 
-    def on_trigger(request, response):
+    def on_trigger(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         calls[0] += 1
         response.success = True
         return response
 
-    node.create_subscription(Float64, 'x', lambda m: received.append(m.data), 100)
+    def on_x(m: Float64) -> None:
+        received.append(m.data)
+
+    node.create_subscription(Float64, 'x', on_x, 100)
     node.create_timer(0.01, lambda: ticks.__setitem__(0, ticks[0] + 1))
     node.create_service(Trigger, 'go', on_trigger)
     pub = node.create_publisher(Float64, 'x', 100)
@@ -59,13 +69,15 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
     try:
         _spin_until(executor, lambda: pub.get_subscription_count() > 0 and client.service_is_ready())
         triggers = [0]
-        trigger = executor._guard.trigger  # count the executor's self wake-ups from here on
+        trigger: Callable[[], None] = (
+            executor._guard.trigger
+        )  # count the executor's self wake-ups from here on
 
         def counted() -> None:
             triggers[0] += 1
             trigger()
 
-        executor._guard.trigger = counted
+        executor._guard.trigger = counted  # type: ignore[method-assign]  # a counting wrapper, on purpose
         for i in range(N_MESSAGES):
             pub.publish(Float64(data=float(i)))
         _spin_until(executor, lambda: len(received) >= N_MESSAGES and ticks[0] >= 3)
@@ -80,7 +92,7 @@ def _exercise(context, executor_type) -> tuple[list[float], int, int, bool, int]
         node.destroy_node()
 
 
-def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
+def test_lean_executor_runs_everything_once_without_waking_itself(ros_context: Context) -> None:
     received, ticks, calls, success, triggers = _exercise(ros_context, LeanExecutor)
     assert received == [float(i) for i in range(N_MESSAGES)]  # each once, in order
     assert ticks >= 3 and calls == 1 and success
@@ -92,7 +104,7 @@ def test_lean_executor_runs_everything_once_without_waking_itself(ros_context):
 
 
 @contextlib.contextmanager
-def _lean_node(context, name: str):
+def _lean_node(context: Context, name: str) -> Iterator[tuple[Node, LeanExecutor]]:
     """A node spun by a LeanExecutor of its own; both shut down afterwards."""
     node = rclpy.create_node(name, namespace=f'{name}_{uuid.uuid4().hex[:8]}', context=context)
     executor = LeanExecutor(context=context)
@@ -104,11 +116,15 @@ def _lean_node(context, name: str):
         node.destroy_node()
 
 
-def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context):
+def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_context: Context) -> None:
     with _lean_node(ros_context, 'plan') as (node, executor):
         pub = node.create_publisher(Float64, 'x', 10)
         first: list[float] = []
-        sub = node.create_subscription(Float64, 'x', lambda m: first.append(m.data), 10)
+
+        def on_first(m: Float64) -> None:
+            first.append(m.data)
+
+        sub = node.create_subscription(Float64, 'x', on_first, 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.0))
         _spin_until(executor, lambda: first == [1.0])
@@ -117,16 +133,25 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         plan = executor._plan
         for value in (2.0, 3.0):
             pub.publish(Float64(data=value))
-            _spin_until(executor, lambda v=value: first[-1] == v)
+
+            def arrived(v: float = value) -> bool:
+                return first[-1] == v
+
+            _spin_until(executor, arrived)
             assert executor._plan is plan  # the same wait set served every message
         # a new entity while spinning: planned in and served
         second: list[float] = []
-        node.create_subscription(Float64, 'x', lambda m: second.append(m.data), 10)
+
+        def on_second(m: Float64) -> None:
+            second.append(m.data)
+
+        node.create_subscription(Float64, 'x', on_second, 10)
         _spin_until(executor, lambda: pub.get_subscription_count() == 2)
         pub.publish(Float64(data=4.0))
         _spin_until(executor, lambda: first[-1] == 4.0 and second == [4.0])  # both served
         _spin_until(executor, lambda: executor._plan is not None)
-        assert len(executor._plan.by_pointer['subscription']) == 2
+        plan_now = executor._plan
+        assert plan_now is not None and len(plan_now.by_pointer['subscription']) == 2
         # an entity gone: planned out, its handle released (destroyed), the rest still served
         node.destroy_subscription(sub)
         _spin_until(executor, lambda: pub.get_subscription_count() == 1)
@@ -134,12 +159,13 @@ def test_lean_executor_keeps_its_wait_set_until_an_entity_comes_or_goes(ros_cont
         _spin_until(executor, lambda: second == [4.0, 5.0])
         assert first[-1] == 4.0
         _spin_until(executor, lambda: executor._plan is not None)
-        assert len(executor._plan.by_pointer['subscription']) == 1
+        plan_now = executor._plan
+        assert plan_now is not None and len(plan_now.by_pointer['subscription']) == 1
 
 
-def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context):
+def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros_context: Context) -> None:
     with _lean_node(ros_context, 'events') as (node, executor):
-        incompatible: list[object] = []
+        incompatible: list[QoSRequestedIncompatibleQoSInfo] = []
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         callbacks = SubscriptionEventCallbacks(incompatible_qos=incompatible.append)
@@ -161,14 +187,15 @@ def test_lean_executor_runs_qos_events_and_raises_callback_errors_like_rclpy(ros
             _spin_until(executor, lambda: False)
 
 
-def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
+def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context: Context) -> None:
     with _lean_node(ros_context, 'coro') as (node, executor):
         received: list[float] = []
 
         async def on_message(msg: Float64) -> None:
             received.append(msg.data)
 
-        node.create_subscription(Float64, 'x', on_message, 10)
+        # rclpy awaits a coroutine callback; its annotation says the callback returns None
+        node.create_subscription(Float64, 'x', on_message, 10)  # type: ignore[arg-type]
         pub = node.create_publisher(Float64, 'x', 10)
         _spin_until(executor, lambda: pub.get_subscription_count() > 0)
         pub.publish(Float64(data=1.5))
@@ -176,7 +203,7 @@ def test_lean_executor_hands_coroutine_callbacks_to_rclpy(ros_context):
         assert executor._plan is None  # rclpy's executor served it
 
 
-def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context):
+def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_context: Context) -> None:
     received: list[float] = []
     dispatched = [0]  # how often the executor called the subscription's callback
     batched = Batched(lambda m: received.append(m.data), batch=8)
@@ -204,7 +231,9 @@ def test_batched_takes_a_backlog_in_batches_every_message_once_in_order(ros_cont
 
 
 @pytest.mark.parametrize('stop', [signal.SIGTERM, signal.SIGINT])
-def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, stop):
+def test_power_estimator_main_answers_and_exits_cleanly(
+    ros_context: Context, tmp_path: Path, stop: signal.Signals
+) -> None:
     ns = f'main_{uuid.uuid4().hex[:8]}'
     params = {'map_cache_dir': tmp_path, 'persist': 'false', 'vehicle': 'test_robot_track'}
     argv = node_command('skidsteer_power.nodes.power_estimator', ns, params)
@@ -228,6 +257,7 @@ def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, s
         _spin_until(executor, answered)
         assert list(measured[-1].velocity) == [300.0, 300.0]  # echoed after the side mapping
         proc.send_signal(stop)
+        assert proc.stderr is not None
         assert proc.wait(timeout=15) == 0, proc.stderr.read()
         assert 'Traceback' not in proc.stderr.read()
     finally:
@@ -241,7 +271,7 @@ def test_power_estimator_main_answers_and_exits_cleanly(ros_context, tmp_path, s
 # --------------------------------------------------------------------------- rclpy compatibility
 
 
-def test_the_installed_rclpy_has_every_internal_we_use(ros_context):
+def test_the_installed_rclpy_has_every_internal_we_use(ros_context: Context) -> None:
     from skidsteer_power.nodes import rclpy_compat
 
     support = rclpy_compat.check()
@@ -253,14 +283,16 @@ def test_the_installed_rclpy_has_every_internal_we_use(ros_context):
     assert not support.lean_executor(object())  # an executor without rclpy's attributes
 
 
-def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(ros_context, monkeypatch):
+def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(
+    ros_context: Context, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from skidsteer_power.nodes import rclpy_compat
 
     missing = rclpy_compat.RclpySupport('99.0.0', tested=False, wait_set=False, change_state_handler=False)
     monkeypatch.setattr(rclpy_compat, 'check', lambda: missing)
 
     class Counted(LeanExecutor):
-        def __init__(self, **kwargs):
+        def __init__(self, **kwargs: Any) -> None:
             super().__init__(**kwargs)
             assert not self.lean  # the stock path
 
@@ -270,8 +302,9 @@ def test_lean_executor_falls_back_to_rclpys_own_where_internals_differ(ros_conte
     assert triggers >= 2 * N_MESSAGES  # rclpy's own executor: it wakes itself around each callback
 
 
-def _ask_transition(context, node_class, transition_id: int):
-    """Ask a fresh ``node_class`` node for a lifecycle transition over real DDS; (answer, node)."""
+def _ask_transition(context: Context, node_class: Callable[..., Node], transition_id: int) -> Any:
+    """Ask a fresh ``node_class`` node for a lifecycle transition over real DDS; the ChangeState
+    response (Any: rclpy's Future.result is unannotated)."""
     from lifecycle_msgs.srv import ChangeState
 
     ns = f'lc_{uuid.uuid4().hex[:8]}'
@@ -294,7 +327,7 @@ def _ask_transition(context, node_class, transition_id: int):
         node.destroy_node()
 
 
-def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_context):
+def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_context: Context) -> None:
     from lifecycle_msgs.msg import Transition
     from rclpy._rclpy_pybind11 import RCLError
     from rclpy.lifecycle import LifecycleNode
@@ -312,7 +345,7 @@ def test_invalid_lifecycle_transition_is_refused_through_the_compat_module(ros_c
     assert _ask_transition(ros_context, Refusing, Transition.TRANSITION_CONFIGURE).success is True
 
 
-def test_without_the_handler_the_node_class_stays_stock_rclpy(monkeypatch):
+def test_without_the_handler_the_node_class_stays_stock_rclpy(monkeypatch: pytest.MonkeyPatch) -> None:
     from rclpy.lifecycle import LifecycleNode
 
     from skidsteer_power.nodes import rclpy_compat

@@ -16,7 +16,7 @@ from skidsteer_power.nodes.wire import PackedJointState, decoder
 NAMES = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
 
 
-def test_packed_joint_state_is_the_message_rclpy_serializes():
+def test_packed_joint_state_is_the_message_rclpy_serializes() -> None:
     wire = PackedJointState(NAMES, ('velocity', 'effort'))
     for sec, nanosec, velocity, effort in (
         (1_796_160_000, 123_456_789, [300.0, -299.5, 25.0, -24.96], [0.21, 0.19, 2.4, 2.3]),
@@ -33,12 +33,12 @@ def test_packed_joint_state_is_the_message_rclpy_serializes():
         np.testing.assert_array_equal(msg.effort, effort)
 
 
-def test_packed_joint_state_rejects_a_field_joint_state_does_not_have():
+def test_packed_joint_state_rejects_a_field_joint_state_does_not_have() -> None:
     with pytest.raises(ValueError, match='torque'):
         PackedJointState(NAMES, ('velocity', 'torque'))
 
 
-def test_decoder_reads_rclpys_serialization():
+def test_decoder_reads_rclpys_serialization() -> None:
     twist = TwistStamped()
     twist.header.stamp.sec, twist.header.stamp.nanosec = 12, 345
     twist.header.frame_id = 'base_link'

@@ -10,7 +10,7 @@ import pytest
 from skidsteer_power.numeric import by_sign, distinct_rows, real, sign
 
 
-def test_floats_stay_floats_and_agree_with_numpy():
+def test_floats_stay_floats_and_agree_with_numpy() -> None:
     values = [2.5, -0.25, 0.0, -0.0, math.nan, math.inf]
     array = np.array(values)
     assert [type(real(v)) for v in values] == [float] * len(values)
@@ -25,7 +25,7 @@ def test_floats_stay_floats_and_agree_with_numpy():
             assert math.copysign(1.0, got) == math.copysign(1.0, want), (v, got, want)  # -0.0 too
 
 
-def test_distinct_rows_is_numpy_unique_over_rows():
+def test_distinct_rows_is_numpy_unique_over_rows() -> None:
     """Against ``np.unique(axis=0, return_inverse=True)``: sorted rows, the same inverse; repeated
     rows, rows equal in the first column only, and inf (a straight's radius) included."""
     rng = np.random.default_rng(0)
@@ -40,7 +40,7 @@ def test_distinct_rows_is_numpy_unique_over_rows():
 
 
 @pytest.mark.parametrize('columns', [1, 3])
-def test_distinct_rows_of_any_width(columns):
+def test_distinct_rows_of_any_width(columns: int) -> None:
     rows, inverse = distinct_rows(np.zeros((0, columns)))
     assert rows.shape == (0, columns) and inverse.size == 0
     table = np.repeat(np.arange(4.0 * columns).reshape(4, columns), 3, axis=0)[::-1]

@@ -44,7 +44,7 @@ def is_ros_package(name: str) -> bool:
     return name in ROS_PACKAGES or name.endswith(('_msgs', '_srvs'))
 
 
-def test_every_imported_ros_package_and_library_is_declared():
+def test_every_imported_ros_package_and_library_is_declared() -> None:
     imported = shipped_imports()
     declared = depends('exec_depend')
     missing = {n for n in imported if is_ros_package(n) and n not in INDIRECT} - declared
@@ -53,7 +53,7 @@ def test_every_imported_ros_package_and_library_is_declared():
     assert keys <= declared, f'rosdep keys missing: {sorted(keys - declared)}'
 
 
-def test_every_declared_ros_package_is_imported():
+def test_every_declared_ros_package_is_imported() -> None:
     imported = shipped_imports()
     unused = {d for d in depends('exec_depend') if not d.startswith('python3-') and d not in imported}
     assert not unused, f'declared but never imported by the shipped code: {sorted(unused)}'

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import pytest
 import yaml
+from rclpy.context import Context
 
 from skidsteer_power.nodes import param_files
+from skidsteer_power.nodes.param_files import NodeParams
 from skidsteer_power.nodes.param_spec import (
     ParamSpec,
     descriptor,
@@ -17,7 +19,7 @@ from skidsteer_power.nodes.param_spec import (
 )
 
 
-def test_shipped_parameter_files_and_doc_tables_are_the_specs_rendering():
+def test_shipped_parameter_files_and_doc_tables_are_the_specs_rendering() -> None:
     for path, text in param_files.rendered().items():
         shipped = (param_files.ROOT / path).read_text(encoding='utf-8')
         assert shipped == text, f'{path} is stale: run python -m skidsteer_power.nodes.param_files'
@@ -25,7 +27,7 @@ def test_shipped_parameter_files_and_doc_tables_are_the_specs_rendering():
 
 
 @pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
-def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry):
+def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry: NodeParams) -> None:
     """Independent of the renderer: the YAML parser reads back every default, type included."""
     shipped = yaml.safe_load((param_files.ROOT / entry.yaml_file).read_text(encoding='utf-8'))
     values = shipped[entry.node]['ros__parameters']
@@ -35,11 +37,11 @@ def test_each_shipped_file_loads_to_the_node_defaults_with_their_types(entry):
 
 
 @pytest.mark.parametrize('value', ['', 'true', 'on', 'No', '1.5', '~', 'a: b', "it's", '/dev/ttyUSB0', 'x y'])
-def test_yaml_value_round_trips_strings_yaml_would_read_as_something_else(value):
+def test_yaml_value_round_trips_strings_yaml_would_read_as_something_else(value: str) -> None:
     assert yaml.safe_load(f'k: {yaml_value(value)}')['k'] == value
 
 
-def test_ranges_become_ros_ranges_and_docs_of_the_right_kind():
+def test_ranges_become_ros_ranges_and_docs_of_the_right_kind() -> None:
     count = ParamSpec('status_every', 5, 'read the status every N polls [-]', (1, 1000))
     rate = ParamSpec('poll_rate_hz', 50.0, 'poll rate [Hz]', (0.1, 1000.0))
     name = ParamSpec('frame_id', '', 'frame of joint_states')
@@ -62,14 +64,16 @@ def test_ranges_become_ros_ranges_and_docs_of_the_right_kind():
     )
 
 
-def test_replace_between_needs_both_markers():
+def test_replace_between_needs_both_markers() -> None:
     assert replace_between('a\n<b>\nold\n</b>\n', '<b>', '</b>', 'new\n') == 'a\n<b>\nnew\n</b>\n'
     with pytest.raises(ValueError, match='markers'):
         replace_between('no markers here', '<b>', '</b>', 'x')
 
 
 @pytest.mark.ros
-def test_a_value_out_of_its_range_is_one_clear_error_at_start_and_refused_by_ros_later(ros_context):
+def test_a_value_out_of_its_range_is_one_clear_error_at_start_and_refused_by_ros_later(
+    ros_context: Context,
+) -> None:
     """A real rclpy node declaring a spec: a start value outside the range is one ConfigError naming
     the parameter, its range, unit and value; a later set outside it is ROS's rejection."""
     from rclpy.node import Node
@@ -101,8 +105,9 @@ def test_a_value_out_of_its_range_is_one_clear_error_at_start_and_refused_by_ros
 
 
 @pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
-def test_every_numeric_parameter_has_a_range_holding_its_default(entry):
+def test_every_numeric_parameter_has_a_range_holding_its_default(entry: NodeParams) -> None:
     for spec in entry.specs:
         if spec.type_name in ('integer', 'double'):
             assert spec.range is not None, spec.name
+            assert isinstance(spec.default, (int, float)), spec.name
             assert spec.range[0] <= spec.default <= spec.range[1], spec.name

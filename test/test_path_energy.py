@@ -5,24 +5,30 @@ from __future__ import annotations
 
 import json
 import math
+import pathlib
+from typing import Any
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
+from rclpy.context import Context
 from std_msgs.msg import Float64
 from test_nodes_estimator import Rig
 
 from skidsteer_power.cli.main import main
+from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.path_energy import PathTracker, path_energy, route_from_polyline
+from skidsteer_power.estimator.prediction import MapPredictor
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.maps.power_map import MapQuery
 from skidsteer_power.missions.energy import run_mission
-from skidsteer_power.missions.routes import Route, Segment, _trace, read_route_csv
+from skidsteer_power.missions.routes import Route, _trace, read_route_csv
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
-from skidsteer_power.vehicle import load_vehicle
+from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 SPEED = 0.3  # [m/s]
 # A route with left and right arcs of 1.5 m and 3 m radius between straights (CSV rows, SI units).
@@ -46,12 +52,12 @@ def _poses(route: Route, spacing_m: float) -> np.ndarray:
 
 
 @pytest.fixture(scope='module')
-def track_map():
+def track_map() -> tuple[PowerMap, Powertrain, Vehicle]:
     vehicle = load_vehicle('test_robot_track')
     return PowerMap.build(vehicle, load_terrain('dry_sand')), Powertrain.for_vehicle(vehicle), vehicle
 
 
-def test_polyline_keeps_length_and_heading_change():
+def test_polyline_keeps_length_and_heading_change() -> None:
     """A quarter circle of R = 2 m sampled every 5 degrees: the route's length is the polyline's
     (18 chords of 2 * 2 sin(2.5 deg)), its total turn pi/2 (one half chord each end straight)."""
     angle = np.radians(np.arange(0, 91, 5))
@@ -67,7 +73,9 @@ def test_polyline_keeps_length_and_heading_change():
     assert all(r > 0 for r in radii)  # left turn (REP 103)
 
 
-def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
+def test_straight_path_is_one_straight_state_and_duplicates_dropped(
+    track_map: tuple[PowerMap, Powertrain, Vehicle],
+) -> None:
     power_map, powertrain, vehicle = track_map
     x = np.array([0.0, 1.0, 1.0, 2.0, 5.0])
     route = route_from_polyline(x, np.zeros(5), SPEED)
@@ -80,7 +88,9 @@ def test_straight_path_is_one_straight_state_and_duplicates_dropped(track_map):
     assert energy.return_J == pytest.approx(straight, rel=1e-12)
 
 
-def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(track_map):
+def test_turns_tighter_than_the_maps_limit_radius_are_counted_limited(
+    track_map: tuple[PowerMap, Powertrain, Vehicle],
+) -> None:
     """Maps flag turns tighter than 2 x tread as ``limited`` (maps module doc): a half circle of
     R = 0.3 m (< 2 x 0.426 m for the test robot's track) is counted there and back; a straight
     path has no flagged segment."""
@@ -100,12 +110,14 @@ class CountingMap:
     def __init__(self, power_map: PowerMap) -> None:
         self.power_map, self.queries = power_map, 0
 
-    def query(self, speed, yaw_rate):
+    def query(self, speed: float, yaw_rate: float) -> MapQuery:
         self.queries += 1
         return self.power_map.query(speed, yaw_rate)
 
 
-def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(tmp_path, track_map):
+def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_scale(
+    tmp_path: pathlib.Path, track_map: tuple[PowerMap, Powertrain, Vehicle]
+) -> None:
     """While the adaptation learns, the terrain scale moves on every estimator tick: the tracker keeps
     the map's loads and reruns only the powertrain, with the same energies as a fresh computation."""
     power_map, powertrain, _ = track_map
@@ -128,12 +140,16 @@ def test_tracker_queries_the_map_again_only_for_a_new_speed_not_a_new_terrain_sc
 @pytest.mark.parametrize(
     ('x', 'y', 'speed'), [([0.0], [0.0], 0.3), ([0, 0], [0, 0], 0.3), ([0, 1], [0, 0], 0.0)]
 )
-def test_bad_paths_are_input_errors(x, y, speed):
+def test_bad_paths_are_input_errors(
+    x: list[float] | list[int], y: list[float] | list[int], speed: float
+) -> None:
     with pytest.raises(InputError):
         route_from_polyline(x, y, speed)
 
 
-def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(tmp_path, track_map):
+def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(
+    tmp_path: pathlib.Path, track_map: tuple[PowerMap, Powertrain, Vehicle]
+) -> None:
     """Pure check of the polyline approximation: the route sampled at 4 points per metre."""
     power_map, powertrain, vehicle = track_map
     csv = tmp_path / 'route.csv'
@@ -156,11 +172,11 @@ def _path_msg(xy: np.ndarray) -> Path:
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
-def _rig_with_path_topics(ros_context, tmp_path, cache_dir, **params):
+def _rig_with_path_topics(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, **params: Any) -> Rig:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, terrain='dry_sand', **params)
     for topic in ('energy/path_required_wh', 'energy/path_margin_wh'):
         rig.received[topic] = []
@@ -170,7 +186,9 @@ def _rig_with_path_topics(ros_context, tmp_path, cache_dir, **params):
     return rig
 
 
-def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir, capsys):
+def test_live_path_energy_equals_mission_route(
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Real rclpy: a Path published on ``plan`` gives ``mission --route FILE.csv``'s battery energy to
     1 % (measured: -0.03 % with a pose every 0.25 m, -0.04 % every 1 m with arcs sampled at most every
     5 degrees: the chords cut the arcs short), and the margin is remaining - there - back - reserve."""
@@ -188,6 +206,7 @@ def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir,
         required = rig.received['energy/path_required_wh'][-1].data
         assert required == pytest.approx(mission_wh, rel=0.01)
         energy = rig.node.path_energy.tracker.energy
+        assert energy is not None
         margin = rig.received['energy/path_margin_wh'][-1].data
         remaining = rig.node.core.battery.remaining_wh  # full battery, no driving: unchanged
         assert margin == pytest.approx(remaining - required - energy.return_wh - 1.5, rel=1e-9)
@@ -196,7 +215,9 @@ def test_live_path_energy_equals_mission_route(ros_context, tmp_path, cache_dir,
         rig.close()
 
 
-def test_negative_margin_warns_and_speed_follows_the_command(ros_context, tmp_path, cache_dir):
+def test_negative_margin_warns_and_speed_follows_the_command(
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
+) -> None:
     rig = _rig_with_path_topics(ros_context, tmp_path, cache_dir, path_reserve_wh=1e6)
     try:
         xy = np.column_stack([np.linspace(0, 10, 41), np.zeros(41)])
@@ -205,9 +226,10 @@ def test_negative_margin_warns_and_speed_follows_the_command(ros_context, tmp_pa
         assert not rig.received['energy/path_required_wh']  # no speed yet: nothing published
         rig.command(0.4, 0.0)
         rig.spin_until(lambda: rig.received['energy/path_required_wh'])
-        assert rig.node.path_energy.tracker.energy.speed_m_s == 0.4
+        energy = rig.node.path_energy.tracker.energy
+        assert energy is not None and energy.speed_m_s == 0.4
 
-        def warned():
+        def warned() -> bool:
             return any(
                 s.name.endswith('path energy') and s.level == DiagnosticStatus.WARN
                 for a in rig.received['diagnostics']
@@ -220,14 +242,14 @@ def test_negative_margin_warns_and_speed_follows_the_command(ros_context, tmp_pa
         rig.close()
 
 
-def test_negative_reserve_is_refused(ros_context, tmp_path, cache_dir):
+def test_negative_reserve_is_refused(ros_context: Context, tmp_path: pathlib.Path, cache_dir: str) -> None:
     from skidsteer_power.errors import ConfigError
 
     with pytest.raises(ConfigError, match='path_reserve_wh'):
         Rig(ros_context, tmp_path, map_cache_dir=cache_dir, path_reserve_wh=-1.0)
 
 
-def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
+def test_monitor_shows_the_path_energy_and_flags_a_shortfall() -> None:
     from rich.console import Console
 
     from skidsteer_power.ui.monitor import MonitorView, render
@@ -241,7 +263,7 @@ def test_monitor_shows_the_path_energy_and_flags_a_shortfall():
 
 
 # --- the online terrain scale in the path energy (issue 19 with issue 15's adaptation) ------------
-def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path):
+def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tmp_path: pathlib.Path) -> None:
     """The estimator's map is for dry sand; the twin (independent physics, docs/TWIN.md) drives on clay.
     The twin first drives the Table 7.3 sets (4 s holds, 1 s stops); its joint_states and commands
     go through the estimator core, whose terrain scale carries over between commands. Then the twin
@@ -254,7 +276,6 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     from skidsteer_power.calibration.direct import feed_trace
     from skidsteer_power.estimator.core import EstimatorCore
     from skidsteer_power.estimator.path_energy import PlannedPath
-    from skidsteer_power.estimator.prediction import MapPredictor
     from skidsteer_power.powertrain import Battery
     from skidsteer_power.terramechanics.terrain import PRESETS
     from skidsteer_power.twin import Twin, commands_from_route, run_commands
@@ -280,7 +301,9 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     assert abs(corrected / truth - 1) < 0.25 * abs(plain / truth - 1)
 
 
-def test_live_path_energy_applies_the_published_terrain_scale(ros_context, tmp_path, cache_dir):
+def test_live_path_energy_applies_the_published_terrain_scale(
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
+) -> None:
     """Real rclpy on sim time: joint_states whose terrain torque is 1.5 x the predicted one (the
     internal torque as predicted: measured = predicted internal + 1.5 x predicted terrain, a hand
     construction), over two alternating commands. ``power/correction`` publishes terrain_scale 1.5
@@ -294,15 +317,20 @@ def test_live_path_energy_applies_the_published_terrain_scale(ros_context, tmp_p
         ros_context, tmp_path, cache_dir, path_speed_m_s=SPEED, use_sim_time=True, persist=False
     )
     try:
-        corrections: list = []
+        corrections: list[Any] = []  # power/correction JointState messages
         rig.probe.create_subscription(JointState, 'power/correction', corrections.append, 10)
         t = 0.0
         for command in ((SPEED, 0.0), (SPEED, 0.2), (SPEED, 0.0)):
             for _ in range(50):  # 2.5 s at 20 Hz: 1 s settle, then 1.5 s settled
                 rig.set_clock(t)
                 rig.command(*command)
-                rig.spin_until(lambda t=t: rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+                def command_seen(t: float = t) -> bool:
+                    return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+                rig.spin_until(command_seen)
                 p = rig.node.core.prediction
+                assert p is not None
                 gear = rig.node.core.powertrain.gear_ratio
                 terrain = np.array(p.terrain_torque_Nm) / gear
                 measured = np.array(p.motor_torque_Nm) - terrain + 1.5 * terrain

@@ -4,6 +4,7 @@ decimated on a worker thread, and the 5 Hz battery tick keeps running. Real rclp
 
 from __future__ import annotations
 
+import pathlib
 import struct
 import time
 
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
+from rclpy.context import Context
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import BatteryState
 from std_msgs.msg import Float64
@@ -84,7 +86,7 @@ def _rclpy_path(xy: np.ndarray, frames: list[str]) -> bytes:
 
 @pytest.mark.parametrize('frames', [['map'], ['', 'odom', 'a_longer_frame_name']])
 @pytest.mark.parametrize('n', [0, 1, 2, 9])
-def test_path_xy_reads_what_rclpy_serializes(frames, n):
+def test_path_xy_reads_what_rclpy_serializes(frames: list[str], n: int) -> None:
     xy = np.random.default_rng(n).normal(size=(n, 2))
     x, y = path_xy(_rclpy_path(xy, frames))
     assert np.array_equal(x, xy[:, 0]) and np.array_equal(y, xy[:, 1])
@@ -95,7 +97,7 @@ def test_path_xy_reads_what_rclpy_serializes(frames, n):
         ]
 
 
-def test_decimation_keeps_every_pose_within_the_tolerance():
+def test_decimation_keeps_every_pose_within_the_tolerance() -> None:
     """A noisy 50 000-pose random walk: each dropped pose is within 5 cm of the segment between the
     kept poses around it (distance to a segment, by hand), and the kept count is within the cap."""
     rng = np.random.default_rng(3)
@@ -112,7 +114,7 @@ def test_decimation_keeps_every_pose_within_the_tolerance():
     assert distance.max() <= PATH_TOLERANCE_M + 1e-12
 
 
-def test_a_long_smooth_path_is_decimated_and_keeps_its_length():
+def test_a_long_smooth_path_is_decimated_and_keeps_its_length() -> None:
     xy = _curve(100_001)
     path = PlannedPath(xy[:, 0], xy[:, 1])
     assert path.poses_given == 100_001 and path.poses_kept <= MAX_PATH_POSES
@@ -120,11 +122,13 @@ def test_a_long_smooth_path_is_decimated_and_keeps_its_length():
 
 
 @pytest.fixture(scope='module')
-def cache_dir(tmp_path_factory):
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(tmp_path_factory.mktemp('maps'))
 
 
-def test_a_1e5_pose_plan_leaves_the_battery_tick_running(ros_context, tmp_path, cache_dir):
+def test_a_1e5_pose_plan_leaves_the_battery_tick_running(
+    ros_context: Context, tmp_path: pathlib.Path, cache_dir: str
+) -> None:
     """battery/state at 5 Hz keeps arriving while the node reads a 1e5-pose plan, and the path energy
     arrives: that of the same curve given as 2001 poses (no decimation), to 1 %. No gap of 2 s is a
     liveness check, not a benchmark: reading the plan on the executor thread stalled the tick 2.65 s
@@ -154,6 +158,7 @@ def test_a_1e5_pose_plan_leaves_the_battery_tick_running(ros_context, tmp_path, 
         tracker.set_path(coarse[:, 0], coarse[:, 1])
         power_map = rig.node.core.predictor.power_map
         reference = tracker.evaluate(SPEED, power_map, Powertrain.for_vehicle(vehicle), 1.0)
+        assert reference is not None
         assert required[-1].data == pytest.approx(reference.required_wh, rel=0.01)
     finally:
         rig.close()

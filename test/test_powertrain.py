@@ -15,7 +15,7 @@ from skidsteer_power.powertrain.internal import components_from_stages
 from skidsteer_power.powertrain.motor import DES_70_10, bus_power, terminal_power
 
 
-def test_ec45_constants_in_si():
+def test_ec45_constants_in_si() -> None:
     # Appendix B: Kt 114 mNm/A, R 0.710 ohm, speed constant 84.0 rpm/V, no-load current 193 mA.
     assert EC45.torque_constant_Nm_A == pytest.approx(0.114)
     assert EC45.terminal_resistance_ohm == pytest.approx(0.710)
@@ -30,7 +30,7 @@ def test_ec45_constants_in_si():
     assert pytest.approx(4.8 * 2.5) == GEAR_RATIO  # ch. 7.1.1
 
 
-def test_table_7_1_is_read_as_eq_7_1_torques_at_the_motor_shaft():
+def test_table_7_1_is_read_as_eq_7_1_torques_at_the_motor_shaft() -> None:
     """Table 7.1 read literally as eq. 7.1's b [N m s/rad] and c [N m] (see internal.py docstring)."""
     pt = Powertrain.default_test_robot('wheel')
     motor = pt.left.components['motor']
@@ -41,7 +41,7 @@ def test_table_7_1_is_read_as_eq_7_1_torques_at_the_motor_shaft():
     assert motor.torque(omega) / EC45.torque_constant_Nm_A > EC45.no_load_current_A
 
 
-def test_current_reading_of_table_7_1_stays_available():
+def test_current_reading_of_table_7_1_stays_available() -> None:
     """The alternative reading (motor currents, converted with K_t) is a data-only change."""
     from skidsteer_power.powertrain.internal import side_from_config
 
@@ -56,7 +56,7 @@ def test_current_reading_of_table_7_1_stays_available():
     assert side.components['motor'].torque(EC45.no_load_speed_rad_s) == pytest.approx(expected)
 
 
-def test_track_has_more_internal_resistance_than_wheels():
+def test_track_has_more_internal_resistance_than_wheels() -> None:
     # ch. 7.2.3: "the track configuration has a much larger internal resistance ... than the wheel"
     track = Powertrain.default_test_robot('track')
     wheel = Powertrain.default_test_robot('wheel')
@@ -69,7 +69,7 @@ def test_track_has_more_internal_resistance_than_wheels():
     assert max(parts, key=lambda k: float(parts[k])) == 'track'
 
 
-def test_internal_torque_hand_calculation_and_sign():
+def test_internal_torque_hand_calculation_and_sign() -> None:
     pt = Powertrain.default_test_robot('track')
     b = 0.0001 + 0.00008 + 0.0001 + 0.00012  # Table 7.1, left column 1 [N m s/rad at the motor]
     c = 0.0617 + 0.0177 + 0.0448 + 0.6489  # Table 7.1, left column 2 [N m at the motor]
@@ -81,7 +81,7 @@ def test_internal_torque_hand_calculation_and_sign():
     assert pt.internal_torque('right', w) != pytest.approx(expected)  # Motor 2 differs (Table 7.1)
 
 
-def test_motor_side_power_balance():
+def test_motor_side_power_balance() -> None:
     pt = Powertrain.default_test_robot('track')
     torque = np.array([0.0, 2.0, 5.0])
     omega = np.array([1.0, 2.0, 3.0])
@@ -94,7 +94,7 @@ def test_motor_side_power_balance():
     np.testing.assert_allclose(mp.motor_omega_rad_s, 12 * omega)
 
 
-def test_motor_side_on_floats_is_motor_side_on_arrays():
+def test_motor_side_on_floats_is_motor_side_on_arrays() -> None:
     """Floats in, floats out (the estimator's per-message path, skidsteer_power.numeric), with the
     same numbers to the last bit as the array path: one formula, two types. Table 7.1's two sides
     differ (Motor 2), and the points cover braking (generating), standstill and reverse, so both
@@ -114,7 +114,7 @@ def test_motor_side_on_floats_is_motor_side_on_arrays():
     assert pt.right.total != pt.left.total
 
 
-def test_regeneration_never_creates_energy():
+def test_regeneration_never_creates_energy() -> None:
     """4-quadrant operation: braking returns at most the braking power, less losses."""
     pt = Powertrain.default_test_robot('wheel')
     omega = np.linspace(0.5, 8.0, 40)
@@ -128,13 +128,13 @@ def test_regeneration_never_creates_energy():
     assert np.all(no_regen.motor_side('left', braking_torque, omega).electrical_power_W >= 0)
 
 
-def test_bus_power_quadrants():
+def test_bus_power_quadrants() -> None:
     p = bus_power(np.array([100.0, -100.0]), DES_70_10)
     np.testing.assert_allclose(p, [100 / 0.92, -92.0])
     assert terminal_power(EC45, 0.114, 0.0) == pytest.approx(0.710)  # 1 A at stall: R i^2
 
 
-def test_axle_from_motor_inverts_motor_side():
+def test_axle_from_motor_inverts_motor_side() -> None:
     pt = Powertrain.default_test_robot('track')
     mp = pt.motor_side('left', 3.0, 1.5)
     torque, omega = pt.axle_from_motor('left', mp.motor_torque_Nm, mp.motor_omega_rad_s)
@@ -142,7 +142,7 @@ def test_axle_from_motor_inverts_motor_side():
     assert omega == pytest.approx(1.5)
 
 
-def test_fit_recovers_coefficients_from_noisy_no_load_runs():
+def test_fit_recovers_coefficients_from_noisy_no_load_runs() -> None:
     rng = np.random.default_rng(7)
     omega = np.r_[np.linspace(-400, -20, 30), np.linspace(20, 400, 30)]
     b_true, c_true = 1.1e-5, 7.0e-3
@@ -154,7 +154,7 @@ def test_fit_recovers_coefficients_from_noisy_no_load_runs():
     assert fit.rms_residual_Nm == pytest.approx(2e-4, rel=0.3)
 
 
-def test_components_from_cumulative_stages():
+def test_components_from_cumulative_stages() -> None:
     omega = np.linspace(10, 300, 20)
     stages = {}
     cumulative_b, cumulative_c = 0.0, 0.0
@@ -167,7 +167,7 @@ def test_components_from_cumulative_stages():
     assert parts['track'].viscous_Nm_s == pytest.approx(2e-5, abs=1e-15)
 
 
-def test_fit_rejects_degenerate_input():
+def test_fit_rejects_degenerate_input() -> None:
     with pytest.raises(InputError, match='two or more distinct speeds'):
         fit_internal([100.0, 100.0], [0.01, 0.01])
     with pytest.raises(InputError, match='NaN'):
@@ -176,7 +176,7 @@ def test_fit_rejects_degenerate_input():
         fit_internal([1.0, 2.0], [0.01])
 
 
-def test_bad_config_errors():
+def test_bad_config_errors() -> None:
     with pytest.raises(ConfigError, match=r'no such file or shipped powertrain \(shipped: test_robot'):
         Powertrain.from_config({'preset': 'no_such_robot'})
     with pytest.raises(ConfigError, match='gear_ratio'):
@@ -192,7 +192,7 @@ def test_bad_config_errors():
 # --------------------------------------------------------------------------- motor presets
 
 
-def test_motor_presets_and_overrides_from_the_powertrain_file():
+def test_motor_presets_and_overrides_from_the_powertrain_file() -> None:
     from skidsteer_power.powertrain.motor import MOTORS, motor_from_config
 
     assert Powertrain.default_test_robot().motor is EC45 is MOTORS['EC45'] is motor_from_config('EC45')
@@ -221,6 +221,6 @@ def test_motor_presets_and_overrides_from_the_powertrain_file():
         (3, 'preset name or a mapping'),
     ],
 )
-def test_bad_motor_entries_are_one_config_error(motor, message):
+def test_bad_motor_entries_are_one_config_error(motor: object, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Powertrain.from_config({'preset': 'test_robot', 'motor': motor})

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +21,7 @@ KT = 0.114  # EC-45 torque constant, Appendix B line 12
 STAGES = {'motor': (0.0001, 0.0617), 'gear_train': (0.00008, 0.0177), 'track': (0.00012, 0.6489)}
 
 
-def _cumulative():
+def _cumulative() -> Iterator[tuple[str, float, float]]:
     a = b = 0.0
     for stage, (da, db) in STAGES.items():
         a += da
@@ -27,7 +29,7 @@ def _cumulative():
         yield stage, a, b
 
 
-def test_fit_internal_csv_recovers_table_7_1(tmp_path, capsys):
+def test_fit_internal_csv_recovers_table_7_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rpm = np.linspace(100, 3000, 15)
     lines = ['side,stage,speed_rpm,current_A']
     for stage, a, b in _cumulative():
@@ -44,7 +46,7 @@ def test_fit_internal_csv_recovers_table_7_1(tmp_path, capsys):
     assert out['fits']['left']['motor']['n_samples'] == 15
 
 
-def test_fit_internal_wide_csv(tmp_path, capsys):
+def test_fit_internal_wide_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / 'wide.csv'
     rows = ['left_speed_rpm,left_current_A,right_speed_rpm,right_current_A']
     for n in (200, 400, 800, 1600):
@@ -57,7 +59,9 @@ def test_fit_internal_wide_csv(tmp_path, capsys):
     assert fits['right']['all']['viscous_A_s'] == pytest.approx(2e-4)  # reverse running, same resistance
 
 
-def test_fit_internal_uses_the_vehicles_motor(tmp_path, capsys, strong_motor_vehicle):
+def test_fit_internal_uses_the_vehicles_motor(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], strong_motor_vehicle: Path
+) -> None:
     """A CSV current becomes torque through the K_t of --vehicle's motor: 0.228 N m/A (a preset
     override of the EC-45's 0.114, Appendix B line 12), so 0.05 A Coulomb current = 0.0114 N m."""
     vehicle = strong_motor_vehicle
@@ -73,7 +77,7 @@ def test_fit_internal_uses_the_vehicles_motor(tmp_path, capsys, strong_motor_veh
     assert main(['fit-internal', str(path), '--vehicle', str(tmp_path / 'none.yaml')]) == 2
 
 
-def _write_bag(path, samples):
+def _write_bag(path: Path, samples: Iterable[tuple[float, float, float, float]]) -> None:
     store = get_typestore(Stores.ROS2_JAZZY)
     JointState = store.types['sensor_msgs/msg/JointState']
     Header = store.types['std_msgs/msg/Header']
@@ -91,7 +95,7 @@ def _write_bag(path, samples):
             writer.write(conn, k * 10**9, store.serialize_cdr(msg, JointState.__msgtype__))
 
 
-def test_fit_internal_bag(tmp_path, capsys):
+def test_fit_internal_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     omega = np.linspace(20, 400, 12)
     samples = [(w, 1e-5 * w + 0.007, w, 2e-5 * w + 0.009) for w in omega] + [(0.0, 0.0, 0.0, 0.0)]
     bag = tmp_path / 'noload_bag'
@@ -103,7 +107,7 @@ def test_fit_internal_bag(tmp_path, capsys):
     assert fits['left']['motor']['n_samples'] == 12  # the stationary sample is dropped
 
 
-def test_fit_internal_bad_inputs(tmp_path, capsys):
+def test_fit_internal_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(['fit-internal', str(tmp_path / 'missing.csv')]) == 2
     bad = tmp_path / 'bad.csv'
     bad.write_text('speed_rpm,current_A\n100,abc\n')

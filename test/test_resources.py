@@ -8,6 +8,7 @@ real ament_index_python.
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -21,7 +22,7 @@ from skidsteer_power.vehicle import available_vehicles, load_vehicle
 SOURCE_CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
-def test_source_tree_resolves_every_shipped_file():
+def test_source_tree_resolves_every_shipped_file() -> None:
     for kind in ('vehicles', 'terrains', 'powertrains', 'batteries', 'drivetrains'):
         names = {p.stem for p in (SOURCE_CONFIG / kind).glob('*.yaml')}
         assert names and set(resources.shipped(kind)) >= names, kind
@@ -29,7 +30,7 @@ def test_source_tree_resolves_every_shipped_file():
     assert resources.find('foxglove', 'operator_layout', ('.json',)).name == 'operator_layout.json'
 
 
-def test_errors_list_what_is_shipped():
+def test_errors_list_what_is_shipped() -> None:
     with pytest.raises(ConfigError, match=r'no such file or shipped vehicle \(shipped: .*test_robot_track'):
         load_vehicle('no_such_robot')
     with pytest.raises(ConfigError, match=r'shipped: .*dry_sand.*example_terrain'):
@@ -38,13 +39,13 @@ def test_errors_list_what_is_shipped():
         load_preset('powertrains', 'nope')
 
 
-def test_shipped_terrain_file_by_name():
+def test_shipped_terrain_file_by_name() -> None:
     terrain = load_terrain('example_terrain')
     assert terrain.name == load_terrain(SOURCE_CONFIG / 'terrains' / 'example_terrain.yaml').name
 
 
 @pytest.fixture
-def ament_prefix(tmp_path, monkeypatch):
+def ament_prefix(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """An install prefix as colcon lays it out, with the source tree hidden from the resolver."""
     prefix = tmp_path / 'install'
     marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'skidsteer_power'
@@ -61,7 +62,7 @@ def ament_prefix(tmp_path, monkeypatch):
     return config
 
 
-def test_colcon_share_directory_is_found_through_the_ament_index(ament_prefix):
+def test_colcon_share_directory_is_found_through_the_ament_index(ament_prefix: Path) -> None:
     assert resources.ament_share_dir() == ament_prefix.parent
     assert resources.config_roots()[0] == ament_prefix
     assert available_vehicles() == ['installed_only']
@@ -71,10 +72,12 @@ def test_colcon_share_directory_is_found_through_the_ament_index(ament_prefix):
         load_vehicle('test_robot_4wheel')
 
 
-def test_no_ament_index_and_no_source_tree_says_where_it_looked(tmp_path, monkeypatch):
+def test_no_ament_index_and_no_source_tree_says_where_it_looked(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
     monkeypatch.setattr(resources, '_SOURCE_CONFIG', tmp_path / 'no_source_tree')
-    monkeypatch.setattr(resources.sys, 'prefix', str(tmp_path))
+    monkeypatch.setattr(sys, 'prefix', str(tmp_path))  # the module resources reads sys.prefix from
     assert resources.ament_share_dir() is None
     with pytest.raises(ConfigError, match=r'shipped: none \(searched no config folder found\)'):
         load_vehicle('test_robot_track')

@@ -8,11 +8,15 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 from conftest import REQUIRE_SHARED_ENV, shared_path
+from numpy.typing import ArrayLike
+from rclpy.context import Context
 from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import open_bag
@@ -23,8 +27,12 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, MapPredictor, factory
 from skidsteer_power.estimator.core import LEVEL_WARN
 from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
+from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.vehicle import load_vehicle
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Msg  # the typestore's message protocol (declared for type checkers)
 
 NS = 1_000_000_000
 START_NS = 1_700_000_000 * NS
@@ -58,7 +66,7 @@ def _twist(v: float, w: float) -> bytes:
     )
 
 
-def _header(t_s: float) -> object:
+def _header(t_s: float) -> Msg:
     sec, nsec = divmod(START_NS + round(t_s * NS), NS)
     return T['std_msgs/msg/Header'](T['builtin_interfaces/msg/Time'](sec, nsec), '')
 
@@ -79,7 +87,9 @@ def _odom(t_s: float, x: float, y: float, yaw: float) -> bytes:
     return STORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry')
 
 
-def _joint_state(t_s: float, names, position, velocity, effort) -> bytes:
+def _joint_state(
+    t_s: float, names: Sequence[str], position: ArrayLike, velocity: ArrayLike, effort: ArrayLike
+) -> bytes:
     msg = T['sensor_msgs/msg/JointState'](
         _header(t_s),
         list(names),
@@ -90,7 +100,12 @@ def _joint_state(t_s: float, names, position, velocity, effort) -> bytes:
     return STORE.serialize_cdr(msg, 'sensor_msgs/msg/JointState')
 
 
-def _write(path: Path, commands, odom=(), joints=()) -> Path:
+def _write(
+    path: Path,
+    commands: Sequence[tuple[float, float, float]],
+    odom: Sequence[tuple[float, float, float, float]] = (),
+    joints: Sequence[tuple[float, Sequence[str], ArrayLike, ArrayLike, ArrayLike]] = (),
+) -> Path:
     """A bag of (t, V, yaw) commands, (t, x, y, yaw) odometry and (t, names, pos, vel, effort) joints."""
     with BagWriter(path) as writer:
         cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
@@ -100,11 +115,15 @@ def _write(path: Path, commands, odom=(), joints=()) -> Path:
         events += [(row[0], 1, _odom(*row)) for row in odom]
         events += [(row[0], 2, _joint_state(*row)) for row in joints]
         for t, kind, data in sorted(events, key=lambda e: (e[0], e[1])):
-            writer.write((cmd, od, js)[kind], START_NS + round(t * NS), data)
+            connection = (cmd, od, js)[kind]
+            assert connection is not None  # a kind of event exists only where its topic was added
+            writer.write(connection, START_NS + round(t * NS), data)
     return path
 
 
-def _validate(path: Path, tmp_path: Path, predictor, vehicle='test_robot_track', **options) -> dict:
+def _validate(
+    path: Path, tmp_path: Path, predictor: Predictor, vehicle: str = 'test_robot_track', **options: Any
+) -> dict[str, Any]:
     options.setdefault('plots', False)
     opts = ValidateOptions(vehicle=vehicle, terrain=TERRAIN, report_dir=tmp_path / 'report', **options)
     with open_bag(path) as bag:
@@ -112,7 +131,7 @@ def _validate(path: Path, tmp_path: Path, predictor, vehicle='test_robot_track',
 
 
 # --- the shared folder helper -------------------------------------------------------------------
-def test_missing_shared_folder_skips_on_a_clone_and_fails_in_ci(monkeypatch):
+def test_missing_shared_folder_skips_on_a_clone_and_fails_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(REQUIRE_SHARED_ENV, raising=False)
     with pytest.raises(pytest.skip.Exception, match='no-such-folder is missing'):
         shared_path('no-such-folder')
@@ -125,7 +144,7 @@ def test_missing_shared_folder_skips_on_a_clone_and_fails_in_ci(monkeypatch):
 LIMITS = InputLimits()
 
 
-def test_four_wheel_joints_at_the_wheel_in_newton_metres_become_motor_equivalent_values():
+def test_four_wheel_joints_at_the_wheel_in_newton_metres_become_motor_equivalent_values() -> None:
     """Hand calculation: side torque = sum of wheel torques, side speed = mean wheel speed, referred
     to the motor of a 12:1 powertrain: T_m = T_side / 12, w_m = 12 w_side."""
     joint_map = JointMap.from_config({'preset': 'ros2_control_4wheel'})
@@ -138,30 +157,36 @@ def test_four_wheel_joints_at_the_wheel_in_newton_metres_become_motor_equivalent
     ]
     velocity = [2.2, 1.0, 1.8, 1.2]  # rad/s at each wheel
     effort = [4.0, 3.0, 5.0, 6.0]  # N m at each wheel
-    omega, torque = reader.read(names, [], velocity, effort, 0.0)
+    read = reader.read(names, [], velocity, effort, 0.0)
+    assert read is not None
+    omega, torque = read
     assert omega == pytest.approx((12 * (1.0 + 1.2) / 2, 12 * (1.8 + 2.2) / 2), rel=1e-12)
     assert torque == pytest.approx(((3.0 + 6.0) / 12, (5.0 + 4.0) / 12), rel=1e-12)
 
 
-def test_current_effort_at_the_motor_uses_the_torque_constant_and_inverted_joints_flip():
+def test_current_effort_at_the_motor_uses_the_torque_constant_and_inverted_joints_flip() -> None:
     joint_map = JointMap(
         left=('l',), right=('r',), effort_is='current', torque_constant_Nm_A=0.05, inverted=('r',)
     )
     reader = JointReader(joint_map, 12.0, 0.114, LIMITS)
-    omega, torque = reader.read(['l', 'r'], [], [100.0, -100.0], [2.0, -3.0], 0.0)
+    read = reader.read(['l', 'r'], [], [100.0, -100.0], [2.0, -3.0], 0.0)
+    assert read is not None
+    omega, torque = read
     assert omega == (100.0, 100.0)
     assert torque == pytest.approx((0.05 * 2.0, 0.05 * 3.0), rel=1e-12)  # T = Kt I
 
 
-def test_speed_from_positions_when_no_velocity_is_published():
+def test_speed_from_positions_when_no_velocity_is_published() -> None:
     joint_map = JointMap(left=('l',), right=('r',), location='wheel', interfaces=('position', 'effort'))
     reader = JointReader(joint_map, 10.0, 0.114, LIMITS)
     assert reader.read(['l', 'r'], [0.0, 0.0], [], [1.0, 1.0], 0.0) is None  # needs two samples
-    omega, _ = reader.read(['l', 'r'], [0.5, 1.0], [], [1.0, 1.0], 0.5)
+    read = reader.read(['l', 'r'], [0.5, 1.0], [], [1.0, 1.0], 0.5)
+    assert read is not None
+    omega, _ = read
     assert omega == pytest.approx((10 * 1.0, 10 * 2.0))  # (0.5 rad / 0.5 s) x 10, (1 / 0.5) x 10
 
 
-def test_joint_mapping_errors_are_clear():
+def test_joint_mapping_errors_are_clear() -> None:
     with pytest.raises(ConfigError, match='listed twice'):
         JointMap(left=('a',), right=('a',))
     with pytest.raises(ConfigError, match="effort_is must be one of \\('torque', 'current'\\)"):
@@ -186,7 +211,9 @@ def test_joint_mapping_errors_are_clear():
         ('leo_rover', 6.5, 0.358, 0.065, 2 * 0.15256),
     ],
 )
-def test_public_robot_files_hold_their_published_dimensions(name, mass, tread, radius, wheelbase):
+def test_public_robot_files_hold_their_published_dimensions(
+    name: str, mass: float, tread: float, radius: float, wheelbase: float
+) -> None:
     vehicle = load_vehicle(name)
     assert vehicle.mass_kg == pytest.approx(mass, abs=0.006)
     assert (vehicle.tread_m, vehicle.wheels().wheel_radius_m) == (tread, radius)
@@ -195,7 +222,7 @@ def test_public_robot_files_hold_their_published_dimensions(name, mass, tread, r
     assert len(factory.joint_map_for(vehicle).joints) == 4
 
 
-def test_diagnostics_warn_while_a_command_is_outside_the_map(track):
+def test_diagnostics_warn_while_a_command_is_outside_the_map(track: MapPredictor) -> None:
     vehicle = load_vehicle('test_robot_track')
     core = EstimatorCore(
         track, factory.battery_for(vehicle), factory.powertrain_for(vehicle), EstimatorSettings()
@@ -210,7 +237,9 @@ def test_diagnostics_warn_while_a_command_is_outside_the_map(track):
 
 
 @pytest.mark.ros
-def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(ros_context, track):
+def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(
+    ros_context: Context, track: MapPredictor
+) -> None:
     from rclpy.parameter import Parameter
 
     from skidsteer_power.estimator.core import RejectedInput
@@ -251,7 +280,7 @@ def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(
 ON_CHANGE = [(0.0, 0.2, 0.0), (1.3, 0.2, 0.3), (2.0, 0.0, 0.0)]
 
 
-def test_on_change_commands_are_held_until_the_next_one(tmp_path, track):
+def test_on_change_commands_are_held_until_the_next_one(tmp_path: Path, track: MapPredictor) -> None:
     bag = _write(tmp_path / 'on_change.mcap', [*ON_CHANGE, (5.0, 0.0, 0.0)])
     summary = _validate(bag, tmp_path, track)
     assert summary['cmd_vel_mode'] == 'on_change' and summary['cmd_hold_s'] == math.inf
@@ -269,7 +298,9 @@ def test_on_change_commands_are_held_until_the_next_one(tmp_path, track):
     assert 'only when they change' in report and 'until the next command' in report
 
 
-def test_on_change_hold_ends_where_odometry_shows_the_robot_at_rest(tmp_path, track):
+def test_on_change_hold_ends_where_odometry_shows_the_robot_at_rest(
+    tmp_path: Path, track: MapPredictor
+) -> None:
     """The robot drives at 0.2 m/s for 1.5 s, then stands (its driver timed out) although the next
     command comes only at 3.0 s: the hold ends at 1.5 s, the first odometry interval at rest."""
     odom = [(k / 10, 0.2 * min(k / 10, 1.5), 0.0, 0.0) for k in range(31)]
@@ -279,7 +310,7 @@ def test_on_change_hold_ends_where_odometry_shows_the_robot_at_rest(tmp_path, tr
     assert summary['metrics']['energy_predicted_J'] == pytest.approx(sum(p.electrical_W) * 1.5, rel=1e-9)
 
 
-def test_stream_detection_and_a_given_hold(tmp_path, track):
+def test_stream_detection_and_a_given_hold(tmp_path: Path, track: MapPredictor) -> None:
     commands = [(k / 20, 0.2, 0.0) for k in range(40)]  # 20 Hz, all repeats
     timing = command_timing(np.array([c[0] for c in commands]), np.array([c[1:] for c in commands]))
     assert timing.mode == 'stream' and timing.period_s == pytest.approx(0.05)
@@ -292,7 +323,7 @@ def test_stream_detection_and_a_given_hold(tmp_path, track):
     assert summary['metrics']['energy_predicted_J'] == pytest.approx(sum(p.electrical_W) * 2.2, rel=1e-9)
 
 
-def test_mirrored_spins_in_place_predict_mirrored_sides(tmp_path, track):
+def test_mirrored_spins_in_place_predict_mirrored_sides(tmp_path: Path, track: MapPredictor) -> None:
     """Spinning left then right at the same rate: each side's axle torque (what the terrain needs) in
     one equals the other side's in the other (REP 103 mirror). Terminal power is not compared: the
     two drivetrains' internal resistances differ (Table 7.1, left and right)."""
@@ -308,7 +339,7 @@ def test_mirrored_spins_in_place_predict_mirrored_sides(tmp_path, track):
         assert mirrored != 0
 
 
-def test_out_of_map_share_of_time_and_energy_is_reported(tmp_path, track):
+def test_out_of_map_share_of_time_and_energy_is_reported(tmp_path: Path, track: MapPredictor) -> None:
     commands = [(k / 10, 0.2, 0.0) for k in range(20)] + [(2 + k / 10, 3.0, 0.0) for k in range(20)]
     bag = _write(tmp_path / 'fast.mcap', commands)
     summary = _validate(bag, tmp_path, track)
@@ -322,7 +353,9 @@ def test_out_of_map_share_of_time_and_energy_is_reported(tmp_path, track):
     assert '48.7 % of the time' in (tmp_path / 'report' / 'report.md').read_text()
 
 
-def test_four_wheel_ros2_control_joint_states_are_validated_with_measured_power(tmp_path, four_wheel):
+def test_four_wheel_ros2_control_joint_states_are_validated_with_measured_power(
+    tmp_path: Path, four_wheel: MapPredictor
+) -> None:
     """joint_states like joint_state_broadcaster's: four wheel joints, effort in N m at the wheel.
     Each wheel reports half its side's predicted wheel torque (12 x motor torque) at the side's
     wheel speed, so measured equals predicted: torque and power errors 0, energy error 0 %."""
@@ -357,7 +390,7 @@ def test_four_wheel_ros2_control_joint_states_are_validated_with_measured_power(
 
 
 # --- message types --------------------------------------------------------------------------------
-def test_markers_and_tf_are_read_and_markers_can_be_replayed(tmp_path, track):
+def test_markers_and_tf_are_read_and_markers_can_be_replayed(tmp_path: Path, track: MapPredictor) -> None:
     """visualization_msgs is installed (requirements.txt), so replay can publish /person_marker;
     tf2_msgs is not installable here, yet validate reads /tf from the bag's definitions."""
     from rclpy.serialization import serialize_message
@@ -397,7 +430,9 @@ def test_markers_and_tf_are_read_and_markers_can_be_replayed(tmp_path, track):
 
 
 # --- the real bag ---------------------------------------------------------------------------------
-def test_real_bag_report_reads_the_commands_and_shows_only_what_exists(tmp_path, track, neato_bag):
+def test_real_bag_report_reads_the_commands_and_shows_only_what_exists(
+    tmp_path: Path, track: MapPredictor, neato_bag: Path
+) -> None:
     with open_bag(neato_bag, warn_unknown=False) as bag:
         summary = validate(
             bag, ValidateOptions('test_robot_track', TERRAIN, tmp_path / 'report', plots=True), track

@@ -6,15 +6,20 @@ from __future__ import annotations
 import time
 
 import rclpy
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 
 
-def test_message_crosses_between_two_nodes(ros_context):
+def test_message_crosses_between_two_nodes(ros_context: Context) -> None:
     talker = rclpy.create_node('smoke_talker', context=ros_context)
     listener = rclpy.create_node('smoke_listener', context=ros_context)
     received: list[str] = []
-    listener.create_subscription(String, 'smoke_chatter', lambda m: received.append(m.data), 10)
+
+    def on_chatter(m: String) -> None:
+        received.append(m.data)
+
+    listener.create_subscription(String, 'smoke_chatter', on_chatter, 10)
     publisher = talker.create_publisher(String, 'smoke_chatter', 10)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(talker)

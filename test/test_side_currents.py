@@ -10,10 +10,13 @@ them; a power_estimator node subscribes when the message package is installed.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from test_nodes_estimator import Rig
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.reader import build_typestore, load_msg_definitions
@@ -77,13 +80,13 @@ def write_husky_bag(
                     effort=np.zeros(0),
                 )
                 writer.write(js, t_ns + 1000, store.serialize_cdr(msg, 'sensor_msgs/msg/JointState'))
-            if vendor_conn is not None and k % 10 == 0 and k * 0.01 < status_s:
+            if vendor_conn is not None and vendor is not None and k % 10 == 0 and k * 0.01 < status_s:
                 writer.write(
                     vendor_conn, t_ns + 500, store.serialize_cdr(_vendor_msg(types, vendor, header), vendor)
                 )
 
 
-def _vendor_msg(types: dict, vendor: str, header: object) -> object:
+def _vendor_msg(types: dict[str, Any], vendor: str, header: object) -> object:
     if vendor == HUSKY:
         fields = {f: 0.0 for f in (
             'ros_control_loop_freq', 'mcu_and_user_port_current', 'battery_voltage', 'left_driver_voltage',
@@ -122,7 +125,9 @@ def expected_side(current_A: float) -> tuple[float, float]:
 
 
 @pytest.mark.parametrize('vendor', [HUSKY, POWER])
-def test_validate_measures_power_from_the_vendor_currents(tmp_path, predictor, vendor):
+def test_validate_measures_power_from_the_vendor_currents(
+    tmp_path: Path, predictor: MapPredictor, vendor: str
+) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, vendor, status_s=5.0)
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
@@ -146,7 +151,7 @@ def test_validate_measures_power_from_the_vendor_currents(tmp_path, predictor, v
     assert summary['joint_states_no_data'] == 180
 
 
-def test_validate_without_the_vendor_topic_says_so(tmp_path, predictor):
+def test_validate_without_the_vendor_topic_says_so(tmp_path: Path, predictor: MapPredictor) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, None)
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
@@ -156,7 +161,7 @@ def test_validate_without_the_vendor_topic_says_so(tmp_path, predictor):
     assert math.isnan(summary['metrics']['energy_measured_J'] or math.nan)
 
 
-def test_calibrate_reads_the_vendor_currents(tmp_path):
+def test_calibrate_reads_the_vendor_currents(tmp_path: Path) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, HUSKY)
     pt = factory.powertrain_for(factory.load_vehicle_config(VEHICLE))
@@ -168,7 +173,7 @@ def test_calibrate_reads_the_vendor_currents(tmp_path):
     assert np.allclose(recording.torque, expected, rtol=1e-5)
 
 
-def test_side_currents_config_errors():
+def test_side_currents_config_errors() -> None:
     with pytest.raises(ConfigError, match='effort_is: current'):
         JointMap.from_config({'side_currents': [{'topic': 's', 'type': HUSKY, 'left': 'a', 'right': 'b'}]})
     with pytest.raises(ConfigError, match="'name' or 'name\\[index\\]'"):
@@ -182,7 +187,9 @@ def test_side_currents_config_errors():
 
 @pytest.mark.ros
 @pytest.mark.parametrize('installed', [True, False])
-def test_power_estimator_node_takes_effort_from_a_current_topic(rig_factory, tmp_path, installed):
+def test_power_estimator_node_takes_effort_from_a_current_topic(
+    rig_factory: Callable[..., Rig], tmp_path: Path, installed: bool
+) -> None:
     """Real rclpy and DDS. husky_msgs and clearpath_platform_msgs are not installed here, so the node
     is given the husky file with its side_currents pointed at std_msgs/Float64MultiArray
     (``data[0]``, ``data[1]``: a message type that is installed; any robot can publish it) and the
@@ -222,6 +229,7 @@ def test_power_estimator_node_takes_effort_from_a_current_topic(rig_factory, tmp
 
         rig.spin_until(measured)
         expected = [expected_side(i)[0] for i in CURRENT_A]
+        assert core.comparison is not None
         assert core.comparison.measured.torque_Nm == pytest.approx(expected, rel=1e-6)
     else:
         for _ in range(5):
@@ -231,7 +239,7 @@ def test_power_estimator_node_takes_effort_from_a_current_topic(rig_factory, tmp
     assert core.rejects.counts['joint_states'] == 0
 
 
-def test_a_bag_without_the_definition_needs_msg(tmp_path, predictor):
+def test_a_bag_without_the_definition_needs_msg(tmp_path: Path, predictor: MapPredictor) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, HUSKY, definition=False)
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -15,20 +18,20 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.studies import uncertainty as u
-from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 
 
 @pytest.fixture(scope='module')
-def sandy():
+def sandy() -> Terrain:
     return load_terrain('sandy_soil')
 
 
 @pytest.fixture(scope='module')
-def pt():
+def pt() -> Powertrain:
     return Powertrain.default_test_robot('track')
 
 
-def test_default_sigmas_are_relative_to_the_nominal(sandy, pt):
+def test_default_sigmas_are_relative_to_the_nominal(sandy: Terrain, pt: Powertrain) -> None:
     spread = u.default_spread(sandy, pt)
     sigma = spread.sigma
     # Table 8.2: kphi 1523.4 kN/m^(n+2), phi 30 deg; defaults 10 % and 5 %
@@ -37,7 +40,9 @@ def test_default_sigmas_are_relative_to_the_nominal(sandy, pt):
     assert sigma['internal_scale'] == pytest.approx(0.10)
 
 
-def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(tmp_path, sandy, pt):
+def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(
+    tmp_path: Path, sandy: Terrain, pt: Powertrain
+) -> None:
     path = tmp_path / 'u.yaml'
     path.write_text(
         'terrain:\n  kphi_kN: {sigma: 100}\n  phi_deg: {sigma: 1.5}\n  n: 0.02\n'
@@ -52,7 +57,9 @@ def test_sigma_yaml_relative_and_absolute_in_the_keys_unit(tmp_path, sandy, pt):
         u.spread_from_yaml(path, sandy, pt)
 
 
-def _calibrated_file(tmp_path, cov, names=('kphi', 'phi', 'n')):
+def _calibrated_file(
+    tmp_path: Path, cov: Sequence[Sequence[float]], names: Sequence[str] = ('kphi', 'phi', 'n')
+) -> Path:
     data = {
         'name': 'calibrated',
         'n': 1.1,
@@ -68,7 +75,7 @@ def _calibrated_file(tmp_path, cov, names=('kphi', 'phi', 'n')):
     return path
 
 
-def test_calibration_covariance_is_read_in_the_terrain_files_units(tmp_path):
+def test_calibration_covariance_is_read_in_the_terrain_files_units(tmp_path: Path) -> None:
     """kphi is written as kphi_kN and phi as phi_deg: covariance in kN^2 and deg^2 -> SI."""
     cov = [[100.0**2, 0.5 * 100.0 * 2.0, 0.0], [0.5 * 100.0 * 2.0, 2.0**2, 0.0], [0.0, 0.0, 0.01]]
     spread = u.spread_from_calibration(_calibrated_file(tmp_path, cov))
@@ -82,12 +89,14 @@ def test_calibration_covariance_is_read_in_the_terrain_files_units(tmp_path):
     ('cov', 'match'),
     [([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1]], 'positive semi-definite'), ([[1.0]], '3 x 3')],
 )
-def test_bad_calibration_covariance_is_a_config_error(tmp_path, cov, match):
+def test_bad_calibration_covariance_is_a_config_error(
+    tmp_path: Path, cov: list[list[float] | list[int]] | list[list[float]], match: str
+) -> None:
     with pytest.raises(ConfigError, match=match):
         u.spread_from_calibration(_calibrated_file(tmp_path, cov))
 
 
-def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy, pt):
+def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy: Terrain, pt: Powertrain) -> None:
     cov = np.array([[0.04, 0.03], [0.03, 0.04]]) * np.outer([1523400, 0.5236], [1523400, 0.5236])
     spread = u.ParameterSpread(('kphi', 'phi'), cov, 'test')
     a = u.draw(spread, sandy, pt, 512, seed=3)
@@ -101,7 +110,7 @@ def test_sobol_samples_are_reproducible_correlated_and_clipped(sandy, pt):
     assert n.min() == u.BOUNDS['n'][0] and n.max() == u.BOUNDS['n'][1]
 
 
-def test_internal_scale_scales_internal_power_exactly(pt):
+def test_internal_scale_scales_internal_power_exactly(pt: Powertrain) -> None:
     doubled = u.apply_powertrain(pt, {'internal_scale': 2.0})
     omega = np.array([10.0, 300.0])
     for side in ('left', 'right'):
@@ -110,13 +119,14 @@ def test_internal_scale_scales_internal_power_exactly(pt):
     assert totals.resistance('left').total.coulomb_Nm == 0.5 and totals.right == pt.right
 
 
-def _mission(capsys, *extra):
+def _mission(capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, Any]:
     argv = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', 'patrol']
     assert main([*argv, '--no-cache', '--json', *extra]) == 0
-    return json.loads(capsys.readouterr().out)
+    mission: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return mission
 
 
-def test_mission_samples_on_a_local_cluster(tmp_path, capsys):
+def test_mission_samples_on_a_local_cluster(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Zero sigmas: every sample is the nominal mission, so p05 = p50 = p95 = energy_J (the samples
     go through the same route-energy code). Default sigmas: an ordered, non-degenerate band."""
     zero = tmp_path / 'zero.yaml'
@@ -129,7 +139,7 @@ def test_mission_samples_on_a_local_cluster(tmp_path, capsys):
     assert out['uncertainty']['samples'] == 8 and 'in-process' in out['uncertainty']['engine']  # 8 light
 
 
-def test_mission_from_calibration(tmp_path, capsys):
+def test_mission_from_calibration(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cov = [[150.0**2, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0025]]
     out = _mission(capsys, '--samples', '4', '--from-calibration', str(_calibrated_file(tmp_path, cov)))
     assert out['uncertainty']['spread'].startswith('calibration')
@@ -137,7 +147,7 @@ def test_mission_from_calibration(tmp_path, capsys):
     assert out['energy_J_p05'] <= out['energy_J_p95']
 
 
-def test_options_without_samples_are_refused(tmp_path, capsys):
+def test_options_without_samples_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     zero = tmp_path / 'zero.yaml'
     zero.write_text('terrain: {kphi: 0.0}\n')
     argv = ['mission', '--vehicle', 'test_robot_track', '--terrain', 'sandy_soil', '--route', 'patrol']

@@ -12,18 +12,23 @@ import subprocess
 import sys
 import time
 import uuid
+from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import BatteryState, JointState
 
 from skidsteer_power.nodes.suite import Suite, SuiteOptions
 
 
-def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery(ros_context, tmp_path):
+def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery(
+    ros_context: Context, tmp_path: Path
+) -> None:
     namespace = f'suite_{uuid.uuid4().hex[:8]}'
     options = SuiteOptions(
         simulate=True, map_cache_dir=str(tmp_path / 'maps'), state_file=str(tmp_path / 'energy.json'),
@@ -49,7 +54,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     try:
         deadline = time.monotonic() + 60.0
         next_command = 0.0
-        moving = []
+        moving: list[Any] = []  # JointState messages
         while time.monotonic() < deadline and (len(moving) < 20 or len(battery) < 10 or len(truth) < 20):
             if time.monotonic() >= next_command:
                 publisher.publish(command)
@@ -74,7 +79,7 @@ def test_simulated_suite_produces_joint_states_predictions_and_a_falling_battery
     assert odom and odom[-1].pose.pose.orientation.z > truth[-1].pose.pose.orientation.z > 0.0
 
 
-def run_cli(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+def run_cli(*args: str, env_extra: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, **(env_extra or {})}
     return subprocess.run(
         [sys.executable, '-m', 'skidsteer_power.cli.main', 'run', *args],
@@ -83,7 +88,7 @@ def run_cli(*args: str, env_extra: dict | None = None) -> subprocess.CompletedPr
 
 
 @pytest.mark.slow
-def test_run_simulate_cli_reports_a_falling_battery(tmp_path):
+def test_run_simulate_cli_reports_a_falling_battery(tmp_path: Path) -> None:
     result = run_cli(
         '--simulate', '--duration', '4', '--speed', '0.2', '--json',
         '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'),
@@ -102,7 +107,9 @@ def test_run_simulate_cli_reports_a_falling_battery(tmp_path):
         (('--duration', '-1'), 'duration = -1 s is outside its range'),
     ],
 )
-def test_run_bad_arguments_give_one_line(tmp_path, args, match):
+def test_run_bad_arguments_give_one_line(
+    tmp_path: Path, args: tuple[str, str, str, str, str] | tuple[str, str], match: str
+) -> None:
     result = run_cli(*args, '--map-cache', str(tmp_path), '--state-file', str(tmp_path / 'e.json'))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
@@ -110,7 +117,9 @@ def test_run_bad_arguments_give_one_line(tmp_path, args, match):
 
 
 @pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
-def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(tmp_path, signum):
+def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(
+    tmp_path: Path, signum: signal.Signals
+) -> None:
     """SIGTERM, or SIGINT even when inherited as ignored (a background job of a script), ends the
     suite cleanly: the JSON summary is printed and the energy state is saved (nothing accumulated is
     lost)."""
@@ -155,7 +164,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-def test_run_stops_non_zero_when_a_thread_of_the_suite_dies(tmp_path):
+def test_run_stops_non_zero_when_a_thread_of_the_suite_dies(tmp_path: Path) -> None:
     """Before: the estimator thread died, the suite went on printing 'drive 0.0 W' and exited 0
     after --duration. Now the suite stops, one error line names the thread, exit 1, no summary."""
     result = subprocess.run(

@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -19,9 +20,10 @@ TRACK = ['track', '--terrain', 'dry_sand', '--load', '100', '--width', '0.07', '
 WHEEL = ['wheel', '--terrain', 'dry_sand', '--load', '100', '--width', '0.07', '--radius', '0.1']
 
 
-def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> dict:
+def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> dict[str, Any]:
     assert main([*argv, '--json']) == 0
-    return json.loads(capsys.readouterr().out)
+    loaded: dict[str, Any] = json.loads(capsys.readouterr().out)
+    return loaded
 
 
 def test_track_json_keys_and_values(capsys: pytest.CaptureFixture[str]) -> None:

@@ -34,7 +34,9 @@ slips = st.floats(-1.0, 1.0)
 
 @settings(max_examples=60, deadline=None)
 @given(terrain=terrains, load=loads, slip=slips, width=st.floats(0.03, 0.2), length=st.floats(0.2, 1.0))
-def test_track_outputs_finite_and_sinkage_monotonic(terrain, load, slip, width, length) -> None:
+def test_track_outputs_finite_and_sinkage_monotonic(
+    terrain: Terrain, load: float, slip: float, width: float, length: float
+) -> None:
     state = single_track(terrain, [load, 1.5 * load], width, length, slip)
     for value in (
         state.sinkage_m,
@@ -52,7 +54,7 @@ def test_track_outputs_finite_and_sinkage_monotonic(terrain, load, slip, width, 
 
 @settings(max_examples=40, deadline=None)
 @given(terrain=terrains, load=st.floats(10.0, 150.0), slip=slips)
-def test_wheel_outputs_finite_and_sinkage_monotonic(terrain, load, slip) -> None:
+def test_wheel_outputs_finite_and_sinkage_monotonic(terrain: Terrain, load: float, slip: float) -> None:
     r, b = 0.1, 0.07
     try:
         state = wheel_at_slip(terrain, [load, 1.5 * load], slip, r, b)
@@ -68,7 +70,7 @@ def test_wheel_outputs_finite_and_sinkage_monotonic(terrain, load, slip) -> None
 
 @settings(max_examples=25, deadline=None)
 @given(terrain=terrains, slip=st.floats(0.05, 1.0))
-def test_wheel_sinkage_monotonic_over_load_grid(terrain, slip) -> None:
+def test_wheel_sinkage_monotonic_over_load_grid(terrain: Terrain, slip: float) -> None:
     loads = np.linspace(10.0, 150.0, 8)
     capacity = float(wheel_forces(terrain, 0.1, slip, 0.1, 0.07).Fz_N)
     z = sinkage_at_slip(terrain, loads[loads < capacity], slip, 0.1, 0.07)

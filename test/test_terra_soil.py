@@ -179,7 +179,7 @@ def test_construction_validates() -> None:
         Terrain('x', n=1.0, kc=0.0, kphi=1e6, c=0.0, phi=0.5, K=-1.0)
 
 
-def test_k_eq_is_eq_2_1s_modulus_on_floats_and_arrays():
+def test_k_eq_is_eq_2_1s_modulus_on_floats_and_arrays() -> None:
     # sandy_soil.yaml: kc = 900 N/m^(n+1), kphi = 1 523 400 N/m^(n+2); b = 0.1 m:
     # k_eq = 900 / 0.1 + 1 523 400 = 1 532 400 (hand calculation), and at z = 1 m eq. 2.1 gives p = k_eq.
     terrain = load_terrain('sandy_soil')

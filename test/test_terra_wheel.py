@@ -11,6 +11,7 @@ from scipy.integrate import quad
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.terramechanics import PRESETS
 from skidsteer_power.terramechanics.soil import shear_stress
+from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.terramechanics.wheel import (
     BALANCE_TOL_N,
     bekker_wheel_sinkage,
@@ -30,14 +31,14 @@ SOILS = ('dry_sand', 'sandy_loam', 'clay')
 DRY_SAND = PRESETS['dry_sand']
 
 
-def _quad_forces(terrain, z, s):
+def _quad_forces(terrain: Terrain, z: float, s: float) -> tuple[float, float, float]:
     """Eqs. 2.27 and 2.34 by adaptive scipy.integrate.quad, point by point (independent reference)."""
     tf, tm, tr = (float(a) for a in wheel_angles(terrain, z, s, R))
 
-    def sigma(th):
+    def sigma(th: float) -> float:
         return float(normal_stress(terrain, th, tf, tm, tr, R, B))
 
-    def tau(th):
+    def tau(th: float) -> float:
         return float(shear_stress(terrain, sigma(th), shear_displacement(th, tf, s, R)))
 
     opts = {'points': [tm, 0.0], 'epsabs': 1e-12, 'epsrel': 1e-10, 'limit': 200}
@@ -246,8 +247,8 @@ def test_quadratic_normal_stress_error(name: str) -> None:
         exact = normal_stress(terrain, theta, tf, tm, tr, R, B)
         approx = quadratic_normal_stress(terrain, theta, z, s, R, B)
         worst_max = max(worst_max, np.abs(approx - exact).max() / exact.max())
-        load_exact = np.trapezoid(exact * np.cos(theta), theta)
-        worst_load = max(worst_load, abs(np.trapezoid(approx * np.cos(theta), theta) / load_exact - 1))
+        load_exact = float(np.trapezoid(exact * np.cos(theta), theta))
+        worst_load = max(worst_load, abs(float(np.trapezoid(approx * np.cos(theta), theta)) / load_exact - 1))
     print(f'{name}: quadratic stress max error {worst_max:.2%} of peak, normal load error {worst_load:.2%}')
     assert worst_max < max_bound
     assert worst_load < load_bound

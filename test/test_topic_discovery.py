@@ -7,8 +7,11 @@ from __future__ import annotations
 
 import time
 import uuid
+from collections.abc import Callable, Collection
 
 import pytest
+from rclpy.context import Context
+from rclpy.node import Node
 
 from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics
 from skidsteer_power.errors import InputError
@@ -37,7 +40,9 @@ class Seen:
         self.skipped[name] = reason
 
 
-def _discover_until(node, wanted, seen: Seen, done, timeout_s: float = 20.0) -> None:
+def _discover_until(
+    node: Node, wanted: Collection[str], seen: Seen, done: Callable[[], object], timeout_s: float = 20.0
+) -> None:
     """Discover as the recorder's timer does, until ``done()`` (DDS discovery takes a moment)."""
     end = time.monotonic() + timeout_s
     while True:
@@ -48,14 +53,14 @@ def _discover_until(node, wanted, seen: Seen, done, timeout_s: float = 20.0) -> 
         time.sleep(0.05)
 
 
-def _wait_for(predicate, timeout_s: float = 20.0) -> None:
+def _wait_for(predicate: Callable[[], object], timeout_s: float = 20.0) -> None:
     end = time.monotonic() + timeout_s
     while not predicate():
         assert time.monotonic() < end, 'timed out waiting for the ROS graph'
         time.sleep(0.05)
 
 
-def test_a_new_publisher_is_discovered_once_with_its_type(ros_context):
+def test_a_new_publisher_is_discovered_once_with_its_type(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import Float64, String
 
@@ -78,7 +83,7 @@ def test_a_new_publisher_is_discovered_once_with_its_type(ros_context):
         listener.destroy_node()
 
 
-def test_named_topics_only_and_graph_topics_when_named(ros_context):
+def test_named_topics_only_and_graph_topics_when_named(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import String
 
@@ -95,7 +100,7 @@ def test_named_topics_only_and_graph_topics_when_named(ros_context):
         node.destroy_node()
 
 
-def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(ros_context):
+def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(ros_context: Context) -> None:
     import rclpy
     from std_msgs.msg import Float64, String
 
@@ -126,6 +131,6 @@ def test_two_types_on_one_topic_and_a_refused_type_are_skipped_with_the_reason(r
         node.destroy_node()
 
 
-def test_absolute_topic_adds_the_root_slash_once():
+def test_absolute_topic_adds_the_root_slash_once() -> None:
     assert absolute_topic('cmd_vel') == '/cmd_vel'
     assert absolute_topic('/cmd_vel') == '/cmd_vel'

@@ -8,6 +8,8 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.models import wong_track, wong_wheel
 from skidsteer_power.terramechanics import load_terrain, solve_wheel
 from skidsteer_power.terramechanics import track as single_track
+from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.twin import (
     Segment,
     Twin,
@@ -27,13 +30,21 @@ from skidsteer_power.twin import (
     run_commands,
     write_bag,
 )
+from skidsteer_power.twin.sensors import TwinTrace
 from skidsteer_power.vehicle import load_vehicle
 
 TWIN_DIR = Path(__file__).resolve().parents[1] / 'skidsteer_power' / 'twin'
 SAND_BIN = load_terrain('sand_bin')
 
 
-def _settled(vehicle: str, speed: float, yaw_rate: float, seconds: float = 7.0, terrain=SAND_BIN, **options):
+def _settled(
+    vehicle: str,
+    speed: float,
+    yaw_rate: float,
+    seconds: float = 7.0,
+    terrain: Terrain = SAND_BIN,
+    **options: Any,
+) -> tuple[Twin, TwinTrace]:
     twin = Twin(load_vehicle(vehicle), terrain, **options)
     trace = run_commands(twin, [Segment(speed, yaw_rate, seconds)])
     return twin, trace
@@ -42,7 +53,7 @@ def _settled(vehicle: str, speed: float, yaw_rate: float, seconds: float = 7.0, 
 # --------------------------------------------------------------------------- independence
 
 
-def test_twin_source_never_imports_fess_or_maps():
+def test_twin_source_never_imports_fess_or_maps() -> None:
     for path in TWIN_DIR.glob('*.py'):
         for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
             names = []
@@ -54,7 +65,7 @@ def test_twin_source_never_imports_fess_or_maps():
                 assert not name.startswith(('skidsteer_power.maps', 'skidsteer_power.models')), (path, name)
 
 
-def test_importing_and_running_the_twin_loads_neither_fess_nor_maps():
+def test_importing_and_running_the_twin_loads_neither_fess_nor_maps() -> None:
     code = (
         'import sys\n'
         'from skidsteer_power.twin import Twin, Segment, run_commands\n'
@@ -73,7 +84,7 @@ def test_importing_and_running_the_twin_loads_neither_fess_nor_maps():
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel'])
-def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle):
+def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle: str) -> None:
     # start, turn, reverse-steer, stop: bus energy = terrain work + internal losses + kinetic change
     twin = Twin(load_vehicle(vehicle), SAND_BIN)
     commands = [
@@ -97,7 +108,7 @@ def test_bus_energy_equals_terrain_work_plus_losses_plus_kinetic_energy(vehicle)
 # compared with them with those terms switched off (contact='classic'; docs/TWIN.md).
 
 
-def test_straight_track_agrees_with_the_single_track_equations():
+def test_straight_track_agrees_with_the_single_track_equations() -> None:
     # steady straight running: each track's drawbar pull F_s - R_c = 0 (eq. 2.18) at load W/2
     twin, trace = _settled('test_robot_track', 0.2, 0.0, contact='classic')
     v = twin.vehicle
@@ -111,7 +122,7 @@ def test_straight_track_agrees_with_the_single_track_equations():
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
+def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle: str) -> None:
     # steady straight running: every wheel has zero drawbar pull at load W / n (eqs. 2.28-2.29)
     twin, trace = _settled(vehicle, 0.2, 0.0, seconds=4.0, contact='classic')
     v = twin.vehicle
@@ -131,7 +142,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle):
     ('vehicle', 'model'),
     [('test_robot_track', wong_track), ('test_robot_4wheel', wong_wheel), ('test_robot_6wheel', wong_wheel)],
 )
-def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, model):
+def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle: str, model: ModuleType) -> None:
     # The twin turns less than commanded (slip); Wong's theory (ch. 3 tracks, ch. 4 wheels) solved at
     # the twin's actual speed and radius must give its sprocket/axle torques and speeds.
     # Tolerance 1 %: the twin discretizes the patches differently (32 trapezoid intervals along a
@@ -152,7 +163,7 @@ def test_steady_turn_agrees_with_wongs_theory_at_the_actual_motion(vehicle, mode
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_4wheel', 'test_robot_6wheel'])
-def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle):
+def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(vehicle: str) -> None:
     # ch. 7.3.4, Table 7.3 (skidsteer_power.real_robot): the test robot completed 0.1 m/s up to
     # 0.2 rad/s and 0.2 m/s up to 0.35 rad/s, and got stuck "because of the large sinkage" at
     # 0.1 m/s, 0.25-0.35 rad/s (the empty cells). A bounded subset; all 66 cells are in
@@ -173,7 +184,9 @@ def test_table_7_3_cells_on_sand_bin_complete_or_get_stuck_as_the_real_robot(veh
     ('vehicle', 'speed', 'yaw_rate', 'radius_real'),
     [('test_robot_track', 0.2, 0.02, 17.48), ('test_robot_6wheel', 0.2, 0.25, 1.62)],
 )
-def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(vehicle, speed, yaw_rate, radius_real):
+def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(
+    vehicle: str, speed: float, yaw_rate: float, radius_real: float
+) -> None:
     # Appendix D (skidsteer_power.real_robot.APPENDIX_D_RADII); the track's longitudinal shear modulus
     # was fitted to the track's 0.1 m/s cells only, so these two are a check. Goal of issue 26:
     # max |R_twin / R_real - 1| <= 30 % (all 14 cells: benchmarks/bench_twin_motion.py).
@@ -187,7 +200,7 @@ def test_turn_radius_matches_appendix_d_where_nothing_was_fitted(vehicle, speed,
         assert classic < 0.75 * radius_real
 
 
-def test_extended_track_torques_stay_wongs_at_the_actual_motion():
+def test_extended_track_torques_stay_wongs_at_the_actual_motion() -> None:
     # Chapter 7.3.4 (Figure 7.41): FESS (Wong's track theory) at the measured speed and radius was
     # "validated by the experiments" on the real track's axle torques. The fitted longitudinal
     # modulus widens the twin's turns as Appendix D's, and keeps that: Wong's theory at the twin's
@@ -201,7 +214,7 @@ def test_extended_track_torques_stay_wongs_at_the_actual_motion():
     assert outer == pytest.approx(float(state.torque_outer_Nm), rel=0.15)
 
 
-def test_track_sinks_deeper_with_slip_in_the_extended_laws():
+def test_track_sinks_deeper_with_slip_in_the_extended_laws() -> None:
     # Lyasko's slip-sinkage (contact.slip_sinkage_factor) under a track as under a wheel: a slipping
     # outer track in a tight turn sinks deeper than the static eq. 2.6 sinkage the classic laws keep
     twin, trace = _settled('test_robot_track', 0.1, 0.3, seconds=3.0)
@@ -211,7 +224,7 @@ def test_track_sinks_deeper_with_slip_in_the_extended_laws():
     assert trace.sinkage_m.max() > 1.05 * classic.sinkage_m.max()
 
 
-def test_the_real_robots_observations_are_the_dissertations():
+def test_the_real_robots_observations_are_the_dissertations() -> None:
     from skidsteer_power.real_robot import APPENDIX_D_RADII, table_7_3_cells
 
     cells = table_7_3_cells()
@@ -223,7 +236,7 @@ def test_the_real_robots_observations_are_the_dissertations():
 # --------------------------------------------------------------------------- sensors, patches, CLI
 
 
-def test_odometry_drifts_with_slip_and_ground_truth_does_not():
+def test_odometry_drifts_with_slip_and_ground_truth_does_not() -> None:
     twin, trace = _settled('test_robot_4wheel', 0.2, 0.0, seconds=3.0)
     true_x, odom_x = trace.pose[-1, 0], trace.odom_pose[-1, 0]
     slip = 1.0 - twin.vel[0] / (twin.r * twin.omega_m.mean() / twin.G)
@@ -236,7 +249,7 @@ def test_odometry_drifts_with_slip_and_ground_truth_does_not():
     assert np.abs(trace.joint_effort_Nm / kt - trace.current_A).mean() < 0.05
 
 
-def test_a_patch_of_other_terrain_changes_the_load(tmp_path):
+def test_a_patch_of_other_terrain_changes_the_load(tmp_path: Path) -> None:
     patch = tmp_path / 'patches.yaml'
     patch.write_text('patches:\n  - terrain: clay\n    polygon: [[0.3, -2], [5, -2], [5, 2], [0.3, 2]]\n')
     patches = load_patches(patch)
@@ -251,7 +264,7 @@ def test_a_patch_of_other_terrain_changes_the_load(tmp_path):
         load_patches(bad)
 
 
-def test_command_csv_rows_hold_until_the_next(tmp_path):
+def test_command_csv_rows_hold_until_the_next(tmp_path: Path) -> None:
     csv = tmp_path / 'cmd.csv'
     csv.write_text('t_s,speed_m_s,yaw_rate_rad_s\n0.5,0.1,0\n2,0.2,0.1\n3,0,0\n')
     assert commands_from_csv(csv) == [Segment(0.0, 0.0, 0.5), Segment(0.1, 0.0, 1.5), Segment(0.2, 0.1, 1.0)]
@@ -260,7 +273,9 @@ def test_command_csv_rows_hold_until_the_next(tmp_path):
         commands_from_csv(csv)
 
 
-def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, capsys):
+def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from skidsteer_power.bag_io.reader import open_bag
 
     csv = tmp_path / 'cmd.csv'
@@ -297,12 +312,12 @@ def test_simulate_cli_writes_the_bag_and_reports_the_contract_keys(tmp_path, cap
     assert json.loads(capsys.readouterr().out)['contact'] == 'classic'
 
 
-def test_twin_refuses_unknown_contact_laws():
+def test_twin_refuses_unknown_contact_laws() -> None:
     with pytest.raises(InputError, match='classic, extended'):
         Twin(load_vehicle('test_robot_4wheel'), SAND_BIN, contact='lyasko')
 
 
-def test_write_bag_needs_a_new_path(tmp_path):
+def test_write_bag_needs_a_new_path(tmp_path: Path) -> None:
     trace = run_commands(Twin(load_vehicle('test_robot_track'), SAND_BIN), [Segment(0.1, 0.0, 0.2)])
     write_bag(trace, tmp_path / 'a.mcap')
     with pytest.raises(InputError, match='exists'):
@@ -312,7 +327,7 @@ def test_write_bag_needs_a_new_path(tmp_path):
 # --------------------------------------------------------------------------- live coupling, kinematics
 
 
-def test_live_coupling_moves_the_twin_with_the_amplifiers_motor_speeds():
+def test_live_coupling_moves_the_twin_with_the_amplifiers_motor_speeds() -> None:
     from skidsteer_power.twin.live import TwinCoupling, TwinLoad
 
     twin = Twin(load_vehicle('test_robot_4wheel'), SAND_BIN)
@@ -333,7 +348,7 @@ def test_live_coupling_moves_the_twin_with_the_amplifiers_motor_speeds():
 
 
 @pytest.fixture(scope='module')
-def turning_bag(tmp_path_factory):
+def turning_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     folder = tmp_path_factory.mktemp('kinematics')
     trace = run_commands(
         Twin(load_vehicle('test_robot_4wheel'), SAND_BIN), [Segment(0.0, 0.0, 1.0), Segment(0.2, 0.2, 5.0)]
@@ -341,7 +356,7 @@ def turning_bag(tmp_path_factory):
     return write_bag(trace, folder / 'turn.mcap'), folder
 
 
-def test_validate_kinematics_predicts_from_the_motion(turning_bag):
+def test_validate_kinematics_predicts_from_the_motion(turning_bag: tuple[Path, Path]) -> None:
     from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
 
@@ -367,7 +382,9 @@ def test_validate_kinematics_predicts_from_the_motion(turning_bag):
     assert summaries['odom']['motion_prediction'] is None
 
 
-def test_validate_kinematics_without_odometry_is_one_clear_error(tmp_path, capsys):
+def test_validate_kinematics_without_odometry_is_one_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from skidsteer_power.bag_io.synthetic import write_drive_bag
 
     bag = tmp_path / 'no_odom.mcap'
@@ -383,7 +400,7 @@ def _rise_time(t: np.ndarray, speed: np.ndarray) -> float:
     return float(t[np.argmax(speed >= 0.9 * speed[-1])])
 
 
-def _live_step_response(configure: bool, seconds: float = 2.0):
+def _live_step_response(configure: bool, seconds: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The live path without ptys: two simulated-amplifier motor models (des/simulator.MotorModel,
     0.5 ms explicit steps as SimulatedDes runs them) loaded by the twin through TwinCoupling."""
     from skidsteer_power.des.kinematics import RPM
@@ -422,7 +439,7 @@ def _live_step_response(configure: bool, seconds: float = 2.0):
     return np.array(times), np.array(speeds), np.array(currents)
 
 
-def test_live_path_counts_the_body_inertia_once():
+def test_live_path_counts_the_body_inertia_once() -> None:
     """Issue 14: the simulated amplifiers integrate the motors, the twin the body; the body's mass
     must not also sit in the amplifiers' motor inertia. A 0.2 m/s step from rest on the 4-wheel
     robot: the motor current peaks while the drivetrain and the body accelerate; live and offline
@@ -442,7 +459,7 @@ def test_live_path_counts_the_body_inertia_once():
     assert float(doubled.max()) > 1.3 * reference_peak  # the test can tell the double count
 
 
-def test_bulldozing_and_slip_sinkage_laws_by_hand():
+def test_bulldozing_and_slip_sinkage_laws_by_hand() -> None:
     from skidsteer_power.twin.contact import (
         SOIL_UNIT_WEIGHT_N_M3,
         bulldozing_coefficients,
@@ -458,7 +475,7 @@ def test_bulldozing_and_slip_sinkage_laws_by_hand():
     assert slip_sinkage_factor(np.array([0.0, 0.5, 1.0, -0.3])) == pytest.approx([1.0, 2.0, 4.0, 1.0])
 
 
-def test_drive_until_empty_refuses_a_segment_that_is_not_whole_pieces():
+def test_drive_until_empty_refuses_a_segment_that_is_not_whole_pieces() -> None:
     """0.1 s would round to no 0.2 s piece at all, 0.3 s to 0.4 s: both said, not driven."""
     twin = Twin(load_vehicle('test_robot_track'), SAND_BIN)
     for seconds in (0.1, 0.3):

@@ -6,6 +6,7 @@ command as one row, which its fixed 2 ms steps integrate exactly as before."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +29,7 @@ def _rows(period_s: float, duration_s: float) -> list[Segment]:
 
 
 @pytest.mark.parametrize('period_s', [0.5e-3, 3e-3])
-def test_short_and_off_grid_rows_drive_like_one_row(period_s):
+def test_short_and_off_grid_rows_drive_like_one_row(period_s: float) -> None:
     one = run_commands(_twin(), [Segment(SPEED, YAW, 1.5)])
     rows = run_commands(_twin(), _rows(period_s, 1.5))
     assert rows.duration_s == pytest.approx(1.5, abs=1e-9)
@@ -40,12 +41,14 @@ def test_short_and_off_grid_rows_drive_like_one_row(period_s):
     assert np.max(np.abs(rows.pose[-1, :2] - one.pose[-1, :2])) < 0.02  # [m]
 
 
-def test_a_run_ending_between_samples_lasts_its_commands():
+def test_a_run_ending_between_samples_lasts_its_commands() -> None:
     trace = run_commands(_twin(), [Segment(SPEED, 0.0, 0.1), Segment(0.0, 0.0, 0.007)])
     assert trace.duration_s == pytest.approx(0.107, abs=1e-9)
 
 
-def test_simulate_cli_with_3_ms_rows_lasts_the_csv_plus_the_lead_in(tmp_path, capsys):
+def test_simulate_cli_with_3_ms_rows_lasts_the_csv_plus_the_lead_in(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """1 s lead-in + 3 s of rows every 3 ms (the issue: 10 s of them gave 13.16 s instead of 11 s)."""
     t = np.arange(0, 1001) * 3e-3  # 1000 rows held 3 ms each; the last row ends the run at 3.0 s
     csv = tmp_path / 'cmd.csv'

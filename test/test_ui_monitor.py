@@ -8,6 +8,8 @@ import io
 import math
 import os
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 from rich.console import Console
@@ -27,6 +29,9 @@ from skidsteer_power.ui.monitor import (
     render,
 )
 
+if TYPE_CHECKING:
+    from skidsteer_power.nodes.energy_monitor import KeyReader
+
 
 def screen(view: MonitorView) -> str:
     console = Console(file=io.StringIO(), width=110, record=True, color_system=None)
@@ -34,7 +39,7 @@ def screen(view: MonitorView) -> str:
     return console.export_text()
 
 
-def full_view(**changes) -> MonitorView:
+def full_view(**changes: object) -> MonitorView:
     summary = {
         'predicted_left_W': 41.25, 'predicted_right_W': 12.5, 'measured_left_W': 44.0,
         'measured_right_W': 11.0, 'error_left_W': 2.75, 'error_right_W': -1.5, 'terrain_W': 30.0,
@@ -53,7 +58,7 @@ def full_view(**changes) -> MonitorView:
     return view
 
 
-def test_render_shows_speeds_currents_power_battery_and_ready():
+def test_render_shows_speeds_currents_power_battery_and_ready() -> None:
     text = screen(full_view())
     assert 'Ready' in text and 'Not Ready' not in text
     assert '2400' in text and '2000' in text  # 251.327 rad/s = 2400 rpm, 209.44 rad/s = 2000 rpm
@@ -67,25 +72,25 @@ def test_render_shows_speeds_currents_power_battery_and_ready():
     assert 'TRACTION WARNING' not in text
 
 
-def test_render_warns_about_traction_and_missing_link():
+def test_render_warns_about_traction_and_missing_link() -> None:
     text = screen(full_view(ready=False, summary={'traction_margin': -0.1, 'traction_warning': 1.0}))
     assert 'Not Ready' in text
     assert 'TRACTION WARNING: margin -0.10' in text
     assert 'predicted -- W' in text  # missing values are shown as --, never as a number
 
 
-def test_render_case_progress():
+def test_render_case_progress() -> None:
     text = screen(full_view(mode='case', case_elapsed_s=3.0, case_total_s=12.5))
     assert 'case 3.0 / 12.5 s' in text and 'keys:' not in text
 
 
-def test_format_duration():
+def test_format_duration() -> None:
     assert format_duration(math.inf) == 'idle'
     assert format_duration(math.nan) == '--'
     assert format_duration(3599.6) == '1:00:00'
 
 
-def test_decode_arrow_keys_and_partial_sequences():
+def test_decode_arrow_keys_and_partial_sequences() -> None:
     keys, rest = decode_keys(b'\x1b[A\x1b[Bx\x1b[C\x1b[D q\x1b[')
     assert keys == ['up', 'down', 'right', 'left', 'stop', 'quit']
     assert rest == b'\x1b['
@@ -93,7 +98,7 @@ def test_decode_arrow_keys_and_partial_sequences():
     assert keys == ['up'] and rest == b''
 
 
-def test_free_drive_steps_and_clamps():
+def test_free_drive_steps_and_clamps() -> None:
     drive = FreeDrive(speed_step_m_s=0.1, yaw_step_rad_s=0.05, max_speed_m_s=0.2, max_yaw_rate_rad_s=0.1)
     command = (0.0, 0.0)
     for key in ('up', 'up', 'up', 'left', 'left', 'left'):
@@ -103,7 +108,7 @@ def test_free_drive_steps_and_clamps():
     assert drive.apply(command, 'stop') == (0.0, 0.0)
 
 
-def test_case_profile_commands():
+def test_case_profile_commands() -> None:
     profile = CaseProfile((Segment(0.1, 0.0, 2.0), Segment(0.2, 0.35, 3.0)))
     assert profile.duration_s == 5.0
     assert profile.command_at(1.9) == (0.1, 0.0)
@@ -111,7 +116,7 @@ def test_case_profile_commands():
     assert profile.command_at(5.0) is None
 
 
-def test_case_file(tmp_path):
+def test_case_file(tmp_path: Path) -> None:
     path = tmp_path / 'case.csv'
     path.write_text('# Table 7.3 row: V = 0.2 m/s\nduration_s,speed_m_s,yaw_rate_rad_s\n5,0.2,0\n5,0.2,0.1\n')
     assert load_case_csv(path).steps[1] == Segment(0.2, 0.1, 5.0)
@@ -126,14 +131,14 @@ def test_case_file(tmp_path):
         ('duration_s,speed_m_s,yaw_rate_rad_s\n1,nan,0\n', 'finite'),
     ],
 )
-def test_bad_case_file(tmp_path, text, match):
+def test_bad_case_file(tmp_path: Path, text: str, match: str) -> None:
     path = tmp_path / 'case.csv'
     path.write_text(text)
     with pytest.raises(InputError, match=match):
         load_case_csv(path)
 
 
-def test_csv_log_writes_what_was_shown(tmp_path):
+def test_csv_log_writes_what_was_shown(tmp_path: Path) -> None:
     log = CsvLog(tmp_path / 'shown.csv')
     log.write([csv_row(full_view(), 0.2), csv_row(full_view(soc=0.79), 0.4)])
     log.close()
@@ -144,7 +149,7 @@ def test_csv_log_writes_what_was_shown(tmp_path):
     assert rows[0]['measured_left_W'] == '44' and rows[0]['speed_cmd_m_s'] == '0.2'
 
 
-def read_keys_until(reader, count: int) -> list[str]:
+def read_keys_until(reader: KeyReader, count: int) -> list[str]:
     """Poll the non-blocking reader (the pty delivers bytes asynchronously) until ``count`` keys came."""
     keys: list[str] = []
     deadline = time.monotonic() + 5.0
@@ -154,7 +159,7 @@ def read_keys_until(reader, count: int) -> list[str]:
     return keys
 
 
-def test_key_reader_on_a_pseudo_terminal():
+def test_key_reader_on_a_pseudo_terminal() -> None:
     from skidsteer_power.nodes.energy_monitor import KeyReader
 
     master, slave = os.openpty()
@@ -171,7 +176,7 @@ def test_key_reader_on_a_pseudo_terminal():
         os.close(slave)
 
 
-def test_render_marks_stale_sources_but_keeps_their_last_values():
+def test_render_marks_stale_sources_but_keeps_their_last_values() -> None:
     from skidsteer_power.ui.monitor import SOURCES
 
     text = screen(full_view(stale=frozenset(SOURCES), ready=False))
@@ -184,7 +189,7 @@ def test_render_marks_stale_sources_but_keeps_their_last_values():
     assert 'stale' not in fresh
 
 
-def test_render_shows_the_time_to_empty_band_and_a_stale_terrain_line():
+def test_render_shows_the_time_to_empty_band_and_a_stale_terrain_line() -> None:
     # 7322 s = 2:02:02; p10 5400 s = 1:30:00; p90 9000 s = 2:30:00
     text = screen(full_view(time_to_empty_p10_s=5400.0, time_to_empty_p90_s=9000.0))
     assert 'time to empty 2:02:02 (p10 1:30:00 - p90 2:30:00)' in text

@@ -133,7 +133,7 @@ BASE = yaml.safe_load((vehicle_dirs()[0] / 'chapter4_4wheel.yaml').read_text())
         ({'powertrain': [1, 2]}, 'powertrain'),
     ],
 )
-def test_bad_field_is_named(tmp_path: Path, change: dict, message: str) -> None:
+def test_bad_field_is_named(tmp_path: Path, change: dict[str, object], message: str) -> None:
     data = {**BASE, **change}
     with pytest.raises(ConfigError, match=message):
         load_vehicle(_write(tmp_path, data))

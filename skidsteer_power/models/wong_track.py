@@ -88,10 +88,10 @@ def sinc_terms(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def track_shear_displacement(
     x: np.ndarray,
     y: np.ndarray,
-    s0: np.ndarray,
-    omega: np.ndarray,
-    speed: np.ndarray,
-    yaw: np.ndarray,
+    s0: np.ndarray | float,
+    omega: np.ndarray | float,
+    speed: np.ndarray | float,
+    yaw: np.ndarray | float,
     length: float,
     radius: float,
 ) -> tuple[np.ndarray, np.ndarray]:
