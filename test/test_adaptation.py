@@ -8,6 +8,7 @@ real rclpy and DDS.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +30,19 @@ VEHICLE = 'test_robot_4wheel'
 DT = 0.02  # 50 Hz joint_states, as the des_driver and the twin publish
 
 
-def feed(adapt: TorqueAdaptation, t: float, pred, meas, omega=(24.0, 24.0)) -> bool:
-    return adapt.update(t, tuple(pred), omega, tuple(meas), omega)
+def pair(values: Sequence[float] | np.ndarray) -> tuple[float, float]:
+    """(left, right) as plain floats."""
+    return float(values[0]), float(values[1])
+
+
+def feed(
+    adapt: TorqueAdaptation,
+    t: float,
+    pred: Sequence[float] | np.ndarray,
+    meas: Sequence[float] | np.ndarray,
+    omega: tuple[float, float] = (24.0, 24.0),
+) -> bool:
+    return adapt.update(t, pair(pred), omega, pair(meas), omega)
 
 
 # --- the RLS correction --------------------------------------------------------------------------
@@ -302,7 +314,7 @@ def test_terrain_scale_is_the_slope_over_all_commands_and_restarts_with_a_terrai
     assert adapt.state().terrain_scale == pytest.approx(1.6, rel=1e-12)
     rng = np.random.default_rng(3)
     while not adapt.update(
-        t, pred, (24.0, 24.0), 0.3 * np.array(meas) + rng.normal(0, 1e-3, 2), (24.0, 24.0), terrain
+        t, pred, (24.0, 24.0), pair(0.3 * np.array(meas) + rng.normal(0, 1e-3, 2)), (24.0, 24.0), terrain
     ):
         t += DT
     assert adapt.terrain_scale() == 1.0 and adapt.state().terrain_scale_evidence_s == 0.0

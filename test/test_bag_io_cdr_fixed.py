@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ STORE = get_typestore(Stores.ROS2_JAZZY)
 RNG = np.random.default_rng(7)
 
 
-def _header(k: int, frame: str = 'base_link') -> object:
+def _header(k: int, frame: str = 'base_link') -> Any:  # rosbags' message classes are made at run time
     Time = STORE.types['builtin_interfaces/msg/Time']
     Header = STORE.types['std_msgs/msg/Header']
     return Header(stamp=Time(sec=k, nanosec=1000 * k), frame_id=frame)
@@ -89,7 +90,7 @@ def test_odometry_matches_the_type_store_and_other_frames_are_refused() -> None:
     got = header_doubles(raw, 2, 85)
     assert got is not None
     for row, data in zip(got, raw, strict=True):
-        msg = STORE.deserialize_cdr(data, 'nav_msgs/msg/Odometry')
+        msg: Any = STORE.deserialize_cdr(data, 'nav_msgs/msg/Odometry')  # a run-time message class
         pose, twist = msg.pose.pose, msg.twist.twist
         o = pose.orientation
         assert row[:7].tolist() == [pose.position.x, pose.position.y, pose.position.z, o.x, o.y, o.z, o.w]

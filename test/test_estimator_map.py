@@ -38,6 +38,7 @@ def test_prediction_adds_the_powertrain_to_the_map(predictor: MapPredictor) -> N
     )
     assert p.terrain_W == pytest.approx((q.power_left_W, q.power_right_W), rel=0.05)
     assert p.motor_omega_rad_s == pytest.approx(tuple(GEAR_RATIO * w for w in p.axle_omega_rad_s))
+    assert isinstance(predictor.powertrain, Powertrain)
     internal = [
         predictor.powertrain.resistance(side).torque(p.motor_omega_rad_s[i])
         for i, side in enumerate(('left', 'right'))

@@ -126,6 +126,7 @@ def test_the_battery_configuration_comes_from_the_vehicle_not_the_state_file(
     reference = make_core()
     reference.energy.battery = Battery.default_test_robot(soc=0.5)  # the vehicle's battery at 50 %
     state = json.loads(_state_bytes())
+    assert isinstance(reference.battery, Battery)
     state['battery']['config'] = dict(reference.battery.to_dict()['config'], capacity_Ah=float(capacity))
     path.write_text(json.dumps(state))
     core = make_core()

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from skidsteer_power.models import fess, wong_wheel
+from skidsteer_power.models.fess_contact import _free_wheel_table, wheel_contact
 from skidsteer_power.terramechanics.terrain import PRESETS
 from skidsteer_power.terramechanics.wheel import quadratic_normal_stress, solve_wheel
 from skidsteer_power.vehicle import load_vehicle
@@ -23,7 +24,7 @@ def test_contact_uses_the_free_wheel_geometry_and_quadratic_stress() -> None:
     terrain = PRESETS['dry_sand']
     per_wheel = WHEELED.weight_N / 4
     loads = np.array([[2 * per_wheel, 2 * per_wheel]])
-    contact = fess.wheel_contact(WHEELED, terrain, loads, n=40)
+    contact = wheel_contact(WHEELED, terrain, loads, n=40)
     wheel = solve_wheel(terrain, per_wheel, 0.0, 0.1, 0.074)
     # the geometry is interpolated in log(load) from a 25-load table: 0.5 % allowed
     assert contact.sinkage[0, 0] == pytest.approx(float(wheel.sinkage_m), rel=5e-3)
@@ -31,7 +32,8 @@ def test_contact_uses_the_free_wheel_geometry_and_quadratic_stress() -> None:
     theta = np.arcsin(contact.fwd[0, 0, 0] / 0.1)
     sigma = (contact.tau_max[0, 0, 0] - terrain.c) / np.tan(terrain.phi)
     z = contact.sinkage[0, 0]
-    slip = np.interp(np.log(per_wheel), *fess._free_wheel_table(terrain, 0.1, 0.074, per_wheel)[::2])
+    log_loads, _, slips = _free_wheel_table(terrain, 0.1, 0.074, per_wheel)
+    slip = np.interp(np.log(per_wheel), log_loads, slips)
     expected = quadratic_normal_stress(terrain, theta, z, slip, 0.1, 0.074)
     assert sigma == pytest.approx(expected, rel=1e-6, abs=1e-6)
 

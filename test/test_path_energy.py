@@ -13,6 +13,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
+from numpy.typing import ArrayLike
 from rclpy.context import Context
 from std_msgs.msg import Float64
 from test_nodes_estimator import Rig
@@ -21,7 +22,7 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.path_energy import PathTracker, path_energy, route_from_polyline
-from skidsteer_power.estimator.prediction import MapPredictor
+from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.maps.power_map import MapQuery
 from skidsteer_power.missions.energy import run_mission
@@ -110,7 +111,7 @@ class CountingMap:
     def __init__(self, power_map: PowerMap) -> None:
         self.power_map, self.queries = power_map, 0
 
-    def query(self, speed: float, yaw_rate: float) -> MapQuery:
+    def query(self, speed: ArrayLike, yaw_rate: ArrayLike, /) -> MapQuery:
         self.queries += 1
         return self.power_map.query(speed, yaw_rate)
 
@@ -343,9 +344,12 @@ def test_live_path_energy_applies_the_published_terrain_scale(
         values = dict(zip(corrections[-1].name, corrections[-1].position, strict=True))
         assert values['terrain_scale'] == pytest.approx(1.5, rel=1e-6)
         predictor = rig.node.core.predictor
+        assert isinstance(predictor, MapPredictor | SetpointPredictor)
+        power_map, powertrain = predictor.power_map, predictor.powertrain
+        assert isinstance(power_map, PowerMap) and isinstance(powertrain, Powertrain)
         path = PlannedPath(xy[:, 0], xy[:, 1])
-        expected = path.energy(SPEED, predictor.power_map, predictor.powertrain, values['terrain_scale'])
-        plain = path.energy(SPEED, predictor.power_map, predictor.powertrain)
+        expected = path.energy(SPEED, power_map, powertrain, values['terrain_scale'])
+        plain = path.energy(SPEED, power_map, powertrain)
         required = rig.received['energy/path_required_wh'][-1].data
         assert required == pytest.approx(expected.required_wh, rel=1e-6)
         assert required > plain.required_wh  # the track on dry sand: mostly internal loss, +0.7 %

@@ -25,6 +25,8 @@ from skidsteer_power.estimator.path_energy import (
     PlannedPath,
     decimate_polyline,
 )
+from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
+from skidsteer_power.maps import PowerMap
 from skidsteer_power.nodes.path_hook import path_xy
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.vehicle import load_vehicle
@@ -156,7 +158,10 @@ def test_a_1e5_pose_plan_leaves_the_battery_tick_running(
         coarse = _curve(2001)
         tracker = PathTracker()
         tracker.set_path(coarse[:, 0], coarse[:, 1])
-        power_map = rig.node.core.predictor.power_map
+        predictor = rig.node.core.predictor
+        assert isinstance(predictor, MapPredictor | SetpointPredictor)
+        power_map = predictor.power_map
+        assert isinstance(power_map, PowerMap)
         reference = tracker.evaluate(SPEED, power_map, Powertrain.for_vehicle(vehicle), 1.0)
         assert reference is not None
         assert required[-1].data == pytest.approx(reference.required_wh, rel=0.01)

@@ -31,6 +31,7 @@ from skidsteer_power.twin import (
     write_bag,
 )
 from skidsteer_power.twin.sensors import TwinTrace
+from skidsteer_power.twin.wheel_contact import WheelContact
 from skidsteer_power.vehicle import load_vehicle
 
 TWIN_DIR = Path(__file__).resolve().parents[1] / 'skidsteer_power' / 'twin'
@@ -135,6 +136,7 @@ def test_straight_wheels_agree_with_the_single_wheel_equations(vehicle: str) -> 
     assert twin_slip == pytest.approx(float(ref.slip), rel=0.02)
     per_wheel = trace.axle_torque_Nm[-1] / v.wheels_per_side
     assert per_wheel == pytest.approx([float(ref.drive_torque_Nm)] * 2, rel=0.02)
+    assert isinstance(twin.contact, WheelContact)
     assert twin.contact.z == pytest.approx(float(ref.sinkage_m), rel=0.02)
 
 
