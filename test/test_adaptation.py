@@ -246,16 +246,7 @@ def test_node_publishes_the_correction_and_the_bounds(
         rig.probe.create_subscription(JointState, 'power/correction', got['power/correction'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p10_s', got['p10'].append, 10)
         rig.probe.create_subscription(Float64, 'energy/time_to_empty_p90_s', got['p90'].append, 10)
-        for k in range(61):  # 3 s at 20 Hz
-            t = k * 0.05
-            rig.set_clock(t)
-            rig.command(0.2, 0.0)
-
-            def command_seen(t: float = t) -> bool:
-                return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
-
-            rig.spin_until(command_seen)
-            rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+        rig.drive_steady()  # 3 s at 20 Hz
         count = len(got['power/correction'])
         rig.run_clock(3.05, lambda: len(got['power/correction']) > count and got['p90'])
         msg = got['power/correction'][-1]

@@ -145,6 +145,20 @@ class Rig:
             msg.header.stamp = stamp
         self.pub_cmd.publish(msg)
 
+    def drive_steady(self, seconds: float = 3.0, rate_hz: float = 20.0) -> None:
+        """0.2 m/s straight for ``seconds`` on the node's clock: at each tick a command (waited for
+        until the node has taken it) and a joint_states reading of 12 rad/s and 0.13 N m per side."""
+        for k in range(round(seconds * rate_hz) + 1):
+            t = k / rate_hz
+            self.set_clock(t)
+            self.command(0.2, 0.0)
+
+            def command_seen(t: float = t) -> bool:
+                return bool(self.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
+
+            self.spin_until(command_seen)
+            self.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+
     def latest_diagnostics(self) -> dict[str, str]:
         status = self.received['diagnostics'][-1].status[0]
         return {kv.key: kv.value for kv in status.values}

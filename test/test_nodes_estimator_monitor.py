@@ -298,16 +298,7 @@ def test_view_shows_the_corrected_online_figure(ros_context: Context, tmp_path: 
     )  # fmt: skip
     rig.executor.add_node(monitor)
     try:
-        for k in range(61):  # 3 s at 20 Hz
-            t = k * 0.05
-            rig.set_clock(t)
-            rig.command(0.2, 0.0)
-
-            def command_seen(t: float = t) -> bool:
-                return bool(rig.node.core.cmd_fresh.last_s == pytest.approx(t, abs=1e-9))
-
-            rig.spin_until(command_seen)
-            rig.joint_state(t, (12.0, 12.0), (0.13, 0.13))
+        rig.drive_steady()  # 3 s at 20 Hz
 
         def corrected_shown() -> bool:
             return abs(monitor.view.get('corrected_left_W') - 2.483) < 0.01
