@@ -18,6 +18,7 @@ import traceback
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.command import CheckedTwist, CommandLimits, DriveGeometry, SlewLimiter, limit_twist
@@ -33,6 +34,7 @@ FAULT_REPORT_HOLD_S = 10.0
 MAX_BACKOFF_S = 10.0
 """Longest wait before restarting a poller that keeps failing [s]."""
 _log = logging.getLogger(__name__)
+_T = TypeVar('_T')
 
 
 class DriveCommand:
@@ -83,7 +85,9 @@ class DriveCommand:
         self.stall_timeout_s = stall_timeout_s
         self._clear_requests: set[str] = set()
         self._active = active
-        self.shutting_down = False
+        self._shutting_down = False
+        self._paused = ''  # the signal that stopped the process (SIGTSTP ...), '' when running
+        self._listeners: list[threading.Event] = []  # each poller's wake-up (see add_listener)
         self.generation = 0
         self.nonfinite_setpoints = 0
 
@@ -112,6 +116,58 @@ class DriveCommand:
             self._stamp = -math.inf
             self._twist, self._targets = None, {}
             self.generation += 1
+        self._notify()
+
+    # -- wake-ups: a stop never waits for the next poll (issue 34) --------------------------------
+
+    def add_listener(self, event: threading.Event) -> None:
+        """``event`` is set whenever a condition for motion may have failed (inactive, shutting
+        down, paused, a fault, a link down, a clear request): a poller waiting between cycles wakes
+        at once instead of at its next poll."""
+        with self._lock:
+            self._listeners.append(event)
+
+    def _notify(self) -> None:
+        with self._lock:
+            listeners = list(self._listeners)
+        for event in listeners:
+            event.set()
+
+    def stale_at(self) -> float:
+        """When the held command goes stale (the watchdog's zero) [s, ``clock``]; -inf without one."""
+        with self._lock:
+            return self._stamp + self.timeout_s
+
+    def must_stop(self, side: str) -> bool:
+        """Whether this side must hold zero now (every condition of :meth:`wanted_rpm` but the value)."""
+        with self._lock:
+            now = self.clock()
+            return bool(self._stop_reason_locked(now)) or side in self._down_locked(now)
+
+    @property
+    def shutting_down(self) -> bool:
+        return self._shutting_down
+
+    @shutting_down.setter
+    def shutting_down(self, value: bool) -> None:
+        self._shutting_down = bool(value)
+        self._notify()
+
+    def pause(self, reason: str) -> None:
+        """The process is about to stop (SIGTSTP, SIGTTIN, SIGTTOU): zero, disable, forget the command."""
+        with self._lock:
+            self._paused = reason or 'paused'
+            self._stamp, self._twist, self._targets = -math.inf, None, {}
+            self.generation += 1
+        self._notify()
+
+    def resume(self) -> None:
+        """The process continued (SIGCONT): power stages on again, motion only on a fresh command."""
+        with self._lock:
+            self._paused = ''
+            self._stamp, self._twist, self._targets = -math.inf, None, {}
+            self.generation += 1
+        self._notify()
 
     @property
     def active(self) -> bool:
@@ -124,11 +180,12 @@ class DriveCommand:
             self._active = bool(value)
             self._stamp, self._twist, self._targets = -math.inf, None, {}
             self.generation += 1
+        self._notify()
 
     @property
     def enable_wanted(self) -> bool:
         """Whether the power stages should be enabled (active and not shutting down)."""
-        return self._active and not self.shutting_down
+        return self._active and not self._shutting_down and not self._paused
 
     # -- the set point --------------------------------------------------------------------------
 
@@ -157,8 +214,10 @@ class DriveCommand:
             return self._stop_reason_locked(self.clock())
 
     def _stop_reason_locked(self, now: float) -> str:
-        if self.shutting_down:
+        if self._shutting_down:
             return 'shutting down'
+        if self._paused:
+            return f'process stopped by {self._paused}'
         if not self._active:
             return 'inactive'
         if self._halted_by:
@@ -179,6 +238,7 @@ class DriveCommand:
     def halt(self, side: str) -> None:
         with self._lock:
             self._halted_by.add(side)
+        self._notify()
 
     @property
     def halted_by(self) -> builtins.set[str]:  # in the class body `set` is the method above
@@ -189,6 +249,7 @@ class DriveCommand:
         """This side cannot be commanded now (port lost, not answering, poller fault)."""
         with self._lock:
             self._down[side] = reason
+        self._notify()
 
     def link_up(self, side: str) -> None:
         """A good cycle on this side (a heartbeat: without one for ``stall_timeout_s`` the side
@@ -214,11 +275,16 @@ class DriveCommand:
         with self._lock:
             self._clear_requests.update(sides)
             self.generation += 1
+        self._notify()
 
     def withdraw_clear_requests(self) -> None:
         """Forget clear requests no poller took (a side that was unreachable must not clear later)."""
         with self._lock:
             self._clear_requests.clear()
+
+    def has_clear_request(self, side: str) -> bool:
+        with self._lock:
+            return side in self._clear_requests
 
     def take_clear_request(self, side: str) -> bool:
         with self._lock:
@@ -316,6 +382,8 @@ class AmplifierPoller:
         self._applied = threading.Condition()
         self._applied_generation = -1
         self._sample = AmplifierSample()
+        self.unsafe_stop = ''  # why the stop could not be confirmed ('' when it was)
+        self.self_resets = 0  # times the amplifier reset itself (power stage off unasked)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_sent: int | None = None
@@ -325,6 +393,10 @@ class AmplifierPoller:
         self._counter_time = 0.0
         self._rate_window: list[float] = []
         self._backoff_s = reconnect_period_s
+        self._wake = threading.Event()
+        self._read_s = 0.0  # longest recent read exchange [s, real time]: how far ahead to zero
+        command.add_listener(self._wake)
+        self.amp.link.abort = self._stop_due  # a stop ends an exchange's retries (transport)
         command.link_down(side, 'not connected yet')
 
     @property
@@ -347,13 +419,17 @@ class AmplifierPoller:
     def request_stop(self) -> None:
         """Ask the thread to finish (zero velocity, disable, close) without waiting."""
         self._stop.set()
+        self._wake.set()
 
     def stop(self, timeout_s: float = 2.0) -> None:
         """Stop polling: zero velocity, then disable, then close the port."""
         self._stop.set()
+        self._wake.set()
         thread, self._thread = self._thread, None
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout_s)
+            if thread.is_alive():
+                self.unsafe_stop = f'{self.side} poller busy after {timeout_s:g} s: motor may be enabled'
         _LIVE_POLLERS.discard(self)
 
     def wait_applied(self, generation: int, timeout_s: float) -> bool:
@@ -377,8 +453,57 @@ class AmplifierPoller:
                 self._stop.wait(wait_s)
                 continue
             next_cycle = max(next_cycle + self.poll_period_s, time.monotonic())
-            self._stop.wait(max(0.0, next_cycle - time.monotonic()))
+            self._idle_until(next_cycle)
         self._shutdown()
+
+    def _idle_until(self, deadline: float) -> None:
+        """Wait for the next cycle, but wake at once when this side must stop (a fault, a transition,
+        a signal, a clear request) and when the held command goes stale: the watchdog's zero never
+        waits for a poll (issue 34: at 1 Hz polling it took 1.37 s)."""
+        while not self._stop.is_set():
+            self._wake.clear()
+            if self._stop_due() or self._enable_due() or self.command.has_clear_request(self.side):
+                return
+            left = deadline - time.monotonic()
+            if self._last_sent not in (None, 0):
+                left = min(left, self.command.stale_at() - self.clock())
+            if left <= 0:
+                return
+            self._wake.wait(left)
+
+    def _stop_due(self) -> bool:
+        """A non-zero set point is held where the command says zero (or the thread is stopping)."""
+        if self._stop.is_set():
+            return True
+        return self._last_sent not in (None, 0) and self.command.must_stop(self.side)
+
+    def _enable_due(self) -> bool:
+        return self._enabled is True and not self.command.enable_wanted
+
+    def _zero_now_if_due(self) -> None:
+        """Before a read exchange: send zero first when the command says stop, or when it goes stale
+        before the read could end (a slow link: one exchange of four turn-arounds took 64 ms at the
+        FTDI default 16 ms latency; issue 34 item 3)."""
+        if self._last_sent in (None, 0):
+            return
+        if not self.command.must_stop(self.side):
+            left = self.command.stale_at() - self.clock()
+            if left > self._read_s:
+                return
+            self._wake.clear()
+            self._wake.wait(max(0.0, left))  # one wait: a stepped clock (tests) does not move here
+            if not self.command.must_stop(self.side):
+                return
+        self.amp.set_velocity(0)
+        self._last_sent = 0
+
+    def _timed_read(self, read: Callable[[], _T]) -> _T:
+        self._zero_now_if_due()
+        start = time.monotonic()
+        value = read()
+        took = time.monotonic() - start
+        self._read_s = max(took, 0.9 * self._read_s)  # the longest recent one, decaying
+        return value
 
     def poll_once(self) -> float | None:
         """One turn of the thread: (re)connect if needed and run one cycle, every failure handled.
@@ -485,11 +610,13 @@ class AmplifierPoller:
         if enable and self._enabled is not True:
             amp.enable()
             self._enabled = True
-        velocity = amp.read_velocity()
-        if velocity.setpoint_rpm != wanted:
+        velocity = self._timed_read(amp.read_velocity)
+        if velocity.setpoint_rpm != self._last_sent:
             self._last_sent = None  # the amplifier lost our set point (reset, stop toggle): resend
-        current = amp.read_current()
-        counter = amp.read_encoder_counter()
+            if self._enabled and Status.ENABLED not in self._timed_read(amp.read_status):
+                self._self_reset()
+        current = self._timed_read(amp.read_current)
+        counter = self._timed_read(amp.read_encoder_counter)
         now = self.clock()
         position = self._unwrap(counter, velocity.actual_rpm, now)
         self._cycle += 1
@@ -523,8 +650,23 @@ class AmplifierPoller:
         self._counter, self._counter_time = counter, now
         return self._sample.position_counts + delta
 
+    def _self_reset(self) -> None:
+        """The amplifier switched its power stage off and dropped our set point by itself (a reset,
+        a brown-out): stop both sides and latch it until ~/clear_faults (issue 34 item 7)."""
+        self.command.halt(self.side)
+        self._zero_and_disable()
+        self._last_sent = 0
+        self.self_resets += 1
+        self._update(
+            fault_latched=True,
+            message='amplifier reset itself (power stage off, set point 0): both sides stopped, '
+            'clear_faults to re-enable',
+        )
+
     def _check_errors(self, force: bool = False) -> None:
-        status = self.amp.read_status()
+        status = self._timed_read(self.amp.read_status)
+        if self._enabled and Status.ENABLED not in status and not self._sample.fault_latched:
+            self._self_reset()
         errors = self.amp.read_errors() if (force or Status.ERROR in status) else DesErrorFlags(0)
         self._update(status=status, errors=errors)
         if errors and not self._sample.fault_latched:
@@ -536,10 +678,21 @@ class AmplifierPoller:
     def _shutdown(self) -> None:
         self.command.link_down(self.side, 'stopped')
         if self.amp.link.is_open:
-            with contextlib.suppress(Exception):
-                self.amp.set_velocity(0)
-            with contextlib.suppress(Exception):
-                self.amp.disable()
+            self.amp.link.abort = None  # the stop itself is never cut short
+            problems = []
+            steps: tuple[tuple[str, Callable[[], None]], ...] = (
+                ('zero', lambda: self.amp.set_velocity(0)),
+                ('disable', self.amp.disable),
+            )
+            for what, step in steps:
+                try:
+                    step()
+                except Exception as err:
+                    problems.append(f'{what}: {type(err).__name__}: {err}')
+            if problems and self._enabled is not False:
+                self.unsafe_stop = f'{self.side} amplifier not confirmed stopped ({"; ".join(problems)})'
+        elif self._enabled:
+            self.unsafe_stop = f'{self.side} amplifier unreachable at the stop: it may still be enabled'
         self.amp.close()
         self._enabled = False
         self._update(connected=False, enabled=False, message='stopped')

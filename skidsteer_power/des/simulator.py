@@ -10,9 +10,13 @@ opposes positive rotation), e.g. a terramechanics axle torque divided by the gea
 is a small viscous + Coulomb load. The current loop is taken as ideal (electrical time constant
 L/R = 0.95 ms, below the 0.5 ms integration step's resolution of interest).
 
-Fault injection: :meth:`SimulatedDes.inject` (drop, delay, corrupt CRC, answer 'F', go silent),
+Fault injection: :meth:`SimulatedDes.inject` (drop, delay, corrupt CRC, answer 'F', go silent;
+``inject(Fault.CORRUPT_CRC, -1)`` is a CRC storm: every reply and every repeat wrong),
 :meth:`SimulatedDes.raise_error` (error bits), :meth:`SimulatedDes.close_port` and
-:meth:`SimulatedDes.reopen_port` (the port disappears and comes back at the same path).
+:meth:`SimulatedDes.reopen_port` (the port disappears and comes back at the same path),
+:meth:`SimulatedDes.self_reset` (the amplifier restarts by itself: power stage off, set point 0),
+``latency_s`` / :meth:`SimulatedDes.set_latency` (a USB adapter's read latency: every answer reaches
+the host that much later, as an FTDI adapter's latency timer, 16 ms by default, holds short packets).
 """
 
 from __future__ import annotations
@@ -181,12 +185,15 @@ class SimulatedDes:
         link_path: str | None = None,
         emulate_baud: bool = True,
         name: str = 'des',
+        latency_s: float = 0.0,
     ) -> None:
         self.config = config or DesConfig(baudrate=baudrate)
         self.baudrate = baudrate
         self.model = model or MotorModel(motor)
         self.name = name
         self.emulate_baud = emulate_baud
+        self.latency_s = latency_s
+        self.self_resets = 0
         self._byte_time_s = 10.0 / baudrate
         self._tmpdir = None if link_path else tempfile.mkdtemp(prefix='des-sim-')
         self.port = link_path or os.path.join(self._tmpdir or '', name)
@@ -271,6 +278,20 @@ class SimulatedDes:
         """Stop every injected link fault."""
         with self._lock:
             self._faults = _Faults()
+
+    def set_latency(self, seconds: float) -> None:
+        """Every answer from now reaches the host ``seconds`` [s] after the amplifier sent it (each
+        'O', each reply op code and body: a USB adapter's latency timer)."""
+        with self._lock:
+            self.latency_s = max(0.0, float(seconds))
+
+    def self_reset(self) -> None:
+        """The amplifier restarts by itself (a brown-out, a watchdog of its own): power stage off,
+        set points 0, RAM parameters from EEPROM, errors cleared; the motor coasts down."""
+        with self._lock:
+            self._advance()
+            self._reset_state()
+            self.self_resets += 1
 
     def raise_error(self, errors: DesErrorFlags) -> None:
         """Set amplifier error bits (bit 15 'any error' is added); the power stage switches off."""
@@ -600,6 +621,8 @@ class SimulatedDes:
             ex.state = 'idle'
 
     def _send(self, data: bytes) -> None:
+        if self.latency_s > 0:
+            self._sleep(self.latency_s)
         if self.emulate_baud:
             start = max(self._wire_free_at, time.monotonic())
             self._wire_free_at = start + len(data) * self._byte_time_s

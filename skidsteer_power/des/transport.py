@@ -2,7 +2,11 @@
 
 The port is opened with :func:`serial.serial_for_url`, so a device path, a pty path or a pyserial
 URL (``loop://``, ``socket://``) all work. Every wait has a deadline from :func:`time.monotonic`;
-failed transactions are retried a bounded number of times, with the input flushed in between.
+failed transactions are retried a bounded number of times, with the input flushed in between, and a
+whole transaction (its retries and the repeats of a reply refused for its CRC included) never takes
+longer than ``LinkTiming.exchange_timeout_s`` (issue 34: a reply whose CRC was always wrong made one
+exchange retry for 10 s, 3942 times). :attr:`DesLink.abort` (a stop became due) ends the retries at
+the next step that leaves the amplifier's side of the protocol idle.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import serial
@@ -51,16 +56,21 @@ class LinkTiming:
     reply_timeout_s : wait for the reply op code after the frame was acknowledged [s]
     slack_s : allowance beyond the byte time for a body to arrive [s]
     retries : extra attempts after a failed transaction (no answer, NAK, CRC, garbled) [-]
+    crc_repeats : repeats of a reply asked for with 'F' after a wrong CRC, per attempt [-]
+    exchange_timeout_s : longest time one transaction may take, retries and repeats included [s]
     """
 
     ack_timeout_s: float = 0.05
     reply_timeout_s: float = 0.05
     slack_s: float = 0.02
     retries: int = 2
+    crc_repeats: int = 2
+    exchange_timeout_s: float = 0.25
 
     def __post_init__(self) -> None:
-        if min(self.ack_timeout_s, self.reply_timeout_s, self.slack_s) <= 0 or self.retries < 0:
-            raise ConfigError(f'timeouts must be > 0 and retries >= 0: {self}')
+        timeouts = (self.ack_timeout_s, self.reply_timeout_s, self.slack_s, self.exchange_timeout_s)
+        if min(timeouts) <= 0 or self.retries < 0 or self.crc_repeats < 0:
+            raise ConfigError(f'timeouts must be > 0, retries and crc_repeats >= 0: {self}')
 
 
 @dataclass
@@ -105,6 +115,9 @@ class DesLink:
         self._lock = threading.Lock()
         self.stats = LinkStats()
         self._byte_time_s = 10.0 / self.config.baudrate  # 8N1: start + 8 data + stop bits
+        self._deadline = float('inf')  # of the transaction under way (time.monotonic) [s]
+        self.abort: Callable[[], bool] | None = None
+        """True when the transaction under way should give up at its next retry or CRC repeat."""
 
     # -- port -----------------------------------------------------------------------------------
 
@@ -169,8 +182,11 @@ class DesLink:
                 raise DesPortError(f'DES port {self.port} is not open')
             self.stats.transactions += 1
             last: DesLinkError | None = None
+            self._deadline = time.monotonic() + self.timing.exchange_timeout_s
             for attempt in range(self.timing.retries + 1):
                 if attempt:
+                    if self._give_up(reply_words):
+                        break
                     self.stats.retries += 1
                 try:
                     return self._transact_once(opcode, words, reply_words)
@@ -196,6 +212,12 @@ class DesLink:
             self.stats.last_error = str(last)
             raise last
 
+    def _give_up(self, reply_words: int) -> bool:
+        """The transaction's time is up, or it is a read and a stop is due (:attr:`abort`; a command
+        without a reply, a set point or an enable, is never cut short by it)."""
+        abort = self.abort if reply_words else None
+        return time.monotonic() >= self._deadline or (abort is not None and bool(abort()))
+
     def _transact_once(self, opcode: int, words: tuple[int, ...], reply_words: int) -> tuple[int, ...]:
         self._drop_stale_input()
         body = encode_body(opcode, words)
@@ -211,14 +233,22 @@ class DesLink:
         decoder = FrameDecoder()
         deadline = time.monotonic() + self.timing.reply_timeout_s
         refused: DesCrcError | None = None
+        repeats = 0
         while True:
             try:
                 event = decoder.next_event()
             except DesCrcError as err:
-                self._write(_FAIL)
                 self.stats.crc_errors += 1
                 if not self.config.des_repeats_reply_after_nak:
+                    self._write(_FAIL)
                     raise
+                if repeats >= self.timing.crc_repeats or self._give_up(reply_words):
+                    # 'O': the amplifier's side of the exchange ends idle (an 'F' would make it
+                    # repeat the reply into the next command); the reply is discarded all the same
+                    self._write(_OK)
+                    raise
+                self._write(_FAIL)
+                repeats += 1
                 refused = err
                 deadline = time.monotonic() + self.timing.reply_timeout_s
                 continue
@@ -256,9 +286,11 @@ class DesLink:
             raise DesFrameError(f'unexpected byte 0x{data[0]:02X} instead of an acknowledge of {what}')
 
     def _read(self, size: int, deadline: float) -> bytes:
-        """Up to ``size`` bytes, returning as soon as any arrived; b'' at the deadline."""
+        """Up to ``size`` bytes, returning as soon as any arrived; b'' at the deadline (or at the
+        transaction's own deadline, whichever is first)."""
         ser = self._serial
         assert ser is not None
+        deadline = min(deadline, self._deadline)
         try:
             while True:
                 data: bytes = ser.read(size)  # pyserial is untyped: read gives bytes

@@ -88,6 +88,7 @@ from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.stop_signals import PauseHook, on_pause, remove_pause_hook
 from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
@@ -235,6 +236,8 @@ class DesDriver(LifecycleNode):
         self.counts = {'received': 0, 'rejected_non_finite': 0, 'clamped': 0, 'ignored_inactive': 0}
         self._published = {side: 0 for side in SIDES}
         self._runtime: list[Any] = []  # subscription and timers of the configured state
+        self._pause_hook: PauseHook | None = None
+        self.unsafe_stop = ''  # set when a stop could not be confirmed at an amplifier (exit 1)
         self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         self.create_service(Trigger, '~/clear_faults', self._on_clear_faults)
@@ -368,7 +371,11 @@ class DesDriver(LifecycleNode):
             current_source=p['current_source'],
             status_variables=StatusVariables(encoder_counter=p['encoder_counter_variable']),
         )
-        timing = LinkTiming(ack_timeout_s=p['ack_timeout_s'], reply_timeout_s=p['ack_timeout_s'])
+        timing = LinkTiming(
+            ack_timeout_s=p['ack_timeout_s'],
+            reply_timeout_s=p['ack_timeout_s'],
+            exchange_timeout_s=max(0.25, 3.0 * p['ack_timeout_s']),
+        )
         self.pollers = {
             side: AmplifierPoller(
                 side,
@@ -386,6 +393,18 @@ class DesDriver(LifecycleNode):
         }
         for poller in self.pollers.values():
             poller.start()
+        # Ctrl-Z (SIGTSTP), SIGTTIN, SIGTTOU: zero and disable before the process stops (issue 34)
+        self._pause_hook = on_pause(self._pause_for_stop, self.command.resume)
+        # (the guardian's heartbeat, issue 34 item 6, is started here too: see docs/RELIABILITY.md)
+
+    def _pause_for_stop(self, signal_name: str) -> None:
+        """The process is about to stop: zero, disable, and wait (bounded) until both sides did."""
+        command = self.command
+        if command is None:
+            return
+        command.pause(signal_name)
+        for poller in self.pollers.values():
+            poller.wait_applied(command.generation, 0.5)
 
     def _wait_connected(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
@@ -404,12 +423,18 @@ class DesDriver(LifecycleNode):
 
     def _stop_pollers(self) -> None:
         """Zero speed on both sides, then disable both, then close the ports (idempotent)."""
+        if self._pause_hook is not None:
+            remove_pause_hook(self._pause_hook)
+            self._pause_hook = None
         if self.command is not None:
             self.command.shutting_down = True
         for poller in self.pollers.values():
             poller.request_stop()
         for poller in self.pollers.values():
             poller.stop()
+            if poller.unsafe_stop:
+                self.unsafe_stop = '; '.join(filter(None, (self.unsafe_stop, poller.unsafe_stop)))
+                self.get_logger().error(f'stop not confirmed: {poller.unsafe_stop}')
 
     def _teardown(self) -> None:
         self._stop_pollers()

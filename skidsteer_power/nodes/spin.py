@@ -382,6 +382,10 @@ def _spin_until_stopped(
     finally:
         if node is not None:
             node.destroy_node()
+            unsafe = getattr(node, 'unsafe_stop', '')  # des_driver: a motor possibly still enabled
+            if unsafe:
+                print(f'{name}: error: motors not confirmed stopped: {unsafe}', file=sys.stderr)
+                exit_code = exit_code or 1
         rclpy.utilities.try_shutdown()
     if exit_code:
         sys.exit(exit_code)
