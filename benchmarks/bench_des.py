@@ -17,6 +17,7 @@ run in the benchmark's process, because the faults are injected into them.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import random
@@ -88,6 +89,7 @@ def measure(baud: int, emulate: bool) -> tuple[float, float, int]:
 
 def run(report: Report) -> None:
     run_fail_safe(report)
+    run_issue34(report)
     run_signals(report)
     nbytes = cycle_bytes()
     report.figure('bytes on the line per poll cycle (one side)', nbytes, 'B')
@@ -210,6 +212,13 @@ def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], l
 
 SIGNAL_TRIALS = 3
 SIGNALS = ('SIGINT', 'SIGTERM', 'SIGHUP', 'SIGQUIT', 'SIGUSR1', 'SIGALRM')  # issue 28: not only INT/TERM
+STOP_SIGNALS = ('SIGTSTP', 'SIGTTIN', 'SIGTTOU')  # issue 34: the process stops; zero and disable first
+
+
+def process_stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (state T in /proc/PID/stat)."""
+    with open(f'/proc/{pid}/stat') as stat:
+        return stat.read().rsplit(')', 1)[1].split()[0] in ('T', 't')
 
 
 def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[float], list[float]]:
@@ -239,8 +248,10 @@ def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[floa
             with SimulatedPair(38400) as pair:
                 ns = f'/b{uuid.uuid4().hex[:8]}'
                 params = {'left_port': pair.left.port, 'right_port': pair.right.port, 'autostart': 'true'}
-                proc = subprocess.Popen(
-                    node_command('skidsteer_power.nodes.des_driver', ns, params), env=os.environ.copy()
+                proc = subprocess.Popen(  # its own process group: not orphaned, so a stop signal stops it
+                    node_command('skidsteer_power.nodes.des_driver', ns, params),
+                    env=os.environ.copy(),
+                    process_group=0,
                 )
                 publisher = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
                 msg = Twist()
@@ -255,7 +266,14 @@ def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[floa
                     time.sleep(0.2 + 0.02 * random.random())  # driving, at a random phase
                     t0 = time.monotonic()
                     proc.send_signal(getattr(signal, signame))
-                    clean = proc.wait(timeout=15) == 0 and not (pair.left.enabled or pair.right.enabled)
+                    if signame in STOP_SIGNALS:
+                        _wait(functools.partial(process_stopped, proc.pid), 10.0)
+                        clean = process_stopped(proc.pid) and not (pair.left.enabled or pair.right.enabled)
+                        proc.send_signal(signal.SIGCONT)
+                        proc.send_signal(signal.SIGTERM)
+                        clean = proc.wait(timeout=15) == 0 and clean
+                    else:
+                        clean = proc.wait(timeout=15) == 0 and not (pair.left.enabled or pair.right.enabled)
                 finally:
                     proc.kill()
                     proc.wait()
@@ -269,7 +287,7 @@ def signal_to_zero(signame: str, trials: int = SIGNAL_TRIALS) -> tuple[list[floa
 
 def run_signals(report: Report) -> None:
     goal_s = 0.5  # as for the faults: not slower than the command timeout
-    for signame in SIGNALS:
+    for signame in (*SIGNALS, *STOP_SIGNALS):
         left, right = signal_to_zero(signame)
         for side, values in (('left', left), ('right', right)):
             p50, worst = _p50_max(values)
@@ -314,3 +332,142 @@ def run_fail_safe(report: Report) -> None:
                 met=worst < goal_s,
                 note=f'p50 {1000 * p50:.0f} ms',
             )
+
+
+# -- issue 34: slow links, CRC storms, slow polling, a self-reset, job-control stops ---------------
+
+WATCHDOG_S = 0.5  # the node's default cmd_timeout_s, unchanged
+STOP_GOAL_S = 0.6  # issue 34: a motor turning > 0.6 s after its command went stale or a fault
+ISSUE34_TRIALS = 5
+
+
+class _Rig:
+    """Two pollers (real time, the node's default timing) on a simulated pair with a slow link, a
+    late amplifier or slow polling: what des_driver runs, without ROS."""
+
+    def __init__(self, *, latency_s: float = 0.0, delay_s: float = 0.0, poll_hz: float = NODE_RATE_HZ):
+        from skidsteer_power.des.simulator import Fault, SimulatedPair
+
+        self.pair = SimulatedPair(38400, latency_s=latency_s).start()
+        if delay_s:
+            for sim in (self.pair.left, self.pair.right):
+                sim.inject(Fault.DELAY, -1, delay_s=delay_s)
+        self.command = DriveCommand(
+            timeout_s=WATCHDOG_S, stall_timeout_s=max(1.0, 5.0 / poll_hz)
+        )  # as the node
+        timing = LinkTiming(exchange_timeout_s=max(0.25, 8 * (latency_s + delay_s)))
+        self.pollers = {
+            side: AmplifierPoller(
+                side, sim.port, self.command, config=DesConfig(baudrate=38400), timing=timing,
+                poll_period_s=1.0 / poll_hz, status_every=STATUS_EVERY, reconnect_period_s=0.1,
+                log_error=lambda text: None,
+            ).start()
+            for side, sim in (('left', self.pair.left), ('right', self.pair.right))
+        }  # fmt: skip
+
+    def drive(self) -> float:
+        """Command +-DRIVE_RPM until both amplifiers hold it; the last command's time [s]."""
+        deadline = time.monotonic() + 30
+        while not _driving(self.pair):
+            if time.monotonic() > deadline:
+                raise RuntimeError('the motors never reached the set point')
+            self.command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})
+            time.sleep(0.02)
+        for _ in range(int(random.random() * 10)):  # a random phase of the poll cycle
+            self.command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})
+            time.sleep(0.013)
+        self.command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})
+        return time.monotonic()
+
+    def both_zeroed_after(self, t0: float, timeout_s: float = 5.0) -> float:
+        """Seconds from ``t0`` until both amplifiers got a zero set point (NaN: not within timeout)."""
+        sims = (self.pair.left, self.pair.right)
+        _wait(lambda: all(not math.isnan(_zeroed_at(s, t0)) for s in sims), timeout_s)
+        return max(_zeroed_at(s, t0) for s in sims) - t0
+
+    def close(self) -> None:
+        for poller in self.pollers.values():
+            poller.request_stop()
+        for poller in self.pollers.values():
+            poller.stop()
+        self.pair.stop()
+
+
+def issue34_case(kind: str, trials: int = ISSUE34_TRIALS) -> list[float]:
+    """Per trial, seconds until both amplifiers hold zero: from the last command (watchdog cases:
+    'latency16', 'late45', 'poll1', 'poll0.1'), or from the fault ('crc' storm on the left, 'reset':
+    the left amplifier resets itself, 'deactivate' at 1 Hz polling)."""
+    from skidsteer_power.des.simulator import Fault
+
+    rig = _Rig(
+        latency_s=0.016 if kind == 'latency16' else 0.0,
+        delay_s=0.045 if kind == 'late45' else 0.0,
+        poll_hz={'poll1': 1.0, 'poll0.1': 0.1, 'deactivate': 1.0}.get(kind, NODE_RATE_HZ),
+    )
+    times = []
+    try:
+        for _ in range(2 if kind == 'poll0.1' else trials):  # a set point waits for a poll: 10 s
+            last = rig.drive()
+            if kind == 'crc':
+                t0 = time.monotonic()
+                rig.pair.left.inject(Fault.CORRUPT_CRC, -1)
+            elif kind == 'reset':
+                t0 = time.monotonic()
+                rig.pair.left.self_reset()
+            elif kind == 'deactivate':
+                t0 = time.monotonic()
+                rig.command.active = False
+            else:
+                t0 = last  # the command goes stale WATCHDOG_S later: the stop counts from here
+            if kind in ('crc', 'reset', 'deactivate'):
+                while time.monotonic() < t0 + 2.0 and math.isnan(rig.both_zeroed_after(t0, 0.01)):
+                    rig.command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})  # a teleop keeps sending
+                    time.sleep(0.02)
+            times.append(rig.both_zeroed_after(t0))
+            rig.pair.left.clear_faults()
+            rig.command.active = True
+            rig.command.request_clear(['left', 'right'])
+            _wait(lambda: not rig.command.halted_by, 5.0)
+    finally:
+        rig.close()
+    return times
+
+
+ISSUE34_CASES = (
+    ('latency16', 'FTDI 16 ms latency: last command -> both zero (watchdog 0.5 s)'),
+    ('late45', 'amplifier answering 45 ms late: last command -> both zero (watchdog 0.5 s)'),
+    ('poll1', 'poll_rate_hz 1: last command -> both zero (watchdog 0.5 s)'),
+    ('poll0.1', 'poll_rate_hz 0.1: last command -> both zero (watchdog 0.5 s)'),
+    ('deactivate', 'poll_rate_hz 1: deactivate -> both zero'),
+    ('crc', 'CRC storm on the left: fault -> both zero'),
+    ('reset', 'left amplifier resets itself: fault -> both zero'),
+)
+
+
+def run_issue34(report: Report, cases: tuple[str, ...] = ()) -> None:
+    for kind, what in ISSUE34_CASES:
+        if cases and kind not in cases:
+            continue
+        times = issue34_case(kind)
+        failed = sum(math.isnan(v) for v in times)
+        p50, worst = _p50_max(times)
+        report.figure(
+            f'{what}: max of {len(times)}',
+            worst if not failed else math.nan,
+            's',
+            goal=f'<= {STOP_GOAL_S:g} s, every trial',
+            met=not failed and worst <= STOP_GOAL_S,
+            note=f'p50 {1000 * p50:.0f} ms' + (f'; {failed} trial(s) never zeroed' if failed else ''),
+        )
+
+
+def main(argv: list[str]) -> int:
+    """``python -m benchmarks.bench_des CASE...``: only the issue-34 cases named (exit 1 on a missed
+    goal); the planted-fault script runs the slow-link case this way."""
+    report = Report(section='des')
+    run_issue34(report, tuple(argv))
+    return 1 if any(f.met is False for f in report.figures) else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

@@ -478,7 +478,8 @@ class AmplifierPoller:
         return self._last_sent not in (None, 0) and self.command.must_stop(self.side)
 
     def _enable_due(self) -> bool:
-        return self._enabled is True and not self.command.enable_wanted
+        """The power stage is not as the command wants it (a transition, a pause, a resume)."""
+        return self._enabled is (not self.command.enable_wanted)
 
     def _zero_now_if_due(self) -> None:
         """Before a read exchange: send zero first when the command says stop, or when it goes stale
