@@ -65,7 +65,7 @@ class Rig:
     def drive(self, timeout_s: float = 30.0) -> float:
         """Command +-DRIVE_RPM until both amplifiers hold it; when the last command was set."""
         deadline = time.monotonic() + timeout_s
-        target = {'left': DRIVE_RPM, 'right': -DRIVE_RPM}
+        target: dict[str, float] = {'left': DRIVE_RPM, 'right': -DRIVE_RPM}
         while (self.pair.left.speed_setpoint_rpm, self.pair.right.speed_setpoint_rpm) != (1000, -1000):
             assert time.monotonic() < deadline, 'the motors never reached the set point'
             self.command.set(target)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -21,7 +22,7 @@ from rclpy.lifecycle import LifecycleNode
 from skidsteer_power.des.protocol import DesErrorFlags, OpCode
 from skidsteer_power.des.simulator import Fault, SimulatedPair
 from skidsteer_power.nodes.spin import node_command
-from skidsteer_power.stop_signals import TERMINATING_SIGNALS, signal_name
+from skidsteer_power.stop_signals import STOPPING_SIGNALS, signal_name
 
 pytestmark = pytest.mark.ros
 
@@ -212,14 +213,106 @@ def test_silent_amplifier_is_reported_and_reconnected(harness: Harness, pair: Si
     assert harness.spin_until(lambda: not math.isnan(harness.joints[-1].velocity[1]))
 
 
-# every signal that ends a Python process by default (stop_signals.TERMINATING_SIGNALS less SIGPIPE
-# and SIGXFSZ, which Python ignores), the first and the last real-time one
-ENDING_SIGNALS = [
-    s for s in TERMINATING_SIGNALS if s not in (signal.SIGPIPE, signal.SIGXFSZ) and s < signal.SIGRTMIN
-] + [signal.SIGRTMIN, signal.SIGRTMAX]
+def _default_dispositions() -> None:
+    """In the probe child before exec: every signal back to its default action (the test process
+    may have inherited some as ignored, e.g. SIGINT in a background job)."""
+    for signum in range(1, signal.NSIG):
+        with contextlib.suppress(OSError, ValueError, RuntimeError):
+            signal.signal(signum, signal.SIG_DFL)
 
 
-@pytest.mark.parametrize('signum', ENDING_SIGNALS, ids=signal_name)
+def probe_default_actions() -> tuple[set[int], set[int]]:
+    """(signals whose default action ends a process, signals whose default action stops it), asked
+    of the OS, not of the code under test: one ``sleep`` child per signal with every disposition at
+    its default, sent that signal, and watched with waitpid(WUNTRACED) (signal(7): Term and Core end
+    it, Stop stops it, Ign and Cont leave it sleeping)."""
+    children = {}
+    for signum in range(1, signal.NSIG):
+        children[signum] = subprocess.Popen(['sleep', '30'], preexec_fn=_default_dispositions)
+    time.sleep(0.3)  # every child in its sleep
+    for signum, child in children.items():
+        os.kill(child.pid, signum)
+    ending, stopping = set(), set()
+    deadline = time.monotonic() + 1.0
+    for signum, child in children.items():
+        while True:
+            pid, status = os.waitpid(child.pid, os.WNOHANG | os.WUNTRACED)
+            if pid and os.WIFSIGNALED(status):
+                ending.add(signum)
+                child.returncode = -signum
+                break
+            if pid and os.WIFSTOPPED(status):
+                stopping.add(signum)
+                break
+            if time.monotonic() > deadline:
+                break  # ignored (SIGCHLD, SIGURG, SIGWINCH, SIGCONT)
+            time.sleep(0.005)
+        if child.returncode is None:
+            child.kill()
+            child.wait()
+    return ending, stopping
+
+
+OS_ENDING, OS_STOPPING = probe_default_actions()
+# Not sent to the driver here: SIGKILL (cannot be caught), SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGSYS
+# (after a real fault no Python handler can run: the guardian's part, issue 34 item 6), and SIGPIPE,
+# SIGXFSZ, which Python sets to ignored at start (Python docs, signal module), so they end no Python
+# process. Every other signal whose default action ends a process must leave the motors at zero.
+NOT_HANDLED_HERE: set[int] = {
+    signal.SIGKILL, signal.SIGSEGV, signal.SIGBUS, signal.SIGILL, signal.SIGFPE, signal.SIGSYS,
+    signal.SIGPIPE, signal.SIGXFSZ,
+}  # fmt: skip
+# signal(7): glibc's threads implementation keeps the first real-time signals (32, 33) for itself and
+# moves SIGRTMIN above them; a process cannot take them
+NOT_HANDLED_HERE |= set(range(32, signal.SIGRTMIN))
+ENDING_SIGNALS = sorted(OS_ENDING - NOT_HANDLED_HERE)
+# Sent one by one to a driver process (each ends it, ~4 s each): one of each kind of default action
+# and origin (Term from a terminal, a kill, a timer, a real-time one; Core). That every other one
+# is caught is read from the kernel in one process (test_the_driver_catches_every_ending_signal).
+SENT_SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGALRM, signal.SIGRTMAX]
+
+
+def _caught_signals(pid: int) -> set[int]:
+    """The signals process ``pid`` has a handler for, as the kernel reports (/proc/PID/status SigCgt)."""
+    with open(f'/proc/{pid}/status') as status:
+        mask = next(int(line.split()[1], 16) for line in status if line.startswith('SigCgt:'))
+    return {n for n in range(1, signal.NSIG) if mask >> (n - 1) & 1}
+
+
+def test_the_driver_catches_every_ending_signal(ros_context: Context, pair: SimulatedPair) -> None:
+    """Every signal the OS probe says ends (or stops) a process, less the ones no handler can serve,
+    has a handler in a running des_driver (before issue 34: SIGTSTP, SIGTTIN, SIGTTOU had none; the
+    old test took its list from stop_signals.py, so removing SIGALRM and SIGPWR went unnoticed)."""
+    params = {'left_port': pair.left.port, 'right_port': pair.right.port, 'autostart': 'true'}
+    ns = f'/t{uuid.uuid4().hex[:8]}'
+    proc = subprocess.Popen(
+        node_command('skidsteer_power.nodes.des_driver', ns, params), env=os.environ.copy()
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while not (pair.left.enabled and pair.right.enabled):  # spinning: every handler installed
+            assert proc.poll() is None and time.monotonic() < deadline, 'the driver never came up'
+            time.sleep(0.05)
+        time.sleep(0.2)
+        missing = (set(ENDING_SIGNALS) | (OS_STOPPING - {signal.SIGSTOP})) - _caught_signals(proc.pid)
+        assert not missing, f'not caught: {sorted(signal_name(s) for s in missing)}'
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=15) == 0
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_the_os_probe_finds_what_signal7_lists() -> None:
+    """The probe itself: signal(7)'s table, a few rows of each kind (Term, Core, Stop, Ign, Cont)."""
+    assert {signal.SIGHUP, signal.SIGALRM, signal.SIGPWR, signal.SIGQUIT, signal.SIGRTMIN} <= OS_ENDING
+    assert {signal.SIGSTOP, signal.SIGTSTP, signal.SIGTTIN, signal.SIGTTOU} == OS_STOPPING
+    assert not {signal.SIGCHLD, signal.SIGURG, signal.SIGWINCH, signal.SIGCONT} & (OS_ENDING | OS_STOPPING)
+    # the stop signals are test_des_failsafe.py's (Ctrl-Z); the ones caught there are these
+    assert set(STOPPING_SIGNALS) == OS_STOPPING - {signal.SIGSTOP}
+
+
+@pytest.mark.parametrize('signum', SENT_SIGNALS, ids=signal_name)
 def test_every_ending_signal_zeroes_speed_then_disables(
     ros_context: Context, pair: SimulatedPair, signum: int
 ) -> None:
