@@ -18,11 +18,16 @@ rules after every poll period:
 3. one side's fault (link lost, poller exception) -> both sides zero within 100 ms, as long as the
    fault lasts (an amplifier error word: within the status read period plus one poll);
 4. a signal (the node's stop path: shutting down, then every poller's stop) -> every reachable
-   amplifier at zero and disabled.
+   amplifier at zero and disabled;
+5. a hung poller (its thread stops taking turns, as if stuck in an exchange) -> the other side at
+   zero within the stall timeout plus two poll periods, as long as it hangs;
+6. deactivate (the lifecycle transition) -> every reachable amplifier at zero and disabled after
+   one poll period, and it stays so until activated again.
 
 Each rule fails on a copy of the code with its fault planted (watchdog 5x slower, watchdog removed,
-acceleration limit removed, ``stop_both_on_link_loss`` ignored), on every seed tried: the table is
-in docs/RELIABILITY.md ("Planted faults").
+acceleration limit removed, ``stop_both_on_link_loss`` ignored, hung-poller detection removed,
+deactivate not zeroing), on every seed tried: test/planted_des_faults.sh, the table in
+docs/RELIABILITY.md ("Planted faults").
 """
 
 from __future__ import annotations
@@ -48,6 +53,7 @@ POLL_S = 0.02  # 50 Hz, the node's default
 STATUS_EVERY = 5  # the node's default: the status word every 5th cycle
 RECONNECT_S = 0.5  # the node's default reconnect_period_s (also the first poller-fault back-off)
 BOTH_ZERO_S = 0.1  # rule 3
+STALL_S = 1.0  # rule 5: the stall timeout given to the DriveCommand (the node's at 50 Hz)
 LIMITS = CommandLimits()  # node defaults: 1.5 m/s, 2 rad/s, 1 m/s^2, 4 rad/s^2
 # test_robot_track.yaml: tread 0.426 m, sprocket radius 0.1 m, 12:1; right side mirrored
 GEOMETRY = DriveGeometry(0.426, 0.1, 12.0, {'left': 1, 'right': -1}, max_rpm=10000.0)
@@ -72,7 +78,7 @@ class DriverModel(RuleBasedStateMachine):
         self.pair = SimulatedPair(38400, emulate_baud=False).start()
         self.sims = {'left': self.pair.left, 'right': self.pair.right}
         self.command = DriveCommand(
-            CMD_TIMEOUT_S, geometry=GEOMETRY, limits=LIMITS, clock=self.clock, stall_timeout_s=1.0
+            CMD_TIMEOUT_S, geometry=GEOMETRY, limits=LIMITS, clock=self.clock, stall_timeout_s=STALL_S
         )
         timing = LinkTiming()  # the node's defaults: shorter ones time out on a loaded machine
         self.pollers = {
@@ -93,6 +99,8 @@ class DriverModel(RuleBasedStateMachine):
         self.previous_reachable: list[str] = []
         self.steps = 0
         self.stopped = False
+        self.hung_at: dict[str, float] = {}  # a poller that stopped taking turns, since
+        self.inactive = False  # deactivated (lifecycle)
 
     def teardown(self) -> None:
         self.command.shutting_down = True
@@ -106,6 +114,8 @@ class DriverModel(RuleBasedStateMachine):
         """One poll period: each poller takes its turn when due, then the rules are checked."""
         self.clock.now += POLL_S
         for side, poller in self.pollers.items():
+            if side in self.hung_at:
+                continue  # stuck: it neither sends nor reads
             if self.clock.now + 1e-9 >= self.next_turn[side]:
                 wait_s = poller.poll_once()
                 self.next_turn[side] = self.clock.now + (POLL_S if wait_s is None else wait_s)
@@ -116,7 +126,11 @@ class DriverModel(RuleBasedStateMachine):
         period is over (until then an amplifier keeps what it held, as a real one would)."""
         now = self.clock.now
         return [
-            s for s in SIDES if s not in self.link_fault_at and now >= self.reconnecting_until.get(s, 0.0)
+            s
+            for s in SIDES
+            if s not in self.link_fault_at
+            and s not in self.hung_at
+            and now >= self.reconnecting_until.get(s, 0.0)
         ]
 
     def _check_rules(self) -> None:
@@ -139,6 +153,11 @@ class DriverModel(RuleBasedStateMachine):
             faults += [t + (STATUS_EVERY + 1) * POLL_S for t in self.error_at.values()]
             if any(now >= due - 1e-9 for due in faults):  # rule 3
                 assert rpm == 0, f'a fault: {side} not at zero {what}'
+            if any(now >= t + STALL_S + 2 * POLL_S - 1e-9 for t in self.hung_at.values()):  # rule 5
+                assert rpm == 0, f'hung poller: {side} not at zero {what}, hung {self.hung_at}'
+            if self.inactive:  # rule 6
+                sim = self.sims[side]
+                assert rpm == 0 and not sim.enabled, f'deactivated: {side} still driven {what}'
         self.previous, self.previous_reachable = setpoints, self._reachable()
 
     # -- rules ------------------------------------------------------------------------------------
@@ -223,6 +242,30 @@ class DriverModel(RuleBasedStateMachine):
         self._tick()
 
     @precondition(lambda self: not self.stopped)
+    @rule(side=st.sampled_from(SIDES), polls=st.integers(1, 80))
+    def hang(self, side: str, polls: int) -> None:
+        """A poller stops taking turns (stuck in an exchange, a deadlock) for ``polls`` periods: its
+        amplifier keeps what it held (the guardian's case); the other side must stop (rule 5)."""
+        self.hung_at.setdefault(side, self.clock.now)
+        for _ in range(polls):
+            self._tick()
+
+    @precondition(lambda self: not self.stopped and not self.inactive)
+    @rule()
+    def deactivate(self) -> None:
+        """The lifecycle's deactivate: DriveCommand.active = False, as des_driver's on_deactivate."""
+        self.command.active = False
+        self.inactive = True
+        self._tick()
+
+    @precondition(lambda self: not self.stopped and self.inactive)
+    @rule()
+    def activate(self) -> None:
+        self.command.active = True
+        self.inactive = False
+        self._tick()
+
+    @precondition(lambda self: not self.stopped)
     @rule()
     def repair(self) -> None:
         """Ports back, amplifiers answering, errors cleared (~/clear_faults); a side that was cut
@@ -233,6 +276,11 @@ class DriverModel(RuleBasedStateMachine):
         self.command.request_clear(list(SIDES))
         for side in self.link_fault_at:
             self.reconnecting_until[side] = self.clock.now + RECONNECT_S + 2 * POLL_S
+        for side in self.hung_at:  # its turn comes again; it sends on its next cycle
+            self.reconnecting_until[side] = max(
+                self.reconnecting_until.get(side, 0.0), self.clock.now + 2 * POLL_S
+            )
+        self.hung_at.clear()
         self.link_fault_at.clear()
         self.error_at.clear()
         self._tick()
