@@ -268,3 +268,44 @@ def test_ctrl_z_zeroes_and_disables_before_the_process_stops(
         proc.wait()
         node.destroy_node()
         executor.shutdown()
+
+
+@pytest.mark.ros
+def test_no_exit_0_with_a_motor_possibly_enabled(ros_context: Context, pair: SimulatedPair) -> None:
+    """Before: a driver whose left exchange was stuck exited 0 with that amplifier enabled at 229 rpm.
+    Now a stop that could not be confirmed at an amplifier (here its port is gone: it keeps its
+    set point, as a real DES 70/10 would) is reported on stderr and the exit code is 1; the other
+    side is zeroed and disabled."""
+    from geometry_msgs.msg import Twist
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    ns = f'/t{uuid.uuid4().hex[:8]}'
+    params = {'left_port': pair.left.port, 'right_port': pair.right.port, 'autostart': 'true'}
+    command = node_command('skidsteer_power.nodes.des_driver', ns, params)
+    proc = subprocess.Popen(command, env=os.environ.copy(), stderr=subprocess.PIPE, text=True)
+    node = Node('des_unsafe_exit_test', namespace=ns, context=ros_context)
+    pub = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    msg = Twist()
+    msg.linear.x = 0.2
+    try:
+        deadline = time.monotonic() + 30
+        while not (pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0):
+            assert time.monotonic() < deadline and proc.poll() is None, 'the driver never drove both sides'
+            pub.publish(msg)
+            executor.spin_once(timeout_sec=0.05)
+        pair.left.close_port()
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=15)
+        assert proc.returncode == 1, stderr[-2000:]
+        assert 'motors not confirmed stopped' in stderr and 'left amplifier' in stderr
+        assert pair.right.speed_setpoint_rpm == 0 and not pair.right.enabled
+        assert pair.left.enabled  # what the test knows and the driver could not change
+    finally:
+        proc.kill()
+        proc.wait()
+        node.destroy_node()
+        executor.shutdown()

@@ -242,18 +242,31 @@ class DriverModel(RuleBasedStateMachine):
         self._tick()
 
     @precondition(lambda self: not self.stopped)
-    @rule(side=st.sampled_from(SIDES), polls=st.integers(1, 80))
-    def hang(self, side: str, polls: int) -> None:
+    @rule(
+        side=st.sampled_from(SIDES),
+        polls=st.integers(1, 80),
+        speed=st.one_of(st.none(), st.floats(-1.5, 1.5)),
+    )
+    def hang(self, side: str, polls: int, speed: float | None) -> None:
         """A poller stops taking turns (stuck in an exchange, a deadlock) for ``polls`` periods: its
-        amplifier keeps what it held (the guardian's case); the other side must stop (rule 5)."""
+        amplifier keeps what it held (the guardian's case); the other side must stop (rule 5), also
+        while a teleop keeps sending ``speed`` [m/s] (None: no command meanwhile)."""
         self.hung_at.setdefault(side, self.clock.now)
         for _ in range(polls):
+            if speed is not None:
+                self.command.set_twist(speed, 0.0)
+                self.valid_at = self.clock.now
             self._tick()
 
     @precondition(lambda self: not self.stopped and not self.inactive)
-    @rule()
-    def deactivate(self) -> None:
-        """The lifecycle's deactivate: DriveCommand.active = False, as des_driver's on_deactivate."""
+    @rule(speed=st.floats(-1.5, 1.5), polls=st.integers(0, 10))
+    def deactivate(self, speed: float, polls: int) -> None:
+        """The lifecycle's deactivate (DriveCommand.active = False, as des_driver's on_deactivate),
+        after ``polls`` periods of driving at ``speed`` [m/s] (0 polls: whatever was going on)."""
+        for _ in range(polls):
+            self.command.set_twist(speed, 0.0)
+            self.valid_at = self.clock.now
+            self._tick()
         self.command.active = False
         self.inactive = True
         self._tick()

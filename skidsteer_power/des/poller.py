@@ -384,6 +384,7 @@ class AmplifierPoller:
         self._sample = AmplifierSample()
         self.unsafe_stop = ''  # why the stop could not be confirmed ('' when it was)
         self.self_resets = 0  # times the amplifier reset itself (power stage off unasked)
+        self._possibly_enabled = False  # an enable was sent and no disable acknowledged since
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_sent: int | None = None
@@ -567,6 +568,7 @@ class AmplifierPoller:
                 self._last_sent = None
                 self.amp.disable()
                 self._enabled = False
+                self._possibly_enabled = False
 
     def _connect(self) -> bool:
         self._last_sent, self._enabled, self._counter = None, None, None
@@ -609,6 +611,7 @@ class AmplifierPoller:
             amp.set_velocity(wanted)
             self._last_sent = wanted
         if enable and self._enabled is not True:
+            self._possibly_enabled = True  # from the moment it is sent, until a disable is acknowledged
             amp.enable()
             self._enabled = True
         velocity = self._timed_read(amp.read_velocity)
@@ -690,9 +693,11 @@ class AmplifierPoller:
                     step()
                 except Exception as err:
                     problems.append(f'{what}: {type(err).__name__}: {err}')
-            if problems and self._enabled is not False:
+            if not problems:
+                self._possibly_enabled = False
+            elif self._possibly_enabled:
                 self.unsafe_stop = f'{self.side} amplifier not confirmed stopped ({"; ".join(problems)})'
-        elif self._enabled:
+        elif self._possibly_enabled:
             self.unsafe_stop = f'{self.side} amplifier unreachable at the stop: it may still be enabled'
         self.amp.close()
         self._enabled = False

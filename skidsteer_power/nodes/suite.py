@@ -190,6 +190,8 @@ class Suite:
             threading.excepthook, self._previous_excepthook = self._previous_excepthook, None
         if getattr(self, 'driver', None) is not None:
             bring_down(self.driver)  # managed node: deactivate (zero, disable) + cleanup (close)
+            if self.driver.unsafe_stop:  # never exit 0 with a motor possibly enabled (issue 34)
+                self.failure = self.failure or f'motors not confirmed stopped: {self.driver.unsafe_stop}'
         for executor in self._executors:
             executor.shutdown(timeout_sec=2.0)
         for thread in self._threads:
