@@ -348,7 +348,15 @@ class AmplifierPoller:
     then reopened every ``reconnect_period_s``. Any other exception in the thread (a bug) zeroes and
     disables the amplifier, closes the link, is reported in the sample (and logged with its
     traceback through ``log_error``) and the polling restarts after a back-off that doubles up to
-    :data:`MAX_BACKOFF_S`. On :meth:`stop` the motor gets zero velocity, then is disabled.
+    :data:`MAX_BACKOFF_S`. On :meth:`stop` the motor gets zero velocity, then is disabled; a stop that
+    could not be confirmed (the port gone, an exchange failing) is kept in :attr:`unsafe_stop`.
+
+    A stop never waits for the next poll (issue 34): between cycles the thread wakes on every stop
+    condition (:meth:`DriveCommand.add_listener`) and when the held command goes stale; within a cycle
+    it sends zero before a read exchange when the command says stop or would go stale before the read
+    could end (the longest recent read's time), and a read's retries end when a stop is due
+    (``DesLink.abort``). An amplifier found with its power stage off while it should be on and its
+    set point not ours (it reset itself) halts both sides and latches until a clear request.
     ``encoder_resolution``: encoder lines per motor turn [-] (default: the test robot's motor's).
     """
 

@@ -43,6 +43,8 @@ from skidsteer_power.errors import ConfigError
 _OK = bytes((ACK_OK,))
 _FAIL = bytes((ACK_FAIL,))
 _READ_SLICE_S = 0.005
+_ANSWER_CAP_S = 0.25
+"""Largest answer time [s] that lengthens the waits (:meth:`DesLink._wait_s`): at most 0.5 s."""
 """pyserial read timeout [s]: the granularity with which a deadline is checked while waiting."""
 
 
@@ -116,6 +118,7 @@ class DesLink:
         self.stats = LinkStats()
         self._byte_time_s = 10.0 / self.config.baudrate  # 8N1: start + 8 data + stop bits
         self._deadline = float('inf')  # of the transaction under way (time.monotonic) [s]
+        self._answer_s = 0.0  # the slowest recent acknowledge, decaying by 2 % per answer [s]
         self.abort: Callable[[], bool] | None = None
         """True when the transaction under way should give up at its next retry or CRC repeat."""
 
@@ -222,16 +225,17 @@ class DesLink:
         self._drop_stale_input()
         body = encode_body(opcode, words)
         self._write(bytes((opcode,)))
-        self._expect_ack(self.timing.ack_timeout_s, f'op code 0x{opcode:02X}')
+        self._expect_ack(self._wait_s(self.timing.ack_timeout_s), f'op code 0x{opcode:02X}')
         self._write(body)
-        self._expect_ack(self.timing.ack_timeout_s + len(body) * self._byte_time_s, f'frame 0x{opcode:02X}')
+        body_s = len(body) * self._byte_time_s
+        self._expect_ack(self._wait_s(self.timing.ack_timeout_s) + body_s, f'frame 0x{opcode:02X}')
         if not reply_words:
             return ()
         return self._receive_reply(opcode, reply_words)
 
     def _receive_reply(self, opcode: int, reply_words: int) -> tuple[int, ...]:
         decoder = FrameDecoder()
-        deadline = time.monotonic() + self.timing.reply_timeout_s
+        deadline = time.monotonic() + self._wait_s(self.timing.reply_timeout_s)
         refused: DesCrcError | None = None
         repeats = 0
         while True:
@@ -250,7 +254,7 @@ class DesLink:
                 self._write(_FAIL)
                 repeats += 1
                 refused = err
-                deadline = time.monotonic() + self.timing.reply_timeout_s
+                deadline = time.monotonic() + self._wait_s(self.timing.reply_timeout_s)
                 continue
             if isinstance(event, FrameStart):
                 self._write(_OK)
@@ -276,8 +280,18 @@ class DesLink:
 
     # -- the only code that touches the port ----------------------------------------------------
 
+    def _wait_s(self, timeout_s: float) -> float:
+        """A wait for an answer [s]: the configured timeout, or twice the slowest recent answer if
+        longer. An amplifier or adapter that answers late but surely (an FTDI latency timer, 45 ms
+        late) then costs no spurious timeouts and retries, which made a stop's time unpredictable
+        (issue 34); a silent one still times out after the configured time (it never answered)."""
+        return max(timeout_s, 2.0 * self._answer_s)
+
     def _expect_ack(self, timeout_s: float, what: str) -> None:
-        data = self._read(1, time.monotonic() + timeout_s)
+        start = time.monotonic()
+        data = self._read(1, start + timeout_s)
+        if data:
+            self._answer_s = min(max(time.monotonic() - start, 0.98 * self._answer_s), _ANSWER_CAP_S)
         if not data:
             raise DesTimeout(f'no acknowledge of {what} from {self.port}')
         if data == _FAIL:

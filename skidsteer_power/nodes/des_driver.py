@@ -42,16 +42,24 @@ thread -> that amplifier zeroed and disabled, ERROR in diagnostics, the poller r
 back-off; an exception in a callback -> both amplifiers zeroed and disabled, then the error
 propagates; every signal that would end the process (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1,
 ...: :mod:`skidsteer_power.stop_signals`), destroy and interpreter exit -> zero speed, then
-disable. All serial I/O runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never
-in the executor.
+disable (a stop that could not be confirmed at an amplifier: one error line and exit code 1, never
+0); Ctrl-Z (SIGTSTP), SIGTTIN, SIGTTOU -> zero and disable, then the process stops; after SIGCONT
+the power stages come back on and only a fresh cmd_vel drives; an amplifier that resets itself
+(power stage off, set point 0) -> both sides stopped, latched and reported until ``~/clear_faults``.
+A stop never waits for the next poll: the pollers wake when the command goes stale and on every
+stop condition, and zero before a read exchange that would end after the command went stale, so the
+watchdog's zero does not depend on ``poll_rate_hz`` (0.1 Hz included) or on a slow link; every
+exchange is bounded in time and retries (issue 34). All serial I/O runs in one thread per amplifier
+(:mod:`skidsteer_power.des.poller`), never in the executor.
 
 Geometry (tread, drive radius, gear ratio) and the motor (the published effort K_t I, the largest
 set point) come from the vehicle file named by ``vehicle`` and its powertrain.
 
 On the robot: each transaction takes four turn-arounds ('O' handshakes), so a USB-RS232 adapter's
 read latency dominates. FTDI adapters default to a 16 ms latency timer, which could cap the poll
-rate at a few Hz; set it to 1 ms (``/sys/bus/usb-serial/devices/ttyUSB0/latency_timer``) to reach
-the 50 Hz default (benchmarks/bench_des.py: about 57 Hz per side at 38400 baud on a pty with the
+rate at a few Hz (the stop still reaches both amplifiers within 0.6 s of the last command:
+benchmarks/bench_des.py, issue-34 cases); set it to 1 ms
+(``/sys/bus/usb-serial/devices/ttyUSB0/latency_timer``) to reach the 50 Hz default (benchmarks/bench_des.py: about 57 Hz per side at 38400 baud on a pty with the
 wire's byte time emulated, 0.86 of the line's byte-time limit).
 """
 
