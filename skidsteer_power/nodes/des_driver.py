@@ -59,8 +59,9 @@ On the robot: each transaction takes four turn-arounds ('O' handshakes), so a US
 read latency dominates. FTDI adapters default to a 16 ms latency timer, which could cap the poll
 rate at a few Hz (the stop still reaches both amplifiers within 0.6 s of the last command:
 benchmarks/bench_des.py, issue-34 cases); set it to 1 ms
-(``/sys/bus/usb-serial/devices/ttyUSB0/latency_timer``) to reach the 50 Hz default (benchmarks/bench_des.py: about 57 Hz per side at 38400 baud on a pty with the
-wire's byte time emulated, 0.86 of the line's byte-time limit).
+(``/sys/bus/usb-serial/devices/ttyUSB0/latency_timer``) to reach the 50 Hz default
+(benchmarks/bench_des.py: about 57 Hz per side at 38400 baud on a pty with the wire's byte time
+emulated, 0.86 of the line's byte-time limit).
 """
 
 from __future__ import annotations
