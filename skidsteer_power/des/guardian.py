@@ -241,6 +241,7 @@ class Guardian:
         self.trips = 0
         self.last_beat = time.monotonic()
         self.ending = ''  # why the loop ends after the stop (EOF, quit, signal)
+        self.attempts = 0  # of the latest stop: rounds of zero + disable until every side answered
         self._next_retry = 0.0
         try:
             for side in self.sides:
@@ -322,7 +323,9 @@ class Guardian:
                 self.trip(self.ending)
                 return 0 if all(s.stopped for s in self.sides) else 1
             if not self.latched and now - self.last_beat > self.timeout_s:
-                self.trip(f'no heartbeat for {now - self.last_beat:.2f} s (driver stopped or frozen)')
+                self._on_control()  # beats that queued while this process was not scheduled count
+                if not self.ending and now - self.last_beat > self.timeout_s:
+                    self.trip(f'no heartbeat for {now - self.last_beat:.2f} s (driver stopped or frozen)')
             if self.latched and now >= self._next_retry and not all(s.stopped for s in self.sides):
                 self._stop(time.monotonic() + STOP_DEADLINE_S, only_unstopped=True)
                 self._next_retry = time.monotonic() + RETRY_PERIOD_S
@@ -433,7 +436,8 @@ class Guardian:
             f'{n}: {"zeroed and disabled" if ok else "NOT reached"}' for n, ok in results.items()
         )
         if first or not all(results.values()):
-            self.log(f'tripped ({reason}): {text} in {took:.0f} ms')
+            tries = f'{self.attempts} attempt{"s" if self.attempts != 1 else ""}'
+            self.log(f'tripped ({reason}): {text} in {took:.0f} ms ({tries})')
         if first:
             with contextlib.suppress(OSError):
                 self.control.send(TRIPPED)
@@ -444,7 +448,9 @@ class Guardian:
             self._finish_exchange(side, deadline)
             _drain(side.real)
         pending = list(sides)
+        self.attempts = 0
         while pending and time.monotonic() < deadline:
+            self.attempts += 1
             zeroed = self._transact(pending, OpCode.SET_VELOCITY, (0,), deadline)
             disabled = self._transact(zeroed, OpCode.ENABLE, (0,), deadline)
             for side in disabled:
@@ -591,8 +597,10 @@ class GuardianClient:
         timeout_s: float = DEFAULT_TIMEOUT_S,
         on_trip: Callable[[str], None] = lambda reason: None,
         on_lost: Callable[[str], None] = lambda reason: None,
+        stderr: int | None = None,
     ) -> None:
         self.ports = dict(ports)
+        self.stderr = stderr  # the guardian's log lines (default: this process's stderr)
         self.baud = baud
         self.timeout_s = timeout_s
         self.on_trip = on_trip
@@ -620,6 +628,7 @@ class GuardianClient:
                 self.command(theirs.fileno()),
                 pass_fds=(theirs.fileno(),),
                 stdin=subprocess.DEVNULL,
+                stderr=self.stderr,
                 start_new_session=True,  # a terminal's Ctrl-C / Ctrl-Z reaches the driver, not the guardian
             )
         finally:
