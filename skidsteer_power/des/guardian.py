@@ -444,8 +444,8 @@ class Guardian:
 
     def _stop(self, deadline: float, *, only_unstopped: bool) -> dict[str, bool]:
         sides = [s for s in self.sides if s.real >= 0 and not (only_unstopped and s.stopped)]
+        self._finish_exchanges(sides, deadline)
         for side in sides:
-            self._finish_exchange(side, deadline)
             _drain(side.real)
         pending = list(sides)
         self.attempts = 0
@@ -460,25 +460,31 @@ class Guardian:
                 _wait_quiet([s.real for s in pending if s.real >= 0], 2 * ACK_TIMEOUT_S, deadline)
         return {s.name: s.stopped for s in self.sides}
 
-    def _finish_exchange(self, side: _Side, deadline: float) -> None:
-        """End the driver's exchange in flight so that the amplifier waits for an op code again."""
-        ex = side.exchange
+    def _finish_exchanges(self, sides: list[_Side], deadline: float) -> None:
+        """End the driver's exchange in flight on every line, all lines at once, so that each
+        amplifier waits for an op code again."""
+        active = [s for s in sides if s.exchange.state != 'idle']
+        body_s = body_length(MAX_WORDS - 1) * self.byte_time_s
         for _ in range(64):  # bytes may come one at a time; bounded by the deadline too
-            if ex.state == 'idle' or time.monotonic() >= deadline:
+            active = [s for s in active if s.exchange.state != 'idle']
+            if not active or time.monotonic() >= deadline:
                 break
-            if ex.amp_speaks:
-                body = body_length(MAX_WORDS - 1) * self.byte_time_s
-                data = _read_some(side.real, min(deadline, time.monotonic() + ACK_TIMEOUT_S + body))
-                if not data:
-                    ex.reset()  # it said nothing: it gave up on the exchange itself
-                    break
-                ex.amp(data)
-            else:
-                data = ex.completion()
-                if not _write_all(side.real, data, deadline):
-                    break
-                ex.host(data)
-        ex.reset()
+            for side in active:
+                if not side.exchange.amp_speaks:
+                    data = side.exchange.completion()
+                    if _write_all(side.real, data, deadline):
+                        side.exchange.host(data)
+                    else:
+                        side.exchange.reset()
+            listening = {s.real: s for s in active if s.exchange.amp_speaks}
+            heard = _read_each(list(listening), min(deadline, time.monotonic() + ACK_TIMEOUT_S + body_s))
+            for fd, side in listening.items():
+                if heard.get(fd):
+                    side.exchange.amp(heard[fd])
+                else:
+                    side.exchange.reset()  # it said nothing: it gave up on the exchange itself
+        for side in sides:
+            side.exchange.reset()
 
     def _transact(
         self, sides: list[_Side], opcode: int, words: tuple[int, ...], deadline: float
@@ -533,21 +539,23 @@ def _write_all(fd: int, data: bytes, deadline: float) -> bool:
     return True
 
 
-def _read_some(fd: int, deadline: float) -> bytes:
-    """Whatever arrives on ``fd`` before ``deadline`` (returns as soon as anything did; b'' if not)."""
-    while (left := deadline - time.monotonic()) > 0:
+def _read_each(fds: list[int], deadline: float) -> dict[int, bytes]:
+    """What arrives on each of ``fds`` before ``deadline``: returns once every one said something
+    (its first chunk), or at the deadline with those that did."""
+    heard: dict[int, bytes] = {}
+    while (waiting := [fd for fd in fds if fd not in heard]) and (left := deadline - time.monotonic()) > 0:
         try:
-            ready, _, _ = select.select([fd], [], [], left)
+            ready, _, _ = select.select(waiting, [], [], left)
         except InterruptedError:
             continue
-        if ready:
+        for fd in ready:
             try:
-                return os.read(fd, 64)
+                heard[fd] = os.read(fd, 64)
             except (BlockingIOError, InterruptedError):
                 continue
             except OSError:
-                return b''
-    return b''
+                heard[fd] = b''
+    return heard
 
 
 def _drain(fd: int) -> None:
