@@ -437,7 +437,8 @@ class Guardian:
         )
         if first or not all(results.values()):
             tries = f'{self.attempts} attempt{"s" if self.attempts != 1 else ""}'
-            self.log(f'tripped ({reason}): {text} in {took:.0f} ms ({tries})')
+            what = 'final stop' if reason == 'driver quit' else 'tripped'  # quit: the driver stopped first
+            self.log(f'{what} ({reason}): {text} in {took:.0f} ms ({tries})')
         if first:
             with contextlib.suppress(OSError):
                 self.control.send(TRIPPED)

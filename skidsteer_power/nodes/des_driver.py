@@ -43,7 +43,9 @@ back-off; an exception in a callback -> both amplifiers zeroed and disabled, the
 propagates; every signal that would end the process (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1,
 ...: :mod:`skidsteer_power.stop_signals`), destroy and interpreter exit -> zero speed, then
 disable. All serial I/O runs in one thread per amplifier (:mod:`skidsteer_power.des.poller`), never
-in the executor.
+in the executor. The ends no handler sees (SIGKILL, SIGSTOP, SIGSEGV, ...) are the guardian's: a
+process started at configure that owns the ports and stops both amplifiers when this one dies or
+freezes (``guardian``, ``guardian_timeout_s``; :mod:`skidsteer_power.nodes.driver_guardian`).
 
 Geometry (tread, drive radius, gear ratio) and the motor (the published effort K_t I, the largest
 set point) come from the vehicle file named by ``vehicle`` and its powertrain.
