@@ -314,11 +314,13 @@ def test_run_on_hardware_ports_killed_zeroes_and_disables(pair: SimulatedPair, t
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize('signum', [signal.SIGKILL, signal.SIGTERM], ids=signal_name)
 def test_guardian_killed_the_driver_stops_both_and_refuses_to_enable(
-    ros_context: Any, pair: SimulatedPair
+    ros_context: Any, pair: SimulatedPair, signum: int
 ) -> None:
-    """The guardian's own SIGKILL while driving: the driver sees its end at once, zeroes and disables
-    both amplifiers on their own ports, and refuses to enable them again until configured anew."""
+    """The guardian's own end while driving (SIGKILL; SIGTERM, on which it stops both and ends): the
+    driver sees it at once, zeroes and disables both amplifiers on their own ports, and refuses to
+    enable them again until configured anew."""
     from lifecycle_msgs.msg import Transition
 
     h = Harness(ros_context, pair)
@@ -328,8 +330,9 @@ def test_guardian_killed_the_driver_stops_both_and_refuses_to_enable(
         assert h.driver.pollers['left'].amp.port != pair.left.port  # through the guardian's proxy
         client = h.driver.guardian.client
         assert client is not None and client.proc is not None
-        client.proc.kill()
+        client.proc.send_signal(signum)
         assert h.spin_until(lambda: stopped(pair.left) and stopped(pair.right))
+        assert client.proc.wait(5) == (-signal.SIGKILL if signum == signal.SIGKILL else 0)
         assert h.driver.pollers['left'].amp.port == pair.left.port
         assert h.spin_until(lambda: 'LOST' in h.diag('des_driver: command')[1].get('guardian', ''))
         assert h.transition(Transition.TRANSITION_DEACTIVATE)

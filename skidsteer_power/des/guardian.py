@@ -682,11 +682,11 @@ class GuardianClient:
                 return
             if data and TRIPPED in data and not self._closing.is_set():
                 self.trips += 1
-                try:
-                    self.on_trip(f'guardian trip {self.trips}: it saw no heartbeat for {self.timeout_s:g} s')
-                finally:
-                    with contextlib.suppress(OSError):
-                        sock.send(ARM)
+                # re-armed only once on_trip returned: if it raised, the stop stays latched (and the
+                # heartbeats end with this thread)
+                self.on_trip(f'guardian trip {self.trips}: it saw no heartbeat for {self.timeout_s:g} s')
+                with contextlib.suppress(OSError):
+                    sock.send(ARM)
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Ask the guardian to stop the amplifiers and end; kill it if it does not (idempotent)."""
