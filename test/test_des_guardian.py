@@ -377,6 +377,35 @@ SET_1000 = _exchange_bytes(OpCode.SET_VELOCITY, (1000,), ())
 READ_VELOCITY = _exchange_bytes(OpCode.READ_VELOCITY_IS_MUST, (0,), (1000, 1000))
 
 
+def test_exchange_follows_the_protocol_both_ways() -> None:
+    """The guardian's view of a line (des-protocol.md, "Host sends a command" / "DES answers"): idle
+    after each complete exchange, a reply refused with 'F' expected again (the DES repeats it), and a
+    host that gave up waiting starts over with an op code."""
+    ex = Exchange()
+    states = []
+    for who, byte in READ_VELOCITY:
+        (ex.host if who == 'host' else ex.amp)(byte)
+        states.append(ex.state)
+    assert states[:2] == ['op_ack', 'host_body'] and states[6:10] == [
+        'frame_ack',
+        'reply_op',
+        'start_ack',
+        'amp_body',
+    ]
+    assert states[-2:] == ['final_ack', 'idle']
+    for who, byte in SET_1000:
+        (ex.host if who == 'host' else ex.amp)(byte)
+    assert ex.state == 'idle'  # no reply to SetVelocity
+    for who, byte in READ_VELOCITY[:-1]:
+        (ex.host if who == 'host' else ex.amp)(byte)
+    ex.host(b'F')  # CRC refused
+    assert ex.state == 'reply_op'  # the DES may repeat
+    ex.host(bytes((OpCode.READ_SYS_STATUS,)))  # ... it did not; the host starts over
+    assert ex.state == 'op_ack' and ex.opcode == OpCode.READ_SYS_STATUS
+    ex.amp(b'F')  # op code refused
+    assert ex.state == 'idle'
+
+
 @pytest.mark.parametrize('cut', range(len(SET_1000) + 1))
 def test_completion_of_a_cut_frame_can_never_execute(cut: int) -> None:
     """Cut a SetVelocity(1000) exchange after any byte: what the guardian sends to finish it is no op
