@@ -217,7 +217,8 @@ class GuardianError(Exception):
 
 
 class Guardian:
-    """The guardian's state and loop (see the module docstring). ``clock``: time.monotonic."""
+    """The guardian's state and loop (see the module docstring); ``log`` takes its lines (default:
+    :func:`log_line`, stderr without ever blocking)."""
 
     def __init__(
         self,
@@ -234,7 +235,7 @@ class Guardian:
         self.byte_time_s = 10.0 / baud
         self.timeout_s = timeout_s
         self.control = control
-        self.log = log or (lambda text: print(f'des guardian: {text}', file=sys.stderr, flush=True))
+        self.log = log or log_line
         self.dir = tempfile.mkdtemp(prefix='des-guardian-')
         self.sides = [_Side(name, device, os.path.join(self.dir, name)) for name, device in ports.items()]
         self.latched = False
@@ -519,6 +520,17 @@ class Guardian:
 
 
 # -- bounded I/O on non-blocking descriptors ----------------------------------------------------------
+
+
+def log_line(text: str) -> None:
+    """One line on stderr, or none: never blocks (a pipe nobody reads, a terminal held by Ctrl-S),
+    never raises (a closed pipe). stderr is the driver's, shared: it stays blocking for the driver;
+    a line shorter than PIPE_BUF is written whole when select says there is room."""
+    data = f'des guardian: {text}\n'.encode(errors='replace')[:4000]
+    with contextlib.suppress(OSError, ValueError):
+        _, writable, _ = select.select([], [2], [], 0)
+        if writable:
+            os.write(2, data)
 
 
 def _write_all(fd: int, data: bytes, deadline: float) -> bool:
