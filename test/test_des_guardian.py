@@ -333,7 +333,12 @@ def test_guardian_killed_the_driver_stops_both_and_refuses_to_enable(
         client.proc.send_signal(signum)
         assert h.spin_until(lambda: stopped(pair.left) and stopped(pair.right))
         assert client.proc.wait(5) == (-signal.SIGKILL if signum == signal.SIGKILL else 0)
-        assert h.driver.pollers['left'].amp.port == pair.left.port
+        # the driver's fallback: its pollers on the amplifiers' own ports (SIGTERM: the guardian may
+        # have stopped both itself before the driver saw it go)
+        pollers = h.driver.pollers
+        assert h.spin_until(
+            lambda: (pollers['left'].amp.port, pollers['right'].amp.port) == (pair.left.port, pair.right.port)
+        )
         assert h.spin_until(lambda: 'LOST' in h.diag('des_driver: command')[1].get('guardian', ''))
         assert h.transition(Transition.TRANSITION_DEACTIVATE)
         assert not h.transition(Transition.TRANSITION_ACTIVATE)  # refused: no live guardian
