@@ -91,6 +91,7 @@ def run(report: Report) -> None:
     run_fail_safe(report)
     run_issue34(report)
     run_signals(report)
+    run_guardian(report)
     nbytes = cycle_bytes()
     report.figure('bytes on the line per poll cycle (one side)', nbytes, 'B')
     for baud in (38400, 115200):
@@ -332,6 +333,153 @@ def run_fail_safe(report: Report) -> None:
                 met=worst < goal_s,
                 note=f'p50 {1000 * p50:.0f} ms',
             )
+
+
+# -- the guardian (issue 34, item 6): the ends of the driver no handler sees -------------------------
+
+GUARDIAN_SIGNALS = ('SIGKILL', 'SIGSTOP', 'SIGSEGV', 'SIGBUS', 'SIGILL', 'SIGFPE', 'SIGSYS')
+GUARDIAN_TRIALS = 3
+GUARDIAN_GOAL_S = 0.6  # issue 34: a motor turning more than 0.6 s after a fault is critical
+
+
+def guardian_signal_to_zero(signame: str, trials: int = GUARDIAN_TRIALS) -> list[tuple[float, float]]:
+    """Per trial: (seconds from sending ``signame`` to a ``des_driver`` process (autostart, default
+    timing, guardian on, cmd_timeout_s 5 s so that its own watchdog cannot be what stops them) until
+    both amplifiers hold zero speed, until both are disabled). NaN: not within 5 s. Arrival times from
+    the simulator's command log; the driver drives the simulated pair at 0.2 m/s from cmd_vel."""
+    import os
+    import resource
+    import signal
+    import uuid
+
+    import rclpy
+    import rclpy.utilities
+    from geometry_msgs.msg import Twist
+    from rclpy.context import Context
+
+    from skidsteer_power.des.simulator import SimulatedPair
+    from skidsteer_power.nodes.spin import node_command
+
+    resource.setrlimit(resource.RLIMIT_CORE, (0, resource.getrlimit(resource.RLIMIT_CORE)[1]))  # no cores
+    results = []
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('bench_des_guardian', context=context)
+        for _ in range(trials):
+            with SimulatedPair(38400) as pair:
+                sims = (pair.left, pair.right)
+                ns = f'/b{uuid.uuid4().hex[:8]}'
+                params = {
+                    'left_port': pair.left.port,
+                    'right_port': pair.right.port,
+                    'autostart': 'true',
+                    'cmd_timeout_s': 5.0,
+                }
+                proc = subprocess.Popen(
+                    node_command('skidsteer_power.nodes.des_driver', ns, params),
+                    env=os.environ.copy(),
+                    stderr=subprocess.DEVNULL,
+                )
+                publisher = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
+                msg = Twist()
+                msg.linear.x = 0.2
+                try:
+                    deadline = time.monotonic() + 40
+                    while not (
+                        pair.left.speed_setpoint_rpm > 0 and pair.right.speed_setpoint_rpm < 0
+                    ) or not (pair.left.enabled and pair.right.enabled):
+                        if time.monotonic() > deadline:
+                            raise RuntimeError('des_driver never drove both sides')
+                        publisher.publish(msg)
+                        time.sleep(0.02)
+                    time.sleep(0.3 + 0.05 * random.random())  # driving, at a random phase
+                    t0 = time.monotonic()
+                    os.kill(proc.pid, getattr(signal, signame))
+                    _wait(lambda _s=sims: all(not s.enabled and s.speed_setpoint_rpm == 0 for s in _s), 5.0)
+                finally:
+                    proc.kill()
+                    proc.wait()
+                    node.destroy_publisher(publisher)
+                zero = max(_zeroed_at(sim, t0) for sim in sims) - t0
+                off = max(_disabled_at(sim, t0) for sim in sims) - t0
+                results.append((zero, off))
+                time.sleep(0.5)  # the guardian sees the EOF of the killed process and ends
+    finally:
+        rclpy.utilities.try_shutdown(context=context)
+    return results
+
+
+def _disabled_at(sim: SimulatedDes, after: float) -> float:
+    """Arrival time of the first Enable 0 at ``sim`` after ``after`` (NaN: none)."""
+    for record in list(sim.commands):
+        if record.time_s >= after and record.opcode == OpCode.ENABLE and record.words == (0,):
+            return record.time_s
+    return math.nan
+
+
+def guardian_poll_rate(seconds: float = 2.0, rounds: int = 3) -> tuple[float, float]:
+    """(direct, through the guardian): free-running poll rate of the slower side [Hz], simulated pair
+    at 38400 baud with the wire's byte time; ``rounds`` alternations of the two, the median of each
+    (the shared machine's load changes from one second to the next)."""
+    from skidsteer_power.des.guardian import GuardianClient
+    from skidsteer_power.des.simulator import SimulatedPair
+
+    rates: dict[bool, list[float]] = {False: [], True: []}
+    for through in (False, True) * rounds:
+        with SimulatedPair(38400) as pair:
+            ports = {'left': pair.left.port, 'right': pair.right.port}
+            client = GuardianClient(ports) if through else None
+            if client is not None:
+                ports = client.start()
+            command = DriveCommand(timeout_s=1e6)
+            command.set({'left': 1000.0, 'right': -1000.0})
+            pollers = [
+                AmplifierPoller(
+                    side, ports[side], command, config=DesConfig(baudrate=38400), timing=LinkTiming(),
+                    poll_period_s=0.0, status_every=STATUS_EVERY,
+                ).start()
+                for side in ('left', 'right')
+            ]  # fmt: skip
+            time.sleep(1.0)
+            start = [p.sample.sequence for p in pollers]
+            time.sleep(seconds)
+            sequences = zip(pollers, start, strict=True)
+            rates[through].append(min((p.sample.sequence - s) / seconds for p, s in sequences))
+            for p in pollers:
+                p.request_stop()
+            for p in pollers:
+                p.stop()
+            if client is not None:
+                client.close()
+    return statistics.median(rates[False]), statistics.median(rates[True])
+
+
+def run_guardian(report: Report) -> None:
+    """Worst time from the driver's unhandled end to zero at both amplifiers (goal <= 0.6 s), and what
+    the proxy costs the poll rate."""
+    for signame in GUARDIAN_SIGNALS:
+        trials = guardian_signal_to_zero(signame)
+        zeros = [z for z, _ in trials]
+        offs = [o for _, o in trials]
+        failed = sum(math.isnan(v) for v in zeros + offs)
+        worst = max(zeros) if not failed else math.nan
+        report.figure(
+            f'guardian: {signame} of des_driver -> zero at both amplifiers: max of {len(trials)}',
+            worst,
+            's',
+            goal=f'<= {GUARDIAN_GOAL_S:g} s, every trial',
+            met=not failed and worst <= GUARDIAN_GOAL_S,
+            note=f'p50 {1000 * _p50_max(zeros)[0]:.0f} ms; both disabled: max {1000 * _p50_max(offs)[1]:.0f} '
+            'ms' + (f'; {failed} trial(s) not stopped within 5 s' if failed else ''),
+        )
+    direct, through = guardian_poll_rate()
+    report.figure(
+        'guardian: free-running poll rate through its proxy, slower side (38400 baud), median of 3',
+        through,
+        'Hz',
+        note=f'direct, alternating with it: {direct:.1f} Hz (ratio {through / direct:.2f})',
+    )
 
 
 # -- issue 34: slow links, CRC storms, slow polling, a self-reset, job-control stops ---------------

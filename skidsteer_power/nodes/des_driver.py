@@ -50,7 +50,10 @@ A stop never waits for the next poll: the pollers wake when the command goes sta
 stop condition, and zero before a read exchange that would end after the command went stale, so the
 watchdog's zero does not depend on ``poll_rate_hz`` (0.1 Hz included) or on a slow link; every
 exchange is bounded in time and retries (issue 34). All serial I/O runs in one thread per amplifier
-(:mod:`skidsteer_power.des.poller`), never in the executor.
+(:mod:`skidsteer_power.des.poller`), never in the executor. The ends no handler sees (SIGKILL,
+SIGSTOP, SIGSEGV, ...) are the guardian's: a process started at configure that owns the ports and
+stops both amplifiers when this one dies or freezes (``guardian``, ``guardian_timeout_s``;
+:mod:`skidsteer_power.nodes.driver_guardian`).
 
 Geometry (tread, drive radius, gear ratio) and the motor (the published effort K_t I, the largest
 set point) come from the vehicle file named by ``vehicle`` and its powertrain.
@@ -92,6 +95,7 @@ from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCo
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.nodes.driver_guardian import GUARDIAN_PARAMETERS, DriverGuardian
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
@@ -188,6 +192,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 )
 """Every parameter of the node, declared and read from this one table."""
 
+PARAMETERS += GUARDIAN_PARAMETERS  # issue 34: the guardian process (nodes/driver_guardian.py)
+
 
 def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
     """An exception in a callback zeroes and disables both amplifiers before it propagates."""
@@ -241,6 +247,7 @@ class DesDriver(LifecycleNode):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.command: DriveCommand | None = None
         self.pollers: dict[str, AmplifierPoller] = {}
+        self.guardian = DriverGuardian(self)
         self.configure_error = ''
         self.counts = {'received': 0, 'rejected_non_finite': 0, 'clamped': 0, 'ignored_inactive': 0}
         self._published = {side: 0 for side in SIDES}
@@ -307,7 +314,7 @@ class DesDriver(LifecycleNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self.params = p = self._read_parameters()
-            self._start_pollers(p)
+            self._start_pollers(self.guardian.start(p))  # the guardian's proxy ports, if on
             self._wait_connected(p['configure_timeout_s'])
         except SkidsteerError as err:
             self.configure_error = str(err)
@@ -335,6 +342,9 @@ class DesDriver(LifecycleNode):
     @_traceback_logged
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.command is not None
+        if refusal := self.guardian.refusal():
+            self.get_logger().error(f'activate refused: {refusal}')
+            return TransitionCallbackReturn.FAILURE
         self.command.active = True
         if not self._wait_applied():
             self.get_logger().warn('activated, but a side is not connected: motors stay at zero')
@@ -447,6 +457,7 @@ class DesDriver(LifecycleNode):
 
     def _teardown(self) -> None:
         self._stop_pollers()
+        self.guardian.close()
         for entity in self._runtime:
             if hasattr(entity, 'cancel'):
                 self.destroy_timer(entity)
@@ -632,6 +643,7 @@ class DesDriver(LifecycleNode):
             'max_speed_m_s': f'{limits.max_speed_m_s:g}',
             'max_yaw_rate_rad_s': f'{limits.max_yaw_rate_rad_s:g}',
             'max_motor_rpm': f'{command.max_rpm:g}',
+            'guardian': self.guardian.status(),
         }
         message = f'{self.state_label}; ' + (f'zero speed: {stop_reason}' if stop_reason else 'driving')
         if rejected:
