@@ -43,8 +43,10 @@ periodic (``publish_period_s``)
     whose positions are their values (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`);
     the terrain-change flag is in ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a
     warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
-    source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
-    every ``diagnostics_period_s``.
+    source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning,
+    malformed-message counts ``malformed_<topic>`` (WARN for 10 s after one: a cmd_vel or joint_states
+    whose bytes do not decode is dropped, counted and logged at most every ``warn_period_s``,
+    :mod:`skidsteer_power.nodes.malformed`)) every ``diagnostics_period_s``.
 path energy (:mod:`skidsteer_power.nodes.path_hook`)
     ``plan`` nav_msgs/Path in; ``energy/path_required_wh``, ``energy/path_margin_wh`` std_msgs/Float64
     [Wh] out, and a ``path energy`` diagnostic that WARNs while the margin is negative.
@@ -109,6 +111,7 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes.malformed import MalformedInputs
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
@@ -360,9 +363,18 @@ class PowerEstimator(QuietNode):
         qos_in = QoSProfile(depth=depth, reliability=INPUT_RELIABILITY[p['input_reliability']])
         qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
 
+        self.malformed = MalformedInputs(self.get_logger().warning, float(p['warn_period_s']))
+
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
-            decode = decoder(msg_type)  # raw bytes in, decoded by rosbags (nodes/wire.py)
-            batched = Batched(lambda data: callback(decode(data)))  # a backlog in batches (spin.py)
+            # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
+            decode = self.malformed.guard(topic, decoder(msg_type))
+
+            def take(data: bytes) -> None:
+                msg = decode(data)
+                if msg is not None:
+                    callback(msg)
+
+            batched = Batched(take)  # a backlog in batches (spin.py)
             batched.subscription = self.create_subscription(
                 msg_type, topic, batched, qos_in, qos_overriding_options=overrides, raw=True
             )
@@ -592,6 +604,11 @@ class PowerEstimator(QuietNode):
         now = self.now_s()
         with self._lock:
             level, message, values = self.core.diagnostics(now)
+        malformed, counts = self.malformed.diagnostics()
+        values.update(counts)
+        if malformed:
+            level = max(level, 1)  # WARN
+            message = malformed if message.startswith('ok') else f'{message}; {malformed}'
         values['terrain'] = self.terrain_name
         values['vehicle'] = self.vehicle.name
         if self.pending_terrain:
