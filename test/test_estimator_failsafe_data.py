@@ -21,7 +21,7 @@ from rclpy.context import Context
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from test_estimator_core import FixedPowerPredictor
-from test_nodes_estimator import Rig, drive_measured
+from test_nodes_estimator import Rig
 
 NAMES = ['left_motor', 'right_motor']
 MALFORMED = {
@@ -118,3 +118,45 @@ def test_run_survives_malformed_messages(ros_context: Context, tmp_path: Path) -
     assert 'Traceback' not in stderr and 'SerdeError' not in stderr
     assert 'malformed message' in stderr
     assert json.loads(stdout)['duration_s'] > 0
+
+
+# --- item 10: the clock steps back --------------------------------------------------------------------
+def _drive_from(rig: Rig, start_s: float, seconds: float, rate_hz: float = 10.0) -> None:
+    """Both motors at 300 rad/s, Kt I = 0.228 N m (:data:`POWER_W`), on sim time start..start+seconds."""
+    for k in range(round(seconds * rate_hz) + 1):
+        t = start_s + k / rate_hz
+        rig.set_clock(t)
+        rig.joint_state(t, (300.0, 300.0), (0.228, 0.228))
+
+
+def test_a_clock_step_back_is_a_gap_and_the_diagnostics_say_so(rig_factory: Callable[..., Rig]) -> None:
+    """Sim time 600..604 s, then the clock steps back 500 s and driving goes on 104..108 s. The step
+    is a gap of zero length, so by hand E = P x (4 s + 4 s + 0.5 s freshness after the last sample)
+    = 154.8696 W x 8.5 s = 1316.39 J. Before the fix only the first 4 s counted (619.5 J: nothing
+    until the clock passed 604 s again) while the diagnostics said 'measured'."""
+    rig = rig_factory(
+        FixedPowerPredictor(999.0), use_sim_time=True, joint_timeout_s=0.5, persist=False,
+        diagnostics_period_s=0.05,
+    )  # fmt: skip
+    _drive_from(rig, 600.0, 4.0)
+    _drive_from(rig, 104.0, 4.0)
+    count = len(rig.received['diagnostics'])
+    rig.run_clock(110.0, lambda: len(rig.received['diagnostics']) > count + 1)
+    energy = rig.node.core.energy
+    assert energy.energy_J['measured'] == pytest.approx(POWER_W * 8.5, rel=1e-9)
+    assert energy.clock_steps_back == 1 and energy.clock_step_back_s == pytest.approx(500.0)
+    status = rig.received['diagnostics'][-1].status[0]
+    values = rig.latest_diagnostics()
+    assert status.level == bytes([1]) and 'clock stepped back 500.000 s' in status.message
+    assert values['clock_steps_back'] == '1'
+    # 110 s: 2 s after the last reading: stale, and said so
+    assert values['joint_states_stale'] == 'true' and values['energy_source'] == 'none'
+
+
+def test_after_a_step_back_a_silent_input_is_stale_not_fresh_until_the_clock_catches_up() -> None:
+    from skidsteer_power.estimator.inputs import Freshness
+
+    fresh = Freshness(0.5)
+    fresh.mark(604.0)
+    assert fresh.is_fresh(604.3) and fresh.is_fresh(603.95)  # 50 ms back: jitter, still fresh
+    assert not fresh.is_fresh(104.0) and math.isinf(fresh.age_s(104.0))  # before: age 0, "fresh"
