@@ -33,6 +33,7 @@ from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.safe_read import check_regular, read_capped
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
@@ -43,6 +44,8 @@ LOG = logging.getLogger(__name__)
 DEFAULT_STORE = Stores.ROS2_JAZZY
 ROS_ENCODING = 'cdr'  # message encoding of ROS 2 channels; others (protobuf, json) are skipped
 _IDL_SEPARATOR = '=' * 80 + '\n'
+MAX_METADATA_BYTES = 16 << 20
+"""Largest metadata.yaml read [bytes] (16 MiB; one of a 10-topic bag is about 5 KB)."""
 # Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
 _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
     ReaderError,
@@ -347,6 +350,23 @@ class BagReader:
         self.close()
 
 
+BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.yaml')
+"""Files of a bag directory that are checked to be regular files before anything reads them."""
+MAX_SALVAGE_BYTES = 4 << 30
+"""Largest MCAP file a salvage read takes into memory [bytes] (4 GiB; counted while reading)."""
+
+
+def _check_regular_files(path: Path) -> None:
+    """InputError unless ``path`` and every bag file in it (``*.mcap``, ``*.db3``, metadata.yaml) is a
+    regular file: a FIFO there made every reader hang, ``/dev/zero`` read forever (issue 34 item 13)."""
+    if not path.is_dir():
+        check_regular(path, 'bag')
+        return
+    for entry in sorted(path.iterdir()):
+        if entry.suffix in BAG_FILE_SUFFIXES and not entry.is_dir():
+            check_regular(entry, 'bag file')
+
+
 def _resolve(path: Path) -> Path:
     """A bag directory without metadata.yaml (a crashed recorder) is opened through its one file."""
     if path.is_dir() and not (path / 'metadata.yaml').exists():
@@ -388,6 +408,7 @@ def open_bag(
     bag_path = Path(path)
     if not bag_path.exists():
         raise InputError(f'bag not found: {bag_path}')
+    _check_regular_files(bag_path)
     bag_path = _resolve(bag_path)
     try:
         if salvage and _storage_of(bag_path) == 'mcap' and bag_path.is_file():
@@ -587,8 +608,9 @@ def _metadata_count(folder: Path) -> int | None:
     from skidsteer_power.bag_io.salvage import message_count_of
 
     try:
-        return message_count_of(yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8')))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        text = read_capped(folder / 'metadata.yaml', MAX_METADATA_BYTES, 'bag metadata').decode('utf-8')
+        return message_count_of(yaml.safe_load(text))
+    except (InputError, UnicodeDecodeError, yaml.YAMLError):
         return None
 
 
@@ -600,7 +622,7 @@ def _scan_mcap(
     """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bag_io.salvage`)."""
     from skidsteer_power.bag_io.salvage import salvage_mcap
 
-    found = salvage_mcap(path.read_bytes())
+    found = salvage_mcap(read_capped(path, MAX_SALVAGE_BYTES, 'bag'))
     formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
     schemas = found.schemas
     channels = {k: c for k, c in found.channels.items() if c.message_encoding == ROS_ENCODING}

@@ -12,8 +12,9 @@ The file keeps tallies only (issue 28): the battery's state of charge, time and 
 measured and predicted energy. The battery's configuration (capacity, cells, curve) comes from the
 vehicle's configuration, never from the file (a file saying ``capacity_Ah: 10`` once turned the test
 robot's battery into 449.7 Wh, ``1e308`` into inf Wh). Every restored number is range-checked
-(:data:`TALLY_RANGES`); a file over :data:`MAX_STATE_BYTES` or nested deeper than JSON's recursion
-limit is unusable, never fatal.
+(:data:`TALLY_RANGES`); a file over :data:`MAX_STATE_BYTES` (counted while reading: ``/dev/zero``
+says it has 0 bytes), not a regular file (a FIFO would block the start), or nested deeper than JSON's
+recursion limit is unusable, never fatal.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from typing import Any
 
 from skidsteer_power.cache import atomic_file
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.safe_read import read_capped
 from skidsteer_power.terramechanics.ranges import Range
 
 FORMAT_VERSION = 1
@@ -144,15 +146,12 @@ def load_state(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     start fresh, and says so).
     """
     source = Path(path)
-    try:
-        size = source.stat().st_size
-        if size > MAX_STATE_BYTES:
-            raise ConfigError(f'energy state {source} is {size:,} bytes; at most {MAX_STATE_BYTES:,} read')
-        text = source.read_text(encoding='utf-8')
-    except FileNotFoundError:
+    if not os.path.lexists(source):
         return None
-    except OSError as err:
-        raise ConfigError(f'cannot read energy state {source}: {err.strerror or err}') from err
+    try:  # a FIFO or /dev/zero is refused, and at most MAX_STATE_BYTES are read (issue 34 item 13)
+        text = read_capped(source, MAX_STATE_BYTES, 'energy state').decode('utf-8')
+    except InputError as err:
+        raise ConfigError(str(err)) from err
     except UnicodeDecodeError as err:
         raise ConfigError(f'energy state {source} is not text (byte {err.start} is not UTF-8)') from err
     try:
