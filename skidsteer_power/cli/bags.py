@@ -32,7 +32,13 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
         '--salvage',
         action='store_true',
         help='read every intact message of a damaged bag instead of failing (exit 0; the JSON says '
-        'messages_expected, messages_read, complete)',
+        'messages_expected, messages_read, complete, messages_unverified); an MCAP file of at most 4 GiB',
+    )
+    parser.add_argument(
+        '--include-unverified',
+        action='store_true',
+        help='with --salvage: also use the messages of chunks whose CRC failed or could not be checked '
+        '(read record by record; their payload may be altered; left out by default; never complete)',
     )
 
 
@@ -43,7 +49,14 @@ def _open(args: argparse.Namespace) -> BagReader:
     from skidsteer_power.bag_io.reader import BagDamageError, load_msg_definitions, open_bag
 
     try:
-        bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
+        if args.include_unverified and not args.salvage:
+            raise InputError('--include-unverified needs --salvage')
+        bag = open_bag(
+            args.bag,
+            extra_types=load_msg_definitions(args.msg),
+            salvage=args.salvage,
+            include_unverified=args.include_unverified,
+        )
         try:
             bag.count_all()  # reads every message once; raises (not salvage) saying what is missing
         except BaseException:
