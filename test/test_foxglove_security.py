@@ -113,13 +113,13 @@ def test_the_backend_refuses_a_direct_handshake_from_a_web_page(bridge_node: Nod
     try:
         backend = bridge.server.port
         assert backend != bridge.port
-        evil = {'subprotocols': [Subprotocol('foxglove.sdk.v1')], 'origin': Origin('http://evil.example')}
+        protocols, evil = [Subprotocol('foxglove.sdk.v1')], Origin('http://evil.example')
         with pytest.raises((InvalidMessage, OSError, EOFError)):
-            websockets_sync.connect(f'ws://127.0.0.1:{backend}', open_timeout=10, **evil)
+            websockets_sync.connect(f'ws://127.0.0.1:{backend}', subprotocols=protocols, origin=evil)
         with pytest.raises(ssl.SSLCertVerificationError):
-            websockets_sync.connect(f'wss://127.0.0.1:{backend}', open_timeout=10, **evil)
+            websockets_sync.connect(f'wss://127.0.0.1:{backend}', subprotocols=protocols, origin=evil)
         with pytest.raises(InvalidStatus) as refused:  # and the front door still refuses that page
-            websockets_sync.connect(f'ws://127.0.0.1:{bridge.port}', open_timeout=10, **evil)
+            websockets_sync.connect(f'ws://127.0.0.1:{bridge.port}', subprotocols=protocols, origin=evil)
         assert refused.value.response.status_code == 403
         with websockets_sync.connect(
             f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.sdk.v1')]
