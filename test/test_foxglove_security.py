@@ -97,6 +97,38 @@ def test_default_host_is_loopback_and_origins_are_checked(bridge_node: Node) -> 
         bridge.close()
 
 
+def test_the_backend_refuses_a_direct_handshake_from_a_web_page(bridge_node: Node) -> None:
+    """Issue 34: the SDK server behind the front door listens on a second 127.0.0.1 port, and a
+    handshake there with Origin http://evil.example was accepted, skipping the front's check. Now it
+    speaks only TLS with a certificate made for this run: a plain ws:// handshake fails, and a
+    wss:// one fails certificate verification as a browser's does (no authority signed it); the
+    front door, which pins that certificate, still serves the same client."""
+    import ssl
+
+    from websockets.exceptions import InvalidMessage
+
+    from skidsteer_power.nodes.foxglove_bridge import FoxgloveBridge
+
+    bridge = FoxgloveBridge(bridge_node, port=0, topics=['/none'])
+    try:
+        backend = bridge.server.port
+        assert backend != bridge.port
+        protocols, evil = [Subprotocol('foxglove.sdk.v1')], Origin('http://evil.example')
+        with pytest.raises((InvalidMessage, OSError, EOFError)):
+            websockets_sync.connect(f'ws://127.0.0.1:{backend}', subprotocols=protocols, origin=evil)
+        with pytest.raises(ssl.SSLCertVerificationError):
+            websockets_sync.connect(f'wss://127.0.0.1:{backend}', subprotocols=protocols, origin=evil)
+        with pytest.raises(InvalidStatus) as refused:  # and the front door still refuses that page
+            websockets_sync.connect(f'ws://127.0.0.1:{bridge.port}', subprotocols=protocols, origin=evil)
+        assert refused.value.response.status_code == 403
+        with websockets_sync.connect(
+            f'ws://127.0.0.1:{bridge.port}', subprotocols=[Subprotocol('foxglove.sdk.v1')]
+        ) as ws:  # the control: through the front door, no Origin: served by that backend
+            assert json.loads(ws.recv(timeout=10))['op'] == 'serverInfo'
+    finally:
+        bridge.close()
+
+
 def test_a_client_offering_only_the_classic_subprotocol_is_served(bridge_node: Node) -> None:
     import foxglove
 

@@ -24,7 +24,7 @@ import struct
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeGuard
 
 from rosbags.interfaces import MessageDefinitionFormat, Qos
 from rosbags.rosbag2 import Reader as Rosbag2Reader
@@ -33,6 +33,7 @@ from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg, get_typestore
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.safe_read import check_regular, read_capped
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
@@ -43,6 +44,8 @@ LOG = logging.getLogger(__name__)
 DEFAULT_STORE = Stores.ROS2_JAZZY
 ROS_ENCODING = 'cdr'  # message encoding of ROS 2 channels; others (protobuf, json) are skipped
 _IDL_SEPARATOR = '=' * 80 + '\n'
+MAX_METADATA_BYTES = 16 << 20
+"""Largest metadata.yaml read [bytes] (16 MiB; one of a 10-topic bag is about 5 KB)."""
 # Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
 _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
     ReaderError,
@@ -147,8 +150,16 @@ def build_typestore(
     return store
 
 
+def one_line(text: str) -> str:
+    """A multi-line library message (ruamel.yaml's is 8 lines) as one line: the lines that say what
+    is wrong, without the source excerpts, caret lines and links."""
+    noise = ('To suppress', 'http')
+    kept = [line.strip() for line in text.splitlines() if line.strip() and not line[0].isspace()]
+    return '; '.join(line for line in kept if not line.startswith(noise))
+
+
 def _damage_text(path: Path, err: BaseException) -> str:
-    reason = str(err).strip() or type(err).__name__
+    reason = one_line(str(err)) or type(err).__name__
     if isinstance(err, TypeError):  # rosbags reading past the end of a record
         reason = 'the file ends inside a record'
     if path.is_file() and path.stat().st_size <= 8:
@@ -180,6 +191,12 @@ class BagReader:
     messages_expected: int | None = None
     messages_read: int | None = None
     undecodable: dict[str, int] = field(default_factory=dict)
+    unverified: int = 0
+    """Messages of chunks whose CRC failed (or could not be checked), left out (salvage only)."""
+    include_unverified: bool = False
+    """Yield the unverified messages too (:func:`open_bag`'s ``include_unverified``)."""
+    counts_valid: bool = True
+    """False when the bag's own counts are not counts (salvage read of a damaged metadata.yaml)."""
     _reader: Rosbag2Reader | None = None
     _connections: list[Connection] = field(default_factory=list)
     _salvaged: list[BagMessage] | None = None
@@ -196,18 +213,21 @@ class BagReader:
         return (
             self.messages_expected is not None
             and self.messages_read is not None
-            and self.messages_read >= self.messages_expected
+            and self.messages_read == self.messages_expected  # more than it says is a lie too
             and not self.undecodable
+            and not self.unverified
         )
 
     def integrity(self) -> dict[str, Any]:
         """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``,
-        ``undecodable`` (messages skipped per topic because they could not be decoded; salvage only)."""
+        ``undecodable`` (messages skipped per topic because they could not be decoded; salvage only),
+        ``messages_unverified`` (messages of chunks whose CRC failed, left out; salvage only)."""
         return {
             'messages_expected': self.messages_expected,
             'messages_read': self.messages_read,
             'complete': self.complete,
             'undecodable': dict(self.undecodable),
+            'messages_unverified': self.unverified,
         }
 
     def count_all(self) -> int:
@@ -270,14 +290,21 @@ class BagReader:
     def _check_pass(self, read: dict[str, int]) -> None:
         """After a full pass over some topics: did it read all the bag holds of them?"""
         short = {t: (n, self.topics[t].count) for t, n in read.items() if n < self.topics[t].count}
+        extra = {t: (n, self.topics[t].count) for t, n in read.items() if n > self.topics[t].count}
         if set(read) == set(self.topics):
             self.messages_read = sum(read.values())
-        if not short:
+        if not self.counts_valid or (not short and not extra):
             return
-        got, held = sum(n for n, _ in short.values()), sum(m for _, m in short.values())
-        detail = ', '.join(f'{t} {n} of {m}' for t, (n, m) in sorted(short.items()))
-        text = f'{self.path}: read {got} of {held} messages ({held - got} missing: {detail})'
-        text += '; the bag is damaged'
+        if short:
+            got, held = sum(n for n, _ in short.values()), sum(m for _, m in short.values())
+            detail = ', '.join(f'{t} {n} of {m}' for t, (n, m) in sorted(short.items()))
+            text = f'{self.path}: read {got} of {held} messages ({held - got} missing: {detail})'
+            text += '; the bag is damaged'
+        else:  # issue 34 item 12: a count below what is there is a damaged or forged metadata.yaml
+            detail = ', '.join(f'{t} {n} where it says {m}' for t, (n, m) in sorted(extra.items()))
+            text = (
+                f'{self.path}: read more messages than the bag says it holds ({detail}); its counts are wrong'
+            )
         if not self.salvage:
             raise BagDamageError(text)
         self.damage = self.damage or text
@@ -293,11 +320,17 @@ class BagReader:
     ) -> Iterator[BagMessage]:
         """Damage met while reading through the index: stream the file and go on after ``last``."""
         file = _single_file(self.path, err)
-        messages = _scan_sqlite(file)[1] if file.suffix == '.db3' else _scan_mcap(file)[1]
+        if file.suffix == '.db3':
+            messages = _scan_sqlite(file)[1]
+        else:
+            scan = _scan_mcap(file, self.include_unverified)
+            messages, self.unverified = scan[1], scan[5]
         self._salvaged = messages
         if wanted == set(self.topics) and start_ns is None and stop_ns is None:
             self.messages_read = len(messages)
-        self.damage = f'damaged ({str(err) or type(err).__name__}); read by streaming up to the damage'
+        self.damage = (
+            f'damaged ({one_line(str(err)) or type(err).__name__}); read by streaming up to the damage'
+        )
         LOG.warning('%s: %s', self.path, self.damage)
         skip = last[1]
         for message in messages:
@@ -347,6 +380,23 @@ class BagReader:
         self.close()
 
 
+BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.yaml')
+"""Files of a bag directory that are checked to be regular files before anything reads them."""
+MAX_SALVAGE_BYTES = 4 << 30
+"""Largest MCAP file a salvage read takes into memory [bytes] (4 GiB; counted while reading)."""
+
+
+def _check_regular_files(path: Path) -> None:
+    """InputError unless ``path`` and every bag file in it (``*.mcap``, ``*.db3``, metadata.yaml) is a
+    regular file: a FIFO there made every reader hang, ``/dev/zero`` read forever (issue 34 item 13)."""
+    if not path.is_dir():
+        check_regular(path, 'bag')
+        return
+    for entry in sorted(path.iterdir()):
+        if entry.suffix in BAG_FILE_SUFFIXES and not entry.is_dir():
+            check_regular(entry, 'bag file')
+
+
 def _resolve(path: Path) -> Path:
     """A bag directory without metadata.yaml (a crashed recorder) is opened through its one file."""
     if path.is_dir() and not (path / 'metadata.yaml').exists():
@@ -370,6 +420,7 @@ def open_bag(
     extra_types: Mapping[str, str] | None = None,
     salvage: bool = False,
     warn_unknown: bool = True,
+    include_unverified: bool = False,
 ) -> BagReader:
     """Open a rosbag2 bag (MCAP file, .db3 file, or bag directory) for reading.
 
@@ -380,6 +431,9 @@ def open_bag(
         (see :func:`load_msg_definitions`)
     salvage : read a damaged bag up to the damage instead of raising
     warn_unknown : log one warning naming topics whose type is unknown
+    include_unverified : (salvage) also yield the messages of chunks whose CRC failed or could not
+        be checked, which are left out by default (their payload may be altered); the bag stays
+        incomplete (``messages_unverified`` counts them)
 
     Raises
     ------
@@ -388,27 +442,31 @@ def open_bag(
     bag_path = Path(path)
     if not bag_path.exists():
         raise InputError(f'bag not found: {bag_path}')
+    _check_regular_files(bag_path)
     bag_path = _resolve(bag_path)
     try:
         if salvage and _storage_of(bag_path) == 'mcap' and bag_path.is_file():
-            bag = _open_salvage(bag_path, extra_types, None)
+            bag = _open_salvage(bag_path, extra_types, None, include_unverified=include_unverified)
         elif _storage_of(bag_path) == 'mcap' and _has_foreign_channels(bag_path):
             bag = _open_salvage(bag_path, extra_types, None, warn=False)  # rosbags cannot open it
             bag.salvage = False
             if bag.damage:
                 raise BagDamageError(f'{bag_path}: bag is truncated or corrupt ({bag.damage})')
         else:
-            bag = _open_intact(bag_path, extra_types)
+            bag = _open_intact(bag_path, extra_types, salvage)
             bag.salvage = salvage
+    except BagDamageError:
+        raise
     except _DAMAGE_ERRORS as err:
         if _FOREIGN_PROFILE in str(err) and bag_path.is_file():
             bag = _open_foreign_profile(bag_path, extra_types, salvage)
         elif not salvage:
             raise BagDamageError(_damage_text(bag_path, err)) from err
         else:
-            bag = _open_salvage(bag_path, extra_types, err)
+            bag = _open_salvage(bag_path, extra_types, err, include_unverified=include_unverified)
     except FileNotFoundError as err:
         raise InputError(f'{bag_path}: {err}') from err
+    bag.include_unverified = include_unverified
     if warn_unknown and bag.undecodable_topics:
         LOG.warning(
             '%s: no definition for the type of %s; these topics are kept as raw bytes only',
@@ -482,7 +540,62 @@ def _has_foreign_channels(path: Path) -> bool:
     return ROS_ENCODING in encodings and len(encodings) > 1
 
 
-def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader:
+def _is_count(value: object) -> TypeGuard[int]:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _not_counts(path: Path, named: Sequence[tuple[str, object]]) -> str:
+    bad = [f'{name} {value!r}' for name, value in named if not _is_count(value)]
+    if not bad:
+        return ''
+    return f'{path}: the message counts of the bag are not counts ({", ".join(bad)}); the bag is damaged'
+
+
+def _metadata_problem(folder: Path, per_topic: Sequence[tuple[str, int]]) -> str:
+    """'' when a bag directory's metadata.yaml states a total and per-file counts that are counts and
+    agree with the topics' (rosbags' MCAP storage takes its counts from the file and never reads
+    these); else one line."""
+    import yaml
+
+    text = read_capped(folder / 'metadata.yaml', MAX_METADATA_BYTES, 'bag metadata').decode('utf-8')
+    info = yaml.safe_load(text)
+    info = info.get('rosbag2_bagfile_information', info) if isinstance(info, dict) else None
+    if not isinstance(info, dict):
+        return ''  # rosbags opened it; nothing more to compare
+    listed = info.get('files')
+    files: list[Any] = listed if isinstance(listed, list) else []
+    named: list[tuple[str, object]] = [('total', info.get('message_count'))]
+    named += [
+        (f'file {f.get("path", k)}', f.get('message_count'))
+        for k, f in enumerate(files)
+        if isinstance(f, dict)
+    ]
+    problem = _not_counts(folder, named)
+    if problem:
+        return problem
+    counts = [value for _, value in named if _is_count(value)]
+    total, in_files, topics = counts[0], sum(counts[1:]), sum(n for _, n in per_topic)
+    if total != topics or (len(counts) > 1 and in_files != total):
+        return (
+            f'{folder}: metadata.yaml says {total} messages, {in_files} in its files, its topics add up '
+            f'to {topics}; the bag is damaged'
+        )
+    return ''
+
+
+def _count_problem(path: Path, total: object, per_topic: Sequence[tuple[str, object]]) -> str:
+    """'' when the bag's own counts (metadata.yaml or MCAP statistics) are whole numbers >= 0 that
+    add up; else one line saying which is not (issue 34 item 12: -5 and 1e12 were taken as counts)."""
+    problem = _not_counts(path, [*per_topic, ('total', total)])
+    if problem:
+        return problem
+    added = sum(n for _, n in per_topic if _is_count(n))
+    if per_topic and added != total:
+        return f'{path}: the bag says it holds {total} messages, its topics add up to {added}; damaged'
+    return ''
+
+
+def _open_intact(path: Path, extra_types: Mapping[str, str] | None, salvage: bool = False) -> BagReader:
     reader = Rosbag2Reader(path)
     reader.open()
     try:
@@ -498,6 +611,14 @@ def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader
         count = reader.message_count
         # a bare .db3 has no count of its own (rosbags counts its rows): nothing to call it complete by
         own_count = _storage_of(path) != 'sqlite3' or (path.is_dir() and (path / 'metadata.yaml').exists())
+        per_topic: list[tuple[str, object]] = [(c.topic, c.msgcount) for c in connections]
+        problem = _count_problem(path, count, per_topic) if own_count else ''
+        if own_count and not problem and path.is_dir():  # rosbags' MCAP storage counts from the file
+            problem = _metadata_problem(path, [(t, n) for t, n in per_topic if _is_count(n)])
+        if problem and not salvage:
+            raise BagDamageError(problem)
+        if problem:
+            LOG.warning('%s', problem)
         return BagReader(
             path=path,
             storage=_storage_of(path),
@@ -506,7 +627,9 @@ def _open_intact(path: Path, extra_types: Mapping[str, str] | None) -> BagReader
             end_ns=max(reader.end_time - 1, reader.start_time) if count else 0,
             message_count=count,
             typestore=store,
-            messages_expected=count if own_count else None,
+            messages_expected=count if own_count and not problem else None,
+            damage=problem,
+            counts_valid=not problem,
             _reader=reader,
             _connections=connections,
         )
@@ -544,25 +667,40 @@ def _single_file(path: Path, cause: BaseException) -> Path:
 
 
 def _open_salvage(
-    path: Path, extra_types: Mapping[str, str] | None, cause: BaseException | None, *, warn: bool = True
+    path: Path,
+    extra_types: Mapping[str, str] | None,
+    cause: BaseException | None,
+    *,
+    warn: bool = True,
+    include_unverified: bool = False,
 ) -> BagReader:
     bag_dir = path if path.is_dir() else None
     path = _single_file(path, cause or InputError('salvage'))
+    unverified = 0
     if path.suffix == '.db3':
         topics, messages, damage = _scan_sqlite(path)
         stored: list[tuple[str, MessageDefinitionFormat, str]] = []
         expected = _metadata_count(bag_dir or path.parent)
     else:
-        topics, messages, damage, stored, expected = _scan_mcap(path)
+        topics, messages, damage, stored, expected, unverified = _scan_mcap(path, include_unverified)
     store = build_typestore(stored, extra_types)
     topics = {k: _with_decodable(v, store) for k, v in topics.items()}
     if not damage and cause is not None:
-        damage = f'unreadable index ({str(cause) or type(cause).__name__})'
+        damage = f'unreadable index ({one_line(str(cause)) or type(cause).__name__})'
     held = 'an unknown number of' if expected is None else f'{expected}'
     if not messages:
         raise InputError(f'{path}: nothing intact to salvage (0 of {held} messages; {damage or "no data"})')
-    if warn and (damage or expected is None or len(messages) < expected):
-        LOG.warning('%s: salvaged %d of %s messages; %s', path, len(messages), held, damage or 'no count')
+    if warn and (damage or expected is None or len(messages) != expected):
+        LOG.warning(
+            '%s: salvaged %d of %s messages%s; %s',
+            path,
+            len(messages),
+            held,
+            f' ({unverified} unverified {"kept" if include_unverified else "left out"})'
+            if unverified
+            else '',
+            damage or 'no count',
+        )
     stamps = [m.timestamp_ns for m in messages]
     return BagReader(
         path=path,
@@ -576,6 +714,7 @@ def _open_salvage(
         salvage=True,
         messages_expected=expected,
         messages_read=len(messages),
+        unverified=unverified,
         _salvaged=messages,
     )
 
@@ -587,20 +726,27 @@ def _metadata_count(folder: Path) -> int | None:
     from skidsteer_power.bag_io.salvage import message_count_of
 
     try:
-        return message_count_of(yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8')))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        text = read_capped(folder / 'metadata.yaml', MAX_METADATA_BYTES, 'bag metadata').decode('utf-8')
+        return message_count_of(yaml.safe_load(text))
+    except (InputError, UnicodeDecodeError, yaml.YAMLError):
         return None
 
 
 def _scan_mcap(
-    path: Path,
+    path: Path, include_unverified: bool = False
 ) -> tuple[
-    dict[str, TopicInfo], list[BagMessage], str, list[tuple[str, MessageDefinitionFormat, str]], int | None
+    dict[str, TopicInfo],
+    list[BagMessage],
+    str,
+    list[tuple[str, MessageDefinitionFormat, str]],
+    int | None,
+    int,
 ]:
-    """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bag_io.salvage`)."""
+    """Every intact message of an MCAP file, in time order (:mod:`skidsteer_power.bag_io.salvage`),
+    with the unverified ones too if ``include_unverified``, and how many unverified ones there are."""
     from skidsteer_power.bag_io.salvage import salvage_mcap
 
-    found = salvage_mcap(path.read_bytes())
+    found = salvage_mcap(read_capped(path, MAX_SALVAGE_BYTES, 'bag'))
     formats = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
     schemas = found.schemas
     channels = {k: c for k, c in found.channels.items() if c.message_encoding == ROS_ENCODING}
@@ -608,7 +754,7 @@ def _scan_mcap(
     messages: list[BagMessage] = []
     counts: dict[int, int] = {}
     skipped = 0
-    for record in found.messages:
+    for record in found.messages + (found.unverified if include_unverified else []):
         if record.channel_id not in channels:
             skipped += 1
             continue
@@ -648,7 +794,7 @@ def _scan_mcap(
             skipped,
         )
         expected = None if expected is None else expected - skipped  # of the ROS channels
-    return topics, messages, '; '.join(found.damage), stored, expected
+    return topics, messages, '; '.join(found.damage), stored, expected, len(found.unverified)
 
 
 def _scan_sqlite(path: Path) -> tuple[dict[str, TopicInfo], list[BagMessage], str]:

@@ -16,9 +16,16 @@
 3. counts what the file says it holds (``expected``): the statistics record, else the rosbag2
    metadata record, else unknown (a recorder killed before it wrote either).
 
-A message whose record frame is intact but whose payload was damaged is still returned: decoding it
-is the caller's check (:meth:`skidsteer_power.bag_io.reader.BagReader.deserialize` raises, replay and
-validate skip and count it). Records are parsed with the ``mcap`` library's record types.
+Verified or not (issue 34 item 11). MCAP has no checksum per message, only per chunk. A message
+from a chunk whose CRC matched (or from an intact record outside chunks) is in ``messages``; one
+read record by record from a chunk whose CRC failed, that does not decompress, whose header (and CRC)
+is gone, or from a damaged stretch between chunks, is in ``unverified``: its frame checked out, but
+its payload may be altered (500 efforts raised by 3 N m passed as intact: 21 253 J measured against
+the true 7 711 J) or it may never have been recorded (100 flipped bits made 2 such messages). The
+reader leaves ``unverified`` out and counts it, so such a bag is never ``complete``. A chunk cut short
+by the end of the file (a killed recorder, a full disk) was cut, not altered: its whole records are
+kept. Records are
+parsed with the ``mcap`` library's record types.
 """
 
 from __future__ import annotations
@@ -52,13 +59,16 @@ _PARSE_ERRORS = (McapError, struct.error, ValueError, UnicodeDecodeError, IndexE
 class Salvaged:
     """What :func:`salvage_mcap` recovered.
 
-    messages : intact messages in file order; expected : messages the file's own statistics or
-    rosbag2 metadata count (None: neither survived); damage : one line per damaged stretch.
+    messages : intact messages in file order (from CRC-checked chunks or intact records);
+    unverified : messages read from damaged or unchecked stretches (module docstring); expected :
+    messages the file's own statistics or rosbag2 metadata count (None: neither survived); damage :
+    one line per damaged stretch.
     """
 
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     messages: list[Message] = field(default_factory=list)
+    unverified: list[Message] = field(default_factory=list)
     expected: int | None = None
     damage: list[str] = field(default_factory=list)
     has_summary: bool = False
@@ -113,7 +123,8 @@ def _walk(data: bytes, out: Salvaged, chunk_index: dict[int, ChunkIndex]) -> Non
         if sane and opcode == Opcode.CHUNK:
             sane = _chunk_frame_ok(data, body, end)
         if not sane or not _take(data, opcode, body, end, out):
-            pos = _recover(data, pos, out, chunk_index)
+            cut = opcode in _OPCODES and end > len(data)  # the file ends inside this record
+            pos = _recover(data, pos, out, chunk_index, cut)
             continue
         pos = end
     if pos < len(data) or not out.has_summary:
@@ -139,8 +150,8 @@ def _take_metadata(record: Metadata, out: Salvaged) -> None:
     if record.name != 'rosbag2' or out.expected is not None:
         return
     info = yaml.safe_load(record.metadata.get('serialized_metadata', '')) or {}
-    if isinstance(info, dict) and isinstance(info.get('message_count'), int):
-        out.expected = info['message_count']
+    if isinstance(info, dict):
+        out.expected = message_count_of(info)
 
 
 def _chunk_frame_ok(data: bytes, body: int, end: int) -> bool:
@@ -205,20 +216,29 @@ def _take_chunk_records(
         return
     before = len(out.messages)
     bad = _scan_records(records, out, times, strict=False, indexed=indexed)
+    if not header_damaged and complete and not crc and not bad:
+        return  # no CRC written and every record checked out: as good as an unchunked file
+    found = _set_aside(out, before)
     if header_damaged:
         why = 'header damaged, located by the summary index'
     elif not complete:
         why = 'does not decompress to the end'
     elif crc:
         why = 'CRC mismatch'
-    elif not bad:
-        return  # no CRC written and every record checked out
     else:
         why = 'damaged records'
     out.damage.append(
-        f'chunk at byte {where - _RECORD.size}: {why}; {len(out.messages) - before} intact messages '
-        f'read from it record by record, {bad} damaged bytes skipped'
+        f'chunk at byte {where - _RECORD.size}: {why}; {found} messages read from it record by record '
+        f'are unverified (left out), {bad} damaged bytes skipped'
     )
+
+
+def _set_aside(out: Salvaged, before: int) -> int:
+    """Move the messages found since ``before`` from ``messages`` to ``unverified``; how many."""
+    found = out.messages[before:]
+    del out.messages[before:]
+    out.unverified += found
+    return len(found)
 
 
 def _decompress(raw: bytes, compression: str, size: int) -> tuple[bytes, bool]:
@@ -342,8 +362,14 @@ def _record_end(
     return end
 
 
-def _recover(data: bytes, pos: int, out: Salvaged, chunk_index: dict[int, ChunkIndex]) -> int:
-    """Damage at ``pos`` in the data section: salvage what lies before the next good record; return it."""
+def _recover(
+    data: bytes, pos: int, out: Salvaged, chunk_index: dict[int, ChunkIndex], cut: bool = False
+) -> int:
+    """Damage at ``pos`` in the data section: salvage what lies before the next good record; return it.
+
+    ``cut``: the record at ``pos`` runs past the end of the file. When nothing follows it (a recorder
+    killed mid-chunk, a disk full) its bytes were cut, not altered, and the records in them that
+    check out are kept as read; any other damaged stretch gives unverified messages only."""
     index = chunk_index.get(pos)
     if index is not None and index.chunk_length > index.compressed_size:  # the summary locates it
         end = pos + index.chunk_length
@@ -357,9 +383,16 @@ def _recover(data: bytes, pos: int, out: Salvaged, chunk_index: dict[int, ChunkI
     nxt = _next_chunk(data, pos + 1, chunk_index)
     before = len(out.messages)
     bad = _scan_records(data[pos:nxt], out, None, strict=False)
+    if cut and nxt == len(data):
+        out.damage.append(
+            f'the file ends inside the record at byte {pos} (cut short): {len(out.messages) - before} '
+            f'messages read from its part, {bad} bytes of an unfinished record skipped'
+        )
+        return nxt
+    found = _set_aside(out, before)
     out.damage.append(
-        f'bytes {pos}-{nxt}: not a valid record; {len(out.messages) - before} intact messages found in '
-        f'them, {bad} bytes skipped'
+        f'bytes {pos}-{nxt}: not a valid record; {found} messages found in them are unverified '
+        f'(left out), {bad} bytes skipped'
     )
     return nxt
 
@@ -388,5 +421,5 @@ def message_count_of(info: object) -> int | None:
     if isinstance(info, dict):
         info = info.get('rosbag2_bagfile_information', info)
         count = info.get('message_count') if isinstance(info, dict) else None
-        return count if isinstance(count, int) else None
+        return count if isinstance(count, int) and not isinstance(count, bool) and count >= 0 else None
     return None

@@ -9,7 +9,15 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from skidsteer_power.cli.common import Subcommands, _number, add_json_flag, add_msg_option, emit, print_json
+from skidsteer_power.cli.common import (
+    Subcommands,
+    _number,
+    add_json_flag,
+    add_msg_option,
+    emit,
+    print_json,
+    ros_topic,
+)
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     BAG_TIME_S,
@@ -32,7 +40,13 @@ def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
         '--salvage',
         action='store_true',
         help='read every intact message of a damaged bag instead of failing (exit 0; the JSON says '
-        'messages_expected, messages_read, complete)',
+        'messages_expected, messages_read, complete, messages_unverified); an MCAP file of at most 4 GiB',
+    )
+    parser.add_argument(
+        '--include-unverified',
+        action='store_true',
+        help='with --salvage: also use the messages of chunks whose CRC failed or could not be checked '
+        '(read record by record; their payload may be altered; left out by default; never complete)',
     )
 
 
@@ -43,7 +57,14 @@ def _open(args: argparse.Namespace) -> BagReader:
     from skidsteer_power.bag_io.reader import BagDamageError, load_msg_definitions, open_bag
 
     try:
-        bag = open_bag(args.bag, extra_types=load_msg_definitions(args.msg), salvage=args.salvage)
+        if args.include_unverified and not args.salvage:
+            raise InputError('--include-unverified needs --salvage')
+        bag = open_bag(
+            args.bag,
+            extra_types=load_msg_definitions(args.msg),
+            salvage=args.salvage,
+            include_unverified=args.include_unverified,
+        )
         try:
             bag.count_all()  # reads every message once; raises (not salvage) saying what is missing
         except BaseException:
@@ -142,6 +163,20 @@ def _is_fleet(args: argparse.Namespace) -> bool:
     )
 
 
+def _check_manifest(path: str | None, manifest: dict[str, tuple[str, str]] | None) -> None:
+    """Every vehicle and terrain a manifest names exists (before any bag is read): one line naming
+    the manifest, not a failed row per bag (issue 34)."""
+    from skidsteer_power.errors import SkidsteerError
+    from skidsteer_power.estimator import factory
+
+    for bag, (vehicle, terrain) in sorted((manifest or {}).items()):
+        try:
+            factory.load_vehicle_config(vehicle)
+            factory.check_terrain(terrain)
+        except SkidsteerError as err:
+            raise InputError(f'manifest {path}, bag {bag}: {err}') from err
+
+
 def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
     """``validate`` in fleet mode (:mod:`skidsteer_power.apps.fleet`): ``shared`` holds the single-bag
     ValidateOptions."""
@@ -151,6 +186,7 @@ def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
     if args.msg:
         raise InputError('--msg is not supported with several bags yet')
     manifest = read_manifest(args.manifest) if args.manifest else None
+    _check_manifest(args.manifest, manifest)
     jobs = plan_jobs(expand(args.bag), shared, manifest, salvage=args.salvage)
     with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
         summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
@@ -201,6 +237,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     with _open(args) as bag:
         summary = validate(bag, options)
         summary.update(bag.integrity())
+    note = summary.get('motor_data_note') or ''
+    if (args.left_joints or args.right_joints) and 'never holds all of' in note:
+        raise InputError(f'{args.bag}: --left-joints/--right-joints: {note}')
     if args.json:
         print_json(summary)
     else:
@@ -236,7 +275,9 @@ def register(subparsers: Subcommands) -> None:
         'rosbag2 directory. SIGINT/SIGTERM stop cleanly without losing a received message.',
     )
     rec.add_argument('-o', '--output', required=True, metavar='OUT.mcap', help='bag to write (new)')
-    rec.add_argument('topics', nargs='*', metavar='TOPIC', help='topics to record (default: all)')
+    rec.add_argument(
+        'topics', nargs='*', type=ros_topic, metavar='TOPIC', help='topics to record (default: all)'
+    )
     rec.add_argument(
         '--duration', type=RECORD_DURATION_S.arg(), metavar='S', help=RECORD_DURATION_S.help('stop after S s')
     )
@@ -258,7 +299,9 @@ def register(subparsers: Subcommands) -> None:
         help=REPLAY_RATE.help('speed factor (default 1)'),
     )
     rep.add_argument('--loop', action='store_true', help='start over at the end until stopped')
-    rep.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='only these topics')
+    rep.add_argument(
+        '--topics', nargs='+', type=ros_topic, default=None, metavar='TOPIC', help='only these topics'
+    )
     rep.add_argument(
         '--start', type=BAG_TIME_S.arg(), default=0.0, metavar='S', help=BAG_TIME_S.help('skip the first S s')
     )

@@ -22,7 +22,7 @@ import math
 import sys
 import time
 
-from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, ros_topic, web_origin
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
@@ -61,10 +61,13 @@ def register(subparsers: Subcommands) -> None:
         help='address to listen on (default 127.0.0.1; 0.0.0.0: every network, no authentication)',
     )
     parser.add_argument('--port', type=_port, default=DEFAULT_PORT, help='TCP port (0 = any free one)')
-    parser.add_argument('--topics', nargs='+', default=[], help='only these topics (default: all)')
+    parser.add_argument(
+        '--topics', nargs='+', type=ros_topic, default=[], help='only these topics (default: all)'
+    )
     parser.add_argument(
         '--allow-origin',
         nargs='+',
+        type=web_origin,
         default=[],
         metavar='URL',
         help='web origins accepted besides localhost, e.g. https://app.foxglove.dev (default: none)',
@@ -72,6 +75,7 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument(
         '--allow-publish',
         nargs='+',
+        type=ros_topic,
         default=[],
         metavar='TOPIC',
         help='topics clients may publish to, e.g. cmd_vel for the Teleop panel (default: none)',

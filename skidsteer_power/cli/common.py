@@ -123,3 +123,41 @@ def add_msg_option(parser: argparse.ArgumentParser) -> None:
         metavar='PATH',
         help='extra message definitions: <pkg>/msg/<Name>.msg files or folders of them (repeatable)',
     )
+
+
+def ros_topic(text: str) -> str:
+    """argparse type: a valid ROS 2 topic name (rclpy's own rules: tokens of letters, digits and
+    underscores between '/', no '//', not starting with a digit), e.g. ``cmd_vel`` or ``/robot/odom``."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_topic_name import validate_topic_name
+
+    try:
+        validate_topic_name(text)
+    except InvalidTopicNameException as err:
+        reason = str(err).splitlines()[0].split(': ', 1)[-1]
+        raise argparse.ArgumentTypeError(f'not a ROS topic name: {text!r} ({reason})') from None
+    return text
+
+
+def web_origin(text: str) -> str:
+    """argparse type: a web origin ``scheme://host[:port]`` (http or https, no path), e.g.
+    ``https://app.foxglove.dev``."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(text.strip())
+        port = parts.port  # ValueError for a port that is not a number in 0-65535
+    except ValueError:
+        parts, port = None, None
+    if (
+        parts is None
+        or parts.scheme not in ('http', 'https')
+        or not parts.hostname
+        or parts.path not in ('', '/')
+        or parts.query
+        or parts.fragment
+        or parts.username
+    ):
+        raise argparse.ArgumentTypeError(f'not a web origin (scheme://host[:port]): {text!r}')
+    del port
+    return text.strip().rstrip('/')

@@ -6,11 +6,15 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.protocol import BAUD_CODES
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
+from skidsteer_power.terramechanics.ranges import Range
+
+PROBE_TIMEOUT_S = Range('timeout', 0.0, 10.0, 's', positive=True)
+"""Wait per acknowledge or reply of ``des probe`` [s]: the DES answers within ms; 1e9 hung the probe."""
 
 
 def _baud(text: str) -> int:
@@ -31,7 +35,12 @@ def register(subparsers: Subcommands) -> None:
     )
     probe.add_argument('--port', required=True, help='serial port path or pyserial URL')
     probe.add_argument('--baud', type=_baud, default=38400, help='link speed [bit/s] (default 38400)')
-    probe.add_argument('--timeout', type=positive_float, default=0.1, help='wait per acknowledge/reply [s]')
+    probe.add_argument(
+        '--timeout',
+        type=PROBE_TIMEOUT_S.arg(),
+        default=0.1,
+        help=PROBE_TIMEOUT_S.help('wait per acknowledge/reply (default 0.1)'),
+    )
     add_json_flag(probe)
     probe.set_defaults(func=run_probe)
     des.set_defaults(func=_usage(des))

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -145,7 +146,11 @@ def run_show(args: argparse.Namespace) -> int:
             if not others:
                 raise ConfigError(f'no cached map for {vehicle.name} on {terrain.name} (run: map build)')
             path = others[-1]  # the newest
-    power_map = PowerMap.load(path, vehicle, terrain)
+    try:
+        power_map = PowerMap.load(path, vehicle, terrain)
+    except (EOFError, zipfile.BadZipFile) as err:  # empty / truncated: PowerMap.load lets these pass
+        # (caught here, not there: a change to maps/ changes the physics digest and every cached map)
+        raise ConfigError(f'{path}: not a skidsteer_power map ({err or type(err).__name__})') from err
     if (args.speed is None) != (args.yaw_rate is None):
         raise InputError('give both --speed and --yaw-rate to query the map')
     payload = power_map.summary()

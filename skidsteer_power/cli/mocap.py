@@ -16,7 +16,7 @@ import math
 
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
-from skidsteer_power.mocap.config import TargetConfig, parse_pattern
+from skidsteer_power.mocap.config import MAX_PATTERN_SIDE, TargetConfig, parse_pattern
 
 # The OpenCV-backed modules are imported inside the handlers: every skidsteer-power command builds
 # this parser, and only mocap commands need cv2.
@@ -107,7 +107,10 @@ def register(subparsers: Subcommands) -> None:
     calibrate.add_argument('images', nargs='+', metavar='IMAGE', help='checkerboard images')
     calibrate.add_argument('--square-size', type=positive_float, required=True, help='square side [m]')
     calibrate.add_argument(
-        '--pattern', type=_pattern, required=True, help='inner corners COLSxROWS, e.g. 9x6'
+        '--pattern',
+        type=_pattern,
+        required=True,
+        help=f'inner corners COLSxROWS, e.g. 9x6 (2 to {MAX_PATTERN_SIDE} a side)',
     )
     calibrate.add_argument('--out', required=True, help='calibration YAML to write')
     calibrate.add_argument('--k3', action='store_true', help='also fit k3 (wide-angle lenses, eq. 7.7)')
@@ -128,7 +131,9 @@ def register(subparsers: Subcommands) -> None:
         '--plane', required=True, help='image of a checkerboard lying in the plane of the target'
     )
     trk.add_argument(
-        '--pattern', type=_pattern, help='plane board inner corners (default: the calibration board)'
+        '--pattern',
+        type=_pattern,
+        help=f'plane board inner corners (default: the calibration board; 2 to {MAX_PATTERN_SIDE} a side)',
     )
     trk.add_argument(
         '--square-size', type=positive_float, help='plane board square [m] (default: calibration)'

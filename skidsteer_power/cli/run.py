@@ -20,10 +20,13 @@ import sys
 import time
 from typing import Any
 
-from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float, positive_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
+from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
-from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
+from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, RECORD_DURATION_S, SPEED_M_S
 
+HARDWARE_PORTS = ('/dev/ttyUSB0', '/dev/ttyUSB1')
+"""Default serial ports of the left and right amplifiers."""
 EXIT_FAILURE = 1
 """Exit code when a thread or process of the suite died (2 is bad input, 0 a clean stop)."""
 
@@ -48,10 +51,25 @@ def register(subparsers: Subcommands) -> None:
         type=RECORD_DURATION_S.arg(),
         help=RECORD_DURATION_S.help('stop after this many seconds (default: until a signal)'),
     )
-    parser.add_argument('--speed', type=finite_float, help='publish cmd_vel with this forward speed [m/s]')
-    parser.add_argument('--yaw-rate', type=finite_float, default=0.0, help='... and this yaw rate [rad/s]')
-    parser.add_argument('--left-port', default='/dev/ttyUSB0', help='left amplifier port (hardware)')
-    parser.add_argument('--right-port', default='/dev/ttyUSB1', help='right amplifier port (hardware)')
+    parser.add_argument(
+        '--speed',
+        type=SPEED_M_S.arg(),
+        help=SPEED_M_S.help('publish cmd_vel with this forward speed'),
+    )
+    parser.add_argument(
+        '--yaw-rate',
+        type=COMMAND_YAW_RATE_RAD_S.arg(),
+        default=0.0,
+        help=COMMAND_YAW_RATE_RAD_S.help('... and this yaw rate'),
+    )
+    parser.add_argument(
+        '--left-port',
+        help=f'left amplifier port (hardware; default {HARDWARE_PORTS[0]}; not with --simulate)',
+    )
+    parser.add_argument(
+        '--right-port',
+        help=f'right amplifier port (hardware; default {HARDWARE_PORTS[1]}; not with --simulate)',
+    )
     parser.add_argument('--map-cache', default='', help='map cache directory')
     parser.add_argument('--state-file', default='', help='energy state file')
     parser.add_argument('--status-every', type=positive_float, default=1.0, help='status line period [s]')
@@ -91,6 +109,10 @@ def run(args: argparse.Namespace) -> int:
 
     from skidsteer_power.nodes.suite import Suite, SuiteOptions
 
+    if args.simulate and (args.left_port or args.right_port):
+        raise InputError('--left-port/--right-port name hardware ports; --simulate makes its own amplifiers')
+    args.left_port = args.left_port or HARDWARE_PORTS[0]
+    args.right_port = args.right_port or HARDWARE_PORTS[1]
     options = SuiteOptions(
         vehicle=args.vehicle, terrain=args.terrain, sim_terrain=args.sim_terrain, simulate=args.simulate,
         patches=args.patches, map_cache_dir=args.map_cache, state_file=args.state_file,

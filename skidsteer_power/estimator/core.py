@@ -361,6 +361,9 @@ class EstimatorCore:
             problems.append('terrain changed: adaptation restarted')
         if self._implausible_s is not None and now_s - self._implausible_s <= IMPLAUSIBLE_WARN_S:
             problems.append('implausible power (beyond what the battery can deliver) skipped or clamped')
+        clock_problem, clock_values = self.energy.clock_diagnostics(now_s)
+        if clock_problem:
+            problems.append(clock_problem)
         level = LEVEL_WARN if problems else LEVEL_OK
         source = self.energy.source(now_s)
         values = {
@@ -382,6 +385,7 @@ class EstimatorCore:
             'remaining_wh': f'{self.battery.remaining_wh:.4f}',
             'predictor': self.predictor.description,
         }
+        values.update(clock_values)
         if self.prediction is not None:
             values['traction_margin'] = f'{self.prediction.traction_margin:.4f}'
         values.update(adaptation_values(correction, self.adaptation.settings.enabled))

@@ -10,7 +10,18 @@ before each new sample is stored, so a step in power is integrated exactly. Over
    cmd_vel stops, so the drive train is assumed idle). Nothing is integrated.
 
 An interval is split at the moment a source goes stale, so the result does not depend on how often
-``advance`` is called. The energy tallies are exact at every call; the battery is stepped with the
+``advance`` is called.
+
+Clock steps (issue 34 item 10). The node's clock is ROS time: sim time can be reset, an NTP step moves
+the system clock. A step back by more than :data:`CLOCK_STEP_BACK_S` is a gap of zero length: the
+held samples keep the freshness they had just before it (their times move with the clock), the
+integration goes on from the new time, and the step is counted and shown (:meth:`EnergyTracker
+.clock_diagnostics`, a WARN for :data:`CLOCK_STEP_SHOWN_S`). Before, nothing was integrated until
+the clock caught up again (1.1 J counted against 215 J drawn in 4 s after a 500 s step back) while
+the diagnostics still said "measured". A step forward needs nothing: a held sample is integrated
+only while fresh (at most its timeout, 0.5 s by default), then the source is ``none``.
+
+The energy tallies are exact at every call; the battery is stepped with the
 mean power of everything integrated since the last :meth:`EnergyTracker.flush` (the node flushes
 from its 5 Hz timer): stepping the battery model per message cost ~95 us, half the node's time per
 message at 1 kHz, and over 0.2 s the mean power gives the same charge to within the battery's
@@ -27,6 +38,11 @@ from dataclasses import dataclass, field
 from skidsteer_power.seams import BatteryModel
 
 SOURCES = ('measured', 'predicted', 'none')
+CLOCK_STEP_BACK_S = 0.1
+"""A clock going back by more than this between two calls is a clock step [s]; less is jitter (the
+overlap is skipped, as for calls out of order)."""
+CLOCK_STEP_SHOWN_S = 10.0
+"""How long the diagnostics WARN after a clock step back [s, on the new clock]."""
 
 
 @dataclass
@@ -60,6 +76,11 @@ class EnergyTracker:
     _time_s: float | None = field(default=None, init=False)
     _pending_J: float = field(default=0.0, init=False)
     _pending_s: float = field(default=0.0, init=False)
+    clock_steps_back: int = field(default=0, init=False)
+    """How many times the clock stepped back (:data:`CLOCK_STEP_BACK_S`)."""
+    clock_step_back_s: float = field(default=0.0, init=False)
+    """Size of the latest step back [s]."""
+    _clock_step_at_s: float | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
         self._measured = _Held(self.measured_timeout_s)
@@ -93,6 +114,9 @@ class EnergyTracker:
     def advance(self, now_s: float) -> None:
         """Integrate from the last call up to ``now_s`` [s], splitting where a source goes stale."""
         start = self._time_s
+        if start is not None and now_s < start - CLOCK_STEP_BACK_S:
+            self._clock_stepped_back(start, now_s)
+            return
         if start is None or now_s <= start:
             self._time_s = now_s if start is None else max(start, now_s)
             return
@@ -104,6 +128,32 @@ class EnergyTracker:
         if now_s > start:
             self._filter(0.0, now_s - start)
         self._time_s = now_s
+
+    def _clock_stepped_back(self, before_s: float, now_s: float) -> None:
+        """The clock went from ``before_s`` back to ``now_s`` [s]: a gap of zero length."""
+        shift = now_s - before_s
+        for held in (self._measured, self._predicted):
+            if held.time_s is not None:
+                held.time_s += shift  # as fresh as just before the step
+        self._time_s = now_s
+        self.clock_steps_back += 1
+        self.clock_step_back_s = -shift
+        self._clock_step_at_s = now_s
+
+    def clock_diagnostics(self, now_s: float) -> tuple[str, dict[str, str]]:
+        """(problem, key/values) about clock steps: the problem is '' unless one came within
+        :data:`CLOCK_STEP_SHOWN_S` before ``now_s``."""
+        at = self._clock_step_at_s
+        recent = at is not None and -CLOCK_STEP_BACK_S <= now_s - at <= CLOCK_STEP_SHOWN_S
+        problem = (
+            f'clock stepped back {self.clock_step_back_s:.3f} s: counted as a gap of zero length'
+            if recent
+            else ''
+        )
+        return problem, {
+            'clock_steps_back': str(self.clock_steps_back),
+            'clock_step_back_s': f'{self.clock_step_back_s:.3f}',
+        }
 
     def _integrate(self, name: str, power_W: float, dt_s: float) -> None:
         self._pending_J += power_W * dt_s

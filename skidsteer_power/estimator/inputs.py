@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.energy import CLOCK_STEP_BACK_S
 
 _isfinite = math.isfinite
 
@@ -384,8 +385,12 @@ class Freshness:
         self.last_s = now_s
 
     def age_s(self, now_s: float) -> float:
-        """Seconds since the last input (inf if none ever arrived)."""
-        return math.inf if self.last_s is None else max(0.0, now_s - self.last_s)
+        """Seconds since the last input (inf if none ever arrived, or if the clock stepped back
+        more than :data:`CLOCK_STEP_BACK_S` past it: not known to be recent)."""
+        if self.last_s is None:
+            return math.inf
+        age = now_s - self.last_s
+        return math.inf if age < -CLOCK_STEP_BACK_S else max(0.0, age)
 
     def is_fresh(self, now_s: float) -> bool:
         return self.age_s(now_s) <= self.timeout_s

@@ -38,6 +38,10 @@ class TargetConfig:
             raise ConfigError(f'min_roundness must be within 0..1, got {self.min_roundness}')
 
 
+MAX_PATTERN_SIDE = 100
+"""Most inner corners along one side of a checkerboard (printed boards have 5-30)."""
+
+
 def parse_pattern(text: str) -> tuple[int, int]:
     """'COLSxROWS' (inner corners, e.g. '9x6') -> (cols, rows); InputError if malformed."""
     match = _PATTERN.match(text or '')
@@ -46,4 +50,6 @@ def parse_pattern(text: str) -> tuple[int, int]:
     cols, rows = int(match.group(1)), int(match.group(2))
     if cols < 2 or rows < 2:
         raise InputError(f'bad pattern {text!r}: needs at least 2x2 inner corners')
+    if max(cols, rows) > MAX_PATTERN_SIDE:  # 100000x100000 once asked for 149 GiB
+        raise InputError(f'bad pattern {text!r}: at most {MAX_PATTERN_SIDE} inner corners a side')
     return cols, rows

@@ -89,7 +89,7 @@ class FoxgloveBridge:
         import foxglove
         from foxglove.websocket import Capability
 
-        from skidsteer_power.nodes.foxglove_front import FrontDoor
+        from skidsteer_power.nodes.foxglove_front import FrontDoor, backend_certificate
 
         self._foxglove = foxglove
         self.node = node
@@ -105,14 +105,22 @@ class FoxgloveBridge:
                 'supported_encodings': [MESSAGE_ENCODING],
                 'server_listener': self.client_publish,
             }
+        cert, key = backend_certificate()  # the backend speaks TLS to the front door only (issue 34)
         try:
             self.server = foxglove.start_server(
-                name=name, host='127.0.0.1', port=0, context=self.context, **publish
+                name=name,
+                host='127.0.0.1',
+                port=0,
+                context=self.context,
+                tls_cert=cert,
+                tls_key=key,
+                **publish,
             )
         except (OSError, RuntimeError) as err:
             raise InputError(f'cannot start the Foxglove server on loopback: {err}') from err
         try:
-            self.front = FrontDoor(host, port, f'ws://127.0.0.1:{self.server.port}', allowed_origins)
+            upstream = f'wss://127.0.0.1:{self.server.port}'
+            self.front = FrontDoor(host, port, upstream, allowed_origins, upstream_certificate=cert)
         except OSError as err:
             self.server.stop()
             raise InputError(f'cannot serve Foxglove on {host}:{port}: {err}') from err

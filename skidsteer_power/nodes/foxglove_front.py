@@ -10,6 +10,17 @@ a client's HTTP handshake, so it cannot refuse a web page on another site (Origi
 doing the protocol (channels, subscriptions, client publishing); this module only decides who may
 connect and copies frames both ways, one upstream connection per client.
 
+The backend (issue 34, security): the SDK server has to listen on a TCP port (127.0.0.1) and offers
+no hook for the handshake, so on its own any page in a browser on the robot could connect to it
+directly and skip the Origin check. It therefore speaks only TLS (``wss://``), with a certificate
+made for this run (:func:`backend_certificate`: a P-256 key made by ``openssl`` in a private
+temporary directory, read into memory, the files deleted at once). The front door trusts exactly
+that certificate (pinned). A browser refuses a ``wss://`` connection whose certificate no
+authority signed, and never asks the user about a WebSocket, so a page cannot reach the backend
+(a plain ``ws://`` handshake fails: the backend wants TLS). A local program that turns certificate
+checks off can still connect, as it can to the front door itself (no Origin = a tool); what the
+check is about is web pages. Without ``openssl`` the bridge does not start (fails closed).
+
 Origin policy: a client without an Origin header (native apps, the npm client, tools) is accepted;
 so are pages served from this machine (``localhost``, ``127.0.0.1``, ``[::1]``, any port) and the
 origins named in ``allowed_origins`` (exact ``scheme://host[:port]``, e.g.
@@ -21,11 +32,18 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import shutil
+import ssl
+import subprocess
+import tempfile
 import threading
 from collections.abc import Sequence
 from http import HTTPStatus
+from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
+
+from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
     from websockets.asyncio.client import ClientConnection
@@ -39,6 +57,36 @@ SUBPROTOCOLS = ('foxglove.sdk.v1', 'foxglove.websocket.v1')
 UPSTREAM_SUBPROTOCOL = 'foxglove.sdk.v1'
 LOCAL_HOSTS = frozenset({'localhost', '127.0.0.1', '::1'})
 MAX_CLIENT_FRAME_BYTES = 1 << 20  # a client sends subscriptions and small messages (cmd_vel)
+
+
+CERTIFICATE_DAYS = 3650
+"""Validity of the backend's per-run certificate [days] (only the front door, in this process, trusts it)."""
+
+
+def backend_certificate() -> tuple[bytes, bytes]:
+    """(certificate, PKCS#8 private key), PEM, for ``127.0.0.1``, made fresh by ``openssl`` (about
+    45 ms on this machine); InputError when openssl is missing or fails (the bridge fails closed)."""
+    openssl = shutil.which('openssl')
+    if openssl is None:
+        raise InputError('cannot secure the Foxglove backend: the openssl program is not installed')
+    with tempfile.TemporaryDirectory(prefix='skidsteer_foxglove_') as folder:  # mode 0700
+        key, cert = Path(folder) / 'key.pem', Path(folder) / 'cert.pem'
+        command = [
+            openssl, 'req', '-x509', '-newkey', 'ec', '-pkeyopt', 'ec_paramgen_curve:P-256', '-nodes',
+            '-keyout', str(key), '-out', str(cert), '-days', str(CERTIFICATE_DAYS),
+            '-subj', '/CN=127.0.0.1', '-addext', 'subjectAltName=IP:127.0.0.1',
+        ]  # fmt: skip
+        try:
+            subprocess.run(command, check=True, capture_output=True, timeout=30)
+        except (OSError, subprocess.SubprocessError) as err:
+            raise InputError(f'cannot secure the Foxglove backend: openssl failed ({err})') from err
+        return cert.read_bytes(), key.read_bytes()
+
+
+def pinned_context(certificate: bytes) -> ssl.SSLContext:
+    """A TLS client context that trusts ``certificate`` (PEM) and nothing else (given ``cadata``,
+    :func:`ssl.create_default_context` loads no system authorities), host name checked."""
+    return ssl.create_default_context(cadata=certificate.decode('ascii'))
 
 
 def origin_allowed(origin: str | None, allowed: Sequence[str]) -> bool:
@@ -57,8 +105,18 @@ def origin_allowed(origin: str | None, allowed: Sequence[str]) -> bool:
 class FrontDoor:
     """A WebSocket server at ``host``:``port`` (0: any free port) relaying to ``upstream_url``."""
 
-    def __init__(self, host: str, port: int, upstream_url: str, allowed_origins: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        upstream_url: str,
+        allowed_origins: Sequence[str] = (),
+        upstream_certificate: bytes | None = None,
+    ) -> None:
+        """``upstream_certificate``: the backend's certificate (PEM), pinned for a ``wss://``
+        ``upstream_url`` (module docstring)."""
         self.upstream_url = upstream_url
+        self._upstream_ssl = None if upstream_certificate is None else pinned_context(upstream_certificate)
         self.allowed_origins = tuple(allowed_origins)
         self.refused = 0
         self.connections = 0
@@ -108,6 +166,7 @@ class FrontDoor:
                 subprotocols=[Subprotocol(UPSTREAM_SUBPROTOCOL)],
                 compression=None,
                 max_size=None,
+                ssl=self._upstream_ssl,
             ) as upstream:
 
                 async def pump(

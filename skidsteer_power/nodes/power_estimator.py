@@ -43,8 +43,10 @@ periodic (``publish_period_s``)
     whose positions are their values (:data:`skidsteer_power.estimator.adaptation.CORRECTION_FIELDS`);
     the terrain-change flag is in ``diagnostics`` (``terrain_changes``, ``terrain_changed_at_s``, a
     warning for 10 s); ``diagnostics`` diagnostic_msgs/DiagnosticArray (energy
-    source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning)
-    every ``diagnostics_period_s``.
+    source, stale inputs, rejected-input counts, implausible-power counts (WARN), traction warning,
+    malformed-message counts ``malformed_<topic>`` (WARN for 10 s after one: a cmd_vel or joint_states
+    whose bytes do not decode is dropped, counted and logged at most every ``warn_period_s``,
+    :mod:`skidsteer_power.nodes.malformed`)) every ``diagnostics_period_s``.
 path energy (:mod:`skidsteer_power.nodes.path_hook`)
     ``plan`` nav_msgs/Path in; ``energy/path_required_wh``, ``energy/path_margin_wh`` std_msgs/Float64
     [Wh] out, and a ``path energy`` diagnostic that WARNs while the margin is negative.
@@ -62,7 +64,8 @@ Every publisher and subscription accepts ``qos_overrides.<topic>.<publisher|subs
 parameters (depth, durability, history, reliability), e.g. ``qos_overrides./joint_states.subscription
 .reliability: reliable`` where every joint_states writer is reliable and no loss is acceptable.
 
-The energy state is saved atomically to ``state_file`` every ``save_period_s`` and on shutdown, and
+The energy state is saved atomically to ``state_file`` every ``save_period_s`` (0.5 s: what a SIGKILL
+or power cut can lose; written by a thread, skipped while nothing changed) and on shutdown, and
 restored on start; an unusable file is moved aside to ``<file>.corrupt-<UTC time>`` with one
 warning. ``terrain`` can be set at run time: the new map is loaded (or built) in a worker thread and
 swapped in when ready; the old map serves until then.
@@ -99,7 +102,7 @@ from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSe
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
 from skidsteer_power.estimator.inputs import InputLimits, JointMap
 from skidsteer_power.estimator.odometry import PredictedOdometry
-from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
+from skidsteer_power.estimator.persistence import StateWriter, load_or_quarantine
 from skidsteer_power.estimator.prediction import Prediction, Predictor
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
@@ -109,6 +112,7 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes.malformed import MalformedInputs
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
@@ -171,7 +175,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         (0.001, 3600.0),
     ),
     ParamSpec('diagnostics_period_s', 1.0, 'period of diagnostics [s]', (0.01, 3600.0)),
-    ParamSpec('save_period_s', 10.0, 'period of energy-state saves [s]', (0.1, 86400.0)),
+    ParamSpec(
+        'save_period_s',
+        0.5,
+        'period of energy-state saves [s]: the most energy a SIGKILL or power cut loses (in a thread)',
+        (0.1, 86400.0),
+    ),
     ParamSpec('qos_depth', 100, 'queue depth of the subscriptions and the per-message outputs', (1, 100000)),
     ParamSpec(
         'input_reliability',
@@ -360,9 +369,18 @@ class PowerEstimator(QuietNode):
         qos_in = QoSProfile(depth=depth, reliability=INPUT_RELIABILITY[p['input_reliability']])
         qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
 
+        self.malformed = MalformedInputs(self.get_logger().warning, float(p['warn_period_s']))
+
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
-            decode = decoder(msg_type)  # raw bytes in, decoded by rosbags (nodes/wire.py)
-            batched = Batched(lambda data: callback(decode(data)))  # a backlog in batches (spin.py)
+            # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
+            decode = self.malformed.guard(topic, decoder(msg_type))
+
+            def take(data: bytes) -> None:
+                msg = decode(data)
+                if msg is not None:
+                    callback(msg)
+
+            batched = Batched(take)  # a backlog in batches (spin.py)
             batched.subscription = self.create_subscription(
                 msg_type, topic, batched, qos_in, qos_overriding_options=overrides, raw=True
             )
@@ -393,8 +411,10 @@ class PowerEstimator(QuietNode):
         self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
         self._figure_timer = self.create_timer(float(p['figure_period_s']), self._publish_figures)
         self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
+        self._writer: StateWriter | None = None
         if self.state_file is not None:
-            self.create_timer(float(p['save_period_s']), self.save)
+            self._writer = StateWriter(self.state_file, self.get_logger().error)
+            self.create_timer(float(p['save_period_s']), self._save_soon)
         # serialized once; each message patches its stamp and numbers (nodes/wire.py)
         axles = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
         self._predicted_wire = PackedJointState(axles, ('velocity', 'effort'))
@@ -592,6 +612,11 @@ class PowerEstimator(QuietNode):
         now = self.now_s()
         with self._lock:
             level, message, values = self.core.diagnostics(now)
+        malformed, counts = self.malformed.diagnostics()
+        values.update(counts)
+        if malformed:
+            level = max(level, 1)  # WARN
+            message = malformed if message.startswith('ok') else f'{message}; {malformed}'
         values['terrain'] = self.terrain_name
         values['vehicle'] = self.vehicle.name
         if self.pending_terrain:
@@ -605,19 +630,22 @@ class PowerEstimator(QuietNode):
         self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
-    def save(self) -> None:
-        """Write the energy state now (atomic); a failure is logged, never fatal."""
-        if self.state_file is None:
-            return
+    def _state(self) -> dict[str, Any]:
         with self._lock:
             self.core.tick(self.now_s())
             state = self.core.state_dict()
         state['vehicle'] = self.vehicle.name
-        state['saved_unix_s'] = time.time()
-        try:
-            save_state(self.state_file, state)
-        except OSError as err:
-            self.get_logger().error(f'cannot save the energy state to {self.state_file}: {err}')
+        return state
+
+    def _save_soon(self) -> None:
+        """The save timer: the state goes to the writer thread (the executor never waits on disk)."""
+        if self._writer is not None:
+            self._writer.submit(self._state())
+
+    def save(self) -> None:
+        """Write the energy state now (atomic); a failure is logged, never fatal."""
+        if self._writer is not None:
+            self._writer.write_now(self._state())
 
     # --- run-time terrain change --------------------------------------------------------------
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
@@ -667,7 +695,9 @@ class PowerEstimator(QuietNode):
         hook = getattr(self, 'path_energy', None)  # absent when the node failed before making it
         if hook is not None:
             hook.close()
-        self.save()
+        writer = getattr(self, '_writer', None)
+        if writer is not None:
+            writer.close(self._state())
         super().destroy_node()
 
 

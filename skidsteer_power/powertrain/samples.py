@@ -56,7 +56,17 @@ class Samples:
 
 
 def read_csv(path: str | os.PathLike[str], torque_constant_Nm_A: float) -> Samples:
-    """Read a CSV of no-load runs (see module doc); InputError naming the file and row on bad data."""
+    """Read a CSV of no-load runs (see module doc); InputError naming the file and row on bad data
+    (a binary file included: not UTF-8, or NUL bytes)."""
+    try:
+        return _read_csv(path, torque_constant_Nm_A)
+    except UnicodeDecodeError as err:
+        raise InputError(f'{path}: not a text CSV (byte {err.start} is not UTF-8)') from err
+    except csv.Error as err:
+        raise InputError(f'{path}: not a CSV ({err})') from err
+
+
+def _read_csv(path: str | os.PathLike[str], torque_constant_Nm_A: float) -> Samples:
     with open(path, newline='', encoding='utf-8') as stream:
         reader = csv.DictReader(stream)
         if not reader.fieldnames:
