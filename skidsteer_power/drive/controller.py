@@ -68,6 +68,8 @@ vehicle's motor (:func:`set_point_limit_rpm`) through its reduction (the chapter
 
 # The numbers a vehicle file's ``drive_controller:`` mapping may declare (each needs a source).
 FILE_NUMBERS = (
+    'wheel_separation_m',
+    'wheel_radius_m',
     'wheel_separation_multiplier',
     'left_wheel_radius_multiplier',
     'right_wheel_radius_multiplier',
@@ -338,7 +340,8 @@ def _limited(target: float, last: list[float], accel: float, jerk: float, dt: fl
 def controller_for_vehicle(vehicle: Vehicle, powertrain: Powertrain | None = None) -> DriveController:
     """The vehicle's drive controller: its ``drive_controller:`` mapping (module doc; ConfigError for an
     unknown key, a bad value or a number without a source), the vehicle's ``max_speed_m_s`` /
-    ``max_yaw_rate_rad_s`` as the velocity limits, its tread and drive radius as B and r. Without a
+    ``max_yaw_rate_rad_s`` as the velocity limits, its tread and drive radius as B and r unless the
+    mapping declares the controller's own ``wheel_separation_m`` / ``wheel_radius_m``. Without a
     mapping: no acceleration limit and the DES 70/10 set-point limit of its motor, scaled (the
     project's des_driver)."""
     data: Mapping[str, Any] = getattr(vehicle, 'drive_controller', None) or {}
@@ -365,9 +368,9 @@ def controller_for_vehicle(vehicle: Vehicle, powertrain: Powertrain | None = Non
             powertrain = Powertrain.for_vehicle(vehicle)
         ceiling_value = set_point_limit_rpm(powertrain.motor) * RPM / powertrain.gear_ratio
     try:
+        values.setdefault('wheel_separation_m', float(vehicle.tread_m))
+        values.setdefault('wheel_radius_m', float(vehicle.drive_radius_m))
         return DriveController(
-            wheel_separation_m=float(vehicle.tread_m),
-            wheel_radius_m=float(vehicle.drive_radius_m),
             max_speed_m_s=float(vehicle.max_speed_m_s),
             max_yaw_rate_rad_s=float(vehicle.max_yaw_rate_rad_s),
             max_wheel_rad_s=ceiling_value,
