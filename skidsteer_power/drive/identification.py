@@ -17,8 +17,9 @@ what the controller made of each command, whatever the ground did. :func:`identi
 3. finds the acceleration limits from the ramps after each large step of the measured twist (from
    where it was to where the hold settled): the median |dV/dt| (|dw_z/dt|) of the measured twist
    (the controller's kinematics inverted) while it is between 20 % and 80 % of the step
-   (a rate limit gives a constant slope there), leaving out holds into or out of the wheel speed
-   ceiling (scaling slows a ramp there); a step crossed in fewer than ``MIN_RAMP_SAMPLES``
+   (a rate limit gives a constant slope there: one that falls with the distance left, taking
+   ``RAMP_SHAPE_RATIO`` times longer for 50-80 % than for 20-50 %, is a lag), leaving out holds
+   into or out of the wheel speed ceiling (scaling slows a ramp there); a step crossed in fewer than ``MIN_RAMP_SAMPLES``
    samples is faster than the recording shows (not reached).
 
 The noise is estimated from the measurements' first differences (MAD), so no threshold is tuned to
@@ -284,6 +285,25 @@ def _fit_steady(
     return out, result
 
 
+RAMP_SHAPE_RATIO = 1.5
+"""A rate limit crosses 20-50 % and 50-80 % of a step in equal times; a first-order lag takes
+ln(2.5) / ln(1.6) = 1.95 times longer for the second: above this ratio the response is a lag."""
+
+
+def _constant_slope(t: np.ndarray, progress: np.ndarray) -> bool:
+    """The step's response is a ramp (constant slope), not a lag: the times to cross 20 %, 50 % and
+    80 % (first crossings, interpolated) split into two halves within :data:`RAMP_SHAPE_RATIO`."""
+    times = []
+    for level in (0.2, 0.5, 0.8):
+        k = int(np.argmax(progress >= level))
+        if k == 0:
+            return False
+        p0, p1 = progress[k - 1], progress[k]
+        times.append(t[k - 1] + (level - p0) / (p1 - p0) * (t[k] - t[k - 1]))
+    first, second = times[1] - times[0], times[2] - times[1]
+    return bool(first > 0 and second / first <= RAMP_SHAPE_RATIO)
+
+
 def _fit_ramps(
     prior: DriveController,
     ctrl: DriveController,
@@ -317,6 +337,8 @@ def _fit_ramps(
             mid = np.flatnonzero((progress >= 0.2) & (progress <= 0.8))
             if mid.size < MIN_RAMP_SAMPLES or np.any(progress[: mid[-1] + 1] > 1.0):
                 continue
+            if not _constant_slope(t[a:b], progress):
+                continue  # a lag (slope falling with the distance left), not a rate limit
             ramps += 1
             slopes.extend(np.abs(rate[a + mid]).tolist())
         if ramps >= 1 and len(slopes) >= MIN_RAMP_SAMPLES:
