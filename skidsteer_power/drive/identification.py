@@ -19,8 +19,8 @@ what the controller made of each command, whatever the ground did. :func:`identi
    (the controller's kinematics inverted) while it is between 20 % and 80 % of the step
    (a rate limit gives a constant slope there: one that falls with the distance left, taking
    ``RAMP_SHAPE_RATIO`` times longer for 50-80 % than for 20-50 %, is a lag), leaving out holds
-   into or out of the wheel speed ceiling (scaling slows a ramp there); a step crossed in fewer than ``MIN_RAMP_SAMPLES``
-   samples is faster than the recording shows (not reached).
+   into or out of the wheel speed ceiling (scaling slows a ramp there); a step crossed in fewer
+   than ``MIN_RAMP_SAMPLES`` samples is faster than the recording shows (not reached).
 
 The noise is estimated from the measurements' first differences (MAD), so no threshold is tuned to
 one recording.
