@@ -57,7 +57,7 @@ def test_the_help_index_lists_every_command_without_importing_them() -> None:
     full = cli_main.build_parser()
     (commands,) = (a for a in full._actions if a.dest == 'command')
     index = cli_main.command_index()
-    assert isinstance(commands.choices, dict) and set(index) == set(commands.choices)
+    assert isinstance(commands, argparse._SubParsersAction) and set(index) == set(commands.choices)
     for action in commands._choices_actions:
         assert index[action.dest][1] == action.help, action.dest
     code = (
