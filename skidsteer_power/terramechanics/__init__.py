@@ -45,7 +45,23 @@ _WHERE = {
     'wheel_forces': 'wheel',
 }
 
-__all__ = sorted(_WHERE)
+__all__ = [
+    'PRESETS',
+    'Terrain',
+    'TrackState',
+    'WheelState',
+    'load_terrain',
+    'pressure_sinkage',
+    'shear_strength',
+    'shear_stress',
+    'single_track',
+    'sinkage_at_slip',
+    'sinkage_for_pressure',
+    'solve_wheel',
+    'solve_wheel_bracketed',
+    'wheel_at_slip',
+    'wheel_forces',
+]
 
 
 def __getattr__(name: str) -> Any:
