@@ -48,16 +48,48 @@ def _command_modules() -> list[str]:
     return sorted(n for n in names if not n.startswith('_'))
 
 
+INDEX_CACHE = 'cli_index.json'
+"""The command index kept in the cache folder (skidsteer_power.cache), keyed by the command modules'
+sizes and modification times: a changed module is read again."""
+
+
 def command_index() -> dict[str, tuple[str, str | None]]:
     """{command: (module, help or None)} from each command module's source: the literal first
     argument and ``help=`` of the ``<first parameter of register>.add_parser(...)`` calls in its
     functions taking that parameter. A module whose calls are not literal is left out (it is
-    imported whenever the full parser is built)."""
+    imported whenever the full parser is built). Kept in :data:`INDEX_CACHE` between runs."""
+    import json
+
     import skidsteer_power.cli as cli_pkg
+    from skidsteer_power.cache import default_cache_dir
 
     folder = Path(cli_pkg.__path__[0])
+    modules = _command_modules()
+    try:
+        key = [[m, *(lambda st: (st.st_mtime_ns, st.st_size))((folder / f'{m}.py').stat())] for m in modules]
+    except OSError:
+        return _read_index(folder, modules)
+    cached = default_cache_dir() / INDEX_CACHE
+    try:
+        data = json.loads(cached.read_text(encoding='utf-8'))
+        if data['key'] == key:
+            return {name: (entry[0], entry[1]) for name, entry in data['index'].items()}
+    except (OSError, ValueError, KeyError, TypeError, IndexError):
+        pass  # missing or stale: read the sources
+    index = _read_index(folder, modules)
+    try:
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        temporary = cached.with_name(f'{INDEX_CACHE}.{os.getpid()}')
+        temporary.write_text(json.dumps({'key': key, 'index': index}), encoding='utf-8')
+        temporary.replace(cached)
+    except OSError:
+        pass  # a read-only home: read the sources every time
+    return index
+
+
+def _read_index(folder: Path, modules: list[str]) -> dict[str, tuple[str, str | None]]:
     index: dict[str, tuple[str, str | None]] = {}
-    for module in _command_modules():
+    for module in modules:
         try:
             functions = _functions_adding_parsers((folder / f'{module}.py').read_text(encoding='utf-8'))
         except (OSError, SyntaxError, ValueError):
@@ -122,7 +154,7 @@ def help_parser() -> argparse.ArgumentParser:
     command module imported): what ``--help`` and a bare ``skidsteer-power`` print."""
     parser, subparsers = _top_parser()
     for name, (_module, text) in sorted(command_index().items()):
-        subparsers.add_parser(name, help=text)
+        subparsers.add_parser(name, help=text, add_help=False)
     return parser
 
 
