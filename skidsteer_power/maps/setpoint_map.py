@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from skidsteer_power.cache import atomic_file, default_cache_dir, physics_digest
+from skidsteer_power.drive.controller import controller_for_vehicle
 from skidsteer_power.errors import InputError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
@@ -40,6 +41,7 @@ from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 from skidsteer_power.vehicle import vehicle_fingerprint
 
 if TYPE_CHECKING:
+    from skidsteer_power.drive.controller import DriveController
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -193,9 +195,10 @@ class SetpointMap:
 
 
 def envelope(predictor: CommandPredictor) -> tuple[float, float]:
-    """The largest set point mean and half difference [rad/s] the map covers: those of the drive
-    controller at the vehicle's velocity limits (V_max / r, w_max B / 2 / r), at most its ceiling."""
-    ctrl = predictor.controller
+    """The largest set point mean and half difference [rad/s] the map covers: those of the vehicle
+    file's drive controller at its velocity limits (V_max / r, w_max B / 2 / r), at most its ceiling
+    (a predictor given another controller queries the same map)."""
+    ctrl = controller_for_vehicle(predictor.vehicle, predictor.powertrain)
     r = min(ctrl.radii_m)
     top = ctrl.ceiling_for(predictor.max_axle_rad_s)
     half_separation = 0.5 * ctrl.separation_m
@@ -225,21 +228,24 @@ def load_or_build(
     terrain: Terrain,
     nodes: tuple[int, int] = DEFAULT_NODES,
     cache_dir: str | os.PathLike[str] | None = None,
+    controller: DriveController | None = None,
 ) -> tuple[SetpointMap, bool]:
     """The cached set-point map of ``vehicle`` on ``terrain``, built and saved if missing or
-    unreadable. Returns (map, built)."""
+    unreadable. Returns (map, built). ``controller``: the drive controller its queries make set
+    points with (default: the vehicle file's; e.g. the des_driver's own limits); the nodes and the
+    cache are the vehicle's either way."""
     path = cache_path(vehicle, terrain, nodes, cache_dir)
+    predictor = CommandPredictor(vehicle, terrain, controller=controller)
     if path.exists():
         try:
             with np.load(path) as data:
                 mean, diff, values = data['mean'], data['diff'], data['values']
-            predictor = CommandPredictor(vehicle, terrain)
             top = envelope(predictor)
             if values.shape == (len(mean), len(diff), len(FIELDS)) and (mean[-1], diff[-1]) == top:
                 return SetpointMap(predictor, mean, diff, values), False
         except (OSError, ValueError, KeyError):
             pass  # damaged: rebuild below, never use it
-    built = SetpointMap.build(vehicle, terrain, nodes)  # missing, damaged or another envelope
+    built = SetpointMap.build(vehicle, terrain, nodes, predictor)  # missing, damaged or another envelope
     with atomic_file(path) as handle:
         np.savez(handle, mean=built.grid.axis0.values, diff=built.grid.axis1.values, values=built.grid.values)
     return built, True
