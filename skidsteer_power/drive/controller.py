@@ -51,7 +51,9 @@ __all__ = [
     'DriveController',
     'Ramp',
     'WheelSetpoints',
+    'clamp_twist',
     'controller_for_vehicle',
+    'limit_rate',
     'set_point_limit_rpm',
     'side_speeds',
 ]
@@ -248,8 +250,7 @@ class DriveController:
         v, w = float(speed_cmd), float(yaw_cmd)
         if not (math.isfinite(v) and math.isfinite(w)):
             raise InputError(f'non-finite command: V {v!r} m/s, yaw rate {w!r} rad/s')
-        vmax, wmax = self.max_speed_m_s, self.max_yaw_rate_rad_s
-        vl, wl = min(vmax, max(-vmax, v)), min(wmax, max(-wmax, w))
+        vl, wl = clamp_twist(v, w, self.max_speed_m_s, self.max_yaw_rate_rad_s)
         left, right = self.wheels_one(vl, wl, ceiling_rad_s=ceiling_rad_s)
         return left[0], right[0], (vl, wl) != (v, w) or left[1]
 
@@ -313,17 +314,22 @@ class Ramp:
         v, w = float(speed_cmd), float(yaw_cmd)
         if not (math.isfinite(v) and math.isfinite(w) and math.isfinite(dt) and dt >= 0):
             raise InputError(f'non-finite command or step: V {v!r} m/s, yaw rate {w!r} rad/s, dt {dt!r} s')
-        vmax, wmax = c.max_speed_m_s, c.max_yaw_rate_rad_s
-        vl, wl = min(vmax, max(-vmax, v)), min(wmax, max(-wmax, w))
-        vl = _limited(vl, self._v, c.max_accel_m_s2, c.max_jerk_m_s3, dt)
-        wl = _limited(wl, self._w, c.max_yaw_accel_rad_s2, c.max_yaw_jerk_rad_s3, dt)
+        vl, wl = clamp_twist(v, w, c.max_speed_m_s, c.max_yaw_rate_rad_s)
+        vl = limit_rate(vl, self._v, c.max_accel_m_s2, c.max_jerk_m_s3, dt)
+        wl = limit_rate(wl, self._w, c.max_yaw_accel_rad_s2, c.max_yaw_jerk_rad_s3, dt)
         left, right = c.wheels_one(vl, wl, ceiling_rad_s=ceiling_rad_s)
         return left[0], right[0], (vl, wl) != (v, w) or left[1]
 
 
-def _limited(target: float, last: list[float], accel: float, jerk: float, dt: float) -> float:
+def clamp_twist(speed: float, yaw_rate: float, max_speed: float, max_yaw_rate: float) -> tuple[float, float]:
+    """(V [m/s], w_z [rad/s]) each clamped to its velocity limit (module doc, step 1), in floats."""
+    return min(max_speed, max(-max_speed, speed)), min(max_yaw_rate, max(-max_yaw_rate, yaw_rate))
+
+
+def limit_rate(target: float, last: list[float], accel: float, jerk: float, dt: float) -> float:
     """SpeedLimiter::limit_jerk then limit_acceleration (ros2_controllers control_toolbox): the value
-    after dt toward ``target`` from the last two outputs ``last`` = [v0, v1]; updates ``last``."""
+    after dt [s] toward ``target`` from the last two outputs ``last`` = [v0, v1], at most ``accel``
+    per second and ``jerk`` per second squared (inf: none); updates ``last``."""
     v0, v1 = last
     v = target
     if math.isfinite(jerk):
