@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_run import one_line_error, run_cli
 
@@ -86,3 +87,43 @@ def test_the_controllers_limits_apply_to_predict(
     # (0.3, 0.3): 0.3 -+ 0.3 x 0.5351 = 0.1395, 0.4605 m/s -> 0.8449, 2.789 rad/s: untouched
     assert [slow[k] for k in sp] == pytest.approx([0.13947 / 0.1651, 0.46053 / 0.1651], rel=1e-4)
     assert not slow['clamped']
+
+
+def test_a_side_the_current_limit_holds_back_reports_its_real_motion() -> None:
+    """An 8 A limit (the test robot's powertrain with current_limit_A 8) at (0.5 m/s, 1.0 rad/s) on the
+    sand bin: the outer (right) side needs 8.4 A at its set point, so it falls behind it until its
+    current is the limit; the motion reported is that one, slower and wider than at the set points."""
+    from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
+    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    vehicle, sand = load_vehicle('test_robot_track'), load_terrain('sand_bin')
+    weak = Powertrain.from_config({'preset': 'test_robot', 'current_limit_A': 8.0}, 'track')
+    full = CommandPredictor(vehicle, sand).predict([0.5], [1.0])
+    held = CommandPredictor(vehicle, sand, weak).predict([0.5], [1.0])
+    assert full.current[0, 1] > 8.0 > full.current[0, 0] and not full.limited[0]
+    assert held.limited[0] and held.reason[0] == REASON_CURRENT
+    assert held.omega is not None
+    assert held.omega[0, 0] == held.setpoint[0, 0] and held.omega[0, 1] < held.setpoint[0, 1]  # right behind
+    assert abs(held.current[0, 1]) <= 8.0 and abs(held.current[0, 1]) > 8.0 * 0.99  # at the limit
+    assert 0 < held.speed[0] < full.speed[0] and 0 < held.yaw_rate[0] < full.yaw_rate[0]
+    record = held.record(0)
+    assert record['omega_right_rad_s'] < record['setpoint_right_rad_s']
+
+
+def test_a_side_that_needs_more_than_the_limit_at_any_speed_stalls() -> None:
+    """A 5 A limit below the drivetrain's own Coulomb friction (about 6.8 A at any speed, eq. 7.1's c):
+    the side stands, the motor pushing with the limit current."""
+    from skidsteer_power.models.predict import REASON_STALL, CommandPredictor
+    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
+
+    weak = Powertrain.from_config({'preset': 'test_robot', 'current_limit_A': 5.0}, 'track')
+    held = CommandPredictor(load_vehicle('test_robot_track'), load_terrain('sand_bin'), weak).predict(
+        [0.2], [0.0]
+    )
+    assert held.reason[0] == REASON_STALL and held.speed[0] == 0.0
+    assert held.omega is not None and np.all(held.omega[0] == 0.0)
+    assert held.current[0] == pytest.approx([5.0, 5.0])
