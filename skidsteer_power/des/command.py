@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 from skidsteer_power.des.kinematics import twist_to_motor_rpm
+from skidsteer_power.drive.controller import clamp_twist, limit_rate
 from skidsteer_power.errors import ConfigError, InputError
 
 
@@ -52,8 +53,7 @@ def limit_twist(linear_m_s: float, yaw_rate_rad_s: float, limits: CommandLimits)
     v, w = float(linear_m_s), float(yaw_rate_rad_s)
     if not (math.isfinite(v) and math.isfinite(w)):
         raise InputError(f'non-finite command: V {v!r} m/s, yaw rate {w!r} rad/s')
-    v_max, w_max = limits.max_speed_m_s, limits.max_yaw_rate_rad_s
-    cv, cw = min(v_max, max(-v_max, v)), min(w_max, max(-w_max, w))
+    cv, cw = clamp_twist(v, w, limits.max_speed_m_s, limits.max_yaw_rate_rad_s)  # the drive layer's
     return CheckedTwist(cv, cw, clamped=(cv, cw) != (v, w))
 
 
@@ -69,10 +69,12 @@ class SlewLimiter:
         self.max_step_s = max_step_s
         self.linear_m_s = 0.0
         self.yaw_rate_rad_s = 0.0
+        self._v, self._w = [0.0, 0.0], [0.0, 0.0]
         self._last_s: float | None = None
 
     def reset(self, now_s: float) -> None:
         self.linear_m_s = self.yaw_rate_rad_s = 0.0
+        self._v, self._w = [0.0, 0.0], [0.0, 0.0]  # last outputs, as skidsteer_power.drive.Ramp keeps
         self._last_s = now_s
 
     def step(
@@ -81,15 +83,12 @@ class SlewLimiter:
         """The twist (V [m/s], w_z [rad/s]) to command at ``now_s`` [s] (time.monotonic)."""
         dt = 0.0 if self._last_s is None else min(self.max_step_s, max(0.0, now_s - self._last_s))
         self._last_s = now_s
-        self.linear_m_s = _toward(self.linear_m_s, target_linear_m_s, self.limits.max_accel_m_s2 * dt)
-        self.yaw_rate_rad_s = _toward(
-            self.yaw_rate_rad_s, target_yaw_rate_rad_s, self.limits.max_yaw_accel_rad_s2 * dt
+        # the drive layer's acceleration limit (skidsteer_power.drive.controller.limit_rate), no jerk limit
+        self.linear_m_s = limit_rate(target_linear_m_s, self._v, self.limits.max_accel_m_s2, math.inf, dt)
+        self.yaw_rate_rad_s = limit_rate(
+            target_yaw_rate_rad_s, self._w, self.limits.max_yaw_accel_rad_s2, math.inf, dt
         )
         return self.linear_m_s, self.yaw_rate_rad_s
-
-
-def _toward(value: float, target: float, max_change: float) -> float:
-    return value + min(max_change, max(-max_change, target - value))
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator.inputs import JointMap
@@ -17,6 +17,9 @@ from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.seams import BatteryModel
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
+
+if TYPE_CHECKING:
+    from skidsteer_power.drive.controller import DriveController
 
 SECONDS_PER_HOUR = 3600.0
 
@@ -60,16 +63,30 @@ KINEMATICS = ('setpoint', 'twist')
 motion FESS finds for them; issue 25) or 'twist' (the command taken as the motion itself)."""
 
 
+def drive_controller(vehicle: Vehicle, **limits: float) -> DriveController:
+    """The vehicle file's drive controller (:func:`skidsteer_power.drive.controller_for_vehicle`) with
+    the given limits (``max_speed_m_s`` [m/s], ``max_yaw_rate_rad_s`` [rad/s], ``max_wheel_rad_s``
+    [rad/s] ...) in place of its own; a limit of 0 keeps the file's. The estimator predicts through
+    the limits the robot's driver applies (the des_driver's parameters, ``skidsteer-power run``)."""
+    from skidsteer_power.drive.controller import controller_for_vehicle
+
+    ctrl = controller_for_vehicle(vehicle, powertrain_for(vehicle))
+    given = {name: float(value) for name, value in limits.items() if value}
+    return ctrl.with_values(**given) if given else ctrl
+
+
 def map_predictor(
     vehicle: Vehicle,
     terrain_name: str,
     cache_dir: str | os.PathLike[str] | None = None,
     kinematics: str = 'setpoint',
+    controller: DriveController | None = None,
 ) -> tuple[MapPredictor | SetpointPredictor, bool, str]:
     """A predictor for ``vehicle`` on the named terrain from its cached map, loaded from
     ``cache_dir`` (default: $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power) or built there
     (FESS) if missing: the set-point map (:class:`SetpointPredictor`) for ``kinematics='setpoint'``,
-    the (V, yaw rate) power map (:class:`MapPredictor`) for ``'twist'``.
+    the (V, yaw rate) power map (:class:`MapPredictor`) for ``'twist'``. ``controller``: the drive
+    controller the set points follow (default: the vehicle file's, :mod:`skidsteer_power.drive`).
 
     Returns (predictor, built, description of the map).
     """
@@ -79,7 +96,9 @@ def map_predictor(
     if kinematics == 'setpoint':
         from skidsteer_power.maps import setpoint_map
 
-        smap, built = setpoint_map.load_or_build(vehicle, terrain, cache_dir=cache_dir or None)
+        smap, built = setpoint_map.load_or_build(
+            vehicle, terrain, cache_dir=cache_dir or None, controller=controller
+        )
         where = setpoint_map.cache_path(vehicle, terrain, cache_dir=cache_dir or None)
         description = f'{vehicle.name} on {terrain.name}, set points ({where})'
 

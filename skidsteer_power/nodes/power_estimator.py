@@ -159,6 +159,24 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'max_yaw_rate_rad_s', 10.0, 'cmd_vel |angular.z| above this is rejected [rad/s]', (0.001, 100.0)
     ),
     ParamSpec(
+        'drive_max_speed_m_s',
+        0.0,
+        "the drive's |V| limit the predictions follow [m/s]; 0 = the vehicle file's (run: the des_driver's)",
+        (0.0, 100.0),
+    ),
+    ParamSpec(
+        'drive_max_yaw_rate_rad_s',
+        0.0,
+        "the drive's |yaw rate| limit the predictions follow [rad/s]; 0 = the vehicle file's",
+        (0.0, 100.0),
+    ),
+    ParamSpec(
+        'drive_max_wheel_rad_s',
+        0.0,
+        "the drive's wheel (axle) speed ceiling the predictions follow [rad/s]; 0 = the vehicle file's",
+        (0.0, 10000.0),
+    ),
+    ParamSpec(
         'max_motor_speed_rad_s',
         1200.0,
         'joint_states |velocity| above this is rejected [rad/s]',
@@ -276,6 +294,12 @@ class PowerEstimator(QuietNode):
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         self.terrain_name = p['terrain']
         self.kinematics = str(p['kinematics'])
+        self.controller = factory.drive_controller(
+            self.vehicle,
+            max_speed_m_s=p['drive_max_speed_m_s'],
+            max_yaw_rate_rad_s=p['drive_max_yaw_rate_rad_s'],
+            max_wheel_rad_s=p['drive_max_wheel_rad_s'],
+        )
         self.odometry = PredictedOdometry()
         self._predicted_twist_stamp: Any = None
         if predictor is None:
@@ -332,7 +356,7 @@ class PowerEstimator(QuietNode):
     def _make_predictor(self, terrain: str, cache_dir: str) -> Predictor:
         started = time.monotonic()
         predictor, built, path = factory.map_predictor(
-            self.vehicle, terrain, cache_dir or None, self.kinematics
+            self.vehicle, terrain, cache_dir or None, self.kinematics, self.controller
         )
         if built:
             self.get_logger().info(

@@ -118,10 +118,35 @@ class Suite:
 
     def _estimator_params(self) -> list[Parameter]:
         o = self.options
-        values = {'vehicle': o.vehicle, 'terrain': o.terrain, 'map_cache_dir': o.map_cache_dir}
+        values: dict[str, Any] = {
+            'vehicle': o.vehicle,
+            'terrain': o.terrain,
+            'map_cache_dir': o.map_cache_dir,
+        }
         values['state_file'] = o.state_file
+        values.update(self._driver_limits())
         values.update(o.estimator_params)
         return [Parameter(k, value=v) for k, v in values.items()]
+
+    def _driver_limits(self) -> dict[str, float]:
+        """The des_driver's own limits (its parameters or their defaults) as the estimator's
+        ``drive_*`` parameters: the estimator predicts the set points the driver really commands."""
+        from skidsteer_power.nodes import des_driver
+        from skidsteer_power.powertrain import Powertrain
+        from skidsteer_power.powertrain.motor import RPM
+
+        given = self.options.driver_params
+        defaults = {spec.name: spec.default for spec in des_driver.PARAMETERS}
+
+        def value(name: str) -> float:
+            return float(given.get(name, defaults[name]))
+
+        gear = Powertrain.for_vehicle(self.vehicle).gear_ratio
+        return {
+            'drive_max_speed_m_s': value('max_speed_m_s'),
+            'drive_max_yaw_rate_rad_s': value('max_yaw_rate_rad_s'),
+            'drive_max_wheel_rad_s': value('max_motor_rpm') * RPM / gear,
+        }
 
     def _driver_params(self, left_port: str, right_port: str) -> list[Parameter]:
         values: dict[str, Any] = {

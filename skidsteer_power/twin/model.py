@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skidsteer_power.des.kinematics import RPM, set_point_limit_rpm, twist_to_motor_rpm
+from skidsteer_power.drive.controller import DriveController, Ramp, controller_for_vehicle
 from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
@@ -111,6 +111,7 @@ class Twin:
         seed: int = 0,
         dt: float = DEFAULT_DT_S,
         contact: str = 'extended',
+        controller: DriveController | None = None,
     ) -> None:
         if not (0 < dt <= DEFAULT_DT_S):
             raise InputError(f'dt must be in (0, 2 ms] (>= 500 Hz), got {dt}')
@@ -119,6 +120,9 @@ class Twin:
         self.vehicle = vehicle
         self.field = TerrainField(terrain, patches or ())
         self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
+        # the robot's drive controller makes the set points (skidsteer_power.drive): the vehicle's
+        self.controller = controller or controller_for_vehicle(vehicle, self.powertrain)
+        self._ramp = Ramp(self.controller)
         self.battery = Battery.from_config(self.powertrain.battery)
         self.seed = seed
         self.dt = dt
@@ -156,6 +160,7 @@ class Twin:
         self.omega_m = np.zeros(2)  # motor speeds, forward positive [rad/s]
         self.theta_m = np.zeros(2)  # motor angles [rad]
         self.drivetrain.reset()
+        self._ramp.reset()
         self.command = (0.0, 0.0)
         self.energy = EnergyLedger()
         self.battery = Battery.from_config(self.powertrain.battery)
@@ -199,15 +204,11 @@ class Twin:
     def set_command(self, speed_m_s: float, yaw_rate_rad_s: float) -> None:
         """Hold forward speed [m/s] and yaw rate [rad/s] until the next command."""
         self.command = (float(speed_m_s), float(yaw_rate_rad_s))
-        rpm = twist_to_motor_rpm(
-            self.command[0],
-            self.command[1],
-            tread_m=self.vehicle.tread_m,
-            drive_radius_m=self.r,
-            gear_ratio=self.G,
-            max_rpm=set_point_limit_rpm(self.powertrain.motor),  # the driver's set-point limit
-        )
-        self._target = np.array(rpm) * RPM
+        if self.controller.has_ramps:  # the set points follow the ramps step by step (_step)
+            left, right, _ = self._ramp.step(*self.command, 0.0)
+        else:
+            left, right, _ = self.controller.apply_one(*self.command)
+        self._target = np.array([left, right]) * self.G  # motor speed set points [rad/s]
         self._targets = self._target.tolist()
 
     def step(
@@ -266,6 +267,9 @@ class Twin:
 
     def _step(self) -> None:
         dt = self.dt
+        if self.controller.has_ramps:  # the controller's acceleration / jerk limits, per step
+            left, right, _ = self._ramp.step(*self.command, dt)
+            self._targets = [left * self.G, right * self.G]
         force, axle, dissipation, sinkage = self.contact.forces(
             self._side_loads(), self.vel, self.omega_m, self.pose
         )
