@@ -196,6 +196,9 @@ class Vehicle:
     max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
         maps cover it, commands beyond it are flagged ``clamped``
     max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
+    measured_power : what the robot publishes as its measured power (topics of per-side or total
+        current and voltage, docs/POWERTRAINS.md), interpreted by
+        :func:`skidsteer_power.estimator.measured.parse_measured_power` (empty: joint_states effort)
     """
 
     name: str
@@ -209,6 +212,7 @@ class Vehicle:
     drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
+    measured_power: dict[str, Any] | list[Any] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -316,6 +320,10 @@ def _validate(vehicle: Vehicle) -> None:
         raise ConfigError(f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
     if not isinstance(vehicle.drivetrain, dict):
         raise ConfigError(f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
+    if not isinstance(vehicle.measured_power, dict | list):
+        raise ConfigError(
+            f'measured_power must be a mapping or a list, not {type(vehicle.measured_power).__name__}'
+        )
     if not isinstance(vehicle.source, str):
         raise ConfigError('source must be a string')
 
@@ -357,7 +365,7 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
         if required not in data:
             raise ConfigError(f'{origin}: missing field {required!r}')
     values = dict(data)
-    for section in ('powertrain', 'drivetrain'):
+    for section in ('powertrain', 'drivetrain', 'measured_power'):
         if values.get(section) is None:
             values[section] = {}
     name = str(values.pop('name'))
@@ -409,6 +417,7 @@ _NOT_FINGERPRINTED = (
     'name',
     'source',
     'drivetrain',
+    'measured_power',
     'yaw_inertia_kg_m2',
     'max_speed_m_s',
     'max_yaw_rate_rad_s',
