@@ -330,3 +330,105 @@ def measure_battery_power(omega_rad_s: Pair, bus_W: Pair, powertrain: Any) -> Me
         bus_W=(bl, br),
         battery_side=True,
     )
+
+
+def source_in_bag(bag: Any, sources: Sequence[MeasuredPowerSource]) -> tuple[MeasuredPowerSource | None, str]:
+    """(the first of ``sources`` whose every topic the bag holds with the declared type and can
+    decode, why none if none: one line naming what was wanted)."""
+    held = {name.lstrip('/'): info for name, info in bag.topics.items()}
+    undecodable: list[str] = []
+    for source in sources:
+        infos = [held.get(topic) for topic in source.topics()]
+        if any(
+            info is None or info.msgtype != source.topics()[topic]
+            for info, topic in zip(infos, source.topics(), strict=True)
+        ):
+            continue
+        bad = [f'{t} ({m})' for t, m in source.topics().items() if not held[t].decodable]
+        if bad:
+            undecodable.extend(bad)
+            continue
+        return source, ''
+    if undecodable:
+        return None, f'no definition of {", ".join(undecodable)} in the bag: pass it with --msg'
+    wanted = ' or '.join('; '.join(f'{t} ({m})' for t, m in s.topics().items()) for s in sources)
+    return (
+        None,
+        f'the bag lacks the measured_power topics of the vehicle file (wanted {wanted}): no measured power',
+    )
+
+
+def latest_at(t: np.ndarray, sample_t: np.ndarray, values: np.ndarray, max_age_s: float) -> np.ndarray:
+    """The latest of ``values`` (at ``sample_t`` [s], sorted) at or before each of ``t`` [s], NaN
+    where none is at most ``max_age_s`` [s] old."""
+    out = np.full(t.size, np.nan)
+    if sample_t.size == 0:
+        return out
+    k = np.searchsorted(sample_t, t, side='right') - 1
+    fresh = (k >= 0) & (t - sample_t[np.maximum(k, 0)] <= max_age_s)
+    out[fresh] = values[np.maximum(k, 0)][fresh]
+    return out
+
+
+def decode_signals(
+    bag: Any, source: MeasuredPowerSource, t0_ns: int
+) -> dict[Signal, tuple[np.ndarray, np.ndarray]]:
+    """Every signal of ``source`` in ``bag``: (t [s] from ``t0_ns``, values), each topic read once."""
+    by_topic: dict[str, list[Signal]] = {}
+    for signal in source.signals:
+        by_topic.setdefault(signal.topic, []).append(signal)
+    names = {name.lstrip('/'): name for name in bag.topics}
+    out: dict[Signal, tuple[np.ndarray, np.ndarray]] = {}
+    for topic, signals in by_topic.items():
+        t: list[float] = []
+        rows: list[list[float]] = []
+        for message in bag.messages([names[topic]]):
+            t.append((message.timestamp_ns - t0_ns) * 1e-9)
+            msg = bag.deserialize(message)
+            rows.append([s.read(msg) for s in signals])
+        table = np.array(rows, dtype=float).reshape(-1, len(signals))
+        order = np.argsort(np.array(t), kind='stable')
+        for j, signal in enumerate(signals):
+            out[signal] = (np.array(t, dtype=float)[order], table[order, j])
+    return out
+
+
+def joint_efforts(
+    bag: Any,
+    joint_map: Any,
+    t0_ns: int,
+    js_t: np.ndarray,
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
+    present: np.ndarray,
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray, str]:
+    """joint_states arrays (position, velocity, effort) with the effort from the vehicle's
+    ``measured_power`` (:func:`side_values`, on each side's first joint, 0 on the others): rows
+    without a fresh current (or a declared voltage) are NaN in every field (no data). Returns
+    (arrays, present, note): which source was used, or why none."""
+    source, why = source_in_bag(bag, joint_map.measured_power)
+    if source is None:
+        return arrays, np.zeros_like(present), why
+    signals = decode_signals(bag, source, t0_ns)
+    currents, voltages = [], []
+    for channel in source.channels:
+        currents.append(latest_at(js_t, *signals[channel.current], channel.max_age_s))
+        voltage = channel.voltage
+        voltages.append(None if voltage is None else latest_at(js_t, *signals[voltage], channel.max_age_s))
+    position, velocity, _ = (a.copy() for a in arrays)
+    n_left, n_joints = len(joint_map.left), len(joint_map.joints)
+    sign = np.array([-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints])
+    signed_speed = velocity * sign if velocity.size else np.zeros((js_t.size, n_joints))
+    finite = np.isfinite(signed_speed)
+    summed = np.where(finite, signed_speed, 0.0)  # only the sign is used: a sum of the finite ones
+    side_speed = np.column_stack([summed[:, :n_left].sum(axis=1), summed[:, n_left:].sum(axis=1)])
+    bus = float(joint_map.bus_voltage_V or math.nan)
+    values = side_values(source, currents, voltages, side_speed, bus).reshape(-1, 2)
+    effort = np.zeros((js_t.size, n_joints))
+    effort[:, 0] = values[:, 0] * sign[0]  # the reader applies the sign again: net +value
+    effort[:, n_left] = values[:, 1] * sign[n_left]
+    fresh = np.all(np.isfinite(values), axis=1)
+    effort[~fresh] = np.nan
+    position[~fresh] = np.nan
+    velocity[~fresh] = np.nan
+    count = max(signals[c.current][0].size for c in source.channels)
+    return (position, velocity, effort), present, f'{source.describe()} ({count} messages)'
