@@ -139,29 +139,45 @@ def import_csv(
         raise InputError(f'{path}: the time column {columns.time!r} goes backwards')
     if not (columns.left_speed and columns.right_speed):
         raise InputError('import needs --left-speed and --right-speed (the wheel speed columns)')
-    speed = np.column_stack([_column(table, columns.left_speed, path, '--left-speed'),
-                             _column(table, columns.right_speed, path, '--right-speed')]) * speed_scale  # fmt: skip
+    speed = (
+        np.column_stack(
+            [
+                _column(table, columns.left_speed, path, '--left-speed'),
+                _column(table, columns.right_speed, path, '--right-speed'),
+            ]
+        )
+        * speed_scale
+    )
     radius, tread = float(vehicle.drive_radius_m), float(vehicle.tread_m)
     currents = None
     if columns.left_current or columns.right_current:
         if not (columns.left_current and columns.right_current):
             raise InputError('give both --left-current and --right-current')
-        currents = np.column_stack([_column(table, columns.left_current, path, '--left-current'),
-                                    _column(table, columns.right_current, path, '--right-current')])  # fmt: skip
+        currents = np.column_stack(
+            [
+                _column(table, columns.left_current, path, '--left-current'),
+                _column(table, columns.right_current, path, '--right-current'),
+            ]
+        )
         currents = currents * current_scale
     voltages = None
     if columns.left_voltage or columns.right_voltage:
         left_v = columns.left_voltage or columns.right_voltage
         right_v = columns.right_voltage or columns.left_voltage
-        voltages = np.column_stack([_column(table, left_v, path, '--left-voltage'),
-                                    _column(table, right_v, path, '--right-voltage')])  # fmt: skip
+        voltages = np.column_stack(
+            [_column(table, left_v, path, '--left-voltage'), _column(table, right_v, path, '--right-voltage')]
+        )
     if columns.cmd_speed or columns.cmd_yaw_rate:
         if not (columns.cmd_speed and columns.cmd_yaw_rate):
             raise InputError(
                 'give both --cmd-speed and --cmd-yaw-rate, or neither (set points = wheel speeds)'
             )
-        cmd = np.column_stack([_column(table, columns.cmd_speed, path, '--cmd-speed'),
-                               _column(table, columns.cmd_yaw_rate, path, '--cmd-yaw-rate')])  # fmt: skip
+        cmd = np.column_stack(
+            [
+                _column(table, columns.cmd_speed, path, '--cmd-speed'),
+                _column(table, columns.cmd_yaw_rate, path, '--cmd-yaw-rate'),
+            ]
+        )
         cmd_note = f'command from columns {columns.cmd_speed}, {columns.cmd_yaw_rate}'
     else:  # the controller holds wheel speeds: the recorded ones are the set points
         cmd = np.column_stack([speed.mean(axis=1), (speed[:, 1] - speed[:, 0]) / tread])
@@ -185,16 +201,24 @@ def import_csv(
         [np.zeros(2), np.cumsum(0.5 * (omega[1:] + omega[:-1]) * np.diff(t)[:, None], axis=0)]
     )
     side = np.r_[np.zeros(n_left, int), np.ones(len(names) - n_left, int)]
-    events: list[tuple[int, int, int]] = [(int(round(x * 1e9)), 0, i) for i, x in enumerate(t)]
+    events: list[tuple[int, int, int]] = [(round(x * 1e9), 0, i) for i, x in enumerate(t)]
     if yaw_t is not None:
-        events += [(int(round(x * 1e9)), 1, i) for i, x in enumerate(yaw_t)]
+        events += [(round(x * 1e9), 1, i) for i, x in enumerate(yaw_t)]
     events.sort()
     counts: dict[str, int] = {}
     with BagWriter(output) as writer:
         c_cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
         c_js = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
-        c_cur = [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in current_topics] if currents is not None else []  # fmt: skip
-        c_volt = [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in voltage_topics] if voltages is not None else []  # fmt: skip
+        c_cur = (
+            [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in current_topics]
+            if currents is not None
+            else []
+        )
+        c_volt = (
+            [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in voltage_topics]
+            if voltages is not None
+            else []
+        )
         c_imu = writer.add_topic('/imu/data', 'sensor_msgs/msg/Imu') if yaw is not None else None
         vec, quat = types['geometry_msgs/msg/Vector3'], types['geometry_msgs/msg/Quaternion']
         zero9 = np.zeros(9)
@@ -210,10 +234,14 @@ def import_csv(
             if kind == 1:
                 assert yaw is not None and c_imu is not None
                 imu_msg = types['sensor_msgs/msg/Imu'](
-                    header=header, orientation=quat(0.0, 0.0, 0.0, 1.0), orientation_covariance=zero9,
-                    angular_velocity=vec(0.0, 0.0, float(yaw[i])), angular_velocity_covariance=zero9,
-                    linear_acceleration=vec(0.0, 0.0, 0.0), linear_acceleration_covariance=zero9,
-                )  # fmt: skip
+                    header=header,
+                    orientation=quat(0.0, 0.0, 0.0, 1.0),
+                    orientation_covariance=zero9,
+                    angular_velocity=vec(0.0, 0.0, float(yaw[i])),
+                    angular_velocity_covariance=zero9,
+                    linear_acceleration=vec(0.0, 0.0, 0.0),
+                    linear_acceleration_covariance=zero9,
+                )
                 put(c_imu, '/imu/data', t_ns, imu_msg, 'sensor_msgs/msg/Imu')
                 continue
             twist = types['geometry_msgs/msg/Twist'](
@@ -222,14 +250,29 @@ def import_csv(
             put(c_cmd, '/cmd_vel', t_ns, twist, 'geometry_msgs/msg/Twist')
             for k, connection in enumerate(c_cur):
                 assert currents is not None
-                put(connection, connection.topic, t_ns, types['std_msgs/msg/Float64'](data=float(currents[i, k])), 'std_msgs/msg/Float64')  # fmt: skip
+                put(
+                    connection,
+                    connection.topic,
+                    t_ns,
+                    types['std_msgs/msg/Float64'](data=float(currents[i, k])),
+                    'std_msgs/msg/Float64',
+                )
             for k, connection in enumerate(c_volt):
                 assert voltages is not None
-                put(connection, connection.topic, t_ns, types['std_msgs/msg/Float64'](data=float(voltages[i, k])), 'std_msgs/msg/Float64')  # fmt: skip
+                put(
+                    connection,
+                    connection.topic,
+                    t_ns,
+                    types['std_msgs/msg/Float64'](data=float(voltages[i, k])),
+                    'std_msgs/msg/Float64',
+                )
             js = types['sensor_msgs/msg/JointState'](
-                header=header, name=names, position=position[i, side] * sign, velocity=omega[i, side] * sign,
+                header=header,
+                name=names,
+                position=position[i, side] * sign,
+                velocity=omega[i, side] * sign,
                 effort=np.zeros(0),
-            )  # fmt: skip
+            )
             put(c_js, '/joint_states', t_ns + 1000, js, 'sensor_msgs/msg/JointState')  # after its currents
     return {
         'bag': str(output),
@@ -261,10 +304,18 @@ def _cmd_import(args: argparse.Namespace) -> int:
     if output.exists():
         raise InputError(f'{output} exists: import writes a new bag')
     summary = import_csv(
-        Path(args.csv), output, args.vehicle, columns, imu=None if args.imu is None else Path(args.imu),
-        time_scale=args.time_scale, speed_scale=args.speed_scale, current_scale=args.current_scale,
-        current_topics=args.current_topics, voltage_topics=args.voltage_topics, max_rows=args.max_rows,
-    )  # fmt: skip
+        Path(args.csv),
+        output,
+        args.vehicle,
+        columns,
+        imu=None if args.imu is None else Path(args.imu),
+        time_scale=args.time_scale,
+        speed_scale=args.speed_scale,
+        current_scale=args.current_scale,
+        current_topics=args.current_topics,
+        voltage_topics=args.voltage_topics,
+        max_rows=args.max_rows,
+    )
     emit(summary, args.json)
     return 0
 
@@ -307,11 +358,26 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument(
         '--current-scale', type=finite_float, default=1.0, help='A per current unit (default 1)'
     )
-    parser.add_argument('--current-topics', type=_pair, default=_pair(CURRENT_TOPICS), metavar='LEFT,RIGHT',
-                        help=f'Float64 topics of the currents (default {CURRENT_TOPICS})')  # fmt: skip
-    parser.add_argument('--voltage-topics', type=_pair, default=_pair(VOLTAGE_TOPICS), metavar='LEFT,RIGHT',
-                        help=f'Float64 topics of the voltages (default {VOLTAGE_TOPICS})')  # fmt: skip
-    parser.add_argument('--max-rows', type=MAX_ROWS.arg(), default=int(MAX_ROWS.high), metavar='N',
-                        help=MAX_ROWS.help('largest CSV read, rows per file'))  # fmt: skip
+    parser.add_argument(
+        '--current-topics',
+        type=_pair,
+        default=_pair(CURRENT_TOPICS),
+        metavar='LEFT,RIGHT',
+        help=f'Float64 topics of the currents (default {CURRENT_TOPICS})',
+    )
+    parser.add_argument(
+        '--voltage-topics',
+        type=_pair,
+        default=_pair(VOLTAGE_TOPICS),
+        metavar='LEFT,RIGHT',
+        help=f'Float64 topics of the voltages (default {VOLTAGE_TOPICS})',
+    )
+    parser.add_argument(
+        '--max-rows',
+        type=MAX_ROWS.arg(),
+        default=int(MAX_ROWS.high),
+        metavar='N',
+        help=MAX_ROWS.help('largest CSV read, rows per file'),
+    )
     add_json_flag(parser)
     parser.set_defaults(func=_cmd_import)
