@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -262,3 +263,36 @@ def test_import_a_borealtc_run_and_validate_it(tmp_path: Path, predictor: MapPre
 
         _, cmd = decode_twists(bag, '/cmd_vel', bag.start_ns)
     assert cmd[10, 0] == pytest.approx((csv['velL'][10] + csv['velR'][10]) / 2)
+
+
+@pytest.mark.ros
+def test_power_estimator_node_measures_v_times_i_from_one_float64_per_side(rig_factory: Any) -> None:
+    """Real rclpy and DDS, the shipped husky file: one std_msgs/Float64 battery-side current per side
+    (its third measured_power alternative; husky_msgs is not installed here, so the node takes the
+    first whose messages are). A reversing driver's -5 A is a magnitude: 24 V x 5 A = 120 W drawn on
+    the left, 24 V x 7 A = 168 W on the right."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+    from test_estimator_core import FixedPowerPredictor
+
+    rig = rig_factory(FixedPowerPredictor(80.0), vehicle=HUSKY, diagnostics_period_s=0.05)
+    left = rig.probe.create_publisher(Float64, 'left_drive/status/battery_current', 10)
+    right = rig.probe.create_publisher(Float64, 'right_drive/status/battery_current', 10)
+    omega = 0.5 / 0.1651
+    joint_state = JointState(name=list(JOINTS), position=[0.0] * 4, velocity=[-omega] * 4)
+    core = rig.node.core
+    rig.spin_until(lambda: left.get_subscription_count() > 0 and right.get_subscription_count() > 0)
+
+    def measured() -> bool:
+        left.publish(Float64(data=-5.0))
+        right.publish(Float64(data=7.0))
+        rig.pub_joint.publish(joint_state)
+        return core.comparison is not None
+
+    rig.spin_until(measured)
+    assert core.comparison is not None
+    assert core.comparison.measured.bus_W == pytest.approx((120.0, 168.0))
+    assert core.comparison.measured.battery_side
+    assert core.rejects.counts['joint_states'] == 0
+    # the vehicle's own limits, not the test robot's fixed 5 N m (config/powertrains/husky_a200.yaml)
+    assert core.settings.limits.max_motor_torque_Nm == pytest.approx(4.122)

@@ -92,6 +92,26 @@ class MeasuredPowerFeed:
         return joints, pos, vel, effort
 
 
+def vehicle_limits(limits: Any, vehicle: Any, parameters: dict[str, Any]) -> Any:
+    """The node's input limits: the vehicle's own motor and driver's
+    (:meth:`~skidsteer_power.estimator.inputs.InputLimits.for_powertrain`, issue 35) where the
+    ``max_motor_speed_rad_s`` / ``max_motor_torque_Nm`` parameters are left at their defaults (the
+    test robot's 1200 rad/s and 5 N m), the parameter where one is set to another value."""
+    import dataclasses
+
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.estimator.inputs import InputLimits
+
+    own = InputLimits.for_powertrain(factory.powertrain_for(vehicle))
+    defaults = InputLimits()
+    changes = {
+        name: getattr(own, name)
+        for name in ('max_motor_speed_rad_s', 'max_motor_torque_Nm')
+        if parameters.get(name) == getattr(defaults, name)
+    }
+    return dataclasses.replace(limits, max_side_power_W=own.max_side_power_W, **changes)
+
+
 def vendor_feed(node: Any, joint_map: Any, qos: Any) -> Any:
     """The feed of the joint map's vendor topics: measured_power, side_currents, or None."""
     if joint_map.measured_power:

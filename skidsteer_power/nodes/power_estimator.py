@@ -109,7 +109,7 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
-from skidsteer_power.nodes.measured_power_feed import vendor_feed
+from skidsteer_power.nodes.measured_power_feed import vehicle_limits, vendor_feed
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
@@ -265,6 +265,7 @@ class PowerEstimator(QuietNode):
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
+        settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
         self.terrain_name = p['terrain']
         self.kinematics = str(p['kinematics'])
         self.odometry = PredictedOdometry()

@@ -285,7 +285,7 @@ class Powertrain:
 KEYS = (
     'name', 'source', 'motor', 'amplifier', 'gear_ratio', 'current_limit_A', 'regen_efficiency',
     'internal_resistance', 'battery', 'bus_voltage_V', 'idle_power_W', 'copper_loss_W_per_Nm2',
-    'sources', 'preset',
+    'sources', 'preset', 'calibration',
 )  # fmt: skip
 """The keys of a powertrain file (docs/POWERTRAINS.md); ``sources`` maps a key to where its number
 comes from (datasheet, manual, or ASSUMED)."""
