@@ -296,3 +296,24 @@ def test_power_estimator_node_measures_v_times_i_from_one_float64_per_side(rig_f
     assert core.rejects.counts['joint_states'] == 0
     # the vehicle's own limits, not the test robot's fixed 5 N m (config/powertrains/husky_a200.yaml)
     assert core.settings.limits.max_motor_torque_Nm == pytest.approx(4.122)
+
+
+def test_calibration_reads_a_battery_side_power_as_the_torque_of_the_powertrains_inverse() -> None:
+    """JointReader with a powertrain (what calibrate builds): 12.5 W per side at 2 rad/s through the
+    effective powertrain with k_cu 0.5 W/(N m)^2 and 4 W idle is 3 N m (12.5 - 2 = 6 + 0.5 x 9, by
+    hand); without one (the estimator core) the reading is the power itself."""
+    from skidsteer_power.estimator.inputs import JointMap, JointReader
+
+    current = {'topic': 'a', 'type': 'std_msgs/msg/Float64', 'field': 'data'}
+    config = {'left': {'current': current}, 'right': {'current': current}}
+    joint_map = JointMap.from_config({'left': ['l'], 'right': ['r'], 'location': 'wheel'}, config, 24.0)
+    pt = Powertrain.from_config(
+        {'preset': 'effective', 'copper_loss_W_per_Nm2': 0.5, 'idle_power_W': 4.0}, 'wheel'
+    )
+    limits = InputLimits.for_powertrain(pt)
+    calibrating = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits, pt)
+    reading = calibrating.read(['l', 'r'], (), [2.0, 2.0], [12.5, 12.5], 0.0)
+    assert reading is not None and reading[1] == pytest.approx((3.0, 3.0))
+    core_reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits)
+    reading = core_reader.read(['l', 'r'], (), [2.0, 2.0], [12.5, 12.5], 0.0)
+    assert reading is not None and reading[1] == (12.5, 12.5)
