@@ -317,3 +317,15 @@ def test_calibration_reads_a_battery_side_power_as_the_torque_of_the_powertrains
     core_reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits)
     reading = core_reader.read(['l', 'r'], (), [2.0, 2.0], [12.5, 12.5], 0.0)
     assert reading is not None and reading[1] == (12.5, 12.5)
+
+
+def test_a_negative_measured_energy_is_a_console_warning() -> None:
+    """The issue's silently wrong number: a battery-side current read as a motor current (K_t I w < 0
+    while reversing) gave 'measured 641.5 J' with no word; a negative measured energy is now said."""
+    summary = {
+        'joint_states_read': 10,
+        'rejected': {'joint_states': 0},
+        'metrics': {'energy_measured_J': -641.5},
+    }
+    (line,) = console_warnings(summary)
+    assert 'measured energy is negative (-641.5 J)' in line and 'current_is: battery' in line
