@@ -35,7 +35,7 @@ def test_errors_list_what_is_shipped() -> None:
         load_vehicle('no_such_robot')
     with pytest.raises(ConfigError, match=r'shipped: .*dry_sand.*example_terrain'):
         load_terrain('mud')
-    with pytest.raises(ConfigError, match=r'powertrain .*shipped: test_robot'):
+    with pytest.raises(ConfigError, match=r'powertrain .*shipped: .*test_robot'):
         load_preset('powertrains', 'nope')
 
 

@@ -189,7 +189,9 @@ def test_speed_from_positions_when_no_velocity_is_published() -> None:
 def test_joint_mapping_errors_are_clear() -> None:
     with pytest.raises(ConfigError, match='listed twice'):
         JointMap(left=('a',), right=('a',))
-    with pytest.raises(ConfigError, match="effort_is must be one of \\('torque', 'current'\\)"):
+    with pytest.raises(
+        ConfigError, match="effort_is must be one of \\('torque', 'current', 'battery_power'\\)"
+    ):
         JointMap(effort_is='amps')
     with pytest.raises(ConfigError, match='unknown key'):
         JointMap.from_config({'left': ['a'], 'right': ['b'], 'wheels': 4})
@@ -265,10 +267,13 @@ def test_estimator_node_takes_the_vehicle_files_mapping_and_parameter_overrides(
         joint_map = node.core.settings.joint_map
         assert (joint_map.left, joint_map.right) == (('fl', 'rl'), ('fr', 'rr'))
         assert (joint_map.effort_is, joint_map.gear_ratio, joint_map.location) == ('current', 20.0, 'wheel')
-        # husky_a200.yaml: no effort in joint_states; the effort is the side currents of its status
-        # topics (test_side_currents.py), so joint_states alone carry no effort
+        # husky_a200.yaml: no effort in joint_states; the effort is the measured power of its status
+        # topics (measured_power, test_measured_power.py), so joint_states alone carry no effort
         assert joint_map.interfaces == ('position', 'velocity', 'effort')
-        assert [s.topic for s in joint_map.side_currents] == ['status', 'platform/mcu/status/power']
+        assert [sorted(s.topics()) for s in joint_map.measured_power] == [
+            ['status'], ['platform/mcu/status/power'],
+            ['left_drive/status/battery_current', 'right_drive/status/battery_current'],
+        ]  # fmt: skip
         with pytest.raises(RejectedInput, match='no effort'):
             node.core.on_joint_state(['fl', 'rl', 'fr', 'rr'], [1.0] * 4, [], 0.0, [0.0] * 4)
     finally:

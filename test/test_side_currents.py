@@ -29,7 +29,10 @@ from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
 from skidsteer_power.maps import PowerMap
 
 MSG_DIR = Path(__file__).resolve().parent / 'msg'
-VEHICLE, TERRAIN = 'husky_a200', 'dry_sand'
+# the Husky with its pre-issue-35 side_currents mapping (config/vehicles/husky_a200.yaml now declares
+# measured_power: test_measured_power.py)
+VEHICLE = str(Path(__file__).resolve().parent / 'vehicles' / 'husky_a200_side_currents.yaml')
+TERRAIN = 'dry_sand'
 HUSKY = 'husky_msgs/msg/HuskyStatus'
 POWER = 'clearpath_platform_msgs/msg/Power'
 SPEED_M_S = 0.5

@@ -71,7 +71,8 @@ def calibrate_bags(
             factory.joint_map_for(veh),
             powertrain.gear_ratio,
             powertrain.motor.torque_constant_Nm_A,
-            InputLimits(),
+            InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
+            powertrain,  # a battery-side V x I reading becomes the motor torque of its inverse
         )  # one per bag: a position-differentiated speed must not span two bags
         found, why = find_segments(read_recording(bag, options, reader), options, powertrain.motor)
         segments.extend(found)

@@ -212,7 +212,7 @@ def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from skidsteer_power.bags.report import one_screen
-    from skidsteer_power.bags.validate import ValidateOptions, validate
+    from skidsteer_power.bags.validate import ValidateOptions, console_warnings, validate
 
     options = ValidateOptions(
         vehicle=args.vehicle,
@@ -240,6 +240,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     note = summary.get('motor_data_note') or ''
     if (args.left_joints or args.right_joints) and 'never holds all of' in note:
         raise InputError(f'{args.bag}: --left-joints/--right-joints: {note}')
+    for line in console_warnings(summary):  # dropped readings, missing measured power (issue 35)
+        print(f'warning: {line}', file=sys.stderr)
     if args.json:
         print_json(summary)
     else:

@@ -113,10 +113,10 @@ from skidsteer_power.estimator.summary import (
     summary_key_values,
 )
 from skidsteer_power.nodes.malformed import MalformedInputs
+from skidsteer_power.nodes.measured_power_feed import vehicle_limits, vendor_feed
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
-from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
 from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
 from skidsteer_power.nodes.wire import PackedJointState, decoder
 
@@ -292,6 +292,7 @@ class PowerEstimator(QuietNode):
         settings = self._settings(p)
         self.vehicle = factory.load_vehicle_config(p['vehicle'])
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
+        settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
         self.terrain_name = p['terrain']
         self.kinematics = str(p['kinematics'])
         self.controller = factory.drive_controller(
@@ -415,7 +416,7 @@ class PowerEstimator(QuietNode):
         sub(TwistStamped if p['cmd_vel_stamped'] else Twist, 'cmd_vel', self._on_cmd_vel)
         sub(JointState, 'joint_states', self._on_joint_states)
         joint_map = self.core.settings.joint_map
-        self.side_currents = SideCurrentFeed(self, joint_map, qos_in) if joint_map.side_currents else None
+        self.side_currents = vendor_feed(self, joint_map, qos_in)  # nodes/measured_power_feed.py
         self.pub_predicted = pub(JointState, 'power/predicted', qos_out)
         self.pub_measured = pub(JointState, 'power/measured', qos_out)
         self.pub_command_figures = [pub(Float64, topic, qos_out) for topic, _ in COMMAND_FIGURES]
