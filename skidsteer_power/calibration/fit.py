@@ -53,8 +53,8 @@ Method
   "not identifiable" (the data do not fix it): it is put back at its start value and the others are
   fitted again without it. A parameter that ends at a bound is "at_bound" (no estimate, no interval).
   When the fitted values predict the hold-out segments worse than the start (a scaled residual RMS
-  grown by more than :data:`COST_WORSE`, or, where power is measured, an |energy error| grown by more than :data:`ENERGY_WORSE`), the
-  start is kept and the result says why.
+  grown by more than :data:`COST_WORSE`, or, where power is measured, an |energy error| grown by more
+  than :data:`ENERGY_WORSE`), the start is kept and the result says why.
 * ``fit='auto'`` (:func:`auto_fit_names`): the ground's parameters of the terrain's kind, and the
   internal resistance where the recordings carry a torque; the screen above then keeps what the data
   see; ``left_fixed`` names every candidate left at its start and why.
