@@ -21,7 +21,8 @@ A vehicle file in ``config/vehicles/`` holds the fields of :class:`Vehicle` and 
     powertrain: {preset: test_robot}
     drivetrain: {preset: test_robot}   # joint_states mapping (skidsteer_power.estimator.inputs.JointMap)
     max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
-    max_yaw_rate_rad_s: 2.0
+    max_yaw_rate_rad_s: 2.0      #   and the drive controller's velocity limits
+    drive_controller: {...}      # optional: skidsteer_power.drive (docs/DRIVE.md)
 
 In Python the running gear is one field, ``Vehicle.gear: TrackGear | WheelGear``; code that needs
 the fields of one kind narrows it (``isinstance``, ``match``, or :meth:`Vehicle.tracks` /
@@ -196,6 +197,10 @@ class Vehicle:
     max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
         maps cover it, commands beyond it are flagged ``clamped``
     max_yaw_rate_rad_s : largest |yaw rate| the vehicle is commanded [rad/s] (default 2.0), likewise
+        (both are the drive controller's velocity limits)
+    drive_controller : the robot's drive controller below the velocity limits (accelerations, wheel
+        speed ceiling, multipliers, current limit), interpreted by
+        :func:`skidsteer_power.drive.controller_for_vehicle` (empty: the DES driver's set-point limit)
     """
 
     name: str
@@ -209,6 +214,7 @@ class Vehicle:
     drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
+    drive_controller: dict[str, Any] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -316,6 +322,10 @@ def _validate(vehicle: Vehicle) -> None:
         raise ConfigError(f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
     if not isinstance(vehicle.drivetrain, dict):
         raise ConfigError(f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
+    if not isinstance(vehicle.drive_controller, dict):
+        raise ConfigError(
+            f'drive_controller must be a mapping, not {type(vehicle.drive_controller).__name__}'
+        )
     if not isinstance(vehicle.source, str):
         raise ConfigError('source must be a string')
 
@@ -357,7 +367,7 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
         if required not in data:
             raise ConfigError(f'{origin}: missing field {required!r}')
     values = dict(data)
-    for section in ('powertrain', 'drivetrain'):
+    for section in ('powertrain', 'drivetrain', 'drive_controller'):
         if values.get(section) is None:
             values[section] = {}
     name = str(values.pop('name'))
@@ -412,6 +422,7 @@ _NOT_FINGERPRINTED = (
     'yaw_inertia_kg_m2',
     'max_speed_m_s',
     'max_yaw_rate_rad_s',
+    'drive_controller',
 )
 
 
@@ -427,7 +438,8 @@ def vehicle_fingerprint(vehicle: Vehicle) -> str:
         name: value
         for name, value in vehicle.as_dict().items()
         # no steady-state physics: the envelope (maps key on it separately: maps.power_map.cache_path),
-        # the inertia (the steady models ignore it) and the joint_states mapping
+        # the inertia (the steady models ignore it), the joint_states mapping and the drive controller
+        # (it makes the set points; a map's nodes are solved at given set points or twists)
         if name not in _NOT_FINGERPRINTED
     }
     if payload['track_longitudinal_shear_ratio'] in (None, DEFAULT_TRACK_LONGITUDINAL_SHEAR_RATIO):

@@ -20,6 +20,7 @@ from skidsteer_power.cli.main import main
 from skidsteer_power.models import appendix_d, fess
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
+from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.real_robot import APPENDIX_D_RADII
@@ -116,7 +117,11 @@ def test_current_limit_is_never_exceeded(sand: Terrain) -> None:
 
 
 def test_no_motor_past_its_no_load_speed(sand: Terrain) -> None:
-    pred = CommandPredictor(load_vehicle('test_robot_track'), sand).predict([5.0], [1.0])
+    vehicle = load_vehicle('test_robot_track')
+    unlimited = controller_for_vehicle(vehicle).with_values(
+        max_speed_m_s=math.inf, max_yaw_rate_rad_s=math.inf
+    )
+    pred = CommandPredictor(vehicle, sand, controller=unlimited).predict([5.0], [1.0])
     motor_rad_s = np.abs(pred.setpoint) * 12.0  # 12:1 reduction (ch. 7.1.1)
     # EC-45: 84 rpm/V (Appendix B) at the 12S pack's full 50.4 V (config/batteries/test_robot.yaml)
     assert motor_rad_s.max() == pytest.approx(84.0 * 50.4 * 2 * np.pi / 60)

@@ -1,4 +1,5 @@
-"""Skid-steer kinematics between a body twist and per-side motor speeds (no ROS).
+"""Skid-steer kinematics between a body twist and per-side motor speeds (no ROS), in motor rpm for
+the DES 70/10; the one implementation is the drive controller's (:mod:`skidsteer_power.drive`).
 
 REP 103: x forward, z up, positive yaw rate turns left. With an effective tread B_eff [m] (the
 geometric tread widened by track/wheel slip in a skid-steered turn), the side speeds are
@@ -12,34 +13,24 @@ from __future__ import annotations
 
 import math
 
+from skidsteer_power.drive.controller import (
+    DES_MAX_SPEED_1PP_RPM,
+    DriveController,
+    set_point_limit_rpm,
+    side_speeds,
+)
 from skidsteer_power.errors import InputError
-from skidsteer_power.numeric import Real
-from skidsteer_power.powertrain.motor import RPM, MotorConstants
+from skidsteer_power.powertrain.motor import RPM
 
 __all__ = [
     'DES_MAX_SPEED_1PP_RPM',
     'RPM',
+    'drive_rpm',
     'set_point_limit_rpm',
     'side_speeds',
     'twist_to_motor_rpm',
     'unwrap_counter',
 ]
-
-DES_MAX_SPEED_1PP_RPM = 25000.0
-"""The DES 70/10's max. speed with a one-pole-pair motor [rpm] (Appendix A); p pole pairs: / p."""
-
-
-def set_point_limit_rpm(motor: MotorConstants) -> float:
-    """The largest speed set point for ``motor`` on a DES 70/10 [rpm]: the motor's max. permissible
-    speed (EC-45: 10 000 rpm, Appendix B line 23), at most the amplifier's 25 000 rpm / pole pairs."""
-    return min(motor.max_speed_rad_s / RPM, DES_MAX_SPEED_1PP_RPM / motor.pole_pairs)
-
-
-def side_speeds(linear_m_s: Real, yaw_rate_rad_s: Real, tread_m: float) -> tuple[Real, Real]:
-    """(left, right) track/wheel ground speeds [m/s] for a body twist (v [m/s], yaw rate [rad/s]);
-    floats or arrays (:mod:`skidsteer_power.numeric`)."""
-    half = 0.5 * yaw_rate_rad_s * tread_m
-    return linear_m_s - half, linear_m_s + half
 
 
 def twist_to_motor_rpm(
@@ -53,21 +44,24 @@ def twist_to_motor_rpm(
 ) -> tuple[float, float]:
     """(left, right) motor speed set points [rpm], forward positive, for a body twist.
 
-    If either side would exceed ``max_rpm`` [rpm], both are scaled by the same factor so the
-    commanded path curvature is kept. A non-finite input is an InputError, never a NaN set point.
+    The drive controller's kinematics and ceiling (:meth:`DriveController.wheels_one`): if either
+    side would exceed ``max_rpm`` [rpm], both are scaled by the same factor so the commanded path
+    curvature is kept. A non-finite input is an InputError, never a NaN set point.
     """
     values = (linear_m_s, yaw_rate_rad_s, tread_m, drive_radius_m, gear_ratio, max_rpm)
     if not all(math.isfinite(v) for v in values):
         raise InputError(f'non-finite twist or geometry: {values}')
-    left, right = side_speeds(linear_m_s, yaw_rate_rad_s, tread_m)
-    scale = gear_ratio / drive_radius_m / RPM
-    rpm_left, rpm_right = left * scale, right * scale
-    peak = max(abs(rpm_left), abs(rpm_right))
-    if not math.isfinite(peak):
-        raise InputError(f'twist ({linear_m_s!r} m/s, {yaw_rate_rad_s!r} rad/s) overflows the motor speed')
-    if peak > max_rpm:
-        rpm_left, rpm_right = rpm_left * max_rpm / peak, rpm_right * max_rpm / peak
-    return rpm_left, rpm_right
+    to_rpm = gear_ratio / RPM
+    ctrl = DriveController(tread_m, drive_radius_m, max_wheel_rad_s=max_rpm / to_rpm)
+    return drive_rpm(ctrl, linear_m_s, yaw_rate_rad_s, gear_ratio)
+
+
+def drive_rpm(ctrl: DriveController, speed: float, yaw_rate: float, gear_ratio: float) -> tuple[float, float]:
+    """(left, right) motor speed set points [rpm] of ``ctrl`` for a twist already within its velocity
+    (and acceleration) limits (V [m/s], w_z [rad/s]), through the reduction ``gear_ratio``."""
+    (left, _), (right, _) = ctrl.wheels_one(speed, yaw_rate)
+    to_rpm = gear_ratio / RPM
+    return left * to_rpm, right * to_rpm
 
 
 def unwrap_counter(previous: int, current: int, expected_delta: float, modulus: int = 1 << 16) -> int:

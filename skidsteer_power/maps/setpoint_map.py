@@ -98,7 +98,7 @@ class SetpointMap:
         # element_turn_rev's test in floats: |w_z| xi / v_rim > limit [rev] times 2 pi [rad]
         self._turn_limit = ELEMENT_TURN_LIMIT_REV * 2.0 * math.pi
         pt = predictor.powertrain
-        self._limit = pt.current_limit_A
+        self._limit = predictor.current_limit_A
         self._kt = pt.motor.torque_constant_Nm_A
         self._gear = pt.gear_ratio
 
@@ -118,9 +118,9 @@ class SetpointMap:
                 f'set-point map nodes must be >= 2 each and at most {MAX_NODES:,} in all: {nodes}'
             )
         predictor = predictor or CommandPredictor(vehicle, terrain)
-        r, half_tread = float(vehicle.drive_radius_m), 0.5 * float(vehicle.tread_m)
-        mean = np.linspace(0.0, vehicle.max_speed_m_s / r, n_mean)
-        diff = np.linspace(0.0, vehicle.max_yaw_rate_rad_s * half_tread / r, n_diff)
+        mean_top, diff_top = envelope(predictor)
+        mean = np.linspace(0.0, mean_top, n_mean)
+        diff = np.linspace(0.0, diff_top, n_diff)
         m, d = np.meshgrid(mean, diff, indexing='ij')
         sol = predictor.solver.solve(np.column_stack([(m - d).ravel(), (m + d).ravel()]))
         columns = (
@@ -173,15 +173,10 @@ class SetpointMap:
         )  # fmt: skip
 
     def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:
-        veh = self.predictor.vehicle
-        half = 0.5 * w * float(veh.tread_m)  # des/kinematics.side_speeds, in floats
-        r = float(veh.drive_radius_m)
-        left, right = (v - half) / r, (v + half) / r
-        peak = max(abs(left), abs(right))
-        top = self.predictor.max_axle_rad_s
-        if peak > top:  # both scaled: the curvature kept (twist_to_motor_rpm's rule)
-            return (left * top / peak, right * top / peak), True
-        return (left, right), False
+        """The drive controller's set points (in floats, :meth:`DriveController.apply_one`)."""
+        pred = self.predictor
+        left, right, clamped = pred.controller.apply_one(v, w, ceiling_rad_s=pred.max_axle_rad_s)
+        return (left, right), clamped
 
     def _side(self, side: str, torque: float, omega: float) -> tuple[float, Any, bool]:
         """(torque, motor point (:class:`MotorPoint`), over the limit) of one side, the current
@@ -195,6 +190,16 @@ class SetpointMap:
         internal = float(pt.resistance(side).torque(self._gear * omega))
         torque = self._gear * (held * self._kt - internal)
         return torque, pt.motor_side(side, torque, omega), True
+
+
+def envelope(predictor: CommandPredictor) -> tuple[float, float]:
+    """The largest set point mean and half difference [rad/s] the map covers: those of the drive
+    controller at the vehicle's velocity limits (V_max / r, w_max B / 2 / r), at most its ceiling."""
+    ctrl = predictor.controller
+    r = min(ctrl.radii_m)
+    top = ctrl.ceiling_for(predictor.max_axle_rad_s)
+    half_separation = 0.5 * ctrl.separation_m
+    return min(ctrl.max_speed_m_s / r, top), min(ctrl.max_yaw_rate_rad_s * half_separation / r, top)
 
 
 def cache_path(
@@ -228,11 +233,13 @@ def load_or_build(
         try:
             with np.load(path) as data:
                 mean, diff, values = data['mean'], data['diff'], data['values']
-            if values.shape == (len(mean), len(diff), len(FIELDS)):
-                return SetpointMap(CommandPredictor(vehicle, terrain), mean, diff, values), False
+            predictor = CommandPredictor(vehicle, terrain)
+            top = envelope(predictor)
+            if values.shape == (len(mean), len(diff), len(FIELDS)) and (mean[-1], diff[-1]) == top:
+                return SetpointMap(predictor, mean, diff, values), False
         except (OSError, ValueError, KeyError):
             pass  # damaged: rebuild below, never use it
-    built = SetpointMap.build(vehicle, terrain, nodes)
+    built = SetpointMap.build(vehicle, terrain, nodes)  # missing, damaged or another envelope
     with atomic_file(path) as handle:
         np.savez(handle, mean=built.grid.axis0.values, diff=built.grid.axis1.values, values=built.grid.values)
     return built, True

@@ -2,13 +2,14 @@
 
 ``predict_commands(vehicle, terrain, speed_cmd, yaw_cmd)`` is the direct (solver) answer of
 ``skidsteer-power predict --direct`` (DESIGN.md): the command's side axle speed set points
-(:func:`~skidsteer_power.models.setpoint.command_setpoints`, the driver's kinematics, scaled so no
-motor passes its no-load speed at the battery's full voltage), the body motion FESS finds for them
+(the vehicle's drive controller, :mod:`skidsteer_power.drive`: its velocity limits, kinematics and
+wheel speed ceiling, and no motor past its no-load speed at the battery's full voltage, scaled), the body motion FESS finds for them
 (:class:`~skidsteer_power.models.setpoint.SetpointSolver`), and each side's motor current and the
 battery power through the powertrain of chapter 7 (:meth:`Powertrain.motor_side`, eqs. 7.1-7.4, the
 EC-45 and the DES 70/10).
 
-No prediction draws more than the powertrain's ``current_limit_A``. A side whose steady state needs
+No prediction draws more than the driver's current limit (the controller's ``current_limit_A``, else
+the powertrain's). A side whose steady state needs
 more cannot hold its set point: its current is the limit, its torque the one the limit gives, and the
 point is ``limited`` with a reason (the motion shown is still the one at the set points, an upper
 bound on what the robot achieves there).
@@ -21,8 +22,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from skidsteer_power.drive.controller import DriveController, controller_for_vehicle
 from skidsteer_power.models.fess import FessSolver
-from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
+from skidsteer_power.models.setpoint import SetpointSolver
 from skidsteer_power.powertrain.battery import Battery
 from skidsteer_power.powertrain.drivetrain import SIDES, Powertrain
 
@@ -66,7 +68,8 @@ class CommandPrediction:
     setpoint : side axle speed set points [rad/s]; speed, yaw_rate, turn_radius : the motion they
     produce [m/s, rad/s, m]; torque : axle torque [N m]; slip [-]; sinkage [m]; current : motor
     current [A] (|.| <= the current limit); battery_power : both amplifiers' bus power [W];
-    limited, clamped, reason : see the module doc and :func:`command_setpoints`.
+    limited, clamped, reason : see the module doc; clamped: the drive controller changed the command
+    (a velocity limit or the wheel speed ceiling, :class:`~skidsteer_power.drive.WheelSetpoints`).
     """
 
     speed_cmd: np.ndarray
@@ -125,22 +128,26 @@ def max_axle_speed(powertrain: Powertrain) -> float:
 class CommandPredictor:
     """Set-point predictions for one vehicle and terrain, prepared once."""
 
-    def __init__(self, vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        terrain: Terrain,
+        powertrain: Powertrain | None = None,
+        controller: DriveController | None = None,
+    ) -> None:
         self.vehicle = vehicle
         self.powertrain = powertrain or Powertrain.for_vehicle(vehicle)
+        self.controller = controller or controller_for_vehicle(vehicle, self.powertrain)
         self.solver = SetpointSolver(FessSolver(vehicle, terrain))
         self.max_axle_rad_s = max_axle_speed(self.powertrain)
+        limit = self.controller.current_limit_A
+        self.current_limit_A = self.powertrain.current_limit_A if limit is None else limit
 
     def setpoints(self, speed_cmd: ArrayLike, yaw_cmd: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(set points (P, 2) [rad/s], clamped (P,)) of commands, as the driver computes them."""
-        veh = self.vehicle
-        return command_setpoints(
-            speed_cmd,
-            yaw_cmd,
-            tread_m=float(veh.tread_m),
-            drive_radius_m=float(veh.drive_radius_m),
-            max_axle_rad_s=self.max_axle_rad_s,
-        )
+        """(set points (P, 2) [rad/s], clamped (P,)) of commands held steady, as the robot's drive
+        controller makes them, at most the motors' no-load speed (:func:`max_axle_speed`)."""
+        out = self.controller.apply(speed_cmd, yaw_cmd, ceiling_rad_s=self.max_axle_rad_s)
+        return out.setpoint, out.clamped
 
     def predict(self, speed_cmd: ArrayLike, yaw_cmd: ArrayLike) -> CommandPrediction:
         """Predict P commands (V [m/s], w_z [rad/s], broadcast) in one batched solve."""
@@ -173,7 +180,7 @@ class CommandPredictor:
         """Axle torque (P, 2) [N m] at axle speeds (P, 2) [rad/s] through the powertrain, with the
         current limit: (torque, current [A], battery power (P,) [W], over the limit (P,))."""
         pt = self.powertrain
-        limit = pt.current_limit_A
+        limit = self.current_limit_A
         torque = torque.copy()
         current = np.empty_like(torque)
         power = np.zeros(len(torque))

@@ -1,9 +1,9 @@
 """FESS driven by the wheel speed set points: what the robot really does for a command (issue 25).
 
 The amplifiers hold the side (sprocket / axle) speeds; the terrain decides the body motion. A command
-(V_cmd [m/s], yaw rate w_cmd [rad/s]) gives the set points with the driver's own kinematics
-(:mod:`skidsteer_power.des.kinematics`: v_side = V -+ w B / 2, omega = v_side / r, both scaled
-together so no motor passes its top speed). FESS (:mod:`skidsteer_power.models.fess`) is then solved
+(V_cmd [m/s], yaw rate w_cmd [rad/s]) gives the set points with the robot's drive controller
+(:mod:`skidsteer_power.drive`: velocity limits, v_side = V -+ w B / 2, omega = v_side / r, the wheel
+speed ceiling). FESS (:mod:`skidsteer_power.models.fess`) is then solved
 the other way round: the side speeds are given and the unknowns are the body motion (V, w_z) and the
 turning-centre offset s0, under the same three equilibrium equations of eq. 3.19 (sum F_x, sum F_y,
 sum M_z). Writing the set points as two more equations (omega_left = sp_left, omega_right =
@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidsteer_power.des.kinematics import side_speeds
+from skidsteer_power.drive.controller import DriveController
 from skidsteer_power.errors import InputError
 from skidsteer_power.models.fess import (
     FORCE_TOL_N,
@@ -80,21 +80,13 @@ def command_setpoints(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Side axle speed set points [rad/s] (P, 2) (left, right) for commands (V [m/s], w_z [rad/s]).
 
-    The driver's kinematics (:func:`skidsteer_power.des.kinematics.side_speeds` and the rule of
-    :func:`~skidsteer_power.des.kinematics.twist_to_motor_rpm`): if a side would pass
-    ``max_axle_rad_s``, both are scaled by the same factor (the path curvature is kept). Returns
-    (set points, clamped (P,) bool).
+    A drive controller with this geometry, no velocity limit and the ceiling ``max_axle_rad_s``
+    scaled (:meth:`skidsteer_power.drive.DriveController.apply`): if a side would pass it, both are
+    scaled by the same factor (the path curvature is kept). Returns (set points, clamped (P,) bool).
     """
-    v, w = np.broadcast_arrays(np.asarray(speed_cmd, dtype=float), np.asarray(yaw_cmd, dtype=float))
-    v, w = v.ravel(), w.ravel()
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
-        raise InputError('commanded speed and yaw rate must be finite numbers (m/s, rad/s)')
-    left, right = side_speeds(v, w, tread_m)
-    sp = np.column_stack([left, right]) / drive_radius_m
-    peak = np.max(np.abs(sp), axis=1)
-    clamped = peak > max_axle_rad_s
-    scale = np.where(clamped, max_axle_rad_s / np.where(peak > 0, peak, 1.0), 1.0)
-    return sp * scale[:, None], clamped
+    ctrl = DriveController(tread_m, drive_radius_m, max_wheel_rad_s=max_axle_rad_s)
+    out = ctrl.apply(speed_cmd, yaw_cmd)
+    return out.setpoint, out.clamped
 
 
 @dataclass
