@@ -20,6 +20,7 @@ import argparse
 import dataclasses
 from typing import Any
 
+from skidsteer_power import resources
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
@@ -32,7 +33,6 @@ from skidsteer_power.terramechanics.ranges import (
     WIDTH_M,
     check_sinkage,
 )
-from skidsteer_power import resources
 from skidsteer_power.terramechanics.terrain import PRESET_SOURCES, PRESETS, load_terrain, terrain_fields
 from skidsteer_power.terramechanics.track import single_track
 from skidsteer_power.terramechanics.wheel import wheel_at_slip
