@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from skidsteer_power.cli.main import main
+from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.models import appendix_d, fess
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
-from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.real_robot import APPENDIX_D_RADII

@@ -99,7 +99,7 @@ def calibrate_bags(
         )
     left_fixed: dict[str, str] = {}
     if names == ['auto']:
-        names, left_fixed = auto_fit_names(segments)
+        names, left_fixed = auto_fit_names(segments, start)
         fit_to = fit_to or _what_to_fit(segments)
     result = calibrate(
         veh,

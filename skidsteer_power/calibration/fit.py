@@ -76,7 +76,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import Segment
-from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
@@ -115,7 +115,12 @@ TERRAIN_PARAMS: dict[str, FitParameter] = {
     'c': FitParameter('Pa', True, (1.0, 5e4)),
     'phi': FitParameter('deg', False, (5.0, 50.0), math.pi / 180.0),
     'K': FitParameter('m', True, (1e-4, 0.2)),
+    # rigid ground (contact: rigid; terramechanics/ranges.py RIGID_FIELD_RANGES): phi = atan(mu_longitudinal)
+    'mu_lateral': FitParameter('-', False, (0.02, 2.0)),
+    'rolling_resistance': FitParameter('-', False, (0.0, 0.5)),
 }
+SOIL_PARAMS = ('kphi', 'kc', 'n', 'c', 'phi', 'K')
+RIGID_PARAMS = ('phi', 'mu_lateral', 'rolling_resistance', 'K')  # phi [deg] = atan(mu_longitudinal)
 INTERNAL_PARAMS: dict[str, FitParameter] = {
     'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
     'left_c': FitParameter('N m', False, (0.0, 3.0)),
@@ -149,11 +154,23 @@ def parse_fit_list(text: str) -> list[str]:
     return names
 
 
-def auto_fit_names(segments: Sequence[Segment]) -> tuple[list[str], dict[str, str]]:
+def terrain_params(terrain: Terrain) -> tuple[str, ...]:
+    """The fittable parameters of ``terrain``'s kind: Bekker / Mohr-Coulomb / Janosi for a soil;
+    friction (phi = atan(mu_longitudinal) [deg], mu_lateral), rolling resistance and K for rigid ground."""
+    return RIGID_PARAMS if terrain.is_rigid else SOIL_PARAMS
+
+
+def auto_fit_names(
+    segments: Sequence[Segment], terrain: Terrain | None = None
+) -> tuple[list[str], dict[str, str]]:
     """(candidates, {name: why left fixed}) of ``--fit auto`` for ``segments``: the ground's
-    parameters always; the internal resistance only where the segments carry a measured torque."""
-    names = list(DEFAULT_FIT)
-    fixed = {'kc': 'enters only as kc / b beside kphi (eq. 2.1): screened like the others'}
+    parameters (of ``terrain``'s kind) always; the internal resistance only where the segments carry
+    a measured torque."""
+    if terrain is not None and terrain.is_rigid:
+        names, fixed = list(RIGID_PARAMS), {}
+    else:
+        names = list(DEFAULT_FIT)
+        fixed = {'kc': 'enters only as kc / b beside kphi (eq. 2.1): rarely visible, left at its start'}
     if any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments):
         names += list(INTERNAL_PARAMS)
     else:
@@ -219,7 +236,12 @@ class Model:
 
     def evaluate(self, values: dict[str, float]) -> Evaluation:
         """Every prediction of the segments for ``values`` (an unsolvable trial: NaN, not solved)."""
-        terrain, powertrain = self.with_values(values)
+        try:
+            terrain, powertrain = self.with_values(values)
+        except ConfigError:  # a trial outside the terrain's validity (e.g. rigid ground's K range)
+            nan = np.full((len(self.speed), 2), np.nan)
+            none = np.full(len(self.speed), np.nan)
+            return Evaluation(nan, nan.copy(), np.zeros(len(self.speed), dtype=bool), none, none.copy())
         try:
             if self.fit_at == 'setpoints':
                 return self._predict_setpoints(terrain, powertrain)
@@ -400,7 +422,8 @@ def _from_z(name: str, z: float) -> float:
     u_lo, u_hi = _u_bounds(name)
     zc = min(max(float(z), 0.0), 1.0) if math.isfinite(z) else (1.0 if z > 0 else 0.0)
     u = u_lo + zc * (u_hi - u_lo)
-    return math.exp(u) if PARAMS[name].log else u
+    lo, hi = PARAMS[name].bounds
+    return min(max(math.exp(u) if PARAMS[name].log else u, lo), hi)  # exactly inside (exp's rounding)
 
 
 def _dvalue_dz(name: str, value: float) -> float:
@@ -573,7 +596,12 @@ def prepare(
         raise InputError('a motion fit predicts the motion at the set points: --fit-at setpoints')
     finite = measured[np.isfinite(measured)]
     rms = float(np.sqrt(np.mean(finite**2))) if finite.size else 1.0
-    candidates = list(dict.fromkeys([*fit, *[k for k in TERRAIN_PARAMS if k not in fit]]))
+    kind = terrain_params(terrain)
+    wrong = [n for n in fit if n in TERRAIN_PARAMS and n not in kind]
+    if wrong:
+        ground = 'rigid ground' if terrain.is_rigid else 'a soil'
+        raise InputError(f'--fit: {", ".join(wrong)} is no parameter of {ground} (its: {", ".join(kind)})')
+    candidates = list(dict.fromkeys([*fit, *[k for k in kind if k not in fit]]))
     start = {n: model.start_value(n) for n in candidates}
     for name in fit:
         lo, hi = PARAMS[name].bounds

@@ -34,7 +34,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from skidsteer_power.calibration.fit import INTERNAL_PARAMS, PARAMS, TERRAIN_PARAMS, CalibrationResult
+from skidsteer_power.calibration.fit import (
+    INTERNAL_PARAMS,
+    PARAMS,
+    TERRAIN_PARAMS,
+    CalibrationResult,
+    terrain_params,
+)
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.terramechanics.terrain import load_terrain
 
@@ -61,7 +67,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'values': values,
         'covariance': cov,
         'ci95': {n: [float(v) for v in ci] for n in terrain_names if (ci := result.ci95.get(n))},
-        'fixed': [n for n in TERRAIN_PARAMS if n not in result.names],
+        'fixed': [n for n in terrain_params(result.terrain) if n not in result.names],
         'at_bound': sorted(n for n in result.at_bound if n in TERRAIN_PARAMS),
         'correlations_warnings': list(result.correlations_warnings),
         'bags': [str(Path(b).resolve()) for b in bags],
@@ -84,7 +90,12 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
 
 
 def terrain_mapping(terrain: Terrain) -> dict[str, Any]:
-    """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``)."""
+    """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``; rigid ground: its
+    friction, rolling resistance and K, :func:`terrain_fields`)."""
+    if terrain.is_rigid:
+        from skidsteer_power.terramechanics.terrain import terrain_fields
+
+        return {'name': terrain.name, **terrain_fields(terrain)}
     data: dict[str, Any] = {
         'name': terrain.name,
         'n': float(terrain.n),
@@ -178,21 +189,23 @@ def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence
 def write_vehicle(
     path: str | Path, vehicle: str, result: CalibrationResult, bags: Sequence[str], terrain_file: str
 ) -> Path:
-    """Write ``vehicle``'s file with its identified powertrain inline (``powertrain:``) and a
-    ``calibration:`` note (the bags, the terrain file written beside it); re-read as a check."""
+    """Write ``vehicle``'s file with its identified powertrain inline (``powertrain:``); its
+    ``source`` says what was calibrated from which bags and where the terrain went (a vehicle file has
+    no other free-text key); re-read as a check."""
     from skidsteer_power import resources
     from skidsteer_power.estimator import factory
 
     data = yaml.safe_load(resources.find('vehicles', vehicle).read_text(encoding='utf-8'))
     data['powertrain'] = powertrain_mapping(result, bags)
     data['name'] = f'{data.get("name", "vehicle")}_calibrated'
-    data['calibration'] = {
-        'bags': [str(Path(b).resolve()) for b in bags],
-        'terrain_file': str(Path(terrain_file).resolve()),
-        'fitted': [n for n in result.names if not result.kept_start],
-        'kept_start': result.kept_start or None,
-        'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
-    }
+    fitted = [n for n in result.names if not result.kept_start]
+    kept = f' ({result.kept_start})' if result.kept_start else ''
+    data['source'] = (
+        f'{str(data.get("source", "")).strip()} Calibrated by skidsteer-power calibrate '
+        f'({_dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}) from '
+        f'{", ".join(str(Path(b).resolve()) for b in bags)}: fitted {", ".join(fitted) or "nothing"}{kept}; '
+        f'terrain written to {Path(terrain_file).resolve()}.'
+    ).strip()
     out = Path(path)
     header = (
         '# Written by `skidsteer-power calibrate --out-vehicle`; see skidsteer_power/calibration/io.py.\n'

@@ -3,7 +3,8 @@
 ``predict_commands(vehicle, terrain, speed_cmd, yaw_cmd)`` is the direct (solver) answer of
 ``skidsteer-power predict --direct`` (DESIGN.md): the command's side axle speed set points
 (the vehicle's drive controller, :mod:`skidsteer_power.drive`: its velocity limits, kinematics and
-wheel speed ceiling, and no motor past its no-load speed at the battery's full voltage, scaled), the body motion FESS finds for them
+wheel speed ceiling, and no motor past its no-load speed at the battery's full voltage, scaled), the
+body motion FESS finds for them
 (:class:`~skidsteer_power.models.setpoint.SetpointSolver`), and each side's motor current and the
 battery power through the powertrain of chapter 7 (:meth:`Powertrain.motor_side`, eqs. 7.1-7.4, the
 EC-45 and the DES 70/10).
