@@ -115,12 +115,13 @@ TERRAIN_PARAMS: dict[str, FitParameter] = {
     'c': FitParameter('Pa', True, (1.0, 5e4)),
     'phi': FitParameter('deg', False, (5.0, 50.0), math.pi / 180.0),
     'K': FitParameter('m', True, (1e-4, 0.2)),
-    # rigid ground (contact: rigid; terramechanics/ranges.py RIGID_FIELD_RANGES): phi = atan(mu_longitudinal)
+    # rigid ground (contact: rigid; ranges.py RIGID_FIELD_RANGES); mu_longitudinal is tan(phi)
+    'mu_longitudinal': FitParameter('-', False, (0.02, 2.0)),
     'mu_lateral': FitParameter('-', False, (0.02, 2.0)),
     'rolling_resistance': FitParameter('-', False, (0.0, 0.5)),
 }
 SOIL_PARAMS = ('kphi', 'kc', 'n', 'c', 'phi', 'K')
-RIGID_PARAMS = ('phi', 'mu_lateral', 'rolling_resistance', 'K')  # phi [deg] = atan(mu_longitudinal)
+RIGID_PARAMS = ('mu_longitudinal', 'mu_lateral', 'rolling_resistance', 'K')
 INTERNAL_PARAMS: dict[str, FitParameter] = {
     'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
     'left_c': FitParameter('N m', False, (0.0, 3.0)),
@@ -156,7 +157,7 @@ def parse_fit_list(text: str) -> list[str]:
 
 def terrain_params(terrain: Terrain) -> tuple[str, ...]:
     """The fittable parameters of ``terrain``'s kind: Bekker / Mohr-Coulomb / Janosi for a soil;
-    friction (phi = atan(mu_longitudinal) [deg], mu_lateral), rolling resistance and K for rigid ground."""
+    friction coefficients, rolling resistance and K for rigid ground."""
     return RIGID_PARAMS if terrain.is_rigid else SOIL_PARAMS
 
 
@@ -204,7 +205,7 @@ class Model:
 
     def start_value(self, name: str) -> float:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
-        if name in TERRAIN_PARAMS:
+        if name in TERRAIN_PARAMS:  # (mu_longitudinal: Terrain's property tan(phi))
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
         side, kind = name.split('_')
         total = self.powertrain.resistance(side).total
@@ -216,6 +217,8 @@ class Model:
         terrain_fields: dict[str, Any] = {
             k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS
         }
+        if 'mu_longitudinal' in terrain_fields:  # rigid ground stores it as phi = atan(mu)
+            terrain_fields['phi'] = math.atan(terrain_fields.pop('mu_longitudinal'))
         terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
         powertrain = self.powertrain
 
