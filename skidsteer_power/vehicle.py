@@ -201,6 +201,9 @@ class Vehicle:
     drive_controller : the robot's drive controller below the velocity limits (accelerations, wheel
         speed ceiling, multipliers, current limit), interpreted by
         :func:`skidsteer_power.drive.controller_for_vehicle` (empty: the DES driver's set-point limit)
+    measured_power : what the robot publishes as its measured power (topics of per-side or total
+        current and voltage, docs/POWERTRAINS.md), interpreted by
+        :func:`skidsteer_power.estimator.measured.parse_measured_power` (empty: joint_states effort)
     """
 
     name: str
@@ -215,6 +218,7 @@ class Vehicle:
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
     drive_controller: dict[str, Any] = field(default_factory=dict, hash=False)
+    measured_power: dict[str, Any] | list[Any] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -326,6 +330,10 @@ def _validate(vehicle: Vehicle) -> None:
         raise ConfigError(
             f'drive_controller must be a mapping, not {type(vehicle.drive_controller).__name__}'
         )
+    if not isinstance(vehicle.measured_power, dict | list):
+        raise ConfigError(
+            f'measured_power must be a mapping or a list, not {type(vehicle.measured_power).__name__}'
+        )
     if not isinstance(vehicle.source, str):
         raise ConfigError('source must be a string')
 
@@ -367,7 +375,7 @@ def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
         if required not in data:
             raise ConfigError(f'{origin}: missing field {required!r}')
     values = dict(data)
-    for section in ('powertrain', 'drivetrain', 'drive_controller'):
+    for section in ('powertrain', 'drivetrain', 'drive_controller', 'measured_power'):
         if values.get(section) is None:
             values[section] = {}
     name = str(values.pop('name'))
@@ -419,6 +427,7 @@ _NOT_FINGERPRINTED = (
     'name',
     'source',
     'drivetrain',
+    'measured_power',
     'yaw_inertia_kg_m2',
     'max_speed_m_s',
     'max_yaw_rate_rad_s',

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -62,6 +64,7 @@ from skidsteer_power.bags.validate_metrics import (
     trace_segments,
 )
 from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
 from skidsteer_power.seams import BatteryModel
 
@@ -152,6 +155,7 @@ class RunSeries:
     remaining_wh: float
     soc: float
     no_data: int = 0  # joint_states saying "no fresh data" (NaN in every field): skipped, not rejected
+    reasons: dict[str, int] = field(default_factory=dict)  # why readings were rejected: count per reason
 
 
 ROW_COLUMNS = (
@@ -223,7 +227,7 @@ def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: Any = None)
         bag, joint_map, t0, js_t, (position, velocity, effort), ok
     )
     note = ''
-    if js_t.size and joint_map.side_currents and not ok.any():
+    if js_t.size and joint_map.vendor_sources and not ok.any():
         note = currents_note
     elif js_t.size and not joint_map.has_power:
         note = f'the drivetrain mapping gives {options.joint_states_topic} no effort or no speed'
@@ -317,8 +321,10 @@ def build_core(
     battery: Any = factory.battery_for(vehicle)
     if battery_window_s > 0:
         battery = WindowedBattery(battery, battery_window_s)
-    settings = EstimatorSettings(joint_map=joint_map_of(options))
-    return EstimatorCore(predictor, battery, factory.powertrain_for(vehicle), settings)
+    powertrain = factory.powertrain_for(vehicle)
+    limits = InputLimits.for_powertrain(powertrain)  # the vehicle's own motor and driver (issue 35)
+    settings = EstimatorSettings(joint_map=joint_map_of(options), limits=limits)
+    return EstimatorCore(predictor, battery, powertrain, settings)
 
 
 def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
@@ -337,6 +343,8 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     index = np.concatenate([np.arange(inputs.cmd_t.size), np.arange(inputs.js_t.size)])
     order = np.lexsort((kinds, times))  # stable by time; a command first when stamps tie
     rejected = {'cmd_vel': 0, 'joint_states': 0}
+    reasons: Counter[str] = Counter()
+    battery_side = bool(core.settings.joint_map.measures_battery)
     rows: list[tuple[float, ...]] = []
     names = inputs.js_names
     # Python lists: per-row access to floats is several times faster than to numpy rows
@@ -361,14 +369,16 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
             else:
                 if not names_ok[i]:
                     rejected['joint_states'] += 1
+                    reasons['joint_states: a mapped joint is missing'] += 1
                     continue
                 position = positions[i] if positions is not None else ()
                 online = online_figures(core)  # before the reading updates the correction
                 comparison = core.on_joint_state(names, velocities[i], efforts[i], now, position)
                 if comparison is None:  # speed from positions: waits for a second sample
                     continue
-        except RejectedInput:
+        except RejectedInput as err:
             rejected['cmd_vel' if kind == 0 else 'joint_states'] += 1
+            reasons[reason_of(err)] += 1
             continue
         if kind == 0:
             online = online_figures(core)
@@ -377,7 +387,7 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
             row_hold.append(core.cmd_fresh.timeout_s if ends_list is None else ends_list[i] - now)
         else:
             row_hold.append(math.nan)
-        rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery)) + online)
+        rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery), battery_side) + online)
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
@@ -396,7 +406,14 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
         core.battery.remaining_wh,
         core.battery.soc,
         core.no_data_count,
+        dict(reasons),
     )
+
+
+def reason_of(err: Exception) -> str:
+    """A rejection's reason without its numbers (readings of one kind count together): 'joint_states:
+    left side (motor-equivalent) effort = # N m exceeds the plausible limit # N m'."""
+    return re.sub(r'-?\d+(\.\d+)?(e[-+]?\d+)?', '#', str(err))
 
 
 PREDICTED_COLUMNS = (
@@ -421,6 +438,7 @@ def with_other_commands(core: Any, inputs: Inputs, series: RunSeries) -> RunSeri
     from skidsteer_power.estimator.core import RejectedInput
 
     ends = None if inputs.cmd_end is None else inputs.cmd_end.tolist()
+    battery_side = bool(core.settings.joint_map.measures_battery)
     taken_t: list[float] = []
     holds: list[float] = []
     predicted: list[tuple[float, float, float, float]] = []
@@ -433,7 +451,7 @@ def with_other_commands(core: Any, inputs: Inputs, series: RunSeries) -> RunSeri
             continue
         taken_t.append(now)
         holds.append(core.cmd_fresh.timeout_s)
-        predicted.append((*p.motor_torque_Nm, *p.electrical_W))
+        predicted.append((*p.motor_torque_Nm, *(p.bus_W if battery_side else p.electrical_W)))
     t = series.columns['t_s']
     last = np.searchsorted(np.array(taken_t, dtype=float), t, side='right') - 1
     known = last >= 0
@@ -464,15 +482,20 @@ def _soc(battery: BatteryModel) -> float:
     return battery.soc_at_last_flush if isinstance(battery, WindowedBattery) else battery.soc
 
 
-def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[float, ...]:
-    """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`)."""
+def _row(
+    now: float, p: Any, fresh: bool, comparison: Any, soc: float, battery_side: bool = False
+) -> tuple[float, ...]:
+    """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`). The
+    power columns are the motor terminal power, or the battery-side power when the measurement is
+    battery-side (``battery_side``: V x I from ``measured_power``)."""
     nan = math.nan
     if p is None:
         pred = (nan,) * 10
         flags = (nan, nan)
         omega: tuple[float, ...] = (nan, nan)
     else:
-        pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *p.electrical_W, *p.terrain_torque_Nm,
+        power = p.bus_W if battery_side else p.electrical_W
+        pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *power, *p.terrain_torque_Nm,
                 p.bus_total_W, p.traction_margin)  # fmt: skip
         flags = (float(p.clamped), float(getattr(p, 'limited', False)))
         omega = p.motor_omega_rad_s
@@ -480,7 +503,7 @@ def _row(now: float, p: Any, fresh: bool, comparison: Any, soc: float) -> tuple[
         meas = (nan,) * 7
     else:
         m = comparison.measured
-        meas = (*m.torque_Nm, *m.electrical_W, m.bus_total_W, *m.omega_rad_s)
+        meas = (*m.torque_Nm, *(m.bus_W if battery_side else m.electrical_W), m.bus_total_W, *m.omega_rad_s)
     return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
             meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags,
             meas[5], meas[6], *omega)  # fmt: skip
@@ -555,6 +578,39 @@ def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None)
     return BagPrediction(inputs, core, timing, motion, series)
 
 
+DROPPED_LOUD = 1.0 / 3.0
+"""A run that drops this share of its readings or more gets a loud warning (issue 35) [-]."""
+
+
+def console_warnings(summary: dict[str, Any]) -> list[str]:
+    """What the console must say beside a validation's numbers (issue 35): readings dropped, how many
+    and why (loud from :data:`DROPPED_LOUD` of them); measured power the bag lacks (once); a measured
+    energy with the wrong sign."""
+    lines = []
+    read = int(summary.get('joint_states_read', 0))
+    dropped = int(summary.get('rejected', {}).get('joint_states', 0))
+    if dropped:
+        reasons = sorted(summary.get('rejected_reasons', {}).items(), key=lambda item: -item[1])
+        why = '; '.join(f'{n} x {reason}' for reason, n in reasons if reason.startswith('joint_states'))
+        share = dropped / read if read else 1.0
+        loud = (
+            'WARNING: A THIRD OR MORE OF THE READINGS DROPPED: the measured energy leaves them out. '
+            if share >= DROPPED_LOUD
+            else ''
+        )
+        lines.append(f'{loud}{dropped} of {read} measured readings dropped ({100 * share:.1f} %): {why}')
+    note = summary.get('motor_data_note')
+    if note:
+        lines.append(str(note))
+    measured = summary.get('metrics', {}).get('energy_measured_J', math.nan)
+    if isinstance(measured, float) and measured < 0:
+        lines.append(
+            f'the measured energy is negative ({measured:.4g} J): a battery-side current read as a motor '
+            "current? (the vehicle file's measured_power: current_is: battery, signed: false)"
+        )
+    return lines
+
+
 def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
     """Run the whole validation of ``bag``; write the report; return the JSON summary."""
     from skidsteer_power.bags.report import write_report
@@ -607,6 +663,9 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
             'poses': int(inputs.pose_t.size),
         },
         'rejected': series.rejected,
+        'rejected_reasons': series.reasons,
+        'power_compared': 'battery' if core.settings.joint_map.measures_battery else 'terminal',
+        'joint_states_read': int(inputs.js_t.size),
         'joint_states_no_data': series.no_data,
         'undecodable_topics': bag.undecodable_topics,
         'kinematics': options.kinematics,

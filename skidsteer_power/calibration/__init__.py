@@ -85,7 +85,7 @@ def calibrate_bags(
             factory.joint_map_for(veh),
             powertrain.gear_ratio,
             powertrain.motor.torque_constant_Nm_A,
-            InputLimits(),
+            InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
         )  # one per bag: a position-differentiated speed must not span two bags
         found, why = find_segments(read_recording(bag, options, reader), options, powertrain.motor)
         segments.extend(found)

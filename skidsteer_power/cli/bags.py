@@ -176,7 +176,7 @@ def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from skidsteer_power.bags.report import one_screen
-    from skidsteer_power.bags.validate import ValidateOptions, validate
+    from skidsteer_power.bags.validate import ValidateOptions, console_warnings, validate
 
     options = ValidateOptions(
         vehicle=args.vehicle,
@@ -201,6 +201,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     with _open(args) as bag:
         summary = validate(bag, options)
         summary.update(bag.integrity())
+    for line in console_warnings(summary):  # dropped readings, missing measured power (issue 35)
+        print(f'warning: {line}', file=sys.stderr)
     if args.json:
         print_json(summary)
     else:

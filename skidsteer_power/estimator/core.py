@@ -33,7 +33,7 @@ from skidsteer_power.estimator.inputs import (
     RejectCounter,
     check_command,
 )
-from skidsteer_power.estimator.measured import MeasuredPower, measure_motor_power
+from skidsteer_power.estimator.measured import MeasuredPower, measure_battery_power, measure_motor_power
 from skidsteer_power.estimator.persistence import battery_tallies, restored_tallies
 from skidsteer_power.estimator.prediction import Prediction, Predictor
 from skidsteer_power.estimator.tte_bounds import TimeToEmptyBounds
@@ -290,7 +290,11 @@ class EstimatorCore:
             return None
         omega, torque = reading
         pt = self.powertrain
-        measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
+        if self.settings.joint_map.measures_battery:  # the "torque" is the side's V x I [W]
+            measured = measure_battery_power(omega, torque, pt)
+            torque = measured.torque_Nm
+        else:
+            measured = measure_motor_power(omega, torque, pt.motor, pt.amplifier, pt.regen_efficiency)
         limit = self.power_limit_W()
         if not abs(measured.bus_total_W) <= limit:
             self._flag_implausible('joint_states', now_s)

@@ -45,9 +45,12 @@ def powertrain_for(vehicle: Vehicle) -> Powertrain:
 
 
 def joint_map_for(vehicle: Vehicle, **overrides: Any) -> JointMap:
-    """The vehicle's joint_states mapping (its ``drivetrain:`` section), with non-empty ``overrides``
-    (node parameters, CLI options: left, right, effort_is, location, gear_ratio ...) applied."""
-    return JointMap.from_config(vehicle.drivetrain or None).with_overrides(**overrides)
+    """The vehicle's joint_states mapping (its ``drivetrain:`` and ``measured_power:`` sections), with
+    non-empty ``overrides`` (node parameters, CLI options: left, right, effort_is, location,
+    gear_ratio ...) applied."""
+    measured = getattr(vehicle, 'measured_power', None)
+    bus = powertrain_for(vehicle).nominal_bus_voltage_V() if measured else None
+    return JointMap.from_config(vehicle.drivetrain or None, measured, bus).with_overrides(**overrides)
 
 
 def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:

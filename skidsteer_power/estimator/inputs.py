@@ -17,6 +17,10 @@ from skidsteer_power.errors import ConfigError, InputError
 _isfinite = math.isfinite
 
 JOINT_NAMES = ('left_motor', 'right_motor')  # the test robot's (TEST_ROBOT_JOINTS)
+LIMIT_MARGIN = 1.5
+"""Readings up to this multiple of the driver's peak current are plausible (a current spike) [-]."""
+SPEED_MARGIN = 1.15
+"""Motor speeds up to this multiple of the motor's top speed are plausible [-]."""
 
 
 @dataclass(frozen=True)
@@ -29,18 +33,48 @@ class InputLimits:
     max_yaw_rate_rad_s : yaw-rate command |r| [rad/s]
     max_motor_speed_rad_s : motor shaft speed |omega| [rad/s] (EC-45: 10,000 rpm = 1047 rad/s, 7.1.2)
     max_motor_torque_Nm : motor torque Kt * I [N m] (DES 70/10: 10 A peak class, 7.1.2; with margin)
+    max_side_power_W : one side's measured battery-side power |V x I| [W] (``measured_power``)
+
+    The defaults are the test robot's; :meth:`for_powertrain` gives any vehicle's own (issue 35: a
+    fixed 5 N m dropped 383 of 1407 readings of another motor). inf: no limit.
     """
 
     max_speed_m_s: float = 5.0
     max_yaw_rate_rad_s: float = 10.0
     max_motor_speed_rad_s: float = 1200.0
     max_motor_torque_Nm: float = 5.0
+    max_side_power_W: float = math.inf
 
     def __post_init__(self) -> None:
-        for name in ('max_speed_m_s', 'max_yaw_rate_rad_s', 'max_motor_speed_rad_s', 'max_motor_torque_Nm'):
+        for name in ('max_speed_m_s', 'max_yaw_rate_rad_s', 'max_motor_speed_rad_s', 'max_motor_torque_Nm',
+                     'max_side_power_W'):  # fmt: skip
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise InputError(f'{name} must be a finite number > 0, got {value!r}')
+            if not value > 0:  # NaN too
+                raise InputError(f'{name} must be a number > 0, got {value!r}')
+
+    @classmethod
+    def for_powertrain(cls, powertrain: Any, **overrides: float) -> InputLimits:
+        """The limits of a vehicle's own motor and driver (``powertrain``: a
+        :class:`~skidsteer_power.powertrain.Powertrain`), each with the margin :data:`LIMIT_MARGIN`:
+
+        * motor speed: the larger of the motor's permissible speed and its no-load speed at the bus
+          voltage (K_n V) [rad/s] (EC-45: 1047 rad/s x 1.15 = 1204, the old fixed 1200);
+        * motor torque: K_t x the driver's peak current [N m] (EC-45 + DES 70/10: 0.114 x 30 A x 1.5
+          = 5.1 N m, the old fixed 5); an effective powertrain (no driver limit): none;
+        * battery-side power per side: bus voltage x peak current x 1.5 [W] (none without a limit).
+
+        ``overrides`` (non-zero) replace single limits (the node's parameters)."""
+        motor, amplifier = powertrain.motor, powertrain.amplifier
+        bus = float(powertrain.nominal_bus_voltage_V())
+        peak = max(float(amplifier.max_current_A), float(powertrain.current_limit_A))
+        speed = max(motor.max_speed_rad_s, motor.speed_constant_rad_s_V * bus) * SPEED_MARGIN
+        values = {
+            'max_motor_speed_rad_s': speed,
+            'max_motor_torque_Nm': motor.torque_constant_Nm_A * peak * LIMIT_MARGIN,
+            'max_side_power_W': bus * peak * LIMIT_MARGIN,
+        }
+        values.update({k: float(v) for k, v in overrides.items() if v})
+        return cls(**values)
 
 
 def _finite_within(name: str, value: float, limit: float, unit: str) -> float:
@@ -80,7 +114,9 @@ def check_joint_state(
     return reading
 
 
-EFFORT_KINDS = ('torque', 'current')
+EFFORT_KINDS = ('torque', 'current', 'battery_power')
+"""What an effort holds: a torque [N m], a motor current [A] or, with ``measured_power`` and
+``current_is: battery``, the side's battery-side power V x I [W] (on its first joint)."""
 LOCATIONS = ('motor', 'wheel')
 INTERFACES = ('position', 'velocity', 'effort')
 
@@ -106,6 +142,11 @@ class JointMap:
     side_currents : vendor topics whose per-side motor currents [A] are the effort (a
         :class:`~skidsteer_power.estimator.side_currents.SideCurrentSource` each; the first present
         is used), with ``effort_is: current``; empty: effort from joint_states
+    measured_power : the vehicle file's ``measured_power:`` sources (a
+        :class:`~skidsteer_power.estimator.measured.MeasuredPowerSource` each; the first present is
+        used): the effort is then the side's V x I [W] (``effort_is: battery_power``) or its motor
+        current [A] (``effort_is: current``)
+    bus_voltage_V : the powertrain's bus voltage [V], for V x I without a measured voltage
     """
 
     left: tuple[str, ...] = ('left_motor',)
@@ -118,6 +159,8 @@ class JointMap:
     inverted: tuple[str, ...] = ()
     source: str = ''
     side_currents: tuple[Any, ...] = ()
+    measured_power: tuple[Any, ...] = ()
+    bus_voltage_V: float | None = None
 
     def __post_init__(self) -> None:
         for side in ('left', 'right'):
@@ -145,6 +188,12 @@ class JointMap:
             raise ConfigError(f'drivetrain: inverted joints {sorted(stray)} are not in left or right')
         if self.side_currents and (self.effort_is != 'current' or 'effort' not in self.interfaces):
             raise ConfigError('drivetrain: side_currents needs effort_is: current and effort in interfaces')
+        if self.side_currents and self.measured_power:
+            raise ConfigError(
+                "declare measured power once: measured_power, or the drivetrain's side_currents"
+            )
+        if self.effort_is == 'battery_power' and not self.measured_power:
+            raise ConfigError('drivetrain: effort_is battery_power comes only from measured_power')
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -160,16 +209,44 @@ class JointMap:
         """True if joint_states give a measured power (an effort and a speed)."""
         return 'effort' in self.interfaces and self.has_speed
 
+    @property
+    def measures_battery(self) -> bool:
+        """True when the measurement is battery-side power (V x I), compared with the predicted
+        battery-side power."""
+        return self.effort_is == 'battery_power'
+
+    @property
+    def vendor_sources(self) -> tuple[Any, ...]:
+        """The vendor topics the effort comes from: ``measured_power`` or ``side_currents``."""
+        return self.measured_power or self.side_currents
+
     @classmethod
-    def from_config(cls, config: Any) -> JointMap:
-        """From a vehicle's ``drivetrain:`` mapping (``preset`` expanded from config/drivetrains/).
+    def from_config(
+        cls, config: Any, measured_power: Any = None, bus_voltage_V: float | None = None
+    ) -> JointMap:
+        """From a vehicle's ``drivetrain:`` mapping (``preset`` expanded from config/drivetrains/)
+        and its ``measured_power:`` (:func:`~skidsteer_power.estimator.measured.parse_measured_power`;
+        it sets ``effort_is`` and adds the effort interface), with the powertrain's bus voltage [V].
 
         None or an empty mapping gives the test robot's mapping; ConfigError for bad keys or values.
         """
         from skidsteer_power.powertrain.config import merged
 
+        if measured_power:
+            from skidsteer_power.estimator.measured import parse_measured_power
+
+            sources = parse_measured_power(measured_power)
+            base = cls.from_config(config)
+            kind = 'battery_power' if sources[0].current_is == 'battery' else 'current'
+            interfaces = base.interfaces if 'effort' in base.interfaces else (*base.interfaces, 'effort')
+            return replace(base, effort_is=kind, interfaces=interfaces, measured_power=sources,
+                           side_currents=(), bus_voltage_V=bus_voltage_V)  # fmt: skip
         if config is None:
-            return TEST_ROBOT_JOINTS
+            return (
+                replace(TEST_ROBOT_JOINTS, bus_voltage_V=bus_voltage_V)
+                if bus_voltage_V
+                else TEST_ROBOT_JOINTS
+            )
         if not isinstance(config, dict):
             raise ConfigError(f'drivetrain must be a mapping, not {type(config).__name__}')
         cfg = merged('drivetrains', config)
@@ -190,6 +267,7 @@ class JointMap:
             from skidsteer_power.estimator.side_currents import parse_sources
 
             cfg['side_currents'] = parse_sources(cfg['side_currents'])
+        cfg['bus_voltage_V'] = bus_voltage_V
         return cls(**cfg)
 
     def with_overrides(self, **overrides: Any) -> JointMap:
@@ -244,6 +322,9 @@ class JointReader:
         self._torque_factor = (g_dt / g_pt) if at_motor else 1.0 / g_pt
         if joint_map.effort_is == 'current':
             self._torque_factor *= kt * (1.0 if at_motor else g_dt)
+        self._power = joint_map.effort_is == 'battery_power'
+        if self._power:  # the side's V x I [W], summed over its joints as it is
+            self._torque_factor = 1.0
         self._sign = [-1.0 if j in joint_map.inverted else 1.0 for j in joint_map.joints]
         self._n_left = len(joint_map.left)
         self._last: tuple[float, list[float]] | None = None
@@ -316,14 +397,15 @@ class JointReader:
         omega_m = (sum(omega[:n]) / n * w_f, sum(omega[n:]) / m * w_f)
         torque_m = (sum(torque[:n]) * t_f, sum(torque[n:]) * t_f)
         limits = self.limits
+        t_max, unit = (limits.max_side_power_W, 'W') if self._power else (limits.max_motor_torque_Nm, 'N m')
         for k, joints in enumerate((self.map.left, self.map.right)):
             w, t = omega_m[k], torque_m[k]
-            if abs(w) <= limits.max_motor_speed_rad_s and abs(t) <= limits.max_motor_torque_Nm:
+            if abs(w) <= limits.max_motor_speed_rad_s and abs(t) <= t_max:
                 continue
             label = joints[0] if len(joints) == 1 else f'{("left", "right")[k]} side (motor-equivalent)'
             # every value was finite: an inf here is a sum or product of huge ones, beyond the limit too
             _within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
-            _within(f'{label} effort', t, limits.max_motor_torque_Nm, 'N m')
+            _within(f'{label} {"battery power" if self._power else "effort"}', t, t_max, unit)
         return omega_m, torque_m
 
     def no_data(

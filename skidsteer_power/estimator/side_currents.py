@@ -182,7 +182,13 @@ def apply_to_joint_arrays(
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray, str]:
     """joint_states arrays (position, velocity, effort) with the effort from the drivetrain's side
     currents, if it names any: rows without fresh currents are NaN in every field (no data).
-    Returns (arrays, present, note); the note says which source was used or why none."""
+    Returns (arrays, present, note); the note says which source was used or why none. A vehicle
+    file's ``measured_power`` (:func:`skidsteer_power.estimator.measured.joint_efforts`) is applied
+    the same way."""
+    if getattr(joint_map, 'measured_power', ()):
+        from skidsteer_power.estimator.measured import joint_efforts
+
+        return joint_efforts(bag, joint_map, t0_ns, js_t, arrays, present)
     sources = getattr(joint_map, 'side_currents', ())
     if not sources:
         return arrays, present, ''

@@ -151,9 +151,50 @@ DES_70_10 = AmplifierConstants(
 
 Preset = TypeVar('Preset', MotorConstants, AmplifierConstants)
 
-MOTORS: dict[str, MotorConstants] = {'EC45': EC45}
+EFFECTIVE_MOTOR = MotorConstants(
+    name='effective: the axle itself (motor unknown; issue 35)',
+    nominal_voltage_V=48.0,  # unused: the powertrain's bus_voltage_V is the bus
+    no_load_speed_rad_s=1.0e4,  # no speed ceiling from a motor nobody knows [rad/s]
+    no_load_current_A=1.0e-9,
+    nominal_speed_rad_s=1.0e4,
+    nominal_torque_Nm=1.0e9,
+    nominal_current_A=1.0e9,
+    stall_torque_Nm=1.0e9,
+    starting_current_A=1.0e9,
+    max_efficiency=1.0,
+    # copper loss R i^2 = R (T / K_t)^2: with K_t = 1 N m/A the resistance IS the copper-loss
+    # coefficient k_cu [W / (N m)^2] of the powertrain file's copper_loss_W_per_Nm2 (neutral: 0)
+    terminal_resistance_ohm=0.0,
+    terminal_inductance_H=1.0e-9,
+    torque_constant_Nm_A=1.0,  # a 'current' of this motor is the axle torque in N m
+    speed_constant_rad_s_V=1.0e4,  # no speed ceiling (the drive controller's own limits apply)
+    speed_torque_gradient=1.0e-9,
+    mechanical_time_constant_s=1.0e-3,
+    rotor_inertia_kg_m2=1.0e-9,
+    max_speed_rad_s=1.0e4,
+    pole_pairs=1,
+    encoder_counts_per_turn=1,
+    mass_kg=1.0e-9,
+)
+"""The motor of an effective powertrain (``preset: effective``): the axle with gear ratio 1 and K_t
+1 N m/A, so its torque and speed are the axle's and its copper loss is k_cu T^2 (every constant
+but K_t and R is a placeholder that sets no limit)."""
+
+MOTORS: dict[str, MotorConstants] = {'EC45': EC45, 'EFFECTIVE': EFFECTIVE_MOTOR}
 """Motor presets a powertrain file names (``motor: EC45``), each with its datasheet constants."""
-AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10}
+EFFECTIVE_AMPLIFIER = AmplifierConstants(
+    name='effective: lossless until calibrated (issue 35)',
+    min_supply_V=0.0,
+    max_supply_V=math.inf,
+    max_output_voltage_fraction=1.0,
+    max_current_A=math.inf,
+    continuous_current_A=math.inf,
+    efficiency=1.0,  # neutral: calibrate fits it (the powertrain file's amplifier.efficiency)
+    four_quadrant=True,
+)
+"""The amplifier of an effective powertrain: efficiency 1 (neutral) and no current limit."""
+
+AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10, 'EFFECTIVE': EFFECTIVE_AMPLIFIER}
 """Amplifier presets a powertrain file names (``amplifier: DES_70_10``)."""
 
 

@@ -1,0 +1,317 @@
+"""``skidsteer-power import LOG.csv -o OUT.mcap --vehicle V``: a CSV log as a bag the other commands read.
+
+Many robots log CSV, not bags (issue 35). A column mapping names, per side, the wheel speed (at the
+tread [m/s], times ``--speed-scale``), the measured current (times ``--current-scale`` [A]) and
+optionally the voltage [V]; the time column (times ``--time-scale`` [s]); optionally the command
+(``--cmd-speed``, ``--cmd-yaw-rate``) and the yaw rate (a column of the same CSV, or of a second CSV
+merged by time: ``--imu``). The bag (rosbag2 MCAP, :class:`skidsteer_power.bag_io.writer.BagWriter`)
+holds:
+
+* ``/joint_states`` (sensor_msgs/JointState): the vehicle's drivetrain joints, velocity = wheel speed /
+  wheel radius [rad/s] (each joint of a side alike), position its integral [rad];
+* ``/cmd_vel`` (geometry_msgs/Twist): the command columns, or without them the recorded wheel speeds
+  taken as the set points (a controller that holds wheel speeds: V = (v_l + v_r) / 2,
+  r = (v_r - v_l) / B with the vehicle's tread B, so the drive's set points are the recorded speeds);
+* the currents and voltages, one std_msgs/Float64 topic each (``--current-topics``,
+  ``--voltage-topics``): what a vehicle file's ``measured_power:`` maps (config/vehicles/husky_a200.yaml
+  has the mapping of ``--preset borealtc``);
+* ``/imu/data`` (sensor_msgs/Imu: angular_velocity.z = the yaw rate [rad/s]) if a yaw rate is given.
+
+``--preset borealtc`` is the BorealTC dataset's Husky logs (docs/USAGE.md, "import": how its units and
+signs were worked out): ``pro_XX.csv`` time, curL, curR (battery-side magnitudes [A]), velL, velR
+([m/s] at the tread), merged with ``imu_XX.csv``'s wz (``--imu``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
+from skidsteer_power.errors import InputError
+from skidsteer_power.terramechanics.ranges import Range
+
+MAX_ROWS = Range('rows', 0, 5_000_000, 'rows', positive=True, integer=True)
+"""Largest CSV (rows, each file) an import reads: ~2.3 h of 100 Hz data x 2 (issue 28's rule)."""
+START_NS = 1_700_000_000 * 10**9
+"""The bag's clock at the CSV's time 0 [ns] (a CSV keeps relative time only)."""
+PRESETS: dict[str, dict[str, Any]] = {
+    'borealtc': {
+        'time': 'time',
+        'left_speed': 'velL',
+        'right_speed': 'velR',
+        'left_current': 'curL',
+        'right_current': 'curR',
+        'imu_time': 'time',
+        'imu_yaw_rate': 'wz',
+    },
+}
+"""Column mappings of known logs (``--preset``); explicit options override them."""
+CURRENT_TOPICS = 'left_drive/status/battery_current,right_drive/status/battery_current'
+VOLTAGE_TOPICS = 'left_drive/status/battery_voltage,right_drive/status/battery_voltage'
+
+
+@dataclass(frozen=True)
+class Columns:
+    """The column mapping of one import (names in the CSV header; '' = not recorded)."""
+
+    time: str = 'time'
+    left_speed: str = ''
+    right_speed: str = ''
+    left_current: str = ''
+    right_current: str = ''
+    left_voltage: str = ''
+    right_voltage: str = ''
+    cmd_speed: str = ''
+    cmd_yaw_rate: str = ''
+    yaw_rate: str = ''
+    imu_time: str = 'time'
+    imu_yaw_rate: str = ''
+
+
+def read_csv(path: Path, max_rows: int) -> dict[str, np.ndarray]:
+    """The numeric columns of a CSV with a header row (name -> float array); InputError if it cannot be
+    read, has no rows, or more than ``max_rows``."""
+    try:
+        with path.open(encoding='utf-8') as handle:
+            header = handle.readline().strip().split(',')
+            rows = sum(1 for line in handle if line.strip())
+    except OSError as err:
+        raise InputError(f'{path}: cannot read ({err.strerror or err})') from err
+    if rows == 0 or not header or not header[0]:
+        raise InputError(f'{path}: no header and data rows')
+    if rows > max_rows:
+        raise InputError(f'{path}: {rows:,} rows is more than --max-rows {max_rows:,}')
+    try:
+        table = np.genfromtxt(path, delimiter=',', skip_header=1, dtype=float, invalid_raise=True)
+    except ValueError as err:
+        raise InputError(f'{path}: not a numeric CSV ({str(err).splitlines()[0]})') from err
+    table = table.reshape(rows, -1) if table.ndim < 2 else table
+    if table.shape[1] != len(header):
+        raise InputError(f'{path}: {table.shape[1]} values per row for {len(header)} header names')
+    return {name.strip(): table[:, j] for j, name in enumerate(header)}
+
+
+def _column(table: dict[str, np.ndarray], name: str, path: Path, option: str) -> np.ndarray:
+    if name not in table:
+        raise InputError(f'{path}: no column {name!r} ({option}); columns: {", ".join(table)}')
+    values = table[name]
+    if not np.all(np.isfinite(values)):
+        raise InputError(f'{path}: column {name!r} has empty or non-numeric values')
+    return values
+
+
+def import_csv(
+    path: Path,
+    output: Path,
+    vehicle_name: str,
+    columns: Columns,
+    *,
+    imu: Path | None = None,
+    time_scale: float = 1.0,
+    speed_scale: float = 1.0,
+    current_scale: float = 1.0,
+    current_topics: tuple[str, str] = (
+        'left_drive/status/battery_current',
+        'right_drive/status/battery_current',
+    ),
+    voltage_topics: tuple[str, str] = (
+        'left_drive/status/battery_voltage',
+        'right_drive/status/battery_voltage',
+    ),
+    max_rows: int = int(MAX_ROWS.high),
+) -> dict[str, Any]:
+    """Write the bag (module docstring); return what was written (topics, message counts, duration)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from skidsteer_power.bag_io.writer import BagWriter
+    from skidsteer_power.estimator import factory
+
+    vehicle = factory.load_vehicle_config(vehicle_name)
+    joints = factory.joint_map_for(vehicle)
+    table = read_csv(path, max_rows)
+    t = _column(table, columns.time, path, '--time') * time_scale
+    if np.any(np.diff(t) < 0):
+        raise InputError(f'{path}: the time column {columns.time!r} goes backwards')
+    if not (columns.left_speed and columns.right_speed):
+        raise InputError('import needs --left-speed and --right-speed (the wheel speed columns)')
+    speed = np.column_stack([_column(table, columns.left_speed, path, '--left-speed'),
+                             _column(table, columns.right_speed, path, '--right-speed')]) * speed_scale  # fmt: skip
+    radius, tread = float(vehicle.drive_radius_m), float(vehicle.tread_m)
+    currents = None
+    if columns.left_current or columns.right_current:
+        if not (columns.left_current and columns.right_current):
+            raise InputError('give both --left-current and --right-current')
+        currents = np.column_stack([_column(table, columns.left_current, path, '--left-current'),
+                                    _column(table, columns.right_current, path, '--right-current')])  # fmt: skip
+        currents = currents * current_scale
+    voltages = None
+    if columns.left_voltage or columns.right_voltage:
+        left_v = columns.left_voltage or columns.right_voltage
+        right_v = columns.right_voltage or columns.left_voltage
+        voltages = np.column_stack([_column(table, left_v, path, '--left-voltage'),
+                                    _column(table, right_v, path, '--right-voltage')])  # fmt: skip
+    if columns.cmd_speed or columns.cmd_yaw_rate:
+        if not (columns.cmd_speed and columns.cmd_yaw_rate):
+            raise InputError(
+                'give both --cmd-speed and --cmd-yaw-rate, or neither (set points = wheel speeds)'
+            )
+        cmd = np.column_stack([_column(table, columns.cmd_speed, path, '--cmd-speed'),
+                               _column(table, columns.cmd_yaw_rate, path, '--cmd-yaw-rate')])  # fmt: skip
+        cmd_note = f'command from columns {columns.cmd_speed}, {columns.cmd_yaw_rate}'
+    else:  # the controller holds wheel speeds: the recorded ones are the set points
+        cmd = np.column_stack([speed.mean(axis=1), (speed[:, 1] - speed[:, 0]) / tread])
+        cmd_note = f'command = the recorded wheel speeds as set points (tread {tread:g} m)'
+    yaw_t: np.ndarray | None = None
+    yaw = None
+    if imu is not None:
+        imu_table = read_csv(imu, max_rows)
+        yaw_t = _column(imu_table, columns.imu_time, imu, '--imu-time') * time_scale
+        yaw = _column(imu_table, columns.imu_yaw_rate or 'wz', imu, '--imu-yaw-rate')
+    elif columns.yaw_rate:
+        yaw_t, yaw = t, _column(table, columns.yaw_rate, path, '--yaw-rate')
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = store.types
+    n_left = len(joints.left)
+    names = list(joints.joints)
+    sign = np.array([-1.0 if j in joints.inverted else 1.0 for j in names])
+    omega = speed / radius  # wheel speed [rad/s]
+    position = np.vstack(
+        [np.zeros(2), np.cumsum(0.5 * (omega[1:] + omega[:-1]) * np.diff(t)[:, None], axis=0)]
+    )
+    side = np.r_[np.zeros(n_left, int), np.ones(len(names) - n_left, int)]
+    events: list[tuple[int, int, int]] = [(int(round(x * 1e9)), 0, i) for i, x in enumerate(t)]
+    if yaw_t is not None:
+        events += [(int(round(x * 1e9)), 1, i) for i, x in enumerate(yaw_t)]
+    events.sort()
+    counts: dict[str, int] = {}
+    with BagWriter(output) as writer:
+        c_cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
+        c_js = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        c_cur = [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in current_topics] if currents is not None else []  # fmt: skip
+        c_volt = [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in voltage_topics] if voltages is not None else []  # fmt: skip
+        c_imu = writer.add_topic('/imu/data', 'sensor_msgs/msg/Imu') if yaw is not None else None
+        vec, quat = types['geometry_msgs/msg/Vector3'], types['geometry_msgs/msg/Quaternion']
+        zero9 = np.zeros(9)
+
+        def put(connection: Any, topic: str, stamp_ns: int, msg: Any, msgtype: str) -> None:
+            writer.write(connection, stamp_ns, store.serialize_cdr(msg, msgtype))
+            counts[topic] = counts.get(topic, 0) + 1
+
+        for offset_ns, kind, i in events:
+            t_ns = START_NS + offset_ns
+            stamp = types['builtin_interfaces/msg/Time'](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+            header = types['std_msgs/msg/Header'](stamp=stamp, frame_id='')
+            if kind == 1:
+                assert yaw is not None and c_imu is not None
+                imu_msg = types['sensor_msgs/msg/Imu'](
+                    header=header, orientation=quat(0.0, 0.0, 0.0, 1.0), orientation_covariance=zero9,
+                    angular_velocity=vec(0.0, 0.0, float(yaw[i])), angular_velocity_covariance=zero9,
+                    linear_acceleration=vec(0.0, 0.0, 0.0), linear_acceleration_covariance=zero9,
+                )  # fmt: skip
+                put(c_imu, '/imu/data', t_ns, imu_msg, 'sensor_msgs/msg/Imu')
+                continue
+            twist = types['geometry_msgs/msg/Twist'](
+                vec(float(cmd[i, 0]), 0.0, 0.0), vec(0.0, 0.0, float(cmd[i, 1]))
+            )
+            put(c_cmd, '/cmd_vel', t_ns, twist, 'geometry_msgs/msg/Twist')
+            for k, connection in enumerate(c_cur):
+                assert currents is not None
+                put(connection, connection.topic, t_ns, types['std_msgs/msg/Float64'](data=float(currents[i, k])), 'std_msgs/msg/Float64')  # fmt: skip
+            for k, connection in enumerate(c_volt):
+                assert voltages is not None
+                put(connection, connection.topic, t_ns, types['std_msgs/msg/Float64'](data=float(voltages[i, k])), 'std_msgs/msg/Float64')  # fmt: skip
+            js = types['sensor_msgs/msg/JointState'](
+                header=header, name=names, position=position[i, side] * sign, velocity=omega[i, side] * sign,
+                effort=np.zeros(0),
+            )  # fmt: skip
+            put(c_js, '/joint_states', t_ns + 1000, js, 'sensor_msgs/msg/JointState')  # after its currents
+    return {
+        'bag': str(output),
+        'csv': str(path),
+        'imu_csv': None if imu is None else str(imu),
+        'vehicle': vehicle.name,
+        'rows': int(t.size),
+        'duration_s': float(t[-1] - t[0]) if t.size > 1 else 0.0,
+        'messages': counts,
+        'command': cmd_note,
+        'wheel_radius_m': radius,
+    }
+
+
+def _pair(text: str) -> tuple[str, str]:
+    parts = [p.strip() for p in text.split(',')]
+    if len(parts) != 2 or not all(parts):
+        raise argparse.ArgumentTypeError(f'expected LEFT,RIGHT topic names, not {text!r}')
+    return parts[0], parts[1]
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    preset = PRESETS.get(args.preset or '', {})
+    given = {f: getattr(args, f) for f in Columns.__dataclass_fields__ if getattr(args, f) is not None}
+    columns = Columns(**{**preset, **given})
+    if args.imu is not None and not columns.imu_yaw_rate:
+        columns = Columns(**{**columns.__dict__, 'imu_yaw_rate': 'wz'})
+    output = Path(args.output)
+    if output.exists():
+        raise InputError(f'{output} exists: import writes a new bag')
+    summary = import_csv(
+        Path(args.csv), output, args.vehicle, columns, imu=None if args.imu is None else Path(args.imu),
+        time_scale=args.time_scale, speed_scale=args.speed_scale, current_scale=args.current_scale,
+        current_topics=args.current_topics, voltage_topics=args.voltage_topics, max_rows=args.max_rows,
+    )  # fmt: skip
+    emit(summary, args.json)
+    return 0
+
+
+def register(subparsers: Subcommands) -> None:
+    parser = subparsers.add_parser(
+        'import',
+        help='turn a CSV log (wheel speeds, currents, voltages, command, yaw rate) into a bag',
+        description='Write a rosbag2 MCAP bag from a CSV log, by a column mapping: /joint_states (the '
+        "vehicle's joints, wheel speed / radius), /cmd_vel (the command columns, or the wheel speeds as "
+        'set points), one std_msgs/Float64 topic per side for current and voltage (what the vehicle '
+        "file's measured_power maps), /imu/data for a yaw rate. validate, calibrate and compare read it.",
+    )
+    parser.add_argument('csv', metavar='LOG.csv', help='CSV with a header row')
+    parser.add_argument('-o', '--output', required=True, metavar='OUT.mcap', help='bag to write (new)')
+    parser.add_argument('--vehicle', required=True, help='vehicle name or YAML (joints, wheel radius, tread)')
+    parser.add_argument('--preset', choices=sorted(PRESETS), help='a known log layout (borealtc: BorealTC)')
+    parser.add_argument('--imu', metavar='IMU.csv', help='a second CSV with the yaw rate, merged by time')
+    for name, what in (
+        ('time', 'time [s x --time-scale] (default time)'),
+        ('left-speed', 'left wheel speed at the tread [m/s x --speed-scale]'),
+        ('right-speed', 'right wheel speed at the tread [m/s x --speed-scale]'),
+        ('left-current', 'left measured current [A x --current-scale]'),
+        ('right-current', 'right measured current [A x --current-scale]'),
+        ('left-voltage', 'left voltage [V] (one column for both sides: give it once)'),
+        ('right-voltage', 'right voltage [V]'),
+        ('cmd-speed', 'commanded forward speed [m/s] (none: the wheel speeds are the set points)'),
+        ('cmd-yaw-rate', 'commanded yaw rate [rad/s]'),
+        ('yaw-rate', 'measured yaw rate [rad/s] in this CSV'),
+        ('imu-time', 'time column of --imu (default time)'),
+        ('imu-yaw-rate', 'yaw-rate column of --imu [rad/s] (default wz)'),
+    ):
+        parser.add_argument(f'--{name}', dest=name.replace('-', '_'), metavar='COL', help=f'column: {what}')
+    parser.add_argument(
+        '--time-scale', type=finite_float, default=1.0, help='seconds per time unit (default 1)'
+    )
+    parser.add_argument(
+        '--speed-scale', type=finite_float, default=1.0, help='m/s per speed unit (default 1)'
+    )
+    parser.add_argument(
+        '--current-scale', type=finite_float, default=1.0, help='A per current unit (default 1)'
+    )
+    parser.add_argument('--current-topics', type=_pair, default=_pair(CURRENT_TOPICS), metavar='LEFT,RIGHT',
+                        help=f'Float64 topics of the currents (default {CURRENT_TOPICS})')  # fmt: skip
+    parser.add_argument('--voltage-topics', type=_pair, default=_pair(VOLTAGE_TOPICS), metavar='LEFT,RIGHT',
+                        help=f'Float64 topics of the voltages (default {VOLTAGE_TOPICS})')  # fmt: skip
+    parser.add_argument('--max-rows', type=MAX_ROWS.arg(), default=int(MAX_ROWS.high), metavar='N',
+                        help=MAX_ROWS.help('largest CSV read, rows per file'))  # fmt: skip
+    add_json_flag(parser)
+    parser.set_defaults(func=_cmd_import)
