@@ -120,7 +120,7 @@ def test_motion_calibration_without_motor_torque(motion_fit: tuple[dict[str, Any
     p, _ = motion_fit
     assert p['segments_fit'] + p['segments_holdout'] == 9
     assert p['fit_to'] == 'motion'
-    assert p['left_fixed']['left_b'] == 'no measured torque or current in the recordings'
+    assert p['left_fixed']['left_b'] == 'no measured torque, current or power in the recordings'
     assert p['kept_start'] is None
     m = p['motion']
     assert m['speed_mae_after_m_s'] < m['speed_mae_before_m_s']
@@ -153,7 +153,7 @@ def test_out_vehicle_is_a_vehicle_file_with_its_powertrain(motion_fit: tuple[dic
 @pytest.mark.parametrize(
     ('extra', 'match'),
     [
-        (['--fit-to', 'torque'], 'no measured torque or current'),
+        (['--fit-to', 'torque'], 'no measured torque, current or power'),
         (['--motion-topic', '/nope'], 'no odometry or pose topic /nope'),
         (['--out-vehicle', 'v.txt'], '--out-vehicle must be a .yaml file'),
     ],

@@ -128,7 +128,10 @@ INTERNAL_PARAMS: dict[str, FitParameter] = {
     'right_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
     'right_c': FitParameter('N m', False, (0.0, 3.0)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
+IDLE_PARAMS: dict[str, FitParameter] = {  # the drive electronics' idle power, both sides (battery side)
+    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),
+}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **IDLE_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
@@ -143,10 +146,12 @@ def parse_fit_list(text: str) -> list[str]:
         name = raw.strip()
         if not name:
             continue
-        expanded = list(INTERNAL_PARAMS) if name == 'internal' else [name]
+        expanded = (
+            list(INTERNAL_PARAMS) if name == 'internal' else ['idle_power_W'] if name == 'idle' else [name]
+        )
         for item in expanded:
             if item not in PARAMS:
-                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'auto'])
+                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'auto'])
                 raise InputError(f'--fit: unknown parameter {name!r} (known: {known})')
             if item not in names:
                 names.append(item)
@@ -172,23 +177,33 @@ def auto_fit_names(
     else:
         names = list(DEFAULT_FIT)
         fixed = {'kc': 'enters only as kc / b beside kphi (eq. 2.1): rarely visible, left at its start'}
-    if any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments):
+    torque = any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments)
+    power = any(math.isfinite(sum(s.battery_W)) for s in segments)
+    if torque or power:
         names += list(INTERNAL_PARAMS)
     else:
-        fixed.update({n: 'no measured torque or current in the recordings' for n in INTERNAL_PARAMS})
+        fixed.update({n: 'no measured torque, current or power in the recordings' for n in INTERNAL_PARAMS})
+    if power:
+        names += list(IDLE_PARAMS)
+    else:
+        fixed['idle_power_W'] = (
+            'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+        )
     return names, fixed
 
 
 @dataclass(frozen=True)
 class Evaluation:
     """One parameter vector's predictions of every segment (S segments): motor torque (S, 2) [N m],
-    motor speed (S, 2) [rad/s], solved (S,), body speed (S,) [m/s] and yaw rate (S,) [rad/s]."""
+    motor speed (S, 2) [rad/s], solved (S,), body speed (S,) [m/s], yaw rate (S,) [rad/s] and
+    battery-side electrical power per side (S, 2) [W]."""
 
     torque: np.ndarray
     omega: np.ndarray
     ok: np.ndarray
     speed: np.ndarray
     yaw: np.ndarray
+    power: np.ndarray
 
 
 @dataclass
@@ -207,6 +222,8 @@ class Model:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
         if name in TERRAIN_PARAMS:  # (mu_longitudinal: Terrain's property tan(phi))
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
+        if name in IDLE_PARAMS:
+            return float(getattr(self.powertrain, name, 0.0))
         side, kind = name.split('_')
         total = self.powertrain.resistance(side).total
         return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
@@ -230,6 +247,8 @@ class Model:
         left, right = side_with_values('left'), side_with_values('right')
         if left is not powertrain.left or right is not powertrain.right:
             powertrain = dataclasses.replace(powertrain, left=left, right=right)
+        if 'idle_power_W' in values:
+            powertrain = dataclasses.replace(powertrain, idle_power_W=values['idle_power_W'])
         return terrain, powertrain
 
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -242,17 +261,20 @@ class Model:
         try:
             terrain, powertrain = self.with_values(values)
         except ConfigError:  # a trial outside the terrain's validity (e.g. rigid ground's K range)
-            nan = np.full((len(self.speed), 2), np.nan)
-            none = np.full(len(self.speed), np.nan)
-            return Evaluation(nan, nan.copy(), np.zeros(len(self.speed), dtype=bool), none, none.copy())
+            return self._failed()
         try:
             if self.fit_at == 'setpoints':
                 return self._predict_setpoints(terrain, powertrain)
             return self._predict_motion(terrain, powertrain)
         except ConvergenceError:  # a trial terrain where FESS's contact has no solution at all
-            nan = np.full((len(self.speed), 2), np.nan)
-            none = np.full(len(self.speed), np.nan)
-            return Evaluation(nan, nan.copy(), np.zeros(len(self.speed), dtype=bool), none, none.copy())
+            return self._failed()
+
+    def _failed(self) -> Evaluation:
+        nan = np.full((len(self.speed), 2), np.nan)
+        none = np.full(len(self.speed), np.nan)
+        return Evaluation(
+            nan, nan.copy(), np.zeros(len(self.speed), dtype=bool), none, none.copy(), nan.copy()
+        )
 
     def _predict_motion(self, terrain: Terrain, powertrain: Powertrain) -> Evaluation:
         """As :meth:`evaluate`, FESS solved at the measured motion (``speed``, ``yaw``)."""
@@ -263,11 +285,14 @@ class Model:
             self._warm = sol.state
         torque = np.empty_like(sol.torque)
         omega = np.empty_like(sol.omega)
+        power = np.empty_like(sol.torque)
         for i, side in enumerate(('left', 'right')):
             point = powertrain.motor_side(side, sol.torque[:, i], sol.omega[:, i])
             torque[:, i] = point.motor_torque_Nm
             omega[:, i] = point.motor_omega_rad_s
-        return Evaluation(torque, omega, np.asarray(sol.converged), self.speed.copy(), self.yaw.copy())
+            power[:, i] = point.electrical_power_W
+        ok = np.asarray(sol.converged)
+        return Evaluation(torque, omega, ok, self.speed.copy(), self.yaw.copy(), power)
 
     def _predict_setpoints(self, terrain: Terrain, powertrain: Powertrain) -> Evaluation:
         """As :meth:`evaluate` for commands (``speed``, ``yaw``) at their wheel speed set points, as
@@ -281,11 +306,13 @@ class Model:
         self._warm = np.where(sol.limited[:, None], np.nan, sol.state)  # dug in: start from no slip
         axle_torque, *_ = predictor.electrical(sol.torque, setpoints)
         torque, omega = np.empty_like(axle_torque), np.empty_like(axle_torque)
+        power = np.empty_like(axle_torque)
         for i, side in enumerate(('left', 'right')):
             point = powertrain.motor_side(side, axle_torque[:, i], setpoints[:, i])
             torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+            power[:, i] = point.electrical_power_W
         ok = np.ones(len(torque), dtype=bool)
-        return Evaluation(torque, omega, ok, np.asarray(sol.speed), np.asarray(sol.yaw_rate))
+        return Evaluation(torque, omega, ok, np.asarray(sol.speed), np.asarray(sol.yaw_rate), power)
 
 
 def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
@@ -501,19 +528,24 @@ def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
     return np.sort(order[n_hold:]), np.sort(order[:n_hold])
 
 
-def _energy_error(
-    segments: Sequence[Segment], idx: np.ndarray, torque: np.ndarray, omega: np.ndarray, motor: Any
-) -> float:
-    """Signed relative error of the summed terminal energy of segments ``idx`` [-] (predicted vs
-    measured; NaN where no segment of ``idx`` has a measured power)."""
-    measured_w = np.array([sum(segments[i].terminal_W) for i in idx]) if idx.size else np.zeros(0)
+def _energy_error(segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: Any) -> float:
+    """Signed relative error of the summed energy of segments ``idx`` [-] (predicted vs measured):
+    the battery-side energy where the segments measured it (V x I), else the motor terminal energy
+    (K_t i); NaN where no segment of ``idx`` measured either."""
+    if idx.size == 0:
+        return math.nan
+    battery = np.array([sum(segments[i].battery_W) for i in idx])
+    if np.any(np.isfinite(battery)):
+        measured_w, predicted_w = battery, np.sum(ev.power[idx], axis=1)
+    else:
+        measured_w = np.array([sum(segments[i].terminal_W) for i in idx])
+        predicted_w = np.sum(np.asarray(terminal_power(motor, ev.torque[idx], ev.omega[idx])), axis=1)
     keep = np.isfinite(measured_w)
     if not np.any(keep):
         return math.nan
-    idx = idx[keep]
-    duration = np.array([segments[i].duration_s for i in idx])
+    duration = np.array([segments[i].duration_s for i in idx])[keep]
     measured = measured_w[keep] @ duration
-    predicted = np.sum(np.asarray(terminal_power(motor, torque[idx], omega[idx])), axis=1) @ duration
+    predicted = predicted_w[keep] @ duration
     return float((predicted - measured) / measured) if measured != 0 else math.nan
 
 
@@ -536,6 +568,8 @@ class FitData:
     torque_scale_Nm: float
     start: dict[str, float]
     candidates: list[str]
+    battery: np.ndarray  # (S, 2) measured battery-side power per side [W] (NaN: not measured)
+    power_scale_W: float = 1.0
 
     def residuals(self, ev: Evaluation, idx: np.ndarray) -> np.ndarray:
         """Scaled residuals of segments ``idx`` (fixed length; a missing measurement gives 0)."""
@@ -545,6 +579,9 @@ class FitData:
             failed = ~ev.ok[idx][:, None] | ~np.isfinite(ev.torque[idx])
             err = np.where(failed, FAILED_RESIDUAL_NM / self.torque_scale_Nm, err)
             parts.append(np.where(np.isfinite(self.measured[idx]), err, 0.0).ravel())
+            err = (ev.power[idx] - self.battery[idx]) / self.power_scale_W
+            err = np.where(~ev.ok[idx][:, None] | ~np.isfinite(ev.power[idx]), FAILED_RESIDUAL_NM / 0.05, err)
+            parts.append(np.where(np.isfinite(self.battery[idx]), err, 0.0).ravel())
         if self.fit_to in ('motion', 'both'):
             pred = np.column_stack([ev.speed[idx], ev.yaw[idx]])
             err = (pred - self.motion[idx]) / np.array([SPEED_SCALE_M_S, YAW_SCALE_RAD_S])
@@ -557,7 +594,7 @@ class FitData:
         """How many measured numbers segments ``idx`` give the residuals."""
         count = 0
         if self.fit_to in ('torque', 'both'):
-            count += int(np.isfinite(self.measured[idx]).sum())
+            count += int(np.isfinite(self.measured[idx]).sum()) + int(np.isfinite(self.battery[idx]).sum())
         if self.fit_to in ('motion', 'both'):
             count += int(np.isfinite(self.motion[idx]).sum())
         return count
@@ -591,8 +628,11 @@ def prepare(
         ],
         dtype=float,
     ).reshape(-1, 2)
-    if fit_to != 'motion' and not np.any(np.isfinite(measured)):
-        raise InputError('the segments carry no measured torque or current: fit the motion (--fit auto)')
+    battery = np.array([s.battery_W for s in segments], dtype=float).reshape(-1, 2)
+    if fit_to != 'motion' and not np.any(np.isfinite(measured)) and not np.any(np.isfinite(battery)):
+        raise InputError(
+            'the segments carry no measured torque, current or power: fit the motion (--fit auto)'
+        )
     if fit_to != 'torque' and not np.any(np.isfinite(motion)):
         raise InputError('the segments carry no measured motion (no odometry, pose or yaw-rate topic)')
     if fit_to != 'torque' and fit_at != 'setpoints':
@@ -614,7 +654,24 @@ def prepare(
                 f'is outside its physical range [{lo:g}, {hi:g}]'
             )
     scale = max(1e-3, TORQUE_SCALE_SHARE * rms)
-    return FitData(segments, model, fit_idx, hold_idx, measured, motion, fit_to, scale, start, candidates)
+    measured_w = battery[np.isfinite(battery)]
+    power_scale = (
+        max(0.1, TORQUE_SCALE_SHARE * float(np.sqrt(np.mean(measured_w**2)))) if measured_w.size else 1.0
+    )
+    return FitData(
+        segments,
+        model,
+        fit_idx,
+        hold_idx,
+        measured,
+        motion,
+        fit_to,
+        scale,
+        start,
+        candidates,
+        battery,
+        power_scale,
+    )
 
 
 @dataclass
@@ -788,8 +845,8 @@ def assess(data: FitData, base: Evaluation, fitted: dict[str, float]) -> Assessm
     after = model.evaluate(fitted)
     idx = data.hold_idx if data.hold_idx.size else data.fit_idx
     _, powertrain_fit = model.with_values(fitted)
-    energy_before = _energy_error(segments, data.hold_idx, base.torque, base.omega, model.powertrain.motor)
-    energy_after = _energy_error(segments, data.hold_idx, after.torque, after.omega, powertrain_fit.motor)
+    energy_before = _energy_error(segments, data.hold_idx, base, model.powertrain.motor)
+    energy_after = _energy_error(segments, data.hold_idx, after, powertrain_fit.motor)
     cost_before = _rmse(data.residuals(base, idx))
     cost_after = _rmse(data.residuals(after, idx))
     v0, w0 = _motion_errors(data, base, idx)
@@ -981,9 +1038,12 @@ def setpoint_check(
     pred = CommandPredictor(vehicle, terrain, powertrain).predict(commands[:, 0], commands[:, 1])
     torque = np.empty_like(pred.torque)
     omega = np.empty_like(pred.torque)
+    power = np.empty_like(pred.torque)
     for i, side in enumerate(('left', 'right')):
         point = powertrain.motor_side(side, pred.torque[:, i], pred.setpoint[:, i])
         torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+        power[:, i] = point.electrical_power_W
+    ev = Evaluation(torque, omega, np.ones(len(torque), bool), pred.speed, pred.yaw_rate, power)
     speed = np.array([seg.speed_m_s for seg in segments])
     yaw = np.array([seg.yaw_rate_rad_s for seg in segments])
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -991,7 +1051,7 @@ def setpoint_check(
         yaw_err = np.abs(pred.yaw_rate - yaw) / np.abs(yaw)
     return {
         'torque_rmse_Nm': _rmse(torque[err_idx] - measured[err_idx]),
-        'holdout_energy_error': _energy_error(segments, hold_idx, torque, omega, powertrain.motor),
+        'holdout_energy_error': _energy_error(segments, hold_idx, ev, powertrain.motor),
         'speed_error_median': _median(speed_err[np.abs(speed) > 1e-3]),
         'yaw_rate_error_median': _median(yaw_err[np.abs(yaw) > 1e-3]),
         'limited_segments': int(np.sum(pred.limited)),

@@ -35,6 +35,7 @@ import numpy as np
 import yaml
 
 from skidsteer_power.calibration.fit import (
+    IDLE_PARAMS,
     INTERNAL_PARAMS,
     PARAMS,
     TERRAIN_PARAMS,
@@ -43,6 +44,8 @@ from skidsteer_power.calibration.fit import (
 )
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.terramechanics.terrain import load_terrain
+
+POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *IDLE_PARAMS)  # fitted powertrain terms
 
 if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
@@ -81,7 +84,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'not_identifiable': sorted(result.not_identifiable),
         'kept_start': result.kept_start or None,
     }
-    internal = [n for n in result.names if n in INTERNAL_PARAMS and not kept]
+    internal = [n for n in result.names if n in POWERTRAIN_NAMES and n not in result.at_bound and not kept]
     if internal:
         block['powertrain_parameters'] = internal
         block['powertrain_units'] = [PARAMS[n].unit for n in internal]
@@ -150,7 +153,7 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
         }
         for side in ('left', 'right')
     }
-    internal = [n for n in result.names if n in INTERNAL_PARAMS and not result.kept_start]
+    internal = [n for n in result.names if n in POWERTRAIN_NAMES and not result.kept_start]
     data: dict[str, Any] = {
         'name': f'{pt.name}_calibrated',
         'source': f'{pt.name} with the internal resistance of {len(bags)} bag(s) '
@@ -163,6 +166,8 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
         'regen_efficiency': pt.regen_efficiency,
         'internal_resistance': sides,
         'battery': pt.battery,
+        'bus_voltage_V': pt.bus_voltage_V,
+        'idle_power_W': float(pt.idle_power_W),
     }
     if internal:
         values, cov = _block(result, internal)

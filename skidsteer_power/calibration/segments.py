@@ -85,6 +85,7 @@ class Recording:
     pose_yaw: np.ndarray  # (n,) heading [rad]
     twist: np.ndarray | None  # (n, 2) odometry body twist V [m/s], yaw rate [rad/s], or None
     gyro: np.ndarray | None = None  # (n,) IMU yaw rate [rad/s] at pose_t (an Imu topic), or None
+    battery: np.ndarray | None = None  # (n, 2) measured battery-side power V x I [W] at js_t, or None
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,8 @@ class Segment:
     command : the commanded (V, yaw rate); duration_s : window length [s]; samples : joint_states
     count; motor_torque_Nm, motor_omega_rad_s : window means at the motor shaft [N m], [rad/s];
     torque_std_Nm : sample standard deviation of the torque [N m]; terminal_W : mean motor
-    terminal power with copper loss [W]; source : bag path.
+    terminal power with copper loss [W]; battery_W : measured electrical (battery-side, V x I) power
+    per side [W] (NaN: not measured); source : bag path.
     """
 
     source: str
@@ -110,6 +112,7 @@ class Segment:
     motor_omega_rad_s: tuple[float, float]
     torque_std_Nm: tuple[float, float]
     terminal_W: tuple[float, float] = (math.nan, math.nan)
+    battery_W: tuple[float, float] = (math.nan, math.nan)
 
 
 def _pose_topic(bag: BagReader, wanted: str) -> str:
@@ -223,8 +226,24 @@ def read_recording(
         else:
             pose_t, pose_xy, pose_yaw, twist = np.zeros(0), np.zeros((0, 2)), np.zeros(0), None
     good = ok & np.all(np.isfinite(omega), axis=1)
+    battery = None
+    if reader.map.measures_battery:  # the vehicle's measured_power: the effort is each side's V x I [W]
+        battery, torque = torque[good], np.full_like(torque[good], np.nan)
+    else:
+        torque = torque[good]
     return Recording(
-        str(path), cmd_t, cmd, js_t[good], omega[good], torque[good], pose_t, pose_xy, pose_yaw, twist, gyro
+        str(path),
+        cmd_t,
+        cmd,
+        js_t[good],
+        omega[good],
+        torque,
+        pose_t,
+        pose_xy,
+        pose_yaw,
+        twist,
+        gyro,
+        battery,
     )
 
 
@@ -306,6 +325,7 @@ def find_segments(
                 motor_omega_rad_s=_mean_pair(rec.omega[sel]),
                 torque_std_Nm=_std_pair(torque),
                 terminal_W=_mean_terminal_power(rec, sel, motor),
+                battery_W=_mean_pair(rec.battery[sel]) if rec.battery is not None else (math.nan, math.nan),
             )
         )
     return segments, dropped

@@ -130,6 +130,7 @@ def steady_segments(
             motor_torque_Nm=nan2,
             motor_omega_rad_s=nan2,
             torque_std_Nm=nan2,
+            battery_W=power,
         )
         out.append(SeriesSegment(segment, power, (float(window_sp[0]), float(window_sp[1]))))
     return out, dropped

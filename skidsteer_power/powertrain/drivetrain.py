@@ -285,10 +285,11 @@ class Powertrain:
 KEYS = (
     'name', 'source', 'motor', 'amplifier', 'gear_ratio', 'current_limit_A', 'regen_efficiency',
     'internal_resistance', 'battery', 'bus_voltage_V', 'idle_power_W', 'copper_loss_W_per_Nm2',
-    'sources', 'preset',
+    'sources', 'preset', 'calibration',
 )  # fmt: skip
 """The keys of a powertrain file (docs/POWERTRAINS.md); ``sources`` maps a key to where its number
-comes from (datasheet, manual, or ASSUMED)."""
+comes from (datasheet, manual, or ASSUMED); ``calibration`` is the record ``skidsteer-power calibrate``
+writes (skidsteer_power/calibration/io.py), not read here."""
 
 
 def _check_keys(cfg: Mapping[str, Any]) -> None:
