@@ -51,6 +51,16 @@ def main(argv: list[str] | None = None) -> int:
             doc = replace_named(doc, name, table, run)
         DOC.write_text(doc)
         print(f'goal table written to {DOC}')
+        for other in sorted(DOC.parent.glob('*.md')):  # a table may live in another doc (docs/REAL.md)
+            if other == DOC:
+                continue
+            text = other.read_text()
+            new = text
+            for name, table in tables.items():
+                new = replace_named(new, name, table, run)
+            if new != text:
+                other.write_text(new)
+                print(f'tables written to {other}')
     return 1 if missed else 0
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import copy
 import math
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -84,6 +84,7 @@ class CompareOptions:
     map_cache_dir: str | Path | None = None
     calibrate_fit: str = 'kphi,n,c,phi,K'
     calibrate_fit_at: str = 'setpoints'
+    extra_types: Mapping[str, str] | None = None  # .msg texts by type name (--msg): types the bags lack
 
     def check(self) -> None:
         for label, bags in (
@@ -127,11 +128,17 @@ def _validate_options(vehicle: str, terrain: str, cache: str | Path | None) -> V
     return ValidateOptions(vehicle, terrain, report_dir='.', plots=False, map_cache_dir=cache)
 
 
-def _predict(path: str, vehicle: str, terrain: str, cache: str | Path | None) -> BagPrediction:
+def _predict(
+    path: str,
+    vehicle: str,
+    terrain: str,
+    cache: str | Path | None,
+    extra_types: Mapping[str, str] | None = None,
+) -> BagPrediction:
     from skidsteer_power.bag_io import open_bag
     from skidsteer_power.bags.validate import predict_bag
 
-    with open_bag(path) as bag:
+    with open_bag(path, extra_types=extra_types) as bag:
         if bag.duration_s > MAX_BAG_S:
             raise InputError(f'{path}: {bag.duration_s:.0f} s long, at most {MAX_BAG_S:.0f} s')
         return predict_bag(bag, _validate_options(vehicle, terrain, cache))
@@ -219,6 +226,13 @@ def scores(predicted: np.ndarray, runs: Sequence[BagRun]) -> dict[str, float]:
     }
 
 
+def failed_scores(reason: str) -> dict[str, Any]:
+    """The scores of a model that could not predict: NaN figures and ``error`` (the reason)."""
+    keys = ('energy_error_pct', 'power_rmse_W', 'median_abs_segment_error_pct')
+    return {**dict.fromkeys(keys, math.nan), 'energy_predicted_J': math.nan, 'energy_measured_J': math.nan,
+            'segments': 0, 'error': reason}  # fmt: skip
+
+
 def envelope(samples: Samples) -> dict[str, float]:
     """Largest |V| [m/s] and |yaw rate| [rad/s] commanded while driving."""
     return {
@@ -261,6 +275,7 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
             fit=options.calibrate_fit,
             holdout=0.0,
             fit_at=options.calibrate_fit_at,
+            extra_types=options.extra_types,
         )
     except SkidsteerError as err:
         return None, {'error': str(err)}
@@ -302,6 +317,8 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
     cache = options.map_cache_dir
     say(f'calibrating on {len(options.train)} training bag(s)')
     cal_terrain, calibration = calibrated_terrain(options, folder)
+    if cal_terrain is None:
+        say(f'warning: the calibrated models fail: {calibration["error"]}')
     configs = {'fess': options.terrain, 'fess_calibrated': cal_terrain}
 
     def predict_runs(bags: Sequence[str], veh: str, terrains: dict[str, str | None]) -> list[BagRun]:
@@ -312,7 +329,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
             for key, terrain in terrains.items():
                 if terrain is None:
                     continue
-                prediction = _predict(path, veh, terrain, cache)
+                prediction = _predict(path, veh, terrain, cache, options.extra_types)
                 if first is None:
                     first = bag_run(path, prediction, vehicle.drive_radius_m, gear)
                 first.predicted_W[key] = fess_power(prediction, online=False)
@@ -372,10 +389,11 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
         for key in FESS_MODELS:
             if all(key in r.predicted_W for r in runs):
                 predicted[key] = np.concatenate([r.predicted_W[key] for r in runs])
-        splits[name] = {
-            'bags': [r.path for r in runs],
-            'models': {key: scores(p, runs) for key, p in predicted.items()},
-        }
+        models = {key: scores(p, runs) for key, p in predicted.items()}
+        for key in FESS_MODELS:  # a model that failed is a visible row with its reason
+            if key not in models and 'calibrated' in key and cal_terrain is None:
+                models[key] = failed_scores(str(calibration['error']))
+        splits[name] = {'bags': [r.path for r in runs], 'models': models}
     return {
         'vehicle': options.vehicle,
         'terrain': options.terrain,
@@ -408,6 +426,16 @@ def goal(splits: dict[str, Any]) -> dict[str, Any]:
         models = split['models']
         if GOAL_MODEL not in models:
             continue
+        if models[GOAL_MODEL].get('error'):
+            out[name] = {
+                'best_baseline': None,
+                'met': False,
+                'error': models[GOAL_MODEL]['error'],
+                'best_baseline_abs_energy_error_pct': math.nan,
+                'fess_calibrated_online_abs_energy_error_pct': math.nan,
+                'limit_pct': math.nan,
+            }
+            continue
         best = min(BASELINES, key=lambda m: abs(models[m]['energy_error_pct']))
         best_error = abs(models[best]['energy_error_pct'])
         error = abs(models[GOAL_MODEL]['energy_error_pct'])
@@ -434,10 +462,20 @@ def table(result: dict[str, Any]) -> str:
             if m is None:
                 cells.append('-')
                 continue
+            if m.get('error'):
+                cells.append('failed (see below)')
+                continue
             seg = m['median_abs_segment_error_pct']
             cells.append(f'{m["energy_error_pct"]:+8.1f} / {m["power_rmse_W"]:6.2f} / {seg:5.1f}')
         lines.append(f'{model:<24}' + ''.join(f'{c:>36}' for c in cells))
+    every = [(m, e) for split in result['splits'].values() for m, e in split['models'].items()]
+    failed = {m: e['error'] for m, e in every if e.get('error')}
+    for model, reason in failed.items():
+        lines.append(f'{model}: failed: {reason}')
     for n, g in result['goal'].items():
+        if g.get('error'):
+            lines.append(f'goal {n}: MISSED (fess_calibrated_online failed)')
+            continue
         lines.append(
             f'goal {n}: fess_calibrated_online |E| {g["fess_calibrated_online_abs_energy_error_pct"]:.1f} % '
             f'vs limit {g["limit_pct"]:.1f} % (best baseline {g["best_baseline"]} '

@@ -11,7 +11,9 @@ from collections.abc import Mapping, Sequence
 from skidsteer_power.calibration.fit import (
     DEFAULT_FIT,
     FIT_AT,
+    FIT_TO,
     CalibrationResult,
+    auto_fit_names,
     calibrate,
     parse_fit_list,
 )
@@ -21,9 +23,11 @@ from skidsteer_power.errors import InputError
 __all__ = [
     'DEFAULT_FIT',
     'FIT_AT',
+    'FIT_TO',
     'CalibrationResult',
     'Segment',
     'SegmentOptions',
+    'auto_fit_names',
     'calibrate',
     'calibrate_bags',
     'find_segments',
@@ -45,9 +49,16 @@ def calibrate_bags(
     topics: tuple[str, str, str] = ('/cmd_vel', '/joint_states', ''),
     extra_types: Mapping[str, str] | None = None,
     fit_at: str = 'setpoints',
+    options: SegmentOptions | None = None,
+    fit_to: str | None = None,
 ) -> tuple[CalibrationResult, list[Segment]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain``, solved at
-    ``fit_at`` (:data:`FIT_AT`; see fit.py)."""
+    ``fit_at`` (:data:`FIT_AT`; see fit.py). ``fit`` 'auto' (or ['auto']): what the recordings
+    identify (:func:`auto_fit_names`), fitted to the torque and the measured motion together where
+    both are recorded. ``options`` (when given) overrides settle_s, min_segment_s, topics and
+    extra_types. ``fit_to`` (:data:`FIT_TO`; None: 'torque', or by the recordings with 'auto')."""
+    import dataclasses
+
     from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits, JointReader
     from skidsteer_power.terramechanics.terrain import load_terrain
@@ -56,7 +67,7 @@ def calibrate_bags(
     veh = factory.load_vehicle_config(vehicle)
     start = load_terrain(terrain)
     powertrain = factory.powertrain_for(veh)
-    options = SegmentOptions(
+    base = SegmentOptions(
         settle_s=settle_s,
         min_s=min_segment_s,
         cmd_vel_topic=topics[0],
@@ -64,6 +75,9 @@ def calibrate_bags(
         odom_topic=topics[2],
         extra_types=extra_types,
     )
+    options = options or base
+    if options.extra_types is None and extra_types is not None:
+        options = dataclasses.replace(options, extra_types=extra_types)
     segments: list[Segment] = []
     dropped: dict[str, int] = {}
     for bag in bags:
@@ -81,9 +95,41 @@ def calibrate_bags(
     if len(segments) < 3:
         raise InputError(
             f'only {len(segments)} steady segment(s) in {len(bags)} bag(s) (dropped: {dropped}); '
-            'calibration needs constant commands held for longer than --settle-s + --min-segment-s'
+            'calibration needs constant commands held for longer than --settle-s + --min-segment-s '
+            '(or a looser --settle-tol / --cmd-tol)'
         )
+    left_fixed: dict[str, str] = {}
+    if names == ['auto']:
+        names, left_fixed = auto_fit_names(segments, start)
+        fit_to = fit_to or _what_to_fit(segments)
     result = calibrate(
-        veh, start, powertrain, segments, names, holdout=holdout, seed=seed, dropped=dropped, fit_at=fit_at
+        veh,
+        start,
+        powertrain,
+        segments,
+        names,
+        holdout=holdout,
+        seed=seed,
+        dropped=dropped,
+        fit_at=fit_at,
+        fit_to=fit_to or 'torque',
+        left_fixed=left_fixed,
     )
     return result, segments
+
+
+def _what_to_fit(segments: Sequence[Segment]) -> str:
+    """'both', 'torque' or 'motion': what the segments measured (torque and / or a body motion)."""
+    import math
+
+    torque = any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments)
+    motion = any(s.motion_source != 'command' for s in segments)
+    if torque and motion:
+        return 'both'
+    if motion:
+        return 'motion'
+    if torque:
+        return 'torque'
+    raise InputError(
+        'the recordings carry neither a motor torque / current nor a body motion: nothing to fit'
+    )

@@ -14,15 +14,28 @@ The model of a segment is what the estimator predicts for it (``fit_at``, :data:
 
 All segments are solved in one batched Newton solve per parameter vector (no map is rebuilt), followed
 by the powertrain (eqs. 7.1-7.4: axle torque / G + internal resistance at the motor shaft). Residuals
-are predicted minus measured motor torque K_t i [N m], both sides of every fit segment.
+are predicted minus measured motor torque K_t i [N m], both sides of every fit segment, and with
+``fit_to`` 'motion' / 'both' predicted minus measured body motion (V, yaw rate) at the set points: the
+ground's slip behaviour, learned from odometry or a gyro without any motor torque.
+
+:func:`calibrate` is a sequence of named steps (as pvlib's ``fit_desoto_sandia``):
+:func:`prepare` -> :func:`screen` -> :func:`optimize_z` -> :func:`uncertainty` (and a refit without
+the parameters whose interval leaves their range) -> :func:`assess` -> :class:`CalibrationResult`.
 
 Method
 ------
-* Parameters are searched in transformed coordinates z: ln(value) for the strictly positive moduli
-  (kphi, kc, c, K), the value itself for n, phi [deg] and the internal-resistance coefficients.
-  ``scipy.optimize.least_squares`` (trust-region reflective) with bounds, ``soft_l1`` loss (a robust
-  loss: a segment spoiled by a stall or a bump cannot dominate) and forward differences of 0.2 % in
-  z (FESS is solved to 1e-6 N, so the difference quotient is far above solver noise).
+* Parameters are searched in bounded, equally scaled coordinates z in [0, 1]: z = (u - u_lo) /
+  (u_hi - u_lo) with u = ln(value) for the strictly positive moduli (kphi, kc, c, K) and u = value
+  for n, phi [deg] and the internal-resistance coefficients; [lo, hi] is the parameter's physical
+  range (:data:`PARAMS`). Every map back clips z to [0, 1] first, so no trial, difference quotient or
+  interval can overflow (``exp`` of at most ln(hi)). ``scipy.optimize.least_squares`` (trust-region
+  reflective) with the box [0, 1], ``soft_l1`` loss (a robust loss: a segment spoiled by a stall or a
+  bump cannot dominate) and forward differences of 0.2 % in z.
+* Residuals (:class:`FitData`): predicted minus measured motor torque over its noise scale
+  (:data:`TORQUE_SCALE_SHARE` of the RMS measured torque), and with ``fit_to`` 'motion' or 'both'
+  predicted minus measured forward speed and yaw rate over :data:`SPEED_SCALE_M_S`,
+  :data:`YAW_SCALE_RAD_S` (ASSUMED noise scales of steady-window means). A segment without a torque
+  (no effort recorded) or without a measured motion contributes only what it has.
 * Identifiability: before fitting, the change of the torques under a 10 % change of every terrain
   parameter (kc always included, so the report shows it) is computed at the starting terrain, and
   the parameters are ranked by orthogonalization (:func:`select_identifiable`): a parameter whose
@@ -32,10 +45,19 @@ Method
   kc / b + kphi (eq. 2.1) with b ~ 0.1 m, so it matters ~1 % as much as kphi. For a track, kphi and
   n act only through the compaction resistance (eq. 2.10), one number per load, so only one of them
   is identifiable; the other is fixed.
-* Uncertainty: covariance of z = s^2 (J^T J)^-1 at the optimum (J the Jacobian of the raw residuals,
-  s^2 = sum r^2 / (m - p)); 95 % intervals z +- t(0.975, m - p) sigma_z mapped back to the parameter
-  (asymmetric for log parameters); covariance in the parameter's own units by the delta method; the
-  correlation matrix; a warning for every pair with |rho| > 0.95 (those two are seen only together).
+* Uncertainty: covariance of z = s^2 (J^T J)^-1 at the optimum (J the Jacobian of the scaled
+  residuals, s^2 = sum r^2 / (m - p)); 95 % intervals z +- t(0.975, m - p) sigma_z mapped back to the
+  parameter (asymmetric for log parameters); covariance in the parameter's own units by the delta
+  method; the correlation matrix; a warning for every pair with |rho| > 0.95.
+* Honesty: a fitted parameter whose 95 % interval leaves its physical range (z outside [0, 1]) is
+  "not identifiable" (the data do not fix it): it is put back at its start value and the others are
+  fitted again without it. A parameter that ends at a bound is "at_bound" (no estimate, no interval).
+  When the fitted values predict the hold-out segments worse than the start (a scaled residual RMS
+  grown by more than :data:`COST_WORSE`, or, where power is measured, an |energy error| grown by more
+  than :data:`ENERGY_WORSE`), the start is kept and the result says why.
+* ``fit='auto'`` (:func:`auto_fit_names`): the ground's parameters of the terrain's kind, and the
+  internal resistance where the recordings carry a torque; the screen above then keeps what the data
+  see; ``left_fixed`` names every candidate left at its start and why.
 * Validation: the segments are split into fit and hold-out sets by segment (never by sample, so the
   hold-out is not a neighbour of a fitted sample); the hold-out torque RMSE and energy error are
   reported before (starting terrain) and after (fitted).
@@ -54,7 +76,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import Segment
-from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
@@ -66,6 +88,13 @@ RHO_WARN = 0.95
 SOLVE_TOL_N = 1e-6  # FESS equilibrium tolerance during the fit [N, N m]
 DIFF_STEP = 2e-3  # forward-difference step in z (relative, scipy's diff_step)
 FAILED_RESIDUAL_NM = 1.0  # residual given to a segment where FESS has no steady state [N m]
+TORQUE_SCALE_SHARE = 0.05  # noise scale of a segment's mean torque: share of the RMS measured [-]
+SPEED_SCALE_M_S = 0.02  # noise scale of a steady window's mean forward speed [m/s] (ASSUMED)
+YAW_SCALE_RAD_S = 0.02  # noise scale of a steady window's mean yaw rate [rad/s] (ASSUMED)
+ENERGY_WORSE = 0.01  # a hold-out |energy error| grown by more than this is worse [-] (1 point)
+COST_WORSE = 0.01  # a hold-out scaled residual RMS grown by more than this share is worse [-]
+IDENT_TOL = 0.04  # a 10 % change moving the scaled residuals by less (RMS) is invisible [-]
+FIT_TO = ('torque', 'motion', 'both')  # what the residuals compare (module doc)
 
 
 @dataclass(frozen=True)
@@ -86,29 +115,43 @@ TERRAIN_PARAMS: dict[str, FitParameter] = {
     'c': FitParameter('Pa', True, (1.0, 5e4)),
     'phi': FitParameter('deg', False, (5.0, 50.0), math.pi / 180.0),
     'K': FitParameter('m', True, (1e-4, 0.2)),
+    # rigid ground (contact: rigid; ranges.py RIGID_FIELD_RANGES); mu_longitudinal is tan(phi)
+    'mu_longitudinal': FitParameter('-', False, (0.02, 2.0)),
+    'mu_lateral': FitParameter('-', False, (0.02, 2.0)),
+    'rolling_resistance': FitParameter('-', False, (0.0, 0.5)),
 }
+SOIL_PARAMS = ('kphi', 'kc', 'n', 'c', 'phi', 'K')
+RIGID_PARAMS = ('mu_longitudinal', 'mu_lateral', 'rolling_resistance', 'K')
 INTERNAL_PARAMS: dict[str, FitParameter] = {
     'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
     'left_c': FitParameter('N m', False, (0.0, 3.0)),
     'right_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
     'right_c': FitParameter('N m', False, (0.0, 3.0)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS}
+IDLE_PARAMS: dict[str, FitParameter] = {  # the drive electronics' idle power, both sides (battery side)
+    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),
+}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **IDLE_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
 
 def parse_fit_list(text: str) -> list[str]:
-    """Comma-separated names; ``internal`` expands to the four per-side b, c. InputError if unknown."""
+    """Comma-separated names; ``internal`` expands to the four per-side b, c; ``auto`` alone is
+    returned as ``['auto']`` (:func:`auto_fit_names` resolves it). InputError if unknown."""
+    if text.strip() == 'auto':
+        return ['auto']
     names: list[str] = []
     for raw in text.split(','):
         name = raw.strip()
         if not name:
             continue
-        expanded = list(INTERNAL_PARAMS) if name == 'internal' else [name]
+        expanded = (
+            list(INTERNAL_PARAMS) if name == 'internal' else ['idle_power_W'] if name == 'idle' else [name]
+        )
         for item in expanded:
             if item not in PARAMS:
-                known = ', '.join([*TERRAIN_PARAMS, 'internal'])
+                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'auto'])
                 raise InputError(f'--fit: unknown parameter {name!r} (known: {known})')
             if item not in names:
                 names.append(item)
@@ -117,9 +160,55 @@ def parse_fit_list(text: str) -> list[str]:
     return names
 
 
+def terrain_params(terrain: Terrain) -> tuple[str, ...]:
+    """The fittable parameters of ``terrain``'s kind: Bekker / Mohr-Coulomb / Janosi for a soil;
+    friction coefficients, rolling resistance and K for rigid ground."""
+    return RIGID_PARAMS if terrain.is_rigid else SOIL_PARAMS
+
+
+def auto_fit_names(
+    segments: Sequence[Segment], terrain: Terrain | None = None
+) -> tuple[list[str], dict[str, str]]:
+    """(candidates, {name: why left fixed}) of ``--fit auto`` for ``segments``: the ground's
+    parameters (of ``terrain``'s kind) always; the internal resistance only where the segments carry
+    a measured torque."""
+    if terrain is not None and terrain.is_rigid:
+        names, fixed = list(RIGID_PARAMS), {}
+    else:
+        names = list(DEFAULT_FIT)
+        fixed = {'kc': 'enters only as kc / b beside kphi (eq. 2.1): rarely visible, left at its start'}
+    torque = any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments)
+    power = any(math.isfinite(sum(s.battery_W)) for s in segments)
+    if torque or power:
+        names += list(INTERNAL_PARAMS)
+    else:
+        fixed.update({n: 'no measured torque, current or power in the recordings' for n in INTERNAL_PARAMS})
+    if power:
+        names += list(IDLE_PARAMS)
+    else:
+        fixed['idle_power_W'] = (
+            'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+        )
+    return names, fixed
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One parameter vector's predictions of every segment (S segments): motor torque (S, 2) [N m],
+    motor speed (S, 2) [rad/s], solved (S,), body speed (S,) [m/s], yaw rate (S,) [rad/s] and
+    battery-side electrical power per side (S, 2) [W]."""
+
+    torque: np.ndarray
+    omega: np.ndarray
+    ok: np.ndarray
+    speed: np.ndarray
+    yaw: np.ndarray
+    power: np.ndarray
+
+
 @dataclass
 class Model:
-    """Predicted motor torque and speed of every segment for a set of parameter values."""
+    """Predicted motor torque, speed and body motion of every segment for a set of parameter values."""
 
     vehicle: Vehicle
     terrain: Terrain
@@ -131,8 +220,10 @@ class Model:
 
     def start_value(self, name: str) -> float:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
-        if name in TERRAIN_PARAMS:
+        if name in TERRAIN_PARAMS:  # (mu_longitudinal: Terrain's property tan(phi))
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
+        if name in IDLE_PARAMS:
+            return float(getattr(self.powertrain, name, 0.0))
         side, kind = name.split('_')
         total = self.powertrain.resistance(side).total
         return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
@@ -143,6 +234,8 @@ class Model:
         terrain_fields: dict[str, Any] = {
             k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS
         }
+        if 'mu_longitudinal' in terrain_fields:  # rigid ground stores it as phi = atan(mu)
+            terrain_fields['phi'] = math.atan(terrain_fields.pop('mu_longitudinal'))
         terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
         powertrain = self.powertrain
 
@@ -154,23 +247,37 @@ class Model:
         left, right = side_with_values('left'), side_with_values('right')
         if left is not powertrain.left or right is not powertrain.right:
             powertrain = dataclasses.replace(powertrain, left=left, right=right)
+        if 'idle_power_W' in values:
+            powertrain = dataclasses.replace(powertrain, idle_power_W=values['idle_power_W'])
         return terrain, powertrain
 
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(motor torque (S, 2) [N m], motor speed (S, 2) [rad/s], converged (S,)) for ``values``."""
-        terrain, powertrain = self.with_values(values)
+        ev = self.evaluate(values)
+        return ev.torque, ev.omega, ev.ok
+
+    def evaluate(self, values: dict[str, float]) -> Evaluation:
+        """Every prediction of the segments for ``values`` (an unsolvable trial: NaN, not solved)."""
+        try:
+            terrain, powertrain = self.with_values(values)
+        except ConfigError:  # a trial outside the terrain's validity (e.g. rigid ground's K range)
+            return self._failed()
         try:
             if self.fit_at == 'setpoints':
                 return self._predict_setpoints(terrain, powertrain)
             return self._predict_motion(terrain, powertrain)
         except ConvergenceError:  # a trial terrain where FESS's contact has no solution at all
-            nan = np.full((len(self.speed), 2), np.nan)
-            return nan, nan.copy(), np.zeros(len(self.speed), dtype=bool)
+            return self._failed()
 
-    def _predict_motion(
-        self, terrain: Terrain, powertrain: Powertrain
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """As :meth:`predict`, FESS solved at the measured motion (``speed``, ``yaw``)."""
+    def _failed(self) -> Evaluation:
+        nan = np.full((len(self.speed), 2), np.nan)
+        none = np.full(len(self.speed), np.nan)
+        return Evaluation(
+            nan, nan.copy(), np.zeros(len(self.speed), dtype=bool), none, none.copy(), nan.copy()
+        )
+
+    def _predict_motion(self, terrain: Terrain, powertrain: Powertrain) -> Evaluation:
+        """As :meth:`evaluate`, FESS solved at the measured motion (``speed``, ``yaw``)."""
         sol = FessSolver(self.vehicle, terrain).solve_twist(
             self.speed, self.yaw, x0=self._warm, tol=SOLVE_TOL_N
         )
@@ -178,16 +285,17 @@ class Model:
             self._warm = sol.state
         torque = np.empty_like(sol.torque)
         omega = np.empty_like(sol.omega)
+        power = np.empty_like(sol.torque)
         for i, side in enumerate(('left', 'right')):
             point = powertrain.motor_side(side, sol.torque[:, i], sol.omega[:, i])
             torque[:, i] = point.motor_torque_Nm
             omega[:, i] = point.motor_omega_rad_s
-        return torque, omega, np.asarray(sol.converged)
+            power[:, i] = point.electrical_power_W
+        ok = np.asarray(sol.converged)
+        return Evaluation(torque, omega, ok, self.speed.copy(), self.yaw.copy(), power)
 
-    def _predict_setpoints(
-        self, terrain: Terrain, powertrain: Powertrain
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """As :meth:`predict` for commands (``speed``, ``yaw``) at their wheel speed set points, as
+    def _predict_setpoints(self, terrain: Terrain, powertrain: Powertrain) -> Evaluation:
+        """As :meth:`evaluate` for commands (``speed``, ``yaw``) at their wheel speed set points, as
         :class:`CommandPredictor` predicts them (its dug-in answer where FESS has no steady state is
         the node's prediction too, so every segment counts as solved)."""
         from skidsteer_power.models.predict import CommandPredictor
@@ -198,10 +306,13 @@ class Model:
         self._warm = np.where(sol.limited[:, None], np.nan, sol.state)  # dug in: start from no slip
         axle_torque, *_ = predictor.electrical(sol.torque, setpoints)
         torque, omega = np.empty_like(axle_torque), np.empty_like(axle_torque)
+        power = np.empty_like(axle_torque)
         for i, side in enumerate(('left', 'right')):
             point = powertrain.motor_side(side, axle_torque[:, i], setpoints[:, i])
             torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
-        return torque, omega, np.ones(len(torque), dtype=bool)
+            power[:, i] = point.electrical_power_W
+        ok = np.ones(len(torque), dtype=bool)
+        return Evaluation(torque, omega, ok, np.asarray(sol.speed), np.asarray(sol.yaw_rate), power)
 
 
 def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
@@ -254,29 +365,44 @@ class CalibrationResult:
     at_bound: dict[str, str] = field(default_factory=dict)  # fitted name -> 'lower' | 'upper'
     jacobian_z: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # residual Jacobian in z
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fitted values in search coordinates
-    residual_variance: float = math.nan  # s^2 [N m^2]
+    residual_variance: float = math.nan  # s^2 of the scaled residuals [-]
     setpoints: dict[str, float] = field(default_factory=dict)
     fit_at: str = 'motion'
+    fit_to: str = 'torque'
+    not_identifiable: dict[str, str] = field(default_factory=dict)  # name -> why (interval, screen)
+    left_fixed: dict[str, str] = field(default_factory=dict)  # candidate -> why it was not fitted
+    kept_start: str = ''  # why the start was kept (empty: the fit was kept)
+    motion: dict[str, float] = field(default_factory=dict)  # hold-out motion errors before / after
+
+    def status(self, name: str) -> str:
+        """'fitted', 'fixed', 'fixed: not identifiable', 'not identifiable', 'at_bound (lower|upper)'
+        or 'kept start' (the fit made the hold-out worse)."""
+        if self.kept_start and name in self.names:
+            return 'kept start'
+        if name in self.at_bound:
+            return f'at_bound ({self.at_bound[name]})'
+        if name in self.not_identifiable:
+            return 'not identifiable'
+        if name not in self.names:
+            return 'fixed' if self.identifiable.get(name, True) else 'fixed: not identifiable'
+        return 'fitted'
 
     def as_json(self) -> dict[str, Any]:
         parameters = {}
         for name in self.values:
             ci = self.ci95.get(name)
-            status = 'fixed' if name not in self.names else 'fitted'
-            if name in self.at_bound:
-                status = f'at_bound ({self.at_bound[name]})'
-            elif not self.identifiable.get(name, True):
-                status = 'fixed: not identifiable'
             parameters[name] = {
                 'value': self.values[name],
                 'ci95': list(ci) if ci is not None else None,
-                'status': status,
+                'status': self.status(name),
                 'at_bound': name in self.at_bound,
                 'unit': PARAMS[name].unit,
-                'fitted': name in self.names,
-                'identifiable': self.identifiable.get(name, True),
+                'range': list(PARAMS[name].bounds),
+                'fitted': name in self.names and not self.kept_start,
+                'identifiable': self.identifiable.get(name, True) and name not in self.not_identifiable,
                 'start': self.start[name],
                 'sensitivity_Nm': self.sensitivity_Nm.get(name),
+                'why': self.not_identifiable.get(name) or self.left_fixed.get(name),
             }
         return {
             'parameters': parameters,
@@ -297,16 +423,43 @@ class CalibrationResult:
             'at_bound': sorted(self.at_bound),
             'converged_inside_bounds': self.converged and not self.at_bound,
             'fit_at': self.fit_at,
+            'fit_to': self.fit_to,
+            'not_identifiable': dict(self.not_identifiable),
+            'left_fixed': dict(self.left_fixed),
+            'kept_start': self.kept_start or None,
+            'motion': dict(self.motion),
             'setpoints': self.setpoints,
         }
 
 
+def _u_bounds(name: str) -> tuple[float, float]:
+    lo, hi = PARAMS[name].bounds
+    return (math.log(lo), math.log(hi)) if PARAMS[name].log else (lo, hi)
+
+
 def _to_z(name: str, value: float) -> float:
-    return math.log(value) if PARAMS[name].log else value
+    """Search coordinate z in [0, 1] of ``value`` (parameter units; clipped to its range)."""
+    lo, hi = PARAMS[name].bounds
+    v = min(max(value, lo), hi)
+    u_lo, u_hi = _u_bounds(name)
+    u = math.log(v) if PARAMS[name].log else v
+    return (u - u_lo) / (u_hi - u_lo)
 
 
 def _from_z(name: str, z: float) -> float:
-    return math.exp(z) if PARAMS[name].log else z
+    """Parameter value of search coordinate ``z`` (clipped to [0, 1] first: never beyond the range,
+    never an overflow)."""
+    u_lo, u_hi = _u_bounds(name)
+    zc = min(max(float(z), 0.0), 1.0) if math.isfinite(z) else (1.0 if z > 0 else 0.0)
+    u = u_lo + zc * (u_hi - u_lo)
+    lo, hi = PARAMS[name].bounds
+    return min(max(math.exp(u) if PARAMS[name].log else u, lo), hi)  # exactly inside (exp's rounding)
+
+
+def _dvalue_dz(name: str, value: float) -> float:
+    """d value / d z at ``value`` [parameter unit per z unit] (the delta method's factor)."""
+    u_lo, u_hi = _u_bounds(name)
+    return (u_hi - u_lo) * (value if PARAMS[name].log else 1.0)
 
 
 def _values(names: Sequence[str], z: np.ndarray) -> dict[str, float]:
@@ -318,11 +471,11 @@ def select_identifiable(
 ) -> tuple[list[str], dict[str, float]]:
     """Which of ``fit`` the data can see, by orthogonalization (Yao et al. 2003).
 
-    ``columns`` maps every candidate to the torque change [N m] (all segments and sides) of a 10 %
-    change of it. Greedily pick the ``fit`` parameter whose change is largest after removing what the
-    already picked ones can explain (least-squares projection); stop when the largest unexplained RMS
-    is below ``tol`` [N m]. Returns (picked names in ``fit`` order, unexplained RMS of every
-    candidate against the picked set: for a picked one, against the others picked before it).
+    ``columns`` maps every candidate to the residual change (all observations) of a 10 % change of
+    it. Greedily pick the ``fit`` parameter whose change is largest after removing what the already
+    picked ones can explain (least-squares projection); stop when the largest unexplained RMS is below
+    ``tol``. Returns (picked names in ``fit`` order, unexplained RMS of every candidate against the
+    picked set: for a picked one, against the others picked before it).
     """
     picked: list[str] = []
     basis = np.zeros((next(iter(columns.values())).size, 0))
@@ -350,16 +503,16 @@ def select_identifiable(
     return [n for n in fit if n in picked], unexplained
 
 
-BOUND_TOL_Z = 1e-4  # a fitted z this close to a bound (in z units) is at it
+BOUND_TOL_Z = 1e-4  # a fitted z this close to 0 or 1 is at its bound
 
 
-def bound_hits(names: Sequence[str], z: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> dict[str, str]:
-    """Fitted parameters whose search coordinate ended at (within :data:`BOUND_TOL_Z` of) a bound."""
+def bound_hits(names: Sequence[str], z: np.ndarray) -> dict[str, str]:
+    """Fitted parameters whose search coordinate ended within :data:`BOUND_TOL_Z` of 0 or 1."""
     hits = {}
-    for name, value, lo, hi in zip(names, z, lower, upper, strict=True):
-        if math.isfinite(lo) and value - lo <= BOUND_TOL_Z * max(1.0, abs(lo)):
+    for name, value in zip(names, z, strict=True):
+        if value <= BOUND_TOL_Z:
             hits[name] = 'lower'
-        elif math.isfinite(hi) and hi - value <= BOUND_TOL_Z * max(1.0, abs(hi)):
+        elif value >= 1.0 - BOUND_TOL_Z:
             hits[name] = 'upper'
     return hits
 
@@ -375,133 +528,271 @@ def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
     return np.sort(order[n_hold:]), np.sort(order[:n_hold])
 
 
-def _energy_error(
-    segments: Sequence[Segment], idx: np.ndarray, torque: np.ndarray, omega: np.ndarray, motor: Any
-) -> float:
-    """Signed relative error of the summed terminal energy of segments ``idx`` [-] (predicted vs measured)."""
+def _energy_error(segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: Any) -> float:
+    """Signed relative error of the summed energy of segments ``idx`` [-] (predicted vs measured):
+    the battery-side energy where the segments measured it (V x I), else the motor terminal energy
+    (K_t i); NaN where no segment of ``idx`` measured either."""
     if idx.size == 0:
         return math.nan
-    duration = np.array([segments[i].duration_s for i in idx])
-    measured = np.array([sum(segments[i].terminal_W) for i in idx]) @ duration
-    predicted = np.sum(np.asarray(terminal_power(motor, torque[idx], omega[idx])), axis=1) @ duration
+    battery = np.array([sum(segments[i].battery_W) for i in idx])
+    if np.any(np.isfinite(battery)):
+        measured_w, predicted_w = battery, np.sum(ev.power[idx], axis=1)
+    else:
+        measured_w = np.array([sum(segments[i].terminal_W) for i in idx])
+        predicted_w = np.sum(np.asarray(terminal_power(motor, ev.torque[idx], ev.omega[idx])), axis=1)
+    keep = np.isfinite(measured_w)
+    if not np.any(keep):
+        return math.nan
+    duration = np.array([segments[i].duration_s for i in idx])[keep]
+    measured = measured_w[keep] @ duration
+    predicted = predicted_w[keep] @ duration
     return float((predicted - measured) / measured) if measured != 0 else math.nan
 
 
 def _rmse(err: np.ndarray) -> float:
+    err = err[np.isfinite(err)] if err.size else err
     return float(np.sqrt(np.mean(err**2))) if err.size else math.nan
 
 
-def calibrate(
+@dataclass
+class FitData:
+    """The measurements of a calibration and their noise scales (module doc, "Residuals")."""
+
+    segments: list[Segment]
+    model: Model
+    fit_idx: np.ndarray
+    hold_idx: np.ndarray
+    measured: np.ndarray  # (S, 2) motor torque [N m] (NaN: none recorded)
+    motion: np.ndarray  # (S, 2) measured V [m/s], yaw rate [rad/s] (NaN: none measured)
+    fit_to: str
+    torque_scale_Nm: float
+    start: dict[str, float]
+    candidates: list[str]
+    battery: np.ndarray  # (S, 2) measured battery-side power per side [W] (NaN: not measured)
+    power_scale_W: float = 1.0
+
+    def residuals(self, ev: Evaluation, idx: np.ndarray) -> np.ndarray:
+        """Scaled residuals of segments ``idx`` (fixed length; a missing measurement gives 0)."""
+        parts = []
+        if self.fit_to in ('torque', 'both'):
+            err = (ev.torque[idx] - self.measured[idx]) / self.torque_scale_Nm
+            failed = ~ev.ok[idx][:, None] | ~np.isfinite(ev.torque[idx])
+            err = np.where(failed, FAILED_RESIDUAL_NM / self.torque_scale_Nm, err)
+            parts.append(np.where(np.isfinite(self.measured[idx]), err, 0.0).ravel())
+            err = (ev.power[idx] - self.battery[idx]) / self.power_scale_W
+            err = np.where(~ev.ok[idx][:, None] | ~np.isfinite(ev.power[idx]), FAILED_RESIDUAL_NM / 0.05, err)
+            parts.append(np.where(np.isfinite(self.battery[idx]), err, 0.0).ravel())
+        if self.fit_to in ('motion', 'both'):
+            pred = np.column_stack([ev.speed[idx], ev.yaw[idx]])
+            err = (pred - self.motion[idx]) / np.array([SPEED_SCALE_M_S, YAW_SCALE_RAD_S])
+            err = np.where(np.isfinite(pred), err, FAILED_RESIDUAL_NM / SPEED_SCALE_M_S)
+            parts.append(np.where(np.isfinite(self.motion[idx]), err, 0.0).ravel())
+        out: np.ndarray = np.nan_to_num(np.concatenate(parts), nan=0.0, posinf=1e6, neginf=-1e6)
+        return out
+
+    def observations(self, idx: np.ndarray) -> int:
+        """How many measured numbers segments ``idx`` give the residuals."""
+        count = 0
+        if self.fit_to in ('torque', 'both'):
+            count += int(np.isfinite(self.measured[idx]).sum()) + int(np.isfinite(self.battery[idx]).sum())
+        if self.fit_to in ('motion', 'both'):
+            count += int(np.isfinite(self.motion[idx]).sum())
+        return count
+
+
+def prepare(
     vehicle: Vehicle,
     terrain: Terrain,
     powertrain: Powertrain,
     segments: Sequence[Segment],
-    fit: Sequence[str] = DEFAULT_FIT,
+    fit: Sequence[str],
     *,
-    holdout: float = 0.3,
-    seed: int = 0,
-    ident_tol_Nm: float | None = None,
-    dropped: dict[str, int] | None = None,
-    fit_at: str = 'setpoints',
-) -> CalibrationResult:
-    """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method
-    and for ``fit_at`` ('setpoints': the commands at their set points, 'motion': the measured motion).
-
-    ``ident_tol_Nm`` : RMS torque change [N m] below which a 10 % parameter change counts as
-    invisible (None: 0.2 % of the RMS measured torque, at least 1e-3 N m).
-    """
-    started = time.perf_counter()
+    holdout: float,
+    seed: int,
+    fit_at: str,
+    fit_to: str,
+) -> FitData:
+    """Step 1: the hold-out split, the segment model, the measurements and the start values."""
     if fit_at not in FIT_AT:
         raise InputError(f'--fit-at must be one of {", ".join(FIT_AT)}, not {fit_at!r}')
+    if fit_to not in FIT_TO:
+        raise InputError(f'fit_to must be one of {", ".join(FIT_TO)}, not {fit_to!r}')
     segments = list(segments)
     fit_idx, hold_idx = split_holdout(len(segments), holdout, seed)
     model = segment_model(vehicle, terrain, powertrain, segments, fit_at)
-    measured = np.array([s.motor_torque_Nm for s in segments])
-    candidates = list(dict.fromkeys([*fit, *[k for k in TERRAIN_PARAMS if k not in fit]]))
+    measured = np.array([s.motor_torque_Nm for s in segments], dtype=float).reshape(-1, 2)
+    motion = np.array(
+        [
+            (s.speed_m_s, s.yaw_rate_rad_s) if s.motion_source != 'command' else (math.nan,) * 2
+            for s in segments
+        ],
+        dtype=float,
+    ).reshape(-1, 2)
+    battery = np.array([s.battery_W for s in segments], dtype=float).reshape(-1, 2)
+    if fit_to != 'motion' and not np.any(np.isfinite(measured)) and not np.any(np.isfinite(battery)):
+        raise InputError(
+            'the segments carry no measured torque, current or power: fit the motion (--fit auto)'
+        )
+    if fit_to != 'torque' and not np.any(np.isfinite(motion)):
+        raise InputError('the segments carry no measured motion (no odometry, pose or yaw-rate topic)')
+    if fit_to != 'torque' and fit_at != 'setpoints':
+        raise InputError('a motion fit predicts the motion at the set points: --fit-at setpoints')
+    finite = measured[np.isfinite(measured)]
+    rms = float(np.sqrt(np.mean(finite**2))) if finite.size else 1.0
+    kind = terrain_params(terrain)
+    wrong = [n for n in fit if n in TERRAIN_PARAMS and n not in kind]
+    if wrong:
+        ground = 'rigid ground' if terrain.is_rigid else 'a soil'
+        raise InputError(f'--fit: {", ".join(wrong)} is no parameter of {ground} (its: {", ".join(kind)})')
+    candidates = list(dict.fromkeys([*fit, *[k for k in kind if k not in fit]]))
     start = {n: model.start_value(n) for n in candidates}
     for name in fit:
         lo, hi = PARAMS[name].bounds
         if not lo <= start[name] <= hi:
             raise InputError(
                 f'starting {name} = {start[name]:.6g} {PARAMS[name].unit} '
-                f'is outside the fit bounds [{lo:g}, {hi:g}]'
+                f'is outside its physical range [{lo:g}, {hi:g}]'
             )
-    # sensitivity of the torques to a 10 % change of every candidate, at the start
-    base_torque, base_omega, base_ok = model.predict({})
-    if not np.all(base_ok):
-        bad = np.flatnonzero(~base_ok)
+    scale = max(1e-3, TORQUE_SCALE_SHARE * rms)
+    measured_w = battery[np.isfinite(battery)]
+    power_scale = (
+        max(0.1, TORQUE_SCALE_SHARE * float(np.sqrt(np.mean(measured_w**2)))) if measured_w.size else 1.0
+    )
+    return FitData(
+        segments,
+        model,
+        fit_idx,
+        hold_idx,
+        measured,
+        motion,
+        fit_to,
+        scale,
+        start,
+        candidates,
+        battery,
+        power_scale,
+    )
+
+
+@dataclass
+class Screen:
+    """Step 2's answer: the start's predictions, what each candidate moves and what the data see."""
+
+    base: Evaluation
+    sensitivity_Nm: dict[str, float]
+    identifiable: dict[str, bool]
+    names: list[str]
+    unexplained: dict[str, float]
+
+
+def screen(data: FitData, fit: Sequence[str], tol: float) -> Screen:
+    """Step 2: solve the start; the change of the scaled residuals under a 10 % change of every
+    candidate; :func:`select_identifiable` picks what the data see (``tol``, scaled RMS)."""
+    model = data.model
+    base = model.evaluate({})
+    if not np.all(base.ok):
+        bad = np.flatnonzero(~base.ok)
         raise InputError(
             f'FESS has no steady state on the starting terrain for {bad.size} segment(s), e.g. '
             f'V = {model.speed[bad[0]]:.3g} m/s, yaw rate {model.yaw[bad[0]]:.3g} rad/s: '
             'choose a closer --terrain'
         )
-    rms_measured = float(np.sqrt(np.mean(measured**2)))
-    tol = ident_tol_Nm if ident_tol_Nm is not None else max(1e-3, 0.002 * rms_measured)
+    every = np.arange(len(data.segments))
+    base_r = data.residuals(base, every)
     columns: dict[str, np.ndarray] = {}
-    for name in candidates:
-        step = 0.1 * start[name] if start[name] != 0 else 0.01
-        torque, _, ok = model.predict({name: start[name] + step})
-        columns[name] = np.where(ok[:, None], torque - base_torque, 0.0).ravel()
-    sensitivity = {n: _rmse(col) for n, col in columns.items()}
+    sensitivity: dict[str, float] = {}
+    for name in data.candidates:
+        value = data.start[name]
+        lo, hi = PARAMS[name].bounds
+        trial = value + (0.1 * value if value != 0 else 0.01 * (hi - lo))
+        trial = trial if trial <= hi else value - 0.1 * value  # stay inside the range
+        ev = model.evaluate({name: trial})
+        columns[name] = data.residuals(ev, every) - base_r
+        torque_change = np.where(ev.ok[:, None], ev.torque - base.torque, 0.0)
+        sensitivity[name] = _rmse(torque_change.ravel())
     names, unexplained = select_identifiable(columns, fit, tol)
-    identifiable = {n: bool(unexplained[n] >= tol) for n in candidates}
-    if not names:
-        raise InputError('no parameter in --fit changes the predicted torque visibly on these segments')
-    m, p = 2 * fit_idx.size, len(names)
-    if m <= p:
-        raise InputError(f'{fit_idx.size} fit segment(s) give {m} torques: too few for {p} parameters')
+    identifiable = {n: bool(unexplained[n] >= tol) for n in data.candidates}
+    return Screen(base, sensitivity, identifiable, names, unexplained)
 
-    z0 = np.array([_to_z(n, start[n]) for n in names])
-    lower = np.array(
-        [
-            _to_z(n, PARAMS[n].bounds[0]) if PARAMS[n].bounds[0] > 0 or not PARAMS[n].log else -np.inf
-            for n in names
-        ]
-    )
-    upper = np.array([_to_z(n, PARAMS[n].bounds[1]) for n in names])
-    z0 = np.clip(z0, lower + 1e-9, upper - 1e-9)
+
+@dataclass
+class Optimum:
+    """Step 3's answer: fitted names, z, scaled residuals and Jacobian, success."""
+
+    names: list[str]
+    z: np.ndarray
+    residuals: np.ndarray
+    jac: np.ndarray
+    success: bool
+
+
+def optimize_z(data: FitData, names: Sequence[str], f_scale: float) -> Optimum:
+    """Step 3: robust least squares over the fit segments in z in [0, 1] (module doc, "Method")."""
+    names = list(names)
+    p = len(names)
+    z0 = np.clip([_to_z(n, data.start[n]) for n in names], 1e-6, 1.0 - 1e-6)
 
     def residuals(z: np.ndarray) -> np.ndarray:
-        torque, _, ok = model.predict(_values(names, z))
-        err = torque[fit_idx] - measured[fit_idx]
-        err[~ok[fit_idx]] = FAILED_RESIDUAL_NM
-        flat: np.ndarray = err.ravel()
-        return flat
+        return data.residuals(data.model.evaluate(_values(names, z)), data.fit_idx)
 
     sol = optimize.least_squares(
         residuals,
         z0,
-        bounds=(lower, upper),
+        bounds=(np.zeros(p), np.ones(p)),
         loss='soft_l1',
-        f_scale=max(tol, 0.02 * rms_measured),
+        f_scale=f_scale,
         x_scale='jac',
         diff_step=DIFF_STEP,
         method='trf',
         max_nfev=60 * (p + 1),
     )
-    fitted = _values(names, sol.x)
-    r = residuals(sol.x)
-    jac = sol.jac
-    at_bound = bound_hits(names, sol.x, lower, upper)
-    free = np.array([n not in at_bound for n in names])
-    dof = max(1, m - int(free.sum()))
-    s2 = float(r @ r) / dof
+    return Optimum(names, np.asarray(sol.x), residuals(sol.x), np.asarray(sol.jac), bool(sol.success))
+
+
+@dataclass
+class Uncertainty:
+    """Step 4's answer (module doc, "Uncertainty" and "Honesty")."""
+
+    ci95: dict[str, tuple[float, float] | None]
+    covariance: np.ndarray
+    correlation: np.ndarray
+    at_bound: dict[str, str]
+    leaves_range: dict[str, str]  # name -> why: its interval leaves the physical range
+    s2: float
+    warnings: list[str]
+
+
+def uncertainty(opt: Optimum, observations: int) -> Uncertainty:
+    """Step 4: covariance, 95 % intervals, bounds, and the intervals that leave the physical range."""
+    names, p = opt.names, len(opt.names)
+    fitted = _values(names, opt.z)
+    at_bound = bound_hits(names, opt.z)
+    free = np.array([n not in at_bound for n in names], dtype=bool)
+    dof = max(1, observations - int(free.sum()))
+    s2 = float(opt.residuals @ opt.residuals) / dof
     # a parameter pinned at a bound is no estimate: no interval, and the others' covariance is that
     # of the free parameters with it held (the Jacobian's pinned columns dropped)
     cov_z = np.zeros((p, p))
-    cov_z[np.ix_(free, free)] = s2 * np.linalg.pinv(jac[:, free].T @ jac[:, free])
-    sigma_z = np.sqrt(np.clip(np.diag(cov_z), 0.0, None))
+    if np.any(free):
+        cov_z[np.ix_(free, free)] = s2 * np.linalg.pinv(opt.jac[:, free].T @ opt.jac[:, free])
+    sigma_z = np.sqrt(np.clip(np.nan_to_num(np.diag(cov_z), nan=np.inf), 0.0, None))
     t = float(stats.t.ppf(0.975, dof))
     ci95: dict[str, tuple[float, float] | None] = {}
-    deriv = np.empty(p)
+    leaves: dict[str, str] = {}
     for k, name in enumerate(names):
-        deriv[k] = fitted[name] if PARAMS[name].log else 1.0
+        ci95[name] = None
         if name in at_bound:
-            ci95[name] = None
             continue
-        lo = _from_z(name, sol.x[k] - t * sigma_z[k])
-        hi = _from_z(name, sol.x[k] + t * sigma_z[k])
-        ci95[name] = (lo, hi)
+        z_lo, z_hi = opt.z[k] - t * sigma_z[k], opt.z[k] + t * sigma_z[k]
+        if not (z_lo >= 0.0 and z_hi <= 1.0):  # also catches a NaN or infinite sigma
+            lo, hi = PARAMS[name].bounds
+            leaves[name] = (
+                f'its 95 % interval (+- {t * sigma_z[k] * 100:.3g} % of the range in search coordinates) '
+                f'leaves the physical range [{lo:g}, {hi:g}] {PARAMS[name].unit}'
+            )
+            continue
+        ci95[name] = (_from_z(name, z_lo), _from_z(name, z_hi))
+    deriv = np.array([_dvalue_dz(n, fitted[n]) for n in names])
     covariance = cov_z * np.outer(deriv, deriv)  # delta method, parameter units
     with np.errstate(invalid='ignore', divide='ignore'):
         correlation = cov_z / np.outer(sigma_z, sigma_z)
@@ -520,51 +811,193 @@ def calibrate(
             'the data push it beyond; it is no estimate and has no interval (a closer --terrain, or other '
             'drives)'
         )
-    after_torque, after_omega, after_ok = model.predict(fitted)
-    err_idx = hold_idx if hold_idx.size else fit_idx
-    values = {n: fitted.get(n, start[n]) for n in candidates}
-    for n in candidates:
-        ci95.setdefault(n, None)
-    terrain_fit, powertrain_fit = model.with_values(fitted)
-    before_error = _energy_error(segments, hold_idx, base_torque, base_omega, powertrain.motor)
-    after_error = _energy_error(segments, hold_idx, after_torque, after_omega, powertrain_fit.motor)
-    if abs(after_error) > abs(before_error):
-        warnings.append(
-            f'the hold-out energy error grew with calibrating ({before_error:+.1%} -> {after_error:+.1%} '
-            f'at the {fit_at}): the fit segments do not represent the hold-out ones (more, or other, drives)'
+    return Uncertainty(ci95, covariance, correlation, at_bound, leaves, s2, warnings)
+
+
+@dataclass
+class Assessment:
+    """Step 5's answer: hold-out before / after, and whether the start is kept."""
+
+    after: Evaluation
+    energy_before: float
+    energy_after: float
+    cost_before: float
+    cost_after: float
+    motion: dict[str, float]
+    kept_start: str
+
+
+def _motion_errors(data: FitData, ev: Evaluation, idx: np.ndarray) -> tuple[float, float]:
+    """(V MAE [m/s], yaw rate MAE [rad/s]) of ``ev`` on segments ``idx`` with a measured motion."""
+    pred = np.column_stack([ev.speed, ev.yaw])[idx]
+    err = np.abs(pred - data.motion[idx])
+    out = []
+    for k in range(2):
+        col = err[:, k][np.isfinite(err[:, k])]
+        out.append(float(col.mean()) if col.size else math.nan)
+    return out[0], out[1]
+
+
+def assess(data: FitData, base: Evaluation, fitted: dict[str, float]) -> Assessment:
+    """Step 5: the hold-out (the fit segments without one) before and after; the start is kept when
+    the fit predicts it worse (scaled RMS, or |energy error| where power is measured)."""
+    model, segments = data.model, data.segments
+    after = model.evaluate(fitted)
+    idx = data.hold_idx if data.hold_idx.size else data.fit_idx
+    _, powertrain_fit = model.with_values(fitted)
+    energy_before = _energy_error(segments, data.hold_idx, base, model.powertrain.motor)
+    energy_after = _energy_error(segments, data.hold_idx, after, powertrain_fit.motor)
+    cost_before = _rmse(data.residuals(base, idx))
+    cost_after = _rmse(data.residuals(after, idx))
+    v0, w0 = _motion_errors(data, base, idx)
+    v1, w1 = _motion_errors(data, after, idx)
+    motion = {'speed_mae_before_m_s': v0, 'speed_mae_after_m_s': v1, 'yaw_mae_before_rad_s': w0,
+              'yaw_mae_after_rad_s': w1}  # fmt: skip
+    which = 'hold-out' if data.hold_idx.size else 'fit'
+    kept = ''
+    if math.isfinite(energy_before) and abs(energy_after) > abs(energy_before) + ENERGY_WORSE:
+        kept = (
+            f'the fit predicted the {which} segments worse than the start (energy error '
+            f'{energy_before:+.1%} -> {energy_after:+.1%}): the start is kept'
         )
+    elif cost_after > cost_before * (1.0 + COST_WORSE):
+        kept = (
+            f'the fit predicted the {which} segments worse than the start (scaled residual RMS '
+            f'{cost_before:.3g} -> {cost_after:.3g}): the start is kept'
+        )
+    return Assessment(after, energy_before, energy_after, cost_before, cost_after, motion, kept)
+
+
+def calibrate(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    powertrain: Powertrain,
+    segments: Sequence[Segment],
+    fit: Sequence[str] = DEFAULT_FIT,
+    *,
+    holdout: float = 0.3,
+    seed: int = 0,
+    ident_tol_Nm: float | None = None,
+    dropped: dict[str, int] | None = None,
+    fit_at: str = 'setpoints',
+    fit_to: str = 'torque',
+    left_fixed: dict[str, str] | None = None,
+) -> CalibrationResult:
+    """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method,
+    for ``fit_at`` ('setpoints': the commands at their set points, 'motion': the measured motion) and
+    ``fit_to`` ('torque', 'motion' or 'both': what the residuals compare, :data:`FIT_TO`).
+
+    ``ident_tol_Nm`` : RMS torque change [N m] below which a 10 % parameter change counts as
+    invisible (None: :data:`IDENT_TOL` noise scales, 0.2 % of the RMS measured torque).
+    ``left_fixed`` : candidates already left at their start, with why (``--fit auto``).
+    """
+    started = time.perf_counter()
+    data = prepare(
+        vehicle, terrain, powertrain, segments, fit, holdout=holdout, seed=seed, fit_at=fit_at, fit_to=fit_to
+    )
+    tol = ident_tol_Nm / data.torque_scale_Nm if ident_tol_Nm is not None else IDENT_TOL
+    scr = screen(data, fit, tol)
+    if not scr.names:
+        raise InputError('no parameter in --fit changes the prediction visibly on these segments')
+    observations = data.observations(data.fit_idx)
+    if observations <= len(scr.names):
+        raise InputError(
+            f'{data.fit_idx.size} fit segment(s) give {observations} measurement(s): '
+            f'too few for {len(scr.names)} parameters'
+        )
+    opt = optimize_z(data, scr.names, f_scale=1.0)
+    unc = uncertainty(opt, observations)
+    if unc.leaves_range and len(unc.leaves_range) < len(opt.names):  # refit without them
+        opt = optimize_z(data, [n for n in opt.names if n not in unc.leaves_range], f_scale=1.0)
+        leaves = unc.leaves_range
+        unc = uncertainty(opt, observations)
+        unc.leaves_range = {**leaves, **unc.leaves_range}
+    fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
+    check = assess(data, scr.base, fitted)
+    return _result(data, scr, opt, unc, check, fitted, fit, tol, dropped, left_fixed, started)
+
+
+def _result(
+    data: FitData,
+    scr: Screen,
+    opt: Optimum,
+    unc: Uncertainty,
+    check: Assessment,
+    fitted: dict[str, float],
+    fit: Sequence[str],
+    tol: float,
+    dropped: dict[str, int] | None,
+    left_fixed: dict[str, str] | None,
+    started: float,
+) -> CalibrationResult:
+    """Step 6: the :class:`CalibrationResult` (the start's terrain and powertrain if it was kept)."""
+    model, start = data.model, data.start
+    warnings = list(unc.warnings)
+    for name, why in unc.leaves_range.items():
+        warnings.append(f'{name} is not identifiable: {why}; left at its start {start[name]:.6g}')
+    if check.kept_start:
+        warnings.append(check.kept_start)
+        fitted_used: dict[str, float] = {}
+        after = scr.base
+    else:
+        fitted_used, after = fitted, check.after
+    values = {n: fitted_used.get(n, start[n]) for n in data.candidates}
+    ci95 = {n: (unc.ci95.get(n) if not check.kept_start else None) for n in data.candidates}
+    terrain_fit, powertrain_fit = model.with_values(fitted_used)
+    why_fixed = dict(left_fixed or {})
+    for name in data.candidates:
+        if name not in fit:
+            why_fixed.setdefault(name, 'not in --fit')
+        elif name not in scr.names:
+            why_fixed[name] = (
+                f'not identifiable: a 10 % change moves the prediction by {scr.unexplained[name]:.3g} '
+                f'noise scales (RMS, after what the others explain), below {tol:.3g}'
+            )
+        else:
+            why_fixed.pop(name, None)
+    err_idx = data.hold_idx if data.hold_idx.size else data.fit_idx
+    names = list(opt.names)
+    keep = list(range(len(names)))
+    torque_r = (after.torque - data.measured)[data.fit_idx]
     return CalibrationResult(
         names=names,
         values=values,
-        start=start,
+        start=dict(start),
         ci95=ci95,
-        sensitivity_Nm=sensitivity,
-        identifiable=identifiable,
-        covariance=covariance,
-        correlation=correlation,
+        sensitivity_Nm=scr.sensitivity_Nm,
+        identifiable=scr.identifiable,
+        covariance=unc.covariance[np.ix_(keep, keep)],
+        correlation=unc.correlation[np.ix_(keep, keep)],
         correlations_warnings=warnings,
-        segments_fit=int(fit_idx.size),
-        segments_holdout=int(hold_idx.size),
-        torque_rmse_before_Nm=_rmse(base_torque[err_idx] - measured[err_idx]),
-        torque_rmse_after_Nm=_rmse(after_torque[err_idx] - measured[err_idx]),
-        holdout_energy_error_before=before_error,
-        holdout_energy_error_after=after_error,
-        residual_rms_Nm=_rmse(r),
+        segments_fit=int(data.fit_idx.size),
+        segments_holdout=int(data.hold_idx.size),
+        torque_rmse_before_Nm=_rmse((scr.base.torque - data.measured)[err_idx].ravel()),
+        torque_rmse_after_Nm=_rmse((after.torque - data.measured)[err_idx].ravel()),
+        holdout_energy_error_before=check.energy_before,
+        holdout_energy_error_after=check.energy_before if check.kept_start else check.energy_after,
+        residual_rms_Nm=_rmse(torque_r.ravel()),
         seconds=time.perf_counter() - started,
         terrain=terrain_fit,
         powertrain=powertrain_fit,
         dropped=dict(dropped or {}),
-        converged=bool(sol.success) and bool(np.all(after_ok)),
-        at_bound=at_bound,
-        jacobian_z=np.asarray(jac),
-        z=np.asarray(sol.x),
-        residual_variance=s2,
-        measured_Nm=measured,
-        before_Nm=base_torque,
-        after_Nm=after_torque,
-        holdout_index=hold_idx,
-        setpoints=setpoint_check(vehicle, terrain_fit, powertrain_fit, segments, measured, err_idx, hold_idx),
-        fit_at=fit_at,
+        converged=opt.success and bool(np.all(after.ok)),
+        at_bound=unc.at_bound,
+        jacobian_z=opt.jac,
+        z=opt.z,
+        residual_variance=unc.s2,
+        measured_Nm=data.measured,
+        before_Nm=scr.base.torque,
+        after_Nm=after.torque,
+        holdout_index=data.hold_idx,
+        setpoints=setpoint_check(
+            model.vehicle, terrain_fit, powertrain_fit, data.segments, data.measured, err_idx, data.hold_idx
+        ),
+        fit_at=model.fit_at,
+        fit_to=data.fit_to,
+        not_identifiable=dict(unc.leaves_range),
+        left_fixed=why_fixed,
+        kept_start=check.kept_start,
+        motion=check.motion,
     )
 
 
@@ -605,9 +1038,12 @@ def setpoint_check(
     pred = CommandPredictor(vehicle, terrain, powertrain).predict(commands[:, 0], commands[:, 1])
     torque = np.empty_like(pred.torque)
     omega = np.empty_like(pred.torque)
+    power = np.empty_like(pred.torque)
     for i, side in enumerate(('left', 'right')):
         point = powertrain.motor_side(side, pred.torque[:, i], pred.setpoint[:, i])
         torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+        power[:, i] = point.electrical_power_W
+    ev = Evaluation(torque, omega, np.ones(len(torque), bool), pred.speed, pred.yaw_rate, power)
     speed = np.array([seg.speed_m_s for seg in segments])
     yaw = np.array([seg.yaw_rate_rad_s for seg in segments])
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -615,8 +1051,14 @@ def setpoint_check(
         yaw_err = np.abs(pred.yaw_rate - yaw) / np.abs(yaw)
     return {
         'torque_rmse_Nm': _rmse(torque[err_idx] - measured[err_idx]),
-        'holdout_energy_error': _energy_error(segments, hold_idx, torque, omega, powertrain.motor),
-        'speed_error_median': float(np.nanmedian(np.where(np.abs(speed) > 1e-3, speed_err, np.nan))),
-        'yaw_rate_error_median': float(np.nanmedian(np.where(np.abs(yaw) > 1e-3, yaw_err, np.nan))),
+        'holdout_energy_error': _energy_error(segments, hold_idx, ev, powertrain.motor),
+        'speed_error_median': _median(speed_err[np.abs(speed) > 1e-3]),
+        'yaw_rate_error_median': _median(yaw_err[np.abs(yaw) > 1e-3]),
         'limited_segments': int(np.sum(pred.limited)),
     }
+
+
+def _median(values: np.ndarray) -> float:
+    """Median of the finite ``values`` (NaN when there is none, without a warning)."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else math.nan

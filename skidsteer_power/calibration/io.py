@@ -24,6 +24,7 @@ The covariance of a log-searched parameter is the delta-method linearization (se
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
 from collections.abc import Sequence
@@ -33,9 +34,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from skidsteer_power.calibration.fit import INTERNAL_PARAMS, PARAMS, TERRAIN_PARAMS, CalibrationResult
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.calibration.fit import (
+    IDLE_PARAMS,
+    INTERNAL_PARAMS,
+    PARAMS,
+    TERRAIN_PARAMS,
+    CalibrationResult,
+    terrain_params,
+)
+from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.terramechanics.terrain import load_terrain
+
+POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *IDLE_PARAMS)  # fitted powertrain terms
 
 if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
@@ -50,7 +60,9 @@ def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], li
 def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name: str) -> dict[str, Any]:
     """The ``calibration:`` mapping written into the terrain file (see module doc)."""
     # a parameter at a fit bound is no estimate (fit.py): written as a plain value, listed in at_bound
-    terrain_names = [n for n in result.names if n in TERRAIN_PARAMS and n not in result.at_bound]
+    # so is one whose interval left its range (not in names) and every fit when the start was kept
+    kept = bool(result.kept_start)
+    terrain_names = [n for n in result.names if n in TERRAIN_PARAMS and n not in result.at_bound and not kept]
     values, cov = _block(result, terrain_names)
     block: dict[str, Any] = {
         'parameters': terrain_names,
@@ -58,7 +70,7 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'values': values,
         'covariance': cov,
         'ci95': {n: [float(v) for v in ci] for n in terrain_names if (ci := result.ci95.get(n))},
-        'fixed': [n for n in TERRAIN_PARAMS if n not in result.names],
+        'fixed': [n for n in terrain_params(result.terrain) if n not in result.names],
         'at_bound': sorted(n for n in result.at_bound if n in TERRAIN_PARAMS),
         'correlations_warnings': list(result.correlations_warnings),
         'bags': [str(Path(b).resolve()) for b in bags],
@@ -68,8 +80,11 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'segments_fit': result.segments_fit,
         'segments_holdout': result.segments_holdout,
         'fit_at': result.fit_at,
+        'fit_to': result.fit_to,
+        'not_identifiable': sorted(result.not_identifiable),
+        'kept_start': result.kept_start or None,
     }
-    internal = [n for n in result.names if n in INTERNAL_PARAMS]
+    internal = [n for n in result.names if n in POWERTRAIN_NAMES and n not in result.at_bound and not kept]
     if internal:
         block['powertrain_parameters'] = internal
         block['powertrain_units'] = [PARAMS[n].unit for n in internal]
@@ -78,7 +93,12 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
 
 
 def terrain_mapping(terrain: Terrain) -> dict[str, Any]:
-    """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``)."""
+    """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``; rigid ground: its
+    friction, rolling resistance and K, :func:`terrain_fields`)."""
+    if terrain.is_rigid:
+        from skidsteer_power.terramechanics.terrain import terrain_fields
+
+        return {'name': terrain.name, **terrain_fields(terrain)}
     data: dict[str, Any] = {
         'name': terrain.name,
         'n': float(terrain.n),
@@ -114,8 +134,17 @@ def write_terrain(
     return out
 
 
-def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence[str]) -> Path:
-    """Write the calibrated powertrain in the format of ``config/powertrains/*.yaml``."""
+def _preset_or_fields(value: Any, presets: dict[str, Any]) -> Any:
+    """A preset's name when ``value`` is one of ``presets``, else its fields (SI units) as a mapping:
+    a vehicle's own motor or amplifier is written out in full."""
+    for key, preset in presets.items():
+        if preset == value:
+            return key
+    return {k: (v if isinstance(v, bool | str) else float(v)) for k, v in dataclasses.asdict(value).items()}
+
+
+def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[str, Any]:
+    """The calibrated powertrain as a ``config/powertrains/*.yaml`` mapping (with its calibration)."""
     pt = result.powertrain
     sides = {
         side: {
@@ -124,18 +153,21 @@ def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence
         }
         for side in ('left', 'right')
     }
-    internal = [n for n in result.names if n in INTERNAL_PARAMS]
+    internal = [n for n in result.names if n in POWERTRAIN_NAMES and not result.kept_start]
     data: dict[str, Any] = {
         'name': f'{pt.name}_calibrated',
         'source': f'{pt.name} with the internal resistance of {len(bags)} bag(s) '
         '(skidsteer-power calibrate); '
         'each side total spread over the components in the original proportions',
-        'motor': next(k for k, v in _motors().items() if v == pt.motor),
-        'amplifier': next(k for k, v in _amplifiers().items() if v == pt.amplifier),
+        'motor': _preset_or_fields(pt.motor, _motors()),
+        'amplifier': _preset_or_fields(pt.amplifier, _amplifiers()),
         'gear_ratio': float(pt.gear_ratio),
+        'current_limit_A': float(pt.current_limit_A),
         'regen_efficiency': pt.regen_efficiency,
         'internal_resistance': sides,
         'battery': pt.battery,
+        'bus_voltage_V': pt.bus_voltage_V,
+        'idle_power_W': float(pt.idle_power_W),
     }
     if internal:
         values, cov = _block(result, internal)
@@ -148,21 +180,59 @@ def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence
             'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             'residual_rms_Nm': float(result.residual_rms_Nm),
         }
+    return data
+
+
+def write_powertrain(path: str | Path, result: CalibrationResult, bags: Sequence[str]) -> Path:
+    """Write the calibrated powertrain in the format of ``config/powertrains/*.yaml``."""
     out = Path(path)
+    data = powertrain_mapping(result, bags)
     out.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding='utf-8')
+    return out
+
+
+def write_vehicle(
+    path: str | Path, vehicle: str, result: CalibrationResult, bags: Sequence[str], terrain_file: str
+) -> Path:
+    """Write ``vehicle``'s file with its identified powertrain inline (``powertrain:``); its
+    ``source`` says what was calibrated from which bags and where the terrain went (a vehicle file has
+    no other free-text key); re-read as a check."""
+    from skidsteer_power import resources
+    from skidsteer_power.estimator import factory
+
+    data = yaml.safe_load(resources.find('vehicles', vehicle).read_text(encoding='utf-8'))
+    data['powertrain'] = powertrain_mapping(result, bags)
+    data['name'] = f'{data.get("name", "vehicle")}_calibrated'
+    fitted = [n for n in result.names if not result.kept_start]
+    kept = f' ({result.kept_start})' if result.kept_start else ''
+    data['source'] = (
+        f'{str(data.get("source", "")).strip()} Calibrated by skidsteer-power calibrate '
+        f'({_dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}) from '
+        f'{", ".join(str(Path(b).resolve()) for b in bags)}: fitted {", ".join(fitted) or "nothing"}{kept}; '
+        f'terrain written to {Path(terrain_file).resolve()}.'
+    ).strip()
+    out = Path(path)
+    header = (
+        '# Written by `skidsteer-power calibrate --out-vehicle`; see skidsteer_power/calibration/io.py.\n'
+    )
+    out.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding='utf-8')
+    try:
+        factory.powertrain_for(factory.load_vehicle_config(str(out)))
+    except SkidsteerError as err:  # a bug here, not the user's input: say so plainly
+        raise ConfigError(f'{out}: the written vehicle does not load again ({err})') from err
     return out
 
 
 def _motors() -> dict[str, Any]:
     from skidsteer_power.powertrain.drivetrain import MOTORS
 
-    return MOTORS
+    return dict(MOTORS)
 
 
 def _amplifiers() -> dict[str, Any]:
     from skidsteer_power.powertrain.drivetrain import AMPLIFIERS
 
-    return AMPLIFIERS
+    return dict(AMPLIFIERS)
 
 
 def read_calibration(path: str | Path) -> tuple[Any, list[str], np.ndarray, np.ndarray]:

@@ -5,7 +5,10 @@ state (chapter 3: the skid-steer models solve for steady turning). A segment is 
 ``cmd_vel`` commands (no gap longer than ``gap_s``); its first ``settle_s`` seconds are dropped
 (acceleration and sinkage transients), and what is left must be at least ``min_s`` long and settled:
 the mean motor speed of each side may differ between the window's two halves by no more than
-``settle_tol`` of its value (or 2 rad/s at the motor, whichever is larger).
+``settle_tol`` of its value (or ``settle_abs_rad_s`` at the motor, whichever is larger). A window that
+is not settled loses its first half until it is, or until it is shorter than ``min_s`` (teleoperated
+driving ramps: the settled tail of a hold still counts). Commands within ``cmd_tol`` of each other are
+one hold (a joystick's jitter does not cut a hold into pieces).
 
 The measured motion of a segment (see :class:`SegmentOptions` for which topic) is the mean body
 twist of ``nav_msgs/Odometry`` (linear.x [m/s], angular.z [rad/s], REP 103) over the window, or, for
@@ -36,6 +39,9 @@ POSE_TYPES = (
     'geometry_msgs/msg/PoseStamped',
     'geometry_msgs/msg/PoseWithCovarianceStamped',
 )
+IMU_TYPE = 'sensor_msgs/msg/Imu'
+MOTION_TYPES = (*POSE_TYPES, IMU_TYPE)
+MAX_HALVINGS = 4  # a window not settled loses its first half at most this often
 
 
 @dataclass(frozen=True)
@@ -45,16 +51,19 @@ class SegmentOptions:
     settle_s : start of each constant-command run left out [s]; min_s : shortest window kept [s];
     gap_s : a pause in commands longer than this ends a run [s]; cmd_tol : commands closer than this
     (m/s, rad/s) are the same command; settle_tol : allowed relative drift of the mean motor speed
-    between the window's halves [-]; odom_topic : pose/odometry topic ('' = ground truth if the bag
-    has a ``*ground_truth*`` topic, else /odom, else any pose topic). Wheel odometry dead-reckons
-    from the motor speeds, so it does not see slip: the FESS would be solved at the wrong (V, R).
+    between the window's halves [-]; settle_abs_rad_s : the same drift always allowed, at the motor
+    [rad/s]; odom_topic : the topic with the true body motion (:data:`MOTION_TYPES`; '' = ground
+    truth if the bag has a ``*ground_truth*`` topic, else odom, else any pose topic; with or without
+    the leading '/'). Wheel odometry dead-reckons from the motor speeds, so it does not see slip
+    (module doc).
     """
 
     settle_s: float = 1.5
     min_s: float = 1.0
     gap_s: float = 1.0
-    cmd_tol: float = 1e-3
-    settle_tol: float = 0.05
+    cmd_tol: float = 0.01
+    settle_tol: float = 0.1
+    settle_abs_rad_s: float = 2.0
     cmd_vel_topic: str = '/cmd_vel'
     joint_states_topic: str = '/joint_states'
     odom_topic: str = ''
@@ -75,6 +84,8 @@ class Recording:
     pose_xy: np.ndarray  # (n, 2) [m]
     pose_yaw: np.ndarray  # (n,) heading [rad]
     twist: np.ndarray | None  # (n, 2) odometry body twist V [m/s], yaw rate [rad/s], or None
+    gyro: np.ndarray | None = None  # (n,) IMU yaw rate [rad/s] at pose_t (an Imu topic), or None
+    battery: np.ndarray | None = None  # (n, 2) measured battery-side power V x I [W] at js_t, or None
 
 
 @dataclass(frozen=True)
@@ -85,7 +96,8 @@ class Segment:
     command : the commanded (V, yaw rate); duration_s : window length [s]; samples : joint_states
     count; motor_torque_Nm, motor_omega_rad_s : window means at the motor shaft [N m], [rad/s];
     torque_std_Nm : sample standard deviation of the torque [N m]; terminal_W : mean motor
-    terminal power with copper loss [W]; source : bag path.
+    terminal power with copper loss [W]; battery_W : measured electrical (battery-side, V x I) power
+    per side [W] (NaN: not measured); source : bag path.
     """
 
     source: str
@@ -100,22 +112,36 @@ class Segment:
     motor_omega_rad_s: tuple[float, float]
     torque_std_Nm: tuple[float, float]
     terminal_W: tuple[float, float] = (math.nan, math.nan)
+    battery_W: tuple[float, float] = (math.nan, math.nan)
 
 
 def _pose_topic(bag: BagReader, wanted: str) -> str:
-    """``wanted`` if given; else ground truth first (it sees slip), then /odom, then any pose topic."""
-    poses = [t for t, info in bag.topics.items() if info.msgtype in POSE_TYPES]
+    """``wanted`` if given (with or without the leading '/'); else ground truth first (it sees
+    slip), then odom, then any pose topic."""
+    poses = [t for t, info in bag.topics.items() if info.msgtype in MOTION_TYPES]
     if wanted:
-        if wanted not in poses:
-            raise InputError(f'{bag.path}: no odometry or pose topic {wanted} ({", ".join(POSE_TYPES)})')
-        return wanted
+        for name in (wanted, '/' + wanted.lstrip('/')):
+            if name in poses:
+                return name
+        raise InputError(f'{bag.path}: no odometry or pose topic {wanted} ({", ".join(MOTION_TYPES)})')
+    poses = [t for t in poses if bag.topics[t].msgtype in POSE_TYPES]
     truth = [t for t in poses if 'ground_truth' in t]
-    return next(iter([*truth, *[t for t in poses if t == '/odom'], *poses]), '')
+    odom = [t for t in poses if t.lstrip('/') == 'odom']
+    return next(iter([*truth, *odom, *poses]), '')
 
 
 def _quaternion_yaw(q: object) -> float:
     x, y, z, w = (float(getattr(q, k)) for k in ('x', 'y', 'z', 'w'))
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _decode_gyro(bag: BagReader, topic: str, t0: int) -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], yaw rate angular_velocity.z [rad/s]) of a sensor_msgs/Imu topic."""
+    t, w = [], []
+    for message, msg in bag.decoded(topic):
+        t.append((message.timestamp_ns - t0) * 1e-9)
+        w.append(float(msg.angular_velocity.z))
+    return np.array(t, dtype=float), np.array(w, dtype=float)
 
 
 def _decode_poses(
@@ -146,18 +172,22 @@ def side_readings(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-side motor-equivalent speed (n, 2) [rad/s] and torque (n, 2) [N m] of decoded joint_states
     rows, through the estimator's own :class:`JointReader` (any joints per side, effort as torque or
-    current, at the motor or the wheel); ``ok`` (n,) is False where a row gives no reading."""
+    current, at the motor or the wheel); ``ok`` (n,) is False where a row gives no reading. A row
+    without any effort (a robot publishing velocities only) gives its speed and a NaN torque."""
     n = js_t.size
     omega, torque, ok = np.full((n, 2), np.nan), np.full((n, 2), np.nan), np.zeros(n, bool)
+    no_effort = np.all(np.isnan(effort), axis=1) if effort.size else np.ones(n, bool)
     for i in range(n):
+        row_effort = np.zeros(len(names)) if no_effort[i] else effort[i]
         try:
             reading = reader.read(
-                names, position[i].tolist(), velocity[i].tolist(), effort[i].tolist(), js_t[i]
+                names, position[i].tolist(), velocity[i].tolist(), row_effort.tolist(), js_t[i]
             )
         except InputError:
             continue
         if reading is not None:
-            omega[i], torque[i], ok[i] = reading[0], reading[1], True
+            omega[i], ok[i] = reading[0], True
+            torque[i] = (math.nan, math.nan) if no_effort[i] else reading[1]
     return omega, torque, ok
 
 
@@ -187,13 +217,33 @@ def read_recording(
         )
         omega, torque, ok = side_readings(reader, names, js_t, position, velocity, effort)
         topic = _pose_topic(bag, options.odom_topic)
-        if topic:
+        gyro = None
+        if topic and bag.topics[topic].msgtype == IMU_TYPE:
+            pose_t, gyro = _decode_gyro(bag, topic, t0)
+            pose_xy, pose_yaw, twist = np.zeros((pose_t.size, 2)), np.zeros(pose_t.size), None
+        elif topic:
             pose_t, pose_xy, pose_yaw, twist = _decode_poses(bag, topic, t0)
         else:
             pose_t, pose_xy, pose_yaw, twist = np.zeros(0), np.zeros((0, 2)), np.zeros(0), None
-    good = ok & np.all(np.isfinite(omega), axis=1) & np.all(np.isfinite(torque), axis=1)
+    good = ok & np.all(np.isfinite(omega), axis=1)
+    battery = None
+    if reader.map.measures_battery:  # the vehicle's measured_power: the effort is each side's V x I [W]
+        battery, torque = torque[good], np.full_like(torque[good], np.nan)
+    else:
+        torque = torque[good]
     return Recording(
-        str(path), cmd_t, cmd, js_t[good], omega[good], torque[good], pose_t, pose_xy, pose_yaw, twist
+        str(path),
+        cmd_t,
+        cmd,
+        js_t[good],
+        omega[good],
+        torque,
+        pose_t,
+        pose_xy,
+        pose_yaw,
+        twist,
+        gyro,
+        battery,
     )
 
 
@@ -224,6 +274,8 @@ def _measured_motion(
     sel = (rec.pose_t >= lo) & (rec.pose_t <= hi)
     if np.count_nonzero(sel) < 3:
         return command[0], command[1], 'command'
+    if rec.gyro is not None:
+        return math.nan, float(rec.gyro[sel].mean()), 'imu yaw rate'
     if rec.twist is not None:
         v, w = rec.twist[sel].mean(axis=0)
         return float(v), float(w), 'odometry twist'
@@ -245,23 +297,19 @@ def find_segments(
     dropped = {'standing': 0, 'too_short': 0, 'not_settled': 0}
     segments = []
     for start, end, k in command_runs(rec.cmd_t, rec.cmd, options):
-        command = (float(rec.cmd[k, 0]), float(rec.cmd[k, 1]))
+        held = rec.cmd[(rec.cmd_t >= start) & (rec.cmd_t < end)]
+        mid = np.median(held, axis=0) if held.size else rec.cmd[k]  # the hold's command (cmd_tol)
+        command = (float(mid[0]), float(mid[1]))
         if abs(command[0]) <= options.cmd_tol and abs(command[1]) <= options.cmd_tol:
             dropped['standing'] += 1
             continue
-        lo, hi = start + options.settle_s, end
-        sel = (rec.js_t >= lo) & (rec.js_t < hi)
+        window = settled_window(rec, start + options.settle_s, end, options)
+        if isinstance(window, str):
+            dropped[window] += 1
+            continue
+        lo, hi, sel = window
         n = int(np.count_nonzero(sel))
-        if hi - lo < options.min_s or n < 6:
-            dropped['too_short'] += 1
-            continue
-        omega, torque = rec.omega[sel], rec.torque[sel]
-        half = n // 2
-        first, second = omega[:half].mean(axis=0), omega[half:].mean(axis=0)
-        allowed = np.maximum(options.settle_tol * np.abs(omega.mean(axis=0)), 2.0)
-        if np.any(np.abs(first - second) > allowed):
-            dropped['not_settled'] += 1
-            continue
+        torque = rec.torque[sel]
         speed, yaw_rate, motion = _measured_motion(rec, lo, hi, command)
         segments.append(
             Segment(
@@ -273,16 +321,55 @@ def find_segments(
                 yaw_rate_rad_s=yaw_rate,
                 motion_source=motion,
                 samples=n,
-                motor_torque_Nm=tuple(torque.mean(axis=0).tolist()),
-                motor_omega_rad_s=tuple(omega.mean(axis=0).tolist()),
-                torque_std_Nm=tuple(torque.std(axis=0, ddof=1).tolist()),
+                motor_torque_Nm=_mean_pair(torque),
+                motor_omega_rad_s=_mean_pair(rec.omega[sel]),
+                torque_std_Nm=_std_pair(torque),
                 terminal_W=_mean_terminal_power(rec, sel, motor),
+                battery_W=_mean_pair(rec.battery[sel]) if rec.battery is not None else (math.nan, math.nan),
             )
         )
     return segments, dropped
 
 
+def settled_window(
+    rec: Recording, lo: float, hi: float, options: SegmentOptions
+) -> tuple[float, float, np.ndarray] | str:
+    """(start [s], end [s], joint_states mask) of the settled part of the hold [lo, hi), or why
+    there is none ('too_short' | 'not_settled'): a window not settled loses its first half, at most
+    :data:`MAX_HALVINGS` times, while it stays at least ``min_s`` long (module doc)."""
+    for attempt in range(MAX_HALVINGS + 1):
+        sel = (rec.js_t >= lo) & (rec.js_t < hi)
+        n = int(np.count_nonzero(sel))
+        if hi - lo < options.min_s or n < 6:
+            return 'too_short' if attempt == 0 else 'not_settled'
+        omega = rec.omega[sel]
+        half = n // 2
+        first, second = omega[:half].mean(axis=0), omega[half:].mean(axis=0)
+        allowed = np.maximum(options.settle_tol * np.abs(omega.mean(axis=0)), options.settle_abs_rad_s)
+        if not np.any(np.abs(first - second) > allowed):
+            return lo, hi, sel
+        lo = 0.5 * (lo + hi)
+    return 'not_settled'
+
+
+def _mean_pair(values: np.ndarray) -> tuple[float, float]:
+    """Per-column mean of the finite entries of (n, 2) ``values`` (NaN for a column without one)."""
+    out = []
+    for k in range(2):
+        col = values[:, k][np.isfinite(values[:, k])]
+        out.append(float(col.mean()) if col.size else math.nan)
+    return out[0], out[1]
+
+
+def _std_pair(values: np.ndarray) -> tuple[float, float]:
+    """Per-column sample standard deviation of the finite entries (NaN with fewer than two)."""
+    out = []
+    for k in range(2):
+        col = values[:, k][np.isfinite(values[:, k])]
+        out.append(float(col.std(ddof=1)) if col.size > 1 else math.nan)
+    return out[0], out[1]
+
+
 def _mean_terminal_power(rec: Recording, sel: np.ndarray, motor: MotorConstants) -> tuple[float, float]:
     """Mean motor terminal power per side over the window [W] (with copper loss, as measured.py)."""
-    mean = np.asarray(terminal_power(motor, rec.torque[sel], rec.omega[sel])).mean(axis=0)
-    return float(mean[0]), float(mean[1])
+    return _mean_pair(np.asarray(terminal_power(motor, rec.torque[sel], rec.omega[sel])))

@@ -9,7 +9,10 @@ segments_dropped, optimizer_converged (the optimizer's own stop; see at_bound),
 at_bound (fitted parameters pinned at a fit bound: status 'at_bound (lower|upper)', no interval, a
 warning), converged_inside_bounds, fit_at ('setpoints' | 'motion', what the segments were solved
 at), setpoints (the fitted terrain predicting each segment from its command, at the wheel speed set
-points), suggest (with --suggest), out_terrain, out_powertrain. Method:
+points), fit_to ('torque' | 'motion' | 'both'), not_identifiable (name -> why: its interval left the
+physical range), left_fixed (name -> why it was not fitted), kept_start (why the start was kept, or
+null), motion (hold-out V and yaw-rate MAE before / after), suggest (with --suggest), out_terrain,
+out_powertrain, out_vehicle. Method:
 :mod:`skidsteer_power.calibration.fit`.
 """
 
@@ -23,6 +26,9 @@ from typing import Any
 from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
+
+FIT_TO = ('torque', 'motion', 'both')  # = calibration.fit.FIT_TO (not imported: --help stays light)
+SETTLE_TOL, SETTLE_ABS_RAD_S, CMD_TOL, GAP_S = 0.1, 2.0, 0.01, 1.0  # = SegmentOptions()'s defaults
 
 
 def register(subparsers: Subcommands) -> None:
@@ -41,7 +47,15 @@ def register(subparsers: Subcommands) -> None:
         '--fit',
         default='kphi,n,c,phi,K',
         help='comma-separated parameters to fit (kphi, kc, n, c, phi, K, '
-        'internal = per-side internal resistance b, c); default kphi,n,c,phi,K',
+        'internal = per-side internal resistance b, c), or auto: what the recordings identify (the '
+        "ground's parameters; the internal resistance where a torque or current is recorded), fitted to "
+        'the torque and the measured motion together where both are recorded; default kphi,n,c,phi,K',
+    )
+    parser.add_argument(
+        '--fit-to',
+        choices=FIT_TO,
+        help='what the residuals compare: motor torque, the measured body motion (V, yaw rate at the set '
+        'points), or both (default: torque; with --fit auto what the recordings carry)',
     )
     parser.add_argument(
         '--fit-at',
@@ -56,7 +70,11 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('seed of the hold-out split'))
     parser.add_argument('--out-terrain', required=True, help='calibrated terrain YAML to write')
     parser.add_argument(
-        '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal)'
+        '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal or auto)'
+    )
+    parser.add_argument(
+        '--out-vehicle',
+        help='vehicle YAML to write: the --vehicle file with its identified powertrain inline',
     )
     parser.add_argument('--name', help='name of the calibrated terrain (default: the output file stem)')
     parser.add_argument(
@@ -68,9 +86,38 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--cmd-vel-topic', default='/cmd_vel')
     parser.add_argument('--joint-states-topic', default='/joint_states')
     parser.add_argument(
+        '--settle-tol',
+        type=nonnegative_float,
+        default=SETTLE_TOL,
+        help='allowed drift of the mean motor speed between the two halves of a window, relative '
+        f'(default {SETTLE_TOL:g}; the larger of this and --settle-abs applies)',
+    )
+    parser.add_argument(
+        '--settle-abs',
+        type=nonnegative_float,
+        default=SETTLE_ABS_RAD_S,
+        help=f'the same drift always allowed, at the motor [rad/s] (default {SETTLE_ABS_RAD_S:g})',
+    )
+    parser.add_argument(
+        '--cmd-tol',
+        type=nonnegative_float,
+        default=CMD_TOL,
+        help=f'commands closer than this [m/s, rad/s] are one hold (default {CMD_TOL:g})',
+    )
+    parser.add_argument(
+        '--gap-s',
+        type=nonnegative_float,
+        default=GAP_S,
+        help=f'a pause in commands longer than this ends a hold [s] (default {GAP_S:g})',
+    )
+    parser.add_argument(
+        '--motion-topic',
         '--odom-topic',
+        dest='odom_topic',
         default='',
-        help='odometry or ground-truth pose topic (default: a *ground_truth* topic if any, else /odom)',
+        help='topic with the true body motion: nav_msgs/Odometry (lidar/ICP, mocap, fused), a pose, or '
+        'sensor_msgs/Imu (yaw rate only); default ground_truth/odom where the bag has it, else odom. '
+        'Wheel odometry from the same encoders shows no slip: it is no evidence of the ground',
     )
     parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
     add_msg_option(parser)
@@ -87,6 +134,7 @@ def register(subparsers: Subcommands) -> None:
 def run(args: argparse.Namespace) -> int:
     from skidsteer_power.bag_io.reader import load_msg_definitions
     from skidsteer_power.calibration import calibrate_bags, io
+    from skidsteer_power.calibration.segments import SegmentOptions
 
     started = time.perf_counter()
     for bag in args.bags:
@@ -95,8 +143,23 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out_terrain)
     if out.suffix.lower() not in ('.yaml', '.yml'):
         raise InputError(f'--out-terrain must be a .yaml file, not {out}')
-    if args.out_powertrain and 'internal' not in args.fit:
-        raise InputError('--out-powertrain needs internal in --fit')
+    if args.out_powertrain and 'internal' not in args.fit and args.fit.strip() != 'auto':
+        raise InputError('--out-powertrain needs internal (or auto) in --fit')
+    for option, path in (('--out-powertrain', args.out_powertrain), ('--out-vehicle', args.out_vehicle)):
+        if path and Path(path).suffix.lower() not in ('.yaml', '.yml'):
+            raise InputError(f'{option} must be a .yaml file, not {path}')
+    options = SegmentOptions(
+        settle_s=args.settle_s,
+        min_s=args.min_segment_s,
+        gap_s=args.gap_s,
+        cmd_tol=args.cmd_tol,
+        settle_tol=args.settle_tol,
+        settle_abs_rad_s=args.settle_abs,
+        cmd_vel_topic=args.cmd_vel_topic,
+        joint_states_topic=args.joint_states_topic,
+        odom_topic=args.odom_topic,
+        extra_types=load_msg_definitions(args.msg),
+    )
     result, segments = calibrate_bags(
         args.bags,
         args.vehicle,
@@ -106,9 +169,9 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         settle_s=args.settle_s,
         min_segment_s=args.min_segment_s,
-        topics=(args.cmd_vel_topic, args.joint_states_topic, args.odom_topic),
-        extra_types=load_msg_definitions(args.msg),
         fit_at=args.fit_at,
+        options=options,
+        fit_to=args.fit_to,
     )
     result.seconds = time.perf_counter() - started
     name = args.name or out.stem
@@ -118,6 +181,11 @@ def run(args: argparse.Namespace) -> int:
     payload['out_powertrain'] = None
     if args.out_powertrain:
         payload['out_powertrain'] = str(io.write_powertrain(args.out_powertrain, result, args.bags))
+    payload['out_vehicle'] = None
+    if args.out_vehicle:
+        payload['out_vehicle'] = str(
+            io.write_vehicle(args.out_vehicle, args.vehicle, result, args.bags, str(out))
+        )
     payload['suggest'] = None
     if args.suggest:
         from skidsteer_power.calibration.design import suggest_holds
@@ -147,6 +215,9 @@ def _print_human(payload: dict[str, Any]) -> None:
         print(f'{name:<17}{_fmt(p["value"]):>12}  {ci:<26}{p["unit"]:<12}{status}')
     for warning in payload['correlations_warnings']:
         print(f'warning: {warning}')
+    for name, why in payload['left_fixed'].items():
+        if why and why != 'not in --fit':
+            print(f'left fixed: {name}: {why}')
     if payload['at_bound']:
         print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
     at = 'the set points of their commands' if payload['fit_at'] == 'setpoints' else 'the measured motion'
@@ -156,10 +227,15 @@ def _print_human(payload: dict[str, Any]) -> None:
         f'{payload["torque_rmse_before_Nm"]:.4g} -> {payload["torque_rmse_after_Nm"]:.4g} N m; energy error: '
         f'{payload["holdout_energy_error_before"]:+.1%} -> {payload["holdout_energy_error_after"]:+.1%}'
     )
-    print(
-        f'wrote {payload["out_terrain"]}'
-        + (f' and {payload["out_powertrain"]}' if payload['out_powertrain'] else '')
-    )
+    motion = payload['motion']
+    if payload['fit_to'] != 'torque' and motion:
+        print(
+            f'hold-out motion MAE: V {motion["speed_mae_before_m_s"]:.3g} -> '
+            f'{motion["speed_mae_after_m_s"]:.3g} m/s, yaw rate {motion["yaw_mae_before_rad_s"]:.3g} -> '
+            f'{motion["yaw_mae_after_rad_s"]:.3g} rad/s'
+        )
+    written = [p for p in (payload['out_terrain'], payload['out_powertrain'], payload['out_vehicle']) if p]
+    print('wrote ' + ', '.join(written))
     suggest = payload.get('suggest')
     if suggest and suggest['holds']:
         name, unit = suggest['widest_parameter'], suggest['unit']

@@ -7,7 +7,8 @@ holdout [{bag, split, outside_envelope_share, max_speed_m_s, max_yaw_rate_rad_s}
 calibration (with fit_at: what calibrate solved the segments at), baselines, splits {same_range |
 extrapolation | transfer: {bags, models {linear, gazebo_cmd_vel, icr_rls_online, fess, fess_online,
 fess_calibrated, fess_calibrated_online: {energy_error_pct, power_rmse_W,
-median_abs_segment_error_pct, energy_predicted_J, energy_measured_J, segments}}}}, goal {split:
+median_abs_segment_error_pct, energy_predicted_J, energy_measured_J, segments, error (a model that
+failed: its reason, the figures NaN)}}}}, goal {split:
 {best_baseline, ..., met}}, plot.
 """
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
+from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, finite_float
 
 
 def register(subparsers: Subcommands) -> None:
@@ -55,12 +56,14 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--work-dir', help='folder for the calibrated terrain (default: a temporary one)')
     parser.add_argument('--map-cache', help="power map cache folder (default: the estimator's)")
     parser.add_argument('--plot', metavar='DIR', help='write DIR/compare.png')
+    add_msg_option(parser)
     add_json_flag(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from skidsteer_power.apps.compare import CompareOptions, compare, plot, table
+    from skidsteer_power.bag_io.reader import load_msg_definitions
 
     train, holdout = list(args.bags), list(args.holdout)
     if not holdout and len(train) >= 2 and not args.transfer:
@@ -75,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         transfer_payload_kg=args.transfer_payload_kg,
         work_dir=args.work_dir,
         map_cache_dir=args.map_cache,
+        extra_types=load_msg_definitions(args.msg),
     )
     result = compare(options, progress=lambda message: print(message, file=sys.stderr, flush=True))
     result['plot'] = str(plot(result, args.plot)) if args.plot else None

@@ -6,7 +6,9 @@ skidsteer-power wheel  --terrain T --load N --width M --radius M --slip S [--spe
     -> sinkage_m, drawbar_pull_N, torque_Nm, entry_angle_rad, exit_angle_rad, max_stress_angle_rad,
        slip; with --speed also wheel_speed_rad_s and shaft_power_W
 skidsteer-power terrains [--json]
-    -> every preset with its values in SI units, the units and the table it came from
+    -> every preset with its values in SI units, the units and the table it came from; then every
+       other shipped terrain file (config/terrains/: rigid ground and snow) with its contact
+       (soil | rigid), its fields and its source (JSON key ``files``)
 
 Every number has a physical range (skidsteer_power.terramechanics.ranges, shown in --help); a
 sinkage deeper than the track height (--height, default 0.2 m) or the wheel radius is an error.
@@ -18,6 +20,7 @@ import argparse
 import dataclasses
 from typing import Any
 
+from skidsteer_power import resources
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
@@ -30,7 +33,7 @@ from skidsteer_power.terramechanics.ranges import (
     WIDTH_M,
     check_sinkage,
 )
-from skidsteer_power.terramechanics.terrain import PRESET_SOURCES, PRESETS, load_terrain
+from skidsteer_power.terramechanics.terrain import PRESET_SOURCES, PRESETS, load_terrain, terrain_fields
 from skidsteer_power.terramechanics.track import single_track
 from skidsteer_power.terramechanics.wheel import wheel_at_slip
 
@@ -48,6 +51,10 @@ UNITS = {
     'a1': '-',
     'b0': '-',
     'b1': '-',
+    'contact': '',
+    'mu_longitudinal': '-',
+    'mu_lateral': '-',
+    'rolling_resistance': '-',
 }
 
 
@@ -95,7 +102,9 @@ def register(subparsers: Subcommands) -> None:
     )
     wheel.set_defaults(func=run_wheel)
 
-    terrains = subparsers.add_parser('terrains', help='list terrain presets with values and units')
+    terrains = subparsers.add_parser(
+        'terrains', help='list terrain presets and shipped terrain files (soil | rigid) with values and units'
+    )
     add_json_flag(terrains)
     terrains.set_defaults(func=run_terrains)
 
@@ -149,22 +158,38 @@ def wheel_speed(speed: float, slip: float, radius: float) -> float:
     return speed * (1.0 + slip) / radius
 
 
+def _shipped_terrain_files() -> dict[str, dict[str, Any]]:
+    """Shipped terrain files that are not a preset's copy (config/terrains/): name -> {values (SI,
+    :func:`terrain_fields`), source (the file's ``source``)}."""
+    import yaml
+
+    out: dict[str, dict[str, Any]] = {}
+    for name, path in resources.shipped('terrains', ('.yaml', '.yml')).items():
+        if name in PRESETS or name.startswith('example'):
+            continue
+        terrain = load_terrain(str(path))
+        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+        out[name] = {'values': terrain_fields(terrain), 'source': str(data.get('source', path.name))}
+    return out
+
+
 def run_terrains(args: argparse.Namespace) -> int:
     payload: dict[str, dict[str, Any]] = {}  # preset name -> {values, source}
     for name, terrain in PRESETS.items():
         values = {k: v for k, v in dataclasses.asdict(terrain).items() if k != 'name' and v is not None}
         values['phi_deg'] = terrain.phi_deg
         payload[name] = {'values': values, 'source': PRESET_SOURCES[name]}
+    files = _shipped_terrain_files()
     if args.json:
-        emit({'presets': payload, 'units': {**UNITS, 'phi_deg': 'deg'}}, True)
+        emit({'presets': payload, 'files': files, 'units': {**UNITS, 'phi_deg': 'deg'}}, True)
         return 0
-    for name, entry in payload.items():
+    for name, entry in {**payload, **files}.items():
         print(f'{name}  ({entry["source"]})')
         for key, value in entry['values'].items():
             unit = 'deg' if key == 'phi_deg' else UNITS[key]
             print(
-                f'    {key:<10} {value:<14.6g} {unit}'
+                f'    {key:<18} {value:<14.6g} {unit}'
                 if not isinstance(value, str)
-                else f'    {key:<10} {value}'
+                else f'    {key:<18} {value}'
             )
     return 0

@@ -156,7 +156,8 @@ class Correction:
     def relative_residual(self, predicted_Nm: tuple[float, float]) -> float:
         """Residual RMS relative to the mean |predicted torque| [-] (NaN when unknown)."""
         scale = float(np.mean(np.abs(predicted_Nm)))
-        rms = float(np.sqrt(np.nanmean(np.square(self.residual_rms_Nm)))) if self.samples else math.nan
+        known = [r for r in self.residual_rms_Nm if math.isfinite(r)]
+        rms = math.sqrt(sum(r * r for r in known) / len(known)) if self.samples and known else math.nan
         return rms / scale if scale > 1e-9 else math.nan
 
 

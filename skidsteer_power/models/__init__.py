@@ -32,7 +32,11 @@ MODELS: dict[str, str] = {
     'fess': 'skidsteer_power.models.fess',  # chapter 6
 }
 
-__all__ = ['MODELS', 'SteadyState', 'solve']
+RIGID_GROUND_MODELS = ('fess',)
+"""The models that solve rigid ground (``contact: rigid`` terrains, :mod:`~skidsteer_power.models.
+rigid_contact`); the others are written for a deformable soil (Bekker sinkage, compaction)."""
+
+__all__ = ['MODELS', 'RIGID_GROUND_MODELS', 'SteadyState', 'solve']
 
 
 def solve(
@@ -48,5 +52,10 @@ def solve(
         module_name = MODELS[model]
     except KeyError:
         raise InputError(f'unknown model {model!r}; choose one of {", ".join(MODELS)}') from None
+    if terrain.is_rigid and model not in RIGID_GROUND_MODELS:
+        raise InputError(
+            f'model {model!r} describes a deformable soil; terrain {terrain.name!r} is rigid ground '
+            f'(contact: rigid): use model {" or ".join(RIGID_GROUND_MODELS)}'
+        )
     solve_model: Callable[..., SteadyState] = importlib.import_module(module_name).solve
     return solve_model(vehicle, terrain, speed, turn_radius, **options)

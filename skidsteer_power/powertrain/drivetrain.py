@@ -288,7 +288,8 @@ KEYS = (
     'sources', 'preset', 'calibration',
 )  # fmt: skip
 """The keys of a powertrain file (docs/POWERTRAINS.md); ``sources`` maps a key to where its number
-comes from (datasheet, manual, or ASSUMED)."""
+comes from (datasheet, manual, or ASSUMED); ``calibration`` is the record ``skidsteer-power calibrate``
+writes (skidsteer_power/calibration/io.py), not read here."""
 
 
 def _check_keys(cfg: Mapping[str, Any]) -> None:

@@ -100,6 +100,19 @@ PAYLOAD_KG = Range('payload', 0.0, 1000.0, 'kg')
 HEIGHT_M = Range('track height', 0.005, 2.0, 'm', positive=True)
 FRICTION = Range('coefficient', 0.0, 10.0, '-', positive=True)  # mu_t (Table 3.1), mu: order 1
 
+# Rigid ground (terrain files with ``contact: rigid``; issue 35). Friction: ice about 0.05-0.15, dry
+# rubber on concrete 0.75-0.9 (Table 3.1; Noon 1994), soft rubber compounds up to about 1.7; rolling
+# resistance from about 0.001 (steel on rail) to 0.35 (tyres on a ploughed field, Wong, Theory of Ground
+# Vehicles, ch. 1); the slip modulus K of the friction's mobilisation (eq. 2.3 form): a tyre reaches its
+# peak friction at a few percent slip over a patch of 0.05-0.2 m, K of a few mm.
+RIGID_FIELD_RANGES: dict[str, Range] = {
+    'mu_longitudinal': Range('mu_longitudinal', 0.0, 2.0, '', positive=True),
+    'mu_lateral': Range('mu_lateral', 0.0, 2.0, '', positive=True),
+    'rolling_resistance': Range('rolling_resistance', 0.0, 0.5, ''),
+    'K': Range('K', 1e-5, 0.1, 'm'),
+}
+"""Physical range of each field of rigid ground (SI): the bounds a calibration may search in."""
+
 # Vehicle files (skidsteer_power.vehicle): the dissertation's robots weigh 20-60 kg with 0.1 m sprockets;
 # these bounds hold any small-to-medium skid-steered vehicle and reject numbers without a meaning.
 MASS_KG = Range('mass', 0.0, 10_000.0, 'kg', positive=True)  # up to a 10 t vehicle

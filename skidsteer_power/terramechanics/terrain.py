@@ -15,6 +15,20 @@ YAML terrain file (see ``config/terrains/example_terrain.yaml``)::
     K: 0.025               # m
     shear_type: A          # optional: A | B | C; B and C need Kw [m], C also Kr [-]
     a0: 0.24               # optional wheel coefficients (default Table 2.4)
+
+Rigid ground (asphalt, concrete, flooring, ice: no sinkage, Coulomb friction; issue 35)::
+
+    name: asphalt
+    contact: rigid         # soil (default) | rigid
+    mu_longitudinal: 0.65  # friction coefficient along the wheel / track [-]
+    mu_lateral: 0.65       # friction coefficient across it [-]
+    rolling_resistance: 0.015  # rolling resistance coefficient f_r [-]: F = f_r x load
+    K: 0.003               # slip modulus [m]: friction mobilised as mu p (1 - exp(-j/K)) (eq. 2.3)
+
+A rigid terrain carries no Bekker or Mohr-Coulomb fields (they are an error in its file); inside,
+its soil fields hold the rigid limit (n = 1, kc = 0, c = 0, kphi = :data:`RIGID_KPHI`, phi =
+atan(mu_longitudinal)) so that code written for a soil reads a consistent, sinkage-free ground.
+The contact FESS builds for it is in :mod:`skidsteer_power.models.rigid_contact`.
 """
 
 from __future__ import annotations
@@ -34,10 +48,21 @@ import yaml
 from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.numeric import Real
+from skidsteer_power.terramechanics.ranges import RIGID_FIELD_RANGES
 
 # Table 2.4 (Wong and Reece, dry sand): the only wheel coefficients the dissertation gives. Chapter 2
 # uses them for all three soils, and so do the presets here.
 TABLE_2_4 = {'a0': 0.24, 'a1': 0.32, 'b0': -0.45, 'b1': 0.0}
+
+CONTACT_SOIL = 'soil'
+CONTACT_RIGID = 'rigid'
+CONTACTS = (CONTACT_SOIL, CONTACT_RIGID)
+RIGID_KPHI = 1e12
+"""kphi [N/m^(n+2)] that stands for rigid ground in a rigid terrain's soil fields (n = 1): a 1 MPa
+contact pressure sinks 1 um. Never used by the rigid contact itself (its sinkage is 0)."""
+RIGID_FIELDS = ('mu_longitudinal', 'mu_lateral', 'rolling_resistance', 'K')
+"""The fields of a rigid terrain file (all required), SI units; ranges in
+:data:`skidsteer_power.terramechanics.ranges.RIGID_FIELD_RANGES`."""
 
 
 @dataclass(frozen=True)
@@ -64,9 +89,22 @@ class Terrain:
     a1: float = TABLE_2_4['a1']
     b0: float = TABLE_2_4['b0']
     b1: float = TABLE_2_4['b1']
+    contact: str = 'soil'
+    mu_lateral: float | None = None
+    rolling_resistance: float | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
+
+    @property
+    def is_rigid(self) -> bool:
+        """True for rigid ground (Coulomb friction, no sinkage), False for a deformable soil."""
+        return self.contact == CONTACT_RIGID
+
+    @property
+    def mu_longitudinal(self) -> float:
+        """Friction coefficient along the running gear [-]: tan(phi) (eq. 2.2 with c = 0)."""
+        return math.tan(self.phi)
 
     @property
     def phi_deg(self) -> float:
@@ -84,6 +122,12 @@ def _bad(name: str, field: str, why: str) -> ConfigError:
 
 
 def _validate(t: Terrain) -> None:
+    if t.contact not in CONTACTS:
+        raise _bad(t.name, 'contact', f"must be 'soil' or 'rigid', got {t.contact!r}")
+    if t.is_rigid:
+        _validate_rigid(t)
+    elif t.mu_lateral is not None or t.rolling_resistance is not None:
+        raise _bad(t.name, 'mu_lateral', "and rolling_resistance belong to 'contact: rigid' ground")
     numbers = ('n', 'kc', 'kphi', 'c', 'phi', 'K', 'a0', 'a1', 'b0', 'b1')
     for field in numbers:
         value = getattr(t, field)
@@ -102,6 +146,19 @@ def _validate(t: Terrain) -> None:
         raise _bad(t.name, 'phi', f'must lie in (0, 90) degrees, got {math.degrees(t.phi):.6g} degrees')
     _validate_shear_type(t)
     _validate_wheel_angles(t)
+
+
+def _validate_rigid(t: Terrain) -> None:
+    values = {'mu_longitudinal': t.mu_longitudinal, 'mu_lateral': t.mu_lateral}
+    values.update(rolling_resistance=t.rolling_resistance, K=t.K)
+    for field, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise _bad(t.name, field, f'must be a finite number, got {value!r}')
+        limits = RIGID_FIELD_RANGES[field]
+        if not limits.contains(float(value)):
+            raise _bad(t.name, field, f'= {value:g} is outside its range {limits.text}')
+    if t.shear_type != 'A':
+        raise _bad(t.name, 'shear_type', "must be 'A' for rigid ground (friction mobilised as 1 - exp(-j/K))")
 
 
 def _validate_shear_type(t: Terrain) -> None:
@@ -144,7 +201,7 @@ _UNIT_KEYS: dict[str, tuple[str, float]] = {
     'b1': ('b1', 1.0),
 }
 _REQUIRED = ('n', 'kc', 'kphi', 'c', 'phi', 'K')
-_TEXT_KEYS = ('name', 'shear_type', 'source', 'description')
+_TEXT_KEYS = ('name', 'shear_type', 'source', 'description', 'contact')
 # provenance and uncertainty written by `skidsteer-power calibrate` (skidsteer_power/calibration/io.py)
 _SKIPPED_KEYS = ('calibration',)
 
@@ -156,6 +213,11 @@ def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain')
             f'terrain {default_name!r}: expected a mapping of fields, got {type(data).__name__}'
         )
     name = str(data.get('name', default_name))
+    contact = str(data.get('contact', CONTACT_SOIL))
+    if contact == CONTACT_RIGID:
+        return _rigid_from_mapping(data, name)
+    if contact != CONTACT_SOIL:
+        raise _bad(name, 'contact', f"must be 'soil' or 'rigid', got {contact!r}")
     fields: dict[str, Any] = {}
     for key, value in data.items():
         if key in _TEXT_KEYS or key in _SKIPPED_KEYS:
@@ -174,6 +236,79 @@ def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain')
             raise _bad(name, field if field != 'phi' else 'phi_deg', 'is missing')
     shear_type = str(data.get('shear_type', 'A')).upper()
     return Terrain(name=name, shear_type=shear_type, **fields)
+
+
+def _rigid_from_mapping(data: Mapping[str, Any], name: str) -> Terrain:
+    """A rigid terrain from its file fields (:data:`RIGID_FIELDS`, SI); soil fields are an error."""
+    values: dict[str, float] = {}
+    for key, value in data.items():
+        if key in _TEXT_KEYS or key in _SKIPPED_KEYS:
+            continue
+        if key not in RIGID_FIELDS:
+            raise _bad(name, str(key), 'is not a field of rigid ground (contact: rigid)')
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _bad(name, str(key), f'must be a number, got {value!r}')
+        values[str(key)] = float(value)
+    for field in RIGID_FIELDS:
+        if field not in values:
+            raise _bad(name, field, 'is missing')
+    shear_type = str(data.get('shear_type', 'A')).upper()
+    return rigid_terrain(name, shear_type=shear_type, **values)
+
+
+def rigid_terrain(
+    name: str,
+    *,
+    mu_longitudinal: float,
+    mu_lateral: float,
+    rolling_resistance: float,
+    K: float,
+    shear_type: str = 'A',
+) -> Terrain:
+    """Rigid ground (SI): friction coefficients along and across the running gear [-], rolling
+    resistance coefficient [-], slip modulus K [m]; soil fields at the rigid limit (module doc)."""
+    mu = RIGID_FIELD_RANGES['mu_longitudinal']
+    if isinstance(mu_longitudinal, bool) or not mu.contains(float(mu_longitudinal)):
+        raise _bad(name, 'mu_longitudinal', f'= {mu_longitudinal!r} is outside its range {mu.text}')
+    return Terrain(
+        name=name,
+        n=1.0,
+        kc=0.0,
+        kphi=RIGID_KPHI,
+        c=0.0,
+        phi=math.atan(float(mu_longitudinal)),
+        K=K,
+        shear_type=shear_type,
+        contact=CONTACT_RIGID,
+        mu_lateral=mu_lateral,
+        rolling_resistance=rolling_resistance,
+    )
+
+
+def terrain_fields(terrain: Terrain) -> dict[str, Any]:
+    """The fields a terrain file of ``terrain`` holds, SI units (phi as ``phi_deg`` [deg]): the soil
+    fields of a soil, ``contact`` and :data:`RIGID_FIELDS` of rigid ground."""
+    if terrain.is_rigid:
+        assert terrain.mu_lateral is not None and terrain.rolling_resistance is not None  # validated
+        return {
+            'contact': CONTACT_RIGID,
+            'mu_longitudinal': terrain.mu_longitudinal,
+            'mu_lateral': float(terrain.mu_lateral),
+            'rolling_resistance': float(terrain.rolling_resistance),
+            'K': float(terrain.K),
+        }
+    fields: dict[str, Any] = {'contact': CONTACT_SOIL}
+    for key in ('n', 'kc', 'kphi', 'c'):
+        fields[key] = float(getattr(terrain, key))
+    fields['phi_deg'] = terrain.phi_deg
+    fields['K'] = float(terrain.K)
+    fields['shear_type'] = terrain.shear_type
+    for key in ('Kr', 'Kw'):
+        if getattr(terrain, key) is not None:
+            fields[key] = float(getattr(terrain, key))
+    for key in ('a0', 'a1', 'b0', 'b1'):
+        fields[key] = float(getattr(terrain, key))
+    return fields
 
 
 # Table units, exactly as printed. Tables 2.1-2.3 (dry sand, sandy loam, clay; K from Table 2.3 and
@@ -225,10 +360,13 @@ def load_terrain(name_or_path: str | os.PathLike[str]) -> Terrain:
 
 def terrain_fingerprint(terrain: Terrain) -> str:
     """Stable hex digest of the terrain's physical parameters (not its name)."""
+    # a soil's digest is over its soil fields only, as before rigid ground existed (cached maps
+    # keep their keys); rigid ground adds its own fields
+    rigid_only = ('contact', 'mu_lateral', 'rolling_resistance')
     payload = {
         k: (repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
         for k, v in dataclasses.asdict(terrain).items()
-        if k != 'name'
+        if k != 'name' and (terrain.is_rigid or k not in rigid_only)
     }
     text = json.dumps(payload, sort_keys=True, default=str)
     return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]

@@ -1,0 +1,164 @@
+"""The BorealTC Husky recordings (../shared/realdata/borealtc-husky, MIT, README there) as
+:class:`~skidsteer_power.calibration.series.Series`, and the experiments of the ``real_motion`` and
+``real`` benches on them.
+
+Units and signs, worked out from the data (and marked where ASSUMED):
+- ``velL``, ``velR``: per-side wheel speed in steps of 1/127 (a signed byte of the Husky's 1 m/s
+  range), read as m/s at the tread (the Husky's hardware max_speed is 1.0 m/s): the axle set point is
+  vel / r with r = 0.1651 m (husky_a200.yaml). No command is recorded: the controller holds wheel
+  speeds, so these are the set points.
+- ``curL``, ``curR``: per-side current [A], magnitudes only (never negative). ASSUMED: the drivers'
+  battery-side current (the Husky MCU reports driver currents), so V x I with V the 24 V nominal bus
+  (ASSUMED: no voltage recorded) is each side's electrical power [W].
+- ``wz``: the IMU's gyro yaw rate [rad/s], REP 103 (positive turns left): its sign agrees with
+  velR - velL in the data.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from skidsteer_power.calibration.series import Series, SeriesSegment, steady_segments
+
+ROOT = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'realdata' / 'borealtc-husky'
+VEHICLE = 'husky_a200'
+WHEEL_RADIUS_M = 0.1651  # husky_a200.yaml (husky_description URDF)
+BUS_V = 24.0  # ASSUMED: the Husky's nominal bus; BorealTC records no voltage
+STEP_M_S = 1.0 / 127.0  # the wheel speeds' resolution [m/s]
+SURFACE_TERRAIN = {  # start terrain of each surface (presets; config/terrains/)
+    'ASPHALT': 'asphalt',
+    'FLOORING': 'flooring',
+    'ICE': 'ice',
+    'SANDY_LOAM': 'sandy_loam',
+    'SNOW': 'snow',
+}
+MIN_RUNS = 7  # surfaces with at least this many runs are benchmarked (issue 35)
+
+
+def root() -> Path:
+    return ROOT.resolve()
+
+
+def surfaces() -> list[str]:
+    """The surfaces with at least :data:`MIN_RUNS` runs and a start terrain."""
+    out = []
+    for name in SURFACE_TERRAIN:
+        if len(runs(name)) >= MIN_RUNS:
+            out.append(name)
+    return out
+
+
+def runs(surface: str) -> list[int]:
+    """Run numbers of ``surface`` that have both files."""
+    folder = root() / surface
+    numbers = sorted(int(p.stem.split('_')[1]) for p in folder.glob('pro_*.csv'))
+    return [n for n in numbers if (folder / f'imu_{n:02d}.csv').exists()]
+
+
+def load_run(surface: str, run: int) -> Series:
+    """One run as a :class:`Series` (module doc for the units)."""
+    folder = root() / surface
+    pro = np.genfromtxt(folder / f'pro_{run:02d}.csv', delimiter=',', names=True)
+    imu = np.genfromtxt(folder / f'imu_{run:02d}.csv', delimiter=',', names=True)
+    t = np.asarray(pro['time'], dtype=float)
+    keep = np.r_[True, np.diff(t) > 0]  # a repeated time stamp: keep the first
+    vel = np.column_stack([pro['velL'], pro['velR']])[keep]
+    cur = np.column_stack([pro['curL'], pro['curR']])[keep]
+    return Series(
+        source=f'{surface}/pro_{run:02d}.csv',
+        t_s=t[keep],
+        setpoint_rad_s=vel / WHEEL_RADIUS_M,
+        power_W=BUS_V * np.abs(cur),
+        gyro_t_s=np.asarray(imu['time'], dtype=float),
+        yaw_rate_rad_s=np.asarray(imu['wz'], dtype=float),
+    )
+
+
+def run_segments(surface: str, numbers: list[int]) -> list[SeriesSegment]:
+    """Steady segments of runs ``numbers``: holds within one wheel speed step (1/127 m/s)."""
+    from skidsteer_power.drive import controller_for_vehicle
+    from skidsteer_power.estimator import factory
+
+    controller = controller_for_vehicle(factory.load_vehicle_config(VEHICLE))
+    out: list[SeriesSegment] = []
+    for n in numbers:
+        found, _ = steady_segments(
+            load_run(surface, n), controller.twist_of, tol_rad_s=1.01 * STEP_M_S / WHEEL_RADIUS_M
+        )
+        out.extend(found)
+    return out
+
+
+@dataclass(frozen=True)
+class MotionRow:
+    """Yaw-rate MAE [rad/s] on the held-out segments of one surface, per model."""
+
+    surface: str
+    segments_fit: int
+    segments_check: int
+    no_slip: float
+    icr: float
+    preset: float
+    calibrated: float
+    status: str
+
+
+def yaw_mae(predicted: np.ndarray, measured: np.ndarray) -> float:
+    return float(np.mean(np.abs(predicted - measured)))
+
+
+def icr_fit(setpoints: np.ndarray, yaw: np.ndarray) -> float:
+    """The ICR model's effective tread B [m] (yaw = r (w_R - w_L) / B, chapter 3.4's ICR spacing)
+    by least squares through the origin on the fit segments."""
+    x = WHEEL_RADIUS_M * (setpoints[:, 1] - setpoints[:, 0])
+    denominator = float(x @ yaw)
+    return float(x @ x) / denominator if abs(denominator) > 1e-12 else math.inf
+
+
+def motion_row(surface: str, fit_runs: list[int], check_runs: list[int]) -> MotionRow:
+    """Calibrate the ground's slip on ``fit_runs`` (``fit_to='motion'``: the gyro against FESS at the
+    set points), predict ``check_runs``' yaw rate from their set points; beside the no-slip kinematics
+    and an ICR fit on the same segments."""
+    from skidsteer_power.calibration import auto_fit_names, calibrate
+    from skidsteer_power.calibration.series import segments_of
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    vehicle = factory.load_vehicle_config(VEHICLE)
+    powertrain = factory.powertrain_for(vehicle)
+    start = load_terrain(SURFACE_TERRAIN[surface])
+    fit, check = run_segments(surface, fit_runs), run_segments(surface, check_runs)
+    fit_sp = np.array([s.setpoint_rad_s for s in fit])
+    fit_yaw = np.array([s.segment.yaw_rate_rad_s for s in fit])
+    sp = np.array([s.setpoint_rad_s for s in check])
+    yaw = np.array([s.segment.yaw_rate_rad_s for s in check])
+    commands = np.array([s.segment.command for s in check])
+    no_slip = WHEEL_RADIUS_M * (sp[:, 1] - sp[:, 0]) / float(vehicle.tread_m)
+    icr = WHEEL_RADIUS_M * (sp[:, 1] - sp[:, 0]) / icr_fit(fit_sp, fit_yaw)
+    preset = CommandPredictor(vehicle, start, powertrain).predict(commands[:, 0], commands[:, 1]).yaw_rate
+    segments = segments_of(fit)
+    names, fixed = auto_fit_names(segments, start)
+    result = calibrate(
+        vehicle, start, powertrain, segments, names, holdout=0.0, fit_to='motion', left_fixed=fixed
+    )
+    after = CommandPredictor(vehicle, result.terrain, powertrain).predict(commands[:, 0], commands[:, 1])
+    fitted = [n for n in result.names if result.status(n) == 'fitted']
+    pinned = [f'{n} at its {side} bound' for n, side in result.at_bound.items()]
+    status = result.kept_start or '; '.join(
+        [f'fitted {", ".join(fitted)}' if fitted else 'nothing fitted inside its range', *pinned]
+    )
+    return MotionRow(
+        surface,
+        len(fit),
+        len(check),
+        yaw_mae(no_slip, yaw),
+        yaw_mae(icr, yaw),
+        yaw_mae(preset, yaw),
+        yaw_mae(after.yaw_rate, yaw),
+        status,
+    )
