@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from skidsteer_power.models import solve
+from skidsteer_power.errors import InputError
+from skidsteer_power.models import MODELS, solve
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -39,3 +41,16 @@ def test_steeds_mu_t_is_constant() -> None:
     s0 = steeds.s0_m
     np.testing.assert_allclose(steeds.extra['mu_t'], 0.5 * (0.25 + s0**2 / 0.7**2), rtol=1e-9)
     np.testing.assert_allclose(steeds.extra['mu_t'][:, RADII >= 10], 0.5 / 4, rtol=2e-3)
+
+
+def test_every_model_names_an_unknown_option() -> None:
+    # Issue 38: `solve(..., model='wong', tolerance=1e-9)` was silently ignored (wong, steeds, icr
+    # took **_ignored) where fess raised. A misspelt option (here `tolerance` for `tol`) is one
+    # InputError naming it, from every model; the spelled-right option still works.
+    for model in MODELS:
+        with pytest.raises(InputError, match='tolerance'):
+            solve(CH3, SAND, 0.5, 10.0, model=model, tolerance=1e-9)
+    wheels = load_vehicle('test_robot_6wheel')
+    with pytest.raises(InputError, match='tolerance'):
+        solve(wheels, SAND, 0.5, 10.0, model='wong', tolerance=1e-9)
+    assert solve(CH3, SAND, 0.5, 10.0, model='wong', tol=1e-9).converged

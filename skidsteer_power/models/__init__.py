@@ -11,6 +11,7 @@ that needs heavy set-up costs nothing until it is used.
 from __future__ import annotations
 
 import importlib
+import inspect
 from typing import TYPE_CHECKING, Any
 
 from skidsteer_power.errors import InputError
@@ -58,4 +59,10 @@ def solve(
             f'(contact: rigid): use model {" or ".join(RIGID_GROUND_MODELS)}'
         )
     solve_model: Callable[..., SteadyState] = importlib.import_module(module_name).solve
+    if model == 'wong':  # wong.solve forwards its options to the track or the wheel solver
+        solve_model = importlib.import_module(module_name).solver_for(vehicle)
+    try:  # an unknown option is the caller's error, named here, never silently ignored
+        inspect.signature(solve_model).bind(vehicle, terrain, speed, turn_radius, **options)
+    except TypeError as err:
+        raise InputError(f'model {model!r}: {err}') from None
     return solve_model(vehicle, terrain, speed, turn_radius, **options)

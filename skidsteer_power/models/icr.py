@@ -30,7 +30,6 @@ Wheels (an extension): each wheel is the flat patch of ``steeds.contact_patches`
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -81,7 +80,6 @@ def solve(
     tol: float = TOLERANCE,
     max_iter: int = MAX_ITERATIONS,
     raise_on_failure: bool | None = None,
-    **_ignored: Any,
 ) -> SteadyState:
     """ICR steady state (eqs. 3.23-3.26 with the equilibrium 3.18) for V [m/s] and signed R [m].
 

@@ -26,8 +26,6 @@ finite R, which is why Steeds' torques hardly change with R (Figure 3.3 text).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import elementwise
@@ -50,7 +48,6 @@ def solve(
     *,
     mu_t: float = DEFAULT_MU_T,
     raise_on_failure: bool | None = None,
-    **_ignored: Any,
 ) -> SteadyState:
     """Steeds' steady state (eqs. 3.2-3.7) for speed V [m/s] and signed radius R [m] (inf straight).
 

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from numpy.typing import ArrayLike
@@ -20,5 +21,9 @@ def solve(
     vehicle: Vehicle, terrain: Terrain, speed: ArrayLike, turn_radius: ArrayLike, **options: Any
 ) -> SteadyState:
     """Steady state by Wong's theory for speed V [m/s] and signed turning radius R [m] (inf straight)."""
-    solve_gear = wong_track.solve if vehicle.is_tracked else wong_wheel.solve
-    return solve_gear(vehicle, terrain, speed, turn_radius, **options)
+    return solver_for(vehicle)(vehicle, terrain, speed, turn_radius, **options)
+
+
+def solver_for(vehicle: Vehicle) -> Callable[..., SteadyState]:
+    """Wong's track solver (chapter 3.3) for a tracked vehicle, the wheel solver (chapter 4) else."""
+    return wong_track.solve if vehicle.is_tracked else wong_wheel.solve

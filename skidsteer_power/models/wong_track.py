@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -255,7 +254,6 @@ def solve(
     tol: float = TOLERANCE,
     max_iter: int = MAX_ITERATIONS,
     raise_on_failure: bool | None = None,
-    **_ignored: Any,
 ) -> SteadyState:
     """Steady skid-steering state of a tracked vehicle by Wong's theory (eqs. 3.8-3.22).
 

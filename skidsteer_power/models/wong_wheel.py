@@ -45,7 +45,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -295,7 +294,6 @@ def solve(
     tol: float = TOLERANCE,
     max_iter: int = MAX_ITERATIONS,
     raise_on_failure: bool | None = None,
-    **_ignored: Any,
 ) -> SteadyState:
     """Steady skid-steering state of a 4- or 6-wheel vehicle (eqs. 4.1-4.14).
 
