@@ -133,10 +133,9 @@ def max_axle_speed(powertrain: Powertrain) -> float:
     """Largest axle speed [rad/s] a set point may ask for: the motor's no-load speed at the battery's
     full open-circuit voltage (Kn V_bus), at most its permissible speed, through the reduction."""
     motor = powertrain.motor
-    try:
-        v_bus = float(Battery.from_config(powertrain.battery).config.ocv(1.0))
-    except Exception:  # no battery described or readable: the motor's nominal voltage
-        v_bus = motor.nominal_voltage_V
+    # a battery that is not described is the test robot's (Battery.from_config); a battery described
+    # wrongly is the user's ConfigError, never silently the motor's nominal voltage (issue 38)
+    v_bus = float(Battery.from_config(powertrain.battery).config.ocv(1.0))
     return min(motor.speed_constant_rad_s_V * v_bus, motor.max_speed_rad_s) / powertrain.gear_ratio
 
 
