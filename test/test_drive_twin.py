@@ -7,13 +7,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 from cli_run import run_cli
 
+from skidsteer_power.calibration.drive_limits import identify_drive
 from skidsteer_power.calibration.segments import read_recording
-from skidsteer_power.drive import DriveIdentification, controller_for_vehicle, identify
+from skidsteer_power.drive import DriveIdentification, controller_for_vehicle
 from skidsteer_power.vehicle import load_vehicle
 
 GEAR = 12.0  # the test robot's reduction (section 7.1.1): joint_states carry motor speeds
@@ -33,11 +33,10 @@ def _write_commands(path: Path, rows: list[tuple[float, float]]) -> Path:
 
 
 def _identify_bag(bag: Path) -> DriveIdentification:
-    rec = read_recording(bag)
-    k = np.searchsorted(rec.cmd_t, rec.js_t, side='right') - 1  # the command in force at each sample
-    cmd = np.where(k[:, None] >= 0, rec.cmd[np.maximum(k, 0)], 0.0)
     prior = controller_for_vehicle(load_vehicle('test_robot_track'))  # what the vehicle file says
-    return identify(rec.js_t, cmd, rec.omega / GEAR, prior=prior)
+    found = identify_drive([read_recording(bag)], prior, GEAR)
+    assert found is not None
+    return found
 
 
 @pytest.fixture(scope='module')
