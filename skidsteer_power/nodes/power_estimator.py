@@ -5,7 +5,8 @@ A thin rclpy shell around :class:`skidsteer_power.estimator.EstimatorCore` (all 
 Topics (names are defaults; remap freely)
 ----------------------------------------
 subscribes (best-effort by default, so reliable AND best-effort publishers both match; see QoS)
-    ``cmd_vel``  geometry_msgs/Twist (or TwistStamped with ``cmd_vel_stamped: true``):
+    ``cmd_vel``  geometry_msgs/Twist or TwistStamped (``cmd_vel_type``, by default whichever the
+                 publishers offer; stale or future stamps refused: nodes/cmd_vel_input.py):
                  linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
     ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
                  velocity = motor shaft speed [rad/s], effort = Kt * I [N m]; any other robot's
@@ -84,7 +85,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -109,6 +110,8 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes import cmd_vel_input
+from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
@@ -138,7 +141,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         'initial_soc', -1.0, 'state of charge at start when nothing is restored [-]; < 0 = full', (-1.0, 1.0)
     ),
-    ParamSpec('cmd_vel_stamped', False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
+    ParamSpec(
+        'cmd_vel_stamped', False, 'deprecated: cmd_vel_type:=twist_stamped (true = that, with a warning)'
+    ),
+    *cmd_vel_input.PARAMETERS,
     ParamSpec('cmd_timeout_s', 0.5, 'cmd_vel older than this is stale [s]', (0.01, 60.0)),
     ParamSpec('joint_timeout_s', 0.5, 'joint_states older than this is stale [s]', (0.01, 60.0)),
     ParamSpec(
@@ -276,7 +282,6 @@ class PowerEstimator(QuietNode):
             memory_s=float(p['adaptation_memory_s']),
             terrain_memory_s=float(p['adaptation_terrain_memory_s']),
         )
-        self._cmd_vel_stamped = bool(p['cmd_vel_stamped'])
         self.core = EstimatorCore(
             predictor,
             factory.battery_for(self.vehicle),
@@ -370,7 +375,17 @@ class PowerEstimator(QuietNode):
         def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
             return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)
 
-        sub(TwistStamped if p['cmd_vel_stamped'] else Twist, 'cmd_vel', self._on_cmd_vel)
+        self.cmd_input = CmdVelInput(
+            self,
+            cmd_vel_input.cmd_vel_mode(self, p['cmd_vel_type'], 'cmd_vel_stamped', p['cmd_vel_stamped']),
+            self._on_cmd_vel,
+            qos_in,
+            timeout_s=float(p['cmd_timeout_s']),
+            tolerance_s=float(p['cmd_vel_stamp_tolerance_s']),
+            decode=decoder,  # raw bytes in, decoded by rosbags (nodes/wire.py)
+            make_callback=Batched,  # a backlog in batches (spin.py)
+            qos_overriding_options=overrides,
+        )
         sub(JointState, 'joint_states', self._on_joint_states)
         joint_map = self.core.settings.joint_map
         self.side_currents = SideCurrentFeed(self, joint_map, qos_in) if joint_map.side_currents else None
@@ -406,17 +421,22 @@ class PowerEstimator(QuietNode):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_cmd_vel(self, msg: Any) -> None:
-        """A decoded (rosbags) geometry_msgs/Twist, or TwistStamped with ``cmd_vel_stamped``."""
-        twist = msg.twist if self._cmd_vel_stamped else msg
+        """A decoded (rosbags) geometry_msgs/Twist or TwistStamped (a refused stamp is dropped)."""
         received = self.get_clock().now()
         now = received.nanoseconds * 1e-9
+        twist = self.cmd_input.accept(msg, now)
+        if twist is None:
+            return
         try:
             with self._lock:
                 prediction = self.core.on_command(twist.linear.x, twist.angular.z, now)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        stamp = msg.header.stamp if self._cmd_vel_stamped else received.to_msg()
+        header = getattr(msg, 'header', None)  # TwistStamped; a zero stamp counts as none
+        stamp = header.stamp if header is not None else None
+        if stamp is None or not (stamp.sec or stamp.nanosec):
+            stamp = received.to_msg()
         self._publish_predicted(prediction, stamp.sec, stamp.nanosec)
         self._publish_predicted_motion(prediction, now, stamp)
         self._figure_due(0)
@@ -594,6 +614,7 @@ class PowerEstimator(QuietNode):
             level, message, values = self.core.diagnostics(now)
         values['terrain'] = self.terrain_name
         values['vehicle'] = self.vehicle.name
+        values.update(self.cmd_input.diagnostics())
         if self.pending_terrain:
             values['pending_terrain'] = self.pending_terrain
         status = DiagnosticStatus(level=bytes([level]), name=f'{self.get_name()}: energy', message=message)
