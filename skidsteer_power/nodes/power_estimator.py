@@ -102,6 +102,7 @@ from skidsteer_power.estimator.inputs import InputLimits, JointMap
 from skidsteer_power.estimator.odometry import PredictedOdometry
 from skidsteer_power.estimator.persistence import load_or_quarantine, save_state
 from skidsteer_power.estimator.prediction import Prediction, Predictor
+from skidsteer_power.estimator.state_lock import StateLock
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -135,7 +136,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'directory of cached maps ("" = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
     ),
     ParamSpec(
-        'state_file', '', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'
+        'state_file',
+        '',
+        'energy state file ("" = ~/.local/state/skidsteer_power/energy_[<namespace>_]<vehicle>.json); '
+        'one live process per file (a lock)',
     ),
     ParamSpec('persist', True, 'save the energy state and restore it on start'),
     ParamSpec(
@@ -289,7 +293,10 @@ class PowerEstimator(QuietNode):
             settings,
             adaptation,
         )
-        self.state_file = factory.state_path(p['state_file'], self.vehicle) if p['persist'] else None
+        self.state_file = None
+        if p['persist']:
+            self.state_file = factory.state_path(p['state_file'], self.vehicle, self.get_namespace())
+            self._state_lock = StateLock.take(self.state_file)  # one live process per file
         self._restore(p['initial_soc'])
         self._make_interfaces(p)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -689,6 +696,9 @@ class PowerEstimator(QuietNode):
         if hook is not None:
             hook.close()
         self.save()
+        lock = getattr(self, '_state_lock', None)
+        if lock is not None:
+            lock.release()
         super().destroy_node()
 
 
