@@ -41,7 +41,9 @@ $BIN/skidsteer-power replay "$BAG" --topics /cmd_vel --wait-for-subscribers 30 >
 sleep 1
 suite_alive 'during the replay'
 kill -INT "$rec"; wait "$rec"
+# the live joint_states are des_driver's (motor shaft, effort = K_t I), whatever the vehicle's own stack
 $BIN/skidsteer-power validate "$LIVE" --vehicle "$VEHICLE" --terrain "$TERRAIN" --report "$OUT/report" \
+    --left-joints left_motor --right-joints right_motor --effort torque --joints-at motor \
     --json > "$OUT/validate.json"
 $BIN/python - "$OUT/validate.json" <<'PY'
 import json, sys

@@ -575,7 +575,9 @@ class PowerEstimator(QuietNode):
                 self.odometry.set_twist(0.0, 0.0, now)
             else:
                 self.odometry.advance(now)
+            expired = self.core.expired_commands
             self.core.tick(now)
+            standing = self.core.prediction if self.core.expired_commands != expired else None
             fields = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
             remaining = float(self.core.battery.remaining_wh)
             tte = float(self.core.time_to_empty_s)
@@ -585,6 +587,10 @@ class PowerEstimator(QuietNode):
                 name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
             )
         stamp = self.get_clock().now().to_msg()
+        if standing is not None:  # the command went stale: the standing prediction goes out at once
+            self._publish_predicted(standing, stamp.sec, stamp.nanosec)
+            self._predicted_twist_stamp = stamp
+            self._figure_due(0)
         battery = battery_state_message(fields)
         battery.header.stamp = stamp
         self.pub_battery.publish(battery)
