@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist
@@ -31,7 +32,7 @@ class SpeedPowerPredictor(FixedPowerPredictor):
         self.battery_W = WATTS_PER_M_S * abs(speed_m_s)
         base = super().predict(speed_m_s, yaw_rate_rad_s)
         k = abs(speed_m_s) / 0.3  # speeds and torques too: standing predicts zero everywhere
-        scaled = {
+        scaled: dict[str, Any] = {
             f.name: tuple(k * v for v in getattr(base, f.name))
             for f in dataclasses.fields(base)
             if isinstance(getattr(base, f.name), tuple)
