@@ -11,6 +11,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist
 from rclpy.context import Context
+from std_msgs.msg import Float64
 from test_cmd_vel_input import Graph
 from test_estimator_core import FixedPowerPredictor
 
@@ -79,12 +80,10 @@ def test_node_publishes_the_standing_prediction(ros_context: Context, tmp_path: 
         moving = g.predicted[-1]
         assert list(moving.effort[:2]) != [0.0, 0.0] or moving.velocity[0] != 0.0
 
-        def standing() -> bool:
-            return bool(g.predicted) and list(g.predicted[-1].velocity) == [0.0] * len(
-                g.predicted[-1].velocity
-            )
-
-        assert g.spin_until(standing)  # no more commands: the prediction says standing still
+        figures: list[Float64] = []
+        g.client.create_subscription(Float64, 'power/predicted_left_w', figures.append, 100)
+        assert g.spin_until(lambda: bool(figures) and figures[-1].data == 0.0)  # standing still: 0 W
+        assert len(g.predicted) >= 1  # power/predicted: one message per cmd_vel, none for the expiry
 
         def summary_standing() -> bool:
             if not summaries:

@@ -160,6 +160,7 @@ class EstimatorCore:
         )
         self.prediction: Prediction | None = None
         self.expired_commands = 0  # commands that went stale: the prediction fell back to standing
+        self.standing = False  # the prediction is standing still's (the last command went stale)
         self.comparison: Comparison | None = None
         self.command: tuple[float, float] | None = None
         self.clamped_count = 0
@@ -194,6 +195,7 @@ class EstimatorCore:
         self.cmd_fresh.mark(now_s)
         self.cmd_fresh.timeout_s = self.settings.cmd_timeout_s if hold_s is None else float(hold_s)
         self.command = (speed, yaw_rate)
+        self.standing = False
         self.adaptation.on_command(self.command, now_s)
         return self._update_prediction(now_s)
 
@@ -343,10 +345,11 @@ class EstimatorCore:
         so the prediction becomes that of standing still (V = 0, yaw rate 0: idle power), never the
         last moving command's (issue 37 item 4). Counted in ``expired_commands``; the energy is not
         charged with it (the hold of the last command ended: the energy source says so)."""
-        if self.command is None or self.command == (0.0, 0.0) or self.cmd_fresh.is_fresh(now_s):
+        if self.command is None or self.standing or self.cmd_fresh.is_fresh(now_s):
             return
-        self.command = (0.0, 0.0)
+        # ``command`` stays the last one given (the path energy plans at its speed: path_hook.py)
         self.prediction = self.predictor.predict(0.0, 0.0)
+        self.standing = True
         self.expired_commands += 1
 
     def traction_warning(self) -> bool:

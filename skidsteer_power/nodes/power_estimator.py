@@ -587,9 +587,8 @@ class PowerEstimator(QuietNode):
                 name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
             )
         stamp = self.get_clock().now().to_msg()
-        if standing is not None:  # the command went stale: the standing prediction goes out at once
-            self._publish_predicted(standing, stamp.sec, stamp.nanosec)
-            self._predicted_twist_stamp = stamp
+        if standing is not None:  # the command went stale: the figures show standing still at once
+            self._predicted_twist_stamp = stamp  # (power/predicted stays one message per cmd_vel)
             self._figure_due(0)
         battery = battery_state_message(fields)
         battery.header.stamp = stamp
@@ -634,9 +633,11 @@ class PowerEstimator(QuietNode):
         status.hardware_id = self.vehicle.name
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
+        path_status = self.path_energy.diagnostic_status()
+        if path_status is not None:
+            array.status.append(path_status)
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
-        self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
     def save(self) -> None:
