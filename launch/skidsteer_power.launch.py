@@ -2,8 +2,11 @@
 skidsteer_power.launch.py``). Without ROS launch, use ``skidsteer-power run`` (same nodes).
 
 Arguments: vehicle, terrain (estimator parameters), left_port, right_port (DES 70/10 amplifiers),
-monitor (true: also open energy_monitor in view mode in this terminal). Every other parameter comes
-from the installed ``config/estimator.yaml`` and ``config/des_driver.yaml``.
+monitor (true: also open energy_monitor in view mode in this terminal), namespace (of every node, e.g.
+``robot1``: one robot, one energy state file), cmd_vel_topic and joint_states_topic (remaps of the
+nodes' ``cmd_vel`` and ``joint_states``, e.g. ``cmd_vel_topic:=/diff_drive_controller/cmd_vel``),
+cmd_vel_type (auto, twist or twist_stamped: :mod:`skidsteer_power.nodes.cmd_vel_input`). Every other
+parameter comes from the installed ``config/estimator.yaml`` and ``config/des_driver.yaml``.
 
 des_driver is a managed (lifecycle) node: this file configures it once its process is up, activates
 it once it is inactive, and on shutdown deactivates it (zero speed, power stages off) and cleans it
@@ -35,17 +38,25 @@ def generate_launch_description() -> LaunchDescription:
     estimator_defaults = os.path.join(share, 'config', 'estimator.yaml')
     driver_defaults = os.path.join(share, 'config', 'des_driver.yaml')
     vehicle = LaunchConfiguration('vehicle')
+    namespace = LaunchConfiguration('namespace')
+    cmd_vel_type = LaunchConfiguration('cmd_vel_type')
+    remappings = [
+        ('cmd_vel', LaunchConfiguration('cmd_vel_topic')),
+        ('joint_states', LaunchConfiguration('joint_states_topic')),
+    ]
     driver = LifecycleNode(
         package='skidsteer_power',
         executable='des_driver',
         name='des_driver',
-        namespace='',
+        namespace=namespace,
+        remappings=remappings,
         parameters=[
             driver_defaults,
             {
                 'vehicle': vehicle,
                 'left_port': LaunchConfiguration('left_port'),
                 'right_port': LaunchConfiguration('right_port'),
+                'cmd_vel_type': cmd_vel_type,
             },
         ],
         output='screen',
@@ -86,13 +97,23 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument('left_port', default_value='/dev/ttyUSB0'),
             DeclareLaunchArgument('right_port', default_value='/dev/ttyUSB1'),
             DeclareLaunchArgument('monitor', default_value='false'),
+            DeclareLaunchArgument('namespace', default_value=''),
+            DeclareLaunchArgument('cmd_vel_topic', default_value='cmd_vel'),
+            DeclareLaunchArgument('joint_states_topic', default_value='joint_states'),
+            DeclareLaunchArgument('cmd_vel_type', default_value='auto'),
             Node(
                 package='skidsteer_power',
                 executable='power_estimator',
                 name='power_estimator',
+                namespace=namespace,
+                remappings=remappings,
                 parameters=[
                     estimator_defaults,
-                    {'vehicle': vehicle, 'terrain': LaunchConfiguration('terrain')},
+                    {
+                        'vehicle': vehicle,
+                        'terrain': LaunchConfiguration('terrain'),
+                        'cmd_vel_type': cmd_vel_type,
+                    },
                 ],
                 output='screen',
                 on_exit=[Shutdown(reason='power_estimator exited')],
@@ -103,6 +124,7 @@ def generate_launch_description() -> LaunchDescription:
                 package='skidsteer_power',
                 executable='energy_monitor',
                 name='energy_monitor',
+                namespace=namespace,
                 arguments=['--mode', 'view'],
                 output='screen',
                 emulate_tty=True,

@@ -172,17 +172,20 @@ def test_block_means_by_hand() -> None:
 
 
 def test_bounds_follow_the_documented_formula() -> None:
-    """Constant power: block spread 0 and block mean = P, so with model spread s the bounds are the
-    battery's time at P (1 +- z90 s); before three blocks the default spread applies."""
+    """Constant power: block spread 0 and block mean = P, so the spread is the prior's, pooled: three
+    complete blocks (0-10, 10-20, 20-30 s; 30-40 s still fills) give s = 0.5 sqrt(3 / (3 + 2)) =
+    0.3873; with model spread 0.1, s = hypot(0.3873, 0.1), and the bounds are the battery's time at
+    P e^(+-z90 s) (tte_bounds.py, steps 2-4)."""
     battery = Battery.default_test_robot(soc=0.5)
     bounds = TimeToEmptyBounds()
-    assert bounds.spread() == bounds.settings.default_spread
-    for k in range(400):  # 40 s of 0.1 s ticks at 50 W: four complete 10 s blocks
+    assert bounds.spread() == bounds.settings.prior_spread  # no data: the prior
+    for k in range(400):  # 40 s of 0.1 s ticks at 50 W
         bounds.add(k * 0.1, 50.0)
-    assert bounds.spread() == pytest.approx(0.0, abs=1e-12)
+    assert bounds.spread() == pytest.approx(0.5 * math.sqrt(3 / 5), rel=1e-12)
+    s = math.hypot(0.5 * math.sqrt(3 / 5), 0.1)
     p10, p90 = bounds.bounds(battery, 50.0, model_spread=0.1)
-    assert p10 == pytest.approx(battery.time_to_empty_s(50.0 * (1 + Z90 * 0.1)))
-    assert p90 == pytest.approx(battery.time_to_empty_s(50.0 * (1 - Z90 * 0.1)))
+    assert p10 == pytest.approx(battery.time_to_empty_s(50.0 * math.exp(Z90 * s)))
+    assert p90 == pytest.approx(battery.time_to_empty_s(50.0 * math.exp(-Z90 * s)))
     assert p10 < battery.time_to_empty_s(50.0) < p90
     assert bounds.bounds(battery, 0.0) == (math.inf, math.inf)
 

@@ -22,7 +22,8 @@ ROSDEP_KEYS = {  # import name -> rosdep key (rosdep/python.yaml)
     'rosbags': 'python3-rosbags-pip',
     'rich': 'python3-rich',
 }
-INDIRECT = {'rcl_interfaces', 'builtin_interfaces'}  # come with rclpy (its own exec_depends)
+INDIRECT = {'builtin_interfaces'}  # comes with every message package (their own exec_depends)
+# rcl_interfaces is imported directly (parameter descriptors, SetParametersResult): declared (issue 37)
 
 
 def shipped_imports() -> set[str]:

@@ -38,6 +38,15 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger(__name__)
 
+NO_TYPE_SUPPORT = (
+    "; rclpy cannot publish even raw CDR without the type's generated type support (create_publisher "
+    "needs the class's _TYPE_SUPPORT; a stand-in type of the same layout would carry another DDS type "
+    'name and match no subscriber): install its ROS package (tf2_msgs for /tf and /tf_static is not on '
+    'PyPI: apt ros-jazzy-tf2-msgs on a ROS install), or pass --topics without it'
+)
+"""Why a topic of an uninstalled type is not replayed even as raw bytes (checked with rclpy 7.1.6:
+``create_publisher`` of a class without ``_TYPE_SUPPORT`` raises AttributeError; issue 37 item 7)."""
+
 NS = 1_000_000_000
 ACK_TIMEOUT_S = 5.0  # longest wait at the end for subscribers to acknowledge [s]
 MATCH_SETTLE_S = 0.3  # pause after every publisher is matched, before the first message [s]
@@ -158,8 +167,8 @@ class Replayer:
             try:
                 cls = message_class(info.msgtype)
             except InputError as err:
-                self.skipped[topic] = str(err)
-                LOG.warning('not replaying %s: %s', topic, err)
+                self.skipped[topic] = f'{err}{NO_TYPE_SUPPORT}'
+                LOG.warning('not replaying %s: %s%s', topic, err, NO_TYPE_SUPPORT)
                 continue
             self.publishers[topic] = node.create_publisher(cls, topic, qos_for_stored(info.qos))
             self.classes[topic] = cls

@@ -97,10 +97,26 @@ MIN_TURN_RAD = 0.2
 straight run (radius hundreds of m) says nothing a reader could see and is left out of the plot."""
 
 
+MIN_FIT_POSES = 4
+"""Fewest poses for a circle that counts as fitted: a circle passes through any 3 points exactly (no
+residual, nothing fitted), so eqs. 7.8-7.10 over-determine it from 4 on."""
+
+LEGEND_CIRCLES = 8
+"""trace.png names at most this many circles in its legend (radius and time); the rest are counted."""
+
+
+def is_fitted(segment: Any) -> bool:
+    """A segment (TraceSegment or its dict) whose circle was fitted: finite radius, >= 4 poses."""
+    values = segment if isinstance(segment, dict) else vars(segment)
+    return math.isfinite(float(values['radius_m'])) and int(values['points']) >= MIN_FIT_POSES
+
+
 def is_turn(segment: TraceSegment) -> bool:
-    """True if the segment's fitted circle describes a turn: finite radius and the arc driven
-    (measured speed [m/s] x duration [s]) sweeps at least :data:`MIN_TURN_RAD` of it."""
+    """True if the segment's fitted circle (:func:`is_fitted`) describes a turn: finite radius and the
+    arc driven (measured speed [m/s] x duration [s]) sweeps at least :data:`MIN_TURN_RAD` of it."""
     if not (math.isfinite(segment.radius_m) and segment.radius_m > 0 and math.isfinite(segment.speed_m_s)):
+        return False
+    if not is_fitted(segment):
         return False
     arc_m = abs(segment.speed_m_s) * (segment.t_end_s - segment.t_start_s)
     return arc_m / segment.radius_m >= MIN_TURN_RAD
@@ -172,6 +188,22 @@ def write_plots(
     return written
 
 
+def trace_window(
+    x: np.ndarray, y: np.ndarray, turns: list[TraceSegment]
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """trace.png's square window ((x_lo, x_hi), (y_lo, y_hi)) [m]: the path and every turn's whole
+    circle with a 4 % margin. A turn's circle sweeps >= MIN_TURN_RAD of the driven arc, so its radius
+    is at most arc / MIN_TURN_RAD (no hundreds-of-m circle of a straight run, :func:`is_turn`)."""
+    lo = np.array([x.min(), y.min()])
+    hi = np.array([x.max(), y.max()])
+    for s in turns:
+        lo = np.minimum(lo, [s.center_x_m - s.radius_m, s.center_y_m - s.radius_m])
+        hi = np.maximum(hi, [s.center_x_m + s.radius_m, s.center_y_m + s.radius_m])
+    cx, cy = (hi + lo) / 2
+    half = max(float(np.max(hi - lo)), 0.1) / 2 * 1.08
+    return (float(cx - half), float(cx + half)), (float(cy - half), float(cy + half))
+
+
 def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
     """The recorded path, scaled to itself, with the fitted circles clipped to the path's window."""
     fig, ax = plt.subplots(figsize=(6, 6))
@@ -180,16 +212,19 @@ def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceS
     ax.plot(x, y, '-', lw=0.8, color='0.5', label=f'path ({inputs.pose_topic})')
     ax.plot(x[:1], y[:1], 'o', color='0.3', ms=4, label='start')
     angles = np.linspace(0, 2 * np.pi, 721)
-    for k, s in enumerate(s for s in segments if is_turn(s)):
-        label = 'fitted circles of turns (eqs. 7.8-7.10)' if k == 0 else None
+    turns = [s for s in segments if is_turn(s)]
+    (x_lo, x_hi), (y_lo, y_hi) = trace_window(x, y, turns)
+    for k, s in enumerate(turns):
+        label = None
+        if k < LEGEND_CIRCLES:
+            label = f'circle R {s.radius_m:.2f} m, {s.t_start_s:.0f}-{s.t_end_s:.0f} s (eqs. 7.8-7.10)'
+        elif k == LEGEND_CIRCLES:
+            label = f'... and {len(turns) - LEGEND_CIRCLES} more fitted circles'
         circle_x = s.center_x_m + s.radius_m * np.cos(angles)
         circle_y = s.center_y_m + s.radius_m * np.sin(angles)
         ax.plot(circle_x, circle_y, lw=0.7, alpha=0.8, label=label)
-    # The window is the path's (a circle fitted to a nearly straight run can be hundreds of m wide).
-    cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
-    half = max(x.max() - x.min(), y.max() - y.min(), 0.1) / 2 * 1.15
-    ax.set_xlim(cx - half, cx + half)
-    ax.set_ylim(cy - half, cy + half)
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(y_lo, y_hi)
     ax.set_aspect('equal', adjustable='box')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
@@ -360,7 +395,7 @@ def one_screen(summary: dict[str, Any]) -> str:
             f'outside the power map: {100 * summary["clamped_time_fraction"]:.1f} % of the time, '
             f'{100 * summary["clamped_energy_fraction"]:.1f} % of the predicted energy'
         )
-    fitted = [s for s in summary['segments'] if math.isfinite(s['radius_m'])]
+    fitted = [s for s in summary['segments'] if is_fitted(s)]
     lines.append(
         f'trace: {len(summary["segments"])} constant-command segments, {len(fitted)} with a fitted circle'
     )

@@ -6,6 +6,7 @@ import argparse
 import glob
 import logging
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -94,6 +95,10 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
     _log_to_stderr()
     stop = StopFlag()
+    if args.all and args.topics:
+        raise InputError('record: -a/--all records every topic: name topics or give -a, not both')
+    if args.output is None:  # rosbag2's default name (local time), a rosbag2 directory
+        args.output = time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
 
     def ready(recorder: Recorder) -> None:
         what = ', '.join(recorder.recorded) or 'none yet'
@@ -276,7 +281,14 @@ def register(subparsers: Subcommands) -> None:
         'rosbag2-compatible MCAP with message definitions. OUT.mcap gives one file; another name a '
         'rosbag2 directory. SIGINT/SIGTERM stop cleanly without losing a received message.',
     )
-    rec.add_argument('-o', '--output', required=True, metavar='OUT.mcap', help='bag to write (new)')
+    rec.add_argument(
+        '-o',
+        '--output',
+        default=None,
+        metavar='OUT.mcap',
+        help='bag to write (new); default: a rosbag2 directory rosbag2_YYYY_MM_DD-HH_MM_SS (as rosbag2)',
+    )
+    rec.add_argument('-a', '--all', action='store_true', help='record every topic (as ros2 bag record -a)')
     rec.add_argument(
         'topics', nargs='*', type=ros_topic, metavar='TOPIC', help='topics to record (default: all)'
     )

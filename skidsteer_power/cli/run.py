@@ -71,7 +71,23 @@ def register(subparsers: Subcommands) -> None:
         help=f'right amplifier port (hardware; default {HARDWARE_PORTS[1]}; not with --simulate)',
     )
     parser.add_argument('--map-cache', default='', help='map cache directory')
-    parser.add_argument('--state-file', default='', help='energy state file')
+    parser.add_argument(
+        '--state-file',
+        default='',
+        help='energy state file (default: per namespace and vehicle; with --simulate none: starts fresh)',
+    )
+    parser.add_argument(
+        '--resume-energy',
+        action='store_true',
+        help='--simulate: restore and save the default energy state file (default: start fresh)',
+    )
+    parser.add_argument('--namespace', default='', help='ROS namespace of the suite (e.g. robot1)')
+    parser.add_argument(
+        '--cmd-vel-type',
+        choices=('auto', 'twist', 'twist_stamped'),
+        default='auto',
+        help="cmd_vel's type: auto (follow the publishers), twist or twist_stamped (ROS 2 Jazzy's default)",
+    )
     parser.add_argument('--status-every', type=positive_float, default=1.0, help='status line period [s]')
     parser.add_argument('--quiet', action='store_true', help='no status lines')
     add_json_flag(parser)
@@ -103,7 +119,6 @@ class _Counters:
 def run(args: argparse.Namespace) -> int:
     import rclpy
     import rclpy.utilities
-    from geometry_msgs.msg import Twist
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
 
@@ -116,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
     options = SuiteOptions(
         vehicle=args.vehicle, terrain=args.terrain, sim_terrain=args.sim_terrain, simulate=args.simulate,
         patches=args.patches, map_cache_dir=args.map_cache, state_file=args.state_file,
-        left_port=args.left_port, right_port=args.right_port,
+        left_port=args.left_port, right_port=args.right_port, namespace=args.namespace,
+        estimator_params=_estimator_params(args), driver_params={'cmd_vel_type': args.cmd_vel_type},
     )  # fmt: skip
     signals = contextlib.ExitStack()  # from here on, also during start-up: SIGINT/SIGTERM end cleanly
     stop = signals.enter_context(stop_on_signals(StopFlag()))
@@ -126,15 +142,12 @@ def run(args: argparse.Namespace) -> int:
     counters = _Counters()
     try:
         suite = Suite(options, context=context, stop=stop)
-        helper = rclpy.create_node('run_cli', context=context)
+        helper = rclpy.create_node('run_cli', context=context, namespace=args.namespace)
         suite.add_node(helper)
         helper.create_subscription(JointState, 'joint_states', lambda m: _count(counters, 'joint_states'), 50)
         helper.create_subscription(JointState, 'power/predicted', lambda m: _count(counters, 'predicted'), 50)
         if args.speed is not None:
-            publisher = helper.create_publisher(Twist, 'cmd_vel', 10)
-            command = Twist()
-            command.linear.x, command.angular.z = args.speed, args.yaw_rate
-            helper.create_timer(0.1, lambda: publisher.publish(command))
+            _drive(helper, args)
         start = _snapshot(suite)
         started = time.monotonic()
         suite.start()
@@ -166,6 +179,32 @@ def run(args: argparse.Namespace) -> int:
         args.json,
     )
     return 0
+
+
+def _estimator_params(args: argparse.Namespace) -> dict[str, Any]:
+    params: dict[str, Any] = {'cmd_vel_type': args.cmd_vel_type}
+    if args.simulate and not args.state_file and not args.resume_energy:
+        params['persist'] = False  # a simulation starts with a full battery and leaves no state behind
+    return params
+
+
+def _drive(helper: Any, args: argparse.Namespace) -> None:
+    """Publish --speed / --yaw-rate at 10 Hz, as the type the suite takes (TwistStamped stamped now
+    with --cmd-vel-type twist_stamped, else Twist)."""
+    from geometry_msgs.msg import Twist, TwistStamped
+
+    stamped = args.cmd_vel_type == 'twist_stamped'
+    publisher = helper.create_publisher(TwistStamped if stamped else Twist, 'cmd_vel', 10)
+
+    def publish() -> None:
+        msg = TwistStamped() if stamped else Twist()
+        twist = msg.twist if stamped else msg
+        twist.linear.x, twist.angular.z = args.speed, args.yaw_rate
+        if stamped:
+            msg.header.stamp = helper.get_clock().now().to_msg()
+        publisher.publish(msg)
+
+    helper.create_timer(0.1, publish)
 
 
 def _count(counters: _Counters, name: str) -> None:

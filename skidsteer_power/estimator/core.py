@@ -159,6 +159,8 @@ class EstimatorCore:
             self.settings.limits,
         )
         self.prediction: Prediction | None = None
+        self.expired_commands = 0  # commands that went stale: the prediction fell back to standing
+        self.standing = False  # the prediction is standing still's (the last command went stale)
         self.comparison: Comparison | None = None
         self.command: tuple[float, float] | None = None
         self.clamped_count = 0
@@ -193,6 +195,7 @@ class EstimatorCore:
         self.cmd_fresh.mark(now_s)
         self.cmd_fresh.timeout_s = self.settings.cmd_timeout_s if hold_s is None else float(hold_s)
         self.command = (speed, yaw_rate)
+        self.standing = False
         self.adaptation.on_command(self.command, now_s)
         return self._update_prediction(now_s)
 
@@ -329,6 +332,7 @@ class EstimatorCore:
         Call from a timer, so the gauge moves between inputs; the time to empty (an integral over the
         battery's voltage curve) is refreshed only here, not per message.
         """
+        self._expire_command(now_s)
         self.energy.advance(now_s)
         self.energy.flush()
         self.time_to_empty_s = self.energy.time_to_empty_s()
@@ -340,6 +344,18 @@ class EstimatorCore:
             self.battery, self.energy.filtered_power_W, model_spread
         )
 
+    def _expire_command(self, now_s: float) -> None:
+        """A command older than its hold is no command: the driver's watchdog holds the motors at zero,
+        so the prediction becomes that of standing still (V = 0, yaw rate 0: idle power), never the
+        last moving command's (issue 37 item 4). Counted in ``expired_commands``; the energy is not
+        charged with it (the hold of the last command ended: the energy source says so)."""
+        if self.command is None or self.standing or self.cmd_fresh.is_fresh(now_s):
+            return
+        # ``command`` stays the last one given (the path energy plans at its speed: path_hook.py)
+        self.prediction = self.predictor.predict(0.0, 0.0)
+        self.standing = True
+        self.expired_commands += 1
+
     def traction_warning(self) -> bool:
         """True when the last prediction's traction margin is at or below the warning margin."""
         p = self.prediction
@@ -349,8 +365,9 @@ class EstimatorCore:
         """(level, message, key/values) describing the estimator at ``now_s``."""
         self.energy.flush()
         problems = []
+        notes = []  # not problems: standing still on a stale command is the normal idle state
         if not self.cmd_fresh.is_fresh(now_s):
-            problems.append('cmd_vel stale')
+            notes.append('standing: cmd_vel stale, commanded zero')
         if not self.joint_fresh.is_fresh(now_s):
             problems.append('joint_states stale')
         if self.traction_warning():
@@ -380,6 +397,7 @@ class EstimatorCore:
             'rejected_joint_states': str(self.rejects.counts['joint_states']),
             'joint_states_no_data': str(self.no_data_count),
             'clamped_commands': str(self.clamped_count),
+            'expired_commands': str(self.expired_commands),
             'command_outside_map': str(outside).lower(),
             'commands_outside_map': str(self.outside_map_count),
             'implausible_joint_states': str(self.implausible['joint_states']),
@@ -393,7 +411,9 @@ class EstimatorCore:
         if self.prediction is not None:
             values['traction_margin'] = f'{self.prediction.traction_margin:.4f}'
         values.update(adaptation_values(correction, self.adaptation.settings.enabled))
-        message = '; '.join(problems) if problems else f'ok, energy from {source} power'
+        message = '; '.join(problems + notes) if problems else f'ok, energy from {source} power'
+        if notes and not problems:
+            message += '; ' + '; '.join(notes)
         return level, message, values
 
     def state_dict(self) -> dict[str, Any]:

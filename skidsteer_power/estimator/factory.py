@@ -34,13 +34,17 @@ def check_terrain(name_or_path: str) -> Terrain:
     return load_terrain(name_or_path)
 
 
-def state_path(configured: str, vehicle: Vehicle) -> Path:
+def state_path(configured: str, vehicle: Vehicle, namespace: str = '') -> Path:
     """The energy-state file: ``configured`` if set, else
-    $XDG_STATE_HOME/skidsteer_power/energy_<vehicle>.json."""
+    $XDG_STATE_HOME/skidsteer_power/energy_<vehicle>.json in the root namespace and
+    energy_<namespace>_<vehicle>.json in another (``/robot1/sub`` -> ``robot1.sub``): one robot, one
+    battery, one file (issue 37 item 8)."""
     if configured:
         return Path(configured).expanduser()
     base = os.environ.get('XDG_STATE_HOME') or Path.home() / '.local' / 'state'
-    return Path(base) / 'skidsteer_power' / f'energy_{vehicle.name}.json'
+    ns = '.'.join(part for part in namespace.split('/') if part)
+    name = f'energy_{ns}_{vehicle.name}.json' if ns else f'energy_{vehicle.name}.json'
+    return Path(base) / 'skidsteer_power' / name
 
 
 def powertrain_for(vehicle: Vehicle) -> Powertrain:

@@ -4,26 +4,27 @@ Method
 ------
 The point value divides what the battery holds by the filtered drive power P (the battery model
 integrates its voltage curve, :meth:`Battery.time_to_empty_s`). What the robot will draw on average
-until empty is not known; it is taken to be uncertain like what it drew recently:
+until empty is not known; the band is that of the future mean power, which starts from a stated
+prior and narrows as the robot's own use is seen (issue 37 item 5: 40 s at a steady 114 W gave a
+37x band, p90 74:33:23 against a 2:00:28 point, from a normal spread cut at 10 % of the power):
 
 1. The drive power is sampled at every estimator tick and kept for ``window_s`` [s]; the samples
    are cut into blocks of ``block_s`` [s] and each block's mean is one draw of "the mean power over
-   a stretch of driving". Their relative spread ``s_p`` = std(block means) / mean(block means)
-   (both over the window; idle blocks count, they are part of how the robot is used).
-2. The prediction's own relative error ``s_m`` is the online adaptation's residual RMS over the
-   mean predicted torque (:meth:`Correction.relative_residual`); it matters only while the energy is
-   integrated from predicted power, so it is added only then.
-3. s = sqrt(s_p^2 + s_m^2); with fewer than ``min_blocks`` blocks, s = ``default_spread`` (we
-   do not know yet, and say so with a wide band).
-4. The centre is the mean of the block means (the best guess of the future mean power; the filtered
-   power behind the point value lags and follows the last few seconds), or P before ``min_blocks``.
-   p10 of the time to empty is the battery's time at power max(M (1 + z s), P), p90 at
-   min(M max(1 - z s, ``min_fraction``), P), with z = 1.2816 (the standard normal's 90 % point): a
-   normal spread of the future mean power, mapped through the monotone battery curve; the max/min
-   keep the point value between its bounds.
-
-The bounds are conservative (a block-mean spread is wider than the spread of the mean over the
-hours a battery lasts), which is the side to err on for a robot that must come back.
+   a stretch of driving"; their relative spread ``s_p`` = std(block means) / mean(block means)
+   (idle blocks count: they are part of how the robot is used).
+2. Prior: a relative spread ``prior_spread`` (0.5, ASSUMED: no recording of how a robot's mean power
+   varies between missions is at hand) worth ``prior_blocks`` blocks. With n complete blocks the
+   spread is the pooled s^2 = (n0 s0^2 + (n - 1) s_p^2) / (n0 + n - 1): the prior alone at the start,
+   the data's own spread after many blocks; at steady power it narrows as s0 sqrt(n0 / (n0 + n - 1)).
+3. The prediction's own relative error ``s_m`` (the online adaptation's residual RMS over the mean
+   predicted torque, :meth:`Correction.relative_residual`) is added while the energy is integrated
+   from predicted power: s = sqrt(s^2 + s_m^2), capped at ``max_spread``.
+4. The centre C is the blocks' mean pooled with P the same way, (n0 P + n M) / (n0 + n). The future
+   mean power is taken log-normal around C (it is positive, and a relative error is symmetric in
+   log): p10 of the time to empty is the battery's time at max(C e^{z s}, P), p90 at
+   min(C e^{-z s}, P), z = 1.2816 (the standard normal's 90 % point), mapped through the monotone
+   battery curve; the max/min keep the point value between its bounds. The band's power ratio is at
+   most e^{2 z max_spread} (13x at the cap of 1.0, 3.6x from the prior alone).
 """
 
 from __future__ import annotations
@@ -41,15 +42,15 @@ Z90 = 1.2815515655446004  # standard normal quantile at 0.9
 
 @dataclass(frozen=True)
 class BoundSettings:
-    """window_s : history kept [s]; block_s : block length [s]; min_blocks : blocks needed before
-    the spread is measured; default_spread : relative spread used before that [-]; min_fraction :
-    least power fraction used for the p90 bound [-]."""
+    """window_s : history kept [s]; block_s : block length [s]; prior_blocks : weight of the prior
+    in blocks [-]; prior_spread : the prior relative spread of the mean power [-]; max_spread : the
+    largest relative spread used [-]."""
 
     window_s: float = 300.0
     block_s: float = 10.0
-    min_blocks: int = 3
-    default_spread: float = 0.5
-    min_fraction: float = 0.1
+    prior_blocks: int = 3
+    prior_spread: float = 0.5  # ASSUMED (see the module): the prior relative spread of the mean power
+    max_spread: float = 1.0
 
 
 class TimeToEmptyBounds:
@@ -87,12 +88,16 @@ class TimeToEmptyBounds:
         return means
 
     def spread(self, means: np.ndarray | None = None) -> float:
-        """Relative spread s_p of the block-mean power [-] (``default_spread`` until enough data);
-        ``means``: :meth:`block_means` if already at hand."""
+        """Relative spread of the future mean power [-]: the prior pooled with the block means' own
+        spread (module, step 2); ``means``: :meth:`block_means` if already at hand."""
+        cfg = self.settings
         means = self.block_means() if means is None else means
-        if means.size < self.settings.min_blocks or means.mean() <= 1e-9:
-            return self.settings.default_spread
-        return float(means.std(ddof=1) / means.mean())
+        n0, s0 = cfg.prior_blocks, cfg.prior_spread
+        n = means.size
+        data = 0.0
+        if n >= 2 and means.mean() > 1e-9:
+            data = (n - 1) * float(means.std(ddof=1) / means.mean()) ** 2
+        return math.sqrt((n0 * s0**2 + data) / (n0 + max(n - 1, 0)))
 
     def bounds(self, battery: BatteryModel, power_W: float, model_spread: float = 0.0) -> tuple[float, float]:
         """(p10, p90) time to empty [s] at filtered power ``power_W`` [W]; (inf, inf) when idle.
@@ -101,10 +106,12 @@ class TimeToEmptyBounds:
         """
         if power_W <= 1e-9:
             return math.inf, math.inf
+        cfg = self.settings
         ms = model_spread if math.isfinite(model_spread) else 0.0
         means = self.block_means()
-        s = math.hypot(self.spread(means), ms)
-        centre = float(means.mean()) if means.size >= self.settings.min_blocks else power_W
-        high = max(centre * (1.0 + Z90 * s), power_W)
-        low = min(centre * max(1.0 - Z90 * s, self.settings.min_fraction), power_W)
+        s = min(math.hypot(self.spread(means), ms), cfg.max_spread)
+        n0, n = cfg.prior_blocks, means.size
+        centre = (n0 * power_W + float(means.sum())) / (n0 + n)
+        high = max(centre * math.exp(Z90 * s), power_W)
+        low = min(centre * math.exp(-Z90 * s), power_W)
         return float(battery.time_to_empty_s(high)), float(battery.time_to_empty_s(low))

@@ -16,8 +16,9 @@ Lifecycle (rclpy.lifecycle; ``~/change_state``, ``~/get_state`` as usual):
 
 ``autostart:=true`` configures and activates at start, for use without a lifecycle manager.
 
-Subscribes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with ``twist_stamped:=true``; m/s and
-rad/s, REP 103), best effort by default so that reliable and best-effort publishers both match
+Subscribes ``cmd_vel`` (geometry_msgs/Twist or TwistStamped: ``cmd_vel_type``, by default whichever
+the publishers offer; a stale or future stamp is refused: :mod:`skidsteer_power.nodes.cmd_vel_input`;
+m/s and rad/s, REP 103), best effort by default so that reliable and best-effort publishers both match
 (:func:`cmd_vel_qos`; ``qos_overrides./cmd_vel.subscription.<policy>`` parameters are honoured).
 Every number is checked where it enters: a message with any non-finite field is rejected and
 counted; V and yaw rate are clamped to ``max_speed_m_s`` / ``max_yaw_rate_rad_s`` (a throttled
@@ -79,7 +80,6 @@ from typing import TYPE_CHECKING, Any
 import rclpy
 import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
@@ -95,6 +95,8 @@ from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCo
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
 from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.nodes import cmd_vel_input
+from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.driver_guardian import GUARDIAN_PARAMETERS, DriverGuardian
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
@@ -186,7 +188,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'status variable of the 16-bit encoder counter (UNCONFIRMED)',
         (128, 255),
     ),
-    ParamSpec('twist_stamped', False, 'cmd_vel is geometry_msgs/TwistStamped instead of Twist'),
+    ParamSpec(
+        'twist_stamped', False, 'deprecated: cmd_vel_type:=twist_stamped (true = that, with a warning)'
+    ),
+    *cmd_vel_input.PARAMETERS,
     ParamSpec('frame_id', '', 'header.frame_id of joint_states'),
     ParamSpec('autostart', False, 'configure and activate at start (no lifecycle manager needed)'),
 )
@@ -254,6 +259,7 @@ class DesDriver(LifecycleNode):
         self._runtime: list[Any] = []  # subscription and timers of the configured state
         self._pause_hook: PauseHook | None = None
         self.unsafe_stop = ''  # set when a stop could not be confirmed at an amplifier (exit 1)
+        self.cmd_input: CmdVelInput | None = None  # cmd_vel of the configured state
         self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', 10)
         self.create_service(Trigger, '~/clear_faults', self._on_clear_faults)
@@ -281,6 +287,9 @@ class DesDriver(LifecycleNode):
                 f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
             )
         p['encoder_resolution'] = p['encoder_resolution'] or powertrain.motor.encoder_counts_per_turn
+        p['cmd_vel_mode'] = cmd_vel_input.cmd_vel_mode(
+            self, p['cmd_vel_type'], 'twist_stamped', p['twist_stamped']
+        )
         p['geometry'] = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
@@ -324,15 +333,16 @@ class DesDriver(LifecycleNode):
         except Exception:
             self._teardown()
             raise
-        msg_type = TwistStamped if p['twist_stamped'] else Twist
+        self.cmd_input = CmdVelInput(
+            self,
+            p['cmd_vel_mode'],
+            self._on_cmd_vel,
+            cmd_vel_qos(),
+            timeout_s=p['cmd_timeout_s'],
+            tolerance_s=p['cmd_vel_stamp_tolerance_s'],
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+        )
         self._runtime = [
-            self.create_subscription(
-                msg_type,
-                'cmd_vel',
-                self._on_cmd_vel,
-                cmd_vel_qos(),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies(),
-            ),
             self.create_timer(1.0 / p['poll_rate_hz'], self._publish_joint_states),
             self.create_timer(1.0 / p['diagnostics_rate_hz'], self._publish_diagnostics),
         ]
@@ -464,6 +474,9 @@ class DesDriver(LifecycleNode):
             else:
                 self.destroy_subscription(entity)
         self._runtime = []
+        if self.cmd_input is not None:
+            self.cmd_input.close()
+            self.cmd_input = None
         self.pollers = {}
         self.command = None
 
@@ -479,13 +492,15 @@ class DesDriver(LifecycleNode):
     # -- callbacks ------------------------------------------------------------------------------
 
     @_fail_safe
-    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+    def _on_cmd_vel(self, msg: Any) -> None:
         self.counts['received'] += 1
-        command = self.command
-        if command is None or not command.active:
+        command, cmd_input = self.command, self.cmd_input
+        if command is None or not command.active or cmd_input is None:
             self.counts['ignored_inactive'] += 1
             return
-        twist = msg.twist if isinstance(msg, TwistStamped) else msg
+        twist = cmd_input.accept(msg, self.get_clock().now().nanoseconds * 1e-9)
+        if twist is None:  # a stale or future stamp: refused (warned, counted)
+            return
         values = (
             twist.linear.x,
             twist.linear.y,
@@ -644,6 +659,7 @@ class DesDriver(LifecycleNode):
             'max_yaw_rate_rad_s': f'{limits.max_yaw_rate_rad_s:g}',
             'max_motor_rpm': f'{command.max_rpm:g}',
             'guardian': self.guardian.status(),
+            **(self.cmd_input.diagnostics() if self.cmd_input is not None else {}),
         }
         message = f'{self.state_label}; ' + (f'zero speed: {stop_reason}' if stop_reason else 'driving')
         if rejected:

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -118,6 +119,8 @@ class FoxgloveBridge:
             )
         except (OSError, RuntimeError) as err:
             raise InputError(f'cannot start the Foxglove server on loopback: {err}') from err
+        if self.client_publish is not None:
+            self.client_publish.server = self.server  # refusals are answered with a status message
         try:
             upstream = f'wss://127.0.0.1:{self.server.port}'
             self.front = FrontDoor(host, port, upstream, allowed_origins, upstream_certificate=cert)
@@ -190,6 +193,22 @@ class ClientPublish:
         self.publishers: dict[tuple[int, int], Any] = {}  # (client id, client channel id) -> publisher
         self.published: dict[str, int] = dict.fromkeys(sorted(self.topics), 0)
         self.refused = 0
+        self.server: Any = None  # the SDK's WebSocketServer, set once it runs
+
+    # The SDK calls every ServerListener method it knows of (foxglove-sdk 0.30: subscribe and
+    # unsubscribe for each channel a client views, whatever the capabilities): a missing one logged
+    # "Callback failed: AttributeError" for each (issue 37 item 6). Subscriptions need nothing here.
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        """A client subscribed to a bridged channel (the SDK sends it the channel's messages)."""
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        """A client unsubscribed from a bridged channel."""
+
+    def on_connection_graph_subscribe(self) -> None:
+        """Not offered (no connectionGraph capability)."""
+
+    def on_connection_graph_unsubscribe(self) -> None:
+        """Not offered (no connectionGraph capability)."""
 
     def on_client_advertise(self, client: Any, channel: Any) -> None:
         topic = absolute_topic(channel.topic)
@@ -203,13 +222,32 @@ class ClientPublish:
                 cls = message_class(channel.schema_name)
             except InputError as err:
                 reason = str(err)
-        if reason:
-            self.refused += 1
-            LOG.warning('refused a client channel on %s (%s): %s', topic, channel.schema_name, reason)
+        publisher = None
+        if not reason:
+            try:
+                publisher = self.node.create_publisher(cls, topic, 10)
+            except RCLError:  # another type on this topic in this process (DDS: one type per topic)
+                held = sorted({info.topic_type for info in self.node.get_publishers_info_by_topic(topic)})
+                reason = (
+                    f'{topic} is {" / ".join(held) or "another type"} in the bridge process, not '
+                    f'{channel.schema_name}'
+                )
+        if publisher is None:
+            self._refuse(client, topic, channel.schema_name, reason)
             return
-        publisher = self.node.create_publisher(cls, topic, 10)
         self.publishers[(client.id, channel.id)] = (topic, publisher)
         LOG.info('client %d publishes %s (%s)', client.id, topic, channel.schema_name)
+
+    def _refuse(self, client: Any, topic: str, schema_name: str, reason: str) -> None:
+        """Log the refusal and send it back as a warning status (to every client: foxglove-sdk 0.30
+        has no per-client status; the message names the client)."""
+        self.refused += 1
+        LOG.warning('refused a client channel on %s (%s): %s', topic, schema_name, reason)
+        if self.server is not None:
+            from foxglove.websocket import StatusLevel
+
+            message = f'client {client.id}: refused channel {topic} ({schema_name}): {reason}'
+            self.server.publish_status(message, StatusLevel.Warning)
 
     def on_client_unadvertise(self, client: Any, client_channel_id: int) -> None:
         entry = self.publishers.pop((client.id, client_channel_id), None)

@@ -31,7 +31,7 @@ import threading
 from typing import Any, NamedTuple
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from nav_msgs.msg import Path
 from std_msgs.msg import Float64
 
@@ -96,9 +96,8 @@ class PathEnergyHook:
         node.create_subscription(Path, 'plan', self._on_path_bytes, qos, raw=True)
         self.pub_required = node.create_publisher(Float64, 'energy/path_required_wh', 10)
         self.pub_margin = node.create_publisher(Float64, 'energy/path_margin_wh', 10)
-        self.pub_diag = node.create_publisher(DiagnosticArray, 'diagnostics', 10)
-        # no timers of its own: the node calls publish() from its battery timer and
-        # publish_diagnostics() from its diagnostics timer (one executor entity less each)
+        # no timers and no diagnostics publisher of its own: the node calls publish() from its battery
+        # timer and puts diagnostic_status() into its own diagnostics array (one publisher per topic)
 
     def _on_path_bytes(self, data: bytes) -> None:
         """Executor thread: keep the newest plan for the worker (an older unread one is dropped)."""
@@ -189,13 +188,14 @@ class PathEnergyHook:
         self.pub_required.publish(Float64(data=energy.required_wh))
         self.pub_margin.publish(Float64(data=margin))
 
-    def publish_diagnostics(self) -> None:
+    def diagnostic_status(self) -> DiagnosticStatus | None:
+        """The ``<node>: path energy`` status, None before the first path."""
         with self._lock:
-            self._publish_diagnostics()
+            return self._diagnostic_status()
 
-    def _publish_diagnostics(self) -> None:
+    def _diagnostic_status(self) -> DiagnosticStatus | None:
         if not self.received:
-            return
+            return None
         level, message = DiagnosticStatus.OK, self.status
         values = {'status': self.status}
         if self.last is not None:
@@ -217,9 +217,7 @@ class PathEnergyHook:
                 message += f" ({flagged} segments outside the map's validity: clamped or limited)"
         status = DiagnosticStatus(level=level, name=f'{self.node.get_name()}: path energy', message=message)
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self.node.get_clock().now().to_msg()
-        self.pub_diag.publish(array)
+        return status
 
 
 def _described(planned: PlannedPath | None) -> str:

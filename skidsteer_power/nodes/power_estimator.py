@@ -5,7 +5,8 @@ A thin rclpy shell around :class:`skidsteer_power.estimator.EstimatorCore` (all 
 Topics (names are defaults; remap freely)
 ----------------------------------------
 subscribes (best-effort by default, so reliable AND best-effort publishers both match; see QoS)
-    ``cmd_vel``  geometry_msgs/Twist (or TwistStamped with ``cmd_vel_stamped: true``):
+    ``cmd_vel``  geometry_msgs/Twist or TwistStamped (``cmd_vel_type``, by default whichever the
+                 publishers offer; stale or future stamps refused: nodes/cmd_vel_input.py):
                  linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
     ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
                  velocity = motor shaft speed [rad/s], effort = Kt * I [N m]; any other robot's
@@ -87,7 +88,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -104,6 +105,7 @@ from skidsteer_power.estimator.inputs import InputLimits, JointMap
 from skidsteer_power.estimator.odometry import PredictedOdometry
 from skidsteer_power.estimator.persistence import StateWriter, load_or_quarantine
 from skidsteer_power.estimator.prediction import Prediction, Predictor
+from skidsteer_power.estimator.state_lock import StateLock
 from skidsteer_power.estimator.summary import (
     COMMAND_FIGURES,
     MEASUREMENT_FIGURES,
@@ -112,6 +114,8 @@ from skidsteer_power.estimator.summary import (
     prediction_figures,
     summary_key_values,
 )
+from skidsteer_power.nodes import cmd_vel_input
+from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.malformed import MalformedInputs
 from skidsteer_power.nodes.measured_power_feed import vehicle_limits, vendor_feed
 from skidsteer_power.nodes.param_spec import ParamSpec, declare
@@ -136,13 +140,19 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'directory of cached maps ("" = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power)',
     ),
     ParamSpec(
-        'state_file', '', 'energy state file ("" = ~/.local/state/skidsteer_power/energy_<vehicle>.json)'
+        'state_file',
+        '',
+        'energy state file ("" = ~/.local/state/skidsteer_power/energy_[<namespace>_]<vehicle>.json); '
+        'one live process per file (a lock)',
     ),
     ParamSpec('persist', True, 'save the energy state and restore it on start'),
     ParamSpec(
         'initial_soc', -1.0, 'state of charge at start when nothing is restored [-]; < 0 = full', (-1.0, 1.0)
     ),
-    ParamSpec('cmd_vel_stamped', False, 'subscribe to geometry_msgs/TwistStamped instead of Twist'),
+    ParamSpec(
+        'cmd_vel_stamped', False, 'deprecated: cmd_vel_type:=twist_stamped (true = that, with a warning)'
+    ),
+    *cmd_vel_input.PARAMETERS,
     ParamSpec('cmd_timeout_s', 0.5, 'cmd_vel older than this is stale [s]', (0.01, 60.0)),
     ParamSpec('joint_timeout_s', 0.5, 'joint_states older than this is stale [s]', (0.01, 60.0)),
     ParamSpec(
@@ -310,7 +320,6 @@ class PowerEstimator(QuietNode):
             memory_s=float(p['adaptation_memory_s']),
             terrain_memory_s=float(p['adaptation_terrain_memory_s']),
         )
-        self._cmd_vel_stamped = bool(p['cmd_vel_stamped'])
         self.core = EstimatorCore(
             predictor,
             factory.battery_for(self.vehicle),
@@ -318,7 +327,10 @@ class PowerEstimator(QuietNode):
             settings,
             adaptation,
         )
-        self.state_file = factory.state_path(p['state_file'], self.vehicle) if p['persist'] else None
+        self.state_file = None
+        if p['persist']:
+            self.state_file = factory.state_path(p['state_file'], self.vehicle, self.get_namespace())
+            self._state_lock = StateLock.take(self.state_file)  # one live process per file
         self._restore(p['initial_soc'])
         self._make_interfaces(p)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -413,7 +425,17 @@ class PowerEstimator(QuietNode):
         def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
             return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)
 
-        sub(TwistStamped if p['cmd_vel_stamped'] else Twist, 'cmd_vel', self._on_cmd_vel)
+        self.cmd_input = CmdVelInput(
+            self,
+            cmd_vel_input.cmd_vel_mode(self, p['cmd_vel_type'], 'cmd_vel_stamped', p['cmd_vel_stamped']),
+            self._on_cmd_vel,
+            qos_in,
+            timeout_s=float(p['cmd_timeout_s']),
+            tolerance_s=float(p['cmd_vel_stamp_tolerance_s']),
+            decode=decoder,  # raw bytes in, decoded by rosbags (nodes/wire.py)
+            make_callback=Batched,  # a backlog in batches (spin.py)
+            qos_overriding_options=overrides,
+        )
         sub(JointState, 'joint_states', self._on_joint_states)
         joint_map = self.core.settings.joint_map
         self.side_currents = vendor_feed(self, joint_map, qos_in)  # nodes/measured_power_feed.py
@@ -451,17 +473,22 @@ class PowerEstimator(QuietNode):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_cmd_vel(self, msg: Any) -> None:
-        """A decoded (rosbags) geometry_msgs/Twist, or TwistStamped with ``cmd_vel_stamped``."""
-        twist = msg.twist if self._cmd_vel_stamped else msg
+        """A decoded (rosbags) geometry_msgs/Twist or TwistStamped (a refused stamp is dropped)."""
         received = self.get_clock().now()
         now = received.nanoseconds * 1e-9
+        twist = self.cmd_input.accept(msg, now)
+        if twist is None:
+            return
         try:
             with self._lock:
                 prediction = self.core.on_command(twist.linear.x, twist.angular.z, now)
         except RejectedInput as err:
             self._warn_rejected(err)
             return
-        stamp = msg.header.stamp if self._cmd_vel_stamped else received.to_msg()
+        header = getattr(msg, 'header', None)  # TwistStamped; a zero stamp counts as none
+        stamp = header.stamp if header is not None else None
+        if stamp is None or not (stamp.sec or stamp.nanosec):
+            stamp = received.to_msg()
         self._publish_predicted(prediction, stamp.sec, stamp.nanosec)
         self._publish_predicted_motion(prediction, now, stamp)
         self._figure_due(0)
@@ -593,7 +620,9 @@ class PowerEstimator(QuietNode):
                 self.odometry.set_twist(0.0, 0.0, now)
             else:
                 self.odometry.advance(now)
+            expired = self.core.expired_commands
             self.core.tick(now)
+            standing = self.core.prediction if self.core.expired_commands != expired else None
             fields = factory.battery_message_fields(self.core.battery, self.core.energy.power_W(now))
             remaining = float(self.core.battery.remaining_wh)
             tte = float(self.core.time_to_empty_s)
@@ -603,6 +632,9 @@ class PowerEstimator(QuietNode):
                 name=list(CORRECTION_FIELDS), position=correction_values(self.core.adaptation)
             )
         stamp = self.get_clock().now().to_msg()
+        if standing is not None:  # the command went stale: the figures show standing still at once
+            self._predicted_twist_stamp = stamp  # (power/predicted stays one message per cmd_vel)
+            self._figure_due(0)
         battery = battery_state_message(fields)
         battery.header.stamp = stamp
         self.pub_battery.publish(battery)
@@ -644,15 +676,18 @@ class PowerEstimator(QuietNode):
             message = malformed if message.startswith('ok') else f'{message}; {malformed}'
         values['terrain'] = self.terrain_name
         values['vehicle'] = self.vehicle.name
+        values.update(self.cmd_input.diagnostics())
         if self.pending_terrain:
             values['pending_terrain'] = self.pending_terrain
         status = DiagnosticStatus(level=bytes([level]), name=f'{self.get_name()}: energy', message=message)
         status.hardware_id = self.vehicle.name
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
+        path_status = self.path_energy.diagnostic_status()
+        if path_status is not None:
+            array.status.append(path_status)
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
-        self.path_energy.publish_diagnostics()
 
     # --- persistence --------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
@@ -723,6 +758,9 @@ class PowerEstimator(QuietNode):
         writer = getattr(self, '_writer', None)
         if writer is not None:
             writer.close(self._state())
+        lock = getattr(self, '_state_lock', None)
+        if lock is not None:
+            lock.release()
         super().destroy_node()
 
 

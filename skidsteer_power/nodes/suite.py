@@ -67,6 +67,21 @@ class TerrainSim(Node):
             publisher.publish(msg)
 
 
+def driver_joint_params(vehicle: Any) -> dict[str, Any]:
+    """The estimator's joint mapping for des_driver's joint_states (``left_motor``/``right_motor``:
+    motor shaft, effort = K_t I [N m], the vehicle's powertrain reduction), whatever joints the
+    vehicle file's ``drivetrain:`` names for its own stack (a ros2_control robot's wheel joints): in
+    this suite the joint_states come from des_driver (issue 37 item 3)."""
+    gear_ratio = float(factory.powertrain_for(vehicle).gear_ratio)
+    return {
+        'left_joints': 'left_motor',
+        'right_joints': 'right_motor',
+        'joints_at': 'motor',
+        'effort_is': 'torque',
+        'joint_gear_ratio': gear_ratio,
+    }
+
+
 @dataclass
 class SuiteOptions:
     """What the suite runs. Paths/names as the nodes' parameters; ``estimator_params`` and
@@ -125,6 +140,7 @@ class Suite:
         }
         values['state_file'] = o.state_file
         values.update(self._driver_limits())
+        values.update(driver_joint_params(self.vehicle))
         values.update(o.estimator_params)
         return [Parameter(k, value=v) for k, v in values.items()]
 
@@ -233,4 +249,5 @@ class Suite:
 
 def state_file_for(options: SuiteOptions) -> Path:
     """The energy-state file the suite's estimator uses."""
-    return factory.state_path(options.state_file, factory.load_vehicle_config(options.vehicle))
+    vehicle = factory.load_vehicle_config(options.vehicle)
+    return factory.state_path(options.state_file, vehicle, options.namespace)

@@ -12,7 +12,11 @@ Panels (topics as the suite publishes them, default namespace):
 * path energy [Wh] (Plot: ``energy/path_required_wh``, ``energy/path_margin_wh``; Indicator on the
   margin: red below 0 Wh, the robot cannot drive the planned path and come back with the reserve);
 * trace from odometry (XY plot of ``odom.pose.pose.position``, x vs y [m]);
-* estimator diagnostics (stale inputs, energy source).
+* estimator diagnostics (stale inputs, energy source);
+* Teleop on ``/cmd_vel`` (geometry_msgs/Twist) at :data:`TELEOP_RATE_HZ`: the panel's default is
+  1 Hz, and des_driver's watchdog (``cmd_timeout_s`` 0.5 s) stops the robot when no command came
+  for 0.5 s, so at 1 Hz the robot moves about half the time in jerks; 10 Hz gives five commands per
+  watchdog period (with ``bridge --allow-publish cmd_vel``).
 
 ``python -m skidsteer_power.ui.foxglove_layout [PATH]`` writes it (the shipped file is its output;
 test/test_foxglove_bridge.py checks they agree).
@@ -27,6 +31,11 @@ from typing import Any
 
 LOW_TIME_TO_EMPTY_S = 600.0
 TRACTION_WARNING_MARGIN = 0.1  # power_estimator's traction_warning_margin default
+TELEOP_RATE_HZ = 10.0
+"""The Teleop panel's publish rate [Hz]: at least 2 / cmd_timeout_s (des_driver: 0.5 s -> 4 Hz) so a
+held button never lets the watchdog stop the robot; the panel's own default, 1 Hz, does."""
+TELEOP_SPEED_M_S = 0.3  # ASSUMED: a gentle forward speed for the arrow buttons [m/s]
+TELEOP_YAW_RATE_RAD_S = 0.5  # ASSUMED: a gentle turn rate for the arrow buttons [rad/s]
 
 PREDICTED = '#1f77b4'
 MEASURED = '#d62728'
@@ -137,6 +146,16 @@ def operator_layout() -> Any:
         ),
     )  # fmt: skip
     diagnostics = fl.DiagnosticsSummaryPanel(title='estimator and driver diagnostics')
+    teleop = fl.TeleopPanel(
+        title=f'teleop: /cmd_vel at {TELEOP_RATE_HZ:g} Hz (watchdog 0.5 s)',
+        config=fl.TeleopConfig(
+            topic='/cmd_vel', publish_rate=TELEOP_RATE_HZ,
+            up_button=fl.TeleopButton(field='linear-x', value=TELEOP_SPEED_M_S),
+            down_button=fl.TeleopButton(field='linear-x', value=-TELEOP_SPEED_M_S),
+            left_button=fl.TeleopButton(field='angular-z', value=TELEOP_YAW_RATE_RAD_S),
+            right_button=fl.TeleopButton(field='angular-z', value=-TELEOP_YAW_RATE_RAD_S),
+        ),
+    )  # fmt: skip
     return fl.Layout(
         content=fl.SplitContainer(
             direction='row',
@@ -171,6 +190,7 @@ def operator_layout() -> Any:
                             item(path_margin, 0.5),
                             item(path_energy),
                             item(diagnostics),
+                            item(teleop),
                         ],
                     )
                 ),

@@ -21,7 +21,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rich.console import Group, RenderableType
+from rich.console import Console, ConsoleOptions, Group, RenderableType, RenderResult
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
@@ -35,7 +35,6 @@ STALE_AFTER_S = 1.0
 SOURCES = ('command', 'joint_states', 'summary', 'battery')
 """What the view shows comes from these; each may go stale on its own."""
 SOURCE_NAMES = ('measured', 'predicted', 'none')
-GAUGE_WIDTH = 30
 
 # --- keys (free mode) ---------------------------------------------------------------------------
 KEY_SEQUENCES = {
@@ -236,9 +235,12 @@ def _motor_table(view: MonitorView) -> Table:
         ('measured power [W]', [view.get('measured_left_W'), view.get('measured_right_W')], '.1f', 'summary'),
         ('error meas-pred [W]', [view.get('error_left_W'), view.get('error_right_W')], '+.1f', 'summary'),
     ]
+    standing = view.get('cmd_vel_stale') == 1.0  # no command in force: the robot is held at zero
     for label, (left, right), fmt, source in rows:
         stale = source in view.stale
         style = 'dim' if stale else ''
+        if standing and source == 'summary' and not stale and label.startswith(('predicted', 'corrected')):
+            label, style = f'{label.split(" [")[0]} (standing) [W]', 'dim'  # not a command's figure
         table.add_row(
             _stale_label(label, stale),
             Text(_num(left, fmt), style=style),
@@ -255,11 +257,25 @@ def _tte_band(view: MonitorView) -> str:
     return f' (p10 {low} - p90 {high})'
 
 
+class Gauge:
+    """The battery gauge: ``fraction`` [-] of the width it is given filled (76 of 80 columns in an
+    80x24 terminal's panel), not a fixed width."""
+
+    def __init__(self, fraction: float, colour: str) -> None:
+        self.fraction = fraction
+        self.colour = colour
+
+    def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
+        width = max(1, options.max_width)
+        filled = round(width * self.fraction)
+        yield Text.assemble(('█' * filled, self.colour), ('░' * (width - filled), 'dim'))
+
+
 def _battery_panel(view: MonitorView) -> Panel:
     soc = view.soc
     colour = 'red' if soc < 0.2 else 'yellow' if soc < 0.4 else 'green'
-    filled = 0 if math.isnan(soc) else round(GAUGE_WIDTH * min(max(soc, 0.0), 1.0))
-    gauge = Text.assemble(('█' * filled, colour), ('░' * (GAUGE_WIDTH - filled), 'dim'))
+    fraction = 0.0 if math.isnan(soc) else min(max(soc, 0.0), 1.0)
+    gauge = Gauge(fraction, colour)
     source = view.get('energy_source')
     source_name = SOURCE_NAMES[int(source)] if math.isfinite(source) and 0 <= source < 3 else '--'
     lines = Text.assemble(
@@ -282,7 +298,7 @@ def _battery_panel(view: MonitorView) -> Panel:
             style='bold red' if short else None,
         )
     if 'battery' in view.stale:
-        gauge.stylize('dim')
+        gauge.colour = 'dim'
         lines.stylize('dim')
         return Panel(Group(gauge, lines), title='Battery (stale)', style='dim')
     return Panel(Group(gauge, lines), title='Battery')
@@ -305,11 +321,11 @@ def render(view: MonitorView) -> Group:
     speed, yaw = view.command
     case = ''
     if view.mode == 'case':
-        case = f'   case {_num(view.case_elapsed_s, ".1f")} / {_num(view.case_total_s, ".1f")} s'
+        case = f'  case {_num(view.case_elapsed_s, ".1f")} / {_num(view.case_total_s, ".1f")} s'
     command = f'command V {speed:+.2f} m/s, yaw rate {yaw:+.2f} rad/s'
-    header = Text.assemble(
+    header = Text.assemble(  # one line in 80 columns, 'Not Ready' and case mode too (80 at most)
         ready,
-        f'   mode {view.mode}   ',
+        f'  {view.mode}  ',
         (f'{command} (stale)', 'dim') if 'command' in view.stale else command,
         case,
     )

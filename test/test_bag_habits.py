@@ -1,0 +1,98 @@
+"""rosbag2 habits (issue 37 item 7): ``info`` as ``ros2 bag info`` on real bags, ``record -a`` and
+``record`` without ``-o`` (rosbag2's default name) over real DDS, and a bag with /tf replayed as far
+as rclpy allows (tf2_msgs is not on PyPI: skipped, saying why)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from skidsteer_power.cli.bag_info import bag_info, info_text
+
+ROOT = Path(__file__).resolve().parents[1]
+BAG = ROOT / 'bags' / 'test_robot_track_sand_bin.mcap'
+
+
+def cli(*args: str, cwd: Path = ROOT, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, 'PYTHONPATH': str(ROOT)}
+    return subprocess.run(
+        [sys.executable, '-m', 'skidsteer_power.cli.main', *args],
+        capture_output=True, text=True, cwd=cwd, env=env, timeout=timeout,
+    )  # fmt: skip
+
+
+def test_info_matches_the_bags_own_summary() -> None:
+    """Counts and types against the MCAP summary read by the mcap library (not by the code under test)."""
+    with BAG.open('rb') as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    by_channel = summary.statistics.channel_message_counts
+    expected = {
+        channel.topic: (summary.schemas[channel.schema_id].name, by_channel[cid])
+        for cid, channel in summary.channels.items()
+    }
+    info = bag_info(str(BAG))
+    assert {t['topic']: (t['type'], t['count']) for t in info['topics']} == expected
+    assert info['messages'] == summary.statistics.message_count == 10295
+    assert info['storage'] == 'mcap' and info['size_bytes'] == BAG.stat().st_size
+    duration_ns = summary.statistics.message_end_time - summary.statistics.message_start_time
+    assert info['duration_s'] == pytest.approx(duration_ns * 1e-9)
+    text = info_text(info)
+    assert re.search(
+        r'^Topic information: Topic: /battery/measured +\| Type: sensor_msgs/msg/BatteryState', text, re.M
+    )
+    assert re.search(
+        r'^ {19}Topic: /cmd_vel +\| Type: geometry_msgs/msg/Twist +\| Count: 2451 \|', text, re.M
+    )
+    assert 'Storage id:        mcap' in text and 'Messages:          10295' in text
+
+
+def test_info_cli_json_and_a_missing_bag() -> None:
+    done = cli('info', str(BAG), '--json')
+    assert done.returncode == 0 and json.loads(done.stdout)['messages'] == 10295
+    missing = cli('info', '/nonexistent.mcap')
+    assert missing.returncode == 2 and len(missing.stderr.strip().splitlines()) == 1
+
+
+def test_record_all_and_the_default_name(tmp_path: Path) -> None:
+    done = cli('record', '-a', '--duration', '1', '--json', cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    made = [p.name for p in tmp_path.iterdir()]
+    assert len(made) == 1 and re.fullmatch(r'rosbag2_\d{4}_\d{2}_\d{2}-\d{2}_\d{2}_\d{2}', made[0]), made
+    assert json.loads(done.stdout)['bag'].endswith(made[0]) or made[0] in json.loads(done.stdout)['bag']
+    both = cli('record', '-a', '/cmd_vel', '--duration', '1', cwd=tmp_path)
+    assert both.returncode == 2 and 'not both' in both.stderr
+
+
+def test_replay_names_why_tf_is_not_replayed(tmp_path: Path) -> None:
+    """A bag with /tf (tf2_msgs/msg/TFMessage, whose Python package is not installed) and /cmd_vel:
+    /cmd_vel is replayed, /tf is skipped with the reason (rclpy has no type support for it)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    bag = tmp_path / 'tf_bag'
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        tf = writer.add_connection('/tf', 'tf2_msgs/msg/TFMessage', typestore=store)
+        cmd = writer.add_connection('/cmd_vel', 'geometry_msgs/msg/Twist', typestore=store)
+        Twist = store.types['geometry_msgs/msg/Twist']
+        Vector3 = store.types['geometry_msgs/msg/Vector3']
+        TFMessage = store.types['tf2_msgs/msg/TFMessage']
+        for k in range(5):
+            t = 1_700_000_000_000_000_000 + k * 50_000_000
+            writer.write(tf, t, store.serialize_cdr(TFMessage(transforms=[]), 'tf2_msgs/msg/TFMessage'))
+            twist = Twist(linear=Vector3(x=0.1, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.0))
+            writer.write(cmd, t, store.serialize_cdr(twist, 'geometry_msgs/msg/Twist'))
+    with pytest.raises(ImportError):
+        __import__('tf2_msgs.msg')  # the premise: tf2_msgs is not installed for Python here
+    done = cli('replay', str(bag), '--json')
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert 'type support' in result['skipped']['/tf'] and 'tf2_msgs' in result['skipped']['/tf']
+    assert result['counts']['/cmd_vel'] == 5
