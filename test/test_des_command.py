@@ -165,3 +165,21 @@ def test_a_stalled_poller_counts_as_a_lost_link() -> None:
     assert command.wanted_rpm('left') == 0 and 'right (poller stalled' in command.stop_reason()
     command.link_up('right')
     assert command.stop_reason() == ''
+
+
+def test_the_driver_limits_default_to_the_vehicle_files_controller() -> None:
+    # Issue 36: des_driver's max_speed_m_s / max_yaw_rate_rad_s / max_accel_* at 0 (their defaults)
+    # are the vehicle's drive controller's. husky_a200.yaml: max_speed_m_s 1.0, max_yaw_rate_rad_s 2.0,
+    # drive_controller max_accel_m_s2 3.0, max_yaw_accel_rad_s2 6.0 (husky_control control.yaml).
+    from skidsteer_power.des.command import FALLBACK_ACCEL, limits_for
+    from skidsteer_power.drive import controller_for_vehicle
+
+    husky = controller_for_vehicle(load_vehicle('husky_a200'))
+    assert limits_for(husky, {}) == CommandLimits(1.0, 2.0, 3.0, 6.0)
+    given = {'max_speed_m_s': 0.5, 'max_yaw_rate_rad_s': 0.0, 'max_accel_m_s2': 0.2}
+    assert limits_for(husky, given) == CommandLimits(0.5, 2.0, 0.2, 6.0)  # a value > 0 is the user's
+    # the test robot's file declares no acceleration limit (inf): the driver still slews, at the
+    # 1.0 m/s^2 / 4.0 rad/s^2 it always had, and its velocity limits are the file's defaults 1.5 / 2.0
+    robot = controller_for_vehicle(load_vehicle('test_robot_track'))
+    assert math.isinf(robot.max_accel_m_s2)
+    assert limits_for(robot, {}) == CommandLimits(1.5, 2.0, *FALLBACK_ACCEL) == LIMITS

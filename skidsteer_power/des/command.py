@@ -9,11 +9,16 @@ rejected (:class:`~skidsteer_power.errors.InputError`), a finite one is clamped 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from skidsteer_power.des.kinematics import twist_to_motor_rpm
 from skidsteer_power.drive.controller import clamp_twist, limit_rate
 from skidsteer_power.errors import ConfigError, InputError
+
+if TYPE_CHECKING:
+    from skidsteer_power.drive.controller import DriveController
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,33 @@ class CommandLimits:
         for name, value in self.__dict__.items():
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ConfigError(f'{name} must be a finite number > 0, not {value!r}')
+
+
+VEHICLE_DEFAULT = 0.0
+"""A des_driver limit parameter at 0: the vehicle file's drive controller (:func:`limits_for`)."""
+FALLBACK_ACCEL = (1.0, 4.0)
+"""The slew limits [m/s^2, rad/s^2] where the vehicle's controller has none: the driver always slews
+(ASSUMED: the driver's defaults before vehicle files declared their controller)."""
+
+
+def limits_for(controller: DriveController, given: Mapping[str, float]) -> CommandLimits:
+    """The driver's limits: each of ``given`` (``max_speed_m_s``, ``max_yaw_rate_rad_s``,
+    ``max_accel_m_s2``, ``max_yaw_accel_rad_s2``; SI units) where > 0, else the vehicle's drive
+    ``controller``'s (an acceleration it does not limit: :data:`FALLBACK_ACCEL`)."""
+    own = {
+        'max_speed_m_s': controller.max_speed_m_s,
+        'max_yaw_rate_rad_s': controller.max_yaw_rate_rad_s,
+        'max_accel_m_s2': controller.max_accel_m_s2,
+        'max_yaw_accel_rad_s2': controller.max_yaw_accel_rad_s2,
+    }
+    fallback = dict(zip(('max_accel_m_s2', 'max_yaw_accel_rad_s2'), FALLBACK_ACCEL, strict=True))
+    values = {}
+    for name, vehicle_value in own.items():
+        value = float(given.get(name, VEHICLE_DEFAULT))
+        if value == VEHICLE_DEFAULT:
+            value = vehicle_value if math.isfinite(vehicle_value) else fallback.get(name, vehicle_value)
+        values[name] = value
+    return CommandLimits(**values)
 
 
 @dataclass(frozen=True)

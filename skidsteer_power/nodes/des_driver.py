@@ -89,11 +89,12 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from skidsteer_power.des.command import CommandLimits, DriveGeometry
+from skidsteer_power.des.command import DriveGeometry, limits_for
 from skidsteer_power.des.kinematics import DES_MAX_SPEED_1PP_RPM, RPM, set_point_limit_rpm
 from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCommand
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
 from skidsteer_power.des.transport import LinkTiming
+from skidsteer_power.drive.controller import controller_for_vehicle
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.nodes import cmd_vel_input
 from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
@@ -153,12 +154,28 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         (1.0, DES_MAX_SPEED_1PP_RPM),
     ),
     ParamSpec(
-        'max_speed_m_s', 1.5, '|V| commands beyond are clamped [m/s] (the maps cover 1.5 m/s)', (0.001, 10.0)
+        'max_speed_m_s',
+        0.0,
+        "|V| commands beyond are clamped [m/s]; 0 = the vehicle file's max_speed_m_s (docs/DRIVE.md)",
+        (0.0, 10.0),
     ),
-    ParamSpec('max_yaw_rate_rad_s', 2.0, '|yaw rate| commands beyond are clamped [rad/s]', (0.001, 20.0)),
-    ParamSpec('max_accel_m_s2', 1.0, 'largest change of the commanded V [m/s^2]', (0.001, 100.0)),
     ParamSpec(
-        'max_yaw_accel_rad_s2', 4.0, 'largest change of the commanded yaw rate [rad/s^2]', (0.001, 1000.0)
+        'max_yaw_rate_rad_s',
+        0.0,
+        "|yaw rate| commands beyond are clamped [rad/s]; 0 = the vehicle file's max_yaw_rate_rad_s",
+        (0.0, 20.0),
+    ),
+    ParamSpec(
+        'max_accel_m_s2',
+        0.0,
+        "largest change of the commanded V [m/s^2]; 0 = the vehicle's drive controller's, else 1.0",
+        (0.0, 100.0),
+    ),
+    ParamSpec(
+        'max_yaw_accel_rad_s2',
+        0.0,
+        "largest change of the commanded yaw rate [rad/s^2]; 0 = the vehicle's drive controller's, else 4.0",
+        (0.0, 1000.0),
     ),
     ParamSpec('cmd_timeout_s', 0.5, 'zero speed when no valid cmd_vel for this long [s]', (0.01, 60.0)),
     ParamSpec('stop_both_on_link_loss', True, 'a failed or lost link on one side stops the other side too'),
@@ -297,12 +314,7 @@ class DesDriver(LifecycleNode):
             polarity={side: p[f'{side}_polarity'] for side in SIDES},
             max_rpm=float(p['max_motor_rpm']),
         )
-        p['limits'] = CommandLimits(
-            max_speed_m_s=p['max_speed_m_s'],
-            max_yaw_rate_rad_s=p['max_yaw_rate_rad_s'],
-            max_accel_m_s2=p['max_accel_m_s2'],
-            max_yaw_accel_rad_s2=p['max_yaw_accel_rad_s2'],
-        )
+        p['limits'] = limits_for(controller_for_vehicle(vehicle, powertrain), p)  # 0: the vehicle's
         return p
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:

@@ -147,6 +147,8 @@ class Suite:
     def _driver_limits(self) -> dict[str, float]:
         """The des_driver's own limits (its parameters or their defaults) as the estimator's
         ``drive_*`` parameters: the estimator predicts the set points the driver really commands."""
+        from skidsteer_power.des.command import limits_for
+        from skidsteer_power.drive.controller import controller_for_vehicle
         from skidsteer_power.nodes import des_driver
         from skidsteer_power.powertrain import Powertrain
         from skidsteer_power.powertrain.motor import RPM
@@ -157,11 +159,12 @@ class Suite:
         def value(name: str) -> float:
             return float(given.get(name, defaults[name]))
 
-        gear = Powertrain.for_vehicle(self.vehicle).gear_ratio
+        powertrain = Powertrain.for_vehicle(self.vehicle)
+        limits = limits_for(controller_for_vehicle(self.vehicle, powertrain), given)  # as the driver
         return {
-            'drive_max_speed_m_s': value('max_speed_m_s'),
-            'drive_max_yaw_rate_rad_s': value('max_yaw_rate_rad_s'),
-            'drive_max_wheel_rad_s': value('max_motor_rpm') * RPM / gear,
+            'drive_max_speed_m_s': limits.max_speed_m_s,
+            'drive_max_yaw_rate_rad_s': limits.max_yaw_rate_rad_s,
+            'drive_max_wheel_rad_s': value('max_motor_rpm') * RPM / powertrain.gear_ratio,
         }
 
     def _driver_params(self, left_port: str, right_port: str) -> list[Parameter]:
