@@ -71,10 +71,14 @@ def test_cmd_vel_round_trip(rig: Rig, cache_dir: str, speed: float, yaw_rate: fl
 def test_twist_stamped_keeps_the_stamp(ros_context: Context, tmp_path: Path, cache_dir: str) -> None:
     rig = Rig(ros_context, tmp_path, map_cache_dir=cache_dir, cmd_vel_stamped=True)
     try:
-        rig.command(0.2, 0.0, stamp=Time(sec=1234, nanosec=5678))
+        # a fresh stamp (the node's clock, plus 5678 ns to tell it apart): one far from the node's
+        # clock is refused (issue 34 item 5, cmd_vel_stamp_tolerance_s)
+        now = rig.node.get_clock().now().to_msg()
+        stamp = Time(sec=now.sec, nanosec=(now.nanosec // 10_000) * 10_000 + 5678)
+        rig.command(0.2, 0.0, stamp=stamp)
         rig.spin_until(lambda: rig.received['power/predicted'])
         out = rig.received['power/predicted'][-1]
-        assert (out.header.stamp.sec, out.header.stamp.nanosec) == (1234, 5678)
+        assert (out.header.stamp.sec, out.header.stamp.nanosec) == (stamp.sec, stamp.nanosec)
         assert list(out.effort[:2]) == pytest.approx(
             list(expected(cache_dir, 'dry_sand', 0.2, 0.0).motor_torque_Nm)
         )

@@ -268,7 +268,9 @@ class CmdVelInput:
             decode, inner = self.decode(msg_type), self.callback
 
             def callback(data: bytes) -> None:
-                inner(decode(data))
+                msg = decode(data)
+                if msg is not None:  # a guarded decoder (nodes/malformed.py) drops a malformed one
+                    inner(msg)
 
         if self.make_callback is not None:
             callback = self.make_callback(callback)

@@ -432,7 +432,8 @@ class PowerEstimator(QuietNode):
             qos_in,
             timeout_s=float(p['cmd_timeout_s']),
             tolerance_s=float(p['cmd_vel_stamp_tolerance_s']),
-            decode=decoder,  # raw bytes in, decoded by rosbags (nodes/wire.py)
+            # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
+            decode=lambda msg_type: self.malformed.guard('cmd_vel', decoder(msg_type)),
             make_callback=Batched,  # a backlog in batches (spin.py)
             qos_overriding_options=overrides,
         )
