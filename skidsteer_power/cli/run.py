@@ -20,6 +20,7 @@ import sys
 import time
 from typing import Any
 
+from skidsteer_power.cli import _ros_names
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float, positive_float
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 from skidsteer_power.terramechanics.ranges import RECORD_DURATION_S
@@ -63,7 +64,9 @@ def register(subparsers: Subcommands) -> None:
         action='store_true',
         help='--simulate: restore and save the default energy state file (default: start fresh)',
     )
-    parser.add_argument('--namespace', default='', help='ROS namespace of the suite (e.g. robot1)')
+    parser.add_argument(
+        '--namespace', type=_ros_names.namespace, default='', help='ROS namespace of the suite (e.g. robot1)'
+    )
     parser.add_argument(
         '--cmd-vel-type',
         choices=('auto', 'twist', 'twist_stamped'),
