@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -484,3 +485,37 @@ def test_drive_until_empty_refuses_a_segment_that_is_not_whole_pieces() -> None:
         with pytest.raises(InputError, match='whole number'):
             drive_until_empty(twin, [Segment(0.2, 0.0, 1.0), Segment(0.2, 0.0, seconds)])
     assert twin.t == 0.0  # refused before driving
+
+
+def test_live_twin_stands_still_with_the_amplifiers_off() -> None:
+    """Issue 37 item 9: the simulated robot drifted at rest (``run --simulate``, no command: 0.19 m and
+    0.045 rad in 25 s, up to 0.58 W measured). The unpowered motor model asked its load at 1 rad/s
+    (the friction that holds a coasting motor) and the live twin moved with that speed. Two motor
+    models as SimulatedDes runs them (0.5 ms steps, amplifiers off), loaded by the twin: nothing
+    pushes a robot at rest, so its pose, motor speeds and terrain work stay exactly 0."""
+    from skidsteer_power.des.kinematics import RPM
+    from skidsteer_power.des.simulator import MotorModel
+    from skidsteer_power.twin.live import TwinCoupling, TwinLoad, configure_amplifier
+
+    twin = Twin(load_vehicle('test_robot_track'), SAND_BIN)
+    coupling = TwinCoupling(twin)
+    models = []
+    for side, sign in (('left', 1), ('right', -1)):
+        model = MotorModel(load_torque=TwinLoad(coupling, side, sign))
+        configure_amplifier(model, twin)
+        models.append(model)
+    step = MotorModel.STEP_S
+    for k in range(round(2.0 / step)):
+        for model in models:
+            model.step(
+                step, k * step, powered=False, current_mode=False, speed_setpoint_rad_s=0.0,
+                current_setpoint_A=0.0, peak_current_A=twin.peak_A, acceleration_rad_s2=1e4 * RPM,
+            )  # fmt: skip
+    assert twin.t > 1.9  # the twin did step along
+    assert np.all(twin.pose == 0.0) and np.all(twin.vel == 0.0), (twin.pose, twin.vel)
+    assert [m.omega_rad_s for m in models] == [0.0, 0.0] and twin.energy.terrain_J == 0.0
+    # what holds the coasting motor is the side's internal resistance at 1 rad/s (eq. 7.1: b w + c)
+    r = twin.powertrain.resistance('left').total
+    assert models[0].holding_torque(0.0) == pytest.approx(
+        r.viscous_Nm_s + r.coulomb_Nm * math.tanh(1.0)
+    )  # w_s = 1 rad/s

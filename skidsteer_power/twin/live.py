@@ -113,5 +113,12 @@ class TwinLoad:
         internal = r.viscous_Nm_s * omega_m + r.coulomb_Nm * math.tanh(omega_m / FRICTION_SMOOTHING_RAD_S)
         return axle / self.gear_ratio + internal
 
+    def holding_torque_Nm(self) -> float:
+        """The side's internal resistance at 1 rad/s [N m] (positive): what holds an unpowered motor
+        at rest (``MotorModel.holding_torque``), without stepping the twin at a speed the motor does
+        not turn at (every call of :meth:`__call__` is a motor speed the twin moves with)."""
+        r = self.resistance
+        return r.viscous_Nm_s + r.coulomb_Nm * math.tanh(1.0 / FRICTION_SMOOTHING_RAD_S)
+
     def __call__(self, omega_rad_s: float, t_s: float) -> float:
         return self.polarity * self.robot_sense(self.polarity * omega_rad_s, t_s)
