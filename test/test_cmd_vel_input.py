@@ -57,12 +57,16 @@ class Graph:
         rclpy.init(context=self.client_context)
         self.namespace = f'/cv{time.monotonic_ns() % 10**9}'
         overrides = {'state_file': str(tmp_path / 'e.json'), 'publish_period_s': 0.05, **params}
-        self.node = PowerEstimator(
-            predictor=FixedPowerPredictor(40.0),
-            context=node_context,
-            namespace=self.namespace,
-            parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
-        )
+        try:
+            self.node = PowerEstimator(
+                predictor=FixedPowerPredictor(40.0),
+                context=node_context,
+                namespace=self.namespace,
+                parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+            )
+        except BaseException:  # a refused parameter: leave no second context behind for later tests
+            rclpy.try_shutdown(context=self.client_context)
+            raise
         self.client = Node('teleop', namespace=self.namespace, context=self.client_context)
         self.predicted: list[JointState] = []
         self.client.create_subscription(JointState, 'power/predicted', self.predicted.append, 100)
