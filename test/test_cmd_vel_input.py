@@ -186,8 +186,12 @@ def test_driver_refuses_stale_and_future_stamps(ros_context: Context) -> None:
             assert cmd_input is not None
             assert cmd_input.stamps.refused_stale > 0 and cmd_input.stamps.refused_future > 0
 
-            def fresh_drives() -> bool:
-                h.cmd_pub.publish(stamped(h.node, 0.0, 0.2))
+            last_sent = [-1.0]
+
+            def fresh_drives() -> bool:  # at 20 Hz, a teleop's rate (every spin: ~5 kHz, 38 000 in 8 s)
+                if time.monotonic() - last_sent[0] >= 0.05:
+                    last_sent[0] = time.monotonic()
+                    h.cmd_pub.publish(stamped(h.node, 0.0, 0.2))
                 return pair.left.speed_setpoint_rpm > 0
 
             assert h.spin_until(fresh_drives)
