@@ -96,3 +96,41 @@ def test_replay_names_why_tf_is_not_replayed(tmp_path: Path) -> None:
     result = json.loads(done.stdout)
     assert 'type support' in result['skipped']['/tf'] and 'tf2_msgs' in result['skipped']['/tf']
     assert result['counts']['/cmd_vel'] == 5
+
+
+def test_call_reset_energy_on_a_running_suite(tmp_path: Path) -> None:
+    """``skidsteer-power call reset_energy`` against ``run --simulate --namespace`` (two processes)."""
+    env = {**os.environ, 'PYTHONPATH': str(ROOT), 'XDG_STATE_HOME': str(tmp_path)}
+    suite = subprocess.Popen(
+        [sys.executable, '-m', 'skidsteer_power.cli.main', 'run', '--simulate', '--namespace', 'robot7',
+         '--duration', '60', '--quiet'],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env,
+    )  # fmt: skip
+    try:
+        done = cli('call', 'reset_energy', '--namespace', 'robot7', '--timeout', '40', '--json', timeout=90)
+        assert done.returncode == 0, done.stderr
+        answer = json.loads(done.stdout)
+        assert answer['service'] == '/robot7/power_estimator/reset_energy' and answer['success'] is True
+        assert answer['message'].startswith('battery reset to full')
+    finally:
+        suite.terminate()
+        suite.communicate(timeout=30)
+    absent = cli('call', 'reset_energy', '--namespace', 'nobody_here', '--timeout', '1')
+    assert absent.returncode == 2 and 'no service /nobody_here/power_estimator/reset_energy' in absent.stderr
+    unknown = cli('call', 'reboot')
+    assert unknown.returncode == 2 and len(unknown.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ('args', 'says'),
+    [
+        (('call', '/bad name!', '--timeout', '1'), "invalid service name '/bad name!'"),
+        (('call', 'reset_energy', '--namespace', 'bad ns!'), "invalid namespace 'bad ns!'"),
+        (('call', 'reset_energy', '--timeout', '61'), 'outside its range (0, 60] s'),
+        (('run', '--simulate', '--namespace', 'bad ns!', '--duration', '1'), "invalid namespace 'bad ns!'"),
+    ],
+)
+def test_bad_ros_names_are_one_line(args: tuple[str, ...], says: str) -> None:
+    """A name rclpy would refuse with a traceback is refused before any node: one line, exit 2."""
+    done = cli(*args, timeout=60)
+    assert done.returncode == 2 and done.stderr.count('\n') == 1 and says in done.stderr, done.stderr

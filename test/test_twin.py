@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -484,3 +485,72 @@ def test_drive_until_empty_refuses_a_segment_that_is_not_whole_pieces() -> None:
         with pytest.raises(InputError, match='whole number'):
             drive_until_empty(twin, [Segment(0.2, 0.0, 1.0), Segment(0.2, 0.0, seconds)])
     assert twin.t == 0.0  # refused before driving
+
+
+def test_live_twin_stands_still_with_the_amplifiers_off() -> None:
+    """Issue 37 item 9: the simulated robot drifted at rest (``run --simulate``, no command: 0.19 m and
+    0.045 rad in 25 s, up to 0.58 W measured). The unpowered motor model asked its load at 1 rad/s
+    (the friction that holds a coasting motor) and the live twin moved with that speed. Two motor
+    models as SimulatedDes runs them (0.5 ms steps, amplifiers off), loaded by the twin: nothing
+    pushes a robot at rest, so its pose, motor speeds and terrain work stay exactly 0."""
+    from skidsteer_power.des.kinematics import RPM
+    from skidsteer_power.des.simulator import MotorModel
+    from skidsteer_power.twin.live import TwinCoupling, TwinLoad, configure_amplifier
+
+    twin = Twin(load_vehicle('test_robot_track'), SAND_BIN)
+    coupling = TwinCoupling(twin)
+    models = []
+    for side, sign in (('left', 1), ('right', -1)):
+        model = MotorModel(load_torque=TwinLoad(coupling, side, sign))
+        configure_amplifier(model, twin)
+        models.append(model)
+    step = MotorModel.STEP_S
+    for k in range(round(2.0 / step)):
+        for model in models:
+            model.step(
+                step, k * step, powered=False, current_mode=False, speed_setpoint_rad_s=0.0,
+                current_setpoint_A=0.0, peak_current_A=twin.peak_A, acceleration_rad_s2=1e4 * RPM,
+            )  # fmt: skip
+    assert twin.t > 1.9  # the twin did step along
+    assert np.all(twin.pose == 0.0) and np.all(twin.vel == 0.0), (twin.pose, twin.vel)
+    assert [m.omega_rad_s for m in models] == [0.0, 0.0] and twin.energy.terrain_J == 0.0
+    # what holds the coasting motor is the side's internal resistance at 1 rad/s (eq. 7.1: b w + c)
+    r = twin.powertrain.resistance('left').total
+    assert models[0].holding_torque(0.0) == pytest.approx(
+        r.viscous_Nm_s + r.coulomb_Nm * math.tanh(1.0)
+    )  # w_s = 1 rad/s
+
+
+def test_live_twin_holds_still_at_zero_set_points_after_a_turn() -> None:
+    """Issue 37 item 9, powered: after a turn at zero set points the live twin yawed on (2.320 ->
+    2.437 rad in 5 s, issue; 0.32 rad in 17 s measured here with run --simulate) drawing ~8 W: the
+    explicit motor step chattered at zero speed (c dt / (J w_s) = 0.77 N m x 0.5 ms / (1.4e-4 kg m^2
+    x 1 rad/s) = 2.7 > 2) with a non-zero mean. With the friction slope implicit the motors settle and
+    the stored shear is held: the last 3 s move the heading by less than 1 mrad (before: 92 mrad)."""
+    from skidsteer_power.des.kinematics import RPM
+    from skidsteer_power.des.simulator import MotorModel
+    from skidsteer_power.twin.live import TwinCoupling, TwinLoad, configure_amplifier
+
+    twin = Twin(load_vehicle('test_robot_track'), load_terrain('dry_sand'))
+    coupling = TwinCoupling(twin)
+    polarity, models = (1, -1), []
+    for side, sign in zip(('left', 'right'), polarity, strict=True):
+        model = MotorModel(load_torque=TwinLoad(coupling, side, sign))
+        configure_amplifier(model, twin)
+        models.append(model)
+    twin.set_command(0.2, 0.5)  # only for the motor speed targets [rad/s] (the driver's mapping)
+    turning = twin._target.tolist()
+    step, yaw_at = MotorModel.STEP_S, {}
+    for k in range(round(7.0 / step)):
+        targets = turning if k * step < 2.0 else [0.0, 0.0]
+        for model, sign, target in zip(models, polarity, targets, strict=True):
+            model.step(
+                step, k * step, powered=True, current_mode=False, speed_setpoint_rad_s=sign * target,
+                current_setpoint_A=0.0, peak_current_A=twin.peak_A, acceleration_rad_s2=1e4 * RPM,
+            )  # fmt: skip
+        if k in (round(4.0 / step), round(7.0 / step) - 1):
+            yaw_at[k] = float(twin.pose[2])
+    early, late = yaw_at.values()
+    assert early > 0.4  # it did turn (0.5 rad/s commanded for 2 s)
+    assert abs(late - early) < 1e-3, (early, late)
+    assert max(abs(m.omega_rad_s) for m in models) < 0.05

@@ -20,6 +20,7 @@ import sys
 import time
 from typing import Any
 
+from skidsteer_power.cli import _ros_names
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
@@ -81,7 +82,9 @@ def register(subparsers: Subcommands) -> None:
         action='store_true',
         help='--simulate: restore and save the default energy state file (default: start fresh)',
     )
-    parser.add_argument('--namespace', default='', help='ROS namespace of the suite (e.g. robot1)')
+    parser.add_argument(
+        '--namespace', type=_ros_names.namespace, default='', help='ROS namespace of the suite (e.g. robot1)'
+    )
     parser.add_argument(
         '--cmd-vel-type',
         choices=('auto', 'twist', 'twist_stamped'),

@@ -151,6 +151,13 @@ class MotorModel:
         load = self.load_torque
         return float(load(omega_rad_s, t_s)) if callable(load) else float(load)
 
+    def holding_torque(self, t_s: float) -> float:
+        """The load's torque at 1 rad/s [N m]: what holds a coasting motor at rest. A load that keeps
+        state (the live twin, ``twin/live.TwinLoad``) gives it by ``holding_torque_Nm()`` instead, so
+        asking it never moves anything (issue 37 item 9: asking the twin at 1 rad/s fed it that speed)."""
+        holding = getattr(self.load_torque, 'holding_torque_Nm', None)
+        return float(holding()) if callable(holding) else self.load_at(1.0, t_s)
+
     def step(
         self,
         dt_s: float,
@@ -189,9 +196,15 @@ class MotorModel:
         self.current_limited = powered and current != wanted
         self.current_A = current
         torque = motor.torque_constant_Nm_A * current - self.load_at(self.omega_rad_s, t_s)
-        if not powered and abs(self.omega_rad_s) < 0.5 and abs(torque) < self.load_at(1.0, t_s):
+        if not powered and abs(self.omega_rad_s) < 0.5 and abs(torque) < self.holding_torque(t_s):
             torque, self.omega_rad_s = 0.0, 0.0  # Coulomb friction holds a coasting motor at rest
-        self.omega_rad_s += torque / self.inertia_kg_m2 * dt_s
+        # a load that gives its slope d(load)/d(omega) [N m s/rad] is taken implicitly (as the twin's
+        # drivetrain does): the live twin's Coulomb friction changes sign over 1 rad/s on a rotor of
+        # 1.4e-4 kg m^2, c dt / (J w_s) = 2.7 > 2, and explicit Euler chattered at zero speed with a
+        # non-zero mean, so the robot drifted at zero set points (issue 37 item 9)
+        slope = getattr(self.load_torque, 'slope_Nm_s', None)
+        implicit = float(slope(self.omega_rad_s)) * dt_s if callable(slope) else 0.0
+        self.omega_rad_s += torque * dt_s / (self.inertia_kg_m2 + max(implicit, 0.0))
         self.theta_rad += self.omega_rad_s * dt_s
         alpha = dt_s / (self.mean_time_constant_s + dt_s)
         self.mean_omega_rad_s += alpha * (self.omega_rad_s - self.mean_omega_rad_s)

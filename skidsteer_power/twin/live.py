@@ -113,5 +113,20 @@ class TwinLoad:
         internal = r.viscous_Nm_s * omega_m + r.coulomb_Nm * math.tanh(omega_m / FRICTION_SMOOTHING_RAD_S)
         return axle / self.gear_ratio + internal
 
+    def holding_torque_Nm(self) -> float:
+        """The side's internal resistance at 1 rad/s [N m] (positive): what holds an unpowered motor
+        at rest (``MotorModel.holding_torque``), without stepping the twin at a speed the motor does
+        not turn at (every call of :meth:`__call__` is a motor speed the twin moves with)."""
+        r = self.resistance
+        return r.viscous_Nm_s + r.coulomb_Nm * math.tanh(1.0 / FRICTION_SMOOTHING_RAD_S)
+
+    def slope_Nm_s(self, omega_rad_s: float) -> float:
+        """d(internal resistance)/d(omega) [N m s/rad] at motor speed ``omega_rad_s`` [rad/s] (the
+        same in either sense): b + c (1 - tanh^2(w / w_s)) / w_s, which ``MotorModel.step`` takes
+        implicitly (its explicit step is unstable on the twin's rotor inertia near zero speed)."""
+        r = self.resistance
+        th = math.tanh(omega_rad_s / FRICTION_SMOOTHING_RAD_S)
+        return r.viscous_Nm_s + r.coulomb_Nm * (1.0 - th * th) / FRICTION_SMOOTHING_RAD_S
+
     def __call__(self, omega_rad_s: float, t_s: float) -> float:
         return self.polarity * self.robot_sense(self.polarity * omega_rad_s, t_s)
