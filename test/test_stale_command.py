@@ -49,9 +49,10 @@ def test_core_predicts_standing_once_the_command_is_stale() -> None:
         EstimatorSettings(cmd_timeout_s=0.5),
     )
     core.on_command(0.3, 0.0, 0.0)
-    core.on_joint_state(['left_motor', 'right_motor'], [0.0, 0.0], [0.0, 0.0], 0.9)
     core.tick(0.4)
     assert summary_dict(core, 0.4)['predicted_left_W'] == 60.0  # 120 W / 2, still in force
+    # in time order (a reading stamped before an earlier tick is a clock step back, issue 34 item 10)
+    core.on_joint_state(['left_motor', 'right_motor'], [0.0, 0.0], [0.0, 0.0], 0.9)
     core.tick(1.0)  # 1 s after the command: the watchdog holds zero
     values = summary_dict(core, 1.0)
     assert values['predicted_left_W'] == 0.0 and values['predicted_speed_left_rad_s'] == 0.0
