@@ -162,3 +162,105 @@ def motion_row(surface: str, fit_runs: list[int], check_runs: list[int]) -> Moti
         yaw_mae(after.yaw_rate, yaw),
         status,
     )
+
+
+@dataclass(frozen=True)
+class EnergyRow:
+    """Energy errors [%] of one split of one surface: measured V x I energy of the check runs against
+    the preset, the calibrated FESS and the linear fit P = a|v| + b|w| + c (fitted on the fit runs)."""
+
+    surface: str
+    split: str
+    runs_fit: list[int]
+    runs_check: list[int]
+    measured_J: float
+    preset_pct: float
+    calibrated_pct: float
+    linear_pct: float
+    status: str
+
+
+def _samples(surface: str, numbers: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(commands (n, 2) [m/s, rad/s], measured battery power (n,) [W], hold time (n,) [s]) of every
+    sample of runs ``numbers``: the set points' twist through the drive controller, sample-and-hold."""
+    from skidsteer_power.drive import controller_for_vehicle
+    from skidsteer_power.estimator import factory
+
+    controller = controller_for_vehicle(factory.load_vehicle_config(VEHICLE))
+    commands, power, hold = [], [], []
+    for n in numbers:
+        series = load_run(surface, n)
+        v, w = controller.twist_of(series.setpoint_rad_s)
+        dt = np.diff(series.t_s, append=series.t_s[-1] + float(np.median(np.diff(series.t_s))))
+        commands.append(np.column_stack([v, w]))
+        assert series.power_W is not None
+        power.append(series.power_W.sum(axis=1))
+        hold.append(dt)
+    return np.concatenate(commands), np.concatenate(power), np.concatenate(hold)
+
+
+def linear_fit(commands: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """(a, b, c) of P = a|v| + b|w| + c by least squares [W s/m, W s/rad, W]."""
+    design = np.column_stack([np.abs(commands[:, 0]), np.abs(commands[:, 1]), np.ones(len(commands))])
+    coef, *_ = np.linalg.lstsq(design, power, rcond=None)
+    return np.asarray(coef)
+
+
+def energy_pct(predicted_W: np.ndarray, measured_W: np.ndarray, hold_s: np.ndarray) -> float:
+    measured = float(measured_W @ hold_s)
+    return 100.0 * (float(predicted_W @ hold_s) - measured) / measured
+
+
+def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[int]) -> EnergyRow:
+    """Calibrate (``--fit auto``: ground, internal resistance and idle power, to the V x I power and
+    the gyro's yaw rate together) on the steady segments of ``fit_runs``; predict every sample of
+    ``check_runs`` from its set points (sample-and-hold energy)."""
+    from skidsteer_power.calibration import auto_fit_names, calibrate
+    from skidsteer_power.calibration.series import segments_of
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.terramechanics.terrain import load_terrain
+
+    vehicle = factory.load_vehicle_config(VEHICLE)
+    powertrain = factory.powertrain_for(vehicle)
+    start = load_terrain(SURFACE_TERRAIN[surface])
+    segments = segments_of(run_segments(surface, fit_runs))
+    names, fixed = auto_fit_names(segments, start)
+    result = calibrate(
+        vehicle, start, powertrain, segments, names, holdout=0.0, fit_to='both', left_fixed=fixed
+    )
+    fit_cmd, fit_p, _ = _samples(surface, fit_runs)
+    cmd, measured, hold = _samples(surface, check_runs)
+    preset = CommandPredictor(vehicle, start, powertrain).predict(cmd[:, 0], cmd[:, 1]).battery_power
+    after = CommandPredictor(vehicle, result.terrain, result.powertrain).predict(cmd[:, 0], cmd[:, 1])
+    a, b, c = linear_fit(fit_cmd, fit_p)
+    linear = a * np.abs(cmd[:, 0]) + b * np.abs(cmd[:, 1]) + c
+    fitted = [n for n in result.names if result.status(n) == 'fitted']
+    pinned = [f'{n} at its {side} bound' for n, side in result.at_bound.items()]
+    status = result.kept_start or '; '.join(
+        [f'fitted {", ".join(fitted)}' if fitted else 'nothing fitted inside its range', *pinned]
+    )
+    return EnergyRow(
+        surface,
+        split,
+        fit_runs,
+        check_runs,
+        float(measured @ hold),
+        energy_pct(preset, measured, hold),
+        energy_pct(after.battery_power, measured, hold),
+        energy_pct(linear, measured, hold),
+        status,
+    )
+
+
+def speed_split(surface: str) -> tuple[list[int], list[int]]:
+    """(runs below the median mean |speed|, runs above): the transfer split of issue 35."""
+    numbers = runs(surface)
+    mean_speed = []
+    for n in numbers:
+        series = load_run(surface, n)
+        mean_speed.append(float(np.mean(np.abs(series.setpoint_rad_s.mean(axis=1))) * WHEEL_RADIUS_M))
+    median = float(np.median(mean_speed))
+    below = [n for n, s in zip(numbers, mean_speed, strict=True) if s <= median]
+    above = [n for n, s in zip(numbers, mean_speed, strict=True) if s > median]
+    return below, above

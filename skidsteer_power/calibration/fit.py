@@ -36,22 +36,23 @@ Method
   predicted minus measured forward speed and yaw rate over :data:`SPEED_SCALE_M_S`,
   :data:`YAW_SCALE_RAD_S` (ASSUMED noise scales of steady-window means). A segment without a torque
   (no effort recorded) or without a measured motion contributes only what it has.
-* Identifiability: before fitting, the change of the torques under a 10 % change of every terrain
-  parameter (kc always included, so the report shows it) is computed at the starting terrain, and
-  the parameters are ranked by orthogonalization (:func:`select_identifiable`): a parameter whose
-  10 % change, after removing what the parameters ranked above it can explain, moves the torques by
-  less than ``ident_tol`` (RMS, N m) cannot be seen in the data: it is reported as non-identifiable
-  and kept fixed at its starting value. For small robots this is k_c: it enters only through
-  kc / b + kphi (eq. 2.1) with b ~ 0.1 m, so it matters ~1 % as much as kphi. For a track, kphi and
-  n act only through the compaction resistance (eq. 2.10), one number per load, so only one of them
-  is identifiable; the other is fixed.
+* Identifiability: before fitting, the change of the prediction under a 10 % change (for a linear
+  parameter at least 1 % of its range) of every candidate (kc always included, so the report shows
+  it) is computed at the start, and the parameters are ranked by orthogonalization
+  (:func:`select_identifiable`): a parameter whose change, after removing what the parameters ranked
+  above it can explain, moves the scaled residuals by less than ``ident_tol`` (RMS) cannot be seen in
+  the data: it is reported as non-identifiable and kept fixed at its starting value. For small robots
+  this is k_c: it enters only through kc / b + kphi (eq. 2.1) with b ~ 0.1 m, so it matters ~1 % as
+  much as kphi. For a track, kphi and n act only through the compaction resistance (eq. 2.10), one
+  number per load, so only one of them is identifiable; the other is fixed.
 * Uncertainty: covariance of z = s^2 (J^T J)^-1 at the optimum (J the Jacobian of the scaled
   residuals, s^2 = sum r^2 / (m - p)); 95 % intervals z +- t(0.975, m - p) sigma_z mapped back to the
   parameter (asymmetric for log parameters); covariance in the parameter's own units by the delta
   method; the correlation matrix; a warning for every pair with |rho| > 0.95.
 * Honesty: a fitted parameter whose 95 % interval leaves its physical range (z outside [0, 1]) is
-  "not identifiable" (the data do not fix it): it is put back at its start value and the others are
-  fitted again without it. A parameter that ends at a bound is "at_bound" (no estimate, no interval).
+  "not identifiable" (the data do not fix it): the one with the widest interval is put back at its
+  start value and the others are fitted again without it, until every interval stays in its range.
+  A parameter that ends at a bound is "at_bound" (no estimate, no interval).
   When the fitted values predict the hold-out segments worse than the start (a scaled residual RMS
   grown by more than :data:`COST_WORSE`, or, where power is measured, an |energy error| grown by more
   than :data:`ENERGY_WORSE`), the start is kept and the result says why.
@@ -704,8 +705,10 @@ def screen(data: FitData, fit: Sequence[str], tol: float) -> Screen:
     for name in data.candidates:
         value = data.start[name]
         lo, hi = PARAMS[name].bounds
-        trial = value + (0.1 * value if value != 0 else 0.01 * (hi - lo))
-        trial = trial if trial <= hi else value - 0.1 * value  # stay inside the range
+        # 10 %, and for a linear parameter at least 1 % of its range (a Coulomb term of 0.05 N m or
+        # an idle power of 0 W is no scale for what the data can see)
+        step = 0.1 * abs(value) if PARAMS[name].log else max(0.1 * abs(value), 0.01 * (hi - lo))
+        trial = value + step if value + step <= hi else value - step  # stay inside the range
         ev = model.evaluate({name: trial})
         columns[name] = data.residuals(ev, every) - base_r
         torque_change = np.where(ev.ok[:, None], ev.torque - base.torque, 0.0)
@@ -760,6 +763,7 @@ class Uncertainty:
     leaves_range: dict[str, str]  # name -> why: its interval leaves the physical range
     s2: float
     warnings: list[str]
+    half_width_z: dict[str, float] = field(default_factory=dict)  # t sigma_z of each free parameter
 
 
 def uncertainty(opt: Optimum, observations: int) -> Uncertainty:
@@ -779,11 +783,13 @@ def uncertainty(opt: Optimum, observations: int) -> Uncertainty:
     t = float(stats.t.ppf(0.975, dof))
     ci95: dict[str, tuple[float, float] | None] = {}
     leaves: dict[str, str] = {}
+    half: dict[str, float] = {}
     for k, name in enumerate(names):
         ci95[name] = None
         if name in at_bound:
             continue
         z_lo, z_hi = opt.z[k] - t * sigma_z[k], opt.z[k] + t * sigma_z[k]
+        half[name] = float(t * sigma_z[k]) if math.isfinite(sigma_z[k]) else math.inf
         if not (z_lo >= 0.0 and z_hi <= 1.0):  # also catches a NaN or infinite sigma
             lo, hi = PARAMS[name].bounds
             leaves[name] = (
@@ -811,7 +817,7 @@ def uncertainty(opt: Optimum, observations: int) -> Uncertainty:
             'the data push it beyond; it is no estimate and has no interval (a closer --terrain, or other '
             'drives)'
         )
-    return Uncertainty(ci95, covariance, correlation, at_bound, leaves, s2, warnings)
+    return Uncertainty(ci95, covariance, correlation, at_bound, leaves, s2, warnings, half)
 
 
 @dataclass
@@ -907,11 +913,13 @@ def calibrate(
         )
     opt = optimize_z(data, scr.names, f_scale=1.0)
     unc = uncertainty(opt, observations)
-    if unc.leaves_range and len(unc.leaves_range) < len(opt.names):  # refit without them
-        opt = optimize_z(data, [n for n in opt.names if n not in unc.leaves_range], f_scale=1.0)
-        leaves = unc.leaves_range
+    leaves: dict[str, str] = {}
+    while unc.leaves_range and len(unc.leaves_range) < len(opt.names):  # refit without the worst one
+        worst = max(unc.leaves_range, key=lambda n: unc.half_width_z.get(n, math.inf))
+        leaves[worst] = unc.leaves_range[worst]
+        opt = optimize_z(data, [n for n in opt.names if n != worst], f_scale=1.0)
         unc = uncertainty(opt, observations)
-        unc.leaves_range = {**leaves, **unc.leaves_range}
+    unc.leaves_range = {**leaves, **unc.leaves_range}
     fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
     check = assess(data, scr.base, fitted)
     return _result(data, scr, opt, unc, check, fitted, fit, tol, dropped, left_fixed, started)
