@@ -178,7 +178,9 @@ def test_bad_rigid_files_name_the_field(extra: dict[str, object], message: str) 
 
 def test_missing_rigid_field_is_an_error() -> None:
     with pytest.raises(ConfigError, match="'mu_lateral' is missing"):
-        terrain_from_mapping({'contact': 'rigid', 'mu_longitudinal': 0.7, 'rolling_resistance': 0.01, 'K': 1e-3})
+        terrain_from_mapping(
+            {'contact': 'rigid', 'mu_longitudinal': 0.7, 'rolling_resistance': 0.01, 'K': 1e-3}
+        )
 
 
 def test_soil_fingerprints_are_unchanged_by_rigid_ground() -> None:
