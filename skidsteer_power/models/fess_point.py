@@ -99,7 +99,7 @@ class PointKernel:
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
         self.rigid = problem.terrain.is_rigid
-        self._yaw = w
+        self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
         self._last: tuple[State, np.ndarray, int] | None = None  # state x, q jx (2, k, E) of its rows
