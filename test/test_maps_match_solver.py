@@ -27,10 +27,10 @@ def track_map() -> SetpointMap:
 def test_map_matches_direct_on_a_dense_grid(track_map: SetpointMap) -> None:
     """25 x 25 commands over the whole envelope (both signs of V and w_z), off the map's nodes."""
     veh = track_map.predictor.vehicle
-    v, w = np.meshgrid(
+    grid_v, grid_w = np.meshgrid(
         np.linspace(-1, 1, 25) * veh.max_speed_m_s * 0.987, np.linspace(-1, 1, 25) * veh.max_yaw_rate_rad_s
     )
-    v, w = v.ravel(), w.ravel()
+    v, w = grid_v.ravel(), grid_w.ravel()
     direct = track_map.predictor.predict(v, w)
     answers = [track_map.query(float(a), float(b)) for a, b in zip(v, w, strict=True)]
     limited = np.array([q.limited for q in answers])
@@ -70,8 +70,8 @@ def test_power_map_spin_is_symmetric(name: str) -> None:
         q = pmap.query(0.0, yaw)
         assert q.torque_left_Nm == pytest.approx(-q.torque_right_Nm, rel=1e-9)
         assert q.omega_left_rad_s == pytest.approx(-q.omega_right_rad_s, rel=1e-9)
-        assert abs(q.s0_m) < 1e-12
-        assert q.torque_right_Nm * np.sign(yaw) > 0  # the right side drives a left spin
+        assert abs(float(q.s0_m)) < 1e-12
+        assert float(q.torque_right_Nm) * np.sign(yaw) > 0  # the right side drives a left spin
     left, right = pmap.query(0.0, 0.3), pmap.query(0.0, -0.3)
     assert left.torque_left_Nm == pytest.approx(right.torque_right_Nm, rel=1e-12)
 
@@ -85,5 +85,5 @@ def test_power_map_blend_is_continuous_at_the_limit_radius() -> None:
     yaw = 0.5
     inside, outside = pmap.query(r_min * yaw * (1 - 1e-6), yaw), pmap.query(r_min * yaw * (1 + 1e-6), yaw)
     scale = abs(float(outside.torque_right_Nm))
-    assert abs(inside.torque_right_Nm - outside.torque_right_Nm) < 1e-3 * scale
-    assert abs(inside.torque_left_Nm - outside.torque_left_Nm) < 1e-3 * scale
+    assert abs(float(inside.torque_right_Nm) - float(outside.torque_right_Nm)) < 1e-3 * scale
+    assert abs(float(inside.torque_left_Nm) - float(outside.torque_left_Nm)) < 1e-3 * scale
