@@ -32,11 +32,12 @@ def _solve_row(solver: Any, v: np.ndarray, w: np.ndarray, r_min: float) -> dict[
     side_v = v[:, None] - w[:, None] * ys  # actual ground speed of each side [m/s]
     side_v_eff = v_eff[:, None] - w[:, None] * ys
     slip = r * sol.omega - side_v_eff  # each side keeps its slip speed (module doc)
+    torque, slip, s0 = _spin_symmetric(sol.torque, slip, sol.s0, v, v_eff)
     return {
-        'torque': sol.torque,
+        'torque': torque,
         'slip': slip,
         'omega': (side_v + slip) / r,
-        's0': sol.s0,
+        's0': s0,
         'sinkage': sol.sinkage,
         'margin': sol.traction_margin,
         'slip_ratio': np.max(
@@ -45,6 +46,28 @@ def _solve_row(solver: Any, v: np.ndarray, w: np.ndarray, r_min: float) -> dict[
         'converged': sol.converged,
         'limited': limited,
     }
+
+
+def _spin_symmetric(
+    torque: np.ndarray, slip: np.ndarray, s0: np.ndarray, v: np.ndarray, v_eff: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Torques (P, 2) [N m], slip speeds (P, 2) [m/s] and s0 (P,) [m] of points solved at the
+    small-radius limit, blended with their spin mirror image so that a spin in place is symmetric.
+
+    A laterally and fore-aft symmetric vehicle spinning in place at w_z looks the same after a half
+    turn about the vertical: left and right swap and every forward quantity changes sign, so
+    T_left = -T_right, slip_left = -slip_right, s0 = 0 (module doc of fess.py). The limit answer (the
+    turn at R = min_radius) is not: its outer side keeps a driving, its inner side a braking state.
+    Each limited point (|V| < V_eff = min_radius |w_z|) takes (1 - lam) x its answer + lam x the
+    mirrored answer (sides swapped, signs changed), lam = (1 - V / V_eff) / 2: exactly symmetric at
+    V = 0 (lam = 1/2), the limit answer itself at R = min_radius (lam = 0), continuous between."""
+    with np.errstate(invalid='ignore', divide='ignore'):
+        lam = np.where(v_eff > v, 0.5 * (1.0 - v / np.where(v_eff > 0, v_eff, 1.0)), 0.0)
+    keep = (1.0 - lam)[:, None]
+    mirror = lam[:, None]
+    torque_sym = keep * torque - mirror * torque[:, ::-1]
+    slip_sym = keep * slip - mirror * slip[:, ::-1]
+    return torque_sym, slip_sym, (1.0 - 2.0 * lam) * s0
 
 
 def _check_cells(

@@ -37,9 +37,11 @@ radii "the soil fails and the shear force on the contact surface is saturated" (
 turning resistance stops growing as R shrinks. Points solved this way are flagged in ``limited``
 (the map's and every query's).
 A spin in place therefore gets both sides driven in opposite directions with the turning resistance
-of the tightest reliable turn at that yaw rate. It inherits that turn's asymmetry: the side that
-was outer keeps its driving slip speed and torque, the other its braking ones, so the two sides'
-speeds and torques are opposite but not equal in size (a limitation of the limit, not physics).
+of the tightest reliable turn at that yaw rate. That turn is not symmetric (its outer side keeps a
+driving slip speed and torque, its inner side braking ones), a spin is: each limited point is blended
+with its spin mirror image, weight (1 - |R| / min_radius) / 2 (:func:`~skidsteer_power.maps.map_solve.
+_spin_symmetric`), so a spin in place has T_left = -T_right and omega_left = -omega_right exactly and
+the blend is continuous with the limit answer at R = min_radius (issue 36).
 At rest (V = w_z = 0) every torque is 0.
 
 Points that do not converge even after warm starts from converged neighbours keep

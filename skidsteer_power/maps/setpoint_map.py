@@ -19,6 +19,18 @@ so is one whose interpolated motion turns an element past half a revolution in t
 (:func:`~skidsteer_power.models.setpoint.element_turn_rev`, the direct solve's test); outside the
 envelope it is answered at the edge and ``clamped``. Accuracy and speed against the direct solve:
 benchmarks/bench_maps.py.
+
+Cells answered exactly (issue 36: the map agrees with the direct solve): where the steady state
+changes too abruptly for bilinear interpolation the map does not interpolate but solves the command
+directly (:meth:`SetpointMap.query` then costs one set-point solve, milliseconds). Those cells are
+the ones with a dug-in corner or whose corners disagree on the pivot test (the limited boundary:
+interpolating across it would flag or unflag commands the direct solve does not), and, found at build
+time, the cells near the pivot band (a corner's inner / outer set point ratio within
++-:data:`BAND_RATIO`, where the motion turns steeply with the inner set point) whose centre, solved
+directly, is off the interpolated answer by more than :data:`CHECK_POWER` in battery power or
+:data:`CHECK_SPEED_M_S` in speed (half the goals of 1 % and 5 mm/s: for a smooth solution bilinear
+interpolation errs most at the centre). A spin in place (mean 0) is then solved like the direct path
+and symmetric as it is.
 """
 
 from __future__ import annotations
@@ -36,7 +48,12 @@ from skidsteer_power.drive.controller import controller_for_vehicle
 from skidsteer_power.errors import InputError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
-from skidsteer_power.models.setpoint import ELEMENT_TURN_LIMIT_REV, REASON_PIVOT, REASON_TRACTION
+from skidsteer_power.models.setpoint import (
+    ELEMENT_TURN_LIMIT_REV,
+    REASON_PIVOT,
+    REASON_TRACTION,
+    element_turn_rev,
+)
 from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 from skidsteer_power.vehicle import vehicle_fingerprint
 
@@ -51,6 +68,9 @@ FIELDS = (
 )  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAX_NODES = 200_000
+BAND_RATIO = 0.4  # cells with a corner's inner / outer set point within +-this are checked (module doc)
+CHECK_POWER = 0.005  # a checked cell whose centre is off by more (relative battery power) is exact
+CHECK_SPEED_M_S = 0.0025  # ... or by more in speed [m/s]
 
 
 @dataclass(frozen=True)
@@ -87,22 +107,50 @@ class SetpointMap:
     """The set-point prediction of one vehicle x terrain over (mean, half difference) of set points."""
 
     def __init__(
-        self, predictor: CommandPredictor, mean: np.ndarray, diff: np.ndarray, values: np.ndarray
+        self,
+        predictor: CommandPredictor,
+        mean: np.ndarray,
+        diff: np.ndarray,
+        values: np.ndarray,
+        checked: np.ndarray | None = None,
     ) -> None:
+        """``checked`` (n_mean - 1, n_diff - 1) bool: cells the build-time check found off (module
+        doc); with those with a dug-in corner or a mixed pivot test they are answered exactly."""
         self.predictor = predictor
         self.grid = BilinearGrid(
             Axis(mean, 'set point mean'), Axis(diff, 'set point half difference'), values
         )
-        dug_in = values[..., FIELDS.index('dug_in')] > 0
-        cell = dug_in[:-1, :-1] | dug_in[1:, :-1] | dug_in[:-1, 1:] | dug_in[1:, 1:]
-        self._cell_limited = cell.ravel().tolist()
         self._radius = float(predictor.vehicle.drive_radius_m)
         # element_turn_rev's test in floats: |w_z| xi / v_rim > limit [rev] times 2 pi [rad]
         self._turn_limit = ELEMENT_TURN_LIMIT_REV * 2.0 * math.pi
+        shape = (len(mean) - 1, len(diff) - 1)
+        self.checked = np.zeros(shape, dtype=bool) if checked is None else np.asarray(checked, dtype=bool)
+        if self.checked.shape != shape:
+            raise InputError(f'set-point map: checked cells {self.checked.shape} do not match {shape}')
+        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | self.checked
+        self._cell_exact = self.exact.ravel().tolist()
         pt = predictor.powertrain
         self._limit = predictor.current_limit_A
         self._kt = pt.motor.torque_constant_Nm_A
         self._gear = pt.gear_ratio
+
+    def _dug_in(self) -> np.ndarray:
+        return np.asarray(self.grid.values[..., FIELDS.index('dug_in')] > 0)
+
+    def _pivot_nodes(self) -> np.ndarray:
+        """(n_mean, n_diff) the direct solve's pivot test at every node (:func:`element_turn_rev`)."""
+        m, d = np.meshgrid(self.grid.axis0.values, self.grid.axis1.values, indexing='ij')
+        inner_rim = np.abs(m - d) * self._radius
+        yaw = self.grid.values[..., FIELDS.index('yaw_rate')]
+        contact = self.grid.values[..., FIELDS.index('contact_length')]
+        turn = element_turn_rev(yaw, contact, inner_rim)
+        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in()
+        return pivot
+
+    @property
+    def exact_fraction(self) -> float:
+        """Share of the map's cells answered by the direct solve [-] (module doc)."""
+        return float(np.mean(self.exact))
 
     @classmethod
     def build(
@@ -138,12 +186,41 @@ class SetpointMap:
             sol.contact_length,
         )
         values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
-        return cls(predictor, mean, diff, values)
+        unchecked = cls(predictor, mean, diff, values)
+        return cls(predictor, mean, diff, values, unchecked.check_cells())
+
+    def check_cells(self) -> np.ndarray:
+        """The build-time check (module doc): (n_mean - 1, n_diff - 1) True where a cell near the
+        pivot band, not already exact, misses CHECK_POWER or CHECK_SPEED_M_S at its centre."""
+        mean, diff = self.grid.axis0.values, self.grid.axis1.values
+        m, d = np.meshgrid(mean, diff, indexing='ij')
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.abs((m - d) / (m + d))
+        band = _corner_any(np.nan_to_num(ratio, nan=0.0) <= BAND_RATIO) & ~self.exact
+        cells = np.argwhere(band)
+        out = np.zeros(band.shape, dtype=bool)
+        if cells.size == 0:
+            return out
+        mc = 0.5 * (mean[cells[:, 0]] + mean[cells[:, 0] + 1])
+        dc = 0.5 * (diff[cells[:, 1]] + diff[cells[:, 1] + 1])
+        sp = np.column_stack([mc - dc, mc + dc])
+        sol = self.predictor.solver.solve(sp)
+        _, _, p_direct, _ = self.predictor.electrical(sol.torque, sp)
+        vals = self.grid.values
+        i, j = cells[:, 0], cells[:, 1]
+        centre = 0.25 * (vals[i, j] + vals[i + 1, j] + vals[i, j + 1] + vals[i + 1, j + 1])  # bilinear
+        torque = centre[:, [FIELDS.index('torque_left'), FIELDS.index('torque_right')]]
+        _, _, p_map, _ = self.predictor.electrical(torque, sp)
+        p_err = np.abs(p_map - p_direct) / np.maximum(np.abs(p_direct), 1.0)
+        v_err = np.abs(centre[:, FIELDS.index('speed')] - sol.speed)
+        off = sol.limited | (p_err > CHECK_POWER) | (v_err > CHECK_SPEED_M_S)
+        out[i[off], j[off]] = True
+        return out
 
     @property
     def limited_fraction(self) -> float:
         """Share of the map's nodes with no steady state [-] (dug in; the pivot flag is per query)."""
-        return float(np.mean(self.grid.values[..., FIELDS.index('dug_in')] > 0))
+        return float(np.mean(self._dug_in()))
 
     def query(self, speed_cmd: float, yaw_cmd: float) -> SetpointQuery:
         """The prediction for one command (V [m/s], w_z [rad/s]) in plain Python floats."""
@@ -155,6 +232,8 @@ class SetpointMap:
         mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
         reverse, right_turn = flip < 0, diff < 0
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
+        if self._cell_exact[cell]:
+            return self._direct(sp_l, sp_r, clamped_sp or off_grid)
         speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact = vals
         inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
         pivot = yaw != 0 and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
@@ -162,7 +241,7 @@ class SetpointMap:
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
             speed, yaw, t_l, t_r = -speed, -yaw, -t_l, -t_r
-        traction = self._cell_limited[cell]
+        traction = False  # a cell with a dug-in corner is exact (above)
         t_l, left, over_l = self._side('left', t_l, sp_l)
         t_r, right, over_r = self._side('right', t_r, sp_r)
         current = over_l or over_r
@@ -172,6 +251,22 @@ class SetpointMap:
             float(left.current_A), float(right.current_A),
             float(left.electrical_power_W) + float(right.electrical_power_W),
             traction or pivot or current, clamped_sp or off_grid, reason, (left, right),
+        )  # fmt: skip
+
+    def _direct(self, sp_l: float, sp_r: float, clamped: bool) -> SetpointQuery:
+        """The set-point solve of one pair of set points [rad/s] (an exact cell, module doc), with
+        the powertrain of :meth:`query` (the direct path's formulas)."""
+        sol = self.predictor.solver.solve(np.array([[sp_l, sp_r]]))
+        t_l, left, over_l = self._side('left', float(sol.torque[0, 0]), sp_l)
+        t_r, right, over_r = self._side('right', float(sol.torque[0, 1]), sp_r)
+        current = over_l or over_r
+        reason = sol.reason[0] or (REASON_CURRENT if current else '')
+        return SetpointQuery(
+            sp_l, sp_r, float(sol.speed[0]), float(sol.yaw_rate[0]), t_l, t_r,
+            float(sol.slip[0, 0]), float(sol.slip[0, 1]), float(sol.sinkage[0]),
+            float(sol.traction_margin[0]), float(left.current_A), float(right.current_A),
+            float(left.electrical_power_W) + float(right.electrical_power_W),
+            bool(sol.limited[0]) or current, clamped, reason, (left, right),
         )  # fmt: skip
 
     def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:
@@ -203,6 +298,19 @@ def envelope(predictor: CommandPredictor) -> tuple[float, float]:
     top = ctrl.ceiling_for(predictor.max_axle_rad_s)
     half_separation = 0.5 * ctrl.separation_m
     return min(ctrl.max_speed_m_s / r, top), min(ctrl.max_yaw_rate_rad_s * half_separation / r, top)
+
+
+def _corner_any(nodes: np.ndarray) -> np.ndarray:
+    """(n - 1, m - 1) cells with any of their four corner nodes True."""
+    cells: np.ndarray = nodes[:-1, :-1] | nodes[1:, :-1] | nodes[:-1, 1:] | nodes[1:, 1:]
+    return cells
+
+
+def _mixed(nodes: np.ndarray) -> np.ndarray:
+    """(n - 1, m - 1) cells whose four corner nodes are not all alike."""
+    every = nodes[:-1, :-1] & nodes[1:, :-1] & nodes[:-1, 1:] & nodes[1:, 1:]
+    cells: np.ndarray = _corner_any(nodes) & ~every
+    return cells
 
 
 def cache_path(
@@ -239,13 +347,19 @@ def load_or_build(
     if path.exists():
         try:
             with np.load(path) as data:
-                mean, diff, values = data['mean'], data['diff'], data['values']
+                mean, diff, values, checked = data['mean'], data['diff'], data['values'], data['checked']
             top = envelope(predictor)
             if values.shape == (len(mean), len(diff), len(FIELDS)) and (mean[-1], diff[-1]) == top:
-                return SetpointMap(predictor, mean, diff, values), False
-        except (OSError, ValueError, KeyError):
+                return SetpointMap(predictor, mean, diff, values, checked), False
+        except (OSError, ValueError, KeyError, InputError):
             pass  # damaged: rebuild below, never use it
     built = SetpointMap.build(vehicle, terrain, nodes, predictor)  # missing, damaged or another envelope
     with atomic_file(path) as handle:
-        np.savez(handle, mean=built.grid.axis0.values, diff=built.grid.axis1.values, values=built.grid.values)
+        np.savez(
+            handle,
+            mean=built.grid.axis0.values,
+            diff=built.grid.axis1.values,
+            values=built.grid.values,
+            checked=built.checked,
+        )
     return built, True

@@ -63,6 +63,7 @@ FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.
 MAX_HALVINGS = 12
 RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
 SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
+RIGID_MARGIN_MIN = 0.01  # rigid ground: a side within 1 % of mu x its load has no steady state
 STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
 
 SIDE_Y_SIGN = np.array([1.0, -1.0])  # left side at y = +B/2, right side at y = -B/2
@@ -175,6 +176,8 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
+    if problem.terrain.is_rigid:  # friction: the slip path, not eq. 6.6's chord (rigid_contact)
+        return _rigid_displacement(problem, s0, omega, forward)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
     half = problem.half_turn_rate / np.maximum(np.abs(omega) * problem.radius, 1e-12)
@@ -188,6 +191,23 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); 1 - cos written as 2 sin^2 (no cancellation)
     jx = xk - xe + one_minus_cos * xe - dy * sin
     jy = dy * one_minus_cos + xe * sin
+    return jx, jy, xk
+
+
+def _rigid_displacement(
+    problem: Problem, s0: np.ndarray, omega: np.ndarray, forward: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`element_displacement` on rigid ground: :func:`~skidsteer_power.models.rigid_contact.
+    slip_path_displacement` of every element, shapes (P, S, 2, G, N)."""
+    from skidsteer_power.models.rigid_contact import slip_path_displacement
+
+    fwd_plus, fwd_minus, entry_plus, entry_minus = problem.element_x
+    xk = np.where(forward, fwd_plus, fwd_minus) - s0
+    xe = np.where(forward, entry_plus, entry_minus) - s0
+    along = problem.side_speed[:, None, :, None, None] - omega * problem.radius
+    yaw = problem.yaw[:, None, None, None, None]
+    rim = np.maximum(np.abs(omega) * problem.radius, 1e-12)
+    jx, jy = slip_path_displacement(xk, xe, along, yaw, rim)
     return jx, jy, xk
 
 
@@ -260,6 +280,10 @@ def initial_guess(problem: Problem) -> np.ndarray:
     """
     r = problem.radius
     omega = problem.side_speed / r
+    if problem.terrain.is_rigid:  # a driving slip orients the friction (rigid_contact)
+        from skidsteer_power.models.rigid_contact import straight_slip_guess
+
+        omega = omega * (1.0 + straight_slip_guess(problem.vehicle, problem.terrain))
     s0 = problem.speed * np.abs(problem.yaw) * problem.contact.length_scale * STEEDS_S0_SCALE
     s0 = np.minimum(s0, 0.25 * problem.contact.length_scale)
     return np.column_stack([s0, omega])
@@ -566,6 +590,11 @@ def _outputs(prob: Problem, result: NewtonResult, standing: np.ndarray) -> Twist
     # a side spinning at |slip| > SLIP_LIMIT means its thrust saturated before the balance was met:
     # the residual then creeps below the tolerance only as omega runs away, which is no steady state
     physical = np.all(np.abs(slip) <= SLIP_LIMIT, axis=1)
+    if prob.terrain.is_rigid:
+        # on rigid ground a side may turn backwards while it moves forwards over the ground (|slip|
+        # = 1: a tight turn's inner side, issue 36) and still hold a steady state; a runaway is a
+        # side whose thrust has reached its friction ceiling (the margin's 0), not a slip ratio
+        physical = margin > RIGID_MARGIN_MIN
     converged = (result.converged & physical | standing) & np.all(prob.loads > 0, axis=1)
     return TwistSolution(
         speed=prob.speed,

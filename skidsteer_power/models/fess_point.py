@@ -36,6 +36,7 @@ from skidsteer_power.models.fess import (
 from skidsteer_power.models.fess_contact import track_contact, wheel_contact
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import MAX_ITERATIONS
+from skidsteer_power.models.rigid_contact import slip_path_displacement
 from skidsteer_power.terramechanics.soil import shear_fraction_magnitude
 
 if TYPE_CHECKING:
@@ -97,6 +98,8 @@ class PointKernel:
         mass = float(problem.vehicle.mass_kg)
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
+        self.rigid = problem.terrain.is_rigid
+        self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
         self._last: tuple[State, np.ndarray, int] | None = None  # state x, q jx (2, k, E) of its rows
@@ -137,10 +140,14 @@ class PointKernel:
         sin = twice_sh * np.cos(half)
         one_minus_cos = twice_sh * sh  # 1 - cos written as 2 sin^2 (no cancellation)
         xe = entry - trial[0]  # where the element touched down, relative to the turning centre
-        dy = self._offset
-        # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); x_k - x_e does not depend on s0
-        jx = travel + one_minus_cos * xe - dy * sin
-        jy = dy * one_minus_cos + xe * sin
+        if self.rigid:  # friction: the slip path, not eq. 6.6's chord (rigid_contact module doc)
+            along = np.array(omega).reshape(2, k, 1) * -r + np.array(self.side_speed).reshape(2, 1, 1)
+            jx, jy = slip_path_displacement(travel + xe, xe, along, self._yaw, trial[1])
+        else:
+            dy = self._offset
+            # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); x_k - x_e does not depend on s0
+            jx = travel + one_minus_cos * xe - dy * sin
+            jy = dy * one_minus_cos + xe * sin
         if self.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement
             jx *= self.longitudinal
         j = np.hypot(jx, jy)

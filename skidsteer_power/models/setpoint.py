@@ -180,6 +180,10 @@ class SetpointSolver:
     def _first_guess(self, spf: np.ndarray) -> np.ndarray:
         """(s0, V, w_z): the no-slip motion and the s0 guess of FESS (Steeds' eq. 3.7 form)."""
         motion = no_slip_motion(spf, self.radius, self.tread)
+        if self.fess.terrain.is_rigid:  # a driving slip orients the friction (rigid_contact)
+            from skidsteer_power.models.rigid_contact import straight_slip_guess
+
+            motion[:, 0] *= 1.0 - straight_slip_guess(self.fess.vehicle, self.fess.terrain)
         length = self._length_scale()
         s0 = motion[:, 0] * np.abs(motion[:, 1]) * length * STEEDS_S0_SCALE
         return np.column_stack([np.minimum(s0, 0.25 * length), motion])
