@@ -84,3 +84,26 @@ def test_a_twin_bag_that_reaches_no_limit_keeps_the_vehicle_file(tmp_path: Path)
         assert not found.values[name].reached, name
         assert 'kept from the vehicle file' in found.values[name].note
         assert getattr(found.controller, name) == getattr(prior, name)
+
+
+def test_calibrate_fit_auto_identifies_the_limits_and_writes_them(
+    tmp_path: Path, limited_vehicle: Path
+) -> None:
+    # Issue 36 / DESIGN.md: `calibrate --fit auto` identifies the drive limits too, and --out-vehicle
+    # writes them (with sources). The twin's controller (limited_vehicle): V 0.6 m/s, w 1.2 rad/s.
+    bag = tmp_path / 'limited.mcap'
+    argv = ['simulate', '--vehicle', str(limited_vehicle), '--terrain', 'sand_bin', '-o', str(bag)]
+    assert run_cli([*argv, '--commands', str(_write_commands(tmp_path / 'c.csv', LIMITED))]) == 0
+    out_vehicle = tmp_path / 'identified.yaml'
+    code = run_cli([
+        'calibrate', str(bag), '--vehicle', str(limited_vehicle), '--terrain', 'sand_bin', '--fit', 'auto',
+        '--out-terrain', str(tmp_path / 't.yaml'), '--out-vehicle', str(out_vehicle), '--json',
+    ])  # fmt: skip
+    assert code == 0
+    written = yaml.safe_load(out_vehicle.read_text())
+    assert written['max_speed_m_s'] == pytest.approx(0.6, rel=0.03)
+    assert written['max_yaw_rate_rad_s'] == pytest.approx(1.2, rel=0.03)
+    drive = written['drive_controller']
+    assert drive['max_wheel_speed_rad_s'] == pytest.approx(8.0, rel=0.03)
+    assert 'skidsteer-power calibrate' in drive['sources']['max_wheel_speed_rad_s']
+    assert load_vehicle(str(out_vehicle)).max_speed_m_s == written['max_speed_m_s']  # it loads again

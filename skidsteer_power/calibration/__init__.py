@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+from skidsteer_power.calibration.drive_limits import identify_drive
 from skidsteer_power.calibration.fit import (
     DEFAULT_FIT,
     FIT_AT,
@@ -17,7 +18,14 @@ from skidsteer_power.calibration.fit import (
     calibrate,
     parse_fit_list,
 )
-from skidsteer_power.calibration.segments import Segment, SegmentOptions, find_segments, read_recording
+from skidsteer_power.calibration.segments import (
+    Recording,
+    Segment,
+    SegmentOptions,
+    find_segments,
+    read_recording,
+)
+from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.errors import InputError
 
 __all__ = [
@@ -79,6 +87,7 @@ def calibrate_bags(
     if options.extra_types is None and extra_types is not None:
         options = dataclasses.replace(options, extra_types=extra_types)
     segments: list[Segment] = []
+    recordings: list[Recording] = []
     dropped: dict[str, int] = {}
     for bag in bags:
         reader = JointReader(
@@ -88,7 +97,8 @@ def calibrate_bags(
             InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
             powertrain,  # a battery-side V x I reading becomes the motor torque of its inverse
         )  # one per bag: a position-differentiated speed must not span two bags
-        found, why = find_segments(read_recording(bag, options, reader), options, powertrain.motor)
+        recordings.append(read_recording(bag, options, reader))
+        found, why = find_segments(recordings[-1], options, powertrain.motor)
         segments.extend(found)
         for key, count in why.items():
             dropped[key] = dropped.get(key, 0) + count
@@ -99,7 +109,10 @@ def calibrate_bags(
             '(or a looser --settle-tol / --cmd-tol)'
         )
     left_fixed: dict[str, str] = {}
-    if names == ['auto']:
+    drive = None
+    if names == ['auto']:  # the drive controller's limits too: commanded against measured wheel speeds
+        prior = controller_for_vehicle(veh, powertrain)
+        drive = identify_drive(recordings, prior, powertrain.gear_ratio)
         names, left_fixed = auto_fit_names(segments, start)
         fit_to = fit_to or _what_to_fit(segments)
     result = calibrate(
@@ -115,6 +128,7 @@ def calibrate_bags(
         fit_to=fit_to or 'torque',
         left_fixed=left_fixed,
     )
+    result.drive = drive
     return result, segments
 
 

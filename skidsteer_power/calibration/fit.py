@@ -77,6 +77,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import Segment
+from skidsteer_power.drive import DriveIdentification
 from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.drivetrain import Powertrain
@@ -374,6 +375,7 @@ class CalibrationResult:
     left_fixed: dict[str, str] = field(default_factory=dict)  # candidate -> why it was not fitted
     kept_start: str = ''  # why the start was kept (empty: the fit was kept)
     motion: dict[str, float] = field(default_factory=dict)  # hold-out motion errors before / after
+    drive: DriveIdentification | None = None  # the drive controller's limits (--fit auto), docs/DRIVE.md
 
     def status(self, name: str) -> str:
         """'fitted', 'fixed', 'fixed: not identifiable', 'not identifiable', 'at_bound (lower|upper)'
@@ -430,6 +432,7 @@ class CalibrationResult:
             'kept_start': self.kept_start or None,
             'motion': dict(self.motion),
             'setpoints': self.setpoints,
+            'drive_controller': self.drive.as_json() if self.drive is not None else None,
         }
 
 

@@ -202,6 +202,13 @@ def write_vehicle(
 
     data = yaml.safe_load(resources.find('vehicles', vehicle).read_text(encoding='utf-8'))
     data['powertrain'] = powertrain_mapping(result, bags)
+    if result.drive is not None:  # the drive controller's limits the recordings reached (docs/DRIVE.md)
+        identified = result.drive.vehicle_entries(f'skidsteer-power calibrate from {len(bags)} bag(s)')
+        drive = {**(data.get('drive_controller') or {}), **identified.pop('drive_controller', {})}
+        if drive:
+            sources = {**(data.get('drive_controller') or {}).get('sources', {}), **drive.get('sources', {})}
+            data['drive_controller'] = {**drive, 'sources': sources}
+        data.update(identified)
     data['name'] = f'{data.get("name", "vehicle")}_calibrated'
     fitted = [n for n in result.names if not result.kept_start]
     kept = f' ({result.kept_start})' if result.kept_start else ''

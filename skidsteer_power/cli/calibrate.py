@@ -234,6 +234,10 @@ def _print_human(payload: dict[str, Any]) -> None:
             f'{motion["speed_mae_after_m_s"]:.3g} m/s, yaw rate {motion["yaw_mae_before_rad_s"]:.3g} -> '
             f'{motion["yaw_mae_after_rad_s"]:.3g} rad/s'
         )
+    drive = payload.get('drive_controller')
+    for name, item in (drive or {}).get('values', {}).items():
+        shown = f'{_fmt(item["value"])} {item["unit"]}' if item['reached'] else item['note']
+        print(f'drive controller: {name}: {shown}')
     written = [p for p in (payload['out_terrain'], payload['out_powertrain'], payload['out_vehicle']) if p]
     print('wrote ' + ', '.join(written))
     suggest = payload.get('suggest')
