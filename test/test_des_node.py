@@ -215,7 +215,11 @@ def test_silent_amplifier_is_reported_and_reconnected(harness: Harness, pair: Si
 
 def _default_dispositions() -> None:
     """In the probe child before exec: every signal back to its default action (the test process
-    may have inherited some as ignored, e.g. SIGINT in a background job)."""
+    may have inherited some as ignored, e.g. SIGINT in a background job), in a process group of its
+    own: the test's group may be orphaned (CI started from a shell that has since exited), and
+    the kernel discards SIGTSTP, SIGTTIN and SIGTTOU sent to an orphaned group instead of stopping
+    it (POSIX); a group whose parent, pytest, is in the same session is not orphaned."""
+    os.setpgid(0, 0)
     for signum in range(1, signal.NSIG):
         with contextlib.suppress(OSError, ValueError, RuntimeError):
             signal.signal(signum, signal.SIG_DFL)
