@@ -196,6 +196,12 @@ def test_an_amplifier_reset_stops_the_other_side_and_latches(pair: SimulatedPair
         rig.command.request_clear(['left', 'right'])
         assert _wait(lambda: not rig.command.halted_by, 3.0)
         rig.drive()  # re-enabled, drives again on a fresh command
+        # the set point may reach the amplifier one exchange before the enable (a fresh command is in
+        # force either way): wait for the enable, do not race it
+        deadline = time.monotonic() + 2.0
+        while not (pair.left.enabled and pair.right.enabled) and time.monotonic() < deadline:
+            rig.command.set({'left': DRIVE_RPM, 'right': -DRIVE_RPM})  # kept fresh meanwhile
+            time.sleep(0.02)
         assert pair.left.enabled and pair.right.enabled
     finally:
         rig.close()

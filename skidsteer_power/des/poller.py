@@ -646,7 +646,8 @@ class AmplifierPoller:
             current_ma=current,
             position_counts=position,
             poll_rate_hz=len(self._rate_window) / 1.0,
-            message='fault latched: motors stopped' if self._sample.fault_latched else 'ok',
+            # a latched fault keeps the message that says why (an error word, a self-reset) until cleared
+            message=self._sample.message if self._sample.fault_latched else 'ok',
         )
         with self._applied:
             self._applied_generation = generation
