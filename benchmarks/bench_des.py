@@ -139,11 +139,8 @@ def _driving(pair: SimulatedPair) -> bool:
 
 
 def _zeroed_at(sim: SimulatedDes, after: float) -> float:
-    """Arrival time (simulator clock, time.monotonic) of the first zero set point after ``after``."""
-    for record in list(sim.commands):
-        if record.time_s >= after and record.opcode == OpCode.SET_VELOCITY and record.words == (0,):
-            return record.time_s
-    return math.nan
+    """Arrival time of the first zero set point at ``sim`` at or after ``after`` (NaN: none)."""
+    return sim.arrival_s(OpCode.SET_VELOCITY, (0,), after)
 
 
 def fault_to_zero(kind: str, trials: int = FAULT_TRIALS) -> tuple[list[float], list[float]]:
@@ -411,11 +408,8 @@ def guardian_signal_to_zero(signame: str, trials: int = GUARDIAN_TRIALS) -> list
 
 
 def _disabled_at(sim: SimulatedDes, after: float) -> float:
-    """Arrival time of the first Enable 0 at ``sim`` after ``after`` (NaN: none)."""
-    for record in list(sim.commands):
-        if record.time_s >= after and record.opcode == OpCode.ENABLE and record.words == (0,):
-            return record.time_s
-    return math.nan
+    """Arrival time of the first Enable 0 at ``sim`` at or after ``after`` (NaN: none)."""
+    return sim.arrival_s(OpCode.ENABLE, (0,), after)
 
 
 def guardian_poll_rate(seconds: float = 2.0, rounds: int = 3) -> tuple[float, float]:

@@ -36,11 +36,8 @@ def _wait(predicate: Callable[[], object], timeout_s: float) -> bool:
 
 
 def _zero_at(sim: SimulatedDes, after: float) -> float:
-    """Arrival time of the first zero set point at ``sim`` after ``after`` (NaN: none)."""
-    for record in list(sim.commands):
-        if record.time_s >= after and record.opcode == OpCode.SET_VELOCITY and record.words == (0,):
-            return record.time_s
-    return math.nan
+    """Arrival time of the first zero set point at ``sim`` at or after ``after`` (NaN: none)."""
+    return sim.arrival_s(OpCode.SET_VELOCITY, (0,), after)
 
 
 def _stopped(pid: int) -> bool:

@@ -11,7 +11,6 @@ lives in ``benchmarks/bench_des.py:run_guardian``.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import signal
 import subprocess
@@ -56,11 +55,8 @@ def pair() -> Iterator[SimulatedPair]:
 
 
 def zero_at(sim: SimulatedDes, after: float) -> float:
-    """Arrival time (time.monotonic) of the first zero set point at ``sim`` at or after ``after``."""
-    for record in list(sim.commands):
-        if record.time_s >= after and record.opcode == OpCode.SET_VELOCITY and record.words == (0,):
-            return record.time_s
-    return math.nan
+    """Arrival time of the first zero set point at ``sim`` at or after ``after`` (NaN: none)."""
+    return sim.arrival_s(OpCode.SET_VELOCITY, (0,), after)
 
 
 def stopped(sim: SimulatedDes) -> bool:

@@ -308,6 +308,14 @@ class SimulatedDes:
         with self._lock:
             self.model.load_torque = load_torque
 
+    def arrival_s(self, opcode: OpCode, words: tuple[int, ...], after_s: float) -> float:
+        """Arrival time (time.monotonic) [s] of the first ``opcode`` command with ``words`` at or after
+        ``after_s`` [s] (NaN: none), e.g. the first zero set point after a fault."""
+        for record in list(self.commands):
+            if record.time_s >= after_s and record.opcode == opcode and record.words == words:
+                return record.time_s
+        return math.nan
+
     def commands_of(self, opcode: OpCode) -> list[CommandRecord]:
         """Executed commands with this op code, oldest first."""
         with self._lock:
