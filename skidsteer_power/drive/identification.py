@@ -328,6 +328,8 @@ def _fit_ramps(
         slopes, ramps = [], 0
         rate = np.gradient(series, t)
         for a, b in zip(starts, ends, strict=True):
+            if b - a < MIN_RAMP_SAMPLES:
+                continue  # a hold too short to ramp in (and an empty slice for the medians)
             start_value = float(np.median(series[max(0, a - 3) : a + 1]))
             end_value = float(np.median(series[b - max(3, (b - a) // 5) : b]))  # where the hold settled
             step = end_value - start_value
