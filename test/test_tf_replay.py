@@ -55,12 +55,10 @@ def test_the_built_type_is_upstream_jazzys() -> None:
     nests), the same as rosbags computes from its own Jazzy definitions, and the DDS type name that
     rmw_fastrtps derives from the package and type names."""
     _require_tf2_msgs()
-    from ament_index_python.packages import get_package_share_directory
     from tf2_msgs.msg import TFMessage
 
-    description = json.loads(
-        (Path(get_package_share_directory('tf2_msgs')) / 'msg' / 'TFMessage.json').read_text()
-    )
+    # installed beside the venv's other interface packages (sys.prefix: the ament prefix here)
+    description = json.loads((Path(sys.prefix) / 'share' / 'tf2_msgs' / 'msg' / 'TFMessage.json').read_text())
     hashes = {entry['type_name']: entry['hash_string'] for entry in description['type_hashes']}
     assert hashes['tf2_msgs/msg/TFMessage'] == JAZZY_TFMESSAGE_HASH
     assert get_typestore(Stores.ROS2_JAZZY).hash_rihs01('tf2_msgs/msg/TFMessage') == JAZZY_TFMESSAGE_HASH

@@ -72,16 +72,19 @@ def tf_message(k: int) -> TFMessage:
 
 def as_dicts(message: Any) -> list[dict[str, Any]]:
     """A TFMessage (rclpy's or rosbags') as plain values: frames, stamp, translation, rotation."""
-    return [
-        {
-            'frame_id': t.header.frame_id,
-            'child_frame_id': t.child_frame_id,
-            'stamp': [t.header.stamp.sec, t.header.stamp.nanosec],
-            'translation': [t.transform.translation.x, t.transform.translation.y, t.transform.translation.z],
-            'rotation': [t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w],
-        }
-        for t in message.transforms
-    ]  # fmt: skip
+    out = []
+    for t in message.transforms:
+        position, rotation = t.transform.translation, t.transform.rotation
+        out.append(
+            {
+                'frame_id': t.header.frame_id,
+                'child_frame_id': t.child_frame_id,
+                'stamp': [t.header.stamp.sec, t.header.stamp.nanosec],
+                'translation': [position.x, position.y, position.z],
+                'rotation': [rotation.x, rotation.y, rotation.z, rotation.w],
+            }
+        )
+    return out
 
 
 def _spin_until(node: Node, done: Any) -> bool:
@@ -103,7 +106,8 @@ def publish(count: int) -> int:
     for k in range(count):
         dynamic.publish(tf_message(k))
         time.sleep(PERIOD_NS / 1e9)
-    acked = dynamic.wait_for_all_acked(Duration(seconds=10)) and static.wait_for_all_acked(Duration(seconds=10))
+    wait = Duration(seconds=10)
+    acked = dynamic.wait_for_all_acked(wait) and static.wait_for_all_acked(wait)
     node.destroy_node()
     return 0 if acked else 1
 
