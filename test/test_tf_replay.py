@@ -101,6 +101,44 @@ def _bag_messages(bag: Path) -> tuple[dict[str, list[list[dict[str, Any]]]], dic
     return messages, qos
 
 
+def _replay_to_listener(
+    bag: Path, tf_count: int, static_count: int, *replay_args: str
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``replay BAG --json`` to a tf_peers.py listener in another process: both outputs, parsed."""
+    listener = subprocess.Popen(
+        [sys.executable, str(PEERS), 'listen', str(tf_count), str(static_count)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=_env(),
+    )  # fmt: skip
+    try:
+        assert listener.stdout is not None and listener.stdout.readline().strip() == 'ready'
+        # waits (3 s) for /tf's listener; /tf_static has none until the listener's 5th /tf message
+        replay = subprocess.run(
+            _cli('replay', str(bag), '--json', '--wait-for-subscribers', '3', *replay_args),
+            capture_output=True, text=True, cwd=ROOT, env=_env(), timeout=TIMEOUT_S,
+        )  # fmt: skip
+        out, err = listener.communicate(timeout=TIMEOUT_S)
+    finally:
+        if listener.poll() is None:
+            listener.kill()
+            listener.communicate()
+    assert replay.returncode == 0, replay.stderr
+    assert listener.returncode == 0, err
+    heard: dict[str, Any] = json.loads(out)
+    result: dict[str, Any] = json.loads(replay.stdout)
+    return result, heard
+
+
+def _assert_genuine_on_graph(heard: dict[str, Any]) -> None:
+    """The listener saw the replay's publishers as tf2_msgs/msg/TFMessage with Jazzy's hash, /tf
+    volatile and /tf_static transient-local."""
+    for topic, durability in (('/tf', 'VOLATILE'), ('/tf_static', 'TRANSIENT_LOCAL')):
+        publishers = heard['graph'][topic]
+        assert [p['node'] for p in publishers] == ['skidsteer_replay'], publishers
+        assert publishers[0]['type'] == 'tf2_msgs/msg/TFMessage'
+        assert publishers[0]['type_hash'] == JAZZY_TFMESSAGE_HASH
+        assert publishers[0]['durability'] == durability
+
+
 def test_recorded_tf_replays_as_tfmessage_to_a_late_listener(tmp_path: Path) -> None:
     """record -> MCAP -> replay -> a listener with tf2_msgs' class: every transform as sent, the
     static ones reaching a listener that subscribed after they were published (transient-local,
@@ -117,36 +155,36 @@ def test_recorded_tf_replays_as_tfmessage_to_a_late_listener(tmp_path: Path) -> 
     assert [p.durability for p in stored_qos['/tf_static']] == [QosDurability.TRANSIENT_LOCAL]
     assert [p.durability for p in stored_qos['/tf']] == [QosDurability.VOLATILE]
 
-    listener = subprocess.Popen(
-        [sys.executable, str(PEERS), 'listen', str(COUNT)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=_env(),
-    )  # fmt: skip
-    try:
-        assert listener.stdout is not None and listener.stdout.readline().strip() == 'ready'
-        # waits (3 s) for /tf's listener; /tf_static has none until the listener's 5th /tf message
-        replay = subprocess.run(
-            _cli('replay', str(bag), '--json', '--wait-for-subscribers', '3'),
-            capture_output=True, text=True, cwd=ROOT, env=_env(), timeout=TIMEOUT_S,
-        )  # fmt: skip
-        out, err = listener.communicate(timeout=TIMEOUT_S)
-    finally:
-        if listener.poll() is None:
-            listener.kill()
-            listener.communicate()
-    assert replay.returncode == 0, replay.stderr
-    result = json.loads(replay.stdout)
+    result, heard = _replay_to_listener(bag, COUNT, 1)
     assert result['skipped'] == {} and result['counts'] == {'/tf': COUNT, '/tf_static': 1}
-    assert listener.returncode == 0, err
-    heard = json.loads(out)
     assert heard['received'] == {'/tf': sent_tf, '/tf_static': sent_static}
     # late: subscribed after 5 /tf messages, all of which the bag has after the static one
     assert heard['static_subscribed_after'] >= LATE_AFTER
-    for topic, durability in (('/tf', 'VOLATILE'), ('/tf_static', 'TRANSIENT_LOCAL')):
-        publishers = heard['graph'][topic]
-        assert [p['node'] for p in publishers] == ['skidsteer_replay'], publishers
-        assert publishers[0]['type'] == 'tf2_msgs/msg/TFMessage'
-        assert publishers[0]['type_hash'] == JAZZY_TFMESSAGE_HASH
-        assert publishers[0]['durability'] == durability
+    _assert_genuine_on_graph(heard)
+
+
+def test_a_real_robots_tf_replays_to_a_late_listener(neato_bag: Path) -> None:
+    """The Neato's bag (../shared/realbags/neato-teleop: real rosbag2, real tf2_ros; its /tf_static
+    from two static broadcasters, both stored transient-local): its first 3 s of /tf and both
+    /tf_static messages reach a listener subscribed late to /tf_static, as rosbags decodes them."""
+    _require_tf2_msgs()
+    from rosbags.highlevel import AnyReader
+    from tf_peers import LATE_AFTER, as_dicts
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    expected: dict[str, list[list[dict[str, Any]]]] = {'/tf': [], '/tf_static': []}
+    with AnyReader([neato_bag], default_typestore=store) as reader:
+        connections = [c for c in reader.connections if c.topic in expected]
+        stop = reader.start_time + 3_000_000_000
+        for connection, _, raw in reader.messages(connections=connections, stop=stop):
+            expected[connection.topic].append(as_dicts(reader.deserialize(raw, connection.msgtype)))
+    assert len(expected['/tf']) > 3 * LATE_AFTER and len(expected['/tf_static']) == 2
+    result, heard = _replay_to_listener(
+        neato_bag, len(expected['/tf']), 2, '--topics', '/tf', '/tf_static', '--duration', '3'
+    )
+    assert result['counts'] == {t: len(v) for t, v in expected.items()}
+    assert heard['received'] == expected and heard['static_subscribed_after'] >= LATE_AFTER
+    _assert_genuine_on_graph(heard)
 
 
 def test_tf_static_without_stored_qos_is_replayed_transient_local(tmp_path: Path) -> None:

@@ -9,7 +9,8 @@
   late joiners. Prints one JSON line: the messages received, as :func:`as_dicts`, and what the graph
   says of the publishers (type name, RIHS01 type hash, durability).
 
-Run as ``python test/tf_peers.py publish|listen N``.
+Run as ``python test/tf_peers.py publish N`` or ``python test/tf_peers.py listen N [STATIC]``
+(STATIC: /tf_static messages to wait for, 1 by default).
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ def publish(count: int) -> int:
     return 0 if acked else 1
 
 
-def listen(count: int) -> int:
+def listen(count: int, static_count: int) -> int:
     node = rclpy.create_node('tf_peer_listener')
     received: dict[str, list[list[dict[str, Any]]]] = {'/tf': [], '/tf_static': []}
     graph: dict[str, list[dict[str, str]]] = {}
@@ -140,7 +141,7 @@ def listen(count: int) -> int:
             for info in node.get_publishers_info_by_topic(topic)
         ]
     node.create_subscription(TFMessage, '/tf_static', on_static, STATIC_SUB_QOS)
-    _spin_until(node, lambda: len(received['/tf']) >= count and received['/tf_static'])
+    _spin_until(node, lambda: len(received['/tf']) >= count and len(received['/tf_static']) >= static_count)
     print(json.dumps({'received': received, 'graph': graph, 'static_subscribed_after': subscribed_after}))
     node.destroy_node()
     return 0
@@ -150,10 +151,11 @@ def main() -> int:
     parser = argparse.ArgumentParser()
     parser.add_argument('role', choices=('publish', 'listen'))
     parser.add_argument('count', type=int)
+    parser.add_argument('static_count', type=int, nargs='?', default=1)
     args = parser.parse_args()
     rclpy.init()
     try:
-        return publish(args.count) if args.role == 'publish' else listen(args.count)
+        return publish(args.count) if args.role == 'publish' else listen(args.count, args.static_count)
     finally:
         rclpy.try_shutdown()
 
