@@ -1,4 +1,4 @@
-# Two commands on a fresh machine (only Python 3.11, pip and make needed):
+# Two commands on a fresh machine (Python 3.11, pip, make, cmake, gcc and g++ needed):
 #   make run    set everything up and run the main job
 #   make test   set everything up and run the whole test suite (what .ci/run does)
 PYTHON ?= python3
