@@ -20,17 +20,13 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py
 
 # tf2_msgs (TFMessage only) built from interfaces/ with the venv's rosidl generators and installed
 # into the venv, so replay publishes /tf and /tf_static as tf2_msgs/msg/TFMessage (not on PyPI).
-# About 10 s (configure 1 s, compile 6.5 s on 2 cores) plus the build-only wheels.
-$(TF2): $(STAMP) interfaces/requirements.txt $(wildcard interfaces/tf2_msgs/* interfaces/tf2_msgs/msg/*)
-	$(BIN)/python -m pip install -q -r interfaces/requirements.txt
-	rm -rf build/tf2_msgs
-	cmake -S interfaces/tf2_msgs -B build/tf2_msgs --log-level=WARNING -DBUILD_TESTING=OFF \
-	  -DCMAKE_INSTALL_PREFIX=$(VENV_ABS) -DCMAKE_PREFIX_PATH=$(VENV_ABS) \
-	  -DPython3_EXECUTABLE=$(VENV_ABS)/bin/python
-	cmake --build build/tf2_msgs -j2 -- --no-print-directory > build/tf2_msgs.log || (cat build/tf2_msgs.log; false)
-	cmake --install build/tf2_msgs > /dev/null
-	$(BIN)/python -c "import tf2_msgs.msg"
-	touch $@
+# About 7 s on 2 cores (a fresh `make setup`: 68 s with it, 51 s without). If it cannot be built
+# (no cmake or compiler), set-up goes on with a warning and replay skips those two topics, saying
+# why; in CI (CI set) that is an error.
+$(TF2): $(STAMP) interfaces/requirements.txt interfaces/build_tf2_msgs.sh $(wildcard interfaces/tf2_msgs/* interfaces/tf2_msgs/msg/*)
+	@if bash interfaces/build_tf2_msgs.sh $(VENV) build/tf2_msgs; then touch $@; \
+	elif [ -n "$$CI" ]; then exit 1; \
+	else echo "warning: tf2_msgs not built (above): replay will skip /tf and /tf_static" >&2; fi
 
 tf2-msgs: $(TF2)
 
