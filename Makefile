@@ -1,13 +1,15 @@
-# Two commands on a fresh machine (only Python 3.11, pip and make needed):
+# Two commands on a fresh machine (Python 3.11, pip, make, cmake, gcc and g++ needed):
 #   make run    set everything up and run the main job
 #   make test   set everything up and run the whole test suite (what .ci/run does)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+TF2    := $(VENV)/.tf2_msgs
+VENV_ABS = $(abspath $(VENV))
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup run test lint bench clean
+.PHONY: setup tf2-msgs run test lint bench clean
 
 $(STAMP): requirements.txt requirements-dev.txt setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -16,7 +18,19 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py
 	$(BIN)/python -m pip install -q --no-deps -e .
 	touch $(STAMP)
 
-setup: $(STAMP)
+# tf2_msgs (TFMessage only) built from interfaces/ with the venv's rosidl generators and installed
+# into the venv, so replay publishes /tf and /tf_static as tf2_msgs/msg/TFMessage (not on PyPI).
+# About 7 s on 2 cores (a fresh `make setup`: 68 s with it, 51 s without). If it cannot be built
+# (no cmake or compiler), set-up goes on with a warning and replay skips those two topics, saying
+# why; in CI (CI set) that is an error.
+$(TF2): $(STAMP) interfaces/requirements.txt interfaces/build_tf2_msgs.sh $(wildcard interfaces/tf2_msgs/* interfaces/tf2_msgs/msg/*)
+	@if bash interfaces/build_tf2_msgs.sh $(VENV) build/tf2_msgs; then touch $@; \
+	elif [ -n "$$CI" ]; then exit 1; \
+	else echo "warning: tf2_msgs not built (above): replay will skip /tf and /tf_static" >&2; fi
+
+tf2-msgs: $(TF2)
+
+setup: $(STAMP) $(TF2)
 
 run: setup
 	bash bags/twin_main_job.sh
@@ -28,7 +42,7 @@ lint: setup
 	$(BIN)/lint-imports
 
 test: setup lint
-	$(BIN)/python -c "import rclpy, std_msgs.msg, sensor_msgs.msg, geometry_msgs.msg, diagnostic_msgs.msg"
+	$(BIN)/python -c "import rclpy, std_msgs.msg, sensor_msgs.msg, geometry_msgs.msg, diagnostic_msgs.msg, tf2_msgs.msg"
 	$(BIN)/python -m pytest -q
 
 bench: setup

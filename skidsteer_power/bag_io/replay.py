@@ -28,24 +28,29 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from skidsteer_power.bag_io._ros import message_class, qos_for_stored
+from skidsteer_power.bag_io._ros import matching_qos, message_class, qos_for_stored
 from skidsteer_power.bag_io.reader import BagMessage, BagReader
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
     from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+    from rosbags.interfaces import Qos
 
 LOG = logging.getLogger(__name__)
 
 NO_TYPE_SUPPORT = (
     "; rclpy cannot publish even raw CDR without the type's generated type support (create_publisher "
     "needs the class's _TYPE_SUPPORT; a stand-in type of the same layout would carry another DDS type "
-    'name and match no subscriber): install its ROS package (tf2_msgs for /tf and /tf_static is not on '
-    'PyPI: apt ros-jazzy-tf2-msgs on a ROS install), or pass --topics without it'
+    'name and match no subscriber): install its ROS package, or pass --topics without it (tf2_msgs, '
+    'for /tf and /tf_static, is not on PyPI: `make tf2-msgs` builds it into the venv, '
+    'docs/ROS.md; apt ros-jazzy-tf2-msgs on a ROS install)'
 )
 """Why a topic of an uninstalled type is not replayed even as raw bytes (checked with rclpy 7.1.6:
-``create_publisher`` of a class without ``_TYPE_SUPPORT`` raises AttributeError; issue 37 item 7)."""
+``create_publisher`` of a class without ``_TYPE_SUPPORT`` raises AttributeError; issue 37 item 7).
+With tf2_msgs built (``make tf2-msgs``, interfaces/tf2_msgs) /tf and /tf_static are replayed like any
+other topic: their stored bytes, published as tf2_msgs/msg/TFMessage."""
 
 NS = 1_000_000_000
 ACK_TIMEOUT_S = 5.0  # longest wait at the end for subscribers to acknowledge [s]
@@ -138,6 +143,21 @@ def deadlines(stamps_ns: Sequence[int], window_start_ns: int, rate: float, t0: f
     return t0 + offsets / rate
 
 
+LATCHED_BY_CONVENTION = ('/tf_static',)
+"""Topics replayed transient-local when the bag stored no QoS for them: tf2_ros' static broadcaster
+always offers transient-local (reliable, depth 1), and a volatile replay would miss every listener
+that starts after the bag's first message (a transient-local publisher matches volatile subscribers
+too)."""
+
+
+def replay_qos(topic: str, stored: Sequence[Qos]) -> QoSProfile:
+    """Publisher QoS for ``topic``: that of the original publishers (:func:`qos_for_stored`), or for
+    a latched-by-convention topic with nothing stored, reliable transient-local."""
+    if stored or topic not in LATCHED_BY_CONVENTION:
+        return qos_for_stored(stored)
+    return matching_qos([True], [True])
+
+
 def window_ns(bag: BagReader, options: ReplayOptions) -> tuple[int, int | None]:
     """[start, stop) bag time to replay [ns]; stop None means to the end."""
     start = bag.start_ns + round(options.start_s * NS)
@@ -170,7 +190,7 @@ class Replayer:
                 self.skipped[topic] = f'{err}{NO_TYPE_SUPPORT}'
                 LOG.warning('not replaying %s: %s%s', topic, err, NO_TYPE_SUPPORT)
                 continue
-            self.publishers[topic] = node.create_publisher(cls, topic, qos_for_stored(info.qos))
+            self.publishers[topic] = node.create_publisher(cls, topic, replay_qos(topic, info.qos))
             self.classes[topic] = cls
         self._clock_pub = None
         if self.options.clock:
