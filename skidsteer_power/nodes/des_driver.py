@@ -579,7 +579,8 @@ class DesDriver(LifecycleNode):
     def _joint_values(self, side: str, sample: AmplifierSample) -> tuple[float, float, float]:
         """(position [rad], velocity [rad/s], effort [N m]) at the motor shaft, forward positive."""
         stale_after_s = max(0.2, 5.0 / self.params['poll_rate_hz'])
-        if not sample.connected or not sample.sequence or time.monotonic() - sample.stamp > stale_after_s:
+        age_s = self.pollers[side].clock() - sample.stamp  # the clock that stamped it
+        if not sample.connected or not sample.sequence or age_s > stale_after_s:
             return math.nan, math.nan, math.nan
         sign = self.params[f'{side}_polarity']
         counts_per_rev = (
@@ -612,14 +613,15 @@ class DesDriver(LifecycleNode):
         stop_reason: str,
     ) -> DiagnosticStatus:
         halted = command.halted_by
-        if sample.fault_latched or not sample.connected or sample.poller_fault_recent:
+        fault_recent = sample.poller_fault_recent(poller.clock())
+        if sample.fault_latched or not sample.connected or fault_recent:
             level = DiagnosticStatus.ERROR
         elif halted or command.links_down or sample.message != 'ok':
             level = DiagnosticStatus.WARN
         else:
             level = DiagnosticStatus.OK
         message = sample.message
-        if sample.connected and sample.poller_fault_recent:
+        if sample.connected and fault_recent:
             message = f'restarted after a poller fault: {sample.last_poller_fault}'
         elif halted and not sample.fault_latched:
             message = f'stopped: fault on {", ".join(sorted(halted))} side'
