@@ -7,7 +7,6 @@ import math
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -283,7 +282,10 @@ def test_validate_reproduces_what_the_live_node_published(
             # Both the node and the recorder must be matched before the first message.
             _wait_for(lambda: all(p.get_subscription_count() >= 2 for p in replayer.publishers.values()))
             _wait_for(lambda: node.pub_predicted.get_subscription_count() >= 1)
-            time.sleep(0.3)  # let the subscribers' side of the DDS match finish too (see replay.py)
+            # ... and matched from the subscribers' side too (DDS matching is two-sided, see replay.py)
+            assert recording.recorder is not None
+            readers = [*node.subscriptions, *recording.recorder.node.subscriptions]
+            _wait_for(lambda: all(s.get_publisher_count() >= 1 for s in readers if s.topic_name in topics))
             replayer.run()
     finally:
         result = recording.finish()
