@@ -38,6 +38,7 @@ from skidsteer_power.safe_read import check_regular, read_capped
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
+    from rosbags.interfaces.typing import Typesdict
     from rosbags.typesys.store import Typestore
 
 LOG = logging.getLogger(__name__)
@@ -151,11 +152,11 @@ def load_msg_definitions(paths: Iterable[str | os.PathLike[str]]) -> dict[str, s
     return found
 
 
-def _types_from_definition(msgtype: str, fmt: MessageDefinitionFormat, text: str) -> dict[str, Any]:
+def _types_from_definition(msgtype: str, fmt: MessageDefinitionFormat, text: str) -> Typesdict:
     if fmt == MessageDefinitionFormat.MSG:
         return get_types_from_msg(text, msgtype)
     if text.startswith(f'{_IDL_SEPARATOR}IDL: '):
-        types: dict[str, Any] = {}
+        types: Typesdict = {}
         for section in text.split(_IDL_SEPARATOR)[1:]:
             types.update(get_types_from_idl(section.split('\n', 1)[1]))
         return types
@@ -171,7 +172,7 @@ def build_typestore(
     ``stored`` holds (type name, definition format, definition text) as found in a bag. A stored
     definition that does not parse is skipped with a warning (the Jazzy or extra one, if any, stays).
     """
-    fielddefs: dict[str, Any] = dict(get_typestore(DEFAULT_STORE).fielddefs)
+    fielddefs: Typesdict = dict(get_typestore(DEFAULT_STORE).fielddefs)
     for name, text in (extra or {}).items():
         try:
             fielddefs.update(get_types_from_msg(text, name))
@@ -599,7 +600,7 @@ def _metadata_problem(folder: Path, per_topic: Sequence[tuple[str, int]]) -> str
     if not isinstance(info, dict):
         return ''  # rosbags opened it; nothing more to compare
     listed = info.get('files')
-    files: list[Any] = listed if isinstance(listed, list) else []
+    files: list[object] = listed if isinstance(listed, list) else []
     named: list[tuple[str, object]] = [('total', info.get('message_count'))]
     named += [
         (f'file {f.get("path", k)}', f.get('message_count'))
