@@ -91,6 +91,47 @@ def test_measurements_equal_to_predictions_give_zero_error(tmp_path: Path, predi
     assert abs(online['energy_error_pct']) < 1e-6
 
 
+SUMMARY_KEYS = (
+    'bag', 'storage', 'duration_s', 'vehicle', 'terrain', 'predictor', 'has_motor_data',
+    'motor_data_note', 'motor_currents_from', 'joints', 'pose_topic', 'cmd_vel_mode', 'cmd_hold_s',
+    'cmd_hold_inferred', 'cmd_period_s', 'cmd_timing', 'clamped_time_fraction', 'clamped_energy_fraction',
+    'messages', 'rejected', 'rejected_reasons', 'power_compared', 'joint_states_read',
+    'joint_states_no_data', 'undecodable_topics', 'kinematics', 'metrics', 'motion_prediction',
+    'online_prediction', 'battery', 'segments', 'segments_with_too_few_poses', 'live_comparison',
+    'processing_s', 'real_time_factor', 'report',
+)  # fmt: skip
+"""``validate --json``'s keys in their printed order before the bag's integrity keys (as printed
+before the summary became a dataclass, issue 38; DESIGN.md names several as the contract)."""
+
+
+def test_the_typed_summary_prints_the_json_keys_in_their_order(
+    tmp_path: Path, predictor: MapPredictor
+) -> None:
+    write_drive_bag(tmp_path / 'p.mcap', RUNS, rate_hz=20, motors=_predicted_motors(predictor))
+    with open_bag(tmp_path / 'p.mcap') as bag:
+        result = validate(bag, _options(tmp_path, plots=False), predictor)
+    summary = result.as_json()
+    assert tuple(summary) == SUMMARY_KEYS
+    assert list(summary['metrics']) == [
+        'samples_compared', 'torque_left', 'torque_right', 'power_left', 'power_right',
+        'energy_predicted_J', 'energy_measured_J', 'energy_error_pct',
+    ]  # fmt: skip
+    assert summary['metrics']['torque_left'] == {
+        'mae_Nm': result.metrics.torque_left.mae,
+        'rmse_Nm': result.metrics.torque_left.rmse,
+    }
+    assert list(summary['online_prediction']['terrain_scaled']) == [
+        'energy_predicted_J',
+        'energy_measured_J',
+        'energy_error_pct',
+        'power_left',
+        'power_right',
+    ]
+    assert result.report is not None and summary['report']['markdown'] == result.report.markdown
+    written = json.loads((tmp_path / 'report' / 'summary.json').read_text())
+    assert tuple(written) == SUMMARY_KEYS and written['metrics']['samples_compared'] == 180
+
+
 def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predictor: MapPredictor) -> None:
     base = _predicted_motors(predictor)
 
