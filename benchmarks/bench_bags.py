@@ -74,7 +74,7 @@ def _validate_throughput(report: Report, folder: Path) -> None:
     report.figure(
         'validate speed, CPU time of this process (with report and plots)', duration / cpu, 'x real'
     )
-    report.figure('validate speed (estimator run only, no files)', summary['real_time_factor'], 'x real')
+    report.figure('validate speed (estimator run only, no files)', summary.real_time_factor, 'x real')
     del predictor, motion_predictor
 
 

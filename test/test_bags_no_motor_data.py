@@ -75,7 +75,7 @@ def test_motion_prediction_does_not_depend_on_motor_data(
             vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / name, kinematics=kinematics, plots=False
         )
         with open_bag(path) as bag:
-            summary = validate(bag, options, predictor)
+            summary = validate(bag, options, predictor).as_json()
         energy[name] = summary['metrics']['energy_predicted_J']
     assert summary['has_motor_data'] is False
     assert energy['stripped'] == pytest.approx(energy['full'], rel=0.02)

@@ -7,7 +7,6 @@ import math
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -67,7 +66,7 @@ def _options(tmp_path: Path, **kw: Any) -> ValidateOptions:
 def test_measurements_equal_to_predictions_give_zero_error(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 'p.mcap', RUNS, rate_hz=20, motors=_predicted_motors(predictor))
     with open_bag(tmp_path / 'p.mcap') as bag:
-        summary = validate(bag, _options(tmp_path, plots=False), predictor)
+        summary = validate(bag, _options(tmp_path, plots=False), predictor).as_json()
     m = summary['metrics']
     # Every joint_states sample is aligned with the command in force when it arrived; were it a
     # sample off at the two command changes, the torque error there would be far from zero.
@@ -92,6 +91,47 @@ def test_measurements_equal_to_predictions_give_zero_error(tmp_path: Path, predi
     assert abs(online['energy_error_pct']) < 1e-6
 
 
+SUMMARY_KEYS = (
+    'bag', 'storage', 'duration_s', 'vehicle', 'terrain', 'predictor', 'has_motor_data',
+    'motor_data_note', 'motor_currents_from', 'joints', 'pose_topic', 'cmd_vel_mode', 'cmd_hold_s',
+    'cmd_hold_inferred', 'cmd_period_s', 'cmd_timing', 'clamped_time_fraction', 'clamped_energy_fraction',
+    'messages', 'rejected', 'rejected_reasons', 'power_compared', 'joint_states_read',
+    'joint_states_no_data', 'undecodable_topics', 'kinematics', 'metrics', 'motion_prediction',
+    'online_prediction', 'battery', 'segments', 'segments_with_too_few_poses', 'live_comparison',
+    'processing_s', 'real_time_factor', 'report',
+)  # fmt: skip
+"""``validate --json``'s keys in their printed order before the bag's integrity keys (as printed
+before the summary became a dataclass, issue 38; DESIGN.md names several as the contract)."""
+
+
+def test_the_typed_summary_prints_the_json_keys_in_their_order(
+    tmp_path: Path, predictor: MapPredictor
+) -> None:
+    write_drive_bag(tmp_path / 'p.mcap', RUNS, rate_hz=20, motors=_predicted_motors(predictor))
+    with open_bag(tmp_path / 'p.mcap') as bag:
+        result = validate(bag, _options(tmp_path, plots=False), predictor)
+    summary = result.as_json()
+    assert tuple(summary) == SUMMARY_KEYS
+    assert list(summary['metrics']) == [
+        'samples_compared', 'torque_left', 'torque_right', 'power_left', 'power_right',
+        'energy_predicted_J', 'energy_measured_J', 'energy_error_pct',
+    ]  # fmt: skip
+    assert summary['metrics']['torque_left'] == {
+        'mae_Nm': result.metrics.torque_left.mae,
+        'rmse_Nm': result.metrics.torque_left.rmse,
+    }
+    assert list(summary['online_prediction']['terrain_scaled']) == [
+        'energy_predicted_J',
+        'energy_measured_J',
+        'energy_error_pct',
+        'power_left',
+        'power_right',
+    ]
+    assert result.report is not None and summary['report']['markdown'] == result.report.markdown
+    written = json.loads((tmp_path / 'report' / 'summary.json').read_text())
+    assert tuple(written) == SUMMARY_KEYS and written['metrics']['samples_compared'] == 180
+
+
 def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predictor: MapPredictor) -> None:
     base = _predicted_motors(predictor)
 
@@ -101,7 +141,7 @@ def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predicto
 
     write_drive_bag(tmp_path / 'o.mcap', RUNS, rate_hz=20, motors=offset)
     with open_bag(tmp_path / 'o.mcap') as bag:
-        summary = validate(bag, _options(tmp_path, plots=False), predictor)
+        summary = validate(bag, _options(tmp_path, plots=False), predictor).as_json()
     m = summary['metrics']
     assert m['torque_left']['mae_Nm'] == pytest.approx(0.05, rel=1e-9)
     assert m['torque_left']['rmse_Nm'] == pytest.approx(0.05, rel=1e-9)
@@ -118,7 +158,7 @@ def test_torque_offset_shows_up_as_mae_and_energy_error(tmp_path: Path, predicto
 def test_trace_analysis_recovers_commanded_radius_and_speed(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 't.mcap', RUNS, rate_hz=20, odom_hz=10)
     with open_bag(tmp_path / 't.mcap') as bag:
-        summary = validate(bag, _options(tmp_path, plots=False), predictor)
+        summary = validate(bag, _options(tmp_path, plots=False), predictor).as_json()
     segments = summary['segments']
     assert [(s['speed_cmd_m_s'], s['yaw_rate_cmd_rad_s']) for s in segments] == [
         (0.1, 0.0),
@@ -151,7 +191,7 @@ def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(
 ) -> None:
     write_drive_bag(tmp_path / 'n.mcap', [Segment(0.1, 0.1, 5.0)], rate_hz=10, joint_states=False)
     with open_bag(tmp_path / 'n.mcap') as bag:
-        summary = validate(bag, _options(tmp_path), predictor)
+        summary = validate(bag, _options(tmp_path), predictor).as_json()
     assert summary['has_motor_data'] is False
     assert summary['metrics']['samples_compared'] == 0
     # Hand calculation: 50 commands 0.1 s apart, a stream; each holds its prediction until the next,
@@ -168,7 +208,7 @@ def test_bag_without_motor_data_still_gets_predictions_energy_and_trace(
 def test_report_files_csv_json_markdown_and_plots(tmp_path: Path, predictor: MapPredictor) -> None:
     write_drive_bag(tmp_path / 'r.mcap', RUNS, rate_hz=20)
     with open_bag(tmp_path / 'r.mcap') as bag:
-        summary = validate(bag, _options(tmp_path), predictor)
+        summary = validate(bag, _options(tmp_path), predictor).as_json()
     report = tmp_path / 'report'
     assert sorted(p.name for p in report.iterdir()) == [
         'power.png',
@@ -231,7 +271,7 @@ def test_real_bag_validates_with_trace_analysis_from_odom(
     neato_bag: Path, tmp_path: Path, predictor: MapPredictor
 ) -> None:
     with open_bag(neato_bag, warn_unknown=False) as bag:
-        summary = validate(bag, _options(tmp_path), predictor)
+        summary = validate(bag, _options(tmp_path), predictor).as_json()
     assert summary['has_motor_data'] is False and summary['pose_topic'] == '/odom'
     assert summary['messages'] == {'cmd_vel': 739, 'joint_states': 0, 'poses': 181}  # realbags/README.md
     assert summary['undecodable_topics'] == ['/accel', '/bump']
@@ -283,7 +323,10 @@ def test_validate_reproduces_what_the_live_node_published(
             # Both the node and the recorder must be matched before the first message.
             _wait_for(lambda: all(p.get_subscription_count() >= 2 for p in replayer.publishers.values()))
             _wait_for(lambda: node.pub_predicted.get_subscription_count() >= 1)
-            time.sleep(0.3)  # let the subscribers' side of the DDS match finish too (see replay.py)
+            # ... and matched from the subscribers' side too (DDS matching is two-sided, see replay.py)
+            assert recording.recorder is not None
+            readers = [*node.subscriptions, *recording.recorder.node.subscriptions]
+            _wait_for(lambda: all(s.get_publisher_count() >= 1 for s in readers if s.topic_name in topics))
             replayer.run()
     finally:
         result = recording.finish()
@@ -293,7 +336,7 @@ def test_validate_reproduces_what_the_live_node_published(
         node.destroy_node()
     assert result.counts['/cmd_vel'] == 180 and result.counts['/power/predicted'] == 180
     with open_bag(tmp_path / 'live.mcap') as bag:
-        summary = validate(bag, _options(tmp_path, plots=False), predictor)
+        summary = validate(bag, _options(tmp_path, plots=False), predictor).as_json()
     live = summary['live_comparison']
     assert live['messages'] == 180
     assert live['matching_within_1e-6'] == 180
@@ -314,7 +357,7 @@ def _validate_bundled(
     assert bag_path.exists(), f'bundled bag missing: {bag_path} (make it with bags/make_bundled_bags.sh)'
     options = ValidateOptions(vehicle, terrain, report, odom_topic=odom, map_cache_dir=maps, plots=False)
     with open_bag(bag_path) as bag:
-        return validate(bag, options)
+        return validate(bag, options).as_json()
 
 
 @pytest.mark.parametrize('vehicle', ['test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel'])
@@ -365,8 +408,8 @@ def test_set_points_predict_the_twins_wider_turns(tmp_path: Path, bundled_maps: 
     with open_bag(BUNDLED / name) as bag:
         options = ValidateOptions(vehicle, TERRAIN, tmp_path / 'cmd', odom_topic='/ground_truth/odom',
                                   map_cache_dir=bundled_maps, plots=False)  # fmt: skip
-        setpoints = validate(bag, options)
-        twist = validate(bag, replace(options, report_dir=tmp_path / 'twist', kinematics='twist'))
+        setpoints = validate(bag, options).as_json()
+        twist = validate(bag, replace(options, report_dir=tmp_path / 'twist', kinematics='twist')).as_json()
     turning = [
         s for s in setpoints['segments'] if s['yaw_rate_cmd_rad_s'] >= 0.04 and np.isfinite(s['radius_m'])
     ]

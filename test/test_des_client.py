@@ -269,7 +269,9 @@ def test_short_delay_is_tolerated_long_delay_times_out(sim: SimulatedDes) -> Non
         sim.inject(Fault.DELAY, delay_s=0.6)
         with pytest.raises(DesTimeout):
             amp.read_status()
-        time.sleep(0.8)  # let the late answer arrive; the next transaction flushes it
+        port = amp.link._serial  # the host's end of the pty
+        assert port is not None
+        assert wait_for(lambda: port.in_waiting >= 1)  # the late answer arrived; the next exchange flushes it
         assert amp.read_errors() == DesErrorFlags(0)
         assert amp.link.stats.flushed_bytes >= 1
 

@@ -644,7 +644,7 @@ def test_geometry_comes_from_the_vehicle_file(
         ],
     )
     try:
-        geometry = driver.params['geometry']
+        geometry = driver.setup.geometry
         assert (geometry.tread_m, geometry.drive_radius_m, geometry.gear_ratio) == (0.3, 0.08, 10.0)
         # V 0.2 m/s, yaw rate 0.5 rad/s: v_left = 0.2 - 0.5 * 0.3 / 2 = 0.125 m/s -> 0.125 / 0.08 * 10
         # = 15.625 rad/s = 149.2 rpm; v_right = 0.275 m/s -> 34.375 rad/s = 328.3 rpm (mirrored: -).

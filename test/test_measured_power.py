@@ -18,7 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.writer import BagWriter
-from skidsteer_power.bags.validate import ValidateOptions, console_warnings, validate
+from skidsteer_power.bags.validate import ValidateOptions, console_warnings, reading_warnings, validate
 from skidsteer_power.cli.import_csv import PRESETS, Columns, import_csv
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator import MapPredictor, factory
@@ -169,7 +169,8 @@ def test_one_float64_battery_current_per_side_is_v_times_i(tmp_path: Path, predi
     write_bag(path, [(-5.0, 7.0)])
     options = ValidateOptions(vehicle=HUSKY, terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        result = validate(bag, options, predictor)
+        summary = result.as_json()
     assert summary['power_compared'] == 'battery' and 'V x I' in summary['motor_currents_from']
     assert summary['rejected']['joint_states'] == 0
     series = np.genfromtxt(summary['report']['timeseries_csv'], delimiter=',', names=True)
@@ -184,7 +185,7 @@ def test_one_float64_battery_current_per_side_is_v_times_i(tmp_path: Path, predi
     assert series['predicted_power_left_W'][moving][5] == pytest.approx(
         series['predicted_battery_W'][moving][5] - series['predicted_power_right_W'][moving][5]
     )
-    assert console_warnings(summary) == []
+    assert console_warnings(result) == []
 
 
 def test_a_whole_robot_battery_state_is_measured_power(tmp_path: Path, predictor: MapPredictor) -> None:
@@ -202,7 +203,8 @@ def test_a_whole_robot_battery_state_is_measured_power(tmp_path: Path, predictor
     write_bag(path, None, battery=True)
     options = ValidateOptions(vehicle=str(vehicle), terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        result = validate(bag, options, predictor)
+        summary = result.as_json()
     series = np.genfromtxt(summary['report']['timeseries_csv'], delimiter=',', names=True)
     finite = np.isfinite(series['measured_battery_W'])
     np.testing.assert_allclose(series['measured_battery_W'][finite], 196.0)
@@ -213,9 +215,10 @@ def test_a_bag_without_the_declared_topics_is_told_so_once(tmp_path: Path, predi
     write_bag(path, None)
     options = ValidateOptions(vehicle=HUSKY, terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        result = validate(bag, options, predictor)
+        summary = result.as_json()
     assert not summary['has_motor_data']
-    warnings = console_warnings(summary)
+    warnings = console_warnings(result)
     assert len(warnings) == 1 and 'lacks the measured_power topics' in warnings[0]
     assert 'left_drive/status/battery_current' in warnings[0]
 
@@ -229,9 +232,10 @@ def test_dropped_readings_are_counted_and_explained_on_the_console(
     write_bag(path, [(5.0, 5.0), (100.0, 5.0)])
     options = ValidateOptions(vehicle=HUSKY, terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        result = validate(bag, options, predictor)
+        summary = result.as_json()
     assert summary['rejected']['joint_states'] == 100
-    (line,) = console_warnings(summary)
+    (line,) = console_warnings(result)
     assert line.startswith('WARNING: A THIRD OR MORE') and '100 of 200' in line
     assert 'battery power = # W exceeds the plausible limit # W' in line
 
@@ -248,15 +252,16 @@ def test_import_a_borealtc_run_and_validate_it(tmp_path: Path, predictor: MapPre
     assert result['messages']['/joint_states'] == 338 and result['messages']['/imu/data'] == 5186
     csv = np.genfromtxt(run / 'pro_00.csv', delimiter=',', names=True)
     with open_bag(out) as bag:
-        summary = validate(
+        validated = validate(
             bag,
             ValidateOptions(vehicle=HUSKY, terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False),
             predictor,
         )
+        summary = validated.as_json()
     hold = np.minimum(np.diff(csv['time'], append=csv['time'][-1]), 0.5)
     by_hand = float(np.sum(24.0 * (csv['curL'] + csv['curR']) * hold))
     assert summary['metrics']['energy_measured_J'] == pytest.approx(by_hand, rel=0.02)
-    assert summary['metrics']['energy_measured_J'] > 0 and console_warnings(summary) == []
+    assert summary['metrics']['energy_measured_J'] > 0 and console_warnings(validated) == []
     # the set points are the recorded wheel speeds: V = (v_l + v_r) / 2 of row 10
     with open_bag(out) as bag:
         from skidsteer_power.bag_io.decode import decode_twists
@@ -322,10 +327,5 @@ def test_calibration_reads_a_battery_side_power_as_the_torque_of_the_powertrains
 def test_a_negative_measured_energy_is_a_console_warning() -> None:
     """The issue's silently wrong number: a battery-side current read as a motor current (K_t I w < 0
     while reversing) gave 'measured 641.5 J' with no word; a negative measured energy is now said."""
-    summary = {
-        'joint_states_read': 10,
-        'rejected': {'joint_states': 0},
-        'metrics': {'energy_measured_J': -641.5},
-    }
-    (line,) = console_warnings(summary)
+    (line,) = reading_warnings(read=10, dropped=0, reasons={}, note=None, measured_J=-641.5)
     assert 'measured energy is negative (-641.5 J)' in line and 'current_is: battery' in line

@@ -111,3 +111,55 @@ def test_every_numeric_parameter_has_a_range_holding_its_default(entry: NodePara
             assert spec.range is not None, spec.name
             assert isinstance(spec.default, (int, float)), spec.name
             assert spec.range[0] <= spec.default <= spec.range[1], spec.name
+
+
+def test_a_value_not_among_its_choices_is_one_clear_error_at_start_and_at_every_read(
+    ros_context: Context,
+) -> None:
+    """``choices`` (the des_driver's baud, polarities, current source): a start value not among them
+    is one ConfigError; a later set ROS accepts (in the range) is caught where the node reads again."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.errors import ConfigError
+    from skidsteer_power.nodes.param_spec import declare, read
+
+    spec = ParamSpec('polarity', 1, 'sense of forward motion: +1 or -1', (-1, 1), choices=(1, -1))
+    assert descriptor(spec).additional_constraints == 'one of 1, -1'
+    node = Node('param_choice_bad', context=ros_context, parameter_overrides=[Parameter('polarity', value=0)])
+    try:
+        with pytest.raises(ConfigError) as caught:
+            declare(node, [spec])
+        assert str(caught.value) == 'polarity must be one of 1, -1, not 0'
+    finally:
+        node.destroy_node()
+    node = Node('param_choice_later', context=ros_context)
+    try:
+        assert declare(node, [spec]) == {'polarity': 1}
+        (result,) = node.set_parameters([Parameter('polarity', value=0)])
+        assert result.successful  # inside the range: ROS has no word against it
+        with pytest.raises(ConfigError, match='polarity must be one of 1, -1, not 0'):
+            read(node, [spec])
+    finally:
+        node.destroy_node()
+
+
+def test_a_start_only_parameter_is_read_only_in_its_descriptor(ros_context: Context) -> None:
+    """power_estimator's parameters but ``terrain`` are read at start only: ROS refuses a later set."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from skidsteer_power.nodes.param_spec import declare
+    from skidsteer_power.nodes.power_estimator import PARAMETERS, RUN_TIME_PARAMETERS
+
+    assert {s.name for s in PARAMETERS if not s.read_only} == set(RUN_TIME_PARAMETERS) == {'terrain'}
+    spec = ParamSpec('vehicle', 'test_robot_track', 'vehicle name', read_only=True)
+    assert descriptor(spec).read_only
+    node = Node('param_read_only', context=ros_context)
+    try:
+        declare(node, [spec])
+        (result,) = node.set_parameters([Parameter('vehicle', value='packbot_track')])
+        assert not result.successful and 'read-only' in result.reason
+        assert node.get_parameter('vehicle').value == 'test_robot_track'
+    finally:
+        node.destroy_node()

@@ -127,7 +127,7 @@ def _validate(
     options.setdefault('plots', False)
     opts = ValidateOptions(vehicle=vehicle, terrain=TERRAIN, report_dir=tmp_path / 'report', **options)
     with open_bag(path) as bag:
-        return validate(bag, opts, predictor)
+        return validate(bag, opts, predictor).as_json()
 
 
 # --- the shared folder helper -------------------------------------------------------------------
@@ -442,7 +442,7 @@ def test_real_bag_report_reads_the_commands_and_shows_only_what_exists(
     with open_bag(neato_bag, warn_unknown=False) as bag:
         summary = validate(
             bag, ValidateOptions('test_robot_track', TERRAIN, tmp_path / 'report', plots=True), track
-        )
+        ).as_json()
     # Keyboard teleop: a held key repeats every ~0.03 s (a stream), after a ~0.5 s auto-repeat delay.
     assert summary['cmd_vel_mode'] == 'stream' and summary['cmd_period_s'] == pytest.approx(0.03, abs=0.002)
     assert 0.5 < summary['cmd_hold_s'] < 0.6

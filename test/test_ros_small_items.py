@@ -60,7 +60,7 @@ def test_three_poses_are_not_a_fitted_circle() -> None:
     assert MIN_FIT_POSES == 4  # a circle passes through any 3 points exactly (zero residual)
     assert not is_fitted(segment(3)) and not is_turn(segment(3))
     assert is_fitted(segment(4)) and is_turn(segment(4))  # 0.1 m/s x 10 s on 1 m: 1 rad swept
-    assert is_fitted({'radius_m': 1.0, 'points': 4}) and not is_fitted({'radius_m': math.inf, 'points': 40})
+    assert not is_fitted(segment(40, radius_m=math.inf))  # collinear poses: no circle
 
 
 def test_trace_window_holds_every_turn_circle_whole() -> None:

@@ -136,7 +136,7 @@ def test_validate_measures_power_from_the_vendor_currents(
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
     with open_bag(path) as bag:
         assert bag.undecodable_topics == []  # typed from the bag's own stored definitions
-        summary = validate(bag, options, predictor)
+        summary = validate(bag, options, predictor).as_json()
     assert summary['has_motor_data'] and 'motor currents from' in summary['motor_currents_from']
     assert summary['rejected']['joint_states'] == 0
     series = np.genfromtxt(summary['report']['timeseries_csv'], delimiter=',', names=True)
@@ -159,7 +159,7 @@ def test_validate_without_the_vendor_topic_says_so(tmp_path: Path, predictor: Ma
     write_husky_bag(path, None)
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        summary = validate(bag, options, predictor).as_json()
     assert not summary['has_motor_data'] and 'no side-current topic' in summary['motor_data_note']
     assert math.isnan(summary['metrics']['energy_measured_J'] or math.nan)
 
@@ -247,11 +247,11 @@ def test_a_bag_without_the_definition_needs_msg(tmp_path: Path, predictor: MapPr
     write_husky_bag(path, HUSKY, definition=False)
     options = ValidateOptions(vehicle=VEHICLE, terrain=TERRAIN, report_dir=tmp_path / 'report', plots=False)
     with open_bag(path) as bag:
-        summary = validate(bag, options, predictor)
+        summary = validate(bag, options, predictor).as_json()
     assert not summary['has_motor_data'] and '--msg' in summary['motor_data_note']
     extra = load_msg_definitions([MSG_DIR])
     with open_bag(path, extra_types=extra) as bag:
-        summary = validate(bag, options, predictor)
+        summary = validate(bag, options, predictor).as_json()
     assert summary['has_motor_data'] and summary['motor_currents_from'].startswith(
         'motor currents from status'
     )

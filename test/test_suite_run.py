@@ -139,7 +139,10 @@ def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(
         preexec_fn=ignore_sigint if signum == signal.SIGINT else None,
     )
     try:
-        time.sleep(6.0)  # start-up and a few seconds of driving
+        deadline = time.monotonic() + 60.0  # a wait for the start-up and some driving, not a timing goal
+        while _drawn_J(state) <= 0.0 and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _drawn_J(state) > 0.0, 'the suite saved no energy drawn (did it drive?)'
         process.send_signal(signum)
         stdout, stderr = process.communicate(timeout=30)
     finally:
@@ -149,6 +152,15 @@ def test_run_stops_cleanly_on_a_signal_and_keeps_the_energy_state(
     assert report['duration_s'] < 60
     saved = json.loads(state.read_text())
     assert saved  # the estimator wrote its state on shutdown
+
+
+def _drawn_J(state_file: Path) -> float:
+    """The energy drawn [J] in a saved energy state (the estimator saves every 0.5 s); 0 before the
+    first save (or mid-replace)."""
+    try:
+        return float(json.loads(state_file.read_text())['battery']['state']['drawn_J'])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
 
 
 # a planted fault in a real `run --simulate` process: every joint_states callback of power_estimator

@@ -371,7 +371,7 @@ def test_validate_kinematics_predicts_from_the_motion(turning_bag: tuple[Path, P
             kinematics=kinematics,
         )  # fmt: skip
         with open_bag(bag_path) as bag:
-            summaries[kinematics] = validate(bag, options)
+            summaries[kinematics] = validate(bag, options).as_json()
     cmd = summaries['cmd']
     assert cmd['kinematics'] == 'cmd' and cmd['motion_prediction']['kinematics'] == 'ground_truth'
     error = {k: abs(s['metrics']['energy_error_pct']) for k, s in summaries.items()}

@@ -31,10 +31,10 @@ from __future__ import annotations
 import copy
 import math
 import tempfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -47,6 +47,7 @@ from skidsteer_power.analysis.baselines import (
     energy_J,
 )
 from skidsteer_power.errors import InputError, SkidsteerError
+from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.vehicle import TrackGear
 
 if TYPE_CHECKING:
@@ -226,7 +227,7 @@ def scores(predicted: np.ndarray, runs: Sequence[BagRun]) -> dict[str, float]:
     }
 
 
-def failed_scores(reason: str) -> dict[str, Any]:
+def failed_scores(reason: str) -> JsonObject:
     """The scores of a model that could not predict: NaN figures and ``error`` (the reason)."""
     keys = ('energy_error_pct', 'power_rmse_W', 'median_abs_segment_error_pct')
     return {**dict.fromkeys(keys, math.nan), 'energy_predicted_J': math.nan, 'energy_measured_J': math.nan,
@@ -263,7 +264,7 @@ def payload_vehicle(vehicle: str, payload_kg: float, folder: Path) -> str:
     return str(path)
 
 
-def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | None, dict[str, Any]]:
+def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | None, JsonObject]:
     """Calibrate on the training bags (all their segments); (terrain file or None, report)."""
     from skidsteer_power.calibration import calibrate_bags, io
 
@@ -296,7 +297,7 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
     }
 
 
-def compare(options: CompareOptions, progress: Any = None) -> dict[str, Any]:
+def compare(options: CompareOptions, progress: Callable[[str], None] | None = None) -> JsonObject:
     """The whole comparison (module doc); ``progress(message)`` is told each step. Without
     ``work_dir`` the calibrated terrain lives in a temporary folder removed at the end."""
     options.check()
@@ -308,7 +309,7 @@ def compare(options: CompareOptions, progress: Any = None) -> dict[str, Any]:
         return _compare(options, Path(tmp), progress)
 
 
-def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, Any]:
+def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], None] | None) -> JsonObject:
     from skidsteer_power.estimator import factory
 
     say = progress or (lambda message: None)
@@ -359,7 +360,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
         holdout_report.append(
             {'bag': run.path, 'split': split, 'outside_envelope_share': share, **envelope(run.samples)}
         )
-    transfer_report: dict[str, Any] | None = None
+    transfer_report: JsonObject | None = None
     if options.transfer:
         veh = options.vehicle
         if options.transfer_payload_kg is not None:
@@ -376,7 +377,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
             'vehicle': veh,
         }
 
-    splits: dict[str, Any] = {}
+    splits: JsonObject = {}
     for name, runs in split_runs.items():
         if not runs:
             continue
@@ -418,7 +419,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Any) -> dict[str, 
     }
 
 
-def goal(splits: dict[str, Any]) -> dict[str, Any]:
+def goal(splits: JsonObject) -> JsonObject:
     """Issue 27's goal per split: FESS calibrated + online no worse than the best baseline on the same
     range; at most a third of its |energy error| (or within 5 %) on extrapolation and transfer."""
     out = {}
@@ -450,7 +451,7 @@ def goal(splits: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def table(result: dict[str, Any]) -> str:
+def table(result: JsonObject) -> str:
     """A plain-text table: one row per model, per split energy error / RMSE / median segment error."""
     names = list(result['splits'])
     head = f'{"model":<24}' + ''.join(f'{n + " E% / RMSE W / seg%":>36}' for n in names)
@@ -484,7 +485,7 @@ def table(result: dict[str, Any]) -> str:
     return '\n'.join(lines)
 
 
-def plot(result: dict[str, Any], folder: str | Path) -> Path:
+def plot(result: JsonObject, folder: str | Path) -> Path:
     """Bar charts of |energy error| [%] and power RMSE [W] per model, grouped by split; the PNG path."""
     import matplotlib
 

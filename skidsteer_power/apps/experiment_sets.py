@@ -27,13 +27,20 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from skidsteer_power.bag_io.synthetic import TABLE_7_3_SETS, table_7_3_segments
 from skidsteer_power.commands import Segment
+from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.real_robot import APPENDIX_D_RADII
+
+if TYPE_CHECKING:
+    from skidsteer_power.estimator.prediction import Predictor
+    from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.twin.sensors import TwinTrace
 
 CONFIGURATIONS = ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel')
 TRUTH = 'sand_bin'
@@ -50,7 +57,7 @@ MIN_TORQUE_NM = 0.2
 
 
 @functools.lru_cache(maxsize=8)
-def _command_predictor(vehicle_name: str) -> Any:
+def _command_predictor(vehicle_name: str) -> CommandPredictor:
     from skidsteer_power.models.predict import CommandPredictor
     from skidsteer_power.terramechanics import load_terrain
     from skidsteer_power.vehicle import load_vehicle
@@ -91,7 +98,7 @@ def set_windows() -> list[tuple[float, float, float, float]]:
     return out
 
 
-def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = None) -> dict[str, Any]:
+def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = None) -> JsonObject:
     """Simulate, record, validate and tabulate one configuration; returns its summary."""
     from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
@@ -124,10 +131,11 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     motion_predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir, kinematics='twist')
     powertrain = factory.powertrain_for(vehicle)
     sets = _experiment_sets(trace, predictor, motion_predictor, powertrain, vehicle.tread_m)
-    motion_energy = summary['motion_prediction']['metrics']['energy_error_pct']  # from ground truth
+    assert summary.motion_prediction is not None  # the twin's bag has /ground_truth/odom
+    motion_energy = summary.motion_prediction.metrics.energy_error_pct  # from ground truth
     keys = {'speed_cmd_m_s': 'speed_cmd_m_s', 'yaw_cmd': 'yaw_rate_cmd_rad_s'}
     keys.update(radius_cmd_m='radius_cmd_m', radius_m='radius_m')
-    radius = [{k: s[v] for k, v in keys.items()} for s in summary['segments']]
+    radius = [{k: getattr(s, v) for k, v in keys.items()} for s in summary.segments]
     for row in radius:
         row['radius_real_m'] = real_radius(vehicle_name, row['speed_cmd_m_s'], row['yaw_cmd'])
         row['radius_fess_setpoints_m'] = setpoint_radius(vehicle_name, row['speed_cmd_m_s'], row['yaw_cmd'])
@@ -138,17 +146,21 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
         'simulation_wall_s': sim_s,
         'twin': trace.summary(vehicle.tread_m),
         'contact': twin.contact_laws,
-        'metrics_cmd': summary['metrics'],
+        'metrics_cmd': summary.metrics.as_json(),
         'energy_error_motion_pct': motion_energy,
         'sets': sets,
         'radius': radius,
-        'report': summary['report'],
+        'report': None if summary.report is None else summary.report.as_json(),
     }
 
 
 def _experiment_sets(
-    trace: Any, predictor: Any, motion_predictor: Any, powertrain: Any, tread_m: float
-) -> list[dict[str, Any]]:
+    trace: TwinTrace,
+    predictor: Predictor,
+    motion_predictor: Predictor,
+    powertrain: Powertrain,
+    tread_m: float,
+) -> list[JsonObject]:
     rows = []
     for speed, yaw, start, end in set_windows():
         inside = (trace.t >= start) & (trace.t <= end)
@@ -186,7 +198,7 @@ def _experiment_sets(
     return rows
 
 
-def plot_configuration(result: dict[str, Any], path: Path) -> None:
+def plot_configuration(result: JsonObject, path: Path) -> None:
     """Figures 7.39-7.41 style: rows V = 0.1, 0.2 m/s; columns axle torque, axle power; x = yaw rate cmd."""
     import matplotlib
 
@@ -219,7 +231,7 @@ def plot_configuration(result: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
+def plot_radius(results: list[JsonObject], path: Path) -> None:
     """Figure 7.38 style: commanded, real robot (Appendix D), twin (circle fit of the ground truth) and
     FESS from the set points (:func:`setpoint_radius`) turning radius."""
     import matplotlib
@@ -257,7 +269,7 @@ def plot_radius(results: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def torque_errors(result: dict[str, Any]) -> tuple[float, float]:
+def torque_errors(result: JsonObject) -> tuple[float, float]:
     """Median |FESS at the twin's measured motion - twin| / |twin| axle torque [%] per side (left,
     right) over the sets that moved, with twin torque above ``MIN_TORQUE_NM`` (the chapter 7.3
     comparison; |error|, so the two sides cannot cancel)."""
@@ -271,7 +283,7 @@ def torque_errors(result: dict[str, Any]) -> tuple[float, float]:
     return left, right
 
 
-def radius_rows(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def radius_rows(results: list[JsonObject]) -> list[JsonObject]:
     """The Appendix D cells the runs hold: configuration, command, commanded / real / twin / FESS
     from set points radius [m]."""
     rows = []
@@ -286,7 +298,7 @@ def _ratio_error(radius: float | None, reference: float) -> float:
     return 100.0 * (radius / reference - 1.0) if radius is not None and math.isfinite(radius) else math.nan
 
 
-def radius_table(results: list[dict[str, Any]]) -> str:
+def radius_table(results: list[JsonObject]) -> str:
     """Markdown table of the Appendix D cells: commanded, real robot, twin, FESS from set points."""
     lines = [
         '| configuration | V cmd [m/s] | yaw rate cmd [rad/s] | R cmd [m] | R real robot [m] | R twin [m] '
@@ -318,7 +330,7 @@ def radius_table(results: list[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
-def summary_table(results: list[dict[str, Any]]) -> str:
+def summary_table(results: list[JsonObject]) -> str:
     """Markdown table: per configuration, FESS against the twin and the twin against the real robot."""
     lines = [
         '| configuration | twin energy [J] | energy error, FESS from command [%] | energy error, FESS from '

@@ -26,16 +26,19 @@ import csv
 import glob
 import math
 import traceback
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from skidsteer_power.errors import InputError
+from skidsteer_power.jsonout import JsonObject
 
 if TYPE_CHECKING:
+    from skidsteer_power.bags.series import Inputs
     from skidsteer_power.bags.validate import ValidateOptions
+    from skidsteer_power.distributed.engine import Engine
 
 BAG_SUFFIXES = ('.mcap', '.db3')
 CMD_HOLD_S = 0.5  # [s] a command counts as driven for at most this long (the estimator's staleness)
@@ -80,6 +83,105 @@ class BagJob:
     @property
     def report_dir(self) -> str:
         return str(self.options.report_dir)
+
+
+@dataclass(frozen=True)
+class Validated:
+    """What a validated bag adds to its fleet row: the bag's integrity, its length [s], the distance
+    driven [m] and where it came from ('poses', 'cmd_vel'), the energies [J], the error [%], the
+    energy per metre [J/m] (of the measured energy where there is one, else the predicted)."""
+
+    complete: bool
+    messages_expected: int | None
+    messages_read: int | None
+    duration_s: float
+    distance_m: float
+    distance_source: str
+    energy_measured_J: float
+    energy_predicted_J: float
+    energy_error_pct: float
+    energy_per_m_J_m: float
+
+
+@dataclass(frozen=True)
+class FleetRow:
+    """One bag of a fleet validation (a Dask task's result): ``validated`` None if it failed
+    (``error`` says why); :meth:`as_json` is its row of ``validate --json`` with several bags."""
+
+    bag: str
+    vehicle: str
+    terrain: str
+    report_dir: str
+    error: str
+    processing_s: float
+    validated: Validated | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.validated is not None
+
+    @property
+    def energy_error_pct(self) -> float:
+        return math.nan if self.validated is None else self.validated.energy_error_pct
+
+    def as_json(self) -> JsonObject:
+        head: JsonObject = {
+            'bag': self.bag,
+            'vehicle': self.vehicle,
+            'terrain': self.terrain,
+            'report_dir': self.report_dir,
+            'ok': self.ok,
+            'error': self.error,
+        }
+        body = {} if self.validated is None else asdict(self.validated)
+        return {**head, **body, 'processing_s': self.processing_s}
+
+
+@dataclass(frozen=True)
+class FleetGroup:
+    """Per (vehicle, terrain): bags, distance [m], energy per metre [J/m] (distance-weighted), mean
+    energy error [%]."""
+
+    vehicle: str
+    terrain: str
+    bags: int
+    distance_m: float
+    energy_per_m_J_m: float
+    energy_error_pct_mean: float
+
+    def as_json(self) -> JsonObject:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class FleetSummary:
+    """A fleet validation (:func:`validate_fleet`): counts, the energy error's mean and largest |.|
+    [%], the groups, the rows, the files written and the engine."""
+
+    bags: int
+    ok: int
+    failed: int
+    incomplete: int
+    energy_error_pct_mean: float
+    energy_error_pct_abs_max: float
+    groups: list[FleetGroup]
+    rows: list[FleetRow]
+    engine: str
+    files: dict[str, str] = field(default_factory=dict)
+
+    def as_json(self) -> JsonObject:
+        return {
+            'bags': self.bags,
+            'ok': self.ok,
+            'failed': self.failed,
+            'incomplete': self.incomplete,
+            'energy_error_pct_mean': self.energy_error_pct_mean,
+            'energy_error_pct_abs_max': self.energy_error_pct_abs_max,
+            'groups': [g.as_json() for g in self.groups],
+            'rows': [r.as_json() for r in self.rows],
+            'files': dict(self.files),
+            'engine': self.engine,
+        }
 
 
 def is_bag(path: Path) -> bool:
@@ -148,17 +250,12 @@ def plan_jobs(
     return jobs
 
 
-def validate_job(job: BagJob) -> dict[str, Any]:
+def validate_job(job: BagJob) -> FleetRow:
     """Validate one bag (a Dask task): a fleet row; never raises (a failure is a row with the error)."""
     import time
 
     began = time.perf_counter()
-    row: dict[str, Any] = {
-        'bag': job.bag,
-        'vehicle': job.vehicle,
-        'terrain': job.terrain,
-        'report_dir': job.report_dir,
-    }
+    row = FleetRow(job.bag, job.vehicle, job.terrain, job.report_dir, error='', processing_s=math.nan)
     try:
         from skidsteer_power.bag_io.reader import open_bag
         from skidsteer_power.bags.validate import read_inputs, validate
@@ -168,35 +265,31 @@ def validate_job(job: BagJob) -> dict[str, Any]:
             bag.count_all()  # what the bag holds against what it says it holds (salvage: no raise)
             summary = validate(bag, options)
             distance, source = distance_driven(read_inputs(bag, options))
-            integrity = bag.integrity()
+            complete, expected, read = bag.complete, bag.messages_expected, bag.messages_read
     except Exception as err:  # any failure of one bag is that bag's row, the fleet goes on
         last = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
         where = f' ({Path(last.filename).name}:{last.lineno})' if last else ''
-        row.update(ok=False, error=f'{type(err).__name__}: {err}{where}'.replace('\n', ' '))
-        row['processing_s'] = time.perf_counter() - began
-        return row
-    m = summary['metrics']
-    measured, predicted = m.get('energy_measured_J', math.nan), m.get('energy_predicted_J', math.nan)
-    basis = measured if summary['has_motor_data'] and np.isfinite(measured) else predicted
-    row.update(
-        ok=True,
-        error='',
-        complete=integrity['complete'],  # a salvaged bag is validated but never complete
-        messages_expected=integrity['messages_expected'],
-        messages_read=integrity['messages_read'],
-        duration_s=summary['duration_s'],
+        error = f'{type(err).__name__}: {err}{where}'.replace('\n', ' ')
+        return replace(row, error=error, processing_s=time.perf_counter() - began)
+    m = summary.metrics
+    measured, predicted = m.energy_measured_J, m.energy_predicted_J
+    basis = measured if summary.has_motor_data and np.isfinite(measured) else predicted
+    validated = Validated(
+        complete=complete,  # a salvaged bag is validated but never complete
+        messages_expected=expected,
+        messages_read=read,
+        duration_s=summary.duration_s,
         distance_m=distance,
         distance_source=source,
         energy_measured_J=measured,
         energy_predicted_J=predicted,
-        energy_error_pct=m.get('energy_error_pct', math.nan),
+        energy_error_pct=m.energy_error_pct,
         energy_per_m_J_m=basis / distance if distance > 0 else math.nan,
-        processing_s=time.perf_counter() - began,
     )
-    return row
+    return replace(row, validated=validated, processing_s=time.perf_counter() - began)
 
 
-def distance_driven(inputs: Any) -> tuple[float, str]:
+def distance_driven(inputs: Inputs) -> tuple[float, str]:
     """Path length [m] from poses, else from held commands (module doc)."""
     if inputs.pose_xy.shape[0] >= 2:
         step = np.diff(inputs.pose_xy, axis=0)
@@ -209,63 +302,61 @@ def distance_driven(inputs: Any) -> tuple[float, str]:
 
 
 def validate_fleet(
-    engine: Any, jobs: list[BagJob], out_dir: str | Path, plots: bool = True
-) -> dict[str, Any]:
+    engine: Engine, jobs: list[BagJob], out_dir: str | Path, plots: bool = True
+) -> FleetSummary:
     """Run every job on ``engine``; write fleet.csv, summary.md and plots to ``out_dir``; the summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rows = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags', heavy=True)
+    rows: list[FleetRow] = engine.map(validate_job, jobs, label=f'validate {len(jobs)} bags', heavy=True)
     files = {'csv': str(out / 'fleet.csv'), 'markdown': str(out / 'summary.md')}
     _write_csv(Path(files['csv']), rows)
     groups = group_means(rows)
     Path(files['markdown']).write_text(_markdown(rows, groups, engine.description), encoding='utf-8')
     if plots:
         files |= _plots(out, rows, groups)
-    ok = [r for r in rows if r['ok']]
-    errors = np.array([r['energy_error_pct'] for r in ok], dtype=float)
+    ok = [r.validated for r in rows if r.validated is not None]
+    errors = np.array([v.energy_error_pct for v in ok], dtype=float)
     errors = errors[np.isfinite(errors)]
-    return {
-        'bags': len(rows),
-        'ok': len(ok),
-        'failed': len(rows) - len(ok),
-        'incomplete': sum(not r['complete'] for r in ok),  # validated from part of the bag
-        'energy_error_pct_mean': float(np.mean(errors)) if errors.size else math.nan,
-        'energy_error_pct_abs_max': float(np.max(np.abs(errors))) if errors.size else math.nan,
-        'groups': groups,
-        'rows': rows,
-        'files': files,
-        'engine': engine.description,
-    }
+    return FleetSummary(
+        bags=len(rows),
+        ok=len(ok),
+        failed=len(rows) - len(ok),
+        incomplete=sum(not v.complete for v in ok),  # validated from part of the bag
+        energy_error_pct_mean=float(np.mean(errors)) if errors.size else math.nan,
+        energy_error_pct_abs_max=float(np.max(np.abs(errors))) if errors.size else math.nan,
+        groups=groups,
+        rows=rows,
+        files=files,
+        engine=engine.description,
+    )
 
 
-def group_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def group_means(rows: list[FleetRow]) -> list[FleetGroup]:
     """Per (vehicle, terrain): bags, distance [m], energy per metre [J/m] (distance-weighted) and the
     mean energy error [%]."""
-    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    groups: dict[tuple[str, str], list[Validated]] = {}
     for r in rows:
-        if r['ok']:
-            groups.setdefault((r['vehicle'], r['terrain']), []).append(r)
+        if r.validated is not None:
+            groups.setdefault((r.vehicle, r.terrain), []).append(r.validated)
     out = []
     for (vehicle, terrain), members in sorted(groups.items()):
-        distance = sum(r['distance_m'] for r in members)
-        energy = sum(
-            r['energy_per_m_J_m'] * r['distance_m'] for r in members if np.isfinite(r['energy_per_m_J_m'])
-        )
-        errs = [r['energy_error_pct'] for r in members if np.isfinite(r['energy_error_pct'])]
+        distance = sum(v.distance_m for v in members)
+        energy = sum(v.energy_per_m_J_m * v.distance_m for v in members if np.isfinite(v.energy_per_m_J_m))
+        errs = [v.energy_error_pct for v in members if np.isfinite(v.energy_error_pct)]
         out.append(
-            {
-                'vehicle': vehicle,
-                'terrain': terrain,
-                'bags': len(members),
-                'distance_m': distance,
-                'energy_per_m_J_m': energy / distance if distance > 0 else math.nan,
-                'energy_error_pct_mean': float(np.mean(errs)) if errs else math.nan,
-            }
+            FleetGroup(
+                vehicle=vehicle,
+                terrain=terrain,
+                bags=len(members),
+                distance_m=distance,
+                energy_per_m_J_m=energy / distance if distance > 0 else math.nan,
+                energy_error_pct_mean=float(np.mean(errs)) if errs else math.nan,
+            )
         )
     return out
 
 
-def fmt(value: Any, fmt: str = '.4g') -> str:
+def fmt(value: float | int | str | bool | None, fmt: str = '.4g') -> str:
     if value is None:
         return ''
     if isinstance(value, float):
@@ -273,44 +364,57 @@ def fmt(value: Any, fmt: str = '.4g') -> str:
     return str(value)
 
 
-def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+def _write_csv(path: Path, rows: list[FleetRow]) -> None:
     with path.open('w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
         writer.writerow(CSV_COLUMNS)
         for r in rows:
-            writer.writerow([fmt(r.get(c, math.nan), '.6g') for c in CSV_COLUMNS])
+            values = r.as_json()
+            writer.writerow([fmt(values.get(c, math.nan), '.6g') for c in CSV_COLUMNS])
 
 
-def _status(row: dict[str, Any]) -> str:
-    if not row['ok']:
-        return f'FAILED: {row["error"]}'.replace('|', '/')
-    if row.get('complete'):
+def _status(row: FleetRow) -> str:
+    v = row.validated
+    if v is None:
+        return f'FAILED: {row.error}'.replace('|', '/')
+    if v.complete:
         return 'ok'
-    expected = row.get('messages_expected')
-    return f'ok, INCOMPLETE: read {row.get("messages_read")} of {"?" if expected is None else expected}'
+    expected = v.messages_expected
+    return f'ok, INCOMPLETE: read {v.messages_read} of {"?" if expected is None else expected}'
 
 
-def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: str) -> str:
+def _markdown(rows: list[FleetRow], groups: list[FleetGroup], engine: str) -> str:
     lines = [
         '# Fleet validation',
         '',
-        f'{len(rows)} bags, {sum(r["ok"] for r in rows)} validated, '
-        f'{sum(not r["ok"] for r in rows)} failed ({engine}).',
+        f'{len(rows)} bags, {sum(r.ok for r in rows)} validated, '
+        f'{sum(not r.ok for r in rows)} failed ({engine}).',
         '',
         '| bag | vehicle | terrain | distance [m] | energy measured [J] | predicted [J] | error [%] | J/m '
         '| status |',
         '| --- | --- | --- | --- | --- | --- | --- | --- | --- |',
     ]
     for r in rows:
-        status = _status(r)
+        v = r.validated
+        figures = (
+            (math.nan,) * 5
+            if v is None
+            else (
+                v.distance_m,
+                v.energy_measured_J,
+                v.energy_predicted_J,
+                v.energy_error_pct,
+                v.energy_per_m_J_m,
+            )
+        )
         cells = [
-            Path(r['bag']).name,
-            r['vehicle'],
-            r['terrain'],
-            *(fmt(r.get(k, math.nan)) for k in ('distance_m', 'energy_measured_J', 'energy_predicted_J')),
-            fmt(r.get('energy_error_pct', math.nan), '+.1f'),
-            fmt(r.get('energy_per_m_J_m', math.nan)),
-            status,
+            Path(r.bag).name,
+            r.vehicle,
+            r.terrain,
+            *(fmt(x) for x in figures[:3]),
+            fmt(figures[3], '+.1f'),
+            fmt(figures[4]),
+            _status(r),
         ]
         lines.append('| ' + ' | '.join(cells) + ' |')
     lines += [
@@ -322,13 +426,13 @@ def _markdown(rows: list[dict[str, Any]], groups: list[dict[str, Any]], engine: 
     lines.append('| --- | --- | --- | --- | --- | --- |')
     for g in groups:
         lines.append(
-            f'| {g["vehicle"]} | {g["terrain"]} | {g["bags"]} | {fmt(g["distance_m"])} | '
-            f'{fmt(g["energy_per_m_J_m"])} | {fmt(g["energy_error_pct_mean"], "+.1f")} |'
+            f'| {g.vehicle} | {g.terrain} | {g.bags} | {fmt(g.distance_m)} | '
+            f'{fmt(g.energy_per_m_J_m)} | {fmt(g.energy_error_pct_mean, "+.1f")} |'
         )
     return '\n'.join(lines) + '\n'
 
 
-def _plots(out: Path, rows: list[dict[str, Any]], groups: list[dict[str, Any]]) -> dict[str, str]:
+def _plots(out: Path, rows: list[FleetRow], groups: list[FleetGroup]) -> dict[str, str]:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -336,8 +440,8 @@ def _plots(out: Path, rows: list[dict[str, Any]], groups: list[dict[str, Any]]) 
 
     files = {}
     fig, ax = plt.subplots(figsize=(7, 4))
-    labels = [f'{g["vehicle"]}\n{g["terrain"]}' for g in groups]
-    ax.bar(range(len(groups)), [g['energy_per_m_J_m'] for g in groups])
+    labels = [f'{g.vehicle}\n{g.terrain}' for g in groups]
+    ax.bar(range(len(groups)), [g.energy_per_m_J_m for g in groups])
     ax.set_xticks(range(len(groups)), labels, fontsize=7)
     ax.set_ylabel('motor energy per metre [J/m]')
     ax.set_title('Energy per metre by vehicle and terrain')
@@ -345,9 +449,7 @@ def _plots(out: Path, rows: list[dict[str, Any]], groups: list[dict[str, Any]]) 
     files['energy_per_metre_png'] = str(out / 'energy_per_metre.png')
     fig.savefig(files['energy_per_metre_png'], dpi=100)
     plt.close(fig)
-    errors = [
-        r['energy_error_pct'] for r in rows if r['ok'] and np.isfinite(r.get('energy_error_pct', math.nan))
-    ]
+    errors = [r.energy_error_pct for r in rows if r.ok and np.isfinite(r.energy_error_pct)]
     fig, ax = plt.subplots(figsize=(6, 4))
     if errors:
         ax.hist(errors, bins=max(5, min(30, len(errors))))

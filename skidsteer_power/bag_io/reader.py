@@ -22,6 +22,7 @@ import os
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple, TypeGuard
@@ -37,6 +38,7 @@ from skidsteer_power.safe_read import check_regular, read_capped
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
+    from rosbags.interfaces.typing import Typesdict
     from rosbags.typesys.store import Typestore
 
 LOG = logging.getLogger(__name__)
@@ -46,10 +48,7 @@ ROS_ENCODING = 'cdr'  # message encoding of ROS 2 channels; others (protobuf, js
 _IDL_SEPARATOR = '=' * 80 + '\n'
 MAX_METADATA_BYTES = 16 << 20
 """Largest metadata.yaml read [bytes] (16 MiB; one of a 10-topic bag is about 5 KB)."""
-# Low-level failures that mean "the bytes on disk are not a valid bag", wrapped into InputError.
-_DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
-    ReaderError,
-    sqlite3.Error,
+_PARSE_ERRORS: tuple[type[BaseException], ...] = (
     struct.error,
     EOFError,
     ValueError,
@@ -57,15 +56,56 @@ _DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
     IndexError,
     AssertionError,
     ArithmeticError,
-    MemoryError,
+    MemoryError,  # a damaged record length asks for petabytes
     TypeError,  # rosbags' MCAP reader on a file that ends inside a record
 )
+"""What rosbags' parsers raise on bytes that are not a valid bag. Translated into
+:class:`BagBytesError` by :func:`_parsing` around the calls that read a bag's bytes, and only there:
+the same errors raised by this package's own code are bugs and propagate."""
+_DAMAGE_ERRORS: tuple[type[BaseException], ...] = (ReaderError, sqlite3.Error)
+"""Failures that mean "the bytes on disk are not a valid bag" (a :class:`BagBytesError` is a
+ReaderError), reported as :class:`BagDamageError` or salvaged."""
 try:  # rosbags reads sqlite3 through apsw when it is installed
     import apsw
 
     _DAMAGE_ERRORS += (apsw.Error,)
 except ImportError:  # pragma: no cover - depends on the rosbags build
     pass
+
+
+class BagBytesError(ReaderError):
+    """A rosbags parser failed on a bag's bytes with a built-in error (see :data:`_PARSE_ERRORS`);
+    the message says what was wrong in words, the original error is its ``__cause__``."""
+
+
+@contextmanager
+def _parsing() -> Iterator[None]:
+    """Around a call into rosbags that reads a bag's bytes (open, the next message): its parsers'
+    built-in errors become :class:`BagBytesError`, as rosbags' own reader turns KeyError and
+    TypeError into ReaderError where it reads bytes."""
+    try:
+        yield
+    except _PARSE_ERRORS as err:
+        reason = one_line(str(err)) or type(err).__name__
+        if isinstance(err, TypeError):  # rosbags reading past the end of a record
+            reason = 'the file ends inside a record'
+        if isinstance(err, MemoryError) or 'ssize_t' in reason:
+            reason = 'a record length field is damaged'
+        raise BagBytesError(reason) from err
+
+
+def _read_through(
+    reader: Rosbag2Reader, connections: list[Connection], start_ns: int | None, stop_ns: int | None
+) -> Iterator[tuple[Connection, int, bytes]]:
+    """rosbags' messages of ``connections``, each read inside :func:`_parsing`."""
+    with _parsing():
+        stream = iter(reader.messages(connections=connections, start=start_ns, stop=stop_ns))
+    while True:
+        with _parsing():
+            item = next(stream, None)
+        if item is None:
+            return
+        yield item
 
 
 class BagDamageError(InputError):
@@ -112,11 +152,11 @@ def load_msg_definitions(paths: Iterable[str | os.PathLike[str]]) -> dict[str, s
     return found
 
 
-def _types_from_definition(msgtype: str, fmt: MessageDefinitionFormat, text: str) -> dict[str, Any]:
+def _types_from_definition(msgtype: str, fmt: MessageDefinitionFormat, text: str) -> Typesdict:
     if fmt == MessageDefinitionFormat.MSG:
         return get_types_from_msg(text, msgtype)
     if text.startswith(f'{_IDL_SEPARATOR}IDL: '):
-        types: dict[str, Any] = {}
+        types: Typesdict = {}
         for section in text.split(_IDL_SEPARATOR)[1:]:
             types.update(get_types_from_idl(section.split('\n', 1)[1]))
         return types
@@ -132,7 +172,7 @@ def build_typestore(
     ``stored`` holds (type name, definition format, definition text) as found in a bag. A stored
     definition that does not parse is skipped with a warning (the Jazzy or extra one, if any, stays).
     """
-    fielddefs: dict[str, Any] = dict(get_typestore(DEFAULT_STORE).fielddefs)
+    fielddefs: Typesdict = dict(get_typestore(DEFAULT_STORE).fielddefs)
     for name, text in (extra or {}).items():
         try:
             fielddefs.update(get_types_from_msg(text, name))
@@ -160,11 +200,9 @@ def one_line(text: str) -> str:
 
 def _damage_text(path: Path, err: BaseException) -> str:
     reason = one_line(str(err)) or type(err).__name__
-    if isinstance(err, TypeError):  # rosbags reading past the end of a record
-        reason = 'the file ends inside a record'
     if path.is_file() and path.stat().st_size <= 8:
         reason = f'only {path.stat().st_size} bytes: no records after the MCAP magic'
-    if isinstance(err, MemoryError) or 'ssize_t' in reason:
+    if 'ssize_t' in reason:
         reason = 'a record length field is damaged'
 
     return f'{path}: bag is truncated or corrupt ({reason})'
@@ -273,9 +311,7 @@ class BagReader:
         last: tuple[int, int] = (-1, 0)  # (timestamp, messages yielded at it)
         read: dict[str, int] = dict.fromkeys(wanted, 0)
         try:
-            for connection, timestamp, data in self._reader.messages(
-                connections=connections, start=start_ns, stop=stop_ns
-            ):
+            for connection, timestamp, data in _read_through(self._reader, connections, start_ns, stop_ns):
                 last = (timestamp, last[1] + 1 if timestamp == last[0] else 1)
                 read[connection.topic] += 1
                 yield BagMessage(connection.topic, timestamp, data, connection.msgtype)
@@ -557,13 +593,14 @@ def _metadata_problem(folder: Path, per_topic: Sequence[tuple[str, int]]) -> str
     these); else one line."""
     import yaml
 
-    text = read_capped(folder / 'metadata.yaml', MAX_METADATA_BYTES, 'bag metadata').decode('utf-8')
-    info = yaml.safe_load(text)
+    with _parsing():
+        text = read_capped(folder / 'metadata.yaml', MAX_METADATA_BYTES, 'bag metadata').decode('utf-8')
+        info = yaml.safe_load(text)
     info = info.get('rosbag2_bagfile_information', info) if isinstance(info, dict) else None
     if not isinstance(info, dict):
         return ''  # rosbags opened it; nothing more to compare
     listed = info.get('files')
-    files: list[Any] = listed if isinstance(listed, list) else []
+    files: list[object] = listed if isinstance(listed, list) else []
     named: list[tuple[str, object]] = [('total', info.get('message_count'))]
     named += [
         (f'file {f.get("path", k)}', f.get('message_count'))
@@ -596,8 +633,9 @@ def _count_problem(path: Path, total: object, per_topic: Sequence[tuple[str, obj
 
 
 def _open_intact(path: Path, extra_types: Mapping[str, str] | None, salvage: bool = False) -> BagReader:
-    reader = Rosbag2Reader(path)
-    reader.open()
+    with _parsing():
+        reader = Rosbag2Reader(path)
+        reader.open()
     try:
         connections = list(reader.connections)
         store = build_typestore(

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.bag_io._ros import (
     GRAPH_TOPICS,
@@ -37,7 +37,10 @@ from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
     from rclpy.context import Context
+    from rclpy.executors import Executor
     from rclpy.node import Node
+    from rclpy.subscription import Subscription
+    from rosbags.interfaces import Connection
 
 LOG = logging.getLogger(__name__)
 
@@ -48,8 +51,8 @@ DEFAULT_EXCLUDED = GRAPH_TOPICS  # recorded only when named explicitly
 class _Topic:
     name: str
     msgtype: str
-    connection: Any
-    subscription: Any
+    connection: Connection
+    subscription: Subscription
 
 
 @dataclass
@@ -89,7 +92,7 @@ class Recorder:
         qos = qos_for_stored(profiles)
         connection = self.writer.add_topic(name, msgtype, profiles)
 
-        def on_message(data: bytes, info: Any, connection: Any = connection) -> None:
+        def on_message(data: bytes, info: object, connection: Connection = connection) -> None:
             stamp = info.get('received_timestamp', 0) if isinstance(info, dict) else 0
             self.writer.write(connection, stamp or time.time_ns(), data)
 
@@ -102,7 +105,7 @@ class Recorder:
         """Named topics not subscribed yet (no publisher seen)."""
         return [t for t in self.topics if t not in self.recorded and t not in self.skipped]
 
-    def drain(self, executor: Any, *, quiet_s: float = 0.25, limit_s: float = 3.0) -> None:
+    def drain(self, executor: Executor, *, quiet_s: float = 0.25, limit_s: float = 3.0) -> None:
         """Take messages still queued or in flight: spin until ``quiet_s`` pass with none [s]."""
         deadline = time.monotonic() + limit_s
         last_count, last_change = self.writer.message_count, time.monotonic()

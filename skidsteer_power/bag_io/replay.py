@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,9 +34,11 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
+    from rclpy.context import Context
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
     from rosbags.interfaces import Qos
+    from rclpy.publisher import Publisher
 
 LOG = logging.getLogger(__name__)
 
@@ -175,8 +177,8 @@ class Replayer:
         self.node = node
         self.options = options or ReplayOptions()
         self.skipped: dict[str, str] = {}
-        self.publishers: dict[str, Any] = {}
-        self.classes: dict[str, Any] = {}
+        self.publishers: dict[str, Publisher] = {}
+        self.classes: dict[str, type] = {}
         self.undecodable: dict[str, int] = {}
         wanted = list(bag.topics) if self.options.topics is None else list(self.options.topics)
         missing = [t for t in wanted if t not in bag.topics]
@@ -369,7 +371,7 @@ def replay(
     options: ReplayOptions | None = None,
     *,
     stop: StopFlag | None = None,
-    context: Any = None,
+    context: Context | None = None,
     node_name: str = 'skidsteer_replay',
 ) -> ReplayResult:
     """Replay ``bag`` on a node of its own; ``context`` None initialises (and shuts down) one here."""

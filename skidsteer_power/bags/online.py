@@ -16,14 +16,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidsteer_power.bags.summary import OnlinePrediction
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import RunSeries
+    from skidsteer_power.bags.series import RunSeries
+    from skidsteer_power.estimator import EstimatorCore
+    from skidsteer_power.seams import PowertrainLike
 
 NO_ONLINE = (math.nan,) * 3
 DERIVED_COLUMNS = (
@@ -35,7 +38,7 @@ DERIVED_COLUMNS = (
 )
 
 
-def online_figures(core: Any) -> tuple[float, float, float]:
+def online_figures(core: EstimatorCore) -> tuple[float, float, float]:
     """What a row records of the core's online state: the corrected motor torques [N m] (left,
     right) and the terrain scale k [-]. Kept to three float reads per row (validate's speed); the
     powers follow from them after the run (:func:`online_columns`)."""
@@ -50,7 +53,7 @@ def online_figures(core: Any) -> tuple[float, float, float]:
     return left.a * torque[0] + left.b, right.a * torque[1] + right.b, adaptation.terrain_scale()
 
 
-def online_columns(c: dict[str, np.ndarray], powertrain: Any) -> dict[str, np.ndarray]:
+def online_columns(c: dict[str, np.ndarray], powertrain: PowertrainLike) -> dict[str, np.ndarray]:
     """:data:`DERIVED_COLUMNS` from a run's rows, vectorized: the corrected prediction's terminal
     powers [W] at the predicted motor speeds, its battery power [W] (the prediction's plus the change
     the correction makes through the amplifier, as ``EstimatorCore.corrected_bus_W``), and the
@@ -100,7 +103,7 @@ def with_prediction(series: RunSeries, torque: str | None, power: str) -> RunSer
     return replace(series, columns=columns)
 
 
-def online_summary(series: RunSeries, core: Any) -> dict[str, Any]:
+def online_summary(series: RunSeries, core: EstimatorCore) -> OnlinePrediction:
     """``online_prediction`` of the summary: what power_estimator would have published from the bag.
 
     ``metrics``: the prediction with the per-side online correction learned up to each reading
@@ -113,16 +116,13 @@ def online_summary(series: RunSeries, core: Any) -> dict[str, Any]:
     metrics = error_metrics(with_prediction(series, 'online_torque_{side}_Nm', 'online_power_{side}_W'))
     scaled = error_metrics(with_prediction(series, None, 'scaled_power_{side}_W'))
     state = core.adaptation.state()
-    return {
-        'metrics': metrics,
-        'terrain_scaled': {
-            key: scaled[key] for key in ('energy_predicted_J', 'energy_measured_J', 'energy_error_pct')
-        }
-        | {'power_left': scaled['power_left'], 'power_right': scaled['power_right']},
-        'battery_energy_predicted_J': predicted_battery_J(series, 'online_battery_W'),
-        'adaptation_enabled': bool(core.adaptation.settings.enabled),
-        'terrain_scale': state.terrain_scale,
-        'correction_scale': list(state.scale),
-        'correction_offset_Nm': list(state.offset_Nm),
-        'terrain_changes': state.terrain_changes,
-    }
+    return OnlinePrediction(
+        metrics=metrics,
+        terrain_scaled=scaled,  # its energy and power figures are reported (OnlinePrediction.as_json)
+        battery_energy_predicted_J=predicted_battery_J(series, 'online_battery_W'),
+        adaptation_enabled=bool(core.adaptation.settings.enabled),
+        terrain_scale=state.terrain_scale,
+        correction_scale=state.scale,
+        correction_offset_Nm=state.offset_Nm,
+        terrain_changes=state.terrain_changes,
+    )

@@ -6,14 +6,17 @@ import csv
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidsteer_power.bags.summary import QUANTITIES, SIDES, ReportFiles
 from skidsteer_power.errors import InputError
+from skidsteer_power.jsonout import jsonable as jsonable  # re-exported: its old import path
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import Inputs, RunSeries, TraceSegment
+    from skidsteer_power.bags.series import Inputs, RunSeries, TraceSegment
+    from skidsteer_power.bags.summary import ValidationSummary
 
 SEGMENT_COLUMNS = (
     't_start_s',
@@ -29,21 +32,6 @@ SEGMENT_COLUMNS = (
     'speed_m_s',
     'note',
 )
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy types made plain, NaN as null and infinities as "inf"/"-inf"."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None if math.isnan(value) else ('inf' if value > 0 else '-inf')
-    return value
 
 
 def _prepare(directory: Path) -> None:
@@ -105,10 +93,9 @@ LEGEND_CIRCLES = 8
 """trace.png names at most this many circles in its legend (radius and time); the rest are counted."""
 
 
-def is_fitted(segment: Any) -> bool:
-    """A segment (TraceSegment or its dict) whose circle was fitted: finite radius, >= 4 poses."""
-    values = segment if isinstance(segment, dict) else vars(segment)
-    return math.isfinite(float(values['radius_m'])) and int(values['points']) >= MIN_FIT_POSES
+def is_fitted(segment: TraceSegment) -> bool:
+    """A segment whose circle was fitted: finite radius, >= 4 poses."""
+    return math.isfinite(segment.radius_m) and segment.points >= MIN_FIT_POSES
 
 
 def is_turn(segment: TraceSegment) -> bool:
@@ -184,7 +171,7 @@ def write_plots(
         plt.close(fig)
         written.append(name)
     if inputs.pose_t.size:
-        written.append(_trace_plot(plt, directory, inputs, segments))
+        written.append(_trace_plot(directory, inputs, segments))
     return written
 
 
@@ -204,8 +191,10 @@ def trace_window(
     return (float(cx - half), float(cx + half)), (float(cy - half), float(cy + half))
 
 
-def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
+def _trace_plot(directory: Path, inputs: Inputs, segments: list[TraceSegment]) -> str:
     """The recorded path, scaled to itself, with the fitted circles clipped to the path's window."""
+    import matplotlib.pyplot as plt  # Agg, chosen by write_plots
+
     fig, ax = plt.subplots(figsize=(6, 6))
     every = _thin(len(inputs.pose_t))
     x, y = inputs.pose_xy[every, 0], inputs.pose_xy[every, 1]
@@ -237,7 +226,7 @@ def _trace_plot(plt: Any, directory: Path, inputs: Inputs, segments: list[TraceS
     return 'trace.png'
 
 
-def _fmt(value: Any, digits: int = 4) -> str:
+def _fmt(value: float | int | str, digits: int = 4) -> str:
     if isinstance(value, float):
         if math.isnan(value):
             return '-'
@@ -251,37 +240,31 @@ def _energy_words(joules: float) -> str:
     return f'{_fmt(joules)} J ({_fmt(joules / 3600.0, 3)} Wh)'
 
 
-def markdown(summary: dict[str, Any], plots: list[str]) -> str:
+def markdown(summary: ValidationSummary, plots: list[str]) -> str:
     """The report page: what was run, how commands were read, the comparison (only where motor data
     exist), the battery, the trace (only where poses exist), plots."""
-    m = summary['metrics']
-    joints = summary.get('joints') or {}
+    m = summary.metrics
+    joints = summary.joints
     lines = [
-        f'# Validation of `{Path(summary["bag"]).name}`',
+        f'# Validation of `{Path(summary.bag).name}`',
         '',
-        f'- bag: `{summary["bag"]}` ({summary["storage"]}, {summary["duration_s"]:.1f} s)',
-        f'- vehicle `{summary["vehicle"]}`, terrain `{summary["terrain"]}`',
-        f'- predictor: {summary["predictor"]}',
-        f'- messages: {summary["messages"]}; rejected: {summary["rejected"]}',
+        f'- bag: `{summary.bag}` ({summary.storage}, {summary.duration_s:.1f} s)',
+        f'- vehicle `{summary.vehicle}`, terrain `{summary.terrain}`',
+        f'- predictor: {summary.predictor}',
+        f'- messages: {summary.messages.as_json()}; rejected: {summary.rejected}',
     ]
-    if summary['has_motor_data']:
+    if summary.has_motor_data:
         lines.append(
-            f'- motor data: joints {", ".join(joints.get("left", []))} (left) and '
-            f'{", ".join(joints.get("right", []))} (right), effort as {joints.get("effort_is")} at the '
-            f'{joints.get("at")}'
+            f'- motor data: joints {", ".join(joints.left)} (left) and '
+            f'{", ".join(joints.right)} (right), effort as {joints.effort_is} at the {joints.at}'
         )
     else:
-        lines.append(
-            f'- motor data: none ({summary.get("motor_data_note") or "no joint_states"}): predictions only'
-        )
-    lines.append(f'- poses from: {summary["pose_topic"] or "none"}')
-    if summary['undecodable_topics']:
-        lines.append(f'- topics skipped (unknown type): {", ".join(summary["undecodable_topics"])}')
-    lines += ['', '## Commands', '', summary.get('cmd_timing', '')]
-    clamped_t, clamped_e = (
-        summary.get('clamped_time_fraction', 0.0),
-        summary.get('clamped_energy_fraction', 0.0),
-    )
+        lines.append(f'- motor data: none ({summary.motor_data_note or "no joint_states"}): predictions only')
+    lines.append(f'- poses from: {summary.pose_topic or "none"}')
+    if summary.undecodable_topics:
+        lines.append(f'- topics skipped (unknown type): {", ".join(summary.undecodable_topics)}')
+    lines += ['', '## Commands', '', summary.cmd_timing]
+    clamped_t, clamped_e = summary.coverage.clamped_time_fraction, summary.coverage.clamped_energy_fraction
     if clamped_t > 0 or clamped_e > 0:
         lines.append(
             f'**{100 * clamped_t:.1f} % of the time and {100 * clamped_e:.1f} % of the predicted energy** '
@@ -290,21 +273,19 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
         )
     else:
         lines.append('Every command lay inside the power map.')
-    if summary['has_motor_data']:
+    if summary.has_motor_data:
         lines += ['', '## Predicted vs measured (at the motor, while a command is in force)', '']
         lines += ['| quantity | side | MAE | RMSE |', '| --- | --- | --- | --- |']
-        for quantity, unit in (('torque', 'Nm'), ('power', 'W')):
-            for side in ('left', 'right'):
-                e = m[f'{quantity}_{side}']
-                lines.append(
-                    f'| {quantity} [{unit}] | {side} | {_fmt(e[f"mae_{unit}"])} | {_fmt(e[f"rmse_{unit}"])} |'
-                )
+        for quantity, unit in QUANTITIES:
+            for side in SIDES:
+                e = m.error(quantity, side)
+                lines.append(f'| {quantity} [{unit}] | {side} | {_fmt(e.mae)} | {_fmt(e.rmse)} |')
         lines += [
             '',
-            f'{m["samples_compared"]} samples compared. Energy at the motor terminals, both sides: '
-            f'predicted {_energy_words(m["energy_predicted_J"])}, '
-            f'measured {_energy_words(m["energy_measured_J"])}; '
-            f'the prediction is off by {_fmt(m["energy_error_pct"], 3)} %.',
+            f'{m.samples_compared} samples compared. Energy at the motor terminals, both sides: '
+            f'predicted {_energy_words(m.energy_predicted_J)}, '
+            f'measured {_energy_words(m.energy_measured_J)}; '
+            f'the prediction is off by {_fmt(m.energy_error_pct, 3)} %.',
         ]
     else:
         lines += [
@@ -312,55 +293,20 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
             '## Predicted energy',
             '',
             f'At the motor terminals, both sides, while commands were in force: '
-            f'{_energy_words(m["energy_predicted_J"])}.',
+            f'{_energy_words(m.energy_predicted_J)}.',
         ]
-    battery = summary['battery']
-    parts = []
-    if battery['energy_measured_J']:
-        parts.append(f'{_energy_words(battery["energy_measured_J"])} from measured power')
-    if battery['energy_drawn_from_prediction_J']:
-        where = ' where no measurement was fresh' if battery['energy_measured_J'] else ''
-        drawn_J = battery['energy_drawn_from_prediction_J']
-        parts.append(f'{_energy_words(drawn_J)} from predicted power{where}')
-    drawn = ' and '.join(parts) if parts else 'nothing'
-    lines += [
-        '',
-        '## Battery',
-        '',
-        f'The battery model (through the amplifiers, so a little more than at the motors) drew {drawn}; '
-        f'{_fmt(battery["remaining_wh"])} Wh remain (state of charge {_fmt(battery["soc"])}). '
-        f'The model predicted {_energy_words(battery["energy_predicted_J"])} at the battery while '
-        'commands were in force.',
-    ]
-    if summary['pose_topic']:
-        lines += ['', '## Trace (constant-command segments; circle fit of eqs. 7.8-7.10)', '']
-        if summary['segments']:
-            lines += [
-                '| start [s] | end [s] | V cmd [m/s] | yaw cmd [rad/s] | R cmd [m] | poses | R fit [m] | '
-                'V mean [m/s] | RMS residual [m] | note |',
-                '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |',
-            ]
-            for s in summary['segments']:
-                lines.append(
-                    f'| {_fmt(s["t_start_s"])} | {_fmt(s["t_end_s"])} | {_fmt(s["speed_cmd_m_s"])} | '
-                    f'{_fmt(s["yaw_rate_cmd_rad_s"])} | {_fmt(s["radius_cmd_m"])} | {s["points"]} | '
-                    f'{_fmt(s["radius_m"])} | {_fmt(s["speed_m_s"])} | {_fmt(s["rms_residual_m"])} | '
-                    f'{s["note"]} |'
-                )
-        else:
-            lines.append('No constant-command segment was long enough to analyse.')
-        few = summary.get('segments_with_too_few_poses', 0)
-        if few:
-            lines += ['', f'{few} more segment(s) had fewer than 2 poses after settling and are left out.']
-    live = summary.get('live_comparison')
+    lines += _battery_lines(summary)
+    if summary.pose_topic:
+        lines += _trace_lines(summary)
+    live = summary.live_comparison
     if live:
         lines += [
             '',
             '## Live node comparison',
             '',
-            f'{live["matching_within_1e-6"]} of {live["messages"]} `power/predicted` messages match the '
+            f'{live.matching_within_1e_6} of {live.messages} `power/predicted` messages match the '
             f'offline prediction within 1e-6 N m (largest difference '
-            f'{_fmt(live["max_abs_torque_diff_Nm"])} N m).',
+            f'{_fmt(live.max_abs_torque_diff_Nm)} N m).',
         ]
     if plots:
         lines += ['', '## Plots', ''] + [f'![{p}]({p})' for p in plots]
@@ -368,67 +314,110 @@ def markdown(summary: dict[str, Any], plots: list[str]) -> str:
     return '\n'.join(lines)
 
 
-def one_screen(summary: dict[str, Any]) -> str:
-    """The validation summary for a terminal: metrics, energy, segments analysed, report location."""
-    m = summary['metrics']
-    lines = [
-        f'bag {summary["bag"]}: {summary["duration_s"]:.1f} s, {summary["messages"]}',
-        f'predictor: {summary["predictor"]}',
+def _battery_lines(summary: ValidationSummary) -> list[str]:
+    battery = summary.battery
+    parts = []
+    if battery.energy_measured_J:
+        parts.append(f'{_energy_words(battery.energy_measured_J)} from measured power')
+    if battery.energy_drawn_from_prediction_J:
+        where = ' where no measurement was fresh' if battery.energy_measured_J else ''
+        parts.append(f'{_energy_words(battery.energy_drawn_from_prediction_J)} from predicted power{where}')
+    drawn = ' and '.join(parts) if parts else 'nothing'
+    return [
+        '',
+        '## Battery',
+        '',
+        f'The battery model (through the amplifiers, so a little more than at the motors) drew {drawn}; '
+        f'{_fmt(battery.remaining_wh)} Wh remain (state of charge {_fmt(battery.soc)}). '
+        f'The model predicted {_energy_words(battery.energy_predicted_J)} at the battery while '
+        'commands were in force.',
     ]
-    if summary['has_motor_data']:
-        for quantity, unit in (('torque', 'Nm'), ('power', 'W')):
-            for side in ('left', 'right'):
-                e = m[f'{quantity}_{side}']
-                mae, rmse = _fmt(e[f'mae_{unit}']), _fmt(e[f'rmse_{unit}'])
-                lines.append(f'{quantity:<6} {side:<5} MAE {mae} {unit}  RMSE {rmse} {unit}')
+
+
+def _trace_lines(summary: ValidationSummary) -> list[str]:
+    lines = ['', '## Trace (constant-command segments; circle fit of eqs. 7.8-7.10)', '']
+    if summary.segments:
+        lines += [
+            '| start [s] | end [s] | V cmd [m/s] | yaw cmd [rad/s] | R cmd [m] | poses | R fit [m] | '
+            'V mean [m/s] | RMS residual [m] | note |',
+            '| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |',
+        ]
+        for s in summary.segments:
+            lines.append(
+                f'| {_fmt(s.t_start_s)} | {_fmt(s.t_end_s)} | {_fmt(s.speed_cmd_m_s)} | '
+                f'{_fmt(s.yaw_rate_cmd_rad_s)} | {_fmt(s.radius_cmd_m)} | {s.points} | '
+                f'{_fmt(s.radius_m)} | {_fmt(s.speed_m_s)} | {_fmt(s.rms_residual_m)} | '
+                f'{s.note} |'
+            )
+    else:
+        lines.append('No constant-command segment was long enough to analyse.')
+    few = summary.segments_with_too_few_poses
+    if few:
+        lines += ['', f'{few} more segment(s) had fewer than 2 poses after settling and are left out.']
+    return lines
+
+
+def one_screen(summary: ValidationSummary) -> str:
+    """The validation summary for a terminal: metrics, energy, segments analysed, report location."""
+    m = summary.metrics
+    lines = [
+        f'bag {summary.bag}: {summary.duration_s:.1f} s, {summary.messages.as_json()}',
+        f'predictor: {summary.predictor}',
+    ]
+    if summary.has_motor_data:
+        for quantity, unit in QUANTITIES:
+            for side in SIDES:
+                e = m.error(quantity, side)
+                lines.append(f'{quantity:<6} {side:<5} MAE {_fmt(e.mae)} {unit}  RMSE {_fmt(e.rmse)} {unit}')
         lines.append(
-            f'energy predicted {_fmt(m["energy_predicted_J"])} J, measured {_fmt(m["energy_measured_J"])} J, '
-            f'error {_fmt(m["energy_error_pct"], 3)} %'
+            f'energy predicted {_fmt(m.energy_predicted_J)} J, measured {_fmt(m.energy_measured_J)} J, '
+            f'error {_fmt(m.energy_error_pct, 3)} %'
         )
     else:
-        lines.append(f'no motor data: predicted energy {_fmt(m["energy_predicted_J"])} J')
-    if 'cmd_vel_mode' in summary:
-        hold = summary['cmd_hold_s']
-        held = 'until the next command' if math.isinf(hold) else f'at most {_fmt(hold, 3)} s'
-        lines.append(f'cmd_vel published as {summary["cmd_vel_mode"]}, each held {held}')
-        lines.append(
-            f'outside the power map: {100 * summary["clamped_time_fraction"]:.1f} % of the time, '
-            f'{100 * summary["clamped_energy_fraction"]:.1f} % of the predicted energy'
-        )
-    fitted = [s for s in summary['segments'] if is_fitted(s)]
+        lines.append(f'no motor data: predicted energy {_fmt(m.energy_predicted_J)} J')
+    hold = summary.cmd_hold_s
+    held = 'until the next command' if math.isinf(hold) else f'at most {_fmt(hold, 3)} s'
+    lines.append(f'cmd_vel published as {summary.cmd_vel_mode}, each held {held}')
     lines.append(
-        f'trace: {len(summary["segments"])} constant-command segments, {len(fitted)} with a fitted circle'
+        f'outside the power map: {100 * summary.coverage.clamped_time_fraction:.1f} % of the time, '
+        f'{100 * summary.coverage.clamped_energy_fraction:.1f} % of the predicted energy'
     )
-    live = summary.get('live_comparison')
+    fitted = [s for s in summary.segments if is_fitted(s)]
+    lines.append(
+        f'trace: {len(summary.segments)} constant-command segments, {len(fitted)} with a fitted circle'
+    )
+    live = summary.live_comparison
     if live:
-        lines.append(f'live node: {live["matching_within_1e-6"]}/{live["messages"]} predictions reproduced')
-    lines.append(f'report: {summary["report"]["markdown"]}')
+        lines.append(f'live node: {live.matching_within_1e_6}/{live.messages} predictions reproduced')
+    if summary.report is not None:
+        lines.append(f'report: {summary.report.markdown}')
     return '\n'.join(lines)
 
 
 def write_report(
     directory: Path,
-    summary: dict[str, Any],
+    summary: ValidationSummary,
     series: RunSeries,
     inputs: Inputs,
     segments: list[TraceSegment],
     plots: bool,
-) -> dict[str, Any]:
+) -> ReportFiles:
     """Write every report file into ``directory``; returns their paths (also put into the JSON)."""
     _prepare(directory)
     write_series_csv(directory / 'timeseries.csv', series)
     write_segments_csv(directory / 'segments.csv', segments)
     plot_files = write_plots(directory, series, inputs, segments) if plots else []
-    paths = {
-        'directory': str(directory),
-        'markdown': str(directory / 'report.md'),
-        'timeseries_csv': str(directory / 'timeseries.csv'),
-        'segments_csv': str(directory / 'segments.csv'),
-        'summary_json': str(directory / 'summary.json'),
-        'plots': [str(directory / p) for p in plot_files],
-    }
+    paths = ReportFiles(
+        directory=str(directory),
+        markdown=str(directory / 'report.md'),
+        timeseries_csv=str(directory / 'timeseries.csv'),
+        segments_csv=str(directory / 'segments.csv'),
+        summary_json=str(directory / 'summary.json'),
+        plots=tuple(str(directory / p) for p in plot_files),
+    )
     (directory / 'report.md').write_text(markdown(summary, plot_files), encoding='utf-8')
     (directory / 'summary.json').write_text(
-        json.dumps(jsonable({**summary, 'report': paths}), indent=2) + '\n', encoding='utf-8'
+        json.dumps(jsonable({**summary.as_json(), 'report': paths.as_json()}), indent=2) + '\n',
+        encoding='utf-8',
     )
     return paths

@@ -27,9 +27,9 @@ import re
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -47,6 +47,16 @@ from skidsteer_power.bags.online import (
     online_figures,
     online_summary,
     predicted_battery_J,
+)
+from skidsteer_power.bags.series import Inputs as Inputs  # re-exported: their old import path
+from skidsteer_power.bags.series import RunSeries as RunSeries
+from skidsteer_power.bags.series import ValidateOptions as ValidateOptions
+from skidsteer_power.bags.summary import (
+    BatteryFigures,
+    JointsUsed,
+    MessageCounts,
+    MotionPrediction,
+    ValidationSummary,
 )
 from skidsteer_power.bags.validate_metrics import (  # re-exported: their old import path
     LIVE_TOLERANCE_NM as LIVE_TOLERANCE_NM,
@@ -68,6 +78,13 @@ from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
 from skidsteer_power.seams import BatteryModel
 
+if TYPE_CHECKING:
+    from skidsteer_power.estimator import EstimatorCore
+    from skidsteer_power.estimator.core import Comparison
+    from skidsteer_power.estimator.inputs import JointMap
+    from skidsteer_power.estimator.prediction import Prediction, Predictor
+    from skidsteer_power.powertrain.battery import BatteryConfig, BatteryState
+
 LOG = logging.getLogger(__name__)
 
 POSE_TYPES = (
@@ -78,116 +95,44 @@ POSE_TYPES = (
 LIVE_PREDICTED_TOPIC = '/power/predicted'
 
 
-@dataclass(frozen=True)
-class ValidateOptions:
-    """What to validate and where to write the report.
+class Row(NamedTuple):
+    """One row of :func:`run_estimator`'s series, its fields named as the columns (SI units; NaN where
+    the row has no such value): the command and whether it is in force, the predicted and measured
+    motor torques [N m] and powers [W] per side, the predicted axle torques [N m], battery-side
+    powers [W], traction margin [-], state of charge [-], hold [s], the map flags, motor speeds
+    [rad/s] and the online figures (:func:`online_figures`)."""
 
-    vehicle : vehicle name in config/vehicles/ or YAML file; terrain : preset name or YAML file
-    report_dir : folder for CSV, PNG, Markdown and JSON (created)
-    *_topic : topic names in the bag; odom_topic may be any of :data:`POSE_TYPES`
-    map_cache_dir : where the power map is cached (None: the estimator's default)
-    battery_window_s : battery stepped with the mean power of windows this long [s] (0: per input)
-    settle_s : start of each constant-command segment left out of the trace analysis [s]
-    min_segment_s : shortest segment analysed [s] (just over settle_s: a short leg of a square counts)
-    segment_gap_s : unused (kept for callers); segments end where a command's hold ends
-    plots : write PNG plots
-    cmd_hold_s : how long a command stays in force [s] (None: inferred, see bags/cmd_timing.py; inf:
-        until the next command)
-    left_joints, right_joints, effort_is, joints_at : override the vehicle file's joint_states
-        mapping ('' = the file's; joint lists comma-separated)
-    kinematics : what the estimator predicts from: 'cmd' (the command at its wheel speed set points,
-        as the live node), 'twist' (the command taken as the motion, the old reading), 'odom' (the
-        twist of the Odometry ``odom_topic``) or 'ground_truth' (``/ground_truth/odom``)
-    """
-
-    vehicle: str
-    terrain: str
-    report_dir: str | Path
-    cmd_vel_topic: str = '/cmd_vel'
-    joint_states_topic: str = '/joint_states'
-    odom_topic: str = '/odom'
-    map_cache_dir: str | Path | None = None
-    battery_window_s: float = 0.2
-    settle_s: float = 0.5
-    min_segment_s: float = 0.6
-    segment_gap_s: float = 1.0
-    plots: bool = True
-    cmd_hold_s: float | None = None
-    left_joints: str = ''
-    right_joints: str = ''
-    effort_is: str = ''
-    joints_at: str = ''
-    kinematics: str = 'cmd'
-
-
-@dataclass
-class Inputs:
-    """Decoded bag inputs; times in s from the bag's first message."""
-
-    cmd_t: np.ndarray
-    cmd: np.ndarray  # (n, 2): V [m/s], yaw rate [rad/s]
-    js_t: np.ndarray
-    js_velocity: np.ndarray  # (n, k) velocity of the mapped joints [rad/s]
-    js_effort: np.ndarray  # (n, k) effort of the mapped joints [N m or A]
-    js_names_ok: np.ndarray  # (n,) bool: every mapped joint present
-    pose_t: np.ndarray
-    pose_xy: np.ndarray  # (n, 2) [m]
-    pose_topic: str = ''
-    live_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    live_torque: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    js_position: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (n, k) [rad]
-    js_names: tuple[str, ...] = ('left_motor', 'right_motor')
-    pose_yaw: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) heading [rad]
-    cmd_end: np.ndarray | None = None  # (n,) time each command stops being in force [s]
-    end_s: float = 0.0  # last message of the bag [s]
-    joint_note: str = ''  # why joint_states give no measured power, if they do not
-    currents_note: str = ''  # where the motor currents come from, if a vendor topic (side_currents)
-    pose_twist: np.ndarray | None = None  # (n, 2) V [m/s], yaw rate [rad/s] of an Odometry pose topic
-
-
-@dataclass
-class RunSeries:
-    """Aligned time series of one estimator run; one row per joint_states (or cmd_vel) sample."""
-
-    columns: dict[str, np.ndarray]
-    rejected: dict[str, int]
-    energy_J: dict[str, float]
-    remaining_wh: float
+    t_s: float
+    speed_cmd_m_s: float
+    yaw_rate_cmd_rad_s: float
+    cmd_fresh: float
+    predicted_torque_left_Nm: float
+    predicted_torque_right_Nm: float
+    measured_torque_left_Nm: float
+    measured_torque_right_Nm: float
+    predicted_power_left_W: float
+    predicted_power_right_W: float
+    measured_power_left_W: float
+    measured_power_right_W: float
+    predicted_axle_torque_left_Nm: float
+    predicted_axle_torque_right_Nm: float
+    predicted_battery_W: float
+    measured_battery_W: float
+    traction_margin: float
     soc: float
-    no_data: int = 0  # joint_states saying "no fresh data" (NaN in every field): skipped, not rejected
-    reasons: dict[str, int] = field(default_factory=dict)  # why readings were rejected: count per reason
+    hold_s: float
+    clamped: float
+    limited: float
+    measured_omega_left_rad_s: float
+    measured_omega_right_rad_s: float
+    predicted_omega_left_rad_s: float
+    predicted_omega_right_rad_s: float
+    online_torque_left_Nm: float
+    online_torque_right_Nm: float
+    terrain_scale: float
 
 
-ROW_COLUMNS = (
-    't_s',
-    'speed_cmd_m_s',
-    'yaw_rate_cmd_rad_s',
-    'cmd_fresh',
-    'predicted_torque_left_Nm',
-    'predicted_torque_right_Nm',
-    'measured_torque_left_Nm',
-    'measured_torque_right_Nm',
-    'predicted_power_left_W',
-    'predicted_power_right_W',
-    'measured_power_left_W',
-    'measured_power_right_W',
-    'predicted_axle_torque_left_Nm',
-    'predicted_axle_torque_right_Nm',
-    'predicted_battery_W',
-    'measured_battery_W',
-    'traction_margin',
-    'soc',
-    'hold_s',
-    'clamped',
-    'limited',
-    'measured_omega_left_rad_s',
-    'measured_omega_right_rad_s',
-    'predicted_omega_left_rad_s',
-    'predicted_omega_right_rad_s',
-    'online_torque_left_Nm',
-    'online_torque_right_Nm',
-    'terrain_scale',
-)
+ROW_COLUMNS: tuple[str, ...] = Row._fields
 SERIES_COLUMNS = (*ROW_COLUMNS, *DERIVED_COLUMNS)
 # hold_s: how long the row's values are in force [s] (the weight of the row in energy sums);
 # clamped / limited: 1 where the prediction came from outside the power map (see MapQuery);
@@ -200,7 +145,7 @@ def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
     return next((t for t, info in bag.topics.items() if info.msgtype in types), '')
 
 
-def joint_map_of(options: ValidateOptions) -> Any:
+def joint_map_of(options: ValidateOptions) -> JointMap:
     """The joint_states mapping: the vehicle file's ``drivetrain:`` with the options' overrides."""
     from skidsteer_power.estimator import factory
 
@@ -213,7 +158,7 @@ def joint_map_of(options: ValidateOptions) -> Any:
     )
 
 
-def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: Any = None) -> Inputs:
+def read_inputs(bag: BagReader, options: ValidateOptions, joint_map: JointMap | None = None) -> Inputs:
     """Decode commands, joint states, poses and the live node's predictions from ``bag``."""
     t0 = bag.start_ns
     cmd_topic = options.cmd_vel_topic if options.cmd_vel_topic in bag.topics else ''
@@ -266,8 +211,9 @@ class WindowedBattery:
     The estimator steps the battery at every input (100s per second of bag); offline that dominates
     the run time. Energy per window is kept exactly (sum of power x dt); only the battery's internal
     loss, which depends on power squared, sees the window mean instead of each sample -- a
-    state-of-charge difference far below the battery model's own accuracy (see the test). Any read of
-    the battery's state first flushes the open window, so what is read is up to date.
+    state-of-charge difference far below the battery model's own accuracy (see the test). Every read
+    of the battery's state first flushes the open window, so what is read is up to date. It is a
+    :class:`~skidsteer_power.seams.BatteryModel`: each member of the protocol is spelled out.
     """
 
     def __init__(self, battery: BatteryModel, window_s: float = 0.2) -> None:
@@ -293,17 +239,47 @@ class WindowedBattery:
         """State of charge [-] as of the last full window (no flush; for time-series columns)."""
         return self._battery.soc
 
-    def __getattr__(self, name: str) -> Any:
+    @property
+    def config(self) -> BatteryConfig:
+        return self._battery.config
+
+    @property
+    def state(self) -> BatteryState:
         self.flush()
-        return getattr(self._battery, name)
+        return self._battery.state
+
+    @property
+    def soc(self) -> float:
+        self.flush()
+        return self._battery.soc
+
+    @property
+    def remaining_wh(self) -> float:
+        self.flush()
+        return self._battery.remaining_wh
+
+    def time_to_empty_s(self, power_W: float) -> float:
+        self.flush()
+        return self._battery.time_to_empty_s(power_W)
+
+    def max_power_W(self) -> float:
+        return self._battery.max_power_W()
+
+    def current_for_power(self, power_W: float, soc: float | None = None) -> float:
+        self.flush()
+        return self._battery.current_for_power(power_W, soc)
+
+    def with_state(self, state: BatteryState) -> WindowedBattery:
+        self.flush()
+        return WindowedBattery(self._battery.with_state(state), self._window_s)
 
 
 def build_core(
     options: ValidateOptions,
-    predictor: Any = None,
+    predictor: Predictor | None = None,
     battery_window_s: float = 0.2,
     kinematics: str | None = None,
-) -> Any:
+) -> EstimatorCore:
     """An :class:`EstimatorCore` for the vehicle and terrain; ``predictor`` None builds the map one:
     the set-point map for ``kinematics`` 'cmd' (default: ``options.kinematics``), else the (V, yaw
     rate) map that takes its input as the motion (``twist`` and the measured-motion kinematics)."""
@@ -318,7 +294,7 @@ def build_core(
             raise ConfigError(f'power maps are not available in this installation: {err}') from err
     else:
         factory.check_terrain(options.terrain)
-    battery: Any = factory.battery_for(vehicle)
+    battery: BatteryModel = factory.battery_for(vehicle)
     if battery_window_s > 0:
         battery = WindowedBattery(battery, battery_window_s)
     powertrain = factory.powertrain_for(vehicle)
@@ -327,7 +303,7 @@ def build_core(
     return EstimatorCore(predictor, battery, powertrain, settings)
 
 
-def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
+def run_estimator(core: EstimatorCore, inputs: Inputs) -> RunSeries:
     """Feed commands and joint states to ``core`` in time order; rows per joint_states sample.
 
     Without joint states the rows are the command samples (predictions only). No timer ticks: the
@@ -345,7 +321,7 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
     rejected = {'cmd_vel': 0, 'joint_states': 0}
     reasons: Counter[str] = Counter()
     battery_side = bool(core.settings.joint_map.measures_battery)
-    rows: list[tuple[float, ...]] = []
+    rows: list[Row] = []
     names = inputs.js_names
     # Python lists: per-row access to floats is several times faster than to numpy rows
     has_positions = inputs.js_position.shape[0] == inputs.js_t.size
@@ -387,7 +363,7 @@ def run_estimator(core: Any, inputs: Inputs) -> RunSeries:
             row_hold.append(core.cmd_fresh.timeout_s if ends_list is None else ends_list[i] - now)
         else:
             row_hold.append(math.nan)
-        rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery), battery_side) + online)
+        rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery), battery_side, online))
     core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
     table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
@@ -424,7 +400,7 @@ PREDICTED_COLUMNS = (
 )
 
 
-def with_other_commands(core: Any, inputs: Inputs, series: RunSeries) -> RunSeries:
+def with_other_commands(core: EstimatorCore, inputs: Inputs, series: RunSeries) -> RunSeries:
     """What :func:`error_metrics` reads of ``run_estimator(core, inputs)``, from ``series`` (a run
     with motor data over the same joint_states) and ``inputs``' commands fed to ``core`` alone.
 
@@ -483,30 +459,69 @@ def _soc(battery: BatteryModel) -> float:
 
 
 def _row(
-    now: float, p: Any, fresh: bool, comparison: Any, soc: float, battery_side: bool = False
-) -> tuple[float, ...]:
-    """One row in :data:`ROW_COLUMNS` order, up to the online columns (:func:`online_figures`). The
-    power columns are the motor terminal power, or the battery-side power when the measurement is
-    battery-side (``battery_side``: V x I from ``measured_power``)."""
+    now: float,
+    p: Prediction | None,
+    fresh: bool,
+    comparison: Comparison | None,
+    soc: float,
+    battery_side: bool,
+    online: tuple[float, float, float],
+) -> Row:
+    """One :class:`Row` (``hold_s`` NaN: set after the run). The power columns are the motor terminal
+    power, or the battery-side power when the measurement is battery-side (``battery_side``: V x I
+    from ``measured_power``); ``online``: :func:`online_figures`."""
     nan = math.nan
     if p is None:
-        pred = (nan,) * 10
-        flags = (nan, nan)
-        omega: tuple[float, ...] = (nan, nan)
+        speed = yaw = battery = margin = clamped = limited = nan
+        torque = power = axle = omega = (nan, nan)
     else:
+        speed, yaw, torque, axle, omega = (
+            p.speed_m_s, p.yaw_rate_rad_s, p.motor_torque_Nm, p.terrain_torque_Nm, p.motor_omega_rad_s
+        )  # fmt: skip
         power = p.bus_W if battery_side else p.electrical_W
-        pred = (p.speed_m_s, p.yaw_rate_rad_s, *p.motor_torque_Nm, *power, *p.terrain_torque_Nm,
-                p.bus_total_W, p.traction_margin)  # fmt: skip
-        flags = (float(p.clamped), float(getattr(p, 'limited', False)))
-        omega = p.motor_omega_rad_s
+        battery, margin, clamped, limited = (
+            p.bus_total_W,
+            p.traction_margin,
+            float(p.clamped),
+            float(p.limited),
+        )
     if comparison is None:
-        meas = (nan,) * 7
+        m_torque = m_power = m_omega = (nan, nan)
+        m_battery = nan
     else:
         m = comparison.measured
-        meas = (*m.torque_Nm, *(m.bus_W if battery_side else m.electrical_W), m.bus_total_W, *m.omega_rad_s)
-    return (now, pred[0], pred[1], float(fresh), pred[2], pred[3], meas[0], meas[1], pred[4], pred[5],
-            meas[2], meas[3], pred[6], pred[7], pred[8], meas[4], pred[9], soc, nan, *flags,
-            meas[5], meas[6], *omega)  # fmt: skip
+        m_torque, m_omega, m_battery = m.torque_Nm, m.omega_rad_s, m.bus_total_W
+        m_power = m.bus_W if battery_side else m.electrical_W
+    return Row(
+        t_s=now,
+        speed_cmd_m_s=speed,
+        yaw_rate_cmd_rad_s=yaw,
+        cmd_fresh=float(fresh),
+        predicted_torque_left_Nm=torque[0],
+        predicted_torque_right_Nm=torque[1],
+        measured_torque_left_Nm=m_torque[0],
+        measured_torque_right_Nm=m_torque[1],
+        predicted_power_left_W=power[0],
+        predicted_power_right_W=power[1],
+        measured_power_left_W=m_power[0],
+        measured_power_right_W=m_power[1],
+        predicted_axle_torque_left_Nm=axle[0],
+        predicted_axle_torque_right_Nm=axle[1],
+        predicted_battery_W=battery,
+        measured_battery_W=m_battery,
+        traction_margin=margin,
+        soc=soc,
+        hold_s=nan,
+        clamped=clamped,
+        limited=limited,
+        measured_omega_left_rad_s=m_omega[0],
+        measured_omega_right_rad_s=m_omega[1],
+        predicted_omega_left_rad_s=omega[0],
+        predicted_omega_right_rad_s=omega[1],
+        online_torque_left_Nm=online[0],
+        online_torque_right_Nm=online[1],
+        terrain_scale=online[2],
+    )
 
 
 def stream_hold_ends(t: np.ndarray, cap_s: float) -> np.ndarray:
@@ -550,13 +565,15 @@ class BagPrediction:
     command timing, (kinematics, inputs with the measured twist as commands) or None, the series."""
 
     inputs: Inputs
-    core: Any
+    core: EstimatorCore
     timing: CommandTiming
     motion: tuple[str, Inputs] | None
     series: RunSeries
 
 
-def predict_bag(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> BagPrediction:
+def predict_bag(
+    bag: BagReader, options: ValidateOptions, predictor: Predictor | None = None
+) -> BagPrediction:
     """Run the estimator over ``bag`` from what ``options.kinematics`` says (the command, as the
     live node, by default): the prediction every other offline comparison starts from (validate,
     compare)."""
@@ -582,16 +599,28 @@ DROPPED_LOUD = 1.0 / 3.0
 """A run that drops this share of its readings or more gets a loud warning (issue 35) [-]."""
 
 
-def console_warnings(summary: dict[str, Any]) -> list[str]:
-    """What the console must say beside a validation's numbers (issue 35): readings dropped, how many
-    and why (loud from :data:`DROPPED_LOUD` of them); measured power the bag lacks (once); a measured
-    energy with the wrong sign."""
+def console_warnings(summary: ValidationSummary) -> list[str]:
+    """What the console must say beside a validation's numbers (:func:`reading_warnings`)."""
+    return reading_warnings(
+        summary.joint_states_read,
+        summary.rejected.get('joint_states', 0),
+        summary.rejected_reasons,
+        summary.motor_data_note,
+        summary.metrics.energy_measured_J,
+    )
+
+
+def reading_warnings(
+    read: int, dropped: int, reasons: dict[str, int], note: str | None, measured_J: float
+) -> list[str]:
+    """What the console must say beside a validation's numbers (issue 35): readings dropped
+    (``dropped`` of ``read``), how many and why (``reasons``: count per reason; loud from
+    :data:`DROPPED_LOUD` of them); measured power the bag lacks (``note``, once); a measured energy
+    ``measured_J`` [J] with the wrong sign."""
     lines = []
-    read = int(summary.get('joint_states_read', 0))
-    dropped = int(summary.get('rejected', {}).get('joint_states', 0))
     if dropped:
-        reasons = sorted(summary.get('rejected_reasons', {}).items(), key=lambda item: -item[1])
-        why = '; '.join(f'{n} x {reason}' for reason, n in reasons if reason.startswith('joint_states'))
+        ordered = sorted(reasons.items(), key=lambda item: -item[1])
+        why = '; '.join(f'{n} x {reason}' for reason, n in ordered if reason.startswith('joint_states'))
         share = dropped / read if read else 1.0
         loud = (
             'WARNING: A THIRD OR MORE OF THE READINGS DROPPED: the measured energy leaves them out. '
@@ -599,20 +628,21 @@ def console_warnings(summary: dict[str, Any]) -> list[str]:
             else ''
         )
         lines.append(f'{loud}{dropped} of {read} measured readings dropped ({100 * share:.1f} %): {why}')
-    note = summary.get('motor_data_note')
     if note:
-        lines.append(str(note))
-    measured = summary.get('metrics', {}).get('energy_measured_J', math.nan)
-    if isinstance(measured, float) and measured < 0:
+        lines.append(note)
+    if measured_J < 0:
         lines.append(
-            f'the measured energy is negative ({measured:.4g} J): a battery-side current read as a motor '
+            f'the measured energy is negative ({measured_J:.4g} J): a battery-side current read as a motor '
             "current? (the vehicle file's measured_power: current_is: battery, signed: false)"
         )
     return lines
 
 
-def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) -> dict[str, Any]:
-    """Run the whole validation of ``bag``; write the report; return the JSON summary."""
+def validate(
+    bag: BagReader, options: ValidateOptions, predictor: Predictor | None = None
+) -> ValidationSummary:
+    """Run the whole validation of ``bag``; write the report; return the summary (``as_json``: the
+    JSON of ``validate --json``)."""
     from skidsteer_power.bags.report import write_report
 
     began = time.perf_counter()
@@ -628,65 +658,58 @@ def validate(bag: BagReader, options: ValidateOptions, predictor: Any = None) ->
             motion_series = with_other_commands(other, motion[1], series)
         else:
             motion_series = run_estimator(other, motion[1])
-        motion_metrics = error_metrics(motion_series)
-        motion_summary = {'kinematics': motion[0], 'metrics': motion_metrics}
+        motion_summary = MotionPrediction(motion[0], error_metrics(motion_series))
     segments = trace_segments(inputs, options, core.predictor)
     fitted = [s for s in segments if s.points >= 2]  # fewer: no speed, no circle: left out
     live = live_comparison(inputs, core.predictor)
     elapsed = time.perf_counter() - began
-    summary = {
-        'bag': str(bag.path),
-        'storage': bag.storage,
-        'duration_s': bag.duration_s,
-        'vehicle': options.vehicle,
-        'terrain': options.terrain,
-        'predictor': core.predictor.description,
-        'has_motor_data': bool(inputs.js_t.size),
-        'motor_data_note': inputs.joint_note or None,
-        'motor_currents_from': inputs.currents_note or None,
-        'joints': {
-            'left': list(core.settings.joint_map.left),
-            'right': list(core.settings.joint_map.right),
-            'effort_is': core.settings.joint_map.effort_is,
-            'at': core.settings.joint_map.location,
-        },
-        'pose_topic': inputs.pose_topic or None,
-        'cmd_vel_mode': timing.mode,
-        'cmd_hold_s': timing.hold_s,
-        'cmd_hold_inferred': timing.inferred,
-        'cmd_period_s': timing.period_s,
-        'cmd_timing': timing.describe(),
-        **map_coverage(series),
-        'messages': {
-            'cmd_vel': int(inputs.cmd_t.size),
-            'joint_states': int(inputs.js_t.size),
-            'poses': int(inputs.pose_t.size),
-        },
-        'rejected': series.rejected,
-        'rejected_reasons': series.reasons,
-        'power_compared': 'battery' if core.settings.joint_map.measures_battery else 'terminal',
-        'joint_states_read': int(inputs.js_t.size),
-        'joint_states_no_data': series.no_data,
-        'undecodable_topics': bag.undecodable_topics,
-        'kinematics': options.kinematics,
-        'metrics': metrics,
-        'motion_prediction': motion_summary,
-        'online_prediction': online_summary(series, core),
-        'battery': {
-            'energy_measured_J': series.energy_J.get('measured', math.nan),
+    joint_map = core.settings.joint_map
+    summary = ValidationSummary(
+        bag=str(bag.path),
+        storage=bag.storage,
+        duration_s=bag.duration_s,
+        vehicle=options.vehicle,
+        terrain=options.terrain,
+        predictor=core.predictor.description,
+        has_motor_data=bool(inputs.js_t.size),
+        motor_data_note=inputs.joint_note or None,
+        motor_currents_from=inputs.currents_note or None,
+        joints=JointsUsed(
+            tuple(joint_map.left), tuple(joint_map.right), joint_map.effort_is, joint_map.location
+        ),
+        pose_topic=inputs.pose_topic or None,
+        cmd_vel_mode=timing.mode,
+        cmd_hold_s=timing.hold_s,
+        cmd_hold_inferred=timing.inferred,
+        cmd_period_s=timing.period_s,
+        cmd_timing=timing.describe(),
+        coverage=map_coverage(series),
+        messages=MessageCounts(int(inputs.cmd_t.size), int(inputs.js_t.size), int(inputs.pose_t.size)),
+        rejected=series.rejected,
+        rejected_reasons=series.reasons,
+        power_compared='battery' if joint_map.measures_battery else 'terminal',
+        joint_states_read=int(inputs.js_t.size),
+        joint_states_no_data=series.no_data,
+        undecodable_topics=bag.undecodable_topics,
+        kinematics=options.kinematics,
+        metrics=metrics,
+        motion_prediction=motion_summary,
+        online_prediction=online_summary(series, core),
+        battery=BatteryFigures(
+            energy_measured_J=series.energy_J.get('measured', math.nan),
             # the open-loop prediction over the same time as the measurement (issue 27: the tracker's
             # 'predicted' tally below counts only time without a fresh measurement, 0 J on a bag
             # whose joint_states never stop)
-            'energy_predicted_J': predicted_battery_J(series),
-            'energy_drawn_from_prediction_J': series.energy_J.get('predicted', math.nan),
-            'remaining_wh': series.remaining_wh,
-            'soc': series.soc,
-        },
-        'segments': [s.__dict__ for s in fitted],
-        'segments_with_too_few_poses': len(segments) - len(fitted),
-        'live_comparison': live,
-        'processing_s': elapsed,
-        'real_time_factor': bag.duration_s / elapsed if elapsed > 0 else math.inf,
-    }
-    summary['report'] = write_report(Path(options.report_dir), summary, series, inputs, fitted, options.plots)
-    return summary
+            energy_predicted_J=predicted_battery_J(series),
+            energy_drawn_from_prediction_J=series.energy_J.get('predicted', math.nan),
+            remaining_wh=series.remaining_wh,
+            soc=series.soc,
+        ),
+        segments=fitted,
+        segments_with_too_few_poses=len(segments) - len(fitted),
+        live_comparison=live,
+        processing_s=elapsed,
+        real_time_factor=bag.duration_s / elapsed if elapsed > 0 else math.inf,
+    )
+    files = write_report(Path(options.report_dir), summary, series, inputs, fitted, options.plots)
+    return replace(summary, report=files)

@@ -7,19 +7,29 @@ predictions with the live node's. Pure functions of a run's series and inputs; v
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from skidsteer_power.analysis.trace import fit_circle, mean_speed
+from skidsteer_power.bags.series import TraceSegment as TraceSegment  # re-exported: its old import path
+from skidsteer_power.bags.summary import (
+    NO_ERROR,
+    QUANTITIES,
+    SIDES,
+    ErrorMetrics,
+    LiveComparison,
+    MapCoverage,
+    SideError,
+)
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import Inputs, RunSeries, ValidateOptions
+    from skidsteer_power.bags.series import Inputs, RunSeries, ValidateOptions
+    from skidsteer_power.estimator.prediction import Predictor
 
 
-def error_metrics(series: RunSeries) -> dict[str, Any]:
+def error_metrics(series: RunSeries) -> ErrorMetrics:
     """MAE and RMSE per side of torque [N m] and power [W]; energy over the run and its error [%].
 
     Only rows with a command in force and a measurement count. Energy is the sample-and-hold
@@ -29,17 +39,18 @@ def error_metrics(series: RunSeries) -> dict[str, Any]:
     """
     c = series.columns
     valid = (c['cmd_fresh'] > 0) & np.isfinite(c['measured_torque_left_Nm'])
-    result: dict[str, Any] = {'samples_compared': int(valid.sum())}
-    for quantity, unit in (('torque', 'Nm'), ('power', 'W')):
-        for side in ('left', 'right'):
+    errors: dict[str, SideError] = {}
+    for quantity, unit in QUANTITIES:
+        for side in SIDES:
             error = (
                 c[f'measured_{quantity}_{side}_{unit}'][valid]
                 - c[f'predicted_{quantity}_{side}_{unit}'][valid]
             )
-            result[f'{quantity}_{side}'] = {
-                f'mae_{unit}': float(np.mean(np.abs(error))) if error.size else math.nan,
-                f'rmse_{unit}': float(np.sqrt(np.mean(error**2))) if error.size else math.nan,
-            }
+            errors[f'{quantity}_{side}'] = (
+                SideError(float(np.mean(np.abs(error))), float(np.sqrt(np.mean(error**2))), unit)
+                if error.size
+                else NO_ERROR[unit]
+            )
     weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
     fresh = c['cmd_fresh'] > 0
     predicted = c['predicted_power_left_W'] + c['predicted_power_right_W']
@@ -50,13 +61,19 @@ def error_metrics(series: RunSeries) -> dict[str, Any]:
         else float(np.sum((predicted * weights)[fresh]))
     )
     e_meas = float(np.sum((measured * weights)[valid])) if valid.any() else math.nan
-    result['energy_predicted_J'] = e_pred
-    result['energy_measured_J'] = e_meas
-    result['energy_error_pct'] = 100.0 * (e_pred - e_meas) / abs(e_meas) if abs(e_meas) > 1e-9 else math.nan
-    return result
+    return ErrorMetrics(
+        samples_compared=int(valid.sum()),
+        torque_left=errors['torque_left'],
+        torque_right=errors['torque_right'],
+        power_left=errors['power_left'],
+        power_right=errors['power_right'],
+        energy_predicted_J=e_pred,
+        energy_measured_J=e_meas,
+        energy_error_pct=100.0 * (e_pred - e_meas) / abs(e_meas) if abs(e_meas) > 1e-9 else math.nan,
+    )
 
 
-def map_coverage(series: RunSeries) -> dict[str, float]:
+def map_coverage(series: RunSeries) -> MapCoverage:
     """Share of the time and of the predicted energy (|terminal power| x hold) with a command in
     force whose prediction came from outside the power map (clamped or limited) [-]."""
     c = series.columns
@@ -65,30 +82,10 @@ def map_coverage(series: RunSeries) -> dict[str, float]:
     weights = np.nan_to_num(c['hold_s'], nan=0.0, posinf=0.0)
     energy = np.abs(np.nan_to_num(c['predicted_power_left_W'] + c['predicted_power_right_W'])) * weights
     time_total, energy_total = float(weights[fresh].sum()), float(energy[fresh].sum())
-    return {
-        'clamped_time_fraction': float(weights[outside].sum()) / time_total if time_total > 0 else 0.0,
-        'clamped_energy_fraction': float(energy[outside].sum()) / energy_total if energy_total > 0 else 0.0,
-    }
-
-
-@dataclass(frozen=True)
-class TraceSegment:
-    """What the trace says about one held command (the command: commands.Segment); SI, inf = straight."""
-
-    t_start_s: float
-    t_end_s: float
-    speed_cmd_m_s: float
-    yaw_rate_cmd_rad_s: float
-    radius_cmd_m: float
-    points: int
-    radius_m: float
-    center_x_m: float
-    center_y_m: float
-    rms_residual_m: float
-    speed_m_s: float
-    note: str = ''
-    predicted_speed_m_s: float = math.nan
-    predicted_radius_m: float = math.nan
+    return MapCoverage(
+        clamped_time_fraction=float(weights[outside].sum()) / time_total if time_total > 0 else 0.0,
+        clamped_energy_fraction=float(energy[outside].sum()) / energy_total if energy_total > 0 else 0.0,
+    )
 
 
 def command_segments(
@@ -120,7 +117,9 @@ def command_segments(
     return segments
 
 
-def trace_segments(inputs: Inputs, options: ValidateOptions, predictor: Any = None) -> list[TraceSegment]:
+def trace_segments(
+    inputs: Inputs, options: ValidateOptions, predictor: Predictor | None = None
+) -> list[TraceSegment]:
     """Trace analysis (eqs. 7.8-7.10) of every constant-command segment (a note says why where the
     poses are too few or collinear), beside the motion ``predictor`` expects for its command
     (``predicted_speed_m_s`` and ``predicted_radius_m``, |V / yaw rate|; NaN without a predictor)."""
@@ -168,12 +167,12 @@ def trace_segments(inputs: Inputs, options: ValidateOptions, predictor: Any = No
     return result
 
 
-def _predicted_motion(predictor: Any, speed: float, yaw: float) -> tuple[float, float]:
+def _predicted_motion(predictor: Predictor | None, speed: float, yaw: float) -> tuple[float, float]:
     """(|V| [m/s], |R| [m]) of the motion ``predictor`` expects for a command; NaN if unknown."""
     if predictor is None:
         return math.nan, math.nan
     p = predictor.predict(speed, yaw)
-    v, w = getattr(p, 'achieved_speed_m_s', math.nan), getattr(p, 'achieved_yaw_rate_rad_s', math.nan)
+    v, w = p.achieved_speed_m_s, p.achieved_yaw_rate_rad_s
     radius = abs(v / w) if w != 0 else (math.inf if v != 0 else math.nan)
     return abs(v), radius
 
@@ -181,7 +180,7 @@ def _predicted_motion(predictor: Any, speed: float, yaw: float) -> tuple[float, 
 LIVE_TOLERANCE_NM = 1e-6
 
 
-def live_comparison(inputs: Inputs, predictor: Any) -> dict[str, Any] | None:
+def live_comparison(inputs: Inputs, predictor: Predictor) -> LiveComparison | None:
     """Offline predictions against the live node's ``power/predicted`` motor torques [N m].
 
     The node publishes one prediction per command it takes, in order, but may lag behind (a busy
@@ -210,12 +209,12 @@ def live_comparison(inputs: Inputs, predictor: Any) -> dict[str, Any] | None:
         which = np.searchsorted(inputs.cmd_t, inputs.live_t[mismatched], side='right') - 1
         which = np.maximum(which, 0)
         worst = float(np.abs(offline[which] - inputs.live_torque[mismatched]).max())
-    return {
-        'messages': int(inputs.live_t.size),
-        'matching_within_1e-6': matched,
-        'max_abs_torque_diff_Nm': worst,
-        'commands_without_live_prediction': int(inputs.cmd_t.size - matched),
-    }
+    return LiveComparison(
+        messages=int(inputs.live_t.size),
+        matching_within_1e_6=matched,
+        max_abs_torque_diff_Nm=worst,
+        commands_without_live_prediction=int(inputs.cmd_t.size - matched),
+    )
 
 
 def _next_position(sorted_positions: list[np.ndarray], start: int) -> int | None:

@@ -196,23 +196,23 @@ def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
     with Engine(args.scheduler, None if args.scheduler else args.jobs) as engine:
         summary = validate_fleet(engine, jobs, args.report, plots=not args.no_plots)
     if args.json:
-        print_json(summary)
+        print_json(summary.as_json())
     else:
         print(
-            f'{summary["bags"]} bags: {summary["ok"]} validated ({summary["incomplete"]} of them '
-            f'incomplete), {summary["failed"]} failed ({summary["engine"]})'
+            f'{summary.bags} bags: {summary.ok} validated ({summary.incomplete} of them '
+            f'incomplete), {summary.failed} failed ({summary.engine})'
         )
-        for g in summary['groups']:
+        for g in summary.groups:
             print(
-                f'  {g["vehicle"]} on {g["terrain"]}: {g["bags"]} bags, {g["distance_m"]:.1f} m, '
-                f'{fmt(g["energy_per_m_J_m"])} J/m, '
-                f'mean energy error {fmt(g["energy_error_pct_mean"], "+.1f")} %'
+                f'  {g.vehicle} on {g.terrain}: {g.bags} bags, {g.distance_m:.1f} m, '
+                f'{fmt(g.energy_per_m_J_m)} J/m, '
+                f'mean energy error {fmt(g.energy_error_pct_mean, "+.1f")} %'
             )
-        for r in summary['rows']:
-            if not r['ok']:
-                print(f'  FAILED {r["bag"]}: {r["error"]}')
-        print(f'fleet summary: {summary["files"]["markdown"]}')
-    return 0 if summary['failed'] == 0 else 1
+        for r in summary.rows:
+            if not r.ok:
+                print(f'  FAILED {r.bag}: {r.error}')
+        print(f'fleet summary: {summary.files["markdown"]}')
+    return 0 if summary.failed == 0 else 1
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -241,26 +241,26 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     _log_to_stderr()
     with _open(args) as bag:
         summary = validate(bag, options)
-        summary.update(bag.integrity())
-    note = summary.get('motor_data_note') or ''
+        integrity = bag.integrity()
+    note = summary.motor_data_note or ''
     if (args.left_joints or args.right_joints) and 'never holds all of' in note:
         raise InputError(f'{args.bag}: --left-joints/--right-joints: {note}')
     for line in console_warnings(summary):  # dropped readings, missing measured power (issue 35)
         print(f'warning: {line}', file=sys.stderr)
     if args.json:
-        print_json(summary)
+        print_json({**summary.as_json(), **integrity})
     else:
         print(one_screen(summary))
-        motion = summary.get('motion_prediction')
-        if motion and not summary['has_motor_data']:  # nothing to compare with: say what it predicts
-            energy = motion['metrics']['energy_predicted_J']
-            print(f'predicted from the measured motion ({motion["kinematics"]}): energy {energy:.4g} J')
+        motion = summary.motion_prediction
+        if motion and not summary.has_motor_data:  # nothing to compare with: say what it predicts
+            energy = motion.metrics.energy_predicted_J
+            print(f'predicted from the measured motion ({motion.kinematics}): energy {energy:.4g} J')
         elif motion:  # ch. 7.3 validated FESS with the measured motion: show that prediction too
-            m = motion['metrics']
+            m = motion.metrics
             print(
-                f'predicted from the measured motion ({motion["kinematics"]}): energy error '
-                f'{m["energy_error_pct"]:+.1f} %, torque MAE left/right {m["torque_left"]["mae_Nm"]:.3f} / '
-                f'{m["torque_right"]["mae_Nm"]:.3f} N m'
+                f'predicted from the measured motion ({motion.kinematics}): energy error '
+                f'{m.energy_error_pct:+.1f} %, torque MAE left/right {m.torque_left.mae:.3f} / '
+                f'{m.torque_right.mae:.3f} N m'
             )
     return 0
 

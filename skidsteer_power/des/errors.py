@@ -11,12 +11,36 @@ Two branches keep apart what the caller must handle differently:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import enum
 
 from skidsteer_power.errors import SkidsteerError
 
-if TYPE_CHECKING:
-    from skidsteer_power.des.protocol import DesErrorFlags
+
+class DesErrorFlags(enum.IntFlag):
+    """Error word (ReadError, status variable 137). Sources label bits 0-3 differently."""
+
+    HALL_OR_OFFSET = 1 << 0
+    INDEX_PROCESSING = 1 << 1
+    ENCODER_RESOLUTION = 1 << 2
+    HALL3_OR_INITIAL_POSITION = 1 << 3
+    OVER_CURRENT = 1 << 4
+    OVER_VOLTAGE = 1 << 5
+    OVER_SPEED = 1 << 6
+    UNDER_VOLTAGE = 1 << 7
+    ANGLE_DETECTION = 1 << 8
+    OVER_TEMPERATURE = 1 << 11
+    PARAMETER_RANGE = 1 << 13
+    ANY = 1 << 15
+
+    def describe(self) -> str:
+        """Comma-separated flag names, unknown bits as hex; 'none' for 0."""
+        if not self:
+            return 'none'
+        names = [f.name for f in DesErrorFlags if f in self and f.name]
+        unknown = int(self) & ~sum(int(f) for f in DesErrorFlags)
+        if unknown:
+            names.append(f'0x{unknown:04X}')
+        return ', '.join(names)
 
 
 class DesError(SkidsteerError, RuntimeError):

@@ -302,7 +302,7 @@ class DriveCommand:
 class AmplifierSample:
     """Latest readings of one amplifier, amplifier sense (no polarity applied)."""
 
-    stamp: float = 0.0  # time.monotonic() of the reading [s]
+    stamp: float = 0.0  # the poller's clock() at the reading [s]
     sequence: int = 0
     connected: bool = False
     enabled: bool = False  # the power stage as last commanded by this poller
@@ -317,13 +317,13 @@ class AmplifierSample:
     poll_rate_hz: float = 0.0
     poller_faults: int = 0  # exceptions caught in the poller thread (each: zero, disable, restart)
     last_poller_fault: str = ''
-    poller_fault_at: float = -math.inf  # time.monotonic() of the last poller fault [s]
+    poller_fault_at: float = -math.inf  # the poller's clock() at the last poller fault [s]
     link: dict[str, int | str] = field(default_factory=dict)
 
-    @property
-    def poller_fault_recent(self) -> bool:
-        """A poller fault within the last :data:`FAULT_REPORT_HOLD_S` seconds."""
-        return time.monotonic() - self.poller_fault_at < FAULT_REPORT_HOLD_S
+    def poller_fault_recent(self, now: float) -> bool:
+        """A poller fault within :data:`FAULT_REPORT_HOLD_S` seconds before ``now`` (the poller's
+        ``clock()``, the clock that stamped it) [s]."""
+        return now - self.poller_fault_at < FAULT_REPORT_HOLD_S
 
 
 _LIVE_POLLERS: weakref.WeakSet[AmplifierPoller] = weakref.WeakSet()

@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
+from skidsteer_power.des.errors import DesErrorFlags as DesErrorFlags  # its home is errors.py
 from skidsteer_power.errors import ConfigError, InputError
 
 ACK_OK = 0x4F
@@ -135,33 +136,6 @@ class Status(enum.IntFlag):
         """Comma-separated flag names (power stage bits folded into ``power_stage=...``)."""
         names = [f.name for f in Status if f in self and f.value < (1 << 14) and f.name]
         return ', '.join([*names, f'power_stage={self.power_stage}'])
-
-
-class DesErrorFlags(enum.IntFlag):
-    """Error word (ReadError, status variable 137). Sources label bits 0-3 differently."""
-
-    HALL_OR_OFFSET = 1 << 0
-    INDEX_PROCESSING = 1 << 1
-    ENCODER_RESOLUTION = 1 << 2
-    HALL3_OR_INITIAL_POSITION = 1 << 3
-    OVER_CURRENT = 1 << 4
-    OVER_VOLTAGE = 1 << 5
-    OVER_SPEED = 1 << 6
-    UNDER_VOLTAGE = 1 << 7
-    ANGLE_DETECTION = 1 << 8
-    OVER_TEMPERATURE = 1 << 11
-    PARAMETER_RANGE = 1 << 13
-    ANY = 1 << 15
-
-    def describe(self) -> str:
-        """Comma-separated flag names, unknown bits as hex; 'none' for 0."""
-        if not self:
-            return 'none'
-        names = [f.name for f in DesErrorFlags if f in self and f.name]
-        unknown = int(self) & ~sum(int(f) for f in DesErrorFlags)
-        if unknown:
-            names.append(f'0x{unknown:04X}')
-        return ', '.join(names)
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,7 @@ import math
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import rclpy
@@ -89,7 +90,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from skidsteer_power.des.command import DriveGeometry, limits_for
+from skidsteer_power.des.command import CommandLimits, DriveGeometry, limits_for
 from skidsteer_power.des.kinematics import DES_MAX_SPEED_1PP_RPM, RPM, set_point_limit_rpm
 from skidsteer_power.des.poller import AmplifierPoller, AmplifierSample, DriveCommand
 from skidsteer_power.des.protocol import BAUD_CODES, DesConfig, StatusVariables
@@ -99,7 +100,7 @@ from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.nodes import cmd_vel_input
 from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.driver_guardian import GUARDIAN_PARAMETERS, DriverGuardian
-from skidsteer_power.nodes.param_spec import ParamSpec, declare
+from skidsteer_power.nodes.param_spec import ParamSpec, declare, read
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
@@ -111,6 +112,22 @@ if TYPE_CHECKING:
     from rclpy.impl.rcutils_logger import RcutilsLogger
 
 NODE_NAME = 'des_driver'
+
+
+@dataclass(frozen=True)
+class DriverSetup:
+    """What the driver derives from its parameters and vehicle file at configure (kept apart from the
+    parameters, which are only what was set): the powertrain, the drive geometry, the command limits
+    [SI], the encoder resolution [counts/turn] (the parameter, or the motor's when it is 0) and the
+    cmd_vel message type."""
+
+    powertrain: Powertrain
+    geometry: DriveGeometry
+    limits: CommandLimits
+    encoder_resolution: int
+    cmd_vel_mode: str
+
+
 _WARN_PERIOD_S = 5.0
 
 
@@ -131,14 +148,21 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('left_port', '/dev/ttyUSB0', 'serial port (path or pyserial URL) of the left amplifier'),
     ParamSpec('right_port', '/dev/ttyUSB1', 'serial port (path or pyserial URL) of the right amplifier'),
     ParamSpec(
-        'baud', 38400, 'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200', (9600, 115200)
+        'baud',
+        38400,
+        'link speed [bit/s]: 9600, 14400, 19200, 38400, 57600 or 115200',
+        (9600, 115200),
+        choices=tuple(BAUD_CODES),
     ),
-    ParamSpec('left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1', (-1, 1)),
+    ParamSpec(
+        'left_polarity', 1, 'amplifier sense of forward motion, left side: +1 or -1', (-1, 1), choices=(1, -1)
+    ),
     ParamSpec(
         'right_polarity',
         -1,
         'amplifier sense of forward motion, right side (mirrored motor): +1 or -1',
         (-1, 1),
+        choices=(1, -1),
     ),
     ParamSpec(
         'encoder_resolution',
@@ -198,6 +222,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         'current_source',
         'status_variable',
         "currents from 'status_variable' (130, documented) or 'is_must' (op 0x29, UNCONFIRMED)",
+        choices=('status_variable', 'is_must'),
     ),
     ParamSpec(
         'encoder_counter_variable',
@@ -265,7 +290,7 @@ class DesDriver(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         declare(self, PARAMETERS)  # a value out of its range: one ConfigError
-        self.params = self._read_parameters()  # a bad value is one clear error at once
+        self.params, self.setup = self._read_parameters()  # a bad value is one clear error at once
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.command: DriveCommand | None = None
         self.pollers: dict[str, AmplifierPoller] = {}
@@ -283,39 +308,35 @@ class DesDriver(LifecycleNode):
 
     # -- parameters -----------------------------------------------------------------------------
 
-    def _read_parameters(self) -> dict[str, Any]:
-        p = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
-        if p['baud'] not in BAUD_CODES:
-            raise ConfigError(f'baud must be one of {sorted(BAUD_CODES)}, not {p["baud"]}')
-        for side in SIDES:
-            if p[f'{side}_polarity'] not in (1, -1):
-                raise ConfigError(f'{side}_polarity must be +1 or -1, not {p[f"{side}_polarity"]}')
-        if p['current_source'] not in ('status_variable', 'is_must'):
-            raise ConfigError(
-                f"current_source must be 'status_variable' or 'is_must', not {p['current_source']!r}"
-            )
+    def _read_parameters(self) -> tuple[dict[str, Any], DriverSetup]:
+        """The parameters (their choices checked again: a set while unconfigured is only range-checked
+        by ROS) and what follows from them and the vehicle file."""
+        p: dict[str, Any] = read(self, PARAMETERS)
         if p['left_port'] == p['right_port']:
             raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
         vehicle = load_vehicle(p['vehicle'])
-        p['powertrain'] = powertrain = Powertrain.for_vehicle(vehicle)
+        powertrain = Powertrain.for_vehicle(vehicle)
         motor_max_rpm = set_point_limit_rpm(powertrain.motor)
         if p['max_motor_rpm'] > motor_max_rpm:
             raise ConfigError(
                 f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
             )
-        p['encoder_resolution'] = p['encoder_resolution'] or powertrain.motor.encoder_counts_per_turn
-        p['cmd_vel_mode'] = cmd_vel_input.cmd_vel_mode(
-            self, p['cmd_vel_type'], 'twist_stamped', p['twist_stamped']
-        )
-        p['geometry'] = DriveGeometry(
+        geometry = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
             gear_ratio=float(powertrain.gear_ratio),
             polarity={side: p[f'{side}_polarity'] for side in SIDES},
             max_rpm=float(p['max_motor_rpm']),
         )
-        p['limits'] = limits_for(controller_for_vehicle(vehicle, powertrain), p)  # 0: the vehicle's
-        return p
+        return p, DriverSetup(
+            powertrain=powertrain,
+            geometry=geometry,
+            limits=limits_for(controller_for_vehicle(vehicle, powertrain), p),  # 0: the vehicle's
+            encoder_resolution=p['encoder_resolution'] or powertrain.motor.encoder_counts_per_turn,
+            cmd_vel_mode=cmd_vel_input.cmd_vel_mode(
+                self, p['cmd_vel_type'], 'twist_stamped', p['twist_stamped']
+            ),
+        )
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
         if self.state_label == 'unconfigured' or all(p.name.startswith('qos_overrides.') for p in params):
@@ -334,7 +355,8 @@ class DesDriver(LifecycleNode):
     @_traceback_logged
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            self.params = p = self._read_parameters()
+            self.params, self.setup = self._read_parameters()
+            p, setup = self.params, self.setup
             self._start_pollers(self.guardian.start(p))  # the guardian's proxy ports, if on
             self._wait_connected(p['configure_timeout_s'])
         except SkidsteerError as err:
@@ -347,7 +369,7 @@ class DesDriver(LifecycleNode):
             raise
         self.cmd_input = CmdVelInput(
             self,
-            p['cmd_vel_mode'],
+            setup.cmd_vel_mode,
             self._on_cmd_vel,
             cmd_vel_qos(),
             timeout_s=p['cmd_timeout_s'],
@@ -400,9 +422,9 @@ class DesDriver(LifecycleNode):
         self.command = DriveCommand(
             p['cmd_timeout_s'],
             max_rpm=p['max_motor_rpm'],
-            motor=p['powertrain'].motor,
-            geometry=p['geometry'],
-            limits=p['limits'],
+            motor=self.setup.powertrain.motor,
+            geometry=self.setup.geometry,
+            limits=self.setup.limits,
             stop_both_on_link_loss=p['stop_both_on_link_loss'],
             active=False,
             stall_timeout_s=max(1.0, 5.0 / p['poll_rate_hz']),  # no good cycle for this long: down
@@ -427,7 +449,7 @@ class DesDriver(LifecycleNode):
                 poll_period_s=1.0 / p['poll_rate_hz'],
                 status_every=p['status_every'],
                 reconnect_period_s=p['reconnect_period_s'],
-                encoder_resolution=p['encoder_resolution'],
+                encoder_resolution=self.setup.encoder_resolution,
                 log_error=self.get_logger().error,
             )
             for side in SIDES
@@ -579,15 +601,16 @@ class DesDriver(LifecycleNode):
     def _joint_values(self, side: str, sample: AmplifierSample) -> tuple[float, float, float]:
         """(position [rad], velocity [rad/s], effort [N m]) at the motor shaft, forward positive."""
         stale_after_s = max(0.2, 5.0 / self.params['poll_rate_hz'])
-        if not sample.connected or not sample.sequence or time.monotonic() - sample.stamp > stale_after_s:
+        age_s = self.pollers[side].clock() - sample.stamp  # the clock that stamped it
+        if not sample.connected or not sample.sequence or age_s > stale_after_s:
             return math.nan, math.nan, math.nan
         sign = self.params[f'{side}_polarity']
         counts_per_rev = (
-            self.params['encoder_resolution'] * self.pollers[side].amp.config.quadrature_counts_per_count
+            self.setup.encoder_resolution * self.pollers[side].amp.config.quadrature_counts_per_count
         )
         position = sign * sample.position_counts / counts_per_rev * 2.0 * math.pi
         velocity = sign * sample.velocity_rpm * RPM
-        effort = sign * self.params['powertrain'].motor.torque_constant_Nm_A * sample.current_ma / 1000.0
+        effort = sign * self.setup.powertrain.motor.torque_constant_Nm_A * sample.current_ma / 1000.0
         return position, velocity, effort
 
     @_fail_safe
@@ -612,14 +635,15 @@ class DesDriver(LifecycleNode):
         stop_reason: str,
     ) -> DiagnosticStatus:
         halted = command.halted_by
-        if sample.fault_latched or not sample.connected or sample.poller_fault_recent:
+        fault_recent = sample.poller_fault_recent(poller.clock())
+        if sample.fault_latched or not sample.connected or fault_recent:
             level = DiagnosticStatus.ERROR
         elif halted or command.links_down or sample.message != 'ok':
             level = DiagnosticStatus.WARN
         else:
             level = DiagnosticStatus.OK
         message = sample.message
-        if sample.connected and sample.poller_fault_recent:
+        if sample.connected and fault_recent:
             message = f'restarted after a poller fault: {sample.last_poller_fault}'
         elif halted and not sample.fault_latched:
             message = f'stopped: fault on {", ".join(sorted(halted))} side'
@@ -658,7 +682,7 @@ class DesDriver(LifecycleNode):
     def _command_status(self, command: DriveCommand, stop_reason: str) -> DiagnosticStatus:
         rejected = self.counts['rejected_non_finite']
         level = DiagnosticStatus.WARN if rejected or command.nonfinite_setpoints else DiagnosticStatus.OK
-        limits = self.params['limits']
+        limits = self.setup.limits
         values = {
             'lifecycle_state': self.state_label,
             'stop_reason': stop_reason or 'none (driving on a fresh command)',

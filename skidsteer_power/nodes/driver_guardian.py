@@ -22,7 +22,7 @@ Behaviour (docs/RELIABILITY.md, "The guardian"):
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from skidsteer_power.des.guardian import DEFAULT_TIMEOUT_S, GuardianClient, GuardianError
 from skidsteer_power.errors import ConfigError
@@ -30,7 +30,21 @@ from skidsteer_power.nodes.param_spec import ParamSpec
 from skidsteer_power.powertrain.drivetrain import SIDES
 
 if TYPE_CHECKING:
-    from skidsteer_power.nodes.des_driver import DesDriver
+    from rclpy.impl.rcutils_logger import RcutilsLogger
+
+    from skidsteer_power.des.poller import AmplifierPoller, DriveCommand
+
+
+class GuardedDriver(Protocol):
+    """What the guardian needs of its driver (:class:`~skidsteer_power.nodes.des_driver.DesDriver`):
+    its parameters, held command, pollers and logger (a protocol: des_driver imports this module)."""
+
+    params: dict[str, Any]
+    command: DriveCommand | None
+    pollers: dict[str, AmplifierPoller]
+
+    def get_logger(self) -> RcutilsLogger: ...
+
 
 GUARDIAN_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
@@ -50,9 +64,9 @@ GUARDIAN_PARAMETERS: tuple[ParamSpec, ...] = (
 
 
 class DriverGuardian:
-    """The guardian of one :class:`DesDriver` (see the module docstring)."""
+    """The guardian of one DES driver (see the module docstring)."""
 
-    def __init__(self, node: DesDriver) -> None:
+    def __init__(self, node: GuardedDriver) -> None:
         self.node = node
         self.client: GuardianClient | None = None
         self.real_ports: dict[str, str] = {}

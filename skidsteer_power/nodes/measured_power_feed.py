@@ -6,18 +6,27 @@ fresh current (or a declared voltage) it is "no data" (NaN in every field), as w
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from skidsteer_power.estimator.measured import MeasuredPowerSource, Signal, side_values
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
+
+    from skidsteer_power.estimator.inputs import InputLimits, JointMap
+    from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
+    from skidsteer_power.vehicle import Vehicle
 
 
 class MeasuredPowerFeed:
     """The latest value of every signal of the first ``measured_power`` source whose message packages
     are installed; :meth:`joint_values` rewrites a joint_states reading with the side values."""
 
-    def __init__(self, node: Any, joint_map: Any, qos: Any) -> None:
+    def __init__(self, node: Any, joint_map: JointMap, qos: QoSProfile | int) -> None:
+        """``node``: the power_estimator (its subscriptions, logger and ``now_s`` clock [s])."""
         from skidsteer_power.bag_io._ros import message_class
         from skidsteer_power.errors import InputError
 
@@ -44,8 +53,8 @@ class MeasuredPowerFeed:
             f'({"; ".join(missing)}): no measured power'
         )
 
-    def _on_message(self, signals: list[Signal]) -> Any:
-        def callback(msg: Any) -> None:
+    def _on_message(self, signals: list[Signal]) -> Callable[[object], None]:
+        def callback(msg: object) -> None:
             now = self._now()
             for signal in signals:
                 self.latest[signal] = (signal.read(msg), now)
@@ -92,7 +101,7 @@ class MeasuredPowerFeed:
         return joints, pos, vel, effort
 
 
-def vehicle_limits(limits: Any, vehicle: Any, parameters: dict[str, Any]) -> Any:
+def vehicle_limits(limits: InputLimits, vehicle: Vehicle, parameters: Mapping[str, object]) -> InputLimits:
     """The node's input limits: the vehicle's own motor and driver's
     (:meth:`~skidsteer_power.estimator.inputs.InputLimits.for_powertrain`, issue 35) where the
     ``max_motor_speed_rad_s`` / ``max_motor_torque_Nm`` parameters are left at their defaults (the
@@ -112,7 +121,9 @@ def vehicle_limits(limits: Any, vehicle: Any, parameters: dict[str, Any]) -> Any
     return dataclasses.replace(limits, max_side_power_W=own.max_side_power_W, **changes)
 
 
-def vendor_feed(node: Any, joint_map: Any, qos: Any) -> Any:
+def vendor_feed(
+    node: Any, joint_map: JointMap, qos: QoSProfile | int
+) -> MeasuredPowerFeed | SideCurrentFeed | None:
     """The feed of the joint map's vendor topics: measured_power, side_currents, or None."""
     if joint_map.measured_power:
         return MeasuredPowerFeed(node, joint_map, qos)

@@ -5,7 +5,9 @@ the shipped parameter files (config/*.yaml) and the tables of docs/INTERFACES.md
 ``python -m skidsteer_power.nodes.param_files`` writes the files (``--check`` in CI);
 test/test_param_spec.py checks the shipped ones equal the rendering, so a parameter is added or
 changed in its node's ``PARAMETERS`` only. Every number has a range: ROS refuses a set outside it,
-and :func:`declare` turns an out-of-range or mistyped start value into one ConfigError.
+and :func:`declare` turns an out-of-range or mistyped start value into one ConfigError. A parameter
+with ``choices`` takes only those values (:func:`read` checks them, one ConfigError); one a node reads
+only at its start says ``read_only`` (the descriptor's: ROS refuses every later set).
 """
 
 from __future__ import annotations
@@ -14,7 +16,6 @@ import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
@@ -24,15 +25,28 @@ from skidsteer_power.errors import ConfigError
 
 _UNIT = re.compile(r'\[([^\]]+)\]')
 
+ParamValue = bool | int | float | str
+"""A declared parameter's value: every default is one of these types, and so is every value ROS lets
+a set give it (a typed parameter keeps its type)."""
+
 
 @dataclass(frozen=True)
 class ParamSpec:
     """One declared parameter: name, default (its type is the parameter's), description, range."""
 
     name: str
-    default: bool | int | float | str
+    default: ParamValue
     description: str
     range: tuple[float, float] | None = None
+    choices: tuple[ParamValue, ...] = ()  # the only values it takes (none: any in the range)
+    read_only: bool = False  # read at the node's start only: ROS refuses a later set
+
+    def check(self, value: ParamValue) -> ParamValue:
+        """``value`` if it is one of ``choices`` (or there are none), else one ConfigError."""
+        if self.choices and value not in self.choices:
+            allowed = ', '.join(str(c) for c in self.choices)
+            raise ConfigError(f'{self.name} must be one of {allowed}, not {value!r}')
+        return value
 
     @property
     def type_name(self) -> str:
@@ -56,7 +70,9 @@ class ParamSpec:
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     """The ROS descriptor of ``spec``: its description and, with a range, an integer or float range
     that ROS enforces on every set."""
-    result = ParameterDescriptor(description=spec.description)
+    result = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    if spec.choices:
+        result.additional_constraints = f'one of {", ".join(str(c) for c in spec.choices)}'
     if spec.range is not None:
         low, high = spec.range
         if isinstance(spec.default, int) and not isinstance(spec.default, bool):
@@ -66,10 +82,11 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     return result
 
 
-def declare(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+def declare(node: Node, specs: Sequence[ParamSpec]) -> dict[str, ParamValue]:
     """Declare every parameter of ``specs`` on ``node`` (:func:`descriptor`: ROS enforces the range on
-    every later set) and return their values by name. A start value (override, parameter file) out of
-    its range or of another type is one ConfigError naming the parameter, the value and the range."""
+    every later set) and return their values by name (:func:`read`). A start value (override,
+    parameter file) out of its range, of another type or not one of its choices is one ConfigError
+    naming the parameter, the value and what it may be."""
     for spec in specs:
         try:
             node.declare_parameter(spec.name, spec.default, descriptor(spec))
@@ -77,7 +94,18 @@ def declare(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
             raise ConfigError(_out_of_range(spec, str(err.args[0]))) from None
         except InvalidParameterTypeException as err:
             raise ConfigError(f'{spec.name} must be of type {spec.type_name}: {err.args[0]}') from None
-    return {spec.name: node.get_parameter(spec.name).value for spec in specs}
+    return read(node, specs)
+
+
+def read(node: Node, specs: Sequence[ParamSpec]) -> dict[str, ParamValue]:
+    """The values of ``specs``' parameters on ``node`` by name, each checked against its choices (a
+    set after the declaration is range-checked by ROS, not against the choices: read again, here)."""
+    values: dict[str, ParamValue] = {}
+    for spec in specs:
+        value = node.get_parameter(spec.name).value
+        assert isinstance(value, (bool, int, float, str)), spec.name  # a typed parameter keeps its type
+        values[spec.name] = spec.check(value)
+    return values
 
 
 def _out_of_range(spec: ParamSpec, ros_message: str) -> str:

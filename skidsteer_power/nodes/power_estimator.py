@@ -251,6 +251,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     *PATH_PARAMETERS,
 )
 
+RUN_TIME_PARAMETERS = ('terrain',)
+"""The parameters a set changes at run time; every other one is read at start only: its descriptor
+says ``read_only`` and ROS refuses a later set."""
+PARAMETERS = tuple(
+    spec if spec.name in RUN_TIME_PARAMETERS else dataclasses.replace(spec, read_only=True)
+    for spec in PARAMETERS
+)
 PARAMETER_NAMES = frozenset(spec.name for spec in PARAMETERS)
 
 INPUT_RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT, 'reliable': ReliabilityPolicy.RELIABLE}
@@ -292,7 +299,7 @@ class PowerEstimator(QuietNode):
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
-        p = declare(self, PARAMETERS)  # a value out of its range: one ConfigError
+        p: dict[str, Any] = declare(self, PARAMETERS)  # a value out of its range: one ConfigError
         self._lock = threading.Lock()
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
@@ -719,8 +726,6 @@ class PowerEstimator(QuietNode):
                 if self._terrain_worker is not None and self._terrain_worker.is_alive():
                     return SetParametersResult(successful=False, reason='a terrain change is in progress')
                 self._start_terrain_change(param.value)
-            elif param.name in PARAMETER_NAMES and param.name != 'terrain':
-                return SetParametersResult(successful=False, reason=f'{param.name} is read at start only')
         return SetParametersResult(successful=True)
 
     def _start_terrain_change(self, terrain: str) -> None:

@@ -5,16 +5,22 @@ the latest currents as its effort; without fresh ones it is "no data" (NaN in ev
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skidsteer_power.estimator.side_currents import SideCurrentSource, side_efforts
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
+
+    from skidsteer_power.estimator.inputs import JointMap
 
 
 class SideCurrentFeed:
     """The latest (left, right) current [A] of the first ``side_currents`` source whose message
     package is installed; :meth:`joint_values` rewrites a joint_states reading with it."""
 
-    def __init__(self, node: Any, joint_map: Any, qos: Any) -> None:
+    def __init__(self, node: Any, joint_map: JointMap, qos: QoSProfile | int) -> None:
+        """``node``: the power_estimator (its subscriptions, logger and ``now_s`` clock [s])."""
         from skidsteer_power.bag_io._ros import message_class
         from skidsteer_power.errors import InputError
 
@@ -40,7 +46,7 @@ class SideCurrentFeed:
             f'installed ({"; ".join(missing)}): no measured power'
         )
 
-    def _on_message(self, msg: Any) -> None:
+    def _on_message(self, msg: object) -> None:
         assert self.source is not None
         self.currents = self.source.read(msg)
         self.received_s = self._now()
