@@ -41,21 +41,16 @@ import numpy as np
 
 from skidsteer_power.drive.controller import DriveController
 from skidsteer_power.errors import InputError
-from skidsteer_power.models.fess import (
-    FORCE_TOL_N,
-    SLIP_LIMIT,
-    STEEDS_S0_SCALE,
-    FessSolver,
-    _outputs,
-    residual,
-)
+from skidsteer_power.models.fess import FessSolver, _outputs, residual
+from skidsteer_power.models.fess_problem import FORCE_TOL_N, SLIP_LIMIT, steeds_s0
 from skidsteer_power.models.newton import NewtonResult, newton_solve
 from skidsteer_power.vehicle import TrackGear
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-    from skidsteer_power.models.fess import Problem, TwistSolution
+    from skidsteer_power.models.fess_problem import Problem
+    from skidsteer_power.models.fess_steady import TwistSolution
 
 SETPOINT_MAX_ITERATIONS = 60
 CONTINUATION_STEPS = 8  # steps from straight running to a failed point's set points
@@ -222,9 +217,8 @@ class SetpointSolver:
             from skidsteer_power.models.rigid_contact import straight_slip_guess
 
             motion[:, 0] *= 1.0 - straight_slip_guess(self.fess.vehicle, self.fess.terrain)
-        length = self._length_scale()
-        s0 = motion[:, 0] * np.abs(motion[:, 1]) * length * STEEDS_S0_SCALE
-        return np.column_stack([np.minimum(s0, 0.25 * length), motion])
+        s0 = steeds_s0(motion[:, 0], np.abs(motion[:, 1]), self._length_scale())
+        return np.column_stack([s0, motion])
 
     def _length_scale(self) -> float:
         gear = self.fess.vehicle.gear
