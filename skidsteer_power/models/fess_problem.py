@@ -24,6 +24,7 @@ import numpy as np
 from skidsteer_power.models.fess_contact import Contact, track_contact, wheel_contact
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import TOLERANCE
+from skidsteer_power.models.rigid_contact import rigid_contact
 from skidsteer_power.numeric import Real, hypot, minimum, where
 from skidsteer_power.vehicle import GRAVITY_M_S2
 
@@ -151,7 +152,7 @@ def build_problem(
     outer, inner = side_loads(vehicle, pts)  # eq. 6.12 with m V^2/R = m V |w_z|
     left_outer = yaw < 0
     loads = np.column_stack([np.where(left_outer, outer, inner), np.where(left_outer, inner, outer)])
-    build = track_contact if vehicle.is_tracked else wheel_contact
+    build = rigid_contact if terrain.is_rigid else track_contact if vehicle.is_tracked else wheel_contact
     contact = build(vehicle, terrain, loads, n)
     straight = yaw == 0
     kin_yaw = np.where(straight, STRAIGHT_YAW, yaw)
