@@ -410,8 +410,8 @@ def solve_point(
     s0, omega_l, omega_r = x.tolist()
     torque = kernel.torque((s0, omega_l, omega_r))
     r = kernel.radius
-    slips = slip_ratio(np.array(kernel.side_speed), x[1:] * r)  # eq. 2.13
-    physical = bool(np.all(np.abs(slips) <= SLIP_LIMIT))  # NaN slip: not physical
+    slips = (slip_ratio(kernel.side_speed[0], omega_l * r), slip_ratio(kernel.side_speed[1], omega_r * r))
+    physical = all(abs(s) <= SLIP_LIMIT for s in slips)  # NaN slip: not physical (eq. 2.13)
     ok = converged and physical and bool((problem.loads > 0).all())
     return PointSolution(s0 * flip, x[1:] * flip, torque * flip, ok, iterations)
 

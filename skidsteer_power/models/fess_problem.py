@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -25,7 +25,7 @@ from skidsteer_power.models.fess_contact import Contact, track_contact, wheel_co
 from skidsteer_power.models.loads import OperatingPoints, side_loads
 from skidsteer_power.models.newton import TOLERANCE
 from skidsteer_power.models.rigid_contact import rigid_contact
-from skidsteer_power.numeric import Real, hypot, minimum, where
+from skidsteer_power.numeric import Real, hypot, maximum, minimum, where
 from skidsteer_power.vehicle import GRAVITY_M_S2
 
 if TYPE_CHECKING:
@@ -205,12 +205,16 @@ def steeds_s0(speed: Real, abs_yaw: Real, length: float) -> Real:
     return minimum(speed * abs_yaw * length * STEEDS_S0_SCALE, 0.25 * length)
 
 
-def slip_ratio(side_speed: np.ndarray, rim_speed: np.ndarray) -> np.ndarray:
+def slip_ratio(side_speed: Real, rim_speed: Real) -> Real:
     """Slip of eq. 2.13 [-] for either direction of travel (computed in the side's own direction),
-    from each side's ground speed and rim speed omega r [m/s]; in [-1, 1], NaN for a NaN rim speed."""
-    d = np.where(side_speed < 0, -1.0, 1.0)
+    from each side's ground speed and rim speed omega r [m/s] (floats or arrays); in [-1, 1], NaN
+    for a NaN rim speed. Driving (rim >= v): (rim - v) / rim, 0 at rim = 0; braking: (rim - v) / v,
+    -1 for a side that stands on the ground while its rim turns backwards."""
+    d = where(side_speed < 0, -1.0, 1.0)
     v, rim = side_speed * d, rim_speed * d
-    with np.errstate(invalid='ignore', divide='ignore'):
-        s = np.where(rim >= v, np.where(rim != 0, (rim - v) / rim, 0.0), (rim - v) / v)
-    clipped: np.ndarray = np.clip(s, -1.0, 1.0)
-    return clipped
+    driving, braking = rim >= v, rim < v  # both False for a NaN rim speed
+    den = where(driving, where(rim != 0, rim, 1.0), where(v != 0, v, 1.0))
+    ratio: Real = (rim - v) / den
+    # the cast: mypy binds Real to the 0.0 (float) in both instantiations; the array one needs it
+    s = cast(Real, where(driving & (rim == 0), 0.0, where(braking & (v == 0), -1.0, ratio)))  # type: ignore[redundant-cast]
+    return minimum(maximum(s, -1.0), 1.0)
