@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidsteer_power.drive.controller import DriveController
+from skidsteer_power.drive.controller import DriveController, wheels_to_twist
 from skidsteer_power.errors import InputError
 from skidsteer_power.models.fess import FessSolver, _outputs, residual
 from skidsteer_power.models.fess_problem import FORCE_TOL_N, SLIP_LIMIT, steeds_s0
@@ -139,9 +139,9 @@ class SetpointSolution:
 
 
 def no_slip_motion(setpoints: np.ndarray, drive_radius_m: float, tread_m: float) -> np.ndarray:
-    """(P, 2) (V, w_z) of the set points with no slip (the inverse of the driver's kinematics)."""
-    rim = setpoints * drive_radius_m
-    return np.column_stack([rim.mean(axis=1), (rim[:, 1] - rim[:, 0]) / tread_m])
+    """(P, 2) (V, w_z) of the set points with no slip: the drive layer's inverse kinematics
+    (:func:`~skidsteer_power.drive.controller.wheels_to_twist`) with the vehicle's geometry."""
+    return np.column_stack(wheels_to_twist(setpoints, drive_radius_m, drive_radius_m, tread_m))
 
 
 class SetpointSolver:
