@@ -146,14 +146,14 @@ def build_problem(
     elements per contact: the side loads of eq. 6.12 (m V^2/R = m V |w_z|), the contacts, and the
     straight points' STRAIGHT_YAW (see :func:`~skidsteer_power.models.fess.residual_and_forces`).
     ``path_law``: the slip-path shear law (:class:`Problem`)."""
-    pts = OperatingPoints(
-        speed, np.full_like(speed, np.inf), np.full_like(speed, np.inf), np.abs(yaw), speed.shape
-    )
-    outer, inner = side_loads(vehicle, pts)  # eq. 6.12 with m V^2/R = m V |w_z|
-    left_outer = yaw < 0
-    loads = np.column_stack([np.where(left_outer, outer, inner), np.where(left_outer, inner, outer)])
-    build = rigid_contact if terrain.is_rigid else track_contact if vehicle.is_tracked else wheel_contact
-    contact = build(vehicle, terrain, loads, n)
+    inf = np.full_like(speed, np.inf)  # no turning radius: the loads need only V and |w_z|
+    outer, inner = side_loads(vehicle, OperatingPoints(speed, inf, inf, np.abs(yaw), speed.shape))
+    pair = np.stack((inner, outer), axis=1)  # (P, 2) left, right of a left turn (w_z >= 0)
+    loads = np.where((yaw < 0)[:, None], pair[:, ::-1], pair)  # eq. 6.12: the outer side is heavier
+    if terrain.is_rigid:
+        contact = rigid_contact(vehicle, terrain, loads, n)
+    else:
+        contact = (track_contact if vehicle.is_tracked else wheel_contact)(vehicle, terrain, loads, n)
     straight = yaw == 0
     kin_yaw = np.where(straight, STRAIGHT_YAW, yaw)
     scale = np.where(straight, 1.0 / STRAIGHT_YAW, 1.0)
