@@ -12,7 +12,8 @@ plain arithmetic cannot write for both, a sign and a choice by sign, are here.
 
 from __future__ import annotations
 
-from typing import TypeVar
+import math
+from typing import TypeVar, cast
 
 import numpy as np
 
@@ -44,6 +45,39 @@ def by_sign(x: Real, nonnegative: Real, negative: Real) -> Real:
     if isinstance(x, np.ndarray):
         return np.where(x >= 0.0, nonnegative, negative)
     return nonnegative if x >= 0.0 else negative
+
+
+def where(condition: bool | np.bool_ | np.ndarray, a: Real, b: float | np.ndarray) -> Real:
+    """``a`` where ``condition``, else ``b`` (``np.where`` for an array condition). Both are evaluated:
+    neither may raise for a float (guard a denominator, never rely on the choice)."""
+    if isinstance(condition, np.ndarray):
+        return cast(Real, np.where(condition, a, b))
+    return a if condition else cast(Real, b)
+
+
+def maximum(a: Real, b: float | np.ndarray) -> Real:
+    """The larger of ``a`` and ``b``, NaN if either is NaN (``np.maximum``; Python's ``max`` drops a
+    NaN in second place)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        larger: Real = np.maximum(a, b)
+        return larger
+    return a if (a >= b or a != a) else b
+
+
+def minimum(a: Real, b: float | np.ndarray) -> Real:
+    """The smaller of ``a`` and ``b``, NaN if either is NaN (``np.minimum``)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        smaller: Real = np.minimum(a, b)
+        return smaller
+    return a if (a <= b or a != a) else b
+
+
+def hypot(a: Real, b: Real) -> Real:
+    """sqrt(a^2 + b^2) without overflow: ``math.hypot`` of two floats, ``np.hypot`` otherwise."""
+    if isinstance(a, float) and isinstance(b, float):
+        return math.hypot(a, b)
+    length: Real = np.hypot(a, b)
+    return length
 
 
 def distinct_rows(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

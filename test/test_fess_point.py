@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from skidsteer_power.models import fess, fess_point
+from skidsteer_power.models import fess, fess_point, newton
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -58,10 +58,10 @@ def test_solve3_equals_numpy_and_gives_zero_when_singular() -> None:
     rng = np.random.default_rng(2)
     for _ in range(50):
         a, b = rng.normal(size=(3, 3)), rng.normal(size=3)
-        got = fess_point._solve3(a.tolist(), tuple(b))
+        got = newton.solve3_floats(a.tolist(), tuple(b))
         assert np.allclose(got, np.linalg.solve(a, b), rtol=1e-10, atol=1e-12)
     singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]]
-    assert fess_point._solve3(singular, (1.0, 2.0, 3.0)) == (0.0, 0.0, 0.0)
+    assert newton.solve3_floats(singular, (1.0, 2.0, 3.0)) == (0.0, 0.0, 0.0)
 
 
 def test_a_warm_start_does_a_cold_solve_unless_it_can_save_steps() -> None:

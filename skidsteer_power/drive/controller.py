@@ -56,6 +56,7 @@ __all__ = [
     'limit_rate',
     'set_point_limit_rpm',
     'side_speeds',
+    'wheels_to_twist',
 ]
 
 CeilingMode = Literal['scale', 'clip']
@@ -96,6 +97,17 @@ def side_speeds(linear_m_s: Real, yaw_rate_rad_s: Real, tread_m: float) -> tuple
     floats or arrays (:mod:`skidsteer_power.numeric`): v -+ w B / 2."""
     half = 0.5 * yaw_rate_rad_s * tread_m
     return linear_m_s - half, linear_m_s + half
+
+
+def wheels_to_twist(
+    setpoint: ArrayLike, r_left: float, r_right: float, separation_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(V [m/s], w_z [rad/s]) of wheel speeds (P, 2) (left, right) [rad/s] with wheel radii [m] and
+    separation B [m]: the inverse of :func:`side_speeds` (V = (v_l + v_r) / 2, w_z = (v_r - v_l) / B,
+    v = omega r; with no slip, the body motion)."""
+    sp = np.atleast_2d(np.asarray(setpoint, dtype=float))
+    left, right = sp[:, 0] * r_left, sp[:, 1] * r_right
+    return 0.5 * (left + right), (right - left) / separation_m
 
 
 @dataclass(frozen=True)
@@ -276,10 +288,8 @@ class DriveController:
     def twist_of(self, setpoint: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(V [m/s], w_z [rad/s]) of wheel speeds (P, 2) [rad/s] through the controller's kinematics
         (the inverse of step 3; with no slip, the body motion)."""
-        sp = np.atleast_2d(np.asarray(setpoint, dtype=float))
         r_left, r_right = self.radii_m
-        left, right = sp[:, 0] * r_left, sp[:, 1] * r_right
-        return 0.5 * (left + right), (right - left) / self.separation_m
+        return wheels_to_twist(setpoint, r_left, r_right, self.separation_m)
 
 
 class Ramp:

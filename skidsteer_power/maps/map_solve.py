@@ -7,16 +7,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from skidsteer_power.maps.grid_angles import _angle_coordinate, _angle_from_coordinate
 
-if TYPE_CHECKING:
-    from skidsteer_power.maps.power_map import PowerMap
-
 SLIP_LIMIT = 0.7  # slip ratio from which a node counts as at the traction limit (module doc) [-]
+
+
+class GridMap(Protocol):
+    """What :func:`_check_cells` reads of a :class:`~skidsteer_power.maps.power_map.PowerMap` (named
+    here, so that this module does not import power_map.py, which calls it)."""
+
+    radial: np.ndarray  # (Ns,) command magnitude [m/s]
+    angles: np.ndarray  # (Npsi,) turn angle [rad]
+    length_m: float  # L [m]
+    values: dict[str, np.ndarray]
+    meta: dict[str, Any]
+
+    def query(self, speed: Any, yaw_rate: Any) -> Any: ...
 
 
 def _solve_row(solver: Any, v: np.ndarray, w: np.ndarray, r_min: float) -> dict[str, Any]:
@@ -71,7 +81,7 @@ def _spin_symmetric(
 
 
 def _check_cells(
-    power_map: PowerMap, solver: Any, r_min: float, ring_done: Callable[[int], None] | None = None
+    power_map: GridMap, solver: Any, r_min: float, ring_done: Callable[[int], None] | None = None
 ) -> np.ndarray:
     """The build-time accuracy check (module doc): the relative total-power error [-] of the map at
     the centre of every cell a query could answer unflagged, against FESS solved there (with the

@@ -45,6 +45,7 @@ import numpy as np
 
 from skidsteer_power.cache import atomic_file, default_cache_dir, physics_digest
 from skidsteer_power.drive.controller import controller_for_vehicle
+from skidsteer_power.drive.current import current_limited
 from skidsteer_power.errors import InputError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
@@ -64,7 +65,7 @@ if TYPE_CHECKING:
 
 FIELDS = (
     'speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage',
-    'traction_margin', 'dug_in', 'contact_length',
+    'traction_margin', 'dug_in', 'contact_length', 'shear_path',
 )  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAX_NODES = 200_000
@@ -127,12 +128,14 @@ class SetpointMap:
         self.checked = np.zeros(shape, dtype=bool) if checked is None else np.asarray(checked, dtype=bool)
         if self.checked.shape != shape:
             raise InputError(f'set-point map: checked cells {self.checked.shape} do not match {shape}')
-        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | self.checked
+        # the element-turn (pivot) test belongs to eq. 6.6's chord: not on rigid ground, and a cell
+        # with a corner the slip-path fallback solved (the pivot band on soil) is answered exactly
+        self._pivot_test = not predictor.solver.fess.path_law
+        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
+        fallback = _corner_any(path) if self._pivot_test else np.zeros(shape, dtype=bool)
+        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | fallback | self.checked
         self._cell_exact = self.exact.ravel().tolist()
-        pt = predictor.powertrain
         self._limit = predictor.current_limit_A
-        self._kt = pt.motor.torque_constant_Nm_A
-        self._gear = pt.gear_ratio
 
     def _dug_in(self) -> np.ndarray:
         return np.asarray(self.grid.values[..., FIELDS.index('dug_in')] > 0)
@@ -144,7 +147,8 @@ class SetpointMap:
         yaw = self.grid.values[..., FIELDS.index('yaw_rate')]
         contact = self.grid.values[..., FIELDS.index('contact_length')]
         turn = element_turn_rev(yaw, contact, inner_rim)
-        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in()
+        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
+        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in() & ~path & self._pivot_test
         return pivot
 
     @property
@@ -184,6 +188,7 @@ class SetpointMap:
             sol.traction_margin,
             sol.dug_in.astype(float),
             sol.contact_length,
+            np.asarray(sol.shear_path, dtype=float),
         )
         values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
         unchecked = cls(predictor, mean, diff, values)
@@ -234,21 +239,24 @@ class SetpointMap:
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
         if self._cell_exact[cell]:
             return self._direct(sp_l, sp_r, clamped_sp or off_grid)
-        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact = vals
+        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact, _ = vals
         inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
-        pivot = yaw != 0 and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
+        pivot = (
+            self._pivot_test
+            and yaw != 0
+            and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
+        )
         if right_turn:  # a right turn: the left turn's mirror image
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)
             speed, yaw, t_l, t_r = -speed, -yaw, -t_l, -t_r
         traction = False  # a cell with a dug-in corner is exact (above)
-        t_l, left, over_l = self._side('left', t_l, sp_l)
-        t_r, right, over_r = self._side('right', t_r, sp_r)
+        t_l, i_l, left, over_l = self._side('left', t_l, sp_l)
+        t_r, i_r, right, over_r = self._side('right', t_r, sp_r)
         current = over_l or over_r
         reason = REASON_TRACTION if traction else REASON_PIVOT if pivot else REASON_CURRENT if current else ''
         return SetpointQuery(
-            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin,
-            float(left.current_A), float(right.current_A),
+            sp_l, sp_r, speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, i_l, i_r,
             float(left.electrical_power_W) + float(right.electrical_power_W),
             traction or pivot or current, clamped_sp or off_grid, reason, (left, right),
         )  # fmt: skip
@@ -257,14 +265,14 @@ class SetpointMap:
         """The set-point solve of one pair of set points [rad/s] (an exact cell, module doc), with
         the powertrain of :meth:`query` (the direct path's formulas)."""
         sol = self.predictor.solver.solve(np.array([[sp_l, sp_r]]))
-        t_l, left, over_l = self._side('left', float(sol.torque[0, 0]), sp_l)
-        t_r, right, over_r = self._side('right', float(sol.torque[0, 1]), sp_r)
+        t_l, i_l, left, over_l = self._side('left', float(sol.torque[0, 0]), sp_l)
+        t_r, i_r, right, over_r = self._side('right', float(sol.torque[0, 1]), sp_r)
         current = over_l or over_r
         reason = sol.reason[0] or (REASON_CURRENT if current else '')
         return SetpointQuery(
             sp_l, sp_r, float(sol.speed[0]), float(sol.yaw_rate[0]), t_l, t_r,
             float(sol.slip[0, 0]), float(sol.slip[0, 1]), float(sol.sinkage[0]),
-            float(sol.traction_margin[0]), float(left.current_A), float(right.current_A),
+            float(sol.traction_margin[0]), i_l, i_r,
             float(left.electrical_power_W) + float(right.electrical_power_W),
             bool(sol.limited[0]) or current, clamped, reason, (left, right),
         )  # fmt: skip
@@ -275,18 +283,14 @@ class SetpointMap:
         left, right, clamped = pred.controller.apply_one(v, w, ceiling_rad_s=pred.max_axle_rad_s)
         return (left, right), clamped
 
-    def _side(self, side: str, torque: float, omega: float) -> tuple[float, Any, bool]:
-        """(torque, motor point (:class:`MotorPoint`), over the limit) of one side, the current
-        limit applied (the point's current is then the limit)."""
-        pt = self.predictor.powertrain
-        point: Any = pt.motor_side(side, torque, omega)
-        current = float(point.current_A)
-        if abs(current) <= self._limit:
-            return torque, point, False
-        held = math.copysign(self._limit, current)
-        internal = float(pt.resistance(side).torque(self._gear * omega))
-        torque = self._gear * (held * self._kt - internal)
-        return torque, pt.motor_side(side, torque, omega), True
+    def _side(self, side: str, torque: float, omega: float) -> tuple[float, float, Any, bool]:
+        """(torque [N m], current [A], motor point (:class:`MotorPoint`), over the limit) of one side
+        under the current limit (:func:`~skidsteer_power.drive.current.current_limited`, the direct
+        path's formula, in floats)."""
+        held, current, point, over = current_limited(
+            self.predictor.powertrain, side, torque, omega, self._limit
+        )
+        return float(held), float(current), point, bool(over)
 
 
 def envelope(predictor: CommandPredictor) -> tuple[float, float]:

@@ -34,21 +34,60 @@ that does not move over the ground (w_z y_side = V) makes no rut.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from skidsteer_power.errors import ConvergenceError, InputError
+from skidsteer_power.models import fess_point
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.fess_contact import Contact, track_contact, wheel_contact
 from skidsteer_power.models.fess_contact import _free_wheel_table as _free_wheel_table
-from skidsteer_power.models.fess_steady import reshape_state, to_steady_state
-from skidsteer_power.models.loads import OperatingPoints, side_loads
-from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, NewtonResult
+from skidsteer_power.models.fess_problem import (
+    DEFAULT_ELEMENTS,
+    FORCE_TOL_N,
+    GUESS_FRICTION,
+    MAX_HALVINGS,
+    RETRY_ROUNDS,
+    RIGID_MARGIN_MIN,
+    SIDE_Y_SIGN,
+    SLIP_LIMIT,
+    STEEDS_S0_SCALE,
+    STRAIGHT_YAW,
+    Problem,
+    build_problem,
+    centrifugal,
+    chord_displacement,
+    slip_ratio,
+    steeds_s0,
+)
+from skidsteer_power.models.fess_steady import PointSolution, TwistSolution, reshape_state, to_steady_state
+from skidsteer_power.models.newton import MAX_ITERATIONS, NewtonResult, fd_steps, solve3, trust_scale
 from skidsteer_power.terramechanics.soil import shear_fraction
-from skidsteer_power.vehicle import GRAVITY_M_S2
+
+__all__ = [
+    'DEFAULT_ELEMENTS',
+    'FORCE_TOL_N',
+    'GUESS_FRICTION',
+    'MAX_HALVINGS',
+    'RIGID_MARGIN_MIN',
+    'SIDE_Y_SIGN',
+    'SLIP_LIMIT',
+    'STEEDS_S0_SCALE',
+    'STRAIGHT_YAW',
+    'FessSolver',
+    'PointSolution',
+    'Problem',
+    'TwistSolution',
+    'element_displacement',
+    'element_forces',
+    'initial_guess',
+    'newton',
+    'residual',
+    'residual_and_forces',
+    'slip_ratio',
+    'solve',
+]
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -56,114 +95,10 @@ if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
-GUESS_FRICTION = 0.5  # [-] mu standing in for the unknown mu_t in Steeds' s0 guess (eq. 3.7)
-STEEDS_S0_SCALE = 1.0 / (2.0 * GUESS_FRICTION * GRAVITY_M_S2)  # [s^2/m]: s0 = V |w_z| l x this (eq. 3.7)
-DEFAULT_ELEMENTS = 40  # elements per contact (eq. 6.5); see test_fess_track.py for the n study
-FORCE_TOL_N = TOLERANCE  # stopping rule of section 3.3.1: |each equation of (3.19)| < 0.001 (N, N m)
-MAX_HALVINGS = 12
-RETRY_ROUNDS = 3  # warm-started re-solves of failed points from converged neighbours
-SLIP_LIMIT = 0.95  # |slip| beyond this: the side cannot develop the thrust (no steady state)
-RIGID_MARGIN_MIN = 0.01  # rigid ground: a side within 1 % of mu x its load has no steady state
-STRAIGHT_YAW = 1e-9  # [rad/s] yaw rate at which straight-running points are solved (s0 limit)
-
-SIDE_Y_SIGN = np.array([1.0, -1.0])  # left side at y = +B/2, right side at y = -B/2
-
 
 # --------------------------------------------------------------------------------------------------
 # The residual of eq. 3.18 over a batch of operating points and trial states
 # --------------------------------------------------------------------------------------------------
-
-
-@dataclass
-class Problem:
-    """Everything fixed for a batch of P operating points (forward speed V >= 0)."""
-
-    vehicle: Vehicle
-    terrain: Terrain
-    speed: np.ndarray  # (P,) V >= 0 [m/s]
-    yaw: np.ndarray  # (P,) signed yaw rate [rad/s]; straight points carry STRAIGHT_YAW (see residual)
-    loads: np.ndarray  # (P, 2) left, right [N]
-    contact: Contact
-    radius: float  # drive radius r [m]
-    half_tread: float  # B / 2 [m]
-    lateral_scale: np.ndarray  # (P,) 1, or 1 / STRAIGHT_YAW [s] for straight points
-
-    def take(self, idx: np.ndarray) -> Problem:
-        """The sub-problem of the operating points ``idx``."""
-        return Problem(
-            self.vehicle,
-            self.terrain,
-            self.speed[idx],
-            self.yaw[idx],
-            self.loads[idx],
-            self.contact.take(idx),
-            self.radius,
-            self.half_tread,
-            self.lateral_scale[idx],
-        )
-
-    # fixed per batch and read on every residual call: computed once (cached_property)
-    @cached_property
-    def turn_radius(self) -> np.ndarray:
-        """(P,) signed R = V / w_z [m] (0 when spinning in place)."""
-        radius: np.ndarray = self.speed / self.yaw
-        return radius
-
-    @cached_property
-    def side_speed(self) -> np.ndarray:
-        """(P, 2) ground speed of each side's centreline along x, V - w_z y_side [m/s]."""
-        ground_speed: np.ndarray = self.speed[:, None] - self.yaw[:, None] * SIDE_Y_SIGN * self.half_tread
-        return ground_speed
-
-    @cached_property
-    def rolling(self) -> np.ndarray:
-        """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
-        resistance: np.ndarray = self.contact.resistance * np.sign(self.side_speed)
-        return resistance
-
-    @cached_property
-    def side_y(self) -> np.ndarray:
-        """(2,) lateral position of each side's centreline, +B/2 (left), -B/2 (right) [m]."""
-        return SIDE_Y_SIGN * self.half_tread
-
-    @cached_property
-    def centre_offset(self) -> np.ndarray:
-        """(P, 1, 2, 1, 1) lateral distance of each side's centreline from the turning centre O = (0, R)
-        [m]; R = V / w_z is finite because straight points run at STRAIGHT_YAW, 0 spinning in place."""
-        radius = self.turn_radius[:, None, None, None, None]
-        offset: np.ndarray = self.side_y[None, None, :, None, None] - radius
-        return offset
-
-    @cached_property
-    def half_turn_rate(self) -> np.ndarray:
-        """(P, 1, 2|1, G, N) w_z xi / 2 [m rad/s]: divided by the rim speed |omega| r it is half the
-        angle an element has turned since it touched down (eqs. 6.3, 6.5)."""
-        rate: np.ndarray = (0.5 * self.yaw[:, None, None, None] * self.contact.xi)[:, None]
-        return rate
-
-    @cached_property
-    def element_x(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Each element's x now and at touch-down from the CG [m], forward (omega >= 0) and mirrored:
-        (centre + fwd, centre - fwd, centre + entry, centre - entry), each (P|1, 1, 2|1, G, N|1).
-        :func:`element_displacement` picks per side (the same sums, built once per batch)."""
-        c = self.contact
-        fwd, entry = c.fwd[:, None], c.entry[:, None]
-        return c.centre + fwd, c.centre + -1.0 * fwd, c.centre + entry, c.centre + -1.0 * entry
-
-    @cached_property
-    def centrifugal_terms(self) -> tuple[np.ndarray, ...]:
-        """(P, 1) V, w_z, |V|, |w_z| and -m |V w_z|, -m V w_z [N]: the parts of eq. 3.18 that do not
-        depend on the trial state (:func:`_centrifugal`)."""
-        v, w = self.speed[:, None], self.yaw[:, None]
-        mass = self.vehicle.mass_kg
-        return v, w, np.abs(v), np.abs(w), -mass * np.abs(v * w), -mass * v * w
-
-    @cached_property
-    def omega_ref(self) -> np.ndarray:
-        """(P,) reference wheel speed [rad/s]: the faster side's no-slip speed, at least 1 mm/s / r
-        (scales the Newton steps and their trust region)."""
-        reference: np.ndarray = np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
-        return reference
 
 
 def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -176,21 +111,15 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
-    if problem.terrain.is_rigid:  # friction: the slip path, not eq. 6.6's chord (rigid_contact)
+    if problem.path_law:  # the slip path, not eq. 6.6's chord (rigid_contact module doc)
         return _rigid_displacement(problem, s0, omega, forward)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
     half = problem.half_turn_rate / np.maximum(np.abs(omega) * problem.radius, 1e-12)
-    dy = problem.centre_offset
-    sh, ch = np.sin(half), np.cos(half)
-    twice_sh = 2.0 * sh
-    sin, one_minus_cos = twice_sh * ch, twice_sh * sh
     fwd_plus, fwd_minus, entry_plus, entry_minus = problem.element_x
     xk = np.where(forward, fwd_plus, fwd_minus) - s0  # element now, relative to the turning centre
     xe = np.where(forward, entry_plus, entry_minus) - s0  # where it touched down
-    # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); 1 - cos written as 2 sin^2 (no cancellation)
-    jx = xk - xe + one_minus_cos * xe - dy * sin
-    jy = dy * one_minus_cos + xe * sin
+    jx, jy = chord_displacement(xk - xe, xe, problem.centre_offset, half)  # eq. 6.6
     return jx, jy, xk
 
 
@@ -228,17 +157,6 @@ def element_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, ...]:
     return -scale * jx, -scale * jy, xk
 
 
-def _centrifugal(problem: Problem, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centrifugal force components (x, y) on the CG [N], eq. 3.18: m V^2/R (-sin beta, -cos beta)."""
-    v, w, abs_v, abs_w, force_x, force_y = problem.centrifugal_terms
-    q = np.hypot(v, w * s0)
-    # beta = atan(s0 / R); at q = 0 (V = 0) both forces vanish whatever beta
-    safe = np.where(q > 0, q, 1.0)
-    sin_b = s0 * abs_w / safe
-    cos_b = abs_v / safe
-    return force_x * sin_b, force_y * cos_b
-
-
 def residual(problem: Problem, x: np.ndarray) -> np.ndarray:
     """Equilibrium residuals (P, S, 3) of eq. 3.19 at trial states x (P, S, 3) [N, N, N m]."""
     return residual_and_forces(problem, x)[0]
@@ -256,7 +174,7 @@ def residual_and_forces(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np
     mz_lat = (xk * fy * c.wy[:, None]).sum(axis=(-3, -2, -1))
     net = fx_side - problem.rolling[:, None, :]  # rolling resistance against each side's motion
     s0 = x[..., 0]
-    cfx, cfy = _centrifugal(problem, s0)
+    cfx, cfy = centrifugal(problem.centrifugal_terms, s0)
     out = np.empty((*s0.shape, 3))
     out[..., 0] = net.sum(axis=-1) + cfx  # sum F_x = 0
     e2 = fy_side.sum(axis=-1) + cfy  # sum F_y = 0
@@ -284,40 +202,27 @@ def initial_guess(problem: Problem) -> np.ndarray:
         from skidsteer_power.models.rigid_contact import straight_slip_guess
 
         omega = omega * (1.0 + straight_slip_guess(problem.vehicle, problem.terrain))
-    s0 = problem.speed * np.abs(problem.yaw) * problem.contact.length_scale * STEEDS_S0_SCALE
-    s0 = np.minimum(s0, 0.25 * problem.contact.length_scale)
+    s0 = steeds_s0(problem.speed, np.abs(problem.yaw), problem.contact.length_scale)
     return np.column_stack([s0, omega])
 
 
-def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
-    """Finite-difference steps (P, 3) for the Jacobian of eq. 3.22."""
-    h = np.empty_like(x)
-    h[:, 0] = 1e-7 * problem.contact.length_scale
-    h[:, 1:] = 1e-7 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[:, None])
-    return h
-
-
-def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve the batched 3x3 systems a x = b; x = 0 where a is singular (|det| below 1e-14 of the
-    product of its row norms)."""
-    det = np.linalg.det(a)
-    ok = np.abs(det) > 1e-14 * np.prod(np.linalg.norm(a, axis=2), axis=1)
-    if ok.all():
-        return np.linalg.solve(a, b[..., None])[..., 0]
-    out = np.zeros_like(b)
-    if ok.any():
-        out[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
-    return out
-
-
 def _limit(problem: Problem, idx: np.ndarray, x: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Scale each Newton step so s0 moves < 20 % of the contact span and omega < 50 % (trust region)."""
-    caps = np.empty_like(x)
-    caps[:, 0] = 0.2 * problem.contact.length_scale
-    caps[:, 1:] = 0.5 * np.maximum(np.abs(x[:, 1:]), problem.omega_ref[idx, None])
-    ratio = np.max(np.abs(step) / caps, axis=1)
-    limited: np.ndarray = step / np.maximum(ratio, 1.0)[:, None]
+    """Each Newton step (M, 3) of the points ``idx`` inside the trust region (:func:`~skidsteer_power.
+    models.newton.trust_scale`)."""
+    ref = problem.omega_ref[idx]
+    scale = trust_scale(
+        problem.contact.length_scale, ref, (x[:, 0], x[:, 1], x[:, 2]), (step[:, 0], step[:, 1], step[:, 2])
+    )
+    limited: np.ndarray = step / scale[:, None]
     return limited
+
+
+def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
+    """Finite-difference steps (P, 3) for the Jacobian of eq. 3.22 (:func:`~skidsteer_power.models.
+    newton.fd_steps`)."""
+    h = np.empty_like(x)
+    h[:, 0], h[:, 1], h[:, 2] = fd_steps(problem.contact.length_scale, problem.omega_ref, x[:, 1], x[:, 2])
+    return h
 
 
 _UNKNOWNS = np.arange(3)
@@ -377,7 +282,7 @@ def newton(
         sel = slice(None) if good.all() else good  # all: views, no copies (the common case)
         idx, fg, ng = act[sel], fa[sel], norm[sel]
         jac = (fall[sel, 1:] - fa[sel, None, :]).transpose(0, 2, 1) / h[sel, None, :]
-        step = _solve3(jac, -fg)
+        step = solve3(jac, -fg)
         xi = x[idx]
         step = _limit(problem, idx, xi, step)
         x_prev[idx] = xi
@@ -393,58 +298,6 @@ def newton(
 # --------------------------------------------------------------------------------------------------
 
 
-@dataclass
-class TwistSolution:
-    """FESS steady state over a batch of (V, yaw rate) points, per side (left, right), SI units."""
-
-    speed: np.ndarray  # V [m/s]
-    yaw_rate: np.ndarray  # w_z [rad/s]
-    s0: np.ndarray  # turning-centre offset along x, ahead of the CG [m] (negative in reverse)
-    omega: np.ndarray  # (P, 2) [rad/s]
-    torque: np.ndarray  # (P, 2) drive torque [N m]
-    thrust: np.ndarray  # (P, 2) longitudinal shear force [N]
-    lateral: np.ndarray  # (P, 2) lateral shear force [N]
-    slip: np.ndarray  # (P, 2) [-] eq. 2.13
-    sinkage: np.ndarray  # (P,) largest sinkage [m]
-    traction_margin: np.ndarray  # (P,) [-]
-    converged: np.ndarray  # (P,)
-    residual: np.ndarray  # (P, 3)
-    iterations: np.ndarray  # (P,) Newton steps per point
-
-    @property
-    def power(self) -> np.ndarray:
-        """(P, 2) mechanical power torque * omega [W]."""
-        power: np.ndarray = self.torque * self.omega
-        return power
-
-    @property
-    def state(self) -> np.ndarray:
-        """(P, 3) solver state (s0, omega_left, omega_right), forward-driving frame, for warm starts."""
-        return np.column_stack([self.s0, self.omega])
-
-
-@dataclass
-class PointSolution:
-    """One FESS steady state (left, right sides), SI units; see :meth:`FessSolver.solve_point`."""
-
-    s0: float  # [m]
-    omega: np.ndarray  # (2,) [rad/s]
-    torque: np.ndarray  # (2,) [N m]
-    converged: bool
-    iterations: int
-
-    @property
-    def power(self) -> np.ndarray:
-        """(2,) torque * omega [W]."""
-        power: np.ndarray = self.torque * self.omega
-        return power
-
-    @property
-    def state(self) -> np.ndarray:
-        """(s0, omega_left, omega_right), to warm-start the next call."""
-        return np.array([self.s0, *self.omega])
-
-
 class FessSolver:
     """FESS for one vehicle and terrain, prepared once; :meth:`solve_twist` is the batched solve.
 
@@ -453,30 +306,23 @@ class FessSolver:
     single-point path for on-board use (about 0.3 ms for a track: benchmarks/bench_fess.py).
     """
 
-    def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
+    def __init__(
+        self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS, *, path_law: bool = False
+    ) -> None:
+        """``path_law``: the shear displacement of every element is its slip path along its slip
+        velocity (:func:`~skidsteer_power.models.rigid_contact.slip_path_displacement`) instead of
+        eq. 6.6's chord; always so on rigid ground; on soil the set-point solve's pivot band uses it
+        (:mod:`~skidsteer_power.models.setpoint`)."""
         if not isinstance(n, (int, np.integer)) or n < 2:
             raise InputError(f'number of FESS elements must be an integer >= 2, got {n!r}')
         self.vehicle = vehicle
         self.terrain = terrain
         self.n = int(n)
+        self.path_law = bool(path_law) or terrain.is_rigid
 
     def problem(self, speed: np.ndarray, yaw: np.ndarray) -> Problem:
         """Set up the batch (V >= 0 required here; :meth:`solve_twist` mirrors reverse points)."""
-        veh = self.vehicle
-        pts = OperatingPoints(
-            speed, np.full_like(speed, np.inf), np.full_like(speed, np.inf), np.abs(yaw), speed.shape
-        )
-        outer, inner = side_loads(veh, pts)  # eq. 6.12 with m V^2/R = m V |w_z|
-        left_outer = yaw < 0
-        loads = np.column_stack([np.where(left_outer, outer, inner), np.where(left_outer, inner, outer)])
-        build = track_contact if veh.is_tracked else wheel_contact
-        contact = build(veh, self.terrain, loads, self.n)
-        straight = yaw == 0
-        kin_yaw = np.where(straight, STRAIGHT_YAW, yaw)
-        scale = np.where(straight, 1.0 / STRAIGHT_YAW, 1.0)
-        return Problem(
-            veh, self.terrain, speed, kin_yaw, loads, contact, veh.drive_radius_m, 0.5 * veh.tread_m, scale
-        )
+        return build_problem(self.vehicle, self.terrain, self.n, self.path_law, speed, yaw)
 
     def solve_twist(
         self, speed: ArrayLike, yaw_rate: ArrayLike, *, x0: np.ndarray | None = None, tol: float = FORCE_TOL_N
@@ -515,9 +361,7 @@ class FessSolver:
         :attr:`PointSolution.state` (used where it can save steps: :func:`fess_point._warm_start
         <skidsteer_power.models.fess_point._warm_start>`; elsewhere the same work as a cold solve).
         """
-        from skidsteer_power.models.fess_point import solve_point
-
-        return solve_point(self, speed, yaw_rate, x0, tol)
+        return fess_point.solve_point(self, speed, yaw_rate, x0, tol)
 
     @cached_property
     def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -580,7 +424,7 @@ def _outputs(prob: Problem, result: NewtonResult, standing: np.ndarray) -> Twist
     with np.errstate(invalid='ignore', divide='ignore'):
         margin = 1.0 - np.max(np.abs(thrust) / capacity, axis=1)  # 1 - required / available thrust
     omega = x[:, 1:]
-    slip = _slip(prob.side_speed, omega * prob.radius)
+    slip = slip_ratio(prob.side_speed, omega * prob.radius)
     rest = standing[:, None]
     omega, torque, thrust, lateral, slip = (
         np.where(rest, 0.0, a) for a in (omega, torque, thrust, lateral, slip)
@@ -611,15 +455,6 @@ def _outputs(prob: Problem, result: NewtonResult, standing: np.ndarray) -> Twist
         residual=result.residual,
         iterations=result.iterations,
     )
-
-
-def _slip(side_speed: np.ndarray, rim_speed: np.ndarray) -> np.ndarray:
-    """Slip of eq. 2.13 for either direction of travel (computed in the side's own direction)."""
-    d = np.where(side_speed < 0, -1.0, 1.0)
-    v, rim = side_speed * d, rim_speed * d
-    with np.errstate(invalid='ignore', divide='ignore'):
-        s = np.where(rim >= v, np.where(rim != 0, (rim - v) / rim, 0.0), (rim - v) / v)
-    return np.clip(s, -1.0, 1.0)
 
 
 def _mirror_reverse(sol: TwistSolution, reverse: np.ndarray, v: np.ndarray, w: np.ndarray) -> TwistSolution:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidsteer_power.errors import InputError
 from skidsteer_power.models.newton import newton_solve
 from skidsteer_power.terramechanics.track import compaction_resistance_unchecked, track_sinkage_unchecked
 from skidsteer_power.terramechanics.wheel import (
@@ -87,11 +88,9 @@ def _track_elements(length: float, width: float, n: int) -> tuple[np.ndarray, np
 
 def track_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
     """Contact of two tracks with uniform pressure L_side / (b l) (section 6.4); loads (P, 2) [N].
-    Rigid ground: :func:`~skidsteer_power.models.rigid_contact.rigid_contact`."""
+    Rigid ground has its own contact (:func:`~skidsteer_power.models.rigid_contact.rigid_contact`)."""
     if terrain.is_rigid:
-        from skidsteer_power.models.rigid_contact import rigid_contact
-
-        return rigid_contact(vehicle, terrain, loads, n)
+        raise InputError(f'{terrain.name!r} is rigid ground: its contact is rigid_contact.rigid_contact')
     tracks = vehicle.tracks()
     length, width = float(tracks.track_length_m), float(tracks.track_width_m)
     fwd, area = _track_elements(length, width, n)
@@ -155,11 +154,9 @@ def _free_wheel_table(
 
 def wheel_contact(vehicle: Vehicle, terrain: Terrain, loads: np.ndarray, n: int) -> Contact:
     """Flattened wheel contacts with quadratic normal stress (eqs. 6.8-6.11); side loads (P, 2) [N].
-    Rigid ground: :func:`~skidsteer_power.models.rigid_contact.rigid_contact`."""
+    Rigid ground has its own contact (:func:`~skidsteer_power.models.rigid_contact.rigid_contact`)."""
     if terrain.is_rigid:
-        from skidsteer_power.models.rigid_contact import rigid_contact
-
-        return rigid_contact(vehicle, terrain, loads, n)
+        raise InputError(f'{terrain.name!r} is rigid ground: its contact is rigid_contact.rigid_contact')
     wheels = vehicle.wheels()
     r, b = float(wheels.wheel_radius_m), float(wheels.wheel_width_m)
     per_side = vehicle.wheels_per_side

@@ -19,28 +19,30 @@ rate of eq. 6.3, strength x area weights) is built once per command.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.models.fess import (
+from skidsteer_power.models.fess_problem import (
     FORCE_TOL_N,
-    MAX_HALVINGS,
     SLIP_LIMIT,
-    STEEDS_S0_SCALE,
-    STRAIGHT_YAW,
-    PointSolution,
     Problem,
+    build_problem,
+    centrifugal,
+    chord_displacement,
+    slip_ratio,
+    steeds_s0,
 )
-from skidsteer_power.models.fess_contact import track_contact, wheel_contact
-from skidsteer_power.models.loads import OperatingPoints, side_loads
-from skidsteer_power.models.newton import MAX_ITERATIONS
+from skidsteer_power.models.fess_steady import PointSolution
+from skidsteer_power.models.newton import MAX_HALVINGS, MAX_ITERATIONS, fd_steps, solve3_floats, trust_scale
 from skidsteer_power.models.rigid_contact import slip_path_displacement
+from skidsteer_power.numeric import sign
 from skidsteer_power.terramechanics.soil import shear_fraction_magnitude
 
 if TYPE_CHECKING:
-    from skidsteer_power.models.fess import FessSolver
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 STALL_ITERATIONS = 8  # newton_point: steps without STALL_GAIN progress before it gives up
 STALL_GAIN = 1e-2  # relative decrease of the largest residual that counts as progress
@@ -48,6 +50,19 @@ WARM_MARGIN = 2.0  # _pick_start: a warm guess's scaled residual must be this mu
 TIGHT_RATIO = 0.6  # _warm_start: a turn whose inner / outer side speed is below this is tight
 
 State = tuple[float, float, float]  # (s0 [m], omega_left, omega_right [rad/s]) or residuals [N, N, N m]
+
+
+class Solver(Protocol):
+    """What the one-point path needs of :class:`~skidsteer_power.models.fess.FessSolver` (named
+    here, so that this module does not import fess.py, which calls it)."""
+
+    vehicle: Vehicle
+    terrain: Terrain
+    n: int
+    path_law: bool
+
+    @property
+    def straight_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
 class PointKernel:
@@ -90,7 +105,7 @@ class PointKernel:
         self.side_speed = (v - w * half_tread, v + w * half_tread)  # V - w_z y_side [m/s]
         resistance_l, resistance_r = c.resistance[0].tolist()
         # compaction resistance against each side's motion over the ground [N]
-        self.rolling = (resistance_l * _sign(self.side_speed[0]), resistance_r * _sign(self.side_speed[1]))
+        self.rolling = (resistance_l * sign(self.side_speed[0]), resistance_r * sign(self.side_speed[1]))
         turn_radius = v / w  # finite: straight points run at STRAIGHT_YAW
         self._offset = np.array(
             [[[half_tread - turn_radius]], [[-half_tread - turn_radius]]]
@@ -98,7 +113,7 @@ class PointKernel:
         mass = float(problem.vehicle.mass_kg)
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
-        self.rigid = problem.terrain.is_rigid
+        self.rigid = problem.path_law
         self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
@@ -135,19 +150,12 @@ class PointKernel:
         # half the angle an element has turned since touch-down (eq. 6.3): w_z t / 2 with the time
         # in contact t = xi / (|omega| r) (eq. 6.5)
         half = self._half_rate / trial[1]
-        sh = np.sin(half)
-        twice_sh = 2.0 * sh
-        sin = twice_sh * np.cos(half)
-        one_minus_cos = twice_sh * sh  # 1 - cos written as 2 sin^2 (no cancellation)
         xe = entry - trial[0]  # where the element touched down, relative to the turning centre
         if self.rigid:  # friction: the slip path, not eq. 6.6's chord (rigid_contact module doc)
             along = np.array(omega).reshape(2, k, 1) * -r + np.array(self.side_speed).reshape(2, 1, 1)
             jx, jy = slip_path_displacement(travel + xe, xe, along, self._yaw, trial[1])
-        else:
-            dy = self._offset
-            # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); x_k - x_e does not depend on s0
-            jx = travel + one_minus_cos * xe - dy * sin
-            jy = dy * one_minus_cos + xe * sin
+        else:  # eq. 6.6; x_k - x_e (travel) does not depend on s0
+            jx, jy = chord_displacement(travel, xe, self._offset, half)
         if self.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement
             jx *= self.longitudinal
         j = np.hypot(jx, jy)
@@ -160,11 +168,8 @@ class PointKernel:
         return [fx, fy, mz]
 
     def centrifugal(self, s0: float) -> tuple[float, float]:
-        """:func:`~skidsteer_power.models.fess._centrifugal` in floats: (x, y) force on the CG [N]."""
-        v, w, abs_v, abs_w, force_x, force_y = self._centrifugal_terms
-        q = math.hypot(v, w * s0)
-        safe = q if q > 0 else 1.0  # at q = 0 (V = 0) both forces vanish whatever beta
-        return force_x * (s0 * abs_w / safe), force_y * (abs_v / safe)
+        """:func:`~skidsteer_power.models.fess_problem.centrifugal` in floats: (x, y) force on the CG [N]."""
+        return centrifugal(self._centrifugal_terms, s0)
 
     def combine(
         self,
@@ -247,7 +252,7 @@ def newton_point(
     best, best_at = math.inf, 0
     f: State = (math.nan, math.nan, math.nan)
     for iteration in range(1, MAX_ITERATIONS + 1):
-        h = (1e-7 * length, 1e-7 * max(abs(x[1]), omega_ref), 1e-7 * max(abs(x[2]), omega_ref))
+        h = fd_steps(length, omega_ref, x[1], x[2])
         if iteration == 1 and alternatives is not None and alternatives.size:
             x, h, fall = _pick_start(kern, x, h, alternatives)
         else:
@@ -269,7 +274,9 @@ def newton_point(
             continue
         # eq. 3.22: jac[i][k] = (F_i(x + h_k e_k) - F_i(x)) / h_k
         jac = [[(fall[k + 1][i] - f[i]) / h[k] for k in range(3)] for i in range(3)]
-        step = _limit_point(length, omega_ref, x, _solve3(jac, (-f[0], -f[1], -f[2])))
+        step = solve3_floats(jac, (-f[0], -f[1], -f[2]))
+        scale = trust_scale(length, omega_ref, x, step)
+        step = (step[0] / scale, step[1] / scale, step[2] / scale)
         x_prev, norm_prev, step_prev, halvings = x, norm, step, 0
         x = (x[0] + step[0], x[1] + step[1], x[2] + step[2])
     return np.array(x), np.array(f), False, MAX_ITERATIONS
@@ -281,41 +288,6 @@ def _max_abs(f: State) -> float:
     if not (a < math.inf and b < math.inf and c < math.inf):
         return math.inf
     return max(a, b, c)
-
-
-def _solve3(a: list[list[float]], b: State) -> State:
-    """x with a x = b for one 3x3 system in floats: Gaussian elimination with partial pivoting (the
-    LU of LAPACK's gesv, which np.linalg.solve calls; about 2 us against its 5-10 us here). A zero
-    pivot (singular) gives 0, as :func:`~skidsteer_power.models.fess._solve3`; NaN propagates."""
-    m = [[a[i][0], a[i][1], a[i][2], b[i]] for i in range(3)]
-    for col in range(3):
-        pivot = max(range(col, 3), key=lambda i: abs(m[i][col]))
-        if m[pivot][col] == 0.0:
-            return (0.0, 0.0, 0.0)
-        m[col], m[pivot] = m[pivot], m[col]
-        top = m[col]
-        for i in range(col + 1, 3):
-            row = m[i]
-            factor = row[col] / top[col]
-            for c in range(col + 1, 4):
-                row[c] -= factor * top[c]
-    x2 = m[2][3] / m[2][2]
-    x1 = (m[1][3] - m[1][2] * x2) / m[1][1]
-    x0 = (m[0][3] - m[0][1] * x1 - m[0][2] * x2) / m[0][0]
-    return (x0, x1, x2)
-
-
-def _limit_point(length: float, omega_ref: float, x: State, step: State) -> State:
-    """:func:`~skidsteer_power.models.fess._limit` (the trust region) for one point, in floats: each
-    step scaled so s0 moves < 20 % of the contact span and omega < 50 %."""
-    ratios = (
-        abs(step[0]) / (0.2 * length),
-        abs(step[1]) / (0.5 * max(abs(x[1]), omega_ref)),
-        abs(step[2]) / (0.5 * max(abs(x[2]), omega_ref)),
-    )
-    ratio = math.nan if any(r != r for r in ratios) else max(ratios)  # NaN propagates, as np.max
-    scale = max(ratio, 1.0)
-    return (step[0] / scale, step[1] / scale, step[2] / scale)
 
 
 def warm_alternatives(cold: np.ndarray, warm: np.ndarray) -> np.ndarray:
@@ -372,7 +344,7 @@ def _pick_start(
         return x, h, fall
     start = alts[chosen]
     omega_ref = kernel.omega_ref
-    steps = (h[0], 1e-7 * max(abs(start[1]), omega_ref), 1e-7 * max(abs(start[2]), omega_ref))
+    steps = fd_steps(kernel.length, omega_ref, start[1], start[2])
     return start, steps, kernel.perturbed(start, steps)
 
 
@@ -384,44 +356,20 @@ def _scaled_norm(f: State, scale: State) -> float:
     return max(a, b, c)
 
 
-def _sign(value: float) -> float:
-    """np.sign for one float (0 at 0)."""
-    return 1.0 if value > 0 else (-1.0 if value < 0 else 0.0)
-
-
 # --------------------------------------------------------------------------------------------------
 # The one-point solve: FessSolver.solve_point
 # --------------------------------------------------------------------------------------------------
 
-_INF = np.array([math.inf])
-_INF.flags.writeable = False
 
-
-def point_problem(solver: FessSolver, v: float, w: float) -> Problem:
+def point_problem(solver: Solver, v: float, w: float) -> Problem:
     """:meth:`FessSolver.problem <skidsteer_power.models.fess.FessSolver.problem>` for ONE point
-    (V >= 0 [m/s], w_z [rad/s]): the same arrays, the per-point choices made in floats."""
-    veh = solver.vehicle
-    points = OperatingPoints(np.array([v]), _INF, _INF, np.array([abs(w)]), (1,))
-    outer, inner = side_loads(veh, points)  # eq. 6.12 with m V^2/R = m V |w_z|
-    load_o, load_i = outer.item(), inner.item()
-    loads = np.array([[load_o, load_i] if w < 0 else [load_i, load_o]])  # left outer if w_z < 0
-    build = track_contact if veh.is_tracked else wheel_contact
-    contact = build(veh, solver.terrain, loads, solver.n)
-    straight = w == 0
-    return Problem(
-        veh,
-        solver.terrain,
-        points.speed,
-        np.array([STRAIGHT_YAW if straight else w]),
-        loads,
-        contact,
-        veh.drive_radius_m,
-        0.5 * veh.tread_m,
-        np.array([1.0 / STRAIGHT_YAW if straight else 1.0]),
+    (V >= 0 [m/s], w_z [rad/s]): :func:`~skidsteer_power.models.fess_problem.build_problem` with P = 1."""
+    return build_problem(
+        solver.vehicle, solver.terrain, solver.n, solver.path_law, np.array([v]), np.array([w])
     )
 
 
-def first_guess(solver: FessSolver, kernel: PointKernel) -> State:
+def first_guess(solver: Solver, kernel: PointKernel) -> State:
     """(s0, omega_left, omega_right) to start the point's Newton from: no-slip side speeds (eq.
     3.21) raised by the straight-running slip at this speed, and s0 of straight running faded by
     V^2 / (V^2 + (w_z l / 2)^2) towards 0 for a spin (s0 = 0 by symmetry), both from
@@ -434,7 +382,7 @@ def first_guess(solver: FessSolver, kernel: PointKernel) -> State:
     omega_l, omega_r = kernel.side_speed[0] / r, kernel.side_speed[1] / r
     speeds, s0_table, slip_table = solver.straight_table
     if speeds.size < 2:
-        return (min(v * abs_w * length * STEEDS_S0_SCALE, 0.25 * length), omega_l, omega_r)
+        return (steeds_s0(v, abs_w, length), omega_l, omega_r)
     half_span = 0.5 * length * w
     fade = v * v / (v * v + half_span * half_span) if v != 0 else 0.0
     raise_by = 1.0 - min(float(np.interp(v, speeds, slip_table)), 0.9)
@@ -442,7 +390,7 @@ def first_guess(solver: FessSolver, kernel: PointKernel) -> State:
 
 
 def solve_point(
-    solver: FessSolver, speed: float, yaw_rate: float, x0: np.ndarray | None, tol: float
+    solver: Solver, speed: float, yaw_rate: float, x0: np.ndarray | None, tol: float
 ) -> PointSolution:
     """:meth:`FessSolver.solve_point <skidsteer_power.models.fess.FessSolver.solve_point>`: one
     operating point (V [m/s], w_z [rad/s]) on the lean path."""
@@ -462,8 +410,8 @@ def solve_point(
     s0, omega_l, omega_r = x.tolist()
     torque = kernel.torque((s0, omega_l, omega_r))
     r = kernel.radius
-    slips = (_slip(kernel.side_speed[0], omega_l * r), _slip(kernel.side_speed[1], omega_r * r))
-    physical = all(abs(s) <= SLIP_LIMIT for s in slips)  # NaN slip: not physical
+    slips = (slip_ratio(kernel.side_speed[0], omega_l * r), slip_ratio(kernel.side_speed[1], omega_r * r))
+    physical = all(abs(s) <= SLIP_LIMIT for s in slips)  # NaN slip: not physical (eq. 2.13)
     ok = converged and physical and bool((problem.loads > 0).all())
     return PointSolution(s0 * flip, x[1:] * flip, torque * flip, ok, iterations)
 
@@ -491,17 +439,3 @@ def _warm_start(kernel: PointKernel, cold: np.ndarray, warm: np.ndarray) -> np.n
     ):
         return None
     return warm_alternatives(cold, warm)
-
-
-def _slip(side_speed: float, rim_speed: float) -> float:
-    """:func:`~skidsteer_power.models.fess._slip` (eq. 2.13 in the side's own direction) for one
-    side in floats."""
-    d = -1.0 if side_speed < 0 else 1.0
-    v, rim = side_speed * d, rim_speed * d
-    if rim >= v:
-        s = (rim - v) / rim if rim != 0 else 0.0
-    elif v != 0:
-        s = (rim - v) / v
-    else:  # rim NaN
-        s = math.nan
-    return min(max(s, -1.0), 1.0) if s == s else s

@@ -1,19 +1,69 @@
-"""FESS results as the models' common :class:`~skidsteer_power.models.base.SteadyState`: left / right
-sides of a :class:`~skidsteer_power.models.fess.TwistSolution` turned into outer / inner (split out of
-``fess.py``, which holds the residual and the solver)."""
+"""FESS's result types (:class:`TwistSolution` of a batch, :class:`PointSolution` of one point) and
+the batch as the models' common :class:`~skidsteer_power.models.base.SteadyState`: left / right sides
+turned into outer / inner (split out of ``fess.py``, which holds the residual and the solver; this
+module imports neither FESS kernel, so both can import it)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import numpy as np
 
 from skidsteer_power.models.base import SteadyState
 
-if TYPE_CHECKING:
-    from skidsteer_power.models.fess import TwistSolution
+LEFT, RIGHT = 0, 1  # side indices of a TwistSolution's (n, 2) arrays
 
-LEFT, RIGHT = 0, 1  # side indices of a TwistSolution's (n, 2) arrays (fess.py imports them)
+
+@dataclass
+class TwistSolution:
+    """FESS steady state over a batch of (V, yaw rate) points, per side (left, right), SI units."""
+
+    speed: np.ndarray  # V [m/s]
+    yaw_rate: np.ndarray  # w_z [rad/s]
+    s0: np.ndarray  # turning-centre offset along x, ahead of the CG [m] (negative in reverse)
+    omega: np.ndarray  # (P, 2) [rad/s]
+    torque: np.ndarray  # (P, 2) drive torque [N m]
+    thrust: np.ndarray  # (P, 2) longitudinal shear force [N]
+    lateral: np.ndarray  # (P, 2) lateral shear force [N]
+    slip: np.ndarray  # (P, 2) [-] eq. 2.13
+    sinkage: np.ndarray  # (P,) largest sinkage [m]
+    traction_margin: np.ndarray  # (P,) [-]
+    converged: np.ndarray  # (P,)
+    residual: np.ndarray  # (P, 3)
+    iterations: np.ndarray  # (P,) Newton steps per point
+
+    @property
+    def power(self) -> np.ndarray:
+        """(P, 2) mechanical power torque * omega [W]."""
+        power: np.ndarray = self.torque * self.omega
+        return power
+
+    @property
+    def state(self) -> np.ndarray:
+        """(P, 3) solver state (s0, omega_left, omega_right), forward-driving frame, for warm starts."""
+        return np.column_stack([self.s0, self.omega])
+
+
+@dataclass
+class PointSolution:
+    """One FESS steady state (left, right sides), SI units; see :meth:`FessSolver.solve_point`."""
+
+    s0: float  # [m]
+    omega: np.ndarray  # (2,) [rad/s]
+    torque: np.ndarray  # (2,) [N m]
+    converged: bool
+    iterations: int
+
+    @property
+    def power(self) -> np.ndarray:
+        """(2,) torque * omega [W]."""
+        power: np.ndarray = self.torque * self.omega
+        return power
+
+    @property
+    def state(self) -> np.ndarray:
+        """(s0, omega_left, omega_right), to warm-start the next call."""
+        return np.array([self.s0, *self.omega])
 
 
 def to_steady_state(sol: TwistSolution, turn_radius: np.ndarray, solve_time: float) -> SteadyState:

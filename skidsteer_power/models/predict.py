@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from skidsteer_power.drive.controller import DriveController, controller_for_vehicle
+from skidsteer_power.drive.current import current_limited
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.setpoint import SetpointSolution, SetpointSolver
 from skidsteer_power.powertrain.battery import Battery
@@ -247,24 +248,15 @@ class CommandPredictor:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Axle torque (P, 2) [N m] at axle speeds (P, 2) [rad/s] through the powertrain, with the
         current limit: (torque, current [A], battery power (P,) [W], over the limit (P,))."""
-        pt = self.powertrain
-        limit = self.current_limit_A
         torque = torque.copy()
         current = np.empty_like(torque)
         power = np.zeros(len(torque))
         over = np.zeros(len(torque), dtype=bool)
         for k, side in enumerate(SIDES):
-            point = pt.motor_side(side, torque[:, k], omega[:, k])
-            i = np.asarray(point.current_A, dtype=float)
-            high = np.abs(i) > limit
-            if np.any(high):  # the amplifier holds the current at its limit: that torque, no more
-                i_lim = np.sign(i) * limit
-                motor_torque = i_lim * pt.motor.torque_constant_Nm_A
-                internal = np.asarray(pt.resistance(side).torque(pt.gear_ratio * omega[:, k]), dtype=float)
-                torque[:, k] = np.where(high, pt.gear_ratio * (motor_torque - internal), torque[:, k])
-                point = pt.motor_side(side, torque[:, k], omega[:, k])
-                i = np.where(high, i_lim, np.asarray(point.current_A, dtype=float))
-            current[:, k] = i
+            held, i, point, high = current_limited(
+                self.powertrain, side, torque[:, k], omega[:, k], self.current_limit_A
+            )
+            torque[:, k], current[:, k] = held, i
             power += np.asarray(point.electrical_power_W, dtype=float)
             over |= high
         return torque, current, power, over
