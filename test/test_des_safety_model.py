@@ -18,7 +18,8 @@ rules after every poll period:
 3. one side's fault (link lost, poller exception) -> both sides zero within 100 ms, as long as the
    fault lasts (an amplifier error word: within the status read period plus one poll); the time
    counts while that side's poller takes its turns (a hung poller cannot see a fault on its own
-   line: rule 5 covers that side's faults then);
+   line: rule 5 covers that side's faults then), for an error word while it reaches the amplifier
+   (not cut off, not still reconnecting after a repair);
 4. a signal (the node's stop path: shutting down, then every poller's stop) -> every reachable
    amplifier at zero and disabled;
 5. a hung poller (its thread stops taking turns, as if stuck in an exchange) -> the other side at
@@ -102,8 +103,8 @@ class DriverModel(RuleBasedStateMachine):
         self.steps = 0
         self.stopped = False
         self.hung_at: dict[str, float] = {}  # a poller that stopped taking turns, since
-        # rule 3: per fault (kind, side), the time its side's poller has been free to take turns
-        # since it began [s]: it does not grow while that poller hangs (it cannot see the fault)
+        # rule 3: per fault (kind, side), the time its side's poller has been free to see it since it
+        # began [s]: not while that poller hangs; for an error word, only while it reaches the amplifier
         self.fault_age: dict[tuple[str, str], float] = {}
         self.inactive = False  # deactivated (lifecycle)
 
@@ -119,9 +120,11 @@ class DriverModel(RuleBasedStateMachine):
         """One poll period: each poller takes its turn when due, then the rules are checked."""
         self.clock.now += POLL_S
         faults = [('link', s) for s in self.link_fault_at] + [('poller', s) for s in self.poller_fault_at]
-        for key in faults + [('error', s) for s in self.error_at]:
-            if key[1] not in self.hung_at:
-                self.fault_age[key] = self.fault_age.get(key, 0.0) + POLL_S
+        faults = [key for key in faults if key[1] not in self.hung_at]
+        reachable = self._reachable()  # an error word is read only from an amplifier the poller reaches
+        faults += [('error', s) for s in self.error_at if s in reachable]
+        for key in faults:
+            self.fault_age[key] = self.fault_age.get(key, 0.0) + POLL_S
         for side, poller in self.pollers.items():
             if side in self.hung_at:
                 continue  # stuck: it neither sends nor reads
@@ -311,6 +314,9 @@ class DriverModel(RuleBasedStateMachine):
         self.link_fault_at.clear()
         self.error_at.clear()
         self._tick()
+        # as des_driver's ~/clear_faults: a side its request did not reach is not cleared later (an
+        # error word raised meanwhile would otherwise be cleared behind the caller's back)
+        self.command.withdraw_clear_requests()
 
     @precondition(lambda self: not self.stopped and self.steps >= SIGNAL_AFTER)
     @rule()

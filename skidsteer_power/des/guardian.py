@@ -440,10 +440,10 @@ class Guardian:
         lost = [s.name for s in self.sides if s.real < 0]
         return f'port lost: {", ".join(lost)}' if lost else ''
 
-    def _step_feed(self, now: float) -> None:
+    def _step_feed(self, now: float, hold: str = '') -> None:
         if self.feed is not None:
             serials = {s.name: s.serial for s in self.sides if s.serial is not None and s.real >= 0}
-            self.feed.step(now, serials, self.feed_hold(now))
+            self.feed.step(now, serials, hold or self.feed_hold(now))
 
     def run(self) -> int:
         """Forward, watch, stop; returns the exit code (0: every side stopped at the end, 1: not)."""
@@ -563,7 +563,7 @@ class Guardian:
         started = time.monotonic()
         first = not self.latched
         self.latched = True
-        self._step_feed(started)  # held before the stop frames (which may take up to STOP_DEADLINE_S)
+        self._step_feed(started, f'tripped: {reason}')  # held before the stop (up to STOP_DEADLINE_S)
         if first:
             self.trips += 1
         results = self._stop(started + STOP_DEADLINE_S, only_unstopped=not first)
