@@ -103,16 +103,18 @@ def test_feed_changes_the_line_at_a_fixed_rate_and_holds_it(pair: SimulatedPair)
             now += step
         assert [t - 100.0 for t, _ in levels] == [0.0, 0.0625, 0.125, 0.1875]
         assert [lv for _, lv in levels] == [False, True, False, True]  # open raised DTR: first change low
-        assert feed.running and feed.changes == 4 and feed.last_change_s == 100.1875
+        assert feed.changes == 4 and feed.last_change_s == 100.1875
+        assert bool(feed.running)
         held_at = now
         for _ in range(40):  # 0.625 s held: nothing moves
             turn('no fresh command')
             now += step
-        assert len(levels) == 4 and not feed.running and feed.held_s == held_at
+        assert len(levels) == 4 and feed.held_s == held_at
+        assert not feed.running
         assert 'held (no fresh command)' in log[-1] and 'last change at t=100.187500 s' in log[-1]
         resumed = now
         turn()
-        assert levels[-1] == (resumed, False) and feed.running  # at once
+        assert levels[-1] == (resumed, False) and bool(feed.running)  # at once
         now += 3.5 * period  # a late turn (a loaded machine): one change, the next a period later
         turn()
         assert levels[-1] == (now, True)
@@ -216,13 +218,18 @@ def test_no_feed_is_the_default_and_changes_nothing(pair: SimulatedPair, tmp_pat
     """Without ``--feed`` (guardian_feed none, the default): no feed line, HUPCL as it was, and the
     heartbeat never asks the driver (``driving`` is not called)."""
     asked: list[int] = []
+
+    def driving() -> bool:
+        asked.append(1)
+        return True
+
     log_path = tmp_path / 'guardian.log'
     _set_hupcl(pair)
     with open(log_path, 'w') as log:
         client = GuardianClient(
             {'left': pair.left.port, 'right': pair.right.port},
             stderr=log.fileno(),
-            driving=lambda: bool(asked.append(1)),
+            driving=driving,
         )
         client.start()
     try:
