@@ -339,14 +339,20 @@ GUARDIAN_TRIALS = 3
 GUARDIAN_GOAL_S = 0.6  # issue 34: a motor turning more than 0.6 s after a fault is critical
 
 
-def guardian_signal_to_zero(signame: str, trials: int = GUARDIAN_TRIALS) -> list[tuple[float, float]]:
+def guardian_signal_to_zero(
+    signame: str, trials: int = GUARDIAN_TRIALS, feed: str = 'none'
+) -> list[tuple[float, ...]]:
     """Per trial: (seconds from sending ``signame`` to a ``des_driver`` process (autostart, default
     timing, guardian on, cmd_timeout_s 5 s so that its own watchdog cannot be what stops them) until
     both amplifiers hold zero speed, until both are disabled). NaN: not within 5 s. Arrival times from
-    the simulator's command log; the driver drives the simulated pair at 0.2 m/s from cmd_vel."""
+    the simulator's command log; the driver drives the simulated pair at 0.2 m/s from cmd_vel. With
+    ``feed`` (``guardian_feed`` dtr or rts) two more: seconds from the signal until the guardian held
+    the watchdog feed, and until its last change (negative: before the signal), from its log lines
+    (stamped on the system-wide monotonic clock; NaN: no such line)."""
     import os
     import resource
     import signal
+    import tempfile
     import uuid
 
     import rclpy
@@ -367,16 +373,19 @@ def guardian_signal_to_zero(signame: str, trials: int = GUARDIAN_TRIALS) -> list
             with SimulatedPair(38400) as pair:
                 sims = (pair.left, pair.right)
                 ns = f'/b{uuid.uuid4().hex[:8]}'
-                params = {
+                params: dict[str, object] = {
                     'left_port': pair.left.port,
                     'right_port': pair.right.port,
                     'autostart': 'true',
                     'cmd_timeout_s': 5.0,
                 }
+                if feed != 'none':
+                    params['guardian_feed'] = feed
+                log = tempfile.TemporaryFile()  # noqa: SIM115  # closed below, read for the feed's lines
                 proc = subprocess.Popen(
                     node_command('skidsteer_power.nodes.des_driver', ns, params),
                     env=os.environ.copy(),
-                    stderr=subprocess.DEVNULL,
+                    stderr=log,
                 )
                 publisher = node.create_publisher(Twist, f'{ns}/cmd_vel', 10)
                 msg = Twist()
@@ -400,11 +409,26 @@ def guardian_signal_to_zero(signame: str, trials: int = GUARDIAN_TRIALS) -> list
                     node.destroy_publisher(publisher)
                 zero = max(_zeroed_at(sim, t0) for sim in sims) - t0
                 off = max(_disabled_at(sim, t0) for sim in sims) - t0
-                results.append((zero, off))
                 time.sleep(0.5)  # the guardian sees the EOF of the killed process and ends
+                log.seek(0)
+                held = _feed_held_after(log.read().decode(errors='replace'), t0) if feed != 'none' else ()
+                log.close()
+                results.append((zero, off, *held))
     finally:
         rclpy.utilities.try_shutdown(context=context)
     return results
+
+
+def _feed_held_after(text: str, t0: float) -> tuple[float, float]:
+    """(held - t0, last change - t0) [s] of the guardian's first 'held' line at or after ``t0`` in
+    ``text`` (its log; ``WatchdogFeed.step``), NaN for both if there is none."""
+    import re
+
+    pattern = r'held \(.*?\) at t=([0-9.]+) s; last change at t=([-0-9.inf]+) s'
+    for at, last in re.findall(pattern, text):
+        if float(at) >= t0:
+            return float(at) - t0, float(last) - t0
+    return math.nan, math.nan
 
 
 def _disabled_at(sim: SimulatedDes, after: float) -> float:
@@ -454,8 +478,8 @@ def run_guardian(report: Report) -> None:
     the proxy costs the poll rate."""
     for signame in GUARDIAN_SIGNALS:
         trials = guardian_signal_to_zero(signame)
-        zeros = [z for z, _ in trials]
-        offs = [o for _, o in trials]
+        zeros = [t[0] for t in trials]
+        offs = [t[1] for t in trials]
         failed = sum(math.isnan(v) for v in zeros + offs)
         worst = max(zeros) if not failed else math.nan
         report.figure(
@@ -467,6 +491,7 @@ def run_guardian(report: Report) -> None:
             note=f'p50 {1000 * _p50_max(zeros)[0]:.0f} ms; both disabled: max {1000 * _p50_max(offs)[1]:.0f} '
             'ms' + (f'; {failed} trial(s) not stopped within 5 s' if failed else ''),
         )
+    run_guardian_feed(report)
     direct, through = guardian_poll_rate()
     report.figure(
         'guardian: free-running poll rate through its proxy, slower side (38400 baud), median of 3',
@@ -474,6 +499,41 @@ def run_guardian(report: Report) -> None:
         'Hz',
         note=f'direct, alternating with it: {direct:.1f} Hz (ratio {through / direct:.2f})',
     )
+
+
+FEED_WATCHDOG_PERIOD_S = 0.2  # docs/RELIABILITY.md: the hardware watchdog's period, about 0.2 s (ASSUMED)
+FEED_GOAL_S = GUARDIAN_GOAL_S - FEED_WATCHDOG_PERIOD_S  # held by then: the enable drops within 0.6 s
+FEED_SIGNALS = ('SIGSTOP', 'SIGKILL')  # the heartbeat stops without an EOF / with one
+
+
+def run_guardian_feed(report: Report) -> None:
+    """Worst time from the driver's heartbeat stopping (SIGSTOP: no EOF, the guardian's timeout;
+    SIGKILL: the EOF) to the guardian holding the watchdog feed (``guardian_feed`` dtr on the
+    simulated ptys, which refuse the line: the guardian's own account of when it stopped changing it).
+    Goal: held within 0.6 s less the watchdog's period, so that the enable drops within 0.6 s."""
+    for signame in FEED_SIGNALS:
+        trials = guardian_signal_to_zero(signame, feed='dtr')
+        held = [t[2] for t in trials]
+        last = [t[3] for t in trials]
+        failed = sum(math.isnan(v) for v in held)
+        worst = max(held) if not failed else math.nan
+        report.figure(
+            f'guardian feed (DTR): {signame} of des_driver -> feed held: max of {len(trials)}',
+            worst,
+            's',
+            goal=f'<= {FEED_GOAL_S:g} s (0.6 s less a {FEED_WATCHDOG_PERIOD_S:g} s watchdog period)',
+            met=not failed and worst <= FEED_GOAL_S,
+            note=f'p50 {1000 * _p50_max(held)[0]:.0f} ms; last change {1000 * max(last):+.0f} ms worst; '
+            f'zero at both amplifiers max {1000 * max(t[0] for t in trials):.0f} ms'
+            + (f'; {failed} trial(s) never held' if failed else ''),
+        )
+
+
+def guardian_main(argv: list[str]) -> int:
+    """``python -m benchmarks.bench_des guardian``: the guardian's figures alone (exit 1 on a miss)."""
+    report = Report(section='des')
+    run_guardian(report)
+    return 1 if any(f.met is False for f in report.figures) else 0
 
 
 # -- issue 34: slow links, CRC storms, slow polling, a self-reset, job-control stops ---------------
@@ -605,7 +665,10 @@ def run_issue34(report: Report, cases: tuple[str, ...] = ()) -> None:
 
 def main(argv: list[str]) -> int:
     """``python -m benchmarks.bench_des CASE...``: only the issue-34 cases named (exit 1 on a missed
-    goal); the planted-fault script runs the slow-link case this way."""
+    goal); the planted-fault script runs the slow-link case this way. ``guardian``: the guardian's
+    figures (signals of des_driver, the watchdog feed, the proxy's poll rate)."""
+    if argv == ['guardian']:
+        return guardian_main(argv)
     report = Report(section='des')
     run_issue34(report, tuple(argv))
     return 1 if any(f.met is False for f in report.figures) else 0

@@ -11,7 +11,7 @@
 # NO_SLEW_RULE=1 also takes rule 2 out of the scratch model test, to see which rule fires then.
 # Usage, from the repository root: test/planted_des_faults.sh   (about 10-15 min on 2 cores)
 #   FAULTS="watchdog_removed crc_storm_unbounded" test/planted_des_faults.sh  (some faults only)
-#   CONTROL=0 skips the control run.
+#   CONTROL=0 skips the control run. A fault whose text is not found ends the script (exit 2).
 set -u
 PY=${PY:-/work/main/.venv/bin/python}
 SEEDS=${SEEDS:-1 2 3}
@@ -38,6 +38,10 @@ for old, new in zip(pairs[::2], pairs[1::2]):
     text = text.replace(old, new)
 open(path, 'w').write(text)
 PYEOF
+  if [ $? -ne 0 ]; then  # the code moved: a fault not planted would be "caught" as the control's result
+    echo "$name: NOT PLANTED (its text is not in $file once: update this script)"
+    exit 2
+  fi
   if [ "${NO_SLEW_RULE:-0}" = 1 ]; then
     sed -i 's/            if rpm != 0 and side in self.previous_reachable:  # rule 2/            if False:/' \
       "$SCRATCH/$name/test/test_des_safety_model.py"
@@ -68,8 +72,8 @@ run_check() {  # dir, check, seed -> exit code of the check (0: passed)
 plant watchdog_5x_slower skidsteer_power/des/poller.py \
   '        if now - self._stamp > self.timeout_s:' '        if now - self._stamp > 5 * self.timeout_s:'
 plant watchdog_removed skidsteer_power/des/poller.py '        if now - self._stamp > self.timeout_s:' '        if False:'
-plant acceleration_limit_removed skidsteer_power/des/command.py \
-  '    return value + min(max_change, max(-max_change, target - value))' '    return target'
+plant acceleration_limit_removed skidsteer_power/drive/controller.py \
+  '        v = v0 + min(dv_max, max(-dv_max, v - v0))' '        pass'
 plant stop_both_on_link_loss_ignored skidsteer_power/des/poller.py \
   '        if self.stop_both_on_link_loss and down:' '        if False and down:'
 plant hung_poller_detection_removed skidsteer_power/des/poller.py \

@@ -16,7 +16,10 @@ rules after every poll period:
 2. slew: between two poll periods a non-zero set point changes by at most what ``max_accel_m_s2``
    and ``max_yaw_accel_rad_s2`` allow in that time (plus 1 rpm of rounding); a stop may be a step;
 3. one side's fault (link lost, poller exception) -> both sides zero within 100 ms, as long as the
-   fault lasts (an amplifier error word: within the status read period plus one poll);
+   fault lasts (an amplifier error word: within the status read period plus one poll); the time
+   counts while that side's poller takes its turns (a hung poller cannot see a fault on its own
+   line: rule 5 covers that side's faults then), for an error word while it reaches the amplifier
+   (not cut off, not still reconnecting after a repair);
 4. a signal (the node's stop path: shutting down, then every poller's stop) -> every reachable
    amplifier at zero and disabled;
 5. a hung poller (its thread stops taking turns, as if stuck in an exchange) -> the other side at
@@ -100,6 +103,9 @@ class DriverModel(RuleBasedStateMachine):
         self.steps = 0
         self.stopped = False
         self.hung_at: dict[str, float] = {}  # a poller that stopped taking turns, since
+        # rule 3: per fault (kind, side), the time its side's poller has been free to see it since it
+        # began [s]: not while that poller hangs; for an error word, only while it reaches the amplifier
+        self.fault_age: dict[tuple[str, str], float] = {}
         self.inactive = False  # deactivated (lifecycle)
 
     def teardown(self) -> None:
@@ -113,6 +119,12 @@ class DriverModel(RuleBasedStateMachine):
     def _tick(self) -> None:
         """One poll period: each poller takes its turn when due, then the rules are checked."""
         self.clock.now += POLL_S
+        faults = [('link', s) for s in self.link_fault_at] + [('poller', s) for s in self.poller_fault_at]
+        faults = [key for key in faults if key[1] not in self.hung_at]
+        reachable = self._reachable()  # an error word is read only from an amplifier the poller reaches
+        faults += [('error', s) for s in self.error_at if s in reachable]
+        for key in faults:
+            self.fault_age[key] = self.fault_age.get(key, 0.0) + POLL_S
         for side, poller in self.pollers.items():
             if side in self.hung_at:
                 continue  # stuck: it neither sends nor reads
@@ -136,6 +148,10 @@ class DriverModel(RuleBasedStateMachine):
     def _check_rules(self) -> None:
         now = self.clock.now
         self.poller_fault_at = {s: t for s, t in self.poller_fault_at.items() if now < t + RECONNECT_S - 1e-9}
+        live = {('link', s) for s in self.link_fault_at} | {('poller', s) for s in self.poller_fault_at}
+        live |= {('error', s) for s in self.error_at}
+        self.fault_age = {key: age for key, age in self.fault_age.items() if key in live}
+        age = self.fault_age
         setpoints = {side: self.sims[side].speed_setpoint_rpm for side in SIDES}
         what = (
             f'at {now - 1000:.2f} s: set points {setpoints}, last valid command '
@@ -149,9 +165,10 @@ class DriverModel(RuleBasedStateMachine):
             if rpm != 0 and side in self.previous_reachable:  # rule 2
                 step = abs(rpm - self.previous[side])
                 assert step <= MAX_RPM_PER_S * POLL_S + 1, f'slew: {side} jumped {step} rpm {what}'
-            faults = [t + BOTH_ZERO_S for t in (*self.link_fault_at.values(), *self.poller_fault_at.values())]
-            faults += [t + (STATUS_EVERY + 1) * POLL_S for t in self.error_at.values()]
-            if any(now >= due - 1e-9 for due in faults):  # rule 3
+            due = [age.get(('link', s), 0.0) >= BOTH_ZERO_S - 1e-9 for s in self.link_fault_at]
+            due += [age.get(('poller', s), 0.0) >= BOTH_ZERO_S - 1e-9 for s in self.poller_fault_at]
+            due += [age.get(('error', s), 0.0) >= (STATUS_EVERY + 1) * POLL_S - 1e-9 for s in self.error_at]
+            if any(due):  # rule 3
                 assert rpm == 0, f'a fault: {side} not at zero {what}'
             if any(now >= t + STALL_S + 2 * POLL_S - 1e-9 for t in self.hung_at.values()):  # rule 5
                 assert rpm == 0, f'hung poller: {side} not at zero {what}, hung {self.hung_at}'
@@ -297,6 +314,9 @@ class DriverModel(RuleBasedStateMachine):
         self.link_fault_at.clear()
         self.error_at.clear()
         self._tick()
+        # as des_driver's ~/clear_faults: a side its request did not reach is not cleared later (an
+        # error word raised meanwhile would otherwise be cleared behind the caller's back)
+        self.command.withdraw_clear_requests()
 
     @precondition(lambda self: not self.stopped and self.steps >= SIGNAL_AFTER)
     @rule()

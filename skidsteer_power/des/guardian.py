@@ -10,7 +10,9 @@ good. The guardian owns the serial ports and hands the driver a pseudo-terminal 
 a proxy; docs/RELIABILITY.md "The guardian" says why not (b), a second writer on the same device).
 Beside the data, a socketpair carries the control channel:
 
-- driver -> guardian: ``h`` heartbeat (every :data:`HEARTBEAT_PERIOD_S`), ``A`` re-arm, ``Q`` quit;
+- driver -> guardian: ``h`` heartbeat (every :data:`HEARTBEAT_PERIOD_S`; ``i`` instead: alive, but no
+  fresh command in force, a link down or a fault, which holds the watchdog feed), ``A`` re-arm,
+  ``Q`` quit;
 - guardian -> driver: one JSON line at start (``{"ports": {side: path}}`` or ``{"error": text}``),
   then ``T`` when it tripped.
 
@@ -26,6 +28,13 @@ runs again (``nodes/driver_guardian.py``: the held command is forgotten and the 
 so only a cmd_vel received after the re-arm moves the motors). On EOF, ``Q`` or a signal the guardian
 exits after the stop.
 
+With ``--feed dtr`` or ``--feed rts`` it also feeds a hardware watchdog on the amplifiers' enable input
+(:class:`WatchdogFeed`, docs/RELIABILITY.md "The hardware line of defence"): that modem-control line of
+every amplifier port changes level every :data:`FEED_PERIOD_S` while the guardian is armed, its
+heartbeat fresh, the driver's heartbeat says ``h`` and every port is open; otherwise, and from a trip,
+its own signal or its end on, the line is left as it is. The ports' HUPCL is cleared, so that not even
+the kernel's hang-up on the last close (its SIGKILL) changes the line.
+
 Nothing in it blocks: every descriptor is non-blocking, every wait is a ``select`` with a deadline, a
 write that cannot complete in time is dropped (forwarding) or retried within the stop's deadline, and
 an interval timer (:data:`SELF_WATCHDOG_S`, re-armed every turn of the loop) ends the process with
@@ -35,7 +44,7 @@ in about 0.1 s (its imports: pyserial and the protocol module). It is started in
 own, so a Ctrl-C or Ctrl-Z at the terminal reaches the driver, not it.
 
     python -m skidsteer_power.des.guardian --control-fd N --port left=/dev/ttyUSB0 \\
-        --port right=/dev/ttyUSB1 [--baud 38400] [--timeout 0.3]
+        --port right=/dev/ttyUSB1 [--baud 38400] [--timeout 0.3] [--feed none|dtr|rts]
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ import argparse
 import contextlib
 import errno
 import json
+import math
 import os
 import select
 import shutil
@@ -71,8 +81,13 @@ from skidsteer_power.des.protocol import (
     frame_crc,
 )
 
-HEARTBEAT, ARM, QUIT, TRIPPED = b'h', b'A', b'Q', b'T'
+HEARTBEAT, IDLE, ARM, QUIT, TRIPPED = b'h', b'i', b'A', b'Q', b'T'
 """Control bytes (see the module docstring)."""
+FEED_LINES = ('none', 'dtr', 'rts')
+"""The watchdog feed's choices: no feed, or the pyserial modem-control line it toggles."""
+FEED_PERIOD_S = 0.05
+"""The feed's line changes level this often while the way is clear [s] (a 10 Hz square wave; the
+watchdog's period of about 0.2 s is 4 changes, docs/RELIABILITY.md)."""
 HEARTBEAT_PERIOD_S = 0.05
 """How often the driver's heartbeat thread writes ``h`` [s]."""
 DEFAULT_TIMEOUT_S = 0.3
@@ -193,6 +208,91 @@ class Exchange:
         return bytes(data + crc)[len(self.body) :]
 
 
+# -- the hardware watchdog's feed ---------------------------------------------------------------------
+
+
+class WatchdogFeed:
+    """The feed of a hardware watchdog on the amplifiers' enable input: one modem-control line
+    (pyserial's ``dtr`` or ``rts`` attribute, one ioctl TIOCMBIS / TIOCMBIC per change) of every
+    amplifier port, changed every ``period_s`` [s] while :meth:`step` is told the way is clear, left
+    as it is otherwise (held: the watchdog then drops the enable after its own period).
+
+    A port that refuses the change (a pseudo-terminal has no modem lines: ENOTTY; an unplugged adapter:
+    EIO) is named once in ``log`` and kept in :attr:`refused`; the feed goes on on the others (a line
+    that does not move is a held feed: the safe side). Each change of state (changing, held) is one
+    line in ``log`` with its time on the system-wide monotonic clock (``time.monotonic``), which is
+    how a test or bench in another process reads when the feed stopped.
+    """
+
+    def __init__(self, line: str, *, period_s: float = FEED_PERIOD_S, log: Callable[[str], None]) -> None:
+        if line not in FEED_LINES[1:]:
+            raise GuardianError(f'feed must be one of {", ".join(FEED_LINES)}, not {line!r}')
+        self.line = line
+        self.period_s = period_s
+        self.log = log
+        self.running = False
+        self.changes = 0
+        self.last_change_s = -math.inf  # [s, time.monotonic]
+        self.held_s = -math.inf
+        self.held_why = 'not started'
+        self.refused: dict[str, str] = {}  # port name -> the latest error setting the line
+        self._level: bool | None = None  # the level set last ([None]: as the port opened)
+        self._next_s = 0.0
+
+    def probe(self, name: str, ser: object) -> None:
+        """At open: set the line to the level it has (no change: the kernel and pyserial raise DTR
+        and RTS on open), to learn at once whether the port takes it."""
+        self._set(name, ser, bool(getattr(ser, self.line)))
+
+    def step(self, now: float, serials: dict[str, object], hold: str) -> None:
+        """One turn of the guardian's loop at ``now`` [s]: ``hold`` is why the line must stay as it
+        is ('' when the way is clear); ``serials`` the open ports by name."""
+        if hold:
+            if self.running:
+                self.running = False
+                self.held_s, self.held_why = now, hold
+                self.log(
+                    f'watchdog feed: {self.line.upper()} held ({hold}) at t={now:.6f} s; last change at '
+                    f't={self.last_change_s:.6f} s, {self.changes} changes'
+                )
+            return
+        if not self.running:
+            self.running = True
+            self._next_s = now
+            self.log(
+                f'watchdog feed: {self.line.upper()} changing every {1000 * self.period_s:.0f} ms on '
+                f'{", ".join(serials)} from t={now:.6f} s'
+            )
+        if now < self._next_s:
+            return
+        level = not (self._level if self._level is not None else self._first_level(serials))
+        for name, ser in serials.items():
+            self._set(name, ser, level)
+        self._level = level
+        self.changes += 1
+        self.last_change_s = now
+        self._next_s += self.period_s  # a fixed rate; a late turn does not bunch the changes up
+        if self._next_s <= now:
+            self._next_s = now + self.period_s
+
+    def _first_level(self, serials: dict[str, object]) -> bool:
+        return any(bool(getattr(ser, self.line)) for ser in serials.values())
+
+    def _set(self, name: str, ser: object, level: bool) -> None:
+        try:
+            setattr(ser, self.line, level)
+        except (OSError, ValueError) as err:  # serial.SerialException is an OSError
+            if name not in self.refused:
+                self.log(
+                    f'watchdog feed: {name} refuses {self.line.upper()} ({err}): '
+                    'this port feeds no watchdog (a pseudo-terminal has no modem lines)'
+                )
+            self.refused[name] = str(err)
+        else:
+            if self.refused.pop(name, None) is not None:
+                self.log(f'watchdog feed: {name} takes {self.line.upper()} again')
+
+
 # -- one amplifier line ------------------------------------------------------------------------------
 
 
@@ -227,6 +327,7 @@ class Guardian:
         *,
         baud: int = 38400,
         timeout_s: float = DEFAULT_TIMEOUT_S,
+        feed: str = 'none',
         log: Callable[[str], None] | None = None,
     ) -> None:
         if baud not in BAUD_CODES:
@@ -238,6 +339,8 @@ class Guardian:
         self.log = log or log_line
         self.dir = tempfile.mkdtemp(prefix='des-guardian-')
         self.sides = [_Side(name, device, os.path.join(self.dir, name)) for name, device in ports.items()]
+        self.feed = None if feed == 'none' else WatchdogFeed(feed, log=self.log)
+        self.driving = False  # the driver's latest heartbeat was 'h' (not 'i'): the feed may run
         self.latched = False
         self.trips = 0
         self.last_beat = time.monotonic()
@@ -262,6 +365,12 @@ class Guardian:
             raise GuardianError(f'cannot open DES port {side.device}: {err}') from err
         side.serial, side.real = ser, ser.fileno()
         os.set_blocking(side.real, False)
+        if self.feed is not None:
+            with contextlib.suppress(termios.error):  # no hang-up on close: the line stays as it is
+                attrs = termios.tcgetattr(side.real)
+                attrs[2] &= ~termios.HUPCL
+                termios.tcsetattr(side.real, termios.TCSANOW, attrs)
+            self.feed.probe(side.name, ser)
         master, slave = os.openpty()
         tty.setraw(slave)
         os.set_blocking(master, False)
@@ -312,7 +421,29 @@ class Guardian:
     # -- the loop -----------------------------------------------------------------------------------
 
     def ready_line(self) -> bytes:
-        return json.dumps({'ports': {s.name: s.link for s in self.sides}}).encode() + b'\n'
+        answer: dict[str, object] = {'ports': {s.name: s.link for s in self.sides}}
+        if self.feed is not None:
+            answer['feed'] = self.feed.line
+            answer['feed_refused'] = dict(self.feed.refused)
+        return json.dumps(answer).encode() + b'\n'
+
+    def feed_hold(self, now: float) -> str:
+        """Why the watchdog feed must hold its line now ('' when it may change it)."""
+        if self.ending:
+            return self.ending
+        if self.latched:
+            return 'tripped: latched until the driver re-arms'
+        if now - self.last_beat > self.timeout_s:
+            return f'no heartbeat for {now - self.last_beat:.2f} s'
+        if not self.driving:
+            return 'the driver has no fresh command in force, a link down or a fault'
+        lost = [s.name for s in self.sides if s.real < 0]
+        return f'port lost: {", ".join(lost)}' if lost else ''
+
+    def _step_feed(self, now: float, hold: str = '') -> None:
+        if self.feed is not None:
+            serials = {s.name: s.serial for s in self.sides if s.serial is not None and s.real >= 0}
+            self.feed.step(now, serials, hold or self.feed_hold(now))
 
     def run(self) -> int:
         """Forward, watch, stop; returns the exit code (0: every side stopped at the end, 1: not)."""
@@ -331,6 +462,7 @@ class Guardian:
                 self._stop(time.monotonic() + STOP_DEADLINE_S, only_unstopped=True)
                 self._next_retry = time.monotonic() + RETRY_PERIOD_S
             self._reopen_lost(now)
+            self._step_feed(time.monotonic())
             self._turn(now)
 
     def _turn(self, now: float) -> None:
@@ -361,8 +493,10 @@ class Guardian:
         if not data:
             self.ending = self.ending or 'driver gone (control channel EOF)'
             return
-        if HEARTBEAT in data:
+        beat = max(data.rfind(HEARTBEAT), data.rfind(IDLE))
+        if beat >= 0:
             self.last_beat = time.monotonic()
+            self.driving = data[beat : beat + 1] == HEARTBEAT
         if ARM in data and self.latched:
             self._arm()
         if QUIT in data:
@@ -377,6 +511,7 @@ class Guardian:
             side.exchange.reset()
             side.stopped = False
         self.latched = False
+        self.driving = False  # the feed waits for the driver's next 'h'
         self.last_beat = time.monotonic()
         self.log('re-armed by the driver: forwarding again')
 
@@ -428,6 +563,7 @@ class Guardian:
         started = time.monotonic()
         first = not self.latched
         self.latched = True
+        self._step_feed(started, f'tripped: {reason}')  # held before the stop (up to STOP_DEADLINE_S)
         if first:
             self.trips += 1
         results = self._stop(started + STOP_DEADLINE_S, only_unstopped=not first)
@@ -604,6 +740,11 @@ class GuardianClient:
     """Starts a guardian process for ``ports`` ({side: device}), beats its heartbeat and answers its
     trips (from a thread of its own, in the driver's process; no ROS).
 
+    With ``feed`` 'dtr' or 'rts' the guardian feeds a hardware watchdog; ``driving()`` is then asked
+    before every heartbeat whether a fresh command is in force on healthy links (``h``; false or an
+    exception: ``i``, the feed holds). :attr:`feed_refused` names the ports that refused the line at
+    start ({side: error}).
+
     ``on_trip(reason)`` runs in that thread when the guardian tripped while this process was still
     alive (it was frozen or slow): it must drop the held command and reset the links; the client then
     re-arms the guardian. ``on_lost(reason)`` runs when the guardian ended without being asked (its
@@ -619,7 +760,14 @@ class GuardianClient:
         on_trip: Callable[[str], None] = lambda reason: None,
         on_lost: Callable[[str], None] = lambda reason: None,
         stderr: int | None = None,
+        feed: str = 'none',
+        driving: Callable[[], bool] = lambda: True,
     ) -> None:
+        if feed not in FEED_LINES:
+            raise GuardianError(f'feed must be one of {", ".join(FEED_LINES)}, not {feed!r}')
+        self.feed = feed
+        self.driving = driving
+        self.feed_refused: dict[str, str] = {}
         self.ports = dict(ports)
         self.stderr = stderr  # the guardian's log lines (default: this process's stderr)
         self.baud = baud
@@ -637,6 +785,8 @@ class GuardianClient:
     def command(self, control_fd: int) -> list[str]:
         argv = [sys.executable, '-m', 'skidsteer_power.des.guardian', '--control-fd', str(control_fd)]
         argv += ['--baud', str(self.baud), '--timeout', repr(self.timeout_s)]
+        if self.feed != 'none':
+            argv += ['--feed', self.feed]
         for side, device in self.ports.items():
             argv += ['--port', f'{side}={device}']
         return argv
@@ -665,6 +815,7 @@ class GuardianClient:
             raise
         ours.setblocking(False)
         self.proxy_ports = {str(k): str(v) for k, v in answer['ports'].items()}
+        self.feed_refused = {str(k): str(v) for k, v in answer.get('feed_refused', {}).items()}
         self._thread = threading.Thread(target=self._beat, name='des-guardian-heartbeat', daemon=True)
         self._thread.start()
         return dict(self.proxy_ports)
@@ -679,7 +830,7 @@ class GuardianClient:
         assert sock is not None
         while not self._closing.wait(HEARTBEAT_PERIOD_S):
             try:
-                sock.send(HEARTBEAT)
+                sock.send(self._beat_byte())
                 data = sock.recv(64)
             except BlockingIOError:
                 data = None
@@ -699,6 +850,14 @@ class GuardianClient:
                 self.on_trip(f'guardian trip {self.trips}: it saw no heartbeat for {self.timeout_s:g} s')
                 with contextlib.suppress(OSError):
                     sock.send(ARM)
+
+    def _beat_byte(self) -> bytes:
+        if self.feed == 'none':
+            return HEARTBEAT  # no feed: the driver's state is not asked (as before the feed)
+        try:
+            return HEARTBEAT if self.driving() else IDLE
+        except Exception:  # whatever went wrong, the feed holds: the safe side
+            return IDLE
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Ask the guardian to stop the amplifiers and end; kill it if it does not (idempotent)."""
@@ -751,6 +910,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--timeout', type=float, default=DEFAULT_TIMEOUT_S, help='heartbeat timeout [s] (0.05 .. 5)'
     )
+    parser.add_argument(
+        '--feed',
+        choices=FEED_LINES,
+        default='none',
+        help="modem-control line of every port toggled as a hardware watchdog's feed (default none)",
+    )
     args = parser.parse_args(argv)
     control = socket.socket(fileno=args.control_fd)
     if not 0.05 <= args.timeout <= 5.0:
@@ -759,7 +924,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     try:
-        guardian = Guardian(dict(args.port), control, baud=args.baud, timeout_s=args.timeout)
+        guardian = Guardian(dict(args.port), control, baud=args.baud, timeout_s=args.timeout, feed=args.feed)
     except GuardianError as err:
         with contextlib.suppress(OSError):
             control.sendall(json.dumps({'error': str(err)}).encode() + b'\n')

@@ -666,15 +666,17 @@ class AmplifierPoller:
     def _self_reset(self) -> None:
         """The amplifier switched its power stage off and dropped our set point by itself (a reset,
         a brown-out): stop both sides and latch it until ~/clear_faults (issue 34 item 7)."""
-        self.command.halt(self.side)
-        self._zero_and_disable()
-        self._last_sent = 0
-        self.self_resets += 1
+        # latched in the sample first: the other side zeroes within one exchange of the halt, before
+        # this side's own zero and disable are through (a reader saw the stop but not the latch)
         self._update(
             fault_latched=True,
             message='amplifier reset itself (power stage off, set point 0): both sides stopped, '
             'clear_faults to re-enable',
         )
+        self.command.halt(self.side)
+        self.self_resets += 1
+        self._zero_and_disable()
+        self._last_sent = 0
 
     def _check_errors(self, force: bool = False) -> None:
         status = self._timed_read(self.amp.read_status)

@@ -18,13 +18,17 @@ Behaviour (docs/RELIABILITY.md, "The guardian"):
   configured again with a live guardian.
 - cleanup / shutdown / destroy: the pollers zero and disable through the guardian, then the guardian
   is asked to quit (it sends the same stop frames once more and ends).
+- ``guardian_feed`` (dtr, rts; default none): the guardian feeds a hardware watchdog on that modem line
+  of both ports; each heartbeat says whether the way is clear (:meth:`DriverGuardian.driving`: a fresh
+  command in force, no fault, no link down, active). A port that refuses the line is one warning at
+  configure and shown in the diagnostics (the watchdog then drops the enable: the safe side).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
-from skidsteer_power.des.guardian import DEFAULT_TIMEOUT_S, GuardianClient, GuardianError
+from skidsteer_power.des.guardian import DEFAULT_TIMEOUT_S, FEED_LINES, GuardianClient, GuardianError
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.nodes.param_spec import ParamSpec
 from skidsteer_power.powertrain.drivetrain import SIDES
@@ -59,6 +63,13 @@ GUARDIAN_PARAMETERS: tuple[ParamSpec, ...] = (
         'the guardian stops both amplifiers after no heartbeat from the driver for this long [s]',
         (0.05, 5.0),
     ),
+    ParamSpec(
+        'guardian_feed',
+        'none',
+        'modem-control line of both amplifier ports that the guardian toggles every 50 ms as the feed of '
+        'a hardware watchdog on the enable input, while a fresh command is in force on healthy links: '
+        'none, dtr or rts (docs/RELIABILITY.md, the hardware line of defence)',
+    ),
 )
 """The driver's guardian parameters (appended to its PARAMETERS)."""
 
@@ -74,7 +85,12 @@ class DriverGuardian:
     def start(self, p: dict[str, Any]) -> dict[str, Any]:
         """Start the guardian (if wanted); the parameters with its proxy ports as the sides' ports."""
         self.close()
+        feed = str(p['guardian_feed']).lower()
+        if feed not in FEED_LINES:
+            raise ConfigError(f'guardian_feed must be one of {", ".join(FEED_LINES)}, not {feed!r}')
         if not p['guardian']:
+            if feed != 'none':
+                raise ConfigError(f'guardian_feed {feed} needs guardian:=true (the guardian feeds it)')
             return p
         self.real_ports = {side: p[f'{side}_port'] for side in SIDES}
         client = GuardianClient(
@@ -83,12 +99,18 @@ class DriverGuardian:
             timeout_s=p['guardian_timeout_s'],
             on_trip=self._on_trip,
             on_lost=self._on_lost,
+            feed=feed,
+            driving=self.driving,
         )
         try:
             proxy = client.start()
         except GuardianError as err:
             raise ConfigError(str(err)) from None
         self.client = client
+        for side, error in client.feed_refused.items():
+            self.node.get_logger().warning(
+                f'guardian_feed {feed}: the {side} port refuses the line ({error}): it feeds no watchdog'
+            )
         return {**p, **{f'{side}_port': proxy[side] for side in SIDES}}
 
     def refusal(self) -> str:
@@ -117,7 +139,18 @@ class DriverGuardian:
             return 'not running'
         if client.lost:
             return f'LOST: {client.lost}'
-        return f'alive, {client.trips} trip(s)'
+        text = f'alive, {client.trips} trip(s)'
+        if client.feed != 'none':
+            refused = ', '.join(sorted(client.feed_refused))
+            text += f'; feed {client.feed.upper()}' + (f' REFUSED by {refused}' if refused else '')
+        return text
+
+    def driving(self) -> bool:
+        """Whether the watchdog feed may run (asked before each heartbeat): a fresh command is in
+        force, active, no fault latched, no link down (either side: an unreachable amplifier is what
+        only the hardware stops)."""
+        command = self.node.command
+        return command is not None and not command.stop_reason() and not command.links_down
 
     # -- from the heartbeat thread --------------------------------------------------------------
 
