@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import pytest
 
 from skidsteer_power.apps import experiment_sets as job
+
+if TYPE_CHECKING:
+    from skidsteer_power.twin.sensors import TwinTrace
 
 
 def _set(twin: tuple[float, float], fess: tuple[float, float], stuck: bool = False) -> dict[str, object]:
@@ -85,6 +89,7 @@ def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path: Path) -> None
     vehicle = load_vehicle('test_robot_track')
     speed, yaw = 0.1, 0.1 / 1.44
     t = np.arange(0.0, job.set_windows()[-1][3] + 0.1, 0.02)
+    # the three series _experiment_sets reads, not a whole twin run (TwinTrace's other fields unused)
     trace = SimpleNamespace(
         t=t,
         twist=np.tile([speed, 0.0, yaw], (t.size, 1)),
@@ -94,7 +99,9 @@ def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path: Path) -> None
     cache = str(tmp_path)
     command, _, _ = factory.map_predictor(vehicle, job.TRUTH, cache)
     motion, _, _ = factory.map_predictor(vehicle, job.TRUTH, cache, kinematics='twist')
-    sets = job._experiment_sets(trace, command, motion, factory.powertrain_for(vehicle), vehicle.tread_m)
+    sets = job._experiment_sets(
+        cast('TwinTrace', trace), command, motion, factory.powertrain_for(vehicle), vehicle.tread_m
+    )
     direct = fess.solve(vehicle, load_terrain(job.TRUTH), speed, speed / yaw)
     outer = sets[0]['fess_motion_torque_Nm'][1]  # a left turn: the right track is the outer one
     assert outer == pytest.approx(float(direct.torque_outer_Nm), rel=0.01)

@@ -36,9 +36,9 @@ from skidsteer_power.stop_signals import StopFlag
 if TYPE_CHECKING:
     from rclpy.context import Context
     from rclpy.node import Node
+    from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
     from rosbags.interfaces import Qos
-    from rclpy.publisher import Publisher
 
 LOG = logging.getLogger(__name__)
 
