@@ -64,7 +64,7 @@ if TYPE_CHECKING:
 
 FIELDS = (
     'speed', 'yaw_rate', 'torque_left', 'torque_right', 'slip_left', 'slip_right', 'sinkage',
-    'traction_margin', 'dug_in', 'contact_length',
+    'traction_margin', 'dug_in', 'contact_length', 'shear_path',
 )  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAX_NODES = 200_000
@@ -127,7 +127,12 @@ class SetpointMap:
         self.checked = np.zeros(shape, dtype=bool) if checked is None else np.asarray(checked, dtype=bool)
         if self.checked.shape != shape:
             raise InputError(f'set-point map: checked cells {self.checked.shape} do not match {shape}')
-        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | self.checked
+        # the element-turn (pivot) test belongs to eq. 6.6's chord: not on rigid ground, and a cell
+        # with a corner the slip-path fallback solved (the pivot band on soil) is answered exactly
+        self._pivot_test = not predictor.solver.fess.path_law
+        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
+        fallback = _corner_any(path) if self._pivot_test else np.zeros(shape, dtype=bool)
+        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | fallback | self.checked
         self._cell_exact = self.exact.ravel().tolist()
         pt = predictor.powertrain
         self._limit = predictor.current_limit_A
@@ -144,7 +149,8 @@ class SetpointMap:
         yaw = self.grid.values[..., FIELDS.index('yaw_rate')]
         contact = self.grid.values[..., FIELDS.index('contact_length')]
         turn = element_turn_rev(yaw, contact, inner_rim)
-        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in()
+        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
+        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in() & ~path & self._pivot_test
         return pivot
 
     @property
@@ -184,6 +190,7 @@ class SetpointMap:
             sol.traction_margin,
             sol.dug_in.astype(float),
             sol.contact_length,
+            np.asarray(sol.shear_path, dtype=float),
         )
         values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
         unchecked = cls(predictor, mean, diff, values)
@@ -234,9 +241,13 @@ class SetpointMap:
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
         if self._cell_exact[cell]:
             return self._direct(sp_l, sp_r, clamped_sp or off_grid)
-        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact = vals
+        speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact, _ = vals
         inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
-        pivot = yaw != 0 and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
+        pivot = (
+            self._pivot_test
+            and yaw != 0
+            and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
+        )
         if right_turn:  # a right turn: the left turn's mirror image
             yaw, t_l, t_r, s_l, s_r = -yaw, t_r, t_l, s_r, s_l
         if reverse:  # every speed, yaw rate and torque negated (module doc of fess.py)

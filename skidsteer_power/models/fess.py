@@ -87,6 +87,7 @@ class Problem:
     radius: float  # drive radius r [m]
     half_tread: float  # B / 2 [m]
     lateral_scale: np.ndarray  # (P,) 1, or 1 / STRAIGHT_YAW [s] for straight points
+    path_law: bool = False  # shear along the slip velocity by the slip path (rigid_contact), not eq. 6.6
 
     def take(self, idx: np.ndarray) -> Problem:
         """The sub-problem of the operating points ``idx``."""
@@ -100,6 +101,7 @@ class Problem:
             self.radius,
             self.half_tread,
             self.lateral_scale[idx],
+            self.path_law,
         )
 
     # fixed per batch and read on every residual call: computed once (cached_property)
@@ -176,7 +178,7 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
-    if problem.terrain.is_rigid:  # friction: the slip path, not eq. 6.6's chord (rigid_contact)
+    if problem.path_law:  # the slip path, not eq. 6.6's chord (rigid_contact module doc)
         return _rigid_displacement(problem, s0, omega, forward)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
@@ -453,12 +455,19 @@ class FessSolver:
     single-point path for on-board use (about 0.3 ms for a track: benchmarks/bench_fess.py).
     """
 
-    def __init__(self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS) -> None:
+    def __init__(
+        self, vehicle: Vehicle, terrain: Terrain, n: int = DEFAULT_ELEMENTS, *, path_law: bool = False
+    ) -> None:
+        """``path_law``: the shear displacement of every element is its slip path along its slip
+        velocity (:func:`~skidsteer_power.models.rigid_contact.slip_path_displacement`) instead of
+        eq. 6.6's chord; always so on rigid ground; on soil the set-point solve's pivot band uses it
+        (:mod:`~skidsteer_power.models.setpoint`)."""
         if not isinstance(n, (int, np.integer)) or n < 2:
             raise InputError(f'number of FESS elements must be an integer >= 2, got {n!r}')
         self.vehicle = vehicle
         self.terrain = terrain
         self.n = int(n)
+        self.path_law = bool(path_law) or terrain.is_rigid
 
     def problem(self, speed: np.ndarray, yaw: np.ndarray) -> Problem:
         """Set up the batch (V >= 0 required here; :meth:`solve_twist` mirrors reverse points)."""
@@ -475,7 +484,16 @@ class FessSolver:
         kin_yaw = np.where(straight, STRAIGHT_YAW, yaw)
         scale = np.where(straight, 1.0 / STRAIGHT_YAW, 1.0)
         return Problem(
-            veh, self.terrain, speed, kin_yaw, loads, contact, veh.drive_radius_m, 0.5 * veh.tread_m, scale
+            veh,
+            self.terrain,
+            speed,
+            kin_yaw,
+            loads,
+            contact,
+            veh.drive_radius_m,
+            0.5 * veh.tread_m,
+            scale,
+            self.path_law,
         )
 
     def solve_twist(

@@ -98,7 +98,7 @@ class PointKernel:
         mass = float(problem.vehicle.mass_kg)
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
-        self.rigid = problem.terrain.is_rigid
+        self.rigid = problem.path_law
         self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
@@ -418,6 +418,7 @@ def point_problem(solver: FessSolver, v: float, w: float) -> Problem:
         veh.drive_radius_m,
         0.5 * veh.tread_m,
         np.array([1.0 / STRAIGHT_YAW if straight else 1.0]),
+        solver.path_law,
     )
 
 

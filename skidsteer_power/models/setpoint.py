@@ -43,6 +43,7 @@ from skidsteer_power.drive.controller import DriveController
 from skidsteer_power.errors import InputError
 from skidsteer_power.models.fess import (
     FORCE_TOL_N,
+    SLIP_LIMIT,
     STEEDS_S0_SCALE,
     FessSolver,
     _outputs,
@@ -107,6 +108,9 @@ class SetpointSolution:
         (:func:`element_turn_rev`)
     contact_length : (P,) the longer contact length behind the entry of the two sides [m]
     iterations : (P,) Newton steps
+    shear_path : (P,) solved with the slip-path shear law (rigid ground always; on soil the pivot
+        band's fallback, :data:`REASON_PIVOT` and the dug-in points), where the element-turn test
+        does not apply
     """
 
     speed: np.ndarray
@@ -123,6 +127,7 @@ class SetpointSolution:
     dug_in: np.ndarray
     element_turn: np.ndarray
     contact_length: np.ndarray
+    shear_path: np.ndarray | None = None
 
     @property
     def turn_radius(self) -> np.ndarray:
@@ -152,6 +157,7 @@ class SetpointSolver:
         veh = fess.vehicle
         self.radius = float(veh.drive_radius_m)
         self.tread = float(veh.tread_m)
+        self._path: SetpointSolver | None = None
 
     def solve(
         self, setpoints: ArrayLike, *, x0: np.ndarray | None = None, tol: float = FORCE_TOL_N
@@ -175,7 +181,39 @@ class SetpointSolver:
         guess[straight, 2] = 0.0
         result = self._newton(spf, straight, guess, rest, tol)
         self._continue_failed(spf, straight, result, tol)
-        return self._outputs(sp, spf, flip, straight, rest, result)
+        out = self._outputs(sp, spf, flip, straight, rest, result)
+        if not self.fess.path_law and np.any(out.limited):
+            self._pivot_fallback(sp, out, tol)
+        return out
+
+    def _pivot_fallback(self, sp: np.ndarray, out: SetpointSolution, tol: float) -> None:
+        """Re-solve the points eq. 6.6's chord leaves without a usable steady state (dug in, or an
+        element past half a revolution) with the slip-path shear law (:func:`~skidsteer_power.
+        models.rigid_contact.slip_path_displacement`: the shear displacement is the element's slip
+        path, along its current slip velocity), which stays meaningful however far an element turns
+        (issue 36: a pivot turn's inner side slightly reversed). A root it finds replaces the
+        point's answer, no longer limited; the others keep theirs. Updates ``out``."""
+        idx = np.flatnonzero(out.limited)
+        path = self._path_solver().solve(sp[idx], tol=tol)
+        ok = ~path.limited
+        if not np.any(ok):
+            return
+        rows, src = idx[ok], np.flatnonzero(ok)
+        for name in ('speed', 'yaw_rate', 's0', 'torque', 'slip', 'sinkage', 'traction_margin'):
+            getattr(out, name)[rows] = getattr(path, name)[src]
+        for name in ('limited', 'dug_in', 'element_turn', 'contact_length', 'iterations'):
+            getattr(out, name)[rows] = getattr(path, name)[src]
+        assert out.shear_path is not None  # set by _outputs
+        out.shear_path[rows] = True
+        for k in rows:
+            out.reason[k] = REASON_OK
+
+    def _path_solver(self) -> SetpointSolver:
+        """The same solve with the slip-path shear law (built once)."""
+        if self._path is None:
+            f = self.fess
+            self._path = SetpointSolver(FessSolver(f.vehicle, f.terrain, f.n, path_law=True))
+        return self._path
 
     def _first_guess(self, spf: np.ndarray) -> np.ndarray:
         """(s0, V, w_z): the no-slip motion and the s0 guess of FESS (Steeds' eq. 3.7 form)."""
@@ -287,7 +325,7 @@ class SetpointSolver:
             for name in ('torque', 'slip', 'sinkage', 'traction_margin'):
                 getattr(sol, name)[dug_in] = getattr(dug, name)
             sol.slip[dug_in] = np.sign(spf[dug_in])
-        pivot = turn > ELEMENT_TURN_LIMIT_REV
+        pivot = (turn > ELEMENT_TURN_LIMIT_REV) & (not self.fess.path_law)  # a chord (eq. 6.6) test
         speed, yaw = x[:, 1] * flip, x[:, 2] * flip
         return SetpointSolution(
             speed=speed,
@@ -307,6 +345,7 @@ class SetpointSolver:
             dug_in=dug_in,
             element_turn=turn,
             contact_length=np.array(contact_length, dtype=float),
+            shear_path=np.full(len(sp), self.fess.path_law),
         )
 
     def _fess_outputs(
@@ -316,7 +355,16 @@ class SetpointSolver:
         prob = self.fess.problem(x[:, 1], x[:, 2])
         state = np.column_stack([x[:, 0], spf])
         res = NewtonResult(state, np.zeros_like(state), converged.copy(), np.zeros(len(x), dtype=int))
-        return _outputs(prob, res, rest), prob
+        sol = _outputs(prob, res, rest)
+        if not self.fess.terrain.is_rigid:  # rigid ground: _outputs' friction-ceiling test
+            # a side whose wheels stand or turn against its motion over the ground is dragged
+            # (|slip| = 1, the inner side of a pivot turn: issue 36): at a set point its speed is
+            # held, it cannot run away, and the root is a steady state; SLIP_LIMIT stays the test
+            # for the other sides
+            dragged = (spf * prob.side_speed <= 0) & (prob.side_speed != 0)
+            physical = np.all((np.abs(sol.slip) <= SLIP_LIMIT) | dragged, axis=1)
+            sol.converged = (converged & physical | rest) & np.all(prob.loads > 0, axis=1)
+        return sol, prob
 
 
 def element_turn_rev(yaw: ArrayLike, contact_length: ArrayLike, inner_rim_speed: ArrayLike) -> np.ndarray:
