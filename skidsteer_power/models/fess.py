@@ -87,7 +87,9 @@ class Problem:
     radius: float  # drive radius r [m]
     half_tread: float  # B / 2 [m]
     lateral_scale: np.ndarray  # (P,) 1, or 1 / STRAIGHT_YAW [s] for straight points
-    path_law: bool = False  # shear along the slip velocity by the slip path (rigid_contact), not eq. 6.6
+    # the slip path (rigid_contact) for the shear displacement: on rigid ground everywhere, on soil
+    # past half a revolution of an element (pivot_blend; the pivot band); else eq. 6.6's chord
+    path_law: bool = False
 
     def take(self, idx: np.ndarray) -> Problem:
         """The sub-problem of the operating points ``idx``."""
@@ -168,6 +170,21 @@ class Problem:
         return reference
 
 
+# The pivot band's shear law on soil (``FessSolver(path_law=True)``, docs/PREDICTION.md "The pivot
+# band"): an element keeps eq. 6.6's chord until it has turned half a revolution since touch-down
+# (eq. 6.3: w_z t = pi, where the chord is longest), then its displacement blends linearly into its
+# slip path (rigid_contact.slip_path_displacement) over the next PIVOT_BLEND_REV of a revolution.
+PIVOT_BLEND_REV = 0.125
+
+
+def pivot_blend(half: np.ndarray) -> np.ndarray:
+    """The slip path's weight in an element's shear displacement (0: eq. 6.6's chord, 1: the slip
+    path), from ``half`` = w_z t / 2 [rad], half the angle it turned since touch-down (eq. 6.3):
+    0 up to half a revolution, 1 from 0.5 + PIVOT_BLEND_REV rev on."""
+    weight: np.ndarray = np.clip((np.abs(half) - 0.5 * np.pi) / (np.pi * PIVOT_BLEND_REV), 0.0, 1.0)
+    return weight
+
+
 def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shear displacement (eq. 6.6) of every element for trial states x (P, S, 3).
 
@@ -178,7 +195,7 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
-    if problem.path_law:  # the slip path, not eq. 6.6's chord (rigid_contact module doc)
+    if problem.path_law and problem.terrain.is_rigid:  # the slip path (rigid_contact module doc)
         return _rigid_displacement(problem, s0, omega, forward)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
@@ -193,6 +210,11 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); 1 - cos written as 2 sin^2 (no cancellation)
     jx = xk - xe + one_minus_cos * xe - dy * sin
     jy = dy * one_minus_cos + xe * sin
+    if problem.path_law:  # soil's pivot band: the chord up to half a revolution, then the slip path
+        blend = pivot_blend(half)
+        if np.any(blend > 0):
+            px, py, _ = _rigid_displacement(problem, s0, omega, forward)
+            jx, jy = jx + blend * (px - jx), jy + blend * (py - jy)
     return jx, jy, xk
 
 

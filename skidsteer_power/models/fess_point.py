@@ -32,6 +32,7 @@ from skidsteer_power.models.fess import (
     STRAIGHT_YAW,
     PointSolution,
     Problem,
+    pivot_blend,
 )
 from skidsteer_power.models.fess_contact import track_contact, wheel_contact
 from skidsteer_power.models.loads import OperatingPoints, side_loads
@@ -98,7 +99,8 @@ class PointKernel:
         mass = float(problem.vehicle.mass_kg)
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
-        self.rigid = problem.path_law
+        self.rigid = problem.path_law and problem.terrain.is_rigid
+        self.pivot_law = problem.path_law and not self.rigid  # soil's pivot band (fess.pivot_blend)
         self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
@@ -148,6 +150,11 @@ class PointKernel:
             # eq. 6.6: J = p_k - Rot(-theta) p_e with p = (x, dy); x_k - x_e does not depend on s0
             jx = travel + one_minus_cos * xe - dy * sin
             jy = dy * one_minus_cos + xe * sin
+            if self.pivot_law:  # the slip path past half a revolution (fess.element_displacement)
+                blend = pivot_blend(half)
+                along = np.array(omega).reshape(2, k, 1) * -r + np.array(self.side_speed).reshape(2, 1, 1)
+                px, py = slip_path_displacement(travel + xe, xe, along, self._yaw, trial[1])
+                jx, jy = jx + blend * (px - jx), jy + blend * (py - jy)
         if self.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement
             jx *= self.longitudinal
         j = np.hypot(jx, jy)
