@@ -131,7 +131,7 @@ class SetpointSolution:
     dug_in: np.ndarray
     element_turn: np.ndarray
     contact_length: np.ndarray
-    shear_path: np.ndarray | None = None
+    shear_path: np.ndarray
 
     @property
     def turn_radius(self) -> np.ndarray:
@@ -207,7 +207,6 @@ class SetpointSolver:
             getattr(out, name)[rows] = getattr(path, name)[src]
         for name in ('limited', 'dug_in', 'element_turn', 'contact_length', 'iterations'):
             getattr(out, name)[rows] = getattr(path, name)[src]
-        assert out.shear_path is not None  # set by _outputs
         out.shear_path[rows] = True
         for k in rows:
             out.reason[k] = REASON_OK
