@@ -19,7 +19,14 @@ import pytest
 from scipy.optimize import least_squares
 
 from skidsteer_power.commands import Segment
-from skidsteer_power.models.fess import PIVOT_BLEND_REV, FessSolver, pivot_blend, residual
+from skidsteer_power.models.fess import (
+    PIVOT_BLEND_REV,
+    PIVOT_REST_SPEED_M_S,
+    FessSolver,
+    pivot_blend,
+    residual,
+    rolling_direction,
+)
 from skidsteer_power.models.setpoint import SetpointSolver
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.twin.model import Twin
@@ -129,6 +136,48 @@ def test_pivot_law_is_the_chord_below_half_a_revolution(solver: SetpointSolver) 
     np.testing.assert_array_equal(
         residual(pivot.problem(speed, yaw), state), residual(chord.problem(speed, yaw), state)
     )
+
+
+def test_inner_side_at_rest_over_the_ground_is_a_steady_state(solver: SetpointSolver) -> None:
+    """Outer set point 7/3 rad/s, inner -0.68 .. -0.66: the inner side's ground speed V - w_z B / 2
+    crosses 0 (a pivot about the inner track), its slip passes 0.95 (SLIP_LIMIT) and its compaction
+    resistance would flip sign. These were dug in (no root with the jump, the slip test) and are now
+    solved; least squares on the pivot law's residual, from the neighbour's root, agrees."""
+    right = 7.0 / 3.0
+    lefts = (-0.68, -0.67, -0.66)
+    sol = solver.solve(np.array([[left, right] for left in lefts]))
+    assert not sol.limited.any() and sol.shear_path.all()
+    inner_ground = sol.speed - sol.yaw_rate * solver.tread / 2
+    assert np.all(np.abs(inner_ground) < 0.005) and np.all(sol.slip[:, 0] > 0.95)
+    assert np.all(sol.speed > 0) and np.all(sol.yaw_rate > 0)
+    pivot = solver._path_solver()
+    veh = pivot.fess.vehicle
+    weight, length = veh.mass_kg * 9.81, pivot._length_scale()
+    scale = np.array([weight, weight, weight * length])
+    start = pivot.solve(np.array([[-0.70, right]])).state[0]
+    for k, left in enumerate(lefts):
+        fn = pivot._residual(np.array([[left, right]]), np.array([False]))
+        fit = least_squares(
+            lambda x, fn=fn: fn(x[None], np.zeros(1, int))[0] / scale,
+            start,
+            x_scale=[0.01 * length, 0.01, 0.01],
+            xtol=1e-15,
+            ftol=1e-15,
+            gtol=1e-15,
+            max_nfev=400,
+        )
+        assert np.max(np.abs(fit.fun)) * weight < 1e-6
+        np.testing.assert_allclose(fit.x[1:], [sol.speed[k], sol.yaw_rate[k]], rtol=1e-4)
+        start = fit.x
+    # the compaction resistance's direction by hand: sign(v) for the chord, a ramp of
+    # PIVOT_REST_SPEED_M_S for the pivot law (a side at rest holds any resistance in [-R_c, R_c])
+    left, right_side = 0.01, 0.5 * PIVOT_REST_SPEED_M_S  # side ground speeds [m/s]
+    speed = np.array([(left + right_side) / 2])
+    yaw = np.array([(right_side - left) / solver.tread])  # V -+ w_z B / 2 (left +B/2)
+    for fess, expected in ((solver.fess, [1.0, 1.0]), (pivot.fess, [1.0, 0.5])):
+        problem = fess.problem(speed, yaw)
+        np.testing.assert_allclose(problem.side_speed, [[left, right_side]], atol=1e-15)
+        np.testing.assert_allclose(rolling_direction(problem), [expected], rtol=1e-9)
 
 
 def test_pivot_band_on_the_twin(solver: SetpointSolver) -> None:

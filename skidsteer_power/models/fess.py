@@ -122,7 +122,7 @@ class Problem:
     @cached_property
     def rolling(self) -> np.ndarray:
         """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
-        resistance: np.ndarray = self.contact.resistance * np.sign(self.side_speed)
+        resistance: np.ndarray = self.contact.resistance * rolling_direction(self)
         return resistance
 
     @cached_property
@@ -175,6 +175,23 @@ class Problem:
 # (eq. 6.3: w_z t = pi, where the chord is longest), then its displacement blends linearly into its
 # slip path (rigid_contact.slip_path_displacement) over the next PIVOT_BLEND_REV of a revolution.
 PIVOT_BLEND_REV = 0.125
+
+
+PIVOT_REST_SPEED_M_S = 1e-3
+
+
+def rolling_direction(problem: Problem) -> np.ndarray:
+    """(P, 2) the compaction resistance's direction factor per side [-]: sign(v_side) (against the
+    motion over the ground); in the pivot law on soil clip(v_side / PIVOT_REST_SPEED_M_S, -1, 1),
+    because a side at rest over the ground (a pivot's inner side, its ground speed crossing 0) holds
+    any resistance in [-R_c, R_c], as static friction does, and the sign's jump left a gap of set
+    points without a root (docs/PREDICTION.md, "The pivot band")."""
+    v = problem.side_speed
+    if problem.path_law and not problem.terrain.is_rigid:
+        ramp: np.ndarray = np.clip(v / PIVOT_REST_SPEED_M_S, -1.0, 1.0)
+        return ramp
+    direction: np.ndarray = np.sign(v)
+    return direction
 
 
 def pivot_blend(half: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ from skidsteer_power.models.fess import (
     PointSolution,
     Problem,
     pivot_blend,
+    rolling_direction,
 )
 from skidsteer_power.models.fess_contact import track_contact, wheel_contact
 from skidsteer_power.models.loads import OperatingPoints, side_loads
@@ -92,6 +93,9 @@ class PointKernel:
         resistance_l, resistance_r = c.resistance[0].tolist()
         # compaction resistance against each side's motion over the ground [N]
         self.rolling = (resistance_l * _sign(self.side_speed[0]), resistance_r * _sign(self.side_speed[1]))
+        if problem.path_law and not problem.terrain.is_rigid:  # the pivot law (fess.rolling_direction)
+            ramp_l, ramp_r = (c.resistance[0] * rolling_direction(problem)[0]).tolist()
+            self.rolling = (ramp_l, ramp_r)
         turn_radius = v / w  # finite: straight points run at STRAIGHT_YAW
         self._offset = np.array(
             [[[half_tread - turn_radius]], [[-half_tread - turn_radius]]]

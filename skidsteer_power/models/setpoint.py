@@ -365,6 +365,12 @@ class SetpointSolver:
             # held, it cannot run away, and the root is a steady state; SLIP_LIMIT stays the test
             # for the other sides
             dragged = (spf * prob.side_speed <= 0) & (prob.side_speed != 0)
+            if self.fess.path_law:  # the pivot band: its inner side turns about the turning centre
+                # sitting over it (|slip| -> 1 as its ground speed crosses 0); the outer side's slip
+                # is the traction test (issue 36: without this a gap of set points around that
+                # crossing had roots of eq. 3.19 and no answer)
+                inner = np.abs(spf) < np.abs(spf[:, ::-1])
+                dragged |= inner & (x[:, 1:2] > 0) & (x[:, 2:3] * (spf[:, 1:2] - spf[:, 0:1]) > 0)
             physical = np.all((np.abs(sol.slip) <= SLIP_LIMIT) | dragged, axis=1)
             sol.converged = (converged & physical | rest) & np.all(prob.loads > 0, axis=1)
         return sol, prob
