@@ -31,9 +31,12 @@ are re-solved with FESS's pivot law (``FessSolver(path_law=True)``, :func:`~skid
 fess.pivot_blend`): each element keeps the chord up to half a revolution, then its displacement
 blends into its slip path, the plastic-flow law of the rigid contact. Below half a revolution the two
 laws are the same numbers, so the answers outside the band are unchanged and the torque is
-continuous across its edge (docs/PREDICTION.md, "The pivot band"; test/test_fess_pivot_band.py). A
-point the pivot law does not solve either keeps the chord's answer and flag: ``limited``, dug in
-(:data:`REASON_TRACTION`) or past half a revolution (:data:`REASON_PIVOT`).
+continuous across its edge (docs/PREDICTION.md, "The pivot band"; test/test_fess_pivot_band.py).
+In that re-solve a pivot's inner side may also sit at rest over the ground (its compaction
+resistance anywhere in [-R_c, R_c]: :func:`~skidsteer_power.models.fess.rolling_direction`; exempt
+from the slip limit while the body turns the way the set points ask). A point the pivot law does not
+solve either keeps the chord's answer and flag: ``limited``, dug in (:data:`REASON_TRACTION`) or past
+half a revolution (:data:`REASON_PIVOT`).
 """
 
 from __future__ import annotations
