@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from skidsteer_power.maps.power_map import PowerMap
-from skidsteer_power.maps.setpoint_map import SetpointMap
+from skidsteer_power.maps.setpoint_map import FIELDS, SetpointMap
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -35,7 +35,10 @@ def test_map_matches_direct_on_a_dense_grid(track_map: SetpointMap) -> None:
     answers = [track_map.query(float(a), float(b)) for a, b in zip(v, w, strict=True)]
     limited = np.array([q.limited for q in answers])
     np.testing.assert_array_equal(limited, direct.limited)  # the same points flagged
-    assert 0 < limited.sum() < len(v)  # both kinds of points are in the grid
+    # the pivot band is in the envelope, and solved (issue 36): no command flagged on sand_bin, by
+    # either (before the pivot law: 12.3 % of the map's queries, docs/PREDICTION.md)
+    assert track_map.grid.values[..., FIELDS.index('shear_path')].any()
+    assert not limited.any()
     ok = ~limited
     power = np.array([q.battery_power_W for q in answers])
     speed = np.array([q.speed_m_s for q in answers])

@@ -13,7 +13,6 @@ import pytest
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.maps.setpoint_map import SetpointMap
-from skidsteer_power.models.setpoint import REASON_PIVOT
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -75,14 +74,22 @@ def test_current_limit_holds_in_every_query(track_map: SetpointMap) -> None:
         assert abs(q.current_left_A) <= 10.0 + 1e-9 and abs(q.current_right_A) <= 10.0 + 1e-9
 
 
-def test_pivot_flag_agrees_with_the_direct_solve(track_map: SetpointMap) -> None:
-    """A command whose interpolated motion turns an inner element past half a revolution in the
-    contact is flagged by the map exactly as the direct solve flags it (models/setpoint.py's
-    element_turn_rev; docs/PREDICTION.md, "The pivot band"). (0.196 m/s, 0.744 rad/s) lies in a map
-    cell without a dug-in node, so only the element turn can flag it."""
+def test_pivot_band_agrees_with_the_direct_solve(track_map: SetpointMap) -> None:
+    """A command whose inner element turns past half a revolution in the contact (set points
+    0.375 / 3.545 rad/s; models/setpoint.py's element_turn_rev) is solved by the pivot law
+    (docs/PREDICTION.md, "The pivot band"): the map answers it exactly as the direct solve does,
+    unflagged, and the wide turn at the same speed is an ordinary answer too."""
     query = track_map.query(0.196, 0.744)
-    assert query.limited and query.reason == REASON_PIVOT
     direct = track_map.predictor.predict([0.196], [0.744])
-    assert direct.limited[0] and direct.reason[0] == REASON_PIVOT
+    assert not query.limited and not direct.limited[0] and query.reason == direct.reason[0] == ''
+    assert query.speed_m_s == pytest.approx(float(direct.speed[0]), rel=1e-9)
+    assert query.yaw_rate_rad_s == pytest.approx(float(direct.yaw_rate[0]), rel=1e-9)
+    assert query.torque_left_Nm == pytest.approx(float(direct.torque[0, 0]), rel=1e-9)
+    assert query.torque_right_Nm == pytest.approx(float(direct.torque[0, 1]), rel=1e-9)
+    assert query.yaw_rate_rad_s > 0 and query.setpoint_left_rad_s < 0.15 * query.setpoint_right_rad_s
+    sol = track_map.predictor.solver.solve(
+        np.array([[query.setpoint_left_rad_s, query.setpoint_right_rad_s]])
+    )
+    assert sol.element_turn[0] > 0.5 and sol.shear_path[0]  # in the band, by the pivot law
     wide = track_map.query(0.196, 0.2)  # the same speed on a wide turn: an ordinary answer
     assert not wide.limited and wide.reason == ''

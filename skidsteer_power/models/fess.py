@@ -58,6 +58,7 @@ from skidsteer_power.models.fess_problem import (
     build_problem,
     centrifugal,
     chord_displacement,
+    pivot_blend,
     slip_ratio,
     steeds_s0,
 )
@@ -111,7 +112,7 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     s0 = x[..., 0][..., None, None, None]  # (P, S, 1, 1, 1)
     omega = x[..., 1:][..., None, None]  # (P, S, 2, 1, 1)
     forward = omega >= 0  # omega < 0: entry at the rear (mirrored contact)
-    if problem.path_law:  # the slip path, not eq. 6.6's chord (rigid_contact module doc)
+    if problem.path_law and problem.terrain.is_rigid:  # the slip path (rigid_contact module doc)
         return _rigid_displacement(problem, s0, omega, forward)
     # half the angle turned since the element touched down (eq. 6.3): w_z t / 2 with the time in
     # contact t = xi / (|omega| r) (eq. 6.5)
@@ -120,6 +121,11 @@ def element_displacement(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, n
     xk = np.where(forward, fwd_plus, fwd_minus) - s0  # element now, relative to the turning centre
     xe = np.where(forward, entry_plus, entry_minus) - s0  # where it touched down
     jx, jy = chord_displacement(xk - xe, xe, problem.centre_offset, half)  # eq. 6.6
+    if problem.path_law:  # soil's pivot band: the chord up to half a revolution, then the slip path
+        blend = pivot_blend(half)
+        if np.any(blend > 0):
+            px, py, _ = _rigid_displacement(problem, s0, omega, forward)
+            jx, jy = jx + blend * (px - jx), jy + blend * (py - jy)
     return jx, jy, xk
 
 

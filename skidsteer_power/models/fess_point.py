@@ -31,6 +31,8 @@ from skidsteer_power.models.fess_problem import (
     build_problem,
     centrifugal,
     chord_displacement,
+    pivot_blend,
+    rolling_direction,
     slip_ratio,
     steeds_s0,
 )
@@ -106,6 +108,11 @@ class PointKernel:
         resistance_l, resistance_r = c.resistance[0].tolist()
         # compaction resistance against each side's motion over the ground [N]
         self.rolling = (resistance_l * sign(self.side_speed[0]), resistance_r * sign(self.side_speed[1]))
+        if (
+            problem.path_law and not problem.terrain.is_rigid
+        ):  # the pivot law (fess_problem.rolling_direction)
+            ramp_l, ramp_r = (c.resistance[0] * rolling_direction(problem)[0]).tolist()
+            self.rolling = (ramp_l, ramp_r)
         turn_radius = v / w  # finite: straight points run at STRAIGHT_YAW
         self._offset = np.array(
             [[[half_tread - turn_radius]], [[-half_tread - turn_radius]]]
@@ -113,7 +120,8 @@ class PointKernel:
         mass = float(problem.vehicle.mass_kg)
         self._centrifugal_terms = (v, w, abs(v), abs(w), -mass * abs(v * w), -mass * v * w)
         self.lateral_scale = float(problem.lateral_scale[0])
-        self.rigid = problem.path_law
+        self.rigid = problem.path_law and problem.terrain.is_rigid
+        self.pivot_law = problem.path_law and not self.rigid  # soil's pivot band (fess_problem.pivot_blend)
         self._yaw = np.array(w)
         self.length = float(c.length_scale)
         self.omega_ref = max(abs(self.side_speed[0]), abs(self.side_speed[1]), 1e-3) / r
@@ -156,6 +164,11 @@ class PointKernel:
             jx, jy = slip_path_displacement(travel + xe, xe, along, self._yaw, trial[1])
         else:  # eq. 6.6; x_k - x_e (travel) does not depend on s0
             jx, jy = chord_displacement(travel, xe, self._offset, half)
+            if self.pivot_law:  # the slip path past half a revolution (fess.element_displacement)
+                blend = pivot_blend(half)
+                along = np.array(omega).reshape(2, k, 1) * -r + np.array(self.side_speed).reshape(2, 1, 1)
+                px, py = slip_path_displacement(travel + xe, xe, along, self._yaw, trial[1])
+                jx, jy = jx + blend * (px - jx), jy + blend * (py - jy)
         if self.longitudinal != 1.0:  # a compliant belt: eq. 6.7 in the scaled displacement
             jx *= self.longitudinal
         j = np.hypot(jx, jy)

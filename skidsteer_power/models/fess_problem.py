@@ -58,7 +58,9 @@ class Problem:
     radius: float  # drive radius r [m]
     half_tread: float  # B / 2 [m]
     lateral_scale: np.ndarray  # (P,) 1, or 1 / STRAIGHT_YAW [s] for straight points
-    path_law: bool = False  # shear along the slip velocity by the slip path (rigid_contact), not eq. 6.6
+    # the slip path (rigid_contact) for the shear displacement: on rigid ground everywhere, on soil
+    # past half a revolution of an element (pivot_blend; the pivot band); else eq. 6.6's chord
+    path_law: bool = False
 
     def take(self, idx: np.ndarray) -> Problem:
         """The sub-problem of the operating points ``idx``."""
@@ -91,7 +93,7 @@ class Problem:
     @cached_property
     def rolling(self) -> np.ndarray:
         """(P, 2) compaction resistance of each side, signed against its motion over the ground [N]."""
-        resistance: np.ndarray = self.contact.resistance * np.sign(self.side_speed)
+        resistance: np.ndarray = self.contact.resistance * rolling_direction(self)
         return resistance
 
     @cached_property
@@ -137,6 +139,38 @@ class Problem:
         (scales the Newton steps and their trust region)."""
         reference: np.ndarray = np.maximum(np.max(np.abs(self.side_speed), axis=1), 1e-3) / self.radius
         return reference
+
+
+# The pivot band's shear law on soil (``FessSolver(path_law=True)``, docs/PREDICTION.md "The pivot
+# band"): an element keeps eq. 6.6's chord until it has turned half a revolution since touch-down
+# (eq. 6.3: w_z t = pi, where the chord is longest), then its displacement blends linearly into its
+# slip path (rigid_contact.slip_path_displacement) over the next PIVOT_BLEND_REV of a revolution.
+PIVOT_BLEND_REV = 0.125
+
+
+PIVOT_REST_SPEED_M_S = 1e-3
+
+
+def rolling_direction(problem: Problem) -> np.ndarray:
+    """(P, 2) the compaction resistance's direction factor per side [-]: sign(v_side) (against the
+    motion over the ground); in the pivot law on soil clip(v_side / PIVOT_REST_SPEED_M_S, -1, 1),
+    because a side at rest over the ground (a pivot's inner side, its ground speed crossing 0) holds
+    any resistance in [-R_c, R_c], as static friction does, and the sign's jump left a gap of set
+    points without a root (docs/PREDICTION.md, "The pivot band")."""
+    v = problem.side_speed
+    if problem.path_law and not problem.terrain.is_rigid:
+        ramp: np.ndarray = np.clip(v / PIVOT_REST_SPEED_M_S, -1.0, 1.0)
+        return ramp
+    direction: np.ndarray = np.sign(v)
+    return direction
+
+
+def pivot_blend(half: np.ndarray) -> np.ndarray:
+    """The slip path's weight in an element's shear displacement (0: eq. 6.6's chord, 1: the slip
+    path), from ``half`` = w_z t / 2 [rad], half the angle it turned since touch-down (eq. 6.3):
+    0 up to half a revolution, 1 from 0.5 + PIVOT_BLEND_REV rev on."""
+    weight: np.ndarray = np.clip((np.abs(half) - 0.5 * np.pi) / (np.pi * PIVOT_BLEND_REV), 0.0, 1.0)
+    return weight
 
 
 def build_problem(

@@ -20,15 +20,23 @@ symmetry, reached by the Newton iteration, not imposed).
 Where no steady state exists (Newton finds no equilibrium, also after a continuation from straight
 running, or a side would have to slip more than :data:`~skidsteer_power.models.fess.SLIP_LIMIT`)
 the answer is the robot dug in: V = 0, w_z = 0, the wheels turning at their set points with the
-shear torque of the spinning contacts, ``limited`` and a ``reason``. That is a traction limit, or a
-tight turn with one side near standstill (3-7 % of each envelope). There FESS does have roots (a
-residual scan and least squares find them at 41 of test_robot_track's 43 such map nodes), but no
-usable steady state: an inner element turns past half a revolution while in the contact (eqs. 6.3,
-6.5), eq. 6.6's chord displacement then shrinks as the soil is sheared further, and the torque jumps
-by a factor 3 between set points 2 % apart (docs/PREDICTION.md, "The pivot band";
-test/test_fess_pivot_band.py). A root Newton does find where an element turns past half a
-revolution (:func:`element_turn_rev` > :data:`ELEMENT_TURN_LIMIT_REV`) is kept but flagged
-``limited`` with :data:`REASON_PIVOT`: its torque is as erratic.
+shear torque of the spinning contacts, ``limited`` and a ``reason``.
+
+The pivot band on soil (tight turns with the inner side near standstill or slightly reversed, issue
+36): there an inner element turns past half a revolution while in the contact (eqs. 6.3, 6.5,
+:func:`element_turn_rev`), and eq. 6.6's chord from the gripped ground point shrinks and turns across
+the slip although the soil is sheared further; its roots there have torques that jump by a factor 3
+between set points 2 % apart. Those points (dug in, or a root past :data:`ELEMENT_TURN_LIMIT_REV`)
+are re-solved with FESS's pivot law (``FessSolver(path_law=True)``, :func:`~skidsteer_power.models.
+fess_problem.pivot_blend`): each element keeps the chord up to half a revolution, then its displacement
+blends into its slip path, the plastic-flow law of the rigid contact. Below half a revolution the two
+laws are the same numbers, so the answers outside the band are unchanged and the torque is
+continuous across its edge (docs/PREDICTION.md, "The pivot band"; test/test_fess_pivot_band.py).
+In that re-solve a pivot's inner side may also sit at rest over the ground (its compaction
+resistance anywhere in [-R_c, R_c]: :func:`~skidsteer_power.models.fess_problem.rolling_direction`; exempt
+from the slip limit while the body turns the way the set points ask). A point the pivot law does not
+solve either keeps the chord's answer and flag: ``limited``, dug in (:data:`REASON_TRACTION`) or past
+half a revolution (:data:`REASON_PIVOT`).
 """
 
 from __future__ import annotations
@@ -61,8 +69,7 @@ ELEMENT_TURN_LIMIT_REV = 0.5
 REASON_OK = ''
 REASON_TRACTION = (
     'no steady state found at these set points (a traction limit, or a tight turn with the inner side near '
-    'standstill where FESS has no usable one); the values are the dug-in state: V = 0, wheels at their '
-    'set points'
+    'standstill where FESS has none); the values are the dug-in state: V = 0, wheels at their set points'
 )
 REASON_PIVOT = (
     'tight turn with the inner side near standstill: an element turns past half a revolution while in '
@@ -103,9 +110,9 @@ class SetpointSolution:
         (:func:`element_turn_rev`)
     contact_length : (P,) the longer contact length behind the entry of the two sides [m]
     iterations : (P,) Newton steps
-    shear_path : (P,) solved with the slip-path shear law (rigid ground always; on soil the pivot
-        band's fallback, :data:`REASON_PIVOT` and the dug-in points), where the element-turn test
-        does not apply
+    shear_path : (P,) solved with the slip path in the shear law (rigid ground: always; soil: the
+        pivot band, by the pivot law of :func:`~skidsteer_power.models.fess_problem.pivot_blend`), where
+        the element-turn test does not apply
     """
 
     speed: np.ndarray
@@ -122,7 +129,7 @@ class SetpointSolution:
     dug_in: np.ndarray
     element_turn: np.ndarray
     contact_length: np.ndarray
-    shear_path: np.ndarray | None = None
+    shear_path: np.ndarray
 
     @property
     def turn_radius(self) -> np.ndarray:
@@ -183,11 +190,11 @@ class SetpointSolver:
 
     def _pivot_fallback(self, sp: np.ndarray, out: SetpointSolution, tol: float) -> None:
         """Re-solve the points eq. 6.6's chord leaves without a usable steady state (dug in, or an
-        element past half a revolution) with the slip-path shear law (:func:`~skidsteer_power.
-        models.rigid_contact.slip_path_displacement`: the shear displacement is the element's slip
-        path, along its current slip velocity), which stays meaningful however far an element turns
-        (issue 36: a pivot turn's inner side slightly reversed). A root it finds replaces the
-        point's answer, no longer limited; the others keep theirs. Updates ``out``."""
+        element past half a revolution) with FESS's pivot law (:func:`~skidsteer_power.models.fess.
+        pivot_blend`: the chord up to half a revolution of an element, its slip path past it), which
+        stays meaningful however far an element turns (issue 36: a pivot turn's inner side slightly
+        reversed). A root it finds replaces the point's answer, no longer limited; the others keep
+        theirs. Updates ``out``."""
         idx = np.flatnonzero(out.limited)
         path = self._path_solver().solve(sp[idx], tol=tol)
         ok = ~path.limited
@@ -198,13 +205,12 @@ class SetpointSolver:
             getattr(out, name)[rows] = getattr(path, name)[src]
         for name in ('limited', 'dug_in', 'element_turn', 'contact_length', 'iterations'):
             getattr(out, name)[rows] = getattr(path, name)[src]
-        assert out.shear_path is not None  # set by _outputs
         out.shear_path[rows] = True
         for k in rows:
             out.reason[k] = REASON_OK
 
     def _path_solver(self) -> SetpointSolver:
-        """The same solve with the slip-path shear law (built once)."""
+        """The same solve with the pivot law (``path_law=True``; built once)."""
         if self._path is None:
             f = self.fess
             self._path = SetpointSolver(FessSolver(f.vehicle, f.terrain, f.n, path_law=True))
@@ -356,6 +362,12 @@ class SetpointSolver:
             # held, it cannot run away, and the root is a steady state; SLIP_LIMIT stays the test
             # for the other sides
             dragged = (spf * prob.side_speed <= 0) & (prob.side_speed != 0)
+            if self.fess.path_law:  # the pivot band: its inner side turns about the turning centre
+                # sitting over it (|slip| -> 1 as its ground speed crosses 0); the outer side's slip
+                # is the traction test (issue 36: without this a gap of set points around that
+                # crossing had roots of eq. 3.19 and no answer)
+                inner = np.abs(spf) < np.abs(spf[:, ::-1])
+                dragged |= inner & (x[:, 1:2] > 0) & (x[:, 2:3] * (spf[:, 1:2] - spf[:, 0:1]) > 0)
             physical = np.all((np.abs(sol.slip) <= SLIP_LIMIT) | dragged, axis=1)
             sol.converged = (converged & physical | rest) & np.all(prob.loads > 0, axis=1)
         return sol, prob

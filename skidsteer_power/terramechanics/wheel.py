@@ -328,14 +328,14 @@ def solve_wheel_bracketed(
         raise InputError('load must be > 0 N and drawbar pull finite to solve for sinkage and slip')
     w, fd, r, b = (a.ravel() for a in np.broadcast_arrays(w, fd, r, b))
     shape = np.broadcast_shapes(np.shape(load), np.shape(drawbar_pull), np.shape(radius), np.shape(width))
-    scan = wheel_at_slip(terrain, w[:, None], SLIP_SCAN, r[:, None], b[:, None]).Fx_N - fd[:, None]
+    scan = _pull_scan(terrain, w, r, b) - fd[:, None]
     lo = _nearest_sign_change(scan)
     if np.any(lo < 0):
         i = int(np.flatnonzero(lo < 0)[0])
         raise ConvergenceError(
             f'no slip in [-1, 1] gives drawbar pull {fd[i]:.6g} N on {terrain.name!r}: load {w[i]:.6g} N, '
-            f'r = {r[i]:.6g} m, b = {b[i]:.6g} m (reachable {scan[i].min() + fd[i]:.4g} to '
-            f'{scan[i].max() + fd[i]:.4g} N)'
+            f'r = {r[i]:.6g} m, b = {b[i]:.6g} m (reachable {np.nanmin(scan[i]) + fd[i]:.4g} to '
+            f'{np.nanmax(scan[i]) + fd[i]:.4g} N)'
         )
 
     def pull_residual(
@@ -358,6 +358,24 @@ def solve_wheel_bracketed(
             f'drawbar pull {fd[i]:.6g} N, r = {r[i]:.6g} m, b = {b[i]:.6g} m'
         )
     return WheelState(*(np.reshape(getattr(state, f.name), shape) for f in dataclasses.fields(WheelState)))
+
+
+def _pull_scan(terrain: Terrain, w: FloatArray, r: FloatArray, b: FloatArray) -> FloatArray:
+    """(P, len(SLIP_SCAN)) F_x [N] at the scanned slips, NaN where the wheel would sink deeper than
+    its radius at that slip (slip sinkage, eq. 2.33: a deep-slip scan point of a soft ground such as
+    snow). Those points are no operating point, and the bracket is sought among the others;
+    ConvergenceError if the wheel carries its load at no scanned slip."""
+    slips = np.broadcast_to(SLIP_SCAN, (w.size, SLIP_SCAN.size))
+    wide = [np.broadcast_to(a[:, None], slips.shape) for a in (w, r, b)]
+    carried = wheel_forces(terrain, wide[1], slips, wide[1], wide[2]).Fz_N >= wide[0]
+    if not np.all(np.any(carried, axis=1)):
+        i = int(np.flatnonzero(~np.any(carried, axis=1))[0])
+        sinkage_at_slip(terrain, w[i], 0.0, r[i], b[i])  # raises its ConvergenceError
+    scan = np.full(slips.shape, np.nan)
+    scan[carried] = wheel_at_slip(
+        terrain, wide[0][carried], slips[carried], wide[1][carried], wide[2][carried]
+    ).Fx_N
+    return scan
 
 
 def _nearest_sign_change(scan: FloatArray) -> np.ndarray:
