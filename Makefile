@@ -1,13 +1,15 @@
 # Two commands on a fresh machine (only Python 3.11, pip and make needed):
 #   make run    set everything up and run the main job
-#   make test   set everything up and run the whole test suite (what .ci/run does)
+#   make test   set everything up and run the whole test suite (what .ci/run does; it includes
+#               test/test_docs_figures.py: python -m tools.docs_figures --check)
+#   make docs   rewrite the generated blocks of README.md and docs/*.md from their commands
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup run test lint bench clean
+.PHONY: setup run test lint bench docs clean
 
 $(STAMP): requirements.txt requirements-dev.txt setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +35,9 @@ test: setup lint
 
 bench: setup
 	$(BIN)/python -m benchmarks.run --write-docs
+
+docs: setup
+	$(BIN)/python -m tools.docs_figures
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .ruff_cache .import_linter_cache

@@ -16,8 +16,8 @@ date (:data:`MEASURED_LINE`); ``python -m tools.docs_figures --measured NAME`` r
 whose BEGIN marker ends its line holds whole lines; otherwise it is inline (a figure inside a
 sentence: ``<!-- BEGIN generated: x -->+107.3 %<!-- END generated: x -->``).
 
-Pure text, no imports from the package: the node parameter tables (``nodes/param_files.py``), the
-command examples (``apps/doc_examples.py``) and ``tools/docs_figures.py`` all use it.
+Pure text, no imports from the package: the node parameter tables (``nodes/param_files.py``) and
+``tools/docs_figures.py`` (which also fills the command examples of ``apps/doc_examples.py``) use it.
 """
 
 from __future__ import annotations
@@ -62,10 +62,32 @@ def end_marker(kind: str, name: str) -> str:
     return f'<!-- END {kind}: {name} -->'
 
 
+def _fenced(text: str) -> list[tuple[int, int]]:
+    """The (start, stop) offsets of ``text``'s fenced code blocks (lines opening with three backticks):
+    a marker shown inside one is an example of the syntax, not a block."""
+    spans, start, at = [], -1, 0
+    for line in text.splitlines(keepends=True):
+        if line.lstrip().startswith('```'):
+            if start < 0:
+                start = at
+            else:
+                spans.append((start, at + len(line)))
+                start = -1
+        at += len(line)
+    return spans
+
+
 def find_blocks(text: str, where: str = '<text>') -> list[Block]:
     """Every block of ``text`` in order; :class:`DocBlockError` (naming ``where`` and the line) for an
-    unknown kind, a BEGIN without its END, an END without its BEGIN, nested blocks or a stale marker."""
-    stale = STALE_MARKERS.search(text)
+    unknown kind, a BEGIN without its END, an END without its BEGIN, nested blocks or a stale marker.
+    Markers inside a fenced code block are text (examples of the syntax); a block's body may hold
+    fences."""
+    fences = _fenced(text)
+
+    def shown(m: re.Match[str]) -> bool:
+        return not any(a <= m.start() < b for a, b in fences)
+
+    stale = next((m for m in STALE_MARKERS.finditer(text) if shown(m)), None)
     if stale:
         raise DocBlockError(
             f'{where}:{_line(text, stale.start())}: marker {stale[0]!r} of an earlier syntax: use '
@@ -73,7 +95,7 @@ def find_blocks(text: str, where: str = '<text>') -> list[Block]:
         )
     blocks: list[Block] = []
     open_: re.Match[str] | None = None
-    for m in MARKER.finditer(text):
+    for m in filter(shown, MARKER.finditer(text)):
         at = f'{where}:{_line(text, m.start())}'
         if m['kind'] not in KINDS:
             raise DocBlockError(f'{at}: unknown block kind {m["kind"]!r} (one of {", ".join(KINDS)})')

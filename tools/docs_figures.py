@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import inspect
+import os
 import re
 import shlex
 import shutil
@@ -29,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
@@ -294,6 +296,52 @@ def _neato(ctx: Context) -> str:
     return fenced(lines_starting(out, *kept))
 
 
+# --- the bundled bags (bags/README.md) ------------------------------------------------------------
+
+BUNDLED = {  # bag -> (vehicle, the twin's truth terrain, a note); how bags/make_bundled_bags.sh made them
+    'test_robot_track_sand_bin.mcap': ('test_robot_track', '`sand_bin`'),
+    'test_robot_4wheel_sand_bin.mcap': ('test_robot_4wheel', '`sand_bin`'),
+    'test_robot_6wheel_sand_bin.mcap': ('test_robot_6wheel', '`sand_bin`'),
+    'test_robot_4wheel_dry_sand.mcap': ('test_robot_4wheel', '**`clay`** (not what the name says)'),
+}
+BUNDLED_TOPICS = ('/cmd_vel', '/joint_states', '/odom', '/ground_truth/odom', '/battery/measured')
+
+
+@generator('bundled bags', 'skidsteer-power info bags/BAG.mcap (skidsteer_power.cli.bag_info.bag_info)')
+def _bundled_bags(_: Context) -> str:
+    from skidsteer_power.cli.bag_info import bag_info
+
+    rows = [
+        '| bag | vehicle | twin (truth) terrain | duration [s] | ' + ' | '.join(BUNDLED_TOPICS) + ' |',
+        '| --- | --- | --- | ---: | ' + ' | '.join('---:' for _ in BUNDLED_TOPICS) + ' |',
+    ]
+    for bag, (vehicle, terrain) in BUNDLED.items():
+        info = bag_info(str(ROOT / 'bags' / bag))
+        counts = {t['topic']: t['count'] for t in info['topics']}
+        cells = [f'`{bag}`', f'`{vehicle}`', terrain, f'{info["duration_s"]:.1f}']
+        rows.append('| ' + ' | '.join(cells + [str(counts.get(t, 0)) for t in BUNDLED_TOPICS]) + ' |')
+    return '\n'.join(rows) + '\n'
+
+
+def _motion_error(terrain: str, ctx: Context) -> str:
+    out = cli_stdout(WRONG_TERRAIN.format(terrain=terrain), ctx)
+    m = re.search(r'^predicted from the measured motion \(\w+\): energy error (\S+) %', out, re.M)
+    if not m:
+        raise DocBlockError(f'validate --terrain {terrain}: no "predicted from the measured motion" line')
+    return f'{float(m[1]):+.0f} %'
+
+
+def _wrong_terrain_motion(terrain: str) -> Callable[[Context], str]:
+    return lambda ctx: _motion_error(terrain, ctx)
+
+
+for _terrain in ('dry_sand', 'clay'):
+    generator(
+        f'wrong terrain motion error {_terrain}',
+        WRONG_TERRAIN.format(terrain=_terrain).replace(' {scratch}', ' out'),
+    )(_wrong_terrain_motion(_terrain))
+
+
 # --- benchmark figures, quoted from docs/BENCHMARKS.md's goal table (which names its run) --------
 
 
@@ -345,14 +393,83 @@ def _compare_summary(_: Context) -> str:
 @generator('main job', 'bash bags/twin_main_job.sh OUT', kind='measured')
 def _main_job(ctx: Context) -> str:
     out = ctx.scratch / 'main_job'
+    load, start = os.getloadavg()[0], time.monotonic()
     done = subprocess.run(
         ['bash', str(ROOT / 'bags' / 'twin_main_job.sh'), str(out)], cwd=ROOT, capture_output=True, text=True
     )
+    wall_s = time.monotonic() - start
     if done.returncode != 0:
         raise DocBlockError(f'bags/twin_main_job.sh exited {done.returncode}: {done.stderr.strip()[-300:]}')
     summary = (out / 'summary.md').read_text(encoding='utf-8')
-    tables = summary.split('\n\n', 1)[1]  # below the title
-    return tables if tables.endswith('\n') else tables + '\n'
+    tables = summary.split('\n\n', 1)[1].rstrip('\n')  # below the title
+    return f'{tables}\n\nWall time: {wall_s:.0f} s ({os.cpu_count()} cores, load {load:.1f} at the start).\n'
+
+
+def _markdown_tables(text: str) -> list[list[list[str]]]:
+    """The Markdown tables of ``text``: rows of cells (header and rule lines dropped)."""
+    tables: list[list[list[str]]] = []
+    for chunk in re.split(r'\n\s*\n', text):
+        lines = [ln for ln in chunk.splitlines() if ln.startswith('| ')]
+        if len(lines) > 2:
+            tables.append([[c.strip() for c in re.split(r'(?<!\\)\|', ln)[1:-1]] for ln in lines[2:]])
+    return tables
+
+
+def _main_job_block() -> str:
+    doc = (ROOT / 'README.md').read_text(encoding='utf-8')
+    block = next((b for b in find_blocks(doc, 'README.md') if b.name == 'main job'), None)
+    if block is None:
+        raise DocBlockError("README.md: no 'main job' block to read")
+    return block.body
+
+
+def _range(values: Sequence[float], digits: int = 1, sign: bool = False) -> str:
+    fmt = f'{{:{"+" if sign else ""}.{digits}f}}'
+    lo, hi = (fmt.format(v) for v in (min(values), max(values)))
+    return lo if lo == hi else f'{lo} to {hi}' if sign else f'{lo}-{hi}'
+
+
+@generator('main job reading', "README.md's main job block (bash bags/twin_main_job.sh OUT)")
+def _main_job_reading(_: Context) -> str:
+    """The figures of "What it means", read from the measured tables above it."""
+    body = _main_job_block()
+    try:
+        summary, radii = _markdown_tables(body)[:2]
+        by = {row[0].removeprefix('test_robot_'): row for row in summary}
+        track, wheeled = by['track'], [by['4wheel'], by['6wheel']]
+        sides = [[float(x) for x in re.findall(r'[\d.]+', row[5])[:2]] for row in wheeled]
+        fess_r = {k: [float(x) for x in by[k][7].split(' / ')] for k in ('track', '6wheel')}
+        cells = {
+            k: [(float(r[3]), float(r[4]), float(r[5])) for r in radii if r[0] == f'test_robot_{k}']
+            for k in ('track', '6wheel')
+        }
+        all_cells = re.search(
+            r'FESS from set points against the real robot: .*? ([\d.]+) %, max ([\d.]+) % over (\d+)', body
+        )
+        if all_cells is None:
+            raise KeyError('FESS from set points against the real robot: median ... over N cells')
+    except (ValueError, KeyError, IndexError) as exc:
+        raise DocBlockError(f"README.md's main job block: not the tables it should hold ({exc!r})") from None
+    twin_x = {k: _range([twin / cmd for cmd, _real, twin in v]) for k, v in cells.items()}
+    real_x = _range([real / cmd for v in cells.values() for cmd, real, _twin in v])
+    torque = f'{track[5]} % (track, left / right) and {_range([s[0] for s in sides])} % / '
+    torque += f'{_range([s[1] for s in sides])} %'
+    energy = f'{float(track[2]):+.1f} % (track) and {_range([float(r[2]) for r in wheeled], sign=True)} %'
+    fess_real = f'{fess_r["track"][1]:.0f} % (track) and {fess_r["6wheel"][1]:.0f} % (6-wheel)'
+    fess_twin = f'{fess_r["track"][0]:.0f} % and {fess_r["6wheel"][0]:.0f} %'
+    every = f'{all_cells[3]} cells against the real robot: median {all_cells[1]} %, max {all_cells[2]} %'
+    motion = f'{float(track[3]):+.1f} % for the track and '
+    motion += f'{_range([float(r[3]) for r in wheeled], sign=True)} % for the wheeled robots'
+    return (
+        'in the steady part of each set (the last 1.5 s of each 4 s hold), FESS given the motion the twin '
+        f'really makes predicts its axle torques to a median |error| of {torque} on the two sides of the '
+        'wheeled robots (|error|, so the sides cannot cancel). From the command alone, FESS at the '
+        f'wheel-speed set points misses the energy by {energy} (wheels). In the Appendix D cells the twin '
+        f'turns on {twin_x["track"]}x (track) and {twin_x["6wheel"]}x (6-wheel) the commanded radius, as '
+        f"the real robot did on {real_x}x; FESS from the set points predicts the real robot's radii to a "
+        f"median {fess_real}, the twin's to {fess_twin} (all {every}). Over the whole run, predicting "
+        f'from the true motion (`validate --kinematics ground_truth`) is {motion}'
+    )
 
 
 # --- the run --------------------------------------------------------------------------------------
