@@ -5,7 +5,6 @@ fails on a difference; the marker parser refuses markers that do not pair up."""
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
 
 import pytest
@@ -46,19 +45,21 @@ def test_the_drifting_figures_of_issue_38_are_generated_blocks() -> None:
 
 
 def test_a_hand_edited_figure_is_caught(tmp_path: Path) -> None:
-    """A copy of docs/CALIBRATION.md with one digit of the calibration output changed: the check
-    names that block and exit code 1; the rewrite restores the command's text."""
-    doc = (docs_figures.ROOT / 'docs' / 'CALIBRATION.md').read_text(encoding='utf-8')
-    block = next(b for b in find_blocks(doc) if b.name == 'calibrate walkthrough')
-    edited_body = re.sub(r'segments: (\d+) fit', lambda m: f'segments: {int(m[1]) + 1} fit', block.body)
-    assert edited_body != block.body
+    """A copy of bags/README.md with one message count changed (the track bag's /cmd_vel: 98 s at
+    25 Hz = 2450 intervals, 2451 messages): the check names that block and writes nothing; the
+    rewrite restores the command's text."""
+    doc = (docs_figures.ROOT / 'bags' / 'README.md').read_text(encoding='utf-8')
+    block = next(b for b in find_blocks(doc) if b.name == 'bundled bags')
+    row = '| `test_robot_track_sand_bin.mcap` | `test_robot_track` | `sand_bin` | 98.0 | 2451 |'
+    assert row in block.body
+    edited_body = block.body.replace(row, row.replace('2451', '2452'))
     edited = doc[: block.start] + edited_body + doc[block.stop :]
-    copy = tmp_path / 'CALIBRATION.md'
+    copy = tmp_path / 'README.md'
     copy.write_text(edited, encoding='utf-8')
-    stale = docs_figures.run([copy], check=True)
-    assert len(stale) == 1 and 'calibrate walkthrough' in stale[0]
+    stale = docs_figures.run([copy], check=True, only={'bundled bags'})
+    assert len(stale) == 1 and 'bundled bags' in stale[0]
     assert copy.read_text(encoding='utf-8') == edited  # --check writes nothing
-    assert docs_figures.run([copy], check=False, only={'calibrate walkthrough'})
+    assert docs_figures.run([copy], check=False, only={'bundled bags'})
     assert copy.read_text(encoding='utf-8') == doc
 
 

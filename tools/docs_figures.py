@@ -429,6 +429,17 @@ def _range(values: Sequence[float], digits: int = 1, sign: bool = False) -> str:
     return lo if lo == hi else f'{lo} to {hi}' if sign else f'{lo}-{hi}'
 
 
+@generator('main job summary', "README.md's main job block (bash bags/twin_main_job.sh OUT)")
+def _main_job_summary(_: Context) -> str:
+    """The main job's first table and its dated command line, copied from README.md's block."""
+    body = _main_job_block().strip('\n')
+    first, rest = body.split('\n', 1)
+    table = next((c.strip() for c in re.split(r'\n\s*\n', rest) if c.strip().startswith('| ')), None)
+    if not MEASURED_LINE.match(first) or table is None:
+        raise DocBlockError("README.md's main job block: no dated command line or no table")
+    return f"{first.rstrip('.')} (README.md's block).\n\n{table}\n"
+
+
 @generator('main job reading', "README.md's main job block (bash bags/twin_main_job.sh OUT)")
 def _main_job_reading(_: Context) -> str:
     """The figures of "What it means", read from the measured tables above it."""
