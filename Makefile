@@ -1,6 +1,8 @@
 # Two commands on a fresh machine (Python 3.11, pip, make, cmake, gcc and g++ needed):
 #   make run    set everything up and run the main job
-#   make test   set everything up and run the whole test suite (what .ci/run does)
+#   make test   set everything up and run the whole test suite (what .ci/run does; it includes
+#               test/test_docs_figures.py: python -m tools.docs_figures --check)
+#   make docs   rewrite the generated blocks of README.md and docs/*.md from their commands
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -9,7 +11,7 @@ TF2    := $(VENV)/.tf2_msgs
 VENV_ABS = $(abspath $(VENV))
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup tf2-msgs run test lint bench clean
+.PHONY: setup tf2-msgs run test lint bench docs clean
 
 $(STAMP): requirements.txt requirements-dev.txt setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +49,9 @@ test: setup lint
 
 bench: setup
 	$(BIN)/python -m benchmarks.run --write-docs
+
+docs: setup
+	$(BIN)/python -m tools.docs_figures
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache .ruff_cache .import_linter_cache

@@ -9,7 +9,7 @@ PACKAGE = 'skidsteer_power'
 setup(
     name=PACKAGE,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks', 'tools', 'tools.*']),
     package_data={PACKAGE: ['py.typed', 'data/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),

@@ -14,7 +14,6 @@ from skidsteer_power.nodes.param_spec import (
     descriptor,
     render_table,
     render_yaml,
-    replace_between,
     yaml_value,
 )
 
@@ -62,12 +61,6 @@ def test_ranges_become_ros_ranges_and_docs_of_the_right_kind() -> None:
     assert (
         text == '# header\nn:\n  ros__parameters:\n    poll_rate_hz: 50.0  # poll rate [Hz] [0.1 .. 1000]\n'
     )
-
-
-def test_replace_between_needs_both_markers() -> None:
-    assert replace_between('a\n<b>\nold\n</b>\n', '<b>', '</b>', 'new\n') == 'a\n<b>\nnew\n</b>\n'
-    with pytest.raises(ValueError, match='markers'):
-        replace_between('no markers here', '<b>', '</b>', 'x')
 
 
 @pytest.mark.ros

@@ -1,6 +1,7 @@
 """Render the parameter files and the parameter tables from the nodes' specs (module
 :mod:`skidsteer_power.nodes.param_spec`): config/des_driver.yaml, config/estimator.yaml and the tables
-between the ``<!-- params:NODE -->`` markers of docs/INTERFACES.md.
+in the ``params NODE`` blocks of docs/INTERFACES.md (markers: :mod:`skidsteer_power.doc_blocks`;
+``python -m tools.docs_figures`` fills the same blocks with the same tables).
 
     python -m skidsteer_power.nodes.param_files          # rewrite them from the specs
     python -m skidsteer_power.nodes.param_files --check  # exit 1 if a shipped file differs
@@ -14,8 +15,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
+from skidsteer_power.doc_blocks import replace_block
 from skidsteer_power.nodes import des_driver, power_estimator
-from skidsteer_power.nodes.param_spec import ParamSpec, render_table, render_yaml, replace_between
+from skidsteer_power.nodes.param_spec import ParamSpec, render_table, render_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = Path('docs/INTERFACES.md')
@@ -65,12 +67,9 @@ NODES = (
 )
 
 
-def markers(node: str) -> tuple[str, str]:
-    """The marker lines around ``node``'s table in the doc."""
-    return (
-        f'<!-- params:{node} (generated: python -m skidsteer_power.nodes.param_files) -->',
-        '<!-- /params -->',
-    )
+def block_name(node: str) -> str:
+    """The name of ``node``'s table block in the doc (``<!-- BEGIN generated: params NODE -->``)."""
+    return f'params {node}'
 
 
 def rendered(root: Path = ROOT) -> dict[Path, str]:
@@ -78,7 +77,7 @@ def rendered(root: Path = ROOT) -> dict[Path, str]:
     out = {entry.yaml_file: render_yaml(entry.node, entry.specs, entry.header) for entry in NODES}
     doc = (root / DOC).read_text(encoding='utf-8')
     for entry in NODES:
-        doc = replace_between(doc, *markers(entry.node), render_table(entry.specs))
+        doc = replace_block(doc, 'generated', block_name(entry.node), render_table(entry.specs), str(DOC))
     out[DOC] = doc
     return out
 

@@ -156,12 +156,3 @@ def render_table(specs: Sequence[ParamSpec]) -> str:
         )
         rows.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(rows) + '\n'
-
-
-def replace_between(text: str, begin: str, end: str, body: str) -> str:
-    """``text`` with what lies between the marker lines ``begin`` and ``end`` replaced by ``body``."""
-    head, found, rest = text.partition(begin + '\n')
-    _, found_end, tail = rest.partition(end)
-    if not found or not found_end:
-        raise ValueError(f'markers {begin!r} ... {end!r} not found')
-    return head + begin + '\n' + body + end + tail
