@@ -82,7 +82,7 @@ from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
-from skidsteer_power.powertrain.motor import terminal_power
+from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
 
@@ -233,12 +233,14 @@ class Model:
     def with_values(self, values: dict[str, float]) -> tuple[Terrain, Powertrain]:
         """(terrain, powertrain) with ``values`` (parameter units) substituted."""
         # the keys are Terrain's float fields named in TERRAIN_PARAMS
-        terrain_fields: dict[str, Any] = {
+        terrain_fields: dict[str, float] = {
             k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS
         }
         if 'mu_longitudinal' in terrain_fields:  # rigid ground stores it as phi = atan(mu)
             terrain_fields['phi'] = math.atan(terrain_fields.pop('mu_longitudinal'))
-        terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
+        terrain = self.terrain
+        if terrain_fields:  # only float fields of Terrain: mypy sees every field's type in **kwargs
+            terrain = dataclasses.replace(terrain, **terrain_fields)  # type: ignore[arg-type]
         powertrain = self.powertrain
 
         def side_with_values(side: str) -> SideResistance:
@@ -285,14 +287,7 @@ class Model:
         )
         if np.all(sol.converged):
             self._warm = sol.state
-        torque = np.empty_like(sol.torque)
-        omega = np.empty_like(sol.omega)
-        power = np.empty_like(sol.torque)
-        for i, side in enumerate(('left', 'right')):
-            point = powertrain.motor_side(side, sol.torque[:, i], sol.omega[:, i])
-            torque[:, i] = point.motor_torque_Nm
-            omega[:, i] = point.motor_omega_rad_s
-            power[:, i] = point.electrical_power_W
+        torque, omega, power = motor_points(powertrain, sol.torque, sol.omega)
         ok = np.asarray(sol.converged)
         return Evaluation(torque, omega, ok, self.speed.copy(), self.yaw.copy(), power)
 
@@ -307,14 +302,23 @@ class Model:
         sol = predictor.solver.solve(setpoints, x0=self._warm, tol=SOLVE_TOL_N)
         self._warm = np.where(sol.limited[:, None], np.nan, sol.state)  # dug in: start from no slip
         axle_torque, *_ = predictor.electrical(sol.torque, setpoints)
-        torque, omega = np.empty_like(axle_torque), np.empty_like(axle_torque)
-        power = np.empty_like(axle_torque)
-        for i, side in enumerate(('left', 'right')):
-            point = powertrain.motor_side(side, axle_torque[:, i], setpoints[:, i])
-            torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
-            power[:, i] = point.electrical_power_W
+        torque, omega, power = motor_points(powertrain, axle_torque, setpoints)
         ok = np.ones(len(torque), dtype=bool)
         return Evaluation(torque, omega, ok, np.asarray(sol.speed), np.asarray(sol.yaw_rate), power)
+
+
+def motor_points(
+    powertrain: Powertrain, axle_torque_Nm: np.ndarray, axle_omega_rad_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(motor torque, motor speed, battery-side power), each (S, 2) [N m, rad/s, W], of axle torques
+    and speeds (S, 2) [N m, rad/s], left and right (:meth:`Powertrain.motor_side`)."""
+    torque, omega = np.empty_like(axle_torque_Nm), np.empty_like(axle_torque_Nm)
+    power = np.empty_like(axle_torque_Nm)
+    for i, side in enumerate(('left', 'right')):
+        point = powertrain.motor_side(side, axle_torque_Nm[:, i], axle_omega_rad_s[:, i])
+        torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+        power[:, i] = point.electrical_power_W
+    return torque, omega, power
 
 
 def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
@@ -532,7 +536,9 @@ def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
     return np.sort(order[n_hold:]), np.sort(order[:n_hold])
 
 
-def _energy_error(segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: Any) -> float:
+def _energy_error(
+    segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: MotorConstants
+) -> float:
     """Signed relative error of the summed energy of segments ``idx`` [-] (predicted vs measured):
     the battery-side energy where the segments measured it (V x I), else the motor terminal energy
     (K_t i); NaN where no segment of ``idx`` measured either."""
@@ -906,6 +912,17 @@ def calibrate(
     )
     tol = ident_tol_Nm / data.torque_scale_Nm if ident_tol_Nm is not None else IDENT_TOL
     scr = screen(data, fit, tol)
+    observations = count_observations(data, scr)
+    opt, unc = fit_inside_ranges(data, scr.names, observations)
+    fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
+    steps = Steps(data, scr, opt, unc, assess(data, scr.base, fitted), fitted)
+    why_fixed = reasons_fixed(steps, fit, tol, left_fixed)
+    return _result(steps, why_fixed, dropped, time.perf_counter() - started)
+
+
+def count_observations(data: FitData, scr: Screen) -> int:
+    """Step 2b: the fit segments' measured numbers; InputError when nothing is left to fit or there
+    are no more numbers than parameters."""
     if not scr.names:
         raise InputError('no parameter in --fit changes the prediction visibly on these segments')
     observations = data.observations(data.fit_idx)
@@ -914,7 +931,13 @@ def calibrate(
             f'{data.fit_idx.size} fit segment(s) give {observations} measurement(s): '
             f'too few for {len(scr.names)} parameters'
         )
-    opt = optimize_z(data, scr.names, f_scale=1.0)
+    return observations
+
+
+def fit_inside_ranges(data: FitData, names: Sequence[str], observations: int) -> tuple[Optimum, Uncertainty]:
+    """Steps 3 and 4 with the module doc's "Honesty": fit, and while an interval leaves its physical
+    range, put the widest such parameter back at its start and fit the others again."""
+    opt = optimize_z(data, names, f_scale=1.0)
     unc = uncertainty(opt, observations)
     leaves: dict[str, str] = {}
     while unc.leaves_range and len(unc.leaves_range) < len(opt.names):  # refit without the worst one
@@ -923,25 +946,45 @@ def calibrate(
         opt = optimize_z(data, [n for n in opt.names if n != worst], f_scale=1.0)
         unc = uncertainty(opt, observations)
     unc.leaves_range = {**leaves, **unc.leaves_range}
-    fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
-    check = assess(data, scr.base, fitted)
-    return _result(data, scr, opt, unc, check, fitted, fit, tol, dropped, left_fixed, started)
+    return opt, unc
+
+
+@dataclass
+class Steps:
+    """The answers of every step of one calibration (what :func:`_result` reports)."""
+
+    data: FitData
+    scr: Screen
+    opt: Optimum
+    unc: Uncertainty
+    check: Assessment
+    fitted: dict[str, float]  # fitted values inside their ranges, parameter units
+
+
+def reasons_fixed(
+    steps: Steps, fit: Sequence[str], tol: float, left_fixed: dict[str, str] | None
+) -> dict[str, str]:
+    """Step 6a: why each candidate that was not fitted stayed at its start (not in ``fit``, or
+    invisible in the screen); ``left_fixed`` (``--fit auto``'s reasons) first."""
+    why_fixed = dict(left_fixed or {})
+    for name in steps.data.candidates:
+        if name not in fit:
+            why_fixed.setdefault(name, 'not in --fit')
+        elif name not in steps.scr.names:
+            why_fixed[name] = (
+                f'not identifiable: a 10 % change moves the prediction by {steps.scr.unexplained[name]:.3g} '
+                f'noise scales (RMS, after what the others explain), below {tol:.3g}'
+            )
+        else:
+            why_fixed.pop(name, None)
+    return why_fixed
 
 
 def _result(
-    data: FitData,
-    scr: Screen,
-    opt: Optimum,
-    unc: Uncertainty,
-    check: Assessment,
-    fitted: dict[str, float],
-    fit: Sequence[str],
-    tol: float,
-    dropped: dict[str, int] | None,
-    left_fixed: dict[str, str] | None,
-    started: float,
+    steps: Steps, why_fixed: dict[str, str], dropped: dict[str, int] | None, seconds: float
 ) -> CalibrationResult:
     """Step 6: the :class:`CalibrationResult` (the start's terrain and powertrain if it was kept)."""
+    data, scr, opt, unc, check = steps.data, steps.scr, steps.opt, steps.unc, steps.check
     model, start = data.model, data.start
     warnings = list(unc.warnings)
     for name, why in unc.leaves_range.items():
@@ -951,34 +994,19 @@ def _result(
         fitted_used: dict[str, float] = {}
         after = scr.base
     else:
-        fitted_used, after = fitted, check.after
-    values = {n: fitted_used.get(n, start[n]) for n in data.candidates}
-    ci95 = {n: (unc.ci95.get(n) if not check.kept_start else None) for n in data.candidates}
+        fitted_used, after = steps.fitted, check.after
     terrain_fit, powertrain_fit = model.with_values(fitted_used)
-    why_fixed = dict(left_fixed or {})
-    for name in data.candidates:
-        if name not in fit:
-            why_fixed.setdefault(name, 'not in --fit')
-        elif name not in scr.names:
-            why_fixed[name] = (
-                f'not identifiable: a 10 % change moves the prediction by {scr.unexplained[name]:.3g} '
-                f'noise scales (RMS, after what the others explain), below {tol:.3g}'
-            )
-        else:
-            why_fixed.pop(name, None)
     err_idx = data.hold_idx if data.hold_idx.size else data.fit_idx
-    names = list(opt.names)
-    keep = list(range(len(names)))
     torque_r = (after.torque - data.measured)[data.fit_idx]
     return CalibrationResult(
-        names=names,
-        values=values,
+        names=list(opt.names),
+        values={n: fitted_used.get(n, start[n]) for n in data.candidates},
         start=dict(start),
-        ci95=ci95,
+        ci95={n: (unc.ci95.get(n) if not check.kept_start else None) for n in data.candidates},
         sensitivity_Nm=scr.sensitivity_Nm,
         identifiable=scr.identifiable,
-        covariance=unc.covariance[np.ix_(keep, keep)],
-        correlation=unc.correlation[np.ix_(keep, keep)],
+        covariance=unc.covariance,
+        correlation=unc.correlation,
         correlations_warnings=warnings,
         segments_fit=int(data.fit_idx.size),
         segments_holdout=int(data.hold_idx.size),
@@ -987,7 +1015,7 @@ def _result(
         holdout_energy_error_before=check.energy_before,
         holdout_energy_error_after=check.energy_before if check.kept_start else check.energy_after,
         residual_rms_Nm=_rmse(torque_r.ravel()),
-        seconds=time.perf_counter() - started,
+        seconds=seconds,
         terrain=terrain_fit,
         powertrain=powertrain_fit,
         dropped=dict(dropped or {}),
@@ -1047,13 +1075,7 @@ def setpoint_check(
         return {}
     commands = np.array([seg.command for seg in segments], dtype=float)
     pred = CommandPredictor(vehicle, terrain, powertrain).predict(commands[:, 0], commands[:, 1])
-    torque = np.empty_like(pred.torque)
-    omega = np.empty_like(pred.torque)
-    power = np.empty_like(pred.torque)
-    for i, side in enumerate(('left', 'right')):
-        point = powertrain.motor_side(side, pred.torque[:, i], pred.setpoint[:, i])
-        torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
-        power[:, i] = point.electrical_power_W
+    torque, omega, power = motor_points(powertrain, pred.torque, pred.setpoint)
     ev = Evaluation(torque, omega, np.ones(len(torque), bool), pred.speed, pred.yaw_rate, power)
     speed = np.array([seg.speed_m_s for seg in segments])
     yaw = np.array([seg.yaw_rate_rad_s for seg in segments])
