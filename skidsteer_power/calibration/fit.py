@@ -125,15 +125,20 @@ TERRAIN_PARAMS: dict[str, FitParameter] = {
 SOIL_PARAMS = ('kphi', 'kc', 'n', 'c', 'phi', 'K')
 RIGID_PARAMS = ('mu_longitudinal', 'mu_lateral', 'rolling_resistance', 'K')
 INTERNAL_PARAMS: dict[str, FitParameter] = {
-    'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
-    'left_c': FitParameter('N m', False, (0.0, 3.0)),
-    'right_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
-    'right_c': FitParameter('N m', False, (0.0, 3.0)),
+    # at the motor shaft, or at the axle for an effective powertrain (gear ratio 1): the ranges hold
+    # both (a 56 kg Husky's effective axle Coulomb loss is ~15 N m, issue 35)
+    'left_b': FitParameter('N m s/rad', False, (0.0, 2.0)),
+    'left_c': FitParameter('N m', False, (0.0, 50.0)),
+    'right_b': FitParameter('N m s/rad', False, (0.0, 2.0)),
+    'right_c': FitParameter('N m', False, (0.0, 50.0)),
 }
-IDLE_PARAMS: dict[str, FitParameter] = {  # the drive electronics' idle power, both sides (battery side)
-    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),
+BATTERY_PARAMS: dict[str, FitParameter] = {  # terms only a battery-side (V x I) measurement sees
+    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),  # the drive electronics, both sides
+    # copper loss k_cu T_m^2 = R i^2 (Powertrain.copper_loss_W_per_Nm2); log: it spans decades between
+    # a motor's shaft (the Husky's ASSUMED 167) and an effective powertrain's axle (~0.1)
+    'copper_loss_W_per_Nm2': FitParameter('W/(N m)^2', True, (1e-4, 1e4)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **IDLE_PARAMS}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **BATTERY_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
@@ -149,11 +154,17 @@ def parse_fit_list(text: str) -> list[str]:
         if not name:
             continue
         expanded = (
-            list(INTERNAL_PARAMS) if name == 'internal' else ['idle_power_W'] if name == 'idle' else [name]
+            list(INTERNAL_PARAMS)
+            if name == 'internal'
+            else ['idle_power_W']
+            if name == 'idle'
+            else ['copper_loss_W_per_Nm2']
+            if name == 'copper'
+            else [name]
         )
         for item in expanded:
             if item not in PARAMS:
-                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'auto'])
+                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'copper', 'auto'])
                 raise InputError(f'--fit: unknown parameter {name!r} (known: {known})')
             if item not in names:
                 names.append(item)
@@ -186,10 +197,13 @@ def auto_fit_names(
     else:
         fixed.update({n: 'no measured torque, current or power in the recordings' for n in INTERNAL_PARAMS})
     if power:
-        names += list(IDLE_PARAMS)
+        names += list(BATTERY_PARAMS)
     else:
-        fixed['idle_power_W'] = (
-            'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+        fixed.update(
+            {
+                n: 'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+                for n in BATTERY_PARAMS
+            }
         )
     return names, fixed
 
@@ -224,7 +238,9 @@ class Model:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
         if name in TERRAIN_PARAMS:  # (mu_longitudinal: Terrain's property tan(phi))
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
-        if name in IDLE_PARAMS:
+        if name == 'copper_loss_W_per_Nm2':  # a neutral 0 starts at the range's floor (0.04 W at 20 N m)
+            return max(self.powertrain.copper_loss_W_per_Nm2, BATTERY_PARAMS[name].bounds[0])
+        if name in BATTERY_PARAMS:
             return float(getattr(self.powertrain, name, 0.0))
         side, kind = name.split('_')
         total = self.powertrain.resistance(side).total
@@ -253,6 +269,12 @@ class Model:
             powertrain = dataclasses.replace(powertrain, left=left, right=right)
         if 'idle_power_W' in values:
             powertrain = dataclasses.replace(powertrain, idle_power_W=values['idle_power_W'])
+        if 'copper_loss_W_per_Nm2' in values:  # k_cu = R / K_t^2: the motor's R carries it
+            kt = powertrain.motor.torque_constant_Nm_A
+            motor = dataclasses.replace(
+                powertrain.motor, terminal_resistance_ohm=values['copper_loss_W_per_Nm2'] * kt**2
+            )
+            powertrain = dataclasses.replace(powertrain, motor=motor)
         return terrain, powertrain
 
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -580,6 +602,7 @@ class FitData:
     candidates: list[str]
     battery: np.ndarray  # (S, 2) measured battery-side power per side [W] (NaN: not measured)
     power_scale_W: float = 1.0
+    notes: list[str] = field(default_factory=list)  # what a step changed, for the result's warnings
 
     def residuals(self, ev: Evaluation, idx: np.ndarray) -> np.ndarray:
         """Scaled residuals of segments ``idx`` (fixed length; a missing measurement gives 0)."""
@@ -681,6 +704,68 @@ def prepare(
         candidates,
         battery,
         power_scale,
+    )
+
+
+LOSS_TERMS = ('left_b', 'left_c', 'right_b', 'right_c', 'copper_loss_W_per_Nm2', 'idle_power_W')
+"""The powertrain terms a battery-side measurement makes linear (:func:`battery_prefit`)."""
+
+
+def battery_prefit(data: FitData, fit: Sequence[str]) -> None:
+    """Step 1b: a start for the powertrain's loss terms from battery-side power, by linear least
+    squares. A neutral start (an effective powertrain: no loss, k_cu 0, no idle) is no place to screen
+    or fit from: a term at 0 moves nothing, and a log term at its floor cannot move. Per motoring side
+    of every fit segment (motor torque T, speed w of the start, amplifier efficiency eta)
+
+        eta P_bus = T_t w + b w^2 + c |w| + k_cu T^2 + eta P_idle / 2       [W]
+
+    (T_t = T - the start's internal torque: the load; T^2 of the start, so the copper term's cross
+    terms in b and c are dropped) is linear in b, c per side, k_cu and P_idle: non-negative least
+    squares (scipy.optimize.nnls), each clipped to its range. Terms not in ``fit`` keep their start.
+    The start (``data.start``, the model's powertrain) becomes that estimate, said in ``data.notes``.
+    Nothing happens without battery-side power or a loss term in ``fit``."""
+    free = [n for n in LOSS_TERMS if n in fit]
+    rows = data.fit_idx[np.all(np.isfinite(data.battery[data.fit_idx]), axis=1)]
+    if not free or rows.size == 0:
+        return
+    model = data.model
+    base = model.evaluate({})
+    if not np.all(base.ok[rows]):
+        return  # the screen says which segment has no steady state
+    pt = model.powertrain
+    eta = pt.amplifier.efficiency
+    columns: dict[str, list[np.ndarray]] = {n: [] for n in LOSS_TERMS}
+    target: list[np.ndarray] = []
+    for k, side in enumerate(('left', 'right')):
+        torque, omega = base.torque[rows, k], base.omega[rows, k]
+        load = torque - np.asarray(pt.resistance(side).torque(omega))
+        moving = (torque * omega > 0.0) & (np.abs(omega) > 1e-6)  # motoring: eta applies
+        zero = np.zeros(int(moving.sum()))
+        w, t2 = omega[moving], torque[moving] ** 2
+        for name in LOSS_TERMS:
+            columns[name].append(zero.copy())
+        columns[f'{side}_b'][-1] = w * w
+        columns[f'{side}_c'][-1] = np.abs(w)
+        columns['copper_loss_W_per_Nm2'][-1] = t2
+        columns['idle_power_W'][-1] = np.full(w.size, 0.5 * eta)
+        target.append(eta * data.battery[rows, k][moving] - load[moving] * w)
+    design = {n: np.concatenate(c) for n, c in columns.items()}
+    rhs = np.concatenate(target) - sum(
+        (design[n] * data.start.get(n, model.start_value(n)) for n in LOSS_TERMS if n not in free),
+        np.zeros(len(np.concatenate(target))),
+    )
+    if rhs.size <= len(free):
+        return
+    solution, _ = optimize.nnls(np.column_stack([design[n] for n in free]), rhs)
+    values = {n: float(np.clip(v, *PARAMS[n].bounds)) for n, v in zip(free, solution, strict=True)}
+    _, powertrain = model.with_values(values)
+    model.powertrain = powertrain
+    model._warm = None
+    for name in free:
+        data.start[name] = model.start_value(name)
+    listed = ', '.join(f'{n} {data.start[n]:.4g} {PARAMS[n].unit}' for n in free)
+    data.notes.append(
+        f'loss terms started from their linear least-squares estimate on battery power: {listed}'
     )
 
 
@@ -910,6 +995,7 @@ def calibrate(
     data = prepare(
         vehicle, terrain, powertrain, segments, fit, holdout=holdout, seed=seed, fit_at=fit_at, fit_to=fit_to
     )
+    battery_prefit(data, fit)
     tol = ident_tol_Nm / data.torque_scale_Nm if ident_tol_Nm is not None else IDENT_TOL
     scr = screen(data, fit, tol)
     observations = count_observations(data, scr)
@@ -986,7 +1072,7 @@ def _result(
     """Step 6: the :class:`CalibrationResult` (the start's terrain and powertrain if it was kept)."""
     data, scr, opt, unc, check = steps.data, steps.scr, steps.opt, steps.unc, steps.check
     model, start = data.model, data.start
-    warnings = list(unc.warnings)
+    warnings = [*data.notes, *unc.warnings]
     for name, why in unc.leaves_range.items():
         warnings.append(f'{name} is not identifiable: {why}; left at its start {start[name]:.6g}')
     if check.kept_start:
