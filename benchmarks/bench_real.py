@@ -1,11 +1,12 @@
-"""BorealTC's real Husky (issue 35): measured battery-side energy (V x I: the drivers' current
-magnitudes x the 24 V nominal bus, ASSUMED; benchmarks/realdata.py) against the prediction from the
-recorded wheel speeds (the set points), per surface with at least 7 runs.
+"""BorealTC's real Husky (issue 35): the measured energy V x I (the motor-current magnitudes x the
+24 V nominal bus, ASSUMED; benchmarks/realdata.py says why the current is the motor's) against the
+same quantity predicted from the recorded wheel speeds (the set points: 24 V x the predicted motoring
+current), per surface with at least 7 runs.
 
 Splits: calibrate on the even runs, predict the odd runs; and a transfer split (calibrate on the runs
 below the median mean speed, predict the runs above). Models: the preset (husky_a200 powertrain, the
-surface's terrain preset), FESS calibrated with ``--fit auto`` (ground, internal resistance, idle
-power; power and the gyro's yaw rate together) on the steady segments of the fit runs, and the linear
+surface's terrain preset), FESS calibrated with ``--fit auto`` (ground and internal resistance; the
+measured motor torque K_t |I| and the gyro's yaw rate together) on the steady segments of the fit runs, and the linear
 fit P = a|v| + b|w| + c on every sample of the fit runs. Energy is sample-and-hold over every sample
 of the check runs (standing included).
 
@@ -61,7 +62,10 @@ def run(report: Report) -> None:
                               goal='a value', met=False, note=str(err))  # fmt: skip
                 continue
             rows.append(row)
-            note = f'preset {row.preset_pct:+.1f} %, linear {row.linear_pct:+.1f} %; {row.status}'
+            note = (
+                f'calibrated {row.calibrated_pct:+.1f} %, preset {row.preset_pct:+.1f} %, '
+                f'linear {row.linear_pct:+.1f} %; {row.status}'
+            )
             report.under(f'{surface} {split}: |energy error| calibrated', abs(row.calibrated_pct), '%',
                          limit(row), inclusive=True, note=note)  # fmt: skip
             report.figure(

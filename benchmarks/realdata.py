@@ -7,15 +7,29 @@ Units and signs, worked out from the data (and marked where ASSUMED):
   range), read as m/s at the tread (the Husky's hardware max_speed is 1.0 m/s): the axle set point is
   vel / r with r = 0.1651 m (husky_a200.yaml). No command is recorded: the controller holds wheel
   speeds, so these are the set points.
-- ``curL``, ``curR``: per-side current [A], magnitudes only (never negative). ASSUMED: the drivers'
-  battery-side current (the Husky MCU reports driver currents), so V x I with V the 24 V nominal bus
-  (ASSUMED: no voltage recorded) is each side's electrical power [W].
+- ``curL``, ``curR``: per-side current [A], magnitudes only (never negative). They are the MOTOR
+  (armature) currents, not the drivers' battery-side input: on steady straight holds the current does
+  not grow with speed (ASPHALT 0.236 / 0.472 / 0.787 m/s: 4.9 / 4.6 / 3.9 A both sides; SANDY_LOAM
+  0.236 / 0.394 / 0.551 / 0.630 m/s: 8.1 / 7.8 / 7.4 / 7.9 A), nor on spot turns over a 3.6 x range of
+  wheel speed (SANDY_LOAM 0.055 - 0.197 m/s: 22.2 - 22.6 A), where a battery-side current would grow
+  about in proportion to speed (the mechanical power T w does) and the 1 A drawn at standstill rules
+  out an idle draw that could hide it. A current that follows torque, not power, is the armature
+  current (the MDL-BDC24 / Jaguar senses the armature current for its current loop). A BRAKING side
+  reads about 0 A (the inner side of gentle turns on asphalt and flooring: 0 - 0.6 A while the outer
+  side draws 10 - 15 A): the sensor reads the motoring current only (ASSUMED from that observation).
+  So (:func:`run_segments`) a steady window's motor torque is K_t |I| in the direction of its set
+  point, a reading below :data:`FLOOR_A` says only "braking or unloaded" and is left out of the fit,
+  and the quantity the benches compare is what the sensor shows: 24 V x |I| (the issue's "V x I",
+  the measured figures unchanged), predicted as 24 V x the predicted motoring current (a braking side
+  reads 0, :func:`reading_W`). It is an upper bound of the battery power (the drivers' PWM duty is
+  below 1), not the battery power itself; V = 24 V nominal bus (ASSUMED: no voltage recorded).
 - ``wz``: the IMU's gyro yaw rate [rad/s], REP 103 (positive turns left): its sign agrees with
   velR - velL in the data.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,9 +48,10 @@ SURFACE_TERRAIN = {  # start terrain of each surface (presets; config/terrains/)
     'FLOORING': 'flooring',
     'ICE': 'ice',
     'SANDY_LOAM': 'sandy_loam',
-    'SNOW': 'snow',
+    'SNOW': 'packed_snow',
 }
 MIN_RUNS = 7  # surfaces with at least this many runs are benchmarked (issue 35)
+FLOOR_A = 0.5  # a steady window's mean |I| below this reads "braking or unloaded": no torque [A]
 
 
 def root() -> Path:
@@ -79,17 +94,41 @@ def load_run(surface: str, run: int) -> Series:
 
 
 def run_segments(surface: str, numbers: list[int]) -> list[SeriesSegment]:
-    """Steady segments of runs ``numbers``: holds within one wheel speed step (1/127 m/s)."""
+    """Steady segments of runs ``numbers``: holds within one wheel speed step (1/127 m/s), each with
+    its measured motor torque K_t |I| in its set point's direction (module doc; NaN below
+    :data:`FLOOR_A`) and no battery-side power (the current is the motor's)."""
     from skidsteer_power.drive import controller_for_vehicle
     from skidsteer_power.estimator import factory
 
-    controller = controller_for_vehicle(factory.load_vehicle_config(VEHICLE))
+    vehicle = factory.load_vehicle_config(VEHICLE)
+    powertrain = factory.powertrain_for(vehicle)
+    kt, ratio = powertrain.motor.torque_constant_Nm_A, powertrain.gear_ratio
+    controller = controller_for_vehicle(vehicle)
     out: list[SeriesSegment] = []
     for n in numbers:
         found, _ = steady_segments(
             load_run(surface, n), controller.twist_of, tol_rad_s=1.01 * STEP_M_S / WHEEL_RADIUS_M
         )
-        out.extend(found)
+        for item in found:
+            current = np.asarray(item.power_W) / BUS_V
+            sign = np.sign(item.setpoint_rad_s)
+            torque = np.where((current >= FLOOR_A) & (sign != 0), kt * current * sign, np.nan)
+            segment = dataclasses.replace(
+                item.segment,
+                motor_torque_Nm=(float(torque[0]), float(torque[1])),
+                motor_omega_rad_s=(ratio * item.setpoint_rad_s[0], ratio * item.setpoint_rad_s[1]),
+                battery_W=(math.nan, math.nan),
+            )
+            out.append(SeriesSegment(segment, item.power_W, item.setpoint_rad_s))
+    return out
+
+
+def reading_W(current_A: np.ndarray, setpoint_rad_s: np.ndarray) -> np.ndarray:
+    """What BorealTC's sensors would show for predicted motor currents (P, 2) [A] at set points
+    (P, 2) [rad/s]: 24 V x the motoring current per side, a braking side reading 0 (module doc),
+    summed over the sides (P,) [W]."""
+    motoring = np.maximum(np.asarray(current_A) * np.sign(setpoint_rad_s), 0.0)
+    out: np.ndarray = BUS_V * motoring.sum(axis=1)
     return out
 
 
@@ -231,7 +270,7 @@ def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[i
     )
     fit_cmd, fit_p, _ = _samples(surface, fit_runs)
     cmd, measured, hold = _samples(surface, check_runs)
-    preset = CommandPredictor(vehicle, start, powertrain).predict(cmd[:, 0], cmd[:, 1]).battery_power
+    before = CommandPredictor(vehicle, start, powertrain).predict(cmd[:, 0], cmd[:, 1])
     after = CommandPredictor(vehicle, result.terrain, result.powertrain).predict(cmd[:, 0], cmd[:, 1])
     a, b, c = linear_fit(fit_cmd, fit_p)
     linear = a * np.abs(cmd[:, 0]) + b * np.abs(cmd[:, 1]) + c
@@ -246,8 +285,8 @@ def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[i
         fit_runs,
         check_runs,
         float(measured @ hold),
-        energy_pct(preset, measured, hold),
-        energy_pct(after.battery_power, measured, hold),
+        energy_pct(reading_W(before.current, before.setpoint), measured, hold),
+        energy_pct(reading_W(after.current, after.setpoint), measured, hold),
         energy_pct(linear, measured, hold),
         status,
     )

@@ -34,7 +34,7 @@ from skidsteer_power.vehicle import GRAVITY_M_S2, load_vehicle
 
 TRACK = load_vehicle('test_robot_track')  # 30 kg, l = 0.45 m, B = 0.426 m, r = 0.1 m
 WHEELS = load_vehicle('packbot_4wheel')
-RIGID_FILES = ('asphalt', 'concrete', 'flooring', 'grass', 'ice')
+RIGID_FILES = ('asphalt', 'concrete', 'flooring', 'grass', 'ice', 'packed_snow')
 
 
 @pytest.mark.parametrize('vehicle', [TRACK, WHEELS], ids=['track', 'wheels'])

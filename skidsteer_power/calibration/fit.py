@@ -82,7 +82,7 @@ from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
-from skidsteer_power.powertrain.motor import terminal_power
+from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
 
@@ -125,15 +125,20 @@ TERRAIN_PARAMS: dict[str, FitParameter] = {
 SOIL_PARAMS = ('kphi', 'kc', 'n', 'c', 'phi', 'K')
 RIGID_PARAMS = ('mu_longitudinal', 'mu_lateral', 'rolling_resistance', 'K')
 INTERNAL_PARAMS: dict[str, FitParameter] = {
-    'left_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
-    'left_c': FitParameter('N m', False, (0.0, 3.0)),
-    'right_b': FitParameter('N m s/rad', False, (0.0, 0.05)),
-    'right_c': FitParameter('N m', False, (0.0, 3.0)),
+    # at the motor shaft, or at the axle for an effective powertrain (gear ratio 1): the ranges hold
+    # both (a 56 kg Husky's effective axle Coulomb loss is ~15 N m, issue 35)
+    'left_b': FitParameter('N m s/rad', False, (0.0, 2.0)),
+    'left_c': FitParameter('N m', False, (0.0, 50.0)),
+    'right_b': FitParameter('N m s/rad', False, (0.0, 2.0)),
+    'right_c': FitParameter('N m', False, (0.0, 50.0)),
 }
-IDLE_PARAMS: dict[str, FitParameter] = {  # the drive electronics' idle power, both sides (battery side)
-    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),
+BATTERY_PARAMS: dict[str, FitParameter] = {  # terms only a battery-side (V x I) measurement sees
+    'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),  # the drive electronics, both sides
+    # copper loss k_cu T_m^2 = R i^2 (Powertrain.copper_loss_W_per_Nm2); log: it spans decades between
+    # a motor's shaft (the Husky's ASSUMED 167) and an effective powertrain's axle (~0.1)
+    'copper_loss_W_per_Nm2': FitParameter('W/(N m)^2', True, (1e-4, 1e4)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **IDLE_PARAMS}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **BATTERY_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
@@ -149,11 +154,17 @@ def parse_fit_list(text: str) -> list[str]:
         if not name:
             continue
         expanded = (
-            list(INTERNAL_PARAMS) if name == 'internal' else ['idle_power_W'] if name == 'idle' else [name]
+            list(INTERNAL_PARAMS)
+            if name == 'internal'
+            else ['idle_power_W']
+            if name == 'idle'
+            else ['copper_loss_W_per_Nm2']
+            if name == 'copper'
+            else [name]
         )
         for item in expanded:
             if item not in PARAMS:
-                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'auto'])
+                known = ', '.join([*TERRAIN_PARAMS, 'internal', 'idle', 'copper', 'auto'])
                 raise InputError(f'--fit: unknown parameter {name!r} (known: {known})')
             if item not in names:
                 names.append(item)
@@ -186,10 +197,13 @@ def auto_fit_names(
     else:
         fixed.update({n: 'no measured torque, current or power in the recordings' for n in INTERNAL_PARAMS})
     if power:
-        names += list(IDLE_PARAMS)
+        names += list(BATTERY_PARAMS)
     else:
-        fixed['idle_power_W'] = (
-            'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+        fixed.update(
+            {
+                n: 'no battery-side power (V x I) in the recordings: the motor current cannot see it'
+                for n in BATTERY_PARAMS
+            }
         )
     return names, fixed
 
@@ -224,7 +238,9 @@ class Model:
         """Value of ``name`` in the starting terrain / powertrain, in the parameter's unit."""
         if name in TERRAIN_PARAMS:  # (mu_longitudinal: Terrain's property tan(phi))
             return float(getattr(self.terrain, name)) / TERRAIN_PARAMS[name].to_si
-        if name in IDLE_PARAMS:
+        if name == 'copper_loss_W_per_Nm2':  # a neutral 0 starts at the range's floor (0.04 W at 20 N m)
+            return max(self.powertrain.copper_loss_W_per_Nm2, BATTERY_PARAMS[name].bounds[0])
+        if name in BATTERY_PARAMS:
             return float(getattr(self.powertrain, name, 0.0))
         side, kind = name.split('_')
         total = self.powertrain.resistance(side).total
@@ -233,12 +249,14 @@ class Model:
     def with_values(self, values: dict[str, float]) -> tuple[Terrain, Powertrain]:
         """(terrain, powertrain) with ``values`` (parameter units) substituted."""
         # the keys are Terrain's float fields named in TERRAIN_PARAMS
-        terrain_fields: dict[str, Any] = {
+        terrain_fields: dict[str, float] = {
             k: v * TERRAIN_PARAMS[k].to_si for k, v in values.items() if k in TERRAIN_PARAMS
         }
         if 'mu_longitudinal' in terrain_fields:  # rigid ground stores it as phi = atan(mu)
             terrain_fields['phi'] = math.atan(terrain_fields.pop('mu_longitudinal'))
-        terrain = dataclasses.replace(self.terrain, **terrain_fields) if terrain_fields else self.terrain
+        terrain = self.terrain
+        if terrain_fields:  # only float fields of Terrain: mypy sees every field's type in **kwargs
+            terrain = dataclasses.replace(terrain, **terrain_fields)  # type: ignore[arg-type]
         powertrain = self.powertrain
 
         def side_with_values(side: str) -> SideResistance:
@@ -251,6 +269,12 @@ class Model:
             powertrain = dataclasses.replace(powertrain, left=left, right=right)
         if 'idle_power_W' in values:
             powertrain = dataclasses.replace(powertrain, idle_power_W=values['idle_power_W'])
+        if 'copper_loss_W_per_Nm2' in values:  # k_cu = R / K_t^2: the motor's R carries it
+            kt = powertrain.motor.torque_constant_Nm_A
+            motor = dataclasses.replace(
+                powertrain.motor, terminal_resistance_ohm=values['copper_loss_W_per_Nm2'] * kt**2
+            )
+            powertrain = dataclasses.replace(powertrain, motor=motor)
         return terrain, powertrain
 
     def predict(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -285,14 +309,7 @@ class Model:
         )
         if np.all(sol.converged):
             self._warm = sol.state
-        torque = np.empty_like(sol.torque)
-        omega = np.empty_like(sol.omega)
-        power = np.empty_like(sol.torque)
-        for i, side in enumerate(('left', 'right')):
-            point = powertrain.motor_side(side, sol.torque[:, i], sol.omega[:, i])
-            torque[:, i] = point.motor_torque_Nm
-            omega[:, i] = point.motor_omega_rad_s
-            power[:, i] = point.electrical_power_W
+        torque, omega, power = motor_points(powertrain, sol.torque, sol.omega)
         ok = np.asarray(sol.converged)
         return Evaluation(torque, omega, ok, self.speed.copy(), self.yaw.copy(), power)
 
@@ -307,14 +324,23 @@ class Model:
         sol = predictor.solver.solve(setpoints, x0=self._warm, tol=SOLVE_TOL_N)
         self._warm = np.where(sol.limited[:, None], np.nan, sol.state)  # dug in: start from no slip
         axle_torque, *_ = predictor.electrical(sol.torque, setpoints)
-        torque, omega = np.empty_like(axle_torque), np.empty_like(axle_torque)
-        power = np.empty_like(axle_torque)
-        for i, side in enumerate(('left', 'right')):
-            point = powertrain.motor_side(side, axle_torque[:, i], setpoints[:, i])
-            torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
-            power[:, i] = point.electrical_power_W
+        torque, omega, power = motor_points(powertrain, axle_torque, setpoints)
         ok = np.ones(len(torque), dtype=bool)
         return Evaluation(torque, omega, ok, np.asarray(sol.speed), np.asarray(sol.yaw_rate), power)
+
+
+def motor_points(
+    powertrain: Powertrain, axle_torque_Nm: np.ndarray, axle_omega_rad_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(motor torque, motor speed, battery-side power), each (S, 2) [N m, rad/s, W], of axle torques
+    and speeds (S, 2) [N m, rad/s], left and right (:meth:`Powertrain.motor_side`)."""
+    torque, omega = np.empty_like(axle_torque_Nm), np.empty_like(axle_torque_Nm)
+    power = np.empty_like(axle_torque_Nm)
+    for i, side in enumerate(('left', 'right')):
+        point = powertrain.motor_side(side, axle_torque_Nm[:, i], axle_omega_rad_s[:, i])
+        torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
+        power[:, i] = point.electrical_power_W
+    return torque, omega, power
 
 
 def scaled_side(side: SideResistance, b: float | None, c: float | None) -> SideResistance:
@@ -532,7 +558,9 @@ def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
     return np.sort(order[n_hold:]), np.sort(order[:n_hold])
 
 
-def _energy_error(segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: Any) -> float:
+def _energy_error(
+    segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: MotorConstants
+) -> float:
     """Signed relative error of the summed energy of segments ``idx`` [-] (predicted vs measured):
     the battery-side energy where the segments measured it (V x I), else the motor terminal energy
     (K_t i); NaN where no segment of ``idx`` measured either."""
@@ -574,6 +602,7 @@ class FitData:
     candidates: list[str]
     battery: np.ndarray  # (S, 2) measured battery-side power per side [W] (NaN: not measured)
     power_scale_W: float = 1.0
+    notes: list[str] = field(default_factory=list)  # what a step changed, for the result's warnings
 
     def residuals(self, ev: Evaluation, idx: np.ndarray) -> np.ndarray:
         """Scaled residuals of segments ``idx`` (fixed length; a missing measurement gives 0)."""
@@ -675,6 +704,68 @@ def prepare(
         candidates,
         battery,
         power_scale,
+    )
+
+
+LOSS_TERMS = ('left_b', 'left_c', 'right_b', 'right_c', 'copper_loss_W_per_Nm2', 'idle_power_W')
+"""The powertrain terms a battery-side measurement makes linear (:func:`battery_prefit`)."""
+
+
+def battery_prefit(data: FitData, fit: Sequence[str]) -> None:
+    """Step 1b: a start for the powertrain's loss terms from battery-side power, by linear least
+    squares. A neutral start (an effective powertrain: no loss, k_cu 0, no idle) is no place to screen
+    or fit from: a term at 0 moves nothing, and a log term at its floor cannot move. Per motoring side
+    of every fit segment (motor torque T, speed w of the start, amplifier efficiency eta)
+
+        eta P_bus = T_t w + b w^2 + c |w| + k_cu T^2 + eta P_idle / 2       [W]
+
+    (T_t = T - the start's internal torque: the load; T^2 of the start, so the copper term's cross
+    terms in b and c are dropped) is linear in b, c per side, k_cu and P_idle: non-negative least
+    squares (scipy.optimize.nnls), each clipped to its range. Terms not in ``fit`` keep their start.
+    The start (``data.start``, the model's powertrain) becomes that estimate, said in ``data.notes``.
+    Nothing happens without battery-side power or a loss term in ``fit``."""
+    free = [n for n in LOSS_TERMS if n in fit]
+    rows = data.fit_idx[np.all(np.isfinite(data.battery[data.fit_idx]), axis=1)]
+    if not free or rows.size == 0:
+        return
+    model = data.model
+    base = model.evaluate({})
+    if not np.all(base.ok[rows]):
+        return  # the screen says which segment has no steady state
+    pt = model.powertrain
+    eta = pt.amplifier.efficiency
+    columns: dict[str, list[np.ndarray]] = {n: [] for n in LOSS_TERMS}
+    target: list[np.ndarray] = []
+    for k, side in enumerate(('left', 'right')):
+        torque, omega = base.torque[rows, k], base.omega[rows, k]
+        load = torque - np.asarray(pt.resistance(side).torque(omega))
+        moving = (torque * omega > 0.0) & (np.abs(omega) > 1e-6)  # motoring: eta applies
+        zero = np.zeros(int(moving.sum()))
+        w, t2 = omega[moving], torque[moving] ** 2
+        for name in LOSS_TERMS:
+            columns[name].append(zero.copy())
+        columns[f'{side}_b'][-1] = w * w
+        columns[f'{side}_c'][-1] = np.abs(w)
+        columns['copper_loss_W_per_Nm2'][-1] = t2
+        columns['idle_power_W'][-1] = np.full(w.size, 0.5 * eta)
+        target.append(eta * data.battery[rows, k][moving] - load[moving] * w)
+    design = {n: np.concatenate(c) for n, c in columns.items()}
+    rhs = np.concatenate(target) - sum(
+        (design[n] * data.start.get(n, model.start_value(n)) for n in LOSS_TERMS if n not in free),
+        np.zeros(len(np.concatenate(target))),
+    )
+    if rhs.size <= len(free):
+        return
+    solution, _ = optimize.nnls(np.column_stack([design[n] for n in free]), rhs)
+    values = {n: float(np.clip(v, *PARAMS[n].bounds)) for n, v in zip(free, solution, strict=True)}
+    _, powertrain = model.with_values(values)
+    model.powertrain = powertrain
+    model._warm = None
+    for name in free:
+        data.start[name] = model.start_value(name)
+    listed = ', '.join(f'{n} {data.start[n]:.4g} {PARAMS[n].unit}' for n in free)
+    data.notes.append(
+        f'loss terms started from their linear least-squares estimate on battery power: {listed}'
     )
 
 
@@ -904,8 +995,20 @@ def calibrate(
     data = prepare(
         vehicle, terrain, powertrain, segments, fit, holdout=holdout, seed=seed, fit_at=fit_at, fit_to=fit_to
     )
+    battery_prefit(data, fit)
     tol = ident_tol_Nm / data.torque_scale_Nm if ident_tol_Nm is not None else IDENT_TOL
     scr = screen(data, fit, tol)
+    observations = count_observations(data, scr)
+    opt, unc = fit_inside_ranges(data, scr.names, observations)
+    fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
+    steps = Steps(data, scr, opt, unc, assess(data, scr.base, fitted), fitted)
+    why_fixed = reasons_fixed(steps, fit, tol, left_fixed)
+    return _result(steps, why_fixed, dropped, time.perf_counter() - started)
+
+
+def count_observations(data: FitData, scr: Screen) -> int:
+    """Step 2b: the fit segments' measured numbers; InputError when nothing is left to fit or there
+    are no more numbers than parameters."""
     if not scr.names:
         raise InputError('no parameter in --fit changes the prediction visibly on these segments')
     observations = data.observations(data.fit_idx)
@@ -914,7 +1017,13 @@ def calibrate(
             f'{data.fit_idx.size} fit segment(s) give {observations} measurement(s): '
             f'too few for {len(scr.names)} parameters'
         )
-    opt = optimize_z(data, scr.names, f_scale=1.0)
+    return observations
+
+
+def fit_inside_ranges(data: FitData, names: Sequence[str], observations: int) -> tuple[Optimum, Uncertainty]:
+    """Steps 3 and 4 with the module doc's "Honesty": fit, and while an interval leaves its physical
+    range, put the widest such parameter back at its start and fit the others again."""
+    opt = optimize_z(data, names, f_scale=1.0)
     unc = uncertainty(opt, observations)
     leaves: dict[str, str] = {}
     while unc.leaves_range and len(unc.leaves_range) < len(opt.names):  # refit without the worst one
@@ -923,27 +1032,47 @@ def calibrate(
         opt = optimize_z(data, [n for n in opt.names if n != worst], f_scale=1.0)
         unc = uncertainty(opt, observations)
     unc.leaves_range = {**leaves, **unc.leaves_range}
-    fitted = {n: v for n, v in _values(opt.names, opt.z).items() if n not in unc.leaves_range}
-    check = assess(data, scr.base, fitted)
-    return _result(data, scr, opt, unc, check, fitted, fit, tol, dropped, left_fixed, started)
+    return opt, unc
+
+
+@dataclass
+class Steps:
+    """The answers of every step of one calibration (what :func:`_result` reports)."""
+
+    data: FitData
+    scr: Screen
+    opt: Optimum
+    unc: Uncertainty
+    check: Assessment
+    fitted: dict[str, float]  # fitted values inside their ranges, parameter units
+
+
+def reasons_fixed(
+    steps: Steps, fit: Sequence[str], tol: float, left_fixed: dict[str, str] | None
+) -> dict[str, str]:
+    """Step 6a: why each candidate that was not fitted stayed at its start (not in ``fit``, or
+    invisible in the screen); ``left_fixed`` (``--fit auto``'s reasons) first."""
+    why_fixed = dict(left_fixed or {})
+    for name in steps.data.candidates:
+        if name not in fit:
+            why_fixed.setdefault(name, 'not in --fit')
+        elif name not in steps.scr.names:
+            why_fixed[name] = (
+                f'not identifiable: a 10 % change moves the prediction by {steps.scr.unexplained[name]:.3g} '
+                f'noise scales (RMS, after what the others explain), below {tol:.3g}'
+            )
+        else:
+            why_fixed.pop(name, None)
+    return why_fixed
 
 
 def _result(
-    data: FitData,
-    scr: Screen,
-    opt: Optimum,
-    unc: Uncertainty,
-    check: Assessment,
-    fitted: dict[str, float],
-    fit: Sequence[str],
-    tol: float,
-    dropped: dict[str, int] | None,
-    left_fixed: dict[str, str] | None,
-    started: float,
+    steps: Steps, why_fixed: dict[str, str], dropped: dict[str, int] | None, seconds: float
 ) -> CalibrationResult:
     """Step 6: the :class:`CalibrationResult` (the start's terrain and powertrain if it was kept)."""
+    data, scr, opt, unc, check = steps.data, steps.scr, steps.opt, steps.unc, steps.check
     model, start = data.model, data.start
-    warnings = list(unc.warnings)
+    warnings = [*data.notes, *unc.warnings]
     for name, why in unc.leaves_range.items():
         warnings.append(f'{name} is not identifiable: {why}; left at its start {start[name]:.6g}')
     if check.kept_start:
@@ -951,34 +1080,19 @@ def _result(
         fitted_used: dict[str, float] = {}
         after = scr.base
     else:
-        fitted_used, after = fitted, check.after
-    values = {n: fitted_used.get(n, start[n]) for n in data.candidates}
-    ci95 = {n: (unc.ci95.get(n) if not check.kept_start else None) for n in data.candidates}
+        fitted_used, after = steps.fitted, check.after
     terrain_fit, powertrain_fit = model.with_values(fitted_used)
-    why_fixed = dict(left_fixed or {})
-    for name in data.candidates:
-        if name not in fit:
-            why_fixed.setdefault(name, 'not in --fit')
-        elif name not in scr.names:
-            why_fixed[name] = (
-                f'not identifiable: a 10 % change moves the prediction by {scr.unexplained[name]:.3g} '
-                f'noise scales (RMS, after what the others explain), below {tol:.3g}'
-            )
-        else:
-            why_fixed.pop(name, None)
     err_idx = data.hold_idx if data.hold_idx.size else data.fit_idx
-    names = list(opt.names)
-    keep = list(range(len(names)))
     torque_r = (after.torque - data.measured)[data.fit_idx]
     return CalibrationResult(
-        names=names,
-        values=values,
+        names=list(opt.names),
+        values={n: fitted_used.get(n, start[n]) for n in data.candidates},
         start=dict(start),
-        ci95=ci95,
+        ci95={n: (unc.ci95.get(n) if not check.kept_start else None) for n in data.candidates},
         sensitivity_Nm=scr.sensitivity_Nm,
         identifiable=scr.identifiable,
-        covariance=unc.covariance[np.ix_(keep, keep)],
-        correlation=unc.correlation[np.ix_(keep, keep)],
+        covariance=unc.covariance,
+        correlation=unc.correlation,
         correlations_warnings=warnings,
         segments_fit=int(data.fit_idx.size),
         segments_holdout=int(data.hold_idx.size),
@@ -987,7 +1101,7 @@ def _result(
         holdout_energy_error_before=check.energy_before,
         holdout_energy_error_after=check.energy_before if check.kept_start else check.energy_after,
         residual_rms_Nm=_rmse(torque_r.ravel()),
-        seconds=time.perf_counter() - started,
+        seconds=seconds,
         terrain=terrain_fit,
         powertrain=powertrain_fit,
         dropped=dict(dropped or {}),
@@ -1047,13 +1161,7 @@ def setpoint_check(
         return {}
     commands = np.array([seg.command for seg in segments], dtype=float)
     pred = CommandPredictor(vehicle, terrain, powertrain).predict(commands[:, 0], commands[:, 1])
-    torque = np.empty_like(pred.torque)
-    omega = np.empty_like(pred.torque)
-    power = np.empty_like(pred.torque)
-    for i, side in enumerate(('left', 'right')):
-        point = powertrain.motor_side(side, pred.torque[:, i], pred.setpoint[:, i])
-        torque[:, i], omega[:, i] = point.motor_torque_Nm, point.motor_omega_rad_s
-        power[:, i] = point.electrical_power_W
+    torque, omega, power = motor_points(powertrain, pred.torque, pred.setpoint)
     ev = Evaluation(torque, omega, np.ones(len(torque), bool), pred.speed, pred.yaw_rate, power)
     speed = np.array([seg.speed_m_s for seg in segments])
     yaw = np.array([seg.yaw_rate_rad_s for seg in segments])

@@ -35,7 +35,7 @@ import numpy as np
 import yaml
 
 from skidsteer_power.calibration.fit import (
-    IDLE_PARAMS,
+    BATTERY_PARAMS,
     INTERNAL_PARAMS,
     PARAMS,
     TERRAIN_PARAMS,
@@ -45,7 +45,7 @@ from skidsteer_power.calibration.fit import (
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.terramechanics.terrain import load_terrain
 
-POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *IDLE_PARAMS)  # fitted powertrain terms
+POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *BATTERY_PARAMS)  # fitted powertrain terms
 
 if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain
@@ -169,6 +169,8 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
         'bus_voltage_V': pt.bus_voltage_V,
         'idle_power_W': float(pt.idle_power_W),
     }
+    if 'copper_loss_W_per_Nm2' in internal:  # the fitted k_cu replaces the motor's R (R = k_cu K_t^2)
+        data['copper_loss_W_per_Nm2'] = float(pt.copper_loss_W_per_Nm2)
     if internal:
         values, cov = _block(result, internal)
         data['calibration'] = {

@@ -47,8 +47,10 @@ def register(subparsers: Subcommands) -> None:
         '--fit',
         default='kphi,n,c,phi,K',
         help='comma-separated parameters to fit (kphi, kc, n, c, phi, K, '
-        'internal = per-side internal resistance b, c), or auto: what the recordings identify (the '
-        "ground's parameters; the internal resistance where a torque or current is recorded), fitted to "
+        'internal = per-side internal resistance b, c; idle = idle power, copper = copper-loss '
+        'coefficient k_cu [W/(N m)^2], both seen only in battery-side V x I), or auto: what the recordings '
+        "identify (the ground's parameters; the internal resistance where a torque or current is recorded; "
+        'idle and copper where battery-side power is), fitted to '
         'the torque and the measured motion together where both are recorded; default kphi,n,c,phi,K',
     )
     parser.add_argument(
