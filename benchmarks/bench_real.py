@@ -6,9 +6,9 @@ current), per surface with at least 7 runs.
 Splits: calibrate on the even runs, predict the odd runs; and a transfer split (calibrate on the runs
 below the median mean speed, predict the runs above). Models: the preset (husky_a200 powertrain, the
 surface's terrain preset), FESS calibrated with ``--fit auto`` (ground and internal resistance; the
-measured motor torque K_t |I| and the gyro's yaw rate together) on the steady segments of the fit runs, and the linear
-fit P = a|v| + b|w| + c on every sample of the fit runs. Energy is sample-and-hold over every sample
-of the check runs (standing included).
+measured motor torque K_t |I| and the gyro's yaw rate together) on the steady segments of the fit
+runs, and the linear fit P = a|v| + b|w| + c on every sample of the fit runs. Energy is
+sample-and-hold over every sample of the check runs (standing included).
 
 Goals: even/odd |energy error| <= max(linear's + 2 points, 5 %); transfer <= half the linear fit's.
 About 2 min of CPU.
