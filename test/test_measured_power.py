@@ -303,25 +303,46 @@ def test_power_estimator_node_measures_v_times_i_from_one_float64_per_side(rig_f
     assert core.settings.limits.max_motor_torque_Nm == pytest.approx(4.122)
 
 
-def test_calibration_reads_a_battery_side_power_as_the_torque_of_the_powertrains_inverse() -> None:
-    """JointReader with a powertrain (what calibrate builds): 12.5 W per side at 2 rad/s through the
-    effective powertrain with k_cu 0.5 W/(N m)^2 and 4 W idle is 3 N m (12.5 - 2 = 6 + 0.5 x 9, by
-    hand); without one (the estimator core) the reading is the power itself."""
-    from skidsteer_power.estimator.inputs import JointMap, JointReader
+def _calibration_segments(bag: Path, vehicle: str) -> list[Any]:
+    """The steady segments calibrate cuts from ``bag`` with ``vehicle``'s own reader (as calibrate_bags)."""
+    from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
+    from skidsteer_power.estimator.inputs import JointReader
 
-    current = {'topic': 'a', 'type': 'std_msgs/msg/Float64', 'field': 'data'}
-    config = {'left': {'current': current}, 'right': {'current': current}}
-    joint_map = JointMap.from_config({'left': ['l'], 'right': ['r'], 'location': 'wheel'}, config, 24.0)
-    pt = Powertrain.from_config(
-        {'preset': 'effective', 'copper_loss_W_per_Nm2': 0.5, 'idle_power_W': 4.0}, 'wheel'
-    )
+    veh = factory.load_vehicle_config(vehicle)
+    pt = factory.powertrain_for(veh)
     limits = InputLimits.for_powertrain(pt)
-    calibrating = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits, pt)
-    reading = calibrating.read(['l', 'r'], (), [2.0, 2.0], [12.5, 12.5], 0.0)
-    assert reading is not None and reading[1] == pytest.approx((3.0, 3.0))
-    core_reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits)
-    reading = core_reader.read(['l', 'r'], (), [2.0, 2.0], [12.5, 12.5], 0.0)
-    assert reading is not None and reading[1] == (12.5, 12.5)
+    reader = JointReader(factory.joint_map_for(veh), pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits)
+    segments, _ = find_segments(read_recording(bag, SegmentOptions(), reader), SegmentOptions(), pt.motor)
+    return segments
+
+
+def test_calibration_fits_a_battery_side_power_in_watts_and_knows_a_total(tmp_path: Path) -> None:
+    """calibrate compares the measured V x I [W] with the predicted battery-side power, so a segment
+    keeps it in watts: 24 V x |-5 A| = 120 W and 24 V x 7 A = 168 W per side (the Float64 currents of
+    :func:`write_bag`, the Husky's 24 V bus). It once stored the motor torque of the powertrain's
+    inverse there (N m compared with W: +4135 % energy error on a twin bag). A whole-robot
+    BatteryState (24.5 V x 8 A = 196 W) is split half per side and flagged as a total: only the sum
+    is measured, and the fit compares the sum (fit.battery_error)."""
+    import yaml
+
+    from skidsteer_power.calibration.fit import battery_error
+    from skidsteer_power.resources import find
+
+    per_side = tmp_path / 'per_side.mcap'
+    write_bag(per_side, [(-5.0, 7.0)])
+    (segment,) = _calibration_segments(per_side, HUSKY)
+    assert segment.battery_W == pytest.approx((120.0, 168.0)) and not segment.battery_total
+    config = yaml.safe_load(find('vehicles', HUSKY).read_text())
+    config['measured_power'] = {'total': {'topic': 'battery/state', 'type': 'sensor_msgs/msg/BatteryState'}}
+    vehicle = tmp_path / 'husky_battery_state.yaml'
+    vehicle.write_text(yaml.safe_dump(config))
+    total = tmp_path / 'total.mcap'
+    write_bag(total, None, battery=True)
+    (segment,) = _calibration_segments(total, str(vehicle))
+    assert segment.battery_W == pytest.approx((98.0, 98.0)) and segment.battery_total
+    # the sum's error, once: predicted 150 + 60 W against the measured 196 W is +14 W, whatever the split
+    error = battery_error(np.array([[150.0, 60.0]]), np.array([segment.battery_W]), np.array([True]))
+    np.testing.assert_allclose(error, [[14.0, 0.0]])
 
 
 def test_a_negative_measured_energy_is_a_console_warning() -> None:

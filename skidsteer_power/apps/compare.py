@@ -83,7 +83,7 @@ class CompareOptions:
     transfer_payload_kg: float | None = None
     work_dir: str | Path | None = None
     map_cache_dir: str | Path | None = None
-    calibrate_fit: str = 'kphi,n,c,phi,K'
+    calibrate_fit: str = 'auto'  # what the recordings identify, soil or rigid ground, powertrain terms
     calibrate_fit_at: str = 'setpoints'
     extra_types: Mapping[str, str] | None = None  # .msg texts by type name (--msg): types the bags lack
 
@@ -265,7 +265,9 @@ def payload_vehicle(vehicle: str, payload_kg: float, folder: Path) -> str:
 
 
 def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | None, JsonObject]:
-    """Calibrate on the training bags (all their segments); (terrain file or None, report)."""
+    """Calibrate on the training bags (all their segments); (terrain file or None, report). The
+    report's ``vehicle_file`` is the vehicle with its identified powertrain and drive controller
+    (what ``calibrate --out-vehicle`` writes), which the calibrated models predict with."""
     from skidsteer_power.calibration import calibrate_bags, io
 
     try:
@@ -283,9 +285,13 @@ def calibrated_terrain(options: CompareOptions, folder: Path) -> tuple[str | Non
     path = io.write_terrain(
         folder / 'calibrated_terrain.yaml', result, options.train, options.terrain, 'calibrated'
     )
+    vehicle_file = io.write_vehicle(
+        folder / 'calibrated_vehicle.yaml', options.vehicle, result, options.train, str(path)
+    )
     report = result.as_json()
     return str(path), {
         'terrain_file': str(path),
+        'vehicle_file': str(vehicle_file),
         'parameters': {
             n: {k: p.get(k) for k in ('value', 'ci95', 'fitted', 'status')}
             for n, p in report['parameters'].items()
@@ -321,6 +327,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], No
     if cal_terrain is None:
         say(f'warning: the calibrated models fail: {calibration["error"]}')
     configs = {'fess': options.terrain, 'fess_calibrated': cal_terrain}
+    cal_vehicle = str(calibration.get('vehicle_file', options.vehicle))
 
     def predict_runs(bags: Sequence[str], veh: str, terrains: dict[str, str | None]) -> list[BagRun]:
         runs = []
@@ -330,7 +337,10 @@ def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], No
             for key, terrain in terrains.items():
                 if terrain is None:
                     continue
-                prediction = _predict(path, veh, terrain, cache, options.extra_types)
+                # the calibrated model predicts with the calibrated vehicle (its identified powertrain),
+                # unless the run's vehicle was changed (a payload transfer keeps the given powertrain)
+                own = cal_vehicle if key == 'fess_calibrated' and veh == options.vehicle else veh
+                prediction = _predict(path, own, terrain, cache, options.extra_types)
                 if first is None:
                     first = bag_run(path, prediction, vehicle.drive_radius_m, gear)
                 first.predicted_W[key] = fess_power(prediction, online=False)

@@ -95,8 +95,8 @@ def calibrate_bags(
             powertrain.gear_ratio,
             powertrain.motor.torque_constant_Nm_A,
             InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
-            powertrain,  # a battery-side V x I reading becomes the motor torque of its inverse
-        )  # one per bag: a position-differentiated speed must not span two bags
+        )  # one per bag: a position-differentiated speed must not span two bags; a battery-side
+        # V x I reading stays the power [W]: the fit compares it with the predicted P_bus
         recordings.append(read_recording(bag, options, reader))
         found, why = find_segments(recordings[-1], options, powertrain.motor)
         segments.extend(found)
@@ -136,7 +136,8 @@ def _what_to_fit(segments: Sequence[Segment]) -> str:
     """'both', 'torque' or 'motion': what the segments measured (torque and / or a body motion)."""
     import math
 
-    torque = any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments)
+    # a battery-side V x I is power evidence too: the torque residuals carry it (fit.FitData)
+    torque = any(math.isfinite(sum(s.motor_torque_Nm)) or math.isfinite(sum(s.battery_W)) for s in segments)
     motion = any(s.motion_source != 'command' for s in segments)
     if torque and motion:
         return 'both'

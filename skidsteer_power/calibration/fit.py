@@ -132,13 +132,19 @@ INTERNAL_PARAMS: dict[str, FitParameter] = {
     'right_b': FitParameter('N m s/rad', False, (0.0, 2.0)),
     'right_c': FitParameter('N m', False, (0.0, 50.0)),
 }
+TIED_INTERNAL_PARAMS: dict[str, FitParameter] = {
+    # one b, c for both sides: what a whole-robot battery total (measured_power: total) can see; the
+    # sides' sum is all it measures, so per-side terms would be collinear
+    'sides_b': INTERNAL_PARAMS['left_b'],
+    'sides_c': INTERNAL_PARAMS['left_c'],
+}
 BATTERY_PARAMS: dict[str, FitParameter] = {  # terms only a battery-side (V x I) measurement sees
     'idle_power_W': FitParameter('W', False, (0.0, 1000.0)),  # the drive electronics, both sides
     # copper loss k_cu T_m^2 = R i^2 (Powertrain.copper_loss_W_per_Nm2); log: it spans decades between
     # a motor's shaft (the Husky's ASSUMED 167) and an effective powertrain's axle (~0.1)
     'copper_loss_W_per_Nm2': FitParameter('W/(N m)^2', True, (1e-4, 1e4)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **BATTERY_PARAMS}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **TIED_INTERNAL_PARAMS, **BATTERY_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
@@ -192,8 +198,13 @@ def auto_fit_names(
         fixed = {'kc': 'enters only as kc / b beside kphi (eq. 2.1): rarely visible, left at its start'}
     torque = any(math.isfinite(sum(s.motor_torque_Nm)) for s in segments)
     power = any(math.isfinite(sum(s.battery_W)) for s in segments)
-    if torque or power:
+    per_side = torque or any(math.isfinite(sum(s.battery_W)) and not s.battery_total for s in segments)
+    if per_side:
         names += list(INTERNAL_PARAMS)
+    elif power:  # only a whole-robot total: one b, c for both sides
+        names += list(TIED_INTERNAL_PARAMS)
+        tied = 'a whole-robot battery total: one b, c for both sides (sides_b, sides_c)'
+        fixed.update(dict.fromkeys(INTERNAL_PARAMS, tied))
     else:
         fixed.update({n: 'no measured torque, current or power in the recordings' for n in INTERNAL_PARAMS})
     if power:
@@ -243,8 +254,9 @@ class Model:
         if name in BATTERY_PARAMS:
             return float(getattr(self.powertrain, name, 0.0))
         side, kind = name.split('_')
-        total = self.powertrain.resistance(side).total
-        return float(total.viscous_Nm_s if kind == 'b' else total.coulomb_Nm)
+        sides = ('left', 'right') if side == 'sides' else (side,)
+        totals = [self.powertrain.resistance(s).total for s in sides]
+        return float(np.mean([t.viscous_Nm_s if kind == 'b' else t.coulomb_Nm for t in totals]))
 
     def with_values(self, values: dict[str, float]) -> tuple[Terrain, Powertrain]:
         """(terrain, powertrain) with ``values`` (parameter units) substituted."""
@@ -260,7 +272,8 @@ class Model:
         powertrain = self.powertrain
 
         def side_with_values(side: str) -> SideResistance:
-            b, c = values.get(f'{side}_b'), values.get(f'{side}_c')
+            b = values.get(f'{side}_b', values.get('sides_b'))
+            c = values.get(f'{side}_c', values.get('sides_c'))
             current = powertrain.resistance(side)
             return current if b is None and c is None else scaled_side(current, b, c)
 
@@ -602,6 +615,7 @@ class FitData:
     candidates: list[str]
     battery: np.ndarray  # (S, 2) measured battery-side power per side [W] (NaN: not measured)
     power_scale_W: float = 1.0
+    battery_total: np.ndarray | None = None  # (S,) True: only the sides' sum is measured (a total)
     notes: list[str] = field(default_factory=list)  # what a step changed, for the result's warnings
 
     def residuals(self, ev: Evaluation, idx: np.ndarray) -> np.ndarray:
@@ -612,7 +626,7 @@ class FitData:
             failed = ~ev.ok[idx][:, None] | ~np.isfinite(ev.torque[idx])
             err = np.where(failed, FAILED_RESIDUAL_NM / self.torque_scale_Nm, err)
             parts.append(np.where(np.isfinite(self.measured[idx]), err, 0.0).ravel())
-            err = (ev.power[idx] - self.battery[idx]) / self.power_scale_W
+            err = self.battery_error(ev.power[idx], idx) / self.power_scale_W
             err = np.where(~ev.ok[idx][:, None] | ~np.isfinite(ev.power[idx]), FAILED_RESIDUAL_NM / 0.05, err)
             parts.append(np.where(np.isfinite(self.battery[idx]), err, 0.0).ravel())
         if self.fit_to in ('motion', 'both'):
@@ -623,14 +637,34 @@ class FitData:
         out: np.ndarray = np.nan_to_num(np.concatenate(parts), nan=0.0, posinf=1e6, neginf=-1e6)
         return out
 
+    def battery_error(self, predicted_W: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """(S, 2) predicted minus measured battery-side power [W] of segments ``idx``
+        (:func:`battery_error`)."""
+        total = None if self.battery_total is None else self.battery_total[idx]
+        return battery_error(predicted_W, self.battery[idx], total)
+
     def observations(self, idx: np.ndarray) -> int:
         """How many measured numbers segments ``idx`` give the residuals."""
         count = 0
         if self.fit_to in ('torque', 'both'):
             count += int(np.isfinite(self.measured[idx]).sum()) + int(np.isfinite(self.battery[idx]).sum())
+            if self.battery_total is not None:  # a total is one number, not one per side
+                count -= int(np.count_nonzero(self.battery_total[idx] & np.isfinite(self.battery[idx, 1])))
         if self.fit_to in ('motion', 'both'):
             count += int(np.isfinite(self.motion[idx]).sum())
         return count
+
+
+def battery_error(predicted_W: np.ndarray, measured_W: np.ndarray, total: np.ndarray | None) -> np.ndarray:
+    """(S, 2) predicted minus measured battery-side power per side [W]; where ``total`` (S,) is True
+    only a whole-robot total was measured (split half per side): the sum's error, in the left column,
+    0 in the right (a total is one observation, whatever the model's split between the sides)."""
+    err: np.ndarray = predicted_W - measured_W
+    if total is None or not np.any(total):
+        return err
+    summed = np.column_stack([err.sum(axis=1), np.zeros(len(err))])
+    out: np.ndarray = np.where(total[:, None], summed, err)
+    return out
 
 
 def prepare(
@@ -704,10 +738,20 @@ def prepare(
         candidates,
         battery,
         power_scale,
+        battery_total=np.array([s.battery_total for s in segments], dtype=bool),
     )
 
 
-LOSS_TERMS = ('left_b', 'left_c', 'right_b', 'right_c', 'copper_loss_W_per_Nm2', 'idle_power_W')
+LOSS_TERMS = (
+    'left_b',
+    'left_c',
+    'right_b',
+    'right_c',
+    'sides_b',
+    'sides_c',
+    'copper_loss_W_per_Nm2',
+    'idle_power_W',
+)
 """The powertrain terms a battery-side measurement makes linear (:func:`battery_prefit`)."""
 
 
@@ -720,7 +764,8 @@ def battery_prefit(data: FitData, fit: Sequence[str]) -> None:
         eta P_bus = T_t w + b w^2 + c |w| + k_cu T^2 + eta P_idle / 2       [W]
 
     (T_t = T - the start's internal torque: the load; T^2 of the start, so the copper term's cross
-    terms in b and c are dropped) is linear in b, c per side, k_cu and P_idle: non-negative least
+    terms in b and c are dropped; a whole-robot total: the two sides' equations summed, where both
+    sides motor) is linear in b, c per side, k_cu and P_idle: non-negative least
     squares (scipy.optimize.nnls), each clipped to its range. Terms not in ``fit`` keep their start.
     The start (``data.start``, the model's powertrain) becomes that estimate, said in ``data.notes``.
     Nothing happens without battery-side power or a loss term in ``fit``."""
@@ -736,19 +781,31 @@ def battery_prefit(data: FitData, fit: Sequence[str]) -> None:
     eta = pt.amplifier.efficiency
     columns: dict[str, list[np.ndarray]] = {n: [] for n in LOSS_TERMS}
     target: list[np.ndarray] = []
+    total = data.battery_total[rows] if data.battery_total is not None else np.zeros(rows.size, bool)
+    power_in = base.torque[rows] * base.omega[rows]
+    motoring = [(power_in[:, k] > 0.0) & (np.abs(base.omega[rows, k]) > 1e-6) for k in (0, 1)]
+    both = motoring[0] & motoring[1]
+    side_cols: list[dict[str, np.ndarray]] = []
+    side_target: list[np.ndarray] = []
     for k, side in enumerate(('left', 'right')):
         torque, omega = base.torque[rows, k], base.omega[rows, k]
         load = torque - np.asarray(pt.resistance(side).torque(omega))
-        moving = (torque * omega > 0.0) & (np.abs(omega) > 1e-6)  # motoring: eta applies
-        zero = np.zeros(int(moving.sum()))
-        w, t2 = omega[moving], torque[moving] ** 2
+        cols = {n: np.zeros(rows.size) for n in LOSS_TERMS}
+        cols[f'{side}_b'] = cols['sides_b'] = omega * omega
+        cols[f'{side}_c'] = cols['sides_c'] = np.abs(omega)
+        cols['copper_loss_W_per_Nm2'] = torque**2
+        cols['idle_power_W'] = np.full(rows.size, 0.5 * eta)
+        side_cols.append(cols)
+        side_target.append(eta * data.battery[rows, k] - load * omega)
+    for k in (0, 1):  # a side's own V x I: one equation per motoring side (eta applies)
+        keep = motoring[k] & ~total
         for name in LOSS_TERMS:
-            columns[name].append(zero.copy())
-        columns[f'{side}_b'][-1] = w * w
-        columns[f'{side}_c'][-1] = np.abs(w)
-        columns['copper_loss_W_per_Nm2'][-1] = t2
-        columns['idle_power_W'][-1] = np.full(w.size, 0.5 * eta)
-        target.append(eta * data.battery[rows, k][moving] - load[moving] * w)
+            columns[name].append(side_cols[k][name][keep])
+        target.append(side_target[k][keep])
+    keep = both & total  # a whole-robot total: one equation, the two sides summed, both motoring
+    for name in LOSS_TERMS:
+        columns[name].append((side_cols[0][name] + side_cols[1][name])[keep])
+    target.append((side_target[0] + side_target[1])[keep])
     design = {n: np.concatenate(c) for n, c in columns.items()}
     rhs = np.concatenate(target) - sum(
         (design[n] * data.start.get(n, model.start_value(n)) for n in LOSS_TERMS if n not in free),

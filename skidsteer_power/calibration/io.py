@@ -39,13 +39,14 @@ from skidsteer_power.calibration.fit import (
     INTERNAL_PARAMS,
     PARAMS,
     TERRAIN_PARAMS,
+    TIED_INTERNAL_PARAMS,
     CalibrationResult,
     terrain_params,
 )
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.terramechanics.terrain import load_terrain
 
-POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *BATTERY_PARAMS)  # fitted powertrain terms
+POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *TIED_INTERNAL_PARAMS, *BATTERY_PARAMS)  # fitted powertrain terms
 
 if TYPE_CHECKING:
     from skidsteer_power.terramechanics.terrain import Terrain

@@ -30,6 +30,7 @@ from skidsteer_power.bag_io.decode import decode_joint_arrays, decode_twists
 from skidsteer_power.bag_io.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
+from skidsteer_power.estimator.measured import source_in_bag
 from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
@@ -86,6 +87,7 @@ class Recording:
     twist: np.ndarray | None  # (n, 2) odometry body twist V [m/s], yaw rate [rad/s], or None
     gyro: np.ndarray | None = None  # (n,) IMU yaw rate [rad/s] at pose_t (an Imu topic), or None
     battery: np.ndarray | None = None  # (n, 2) measured battery-side power V x I [W] at js_t, or None
+    battery_total: bool = False  # the battery power is one whole-robot reading, split half per side
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,8 @@ class Segment:
     count; motor_torque_Nm, motor_omega_rad_s : window means at the motor shaft [N m], [rad/s];
     torque_std_Nm : sample standard deviation of the torque [N m]; terminal_W : mean motor
     terminal power with copper loss [W]; battery_W : measured electrical (battery-side, V x I) power
-    per side [W] (NaN: not measured); source : bag path.
+    per side [W] (NaN: not measured); battery_total : that power is one whole-robot reading split
+    half per side (only the sum is measured); source : bag path.
     """
 
     source: str
@@ -113,6 +116,7 @@ class Segment:
     torque_std_Nm: tuple[float, float]
     terminal_W: tuple[float, float] = (math.nan, math.nan)
     battery_W: tuple[float, float] = (math.nan, math.nan)
+    battery_total: bool = False
 
 
 def _pose_topic(bag: BagReader, wanted: str) -> str:
@@ -225,6 +229,7 @@ def read_recording(
             pose_t, pose_xy, pose_yaw, twist = _decode_poses(bag, topic, t0)
         else:
             pose_t, pose_xy, pose_yaw, twist = np.zeros(0), np.zeros((0, 2)), np.zeros(0), None
+        total = _measures_total(bag, reader)
     good = ok & np.all(np.isfinite(omega), axis=1)
     battery = None
     if reader.map.measures_battery:  # the vehicle's measured_power: the effort is each side's V x I [W]
@@ -244,7 +249,16 @@ def read_recording(
         twist,
         gyro,
         battery,
+        total,
     )
+
+
+def _measures_total(bag: BagReader, reader: JointReader) -> bool:
+    """True when the vehicle's measured power in ``bag`` is one whole-robot reading (``total:``)."""
+    if not reader.map.measures_battery:
+        return False
+    source, _ = source_in_bag(bag, reader.map.measured_power)
+    return source is not None and source.total is not None
 
 
 def command_runs(
@@ -326,6 +340,7 @@ def find_segments(
                 torque_std_Nm=_std_pair(torque),
                 terminal_W=_mean_terminal_power(rec, sel, motor),
                 battery_W=_mean_pair(rec.battery[sel]) if rec.battery is not None else (math.nan, math.nan),
+                battery_total=rec.battery_total,
             )
         )
     return segments, dropped

@@ -303,9 +303,8 @@ class JointReader:
 
     G_dt and Kt default to the powertrain's. Velocity missing: differentiated from position between
     two messages (the first one gives no reading, :meth:`read` returns None). A battery-side
-    measurement (``effort_is: battery_power``, V x I [W] per side) is returned as that power, or,
-    given ``powertrain``, as the motor torque the powertrain's inverse gives
-    (:meth:`~skidsteer_power.powertrain.Powertrain.terminal_from_bus`, ``torque_from_terminal``).
+    measurement (``effort_is: battery_power``, V x I [W] per side) is returned as that power: the
+    estimator core inverts it through its powertrain itself, calibration fits the power as it is.
     """
 
     def __init__(
@@ -314,14 +313,9 @@ class JointReader:
         powertrain_gear_ratio: float,
         powertrain_torque_constant_Nm_A: float,
         limits: InputLimits,
-        powertrain: Any = None,
     ) -> None:
         self.map = joint_map
         self.limits = limits
-        # a battery-side measurement (effort_is battery_power) is the side's V x I [W]; with a
-        # powertrain, read() turns it into the motor torque its inverse gives (calibration reads
-        # torques); without one it returns the power (the estimator core inverts it itself)
-        self._invert = powertrain if joint_map.effort_is == 'battery_power' else None
         g_pt = float(powertrain_gear_ratio)
         g_dt = float(joint_map.gear_ratio or g_pt)
         kt = float(joint_map.torque_constant_Nm_A or powertrain_torque_constant_Nm_A)
@@ -415,12 +409,6 @@ class JointReader:
             # every value was finite: an inf here is a sum or product of huge ones, beyond the limit too
             _within(f'{label} velocity', w, limits.max_motor_speed_rad_s, 'rad/s')
             _within(f'{label} {"battery power" if self._power else "effort"}', t, t_max, unit)
-        if self._invert is not None:
-            pt = self._invert
-            torque_m = (
-                float(pt.torque_from_terminal(pt.terminal_from_bus(torque_m[0]), omega_m[0])),
-                float(pt.torque_from_terminal(pt.terminal_from_bus(torque_m[1]), omega_m[1])),
-            )
         return omega_m, torque_m
 
     def no_data(
