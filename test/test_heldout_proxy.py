@@ -1,0 +1,31 @@
+"""The path a new user takes with a robot whose motor nobody modelled (issue 35's held-out check, as
+the proxy of benchmarks/heldout_proxy.py): twin bags -> `calibrate --fit auto --out-vehicle` on one
+-> `validate` with the written vehicle on the other, through the real command line in subprocesses.
+The figures are the bench's (`python -m benchmarks.run heldout`); this checks the path holds."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import yaml
+
+from benchmarks.heldout_proxy import Case, run_case
+from skidsteer_power.estimator import factory
+
+
+def test_an_unknown_robot_calibrates_on_one_bag_and_predicts_the_other(tmp_path: Path) -> None:
+    outcome = run_case(Case('grass', 5, seconds=40.0), tmp_path)
+    # a twin Husky on grass draws tens of watts: 40 s is kilojoules, positive (BatteryState's sign)
+    assert 500.0 < outcome.measured_J < 20_000.0
+    for pct in (outcome.start_pct, outcome.calibrated_pct, outcome.linear_pct):
+        assert math.isfinite(pct)
+    # the watts-vs-newton-metres bug read +4135 % here; any sane fit is within a factor of two
+    assert abs(outcome.calibrated_pct) < 50.0
+    written = tmp_path / 'calibrated_vehicle.yaml'
+    vehicle = factory.load_vehicle_config(str(written))
+    powertrain = factory.powertrain_for(vehicle)
+    assert powertrain.is_effective
+    # a whole-robot total fits one b, c for both sides: the two sides are written alike
+    sides = yaml.safe_load(written.read_text())['powertrain']['internal_resistance']
+    assert sides['left'] == sides['right']
