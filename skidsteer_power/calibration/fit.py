@@ -997,7 +997,9 @@ def _motion_errors(data: FitData, ev: Evaluation, idx: np.ndarray) -> tuple[floa
 
 def assess(data: FitData, base: Evaluation, fitted: dict[str, float]) -> Assessment:
     """Step 5: the hold-out (the fit segments without one) before and after; the start is kept when
-    the fit predicts it worse (scaled RMS, or |energy error| where power is measured)."""
+    the fit predicts it worse: its |energy error| where power is measured (a handful of hold-out
+    segments' RMS, torque and motion together, rejected fits that halved the energy error), else
+    the scaled residual RMS."""
     model, segments = data.model, data.segments
     after = model.evaluate(fitted)
     idx = data.hold_idx if data.hold_idx.size else data.fit_idx
@@ -1012,11 +1014,12 @@ def assess(data: FitData, base: Evaluation, fitted: dict[str, float]) -> Assessm
               'yaw_mae_after_rad_s': w1}  # fmt: skip
     which = 'hold-out' if data.hold_idx.size else 'fit'
     kept = ''
-    if math.isfinite(energy_before) and abs(energy_after) > abs(energy_before) + ENERGY_WORSE:
-        kept = (
-            f'the fit predicted the {which} segments worse than the start (energy error '
-            f'{energy_before:+.1%} -> {energy_after:+.1%}): the start is kept'
-        )
+    if math.isfinite(energy_before):  # power measured: the energy is what is predicted, and decides
+        if abs(energy_after) > abs(energy_before) + ENERGY_WORSE:
+            kept = (
+                f'the fit predicted the {which} segments worse than the start (energy error '
+                f'{energy_before:+.1%} -> {energy_after:+.1%}): the start is kept'
+            )
     elif cost_after > cost_before * (1.0 + COST_WORSE):
         kept = (
             f'the fit predicted the {which} segments worse than the start (scaled residual RMS '
