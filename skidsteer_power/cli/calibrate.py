@@ -47,7 +47,8 @@ def register(subparsers: Subcommands) -> None:
         '--fit',
         default='kphi,n,c,phi,K',
         help='comma-separated parameters to fit (kphi, kc, n, c, phi, K, '
-        'internal = per-side internal resistance b, c; idle = idle power, copper = copper-loss '
+        'internal = per-side internal resistance b, c (sides_b, sides_c: one b, c for both sides, what '
+        'a whole-robot battery total sees); idle = idle power, copper = copper-loss '
         'coefficient k_cu [W/(N m)^2], both seen only in battery-side V x I), or auto: what the recordings '
         "identify (the ground's parameters; the internal resistance where a torque or current is recorded; "
         'idle and copper where battery-side power is), fitted to '
