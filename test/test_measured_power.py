@@ -188,9 +188,8 @@ def test_one_float64_battery_current_per_side_is_v_times_i(tmp_path: Path, predi
     assert console_warnings(result) == []
 
 
-def test_a_whole_robot_battery_state_is_measured_power(tmp_path: Path, predictor: MapPredictor) -> None:
-    """sensor_msgs/BatteryState: current -8 A (discharging, the message's sign) at 24.5 V = 196 W, half
-    per side."""
+def _battery_state_husky(tmp_path: Path) -> tuple[Path, Path]:
+    """(the Husky's file with a whole-robot BatteryState as its measured power, a bag of it)."""
     import yaml
 
     from skidsteer_power.resources import find
@@ -201,6 +200,13 @@ def test_a_whole_robot_battery_state_is_measured_power(tmp_path: Path, predictor
     vehicle.write_text(yaml.safe_dump(config))
     path = tmp_path / 'husky.mcap'
     write_bag(path, None, battery=True)
+    return vehicle, path
+
+
+def test_a_whole_robot_battery_state_is_measured_power(tmp_path: Path, predictor: MapPredictor) -> None:
+    """sensor_msgs/BatteryState: current -8 A (discharging, the message's sign) at 24.5 V = 196 W, half
+    per side."""
+    vehicle, path = _battery_state_husky(tmp_path)
     options = ValidateOptions(vehicle=str(vehicle), terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
     with open_bag(path) as bag:
         result = validate(bag, options, predictor)
@@ -323,21 +329,13 @@ def test_calibration_fits_a_battery_side_power_in_watts_and_knows_a_total(tmp_pa
     inverse there (N m compared with W: +4135 % energy error on a twin bag). A whole-robot
     BatteryState (24.5 V x 8 A = 196 W) is split half per side and flagged as a total: only the sum
     is measured, and the fit compares the sum (fit.battery_error)."""
-    import yaml
-
     from skidsteer_power.calibration.fit import battery_error
-    from skidsteer_power.resources import find
 
     per_side = tmp_path / 'per_side.mcap'
     write_bag(per_side, [(-5.0, 7.0)])
     (segment,) = _calibration_segments(per_side, HUSKY)
     assert segment.battery_W == pytest.approx((120.0, 168.0)) and not segment.battery_total
-    config = yaml.safe_load(find('vehicles', HUSKY).read_text())
-    config['measured_power'] = {'total': {'topic': 'battery/state', 'type': 'sensor_msgs/msg/BatteryState'}}
-    vehicle = tmp_path / 'husky_battery_state.yaml'
-    vehicle.write_text(yaml.safe_dump(config))
-    total = tmp_path / 'total.mcap'
-    write_bag(total, None, battery=True)
+    vehicle, total = _battery_state_husky(tmp_path)
     (segment,) = _calibration_segments(total, str(vehicle))
     assert segment.battery_W == pytest.approx((98.0, 98.0)) and segment.battery_total
     # the sum's error, once: predicted 150 + 60 W against the measured 196 W is +14 W, whatever the split
