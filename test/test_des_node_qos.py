@@ -128,7 +128,7 @@ def test_parameter_file_matches_the_node_and_is_read(tmp_path: Path, pair: Simul
     rclpy.init(args=['--ros-args', '--params-file', str(params)], context=context)
     try:
         node = DesDriver(context=context)
-        assert node.params['max_speed_m_s'] == 0.7 and node.params['left_port'] == pair.left.port
+        assert node.params.max_speed_m_s == 0.7 and node.params.left_port == pair.left.port
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)

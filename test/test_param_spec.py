@@ -156,3 +156,78 @@ def test_a_start_only_parameter_is_read_only_in_its_descriptor(ros_context: Cont
         assert node.get_parameter('vehicle').value == 'test_robot_track'
     finally:
         node.destroy_node()
+
+
+# -- typed parameter objects (nodes/parameters.py, rendered from the specs) ------------------------
+
+
+@pytest.mark.parametrize('entry', param_files.NODES, ids=lambda e: e.node)
+def test_each_node_parameter_object_has_the_specs_names_types_and_defaults(entry: NodeParams) -> None:
+    """The generated dataclass, read with dataclasses (not the renderer): a field per spec, in order,
+    annotated with the default's Python type, defaulting to it; frozen."""
+    import dataclasses
+
+    from skidsteer_power.nodes import parameters
+
+    cls = getattr(parameters, entry.class_name)
+    fields = dataclasses.fields(cls)
+    assert [f.name for f in fields] == [spec.name for spec in entry.specs]
+    for f, spec in zip(fields, entry.specs, strict=True):
+        assert f.type == type(spec.default).__name__ and f.default == spec.default, spec.name
+    defaults = cls()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        defaults.vehicle = 'other'
+
+
+def test_parameters_of_checks_type_range_and_choices_by_spec() -> None:
+    """parameters_of: every value checked by its spec (one ConfigError naming it), an int taken for
+    a float as a float, a missing value at its default, an unknown name refused."""
+    from skidsteer_power.des.protocol import BAUD_CODES
+    from skidsteer_power.errors import ConfigError
+    from skidsteer_power.nodes import des_driver
+    from skidsteer_power.nodes.param_spec import parameters_of
+    from skidsteer_power.nodes.parameters import DesDriverParameters
+
+    specs = des_driver.PARAMETERS
+    p = parameters_of(DesDriverParameters, specs, {'poll_rate_hz': 20, 'baud': 115200})
+    assert p.poll_rate_hz == 20.0 and type(p.poll_rate_hz) is float and p.baud == 115200
+    assert p.left_port == '/dev/ttyUSB0' and p.right_polarity == -1  # the spec's defaults
+    with pytest.raises(ConfigError, match=r'poll_rate_hz must be within 0\.1 \.\. 1000 \[Hz\], got 0\.0'):
+        parameters_of(DesDriverParameters, specs, {'poll_rate_hz': 0.0})
+    assert 12345 not in BAUD_CODES
+    with pytest.raises(ConfigError, match=r'baud must be one of .*, not 12345'):
+        parameters_of(DesDriverParameters, specs, {'baud': 12345})
+    with pytest.raises(ConfigError, match="guardian must be of type bool, not 'yes'"):
+        parameters_of(DesDriverParameters, specs, {'guardian': 'yes'})
+    with pytest.raises(ConfigError, match='status_every must be of type integer, not True'):
+        parameters_of(DesDriverParameters, specs, {'status_every': True})  # a bool is no int here
+    with pytest.raises(ConfigError, match='no such parameter: poll_rate'):
+        parameters_of(DesDriverParameters, specs, {'poll_rate': 20.0})
+
+
+def test_a_stale_parameter_object_is_a_runtime_error_naming_the_renderer() -> None:
+    from skidsteer_power.nodes import des_driver
+    from skidsteer_power.nodes.param_spec import parameters_of
+    from skidsteer_power.nodes.parameters import DesDriverParameters
+
+    with pytest.raises(RuntimeError, match=r'skidsteer_power\.nodes\.param_files'):
+        parameters_of(DesDriverParameters, (*des_driver.PARAMETERS, ParamSpec('extra', 1.0, 'x', (0, 2))), {})
+
+
+def test_the_rendered_module_is_formatted_and_compiles() -> None:
+    """render_parameters_module's text for a small spec: what ruff format leaves (checked on the
+    shipped file by ``ruff format --check``) and a dataclass that builds with the defaults."""
+    from skidsteer_power.nodes.param_spec import render_parameters_module
+
+    specs = (
+        ParamSpec('rate_hz', 2.0, 'a rate [Hz]', (0.5, 4.0)),
+        ParamSpec('mode', 'a', 'the "mode"', choices=('a', 'b'), read_only=True),
+    )
+    text = render_parameters_module([('Small', 'Two parameters.', specs)], 'Header.')
+    assert '    rate_hz: float = 2.0\n    """a rate [Hz]; range 0.5 .. 4"""\n' in text
+    assert "    mode: str = 'a'\n    \"\"\"the 'mode'; one of 'a', 'b'; read only\"\"\"\n" in text
+    namespace: dict[str, object] = {}
+    exec(compile(text, 'small.py', 'exec'), namespace)
+    small = namespace['Small']
+    assert isinstance(small, type)
+    assert (small().rate_hz, small().mode) == (2.0, 'a')

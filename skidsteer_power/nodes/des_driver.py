@@ -100,7 +100,8 @@ from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.nodes import cmd_vel_input
 from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.driver_guardian import GUARDIAN_PARAMETERS, DriverGuardian
-from skidsteer_power.nodes.param_spec import ParamSpec, declare, read
+from skidsteer_power.nodes.param_spec import ParamSpec, declare, read_parameters
+from skidsteer_power.nodes.parameters import DesDriverParameters
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
@@ -276,6 +277,16 @@ def _traceback_logged(transition: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
+def _given_limits(p: DesDriverParameters) -> dict[str, float]:
+    """The command limits the parameters give (0: the vehicle's; :func:`limits_for`)."""
+    return {
+        'max_speed_m_s': p.max_speed_m_s,
+        'max_yaw_rate_rad_s': p.max_yaw_rate_rad_s,
+        'max_accel_m_s2': p.max_accel_m_s2,
+        'max_yaw_accel_rad_s2': p.max_yaw_accel_rad_s2,
+    }
+
+
 class DesDriver(LifecycleNode):
     """Two DES amplifiers behind ``cmd_vel`` / ``joint_states`` / ``diagnostics`` (managed node)."""
 
@@ -308,34 +319,32 @@ class DesDriver(LifecycleNode):
 
     # -- parameters -----------------------------------------------------------------------------
 
-    def _read_parameters(self) -> tuple[dict[str, Any], DriverSetup]:
+    def _read_parameters(self) -> tuple[DesDriverParameters, DriverSetup]:
         """The parameters (their choices checked again: a set while unconfigured is only range-checked
         by ROS) and what follows from them and the vehicle file."""
-        p: dict[str, Any] = read(self, PARAMETERS)
-        if p['left_port'] == p['right_port']:
-            raise ConfigError(f'left_port and right_port are the same: {p["left_port"]}')
-        vehicle = load_vehicle(p['vehicle'])
+        p = read_parameters(self, PARAMETERS, DesDriverParameters)
+        if p.left_port == p.right_port:
+            raise ConfigError(f'left_port and right_port are the same: {p.left_port}')
+        vehicle = load_vehicle(p.vehicle)
         powertrain = Powertrain.for_vehicle(vehicle)
         motor_max_rpm = set_point_limit_rpm(powertrain.motor)
-        if p['max_motor_rpm'] > motor_max_rpm:
+        if p.max_motor_rpm > motor_max_rpm:
             raise ConfigError(
-                f"max_motor_rpm {p['max_motor_rpm']} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
+                f"max_motor_rpm {p.max_motor_rpm} is above the motor's max. speed {motor_max_rpm:.0f} rpm"
             )
         geometry = DriveGeometry(
             tread_m=float(vehicle.tread_m),
             drive_radius_m=float(vehicle.drive_radius_m),
             gear_ratio=float(powertrain.gear_ratio),
-            polarity={side: p[f'{side}_polarity'] for side in SIDES},
-            max_rpm=float(p['max_motor_rpm']),
+            polarity={'left': p.left_polarity, 'right': p.right_polarity},
+            max_rpm=p.max_motor_rpm,
         )
         return p, DriverSetup(
             powertrain=powertrain,
             geometry=geometry,
-            limits=limits_for(controller_for_vehicle(vehicle, powertrain), p),  # 0: the vehicle's
-            encoder_resolution=p['encoder_resolution'] or powertrain.motor.encoder_counts_per_turn,
-            cmd_vel_mode=cmd_vel_input.cmd_vel_mode(
-                self, p['cmd_vel_type'], 'twist_stamped', p['twist_stamped']
-            ),
+            limits=limits_for(controller_for_vehicle(vehicle, powertrain), _given_limits(p)),
+            encoder_resolution=p.encoder_resolution or powertrain.motor.encoder_counts_per_turn,
+            cmd_vel_mode=cmd_vel_input.cmd_vel_mode(self, p.cmd_vel_type, 'twist_stamped', p.twist_stamped),
         )
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
@@ -358,7 +367,7 @@ class DesDriver(LifecycleNode):
             self.params, self.setup = self._read_parameters()
             p, setup = self.params, self.setup
             self._start_pollers(self.guardian.start(p))  # the guardian's proxy ports, if on
-            self._wait_connected(p['configure_timeout_s'])
+            self._wait_connected(p.configure_timeout_s)
         except SkidsteerError as err:
             self.configure_error = str(err)
             self.get_logger().error(f'configure failed: {err}')
@@ -372,13 +381,13 @@ class DesDriver(LifecycleNode):
             setup.cmd_vel_mode,
             self._on_cmd_vel,
             cmd_vel_qos(),
-            timeout_s=p['cmd_timeout_s'],
-            tolerance_s=p['cmd_vel_stamp_tolerance_s'],
+            timeout_s=p.cmd_timeout_s,
+            tolerance_s=p.cmd_vel_stamp_tolerance_s,
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
         )
         self._runtime = [
-            self.create_timer(1.0 / p['poll_rate_hz'], self._publish_joint_states),
-            self.create_timer(1.0 / p['diagnostics_rate_hz'], self._publish_diagnostics),
+            self.create_timer(1.0 / p.poll_rate_hz, self._publish_joint_states),
+            self.create_timer(1.0 / p.diagnostics_rate_hz, self._publish_diagnostics),
         ]
         self.configure_error = ''
         return TransitionCallbackReturn.SUCCESS
@@ -418,37 +427,37 @@ class DesDriver(LifecycleNode):
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
 
-    def _start_pollers(self, p: dict[str, Any]) -> None:
+    def _start_pollers(self, p: DesDriverParameters) -> None:
         self.command = DriveCommand(
-            p['cmd_timeout_s'],
-            max_rpm=p['max_motor_rpm'],
+            p.cmd_timeout_s,
+            max_rpm=p.max_motor_rpm,
             motor=self.setup.powertrain.motor,
             geometry=self.setup.geometry,
             limits=self.setup.limits,
-            stop_both_on_link_loss=p['stop_both_on_link_loss'],
+            stop_both_on_link_loss=p.stop_both_on_link_loss,
             active=False,
-            stall_timeout_s=max(1.0, 5.0 / p['poll_rate_hz']),  # no good cycle for this long: down
+            stall_timeout_s=max(1.0, 5.0 / p.poll_rate_hz),  # no good cycle for this long: down
         )
         config = DesConfig(
-            baudrate=p['baud'],
-            current_source=p['current_source'],
-            status_variables=StatusVariables(encoder_counter=p['encoder_counter_variable']),
+            baudrate=p.baud,
+            current_source=p.current_source,
+            status_variables=StatusVariables(encoder_counter=p.encoder_counter_variable),
         )
         timing = LinkTiming(
-            ack_timeout_s=p['ack_timeout_s'],
-            reply_timeout_s=p['ack_timeout_s'],
-            exchange_timeout_s=max(0.25, 3.0 * p['ack_timeout_s']),
+            ack_timeout_s=p.ack_timeout_s,
+            reply_timeout_s=p.ack_timeout_s,
+            exchange_timeout_s=max(0.25, 3.0 * p.ack_timeout_s),
         )
         self.pollers = {
             side: AmplifierPoller(
                 side,
-                p[f'{side}_port'],
+                p.left_port if side == 'left' else p.right_port,
                 self.command,
                 config=config,
                 timing=timing,
-                poll_period_s=1.0 / p['poll_rate_hz'],
-                status_every=p['status_every'],
-                reconnect_period_s=p['reconnect_period_s'],
+                poll_period_s=1.0 / p.poll_rate_hz,
+                status_every=p.status_every,
+                reconnect_period_s=p.reconnect_period_s,
                 encoder_resolution=self.setup.encoder_resolution,
                 log_error=self.get_logger().error,
             )
@@ -588,7 +597,7 @@ class DesDriver(LifecycleNode):
             return
         msg = JointState()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = self.params['frame_id']
+        msg.header.frame_id = self.params.frame_id
         msg.name = [f'{side}_motor' for side in SIDES]
         for side in SIDES:
             self._published[side] = samples[side].sequence
@@ -600,11 +609,11 @@ class DesDriver(LifecycleNode):
 
     def _joint_values(self, side: str, sample: AmplifierSample) -> tuple[float, float, float]:
         """(position [rad], velocity [rad/s], effort [N m]) at the motor shaft, forward positive."""
-        stale_after_s = max(0.2, 5.0 / self.params['poll_rate_hz'])
+        stale_after_s = max(0.2, 5.0 / self.params.poll_rate_hz)
         age_s = self.pollers[side].clock() - sample.stamp  # the clock that stamped it
         if not sample.connected or not sample.sequence or age_s > stale_after_s:
             return math.nan, math.nan, math.nan
-        sign = self.params[f'{side}_polarity']
+        sign = self.setup.geometry.polarity[side]
         counts_per_rev = (
             self.setup.encoder_resolution * self.pollers[side].amp.config.quadrature_counts_per_count
         )
@@ -758,7 +767,7 @@ def make_driver(**kwargs: Any) -> DesDriver:
         if rclpy.utilities.ok(context=context):
             raise
         raise ExternalShutdownException from None
-    if node.params['autostart']:
+    if node.params.autostart:
         try:
             bring_up(node)
         except RCLError:

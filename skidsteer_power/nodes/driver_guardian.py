@@ -26,24 +26,25 @@ Behaviour (docs/RELIABILITY.md, "The guardian"):
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol
+import dataclasses
+from typing import TYPE_CHECKING, Protocol
 
 from skidsteer_power.des.guardian import DEFAULT_TIMEOUT_S, FEED_LINES, GuardianClient, GuardianError
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.nodes.param_spec import ParamSpec
-from skidsteer_power.powertrain.drivetrain import SIDES
 
 if TYPE_CHECKING:
     from rclpy.impl.rcutils_logger import RcutilsLogger
 
     from skidsteer_power.des.poller import AmplifierPoller, DriveCommand
+    from skidsteer_power.nodes.parameters import DesDriverParameters
 
 
 class GuardedDriver(Protocol):
     """What the guardian needs of its driver (:class:`~skidsteer_power.nodes.des_driver.DesDriver`):
     its parameters, held command, pollers and logger (a protocol: des_driver imports this module)."""
 
-    params: dict[str, Any]
+    params: DesDriverParameters
     command: DriveCommand | None
     pollers: dict[str, AmplifierPoller]
 
@@ -82,21 +83,21 @@ class DriverGuardian:
         self.client: GuardianClient | None = None
         self.real_ports: dict[str, str] = {}
 
-    def start(self, p: dict[str, Any]) -> dict[str, Any]:
+    def start(self, p: DesDriverParameters) -> DesDriverParameters:
         """Start the guardian (if wanted); the parameters with its proxy ports as the sides' ports."""
         self.close()
-        feed = str(p['guardian_feed']).lower()
+        feed = p.guardian_feed.lower()
         if feed not in FEED_LINES:
             raise ConfigError(f'guardian_feed must be one of {", ".join(FEED_LINES)}, not {feed!r}')
-        if not p['guardian']:
+        if not p.guardian:
             if feed != 'none':
                 raise ConfigError(f'guardian_feed {feed} needs guardian:=true (the guardian feeds it)')
             return p
-        self.real_ports = {side: p[f'{side}_port'] for side in SIDES}
+        self.real_ports = {'left': p.left_port, 'right': p.right_port}
         client = GuardianClient(
             self.real_ports,
-            baud=p['baud'],
-            timeout_s=p['guardian_timeout_s'],
+            baud=p.baud,
+            timeout_s=p.guardian_timeout_s,
             on_trip=self._on_trip,
             on_lost=self._on_lost,
             feed=feed,
@@ -111,11 +112,11 @@ class DriverGuardian:
             self.node.get_logger().warning(
                 f'guardian_feed {feed}: the {side} port refuses the line ({error}): it feeds no watchdog'
             )
-        return {**p, **{f'{side}_port': proxy[side] for side in SIDES}}
+        return dataclasses.replace(p, left_port=proxy['left'], right_port=proxy['right'])
 
     def refusal(self) -> str:
         """Why the power stages must not be enabled now ('' when they may)."""
-        if not self.node.params['guardian']:
+        if not self.node.params.guardian:
             return ''
         client = self.client
         if client is None:
@@ -133,7 +134,7 @@ class DriverGuardian:
     def status(self) -> str:
         """One line for diagnostics."""
         client = self.client
-        if not self.node.params['guardian']:
+        if not self.node.params.guardian:
             return 'off (guardian:=false)'
         if client is None:
             return 'not running'

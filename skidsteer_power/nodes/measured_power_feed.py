@@ -6,7 +6,7 @@ fresh current (or a declared voltage) it is "no data" (NaN in every field), as w
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from rclpy.qos import QoSProfile
 
     from skidsteer_power.estimator.inputs import InputLimits, JointMap
+    from skidsteer_power.nodes.parameters import PowerEstimatorParameters
     from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
     from skidsteer_power.vehicle import Vehicle
 
@@ -101,7 +102,7 @@ class MeasuredPowerFeed:
         return joints, pos, vel, effort
 
 
-def vehicle_limits(limits: InputLimits, vehicle: Vehicle, parameters: Mapping[str, object]) -> InputLimits:
+def vehicle_limits(limits: InputLimits, vehicle: Vehicle, p: PowerEstimatorParameters) -> InputLimits:
     """The node's input limits: the vehicle's own motor and driver's
     (:meth:`~skidsteer_power.estimator.inputs.InputLimits.for_powertrain`, issue 35) where the
     ``max_motor_speed_rad_s`` / ``max_motor_torque_Nm`` parameters are left at their defaults (the
@@ -116,7 +117,7 @@ def vehicle_limits(limits: InputLimits, vehicle: Vehicle, parameters: Mapping[st
     changes = {
         name: getattr(own, name)
         for name in ('max_motor_speed_rad_s', 'max_motor_torque_Nm')
-        if parameters.get(name) == getattr(defaults, name)
+        if getattr(p, name) == getattr(defaults, name)
     }
     return dataclasses.replace(limits, max_side_power_W=own.max_side_power_W, **changes)
 

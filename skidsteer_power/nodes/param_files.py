@@ -1,7 +1,8 @@
-"""Render the parameter files and the parameter tables from the nodes' specs (module
-:mod:`skidsteer_power.nodes.param_spec`): config/des_driver.yaml, config/estimator.yaml and the tables
-in the ``params NODE`` blocks of docs/INTERFACES.md (markers: :mod:`skidsteer_power.doc_blocks`;
-``python -m tools.docs_figures`` fills the same blocks with the same tables).
+"""Render the parameter files, the typed parameter objects and the parameter tables from the nodes'
+specs (module :mod:`skidsteer_power.nodes.param_spec`): config/des_driver.yaml, config/estimator.yaml,
+skidsteer_power/nodes/parameters.py and the tables in the ``params NODE`` blocks of docs/INTERFACES.md
+(markers: :mod:`skidsteer_power.doc_blocks`; ``python -m tools.docs_figures`` fills the same blocks with
+the same tables).
 
     python -m skidsteer_power.nodes.param_files          # rewrite them from the specs
     python -m skidsteer_power.nodes.param_files --check  # exit 1 if a shipped file differs
@@ -17,7 +18,7 @@ from typing import NamedTuple
 
 from skidsteer_power.doc_blocks import replace_block
 from skidsteer_power.nodes import des_driver, power_estimator
-from skidsteer_power.nodes.param_spec import ParamSpec, render_table, render_yaml
+from skidsteer_power.nodes.param_spec import ParamSpec, render_parameters_module, render_table, render_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = Path('docs/INTERFACES.md')
@@ -28,6 +29,7 @@ class NodeParams(NamedTuple):
     specs: Sequence[ParamSpec]
     yaml_file: Path  # relative to the source tree
     header: str
+    class_name: str  # of its typed parameter object in PARAMETERS_MODULE
 
 
 DES_DRIVER_HEADER = """\
@@ -42,6 +44,15 @@ DES_DRIVER_HEADER = """\
 #     /cmd_vel:
 #       subscription:
 #         reliability: reliable
+"""
+
+PARAMETERS_MODULE = Path('skidsteer_power/nodes/parameters.py')
+PARAMETERS_HEADER = """\
+The nodes' parameters as frozen, typed objects: one dataclass per node, a field per parameter (name,
+type, default, description as in the node's PARAMETERS spec), filled by
+:func:`skidsteer_power.nodes.param_spec.read_parameters` after each value's type, range and choices
+are checked. Rendered from the specs by ``python -m skidsteer_power.nodes.param_files`` (``--check``
+in CI): edit the spec, not this file.
 """
 
 ESTIMATOR_HEADER = """\
@@ -59,10 +70,18 @@ ESTIMATOR_HEADER = """\
 
 NODES = (
     NodeParams(
-        des_driver.NODE_NAME, des_driver.PARAMETERS, Path('config/des_driver.yaml'), DES_DRIVER_HEADER
+        des_driver.NODE_NAME,
+        des_driver.PARAMETERS,
+        Path('config/des_driver.yaml'),
+        DES_DRIVER_HEADER,
+        'DesDriverParameters',
     ),
     NodeParams(
-        power_estimator.NODE_NAME, power_estimator.PARAMETERS, Path('config/estimator.yaml'), ESTIMATOR_HEADER
+        power_estimator.NODE_NAME,
+        power_estimator.PARAMETERS,
+        Path('config/estimator.yaml'),
+        ESTIMATOR_HEADER,
+        'PowerEstimatorParameters',
     ),
 )
 
@@ -79,6 +98,11 @@ def rendered(root: Path = ROOT) -> dict[Path, str]:
     for entry in NODES:
         doc = replace_block(doc, 'generated', block_name(entry.node), render_table(entry.specs), str(DOC))
     out[DOC] = doc
+    classes = [
+        (entry.class_name, f'The parameters of the {entry.node} node (its PARAMETERS).', entry.specs)
+        for entry in NODES
+    ]
+    out[PARAMETERS_MODULE] = render_parameters_module(classes, PARAMETERS_HEADER)
     return out
 
 
@@ -88,10 +112,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     stale = []
     for path, text in rendered().items():
-        if (ROOT / path).read_text(encoding='utf-8') != text:
+        target = ROOT / path
+        if not target.exists() or target.read_text(encoding='utf-8') != text:
             stale.append(str(path))
             if not args.check:
-                (ROOT / path).write_text(text, encoding='utf-8')
+                target.write_text(text, encoding='utf-8')
     if args.check and stale:
         print(f'not the specs rendering: {", ".join(stale)}', file=sys.stderr)
         return 1

@@ -8,20 +8,34 @@ changed in its node's ``PARAMETERS`` only. Every number has a range: ROS refuses
 and :func:`declare` turns an out-of-range or mistyped start value into one ConfigError. A parameter
 with ``choices`` takes only those values (:func:`read` checks them, one ConfigError); one a node reads
 only at its start says ``read_only`` (the descriptor's: ROS refuses every later set).
+
+A node reads its parameters as one frozen, typed object (as generate_parameter_library does for
+ros2_controllers' diff_drive_controller): :func:`render_parameters_module` writes a dataclass per node
+(skidsteer_power/nodes/parameters.py, by ``param_files``; its fields are the specs' names, types and
+defaults), and :func:`parameters_of` fills one from values after :meth:`ParamSpec.check` (type,
+range, choices), so ``p.poll_rate_hz`` is a float to mypy and a mistyped name an error.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
-from collections.abc import Sequence
+import textwrap
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 
 from skidsteer_power.errors import ConfigError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+    Params = TypeVar('Params', bound=DataclassInstance)
 
 _UNIT = re.compile(r'\[([^\]]+)\]')
 
@@ -42,7 +56,18 @@ class ParamSpec:
     read_only: bool = False  # read at the node's start only: ROS refuses a later set
 
     def check(self, value: ParamValue) -> ParamValue:
-        """``value`` if it is one of ``choices`` (or there are none), else one ConfigError."""
+        """``value`` if it has the default's type (an int stands for a float, as a float), lies in
+        ``range`` and is one of ``choices`` (or there are none), else one ConfigError."""
+        kind = type(self.default)
+        if kind is float and type(value) is int:
+            value = float(value)
+        if type(value) is not kind:
+            raise ConfigError(f'{self.name} must be of type {self.type_name}, not {value!r}')
+        if self.range is not None and not isinstance(value, (bool, str)):
+            low, high = self.range
+            if not low <= value <= high:
+                unit = f' [{self.unit}]' if self.unit else ''
+                raise ConfigError(f'{self.name} must be within {self.range_text()}{unit}, got {value!r}')
         if self.choices and value not in self.choices:
             allowed = ', '.join(str(c) for c in self.choices)
             raise ConfigError(f'{self.name} must be one of {allowed}, not {value!r}')
@@ -106,6 +131,60 @@ def read(node: Node, specs: Sequence[ParamSpec]) -> dict[str, ParamValue]:
         assert isinstance(value, (bool, int, float, str)), spec.name  # a typed parameter keeps its type
         values[spec.name] = spec.check(value)
     return values
+
+
+def read_parameters(node: Node, specs: Sequence[ParamSpec], cls: type[Params]) -> Params:
+    """The values of ``specs``' parameters on ``node`` (:func:`read`) as one ``cls`` object."""
+    return parameters_of(cls, specs, read(node, specs))
+
+
+def parameters_of(cls: type[Params], specs: Sequence[ParamSpec], values: Mapping[str, ParamValue]) -> Params:
+    """``cls`` (a dataclass of :func:`render_parameters_module`) from ``values`` by name, each checked
+    by its spec (:meth:`ParamSpec.check`: type, range, choices; one ConfigError), a missing one at its
+    default. A name no spec has is a ConfigError; a ``cls`` whose fields are not ``specs``' names (a
+    stale rendering) is a RuntimeError naming the command that renders it."""
+    fields = tuple(f.name for f in dataclasses.fields(cls))
+    names = tuple(spec.name for spec in specs)
+    if fields != names:
+        command = 'python -m skidsteer_power.nodes.param_files'
+        raise RuntimeError(f'{cls.__name__} is not the rendering of its specs: run {command}')
+    unknown = sorted(set(values) - set(names))
+    if unknown:
+        raise ConfigError(f'no such parameter: {", ".join(unknown)}')
+    checked = {spec.name: spec.check(values.get(spec.name, spec.default)) for spec in specs}
+    return cls(**checked)
+
+
+def render_parameters_module(classes: Sequence[tuple[str, str, Sequence[ParamSpec]]], header: str) -> str:
+    """A Python module (``header``: its docstring) with one frozen dataclass per ``(class name, what it
+    holds, specs)``: a field per spec in order, of the default's type, with the default and the
+    description (and range, choices) as its docstring. Formatted as ``ruff format`` leaves it."""
+    lines = [f'"""{header.strip()}\n"""', '', 'from __future__ import annotations', '']
+    lines += ['from dataclasses import dataclass']
+    for name, summary, specs in classes:
+        lines += ['', '', '@dataclass(frozen=True)', f'class {name}:', f'    """{summary}"""', '']
+        for spec in specs:
+            kind = {bool: 'bool', int: 'int', float: 'float', str: 'str'}[type(spec.default)]
+            lines.append(f'    {spec.name}: {kind} = {spec.default!r}')
+            lines += _field_doc(spec)
+    return '\n'.join(lines) + '\n'
+
+
+def _field_doc(spec: ParamSpec) -> list[str]:
+    text = spec.description
+    if spec.range is not None:
+        text += f'; range {spec.range_text()}'
+    if spec.choices:
+        text += f'; one of {", ".join(repr(c) for c in spec.choices)}'
+    if spec.read_only:
+        text += '; read only'
+    text = text.replace('\\', '\\\\').replace('"', "'")
+    keep = '\xa0'  # not a break for textwrap: a range 'lo .. hi' stays on one line
+    text = text.replace(' .. ', f'{keep}..{keep}')
+    wrapped = [line.replace(keep, ' ') for line in textwrap.wrap(text, width=100, break_on_hyphens=False)]
+    if len(wrapped) == 1:
+        return [f'    """{wrapped[0]}"""']
+    return ['    """' + wrapped[0], *(f'    {line}' for line in wrapped[1:]), '    """']
 
 
 def _out_of_range(spec: ParamSpec, ros_message: str) -> str:

@@ -44,6 +44,7 @@ from skidsteer_power.estimator.path_energy import (
     PlannedPath,
 )
 from skidsteer_power.nodes.param_spec import ParamSpec
+from skidsteer_power.nodes.parameters import PowerEstimatorParameters
 from skidsteer_power.nodes.wire import decoder
 
 MAX_READ_POSES = 2_000_000
@@ -78,11 +79,11 @@ class PathInputs(NamedTuple):
 class PathEnergyHook:
     """Subscribes ``plan`` on ``node`` and publishes the path energies (module doc)."""
 
-    def __init__(self, node: Any, p: dict[str, Any], qos: Any) -> None:
-        """``p``: the node's declared parameters (:data:`PARAMETERS`, within their ranges)."""
+    def __init__(self, node: Any, p: PowerEstimatorParameters, qos: Any) -> None:
+        """``p``: the node's parameters (:data:`PARAMETERS` among them, within their ranges)."""
         self.node = node
-        self.speed_m_s = float(p['path_speed_m_s'])
-        self.reserve_wh = float(p['path_reserve_wh'])
+        self.speed_m_s = p.path_speed_m_s
+        self.reserve_wh = p.path_reserve_wh
         self.tracker = PathTracker()
         self.status = 'no path received'
         self.received = False

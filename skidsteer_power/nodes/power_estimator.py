@@ -118,7 +118,8 @@ from skidsteer_power.nodes import cmd_vel_input
 from skidsteer_power.nodes.cmd_vel_input import CmdVelInput
 from skidsteer_power.nodes.malformed import MalformedInputs
 from skidsteer_power.nodes.measured_power_feed import vehicle_limits, vendor_feed
-from skidsteer_power.nodes.param_spec import ParamSpec, declare
+from skidsteer_power.nodes.param_spec import ParamSpec, declare, read_parameters
+from skidsteer_power.nodes.parameters import PowerEstimatorParameters
 from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
@@ -299,7 +300,8 @@ class PowerEstimator(QuietNode):
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
-        p: dict[str, Any] = declare(self, PARAMETERS)  # a value out of its range: one ConfigError
+        declare(self, PARAMETERS)  # a value out of its range: one ConfigError
+        p = read_parameters(self, PARAMETERS, PowerEstimatorParameters)
         self._lock = threading.Lock()
         self._terrain_worker: threading.Thread | None = None
         self.pending_terrain = ''
@@ -307,25 +309,25 @@ class PowerEstimator(QuietNode):
         self._figures_due = [False, False]  # a new prediction / measurement since the figures' tick
         self._figure_timer_idle = False  # cancelled after a tick with nothing new (no idle wake-ups)
         settings = self._settings(p)
-        self.vehicle = factory.load_vehicle_config(p['vehicle'])
+        self.vehicle = factory.load_vehicle_config(p.vehicle)
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
-        self.terrain_name = p['terrain']
-        self.kinematics = str(p['kinematics'])
+        self.terrain_name = p.terrain
+        self.kinematics = p.kinematics
         self.controller = factory.drive_controller(
             self.vehicle,
-            max_speed_m_s=p['drive_max_speed_m_s'],
-            max_yaw_rate_rad_s=p['drive_max_yaw_rate_rad_s'],
-            max_wheel_rad_s=p['drive_max_wheel_rad_s'],
+            max_speed_m_s=p.drive_max_speed_m_s,
+            max_yaw_rate_rad_s=p.drive_max_yaw_rate_rad_s,
+            max_wheel_rad_s=p.drive_max_wheel_rad_s,
         )
         self.odometry = PredictedOdometry()
         self._predicted_twist_stamp: Any = None
         if predictor is None:
-            predictor = self._make_predictor(p['terrain'], p['map_cache_dir'])
+            predictor = self._make_predictor(p.terrain, p.map_cache_dir)
         adaptation = AdaptationSettings(
-            enabled=bool(p['adaptation']),
-            memory_s=float(p['adaptation_memory_s']),
-            terrain_memory_s=float(p['adaptation_terrain_memory_s']),
+            enabled=p.adaptation,
+            memory_s=p.adaptation_memory_s,
+            terrain_memory_s=p.adaptation_terrain_memory_s,
         )
         self.core = EstimatorCore(
             predictor,
@@ -335,42 +337,42 @@ class PowerEstimator(QuietNode):
             adaptation,
         )
         self.state_file = None
-        if p['persist']:
-            self.state_file = factory.state_path(p['state_file'], self.vehicle, self.get_namespace())
+        if p.persist:
+            self.state_file = factory.state_path(p.state_file, self.vehicle, self.get_namespace())
             self._state_lock = StateLock.take(self.state_file)  # one live process per file
-        self._restore(p['initial_soc'])
+        self._restore(p.initial_soc)
         self._make_interfaces(p)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     # --- set-up -------------------------------------------------------------------------------
     @staticmethod
-    def _settings(p: dict[str, Any]) -> EstimatorSettings:
-        if p['input_reliability'] not in INPUT_RELIABILITY:
-            reliability = p['input_reliability']
+    def _settings(p: PowerEstimatorParameters) -> EstimatorSettings:
+        if p.input_reliability not in INPUT_RELIABILITY:
+            reliability = p.input_reliability
             raise ConfigError(f'input_reliability must be best_effort or reliable, got {reliability!r}')
-        if p['output_qos'] not in OUTPUT_QOS:
-            raise ConfigError(f'output_qos must be reliable or sensor_data, got {p["output_qos"]!r}')
+        if p.output_qos not in OUTPUT_QOS:
+            raise ConfigError(f'output_qos must be reliable or sensor_data, got {p.output_qos!r}')
         limits = InputLimits(
-            p['max_speed_m_s'], p['max_yaw_rate_rad_s'], p['max_motor_speed_rad_s'], p['max_motor_torque_Nm']
+            p.max_speed_m_s, p.max_yaw_rate_rad_s, p.max_motor_speed_rad_s, p.max_motor_torque_Nm
         )
         return EstimatorSettings(
-            cmd_timeout_s=p['cmd_timeout_s'],
-            joint_timeout_s=p['joint_timeout_s'],
-            traction_warning_margin=p['traction_warning_margin'],
-            power_filter_s=p['power_filter_s'],
-            warn_period_s=p['warn_period_s'],
+            cmd_timeout_s=p.cmd_timeout_s,
+            joint_timeout_s=p.joint_timeout_s,
+            traction_warning_margin=p.traction_warning_margin,
+            power_filter_s=p.power_filter_s,
+            warn_period_s=p.warn_period_s,
             limits=limits,
         )
 
-    def _joint_map(self, p: dict[str, Any]) -> JointMap:
+    def _joint_map(self, p: PowerEstimatorParameters) -> JointMap:
         return factory.joint_map_for(
             self.vehicle,
-            left=p['left_joints'],
-            right=p['right_joints'],
-            effort_is=p['effort_is'],
-            location=p['joints_at'],
-            gear_ratio=p['joint_gear_ratio'] or None,
-            torque_constant_Nm_A=p['joint_torque_constant_Nm_A'] or None,
+            left=p.left_joints,
+            right=p.right_joints,
+            effort_is=p.effort_is,
+            location=p.joints_at,
+            gear_ratio=p.joint_gear_ratio or None,
+            torque_constant_Nm_A=p.joint_torque_constant_Nm_A or None,
         )
 
     def _make_predictor(self, terrain: str, cache_dir: str) -> Predictor:
@@ -407,13 +409,13 @@ class PowerEstimator(QuietNode):
             raise ConfigError(f'it holds the state of vehicle {state.get("vehicle")!r}')
         self.core.restore(state)
 
-    def _make_interfaces(self, p: dict[str, Any]) -> None:
-        depth = int(p['qos_depth'])
+    def _make_interfaces(self, p: PowerEstimatorParameters) -> None:
+        depth = p.qos_depth
         overrides = QoSOverridingOptions.with_default_policies()
-        qos_in = QoSProfile(depth=depth, reliability=INPUT_RELIABILITY[p['input_reliability']])
-        qos_out = qos_profile_sensor_data if p['output_qos'] == 'sensor_data' else QoSProfile(depth=depth)
+        qos_in = QoSProfile(depth=depth, reliability=INPUT_RELIABILITY[p.input_reliability])
+        qos_out = qos_profile_sensor_data if p.output_qos == 'sensor_data' else QoSProfile(depth=depth)
 
-        self.malformed = MalformedInputs(self.get_logger().warning, float(p['warn_period_s']))
+        self.malformed = MalformedInputs(self.get_logger().warning, p.warn_period_s)
 
         def sub(msg_type: Any, topic: str, callback: Any) -> None:
             # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
@@ -434,11 +436,11 @@ class PowerEstimator(QuietNode):
 
         self.cmd_input = CmdVelInput(
             self,
-            cmd_vel_input.cmd_vel_mode(self, p['cmd_vel_type'], 'cmd_vel_stamped', p['cmd_vel_stamped']),
+            cmd_vel_input.cmd_vel_mode(self, p.cmd_vel_type, 'cmd_vel_stamped', p.cmd_vel_stamped),
             self._on_cmd_vel,
             qos_in,
-            timeout_s=float(p['cmd_timeout_s']),
-            tolerance_s=float(p['cmd_vel_stamp_tolerance_s']),
+            timeout_s=p.cmd_timeout_s,
+            tolerance_s=p.cmd_vel_stamp_tolerance_s,
             # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
             decode=lambda msg_type: self.malformed.guard('cmd_vel', decoder(msg_type)),
             make_callback=Batched,  # a backlog in batches (spin.py)
@@ -463,13 +465,13 @@ class PowerEstimator(QuietNode):
         self.pub_predicted_odom = pub(Odometry, 'odom/predicted', qos_out)
         self.create_service(Trigger, '~/reset_energy', self._on_reset_energy)
         self.create_service(Trigger, '~/reset_odometry', self._on_reset_odometry)
-        self.create_timer(float(p['publish_period_s']), self._on_publish_timer)
-        self._figure_timer = self.create_timer(float(p['figure_period_s']), self._publish_figures)
-        self.create_timer(float(p['diagnostics_period_s']), self._publish_diagnostics)
+        self.create_timer(p.publish_period_s, self._on_publish_timer)
+        self._figure_timer = self.create_timer(p.figure_period_s, self._publish_figures)
+        self.create_timer(p.diagnostics_period_s, self._publish_diagnostics)
         self._writer: StateWriter | None = None
         if self.state_file is not None:
             self._writer = StateWriter(self.state_file, self.get_logger().error)
-            self.create_timer(float(p['save_period_s']), self._save_soon)
+            self.create_timer(p.save_period_s, self._save_soon)
         # serialized once; each message patches its stamp and numbers (nodes/wire.py)
         axles = ['left_motor', 'right_motor', 'left_axle', 'right_axle']
         self._predicted_wire = PackedJointState(axles, ('velocity', 'effort'))
