@@ -328,6 +328,24 @@ class SimulatedDes:
             self._advance()
             return self.model.omega_rad_s / RPM
 
+    def settled(self, tolerance_rpm: float = 2.0) -> bool:
+        """Whether the speed loop is at rest on its set point (for tests to wait on): powered in
+        speed mode, and both the instantaneous and the mean speed within ``tolerance_rpm`` [rpm] of
+        the set point. A speed passing through the band (the mean during the ramp, about 100 rpm
+        behind the instantaneous speed; either one in the overshoot) is not settled; the approach
+        after the overshoot is monotonic, so a settled motor stays within the band."""
+        with self._lock:
+            self._advance()
+            if not self.powered or self.current_mode:
+                return False
+            setpoint = (0 if self.stopped else self.speed_setpoint_rpm) * RPM
+            tolerance = tolerance_rpm * RPM
+            model = self.model
+            return (
+                abs(model.omega_rad_s - setpoint) <= tolerance
+                and abs(model.mean_omega_rad_s - setpoint) <= tolerance
+            )
+
     @property
     def powered(self) -> bool:
         """True when the power stage drives the motor (enabled, no error)."""
