@@ -30,7 +30,7 @@ from rosbags.typesys import Stores, get_typestore
 from skidsteer_power.bag_io.synthetic import NS, START_NS
 from skidsteer_power.bag_io.writer import BagWriter
 from skidsteer_power.commands import Segment
-from skidsteer_power.errors import InputError
+from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.terramechanics.ranges import COMMAND_ROWS, SIM_DURATION_S, check_file_size
 from skidsteer_power.twin.model import Twin
 
@@ -133,6 +133,10 @@ class TwinTrace:
 
 MIN_STEP_S = 1e-9
 """Shortest twin step taken [s] (a bag's time resolution, 1 ns): a command row ends within it."""
+TRACTION_BOUND = 10.0
+"""A side's axle torque above this many times the robot's whole weight at the drive radius
+(m g r) is no physics on any ground (friction coefficients stay below about 1.5): the twin's
+integration has diverged [-]."""
 
 
 _Sample = tuple[
@@ -191,6 +195,7 @@ def run_commands(
     sample()
     end_s = next_sample_s = twin.t
     next_sample_s += period
+    bound_Nm = TRACTION_BOUND * twin.mass * 9.81 * twin.r
     try:
         for segment in commands:
             twin.set_command(segment.speed_m_s, segment.yaw_rate_rad_s)
@@ -198,7 +203,10 @@ def run_commands(
             while end_s - twin.t > MIN_STEP_S:
                 step = min(full_dt, end_s - twin.t, max(next_sample_s - twin.t, MIN_STEP_S))
                 twin.dt = full_dt if step > full_dt - MIN_STEP_S else step
-                twin._step()
+                try:
+                    twin._step()
+                except ArithmeticError as err:  # an overflow: the state had diverged already
+                    raise _diverged(twin, f'{type(err).__name__}: {err}') from err
                 w = twin.dt / full_dt  # exactly 1.0 for a full step
                 left, right = twin.current_A
                 current_sum[0] += w * left
@@ -208,6 +216,7 @@ def run_commands(
                 if twin.t >= next_sample_s - MIN_STEP_S:
                     sample()
                     next_sample_s += period
+                    _check_physical(twin, rows[-1][5], bound_Nm)
             if progress is not None:
                 progress(segment.duration_s)
     finally:
@@ -215,6 +224,30 @@ def run_commands(
     if weight > 0:
         sample()  # the run ended between two samples
     return _trace(twin, rows)
+
+
+def _diverged(twin: Twin, what: str) -> ConvergenceError:
+    speed, yaw_rate = twin.command
+    return ConvergenceError(
+        f'the twin diverged at t = {twin.t:.3f} s under the command {speed:g} m/s, {yaw_rate:g} rad/s '
+        f'({what}): its trace is no physics from there; a known weakness of its soil contact on rigid '
+        'ground (docs/TWIN.md)'
+    )
+
+
+def _check_physical(twin: Twin, axle_torque_Nm: Any, bound_Nm: float) -> None:
+    """ConvergenceError when the twin's state is not finite or a side's axle torque [N m] exceeds
+    ``bound_Nm`` (:data:`TRACTION_BOUND`): a trace that silently carries a diverged state would be
+    read as a recording."""
+    torque = np.abs(np.asarray(axle_torque_Nm, dtype=float))
+    state = (twin.vel, twin.omega_m, torque)
+    if not all(np.all(np.isfinite(part)) for part in state):
+        raise _diverged(twin, 'a state that is not finite')
+    if np.any(torque > bound_Nm):
+        raise _diverged(
+            twin,
+            f'axle torque {float(torque.max()):.4g} N m, over {TRACTION_BOUND:g} x the weight at the wheel',
+        )
 
 
 def drive_until_empty(
