@@ -12,7 +12,15 @@ from pathlib import Path
 from benchmarks.harness import Report
 from benchmarks.heldout_proxy import Case, Outcome, run_case
 
-CASES = (Case('grass', 1), Case('grass', 2), Case('asphalt', 3))
+CASES = (
+    Case('grass', 1),
+    Case('grass', 2),
+    Case('asphalt', 3),
+    Case('grass', 4),
+    Case('flooring', 7),
+    Case('sandy_loam', 8),
+    Case('concrete', 9),
+)
 TABLE = 'heldout-proxy'
 
 

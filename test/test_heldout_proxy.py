@@ -29,3 +29,14 @@ def test_an_unknown_robot_calibrates_on_one_bag_and_predicts_the_other(tmp_path:
     # a whole-robot total fits one b, c for both sides: the two sides are written alike
     sides = yaml.safe_load(written.read_text())['powertrain']['internal_resistance']
     assert sides['left'] == sides['right']
+    # step 6 (calibration/reconcile.py) ran on every sample of the first bag and says what it did
+    record = yaml.safe_load(written.read_text())['powertrain']
+    reconciled = record.get('calibration', {}).get('reconciled')
+    if reconciled is not None:  # fitted: the efficiency is in the file and the loaded powertrain
+        values = dict(zip(reconciled['parameters'], reconciled['values'], strict=True))
+        assert 0.3 <= values['amplifier_efficiency'] <= 1.0
+        assert powertrain.amplifier.efficiency == values['amplifier_efficiency']
+        assert reconciled['report']['samples'] > 100
+    else:  # kept: the reason is in the terrain file's warnings
+        warnings = yaml.safe_load((tmp_path / 'calibrated_terrain.yaml').read_text())['calibration']
+        assert any('steady-window fit is kept' in w for w in warnings['correlations_warnings'])

@@ -6,7 +6,9 @@ CLI (``skidsteer-power calibrate``) writes the result with :mod:`.io`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 from skidsteer_power.calibration.drive_limits import identify_drive
 from skidsteer_power.calibration.fit import (
@@ -27,6 +29,9 @@ from skidsteer_power.calibration.segments import (
 )
 from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.errors import InputError
+
+if TYPE_CHECKING:
+    from skidsteer_power.vehicle import Vehicle
 
 __all__ = [
     'DEFAULT_FIT',
@@ -59,12 +64,15 @@ def calibrate_bags(
     fit_at: str = 'setpoints',
     options: SegmentOptions | None = None,
     fit_to: str | None = None,
+    every_sample: bool = True,
 ) -> tuple[CalibrationResult, list[Segment]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain``, solved at
     ``fit_at`` (:data:`FIT_AT`; see fit.py). ``fit`` 'auto' (or ['auto']): what the recordings
     identify (:func:`auto_fit_names`), fitted to the torque and the measured motion together where
     both are recorded. ``options`` (when given) overrides settle_s, min_segment_s, topics and
-    extra_types. ``fit_to`` (:data:`FIT_TO`; None: 'torque', or by the recordings with 'auto')."""
+    extra_types. ``fit_to`` (:data:`FIT_TO`; None: 'torque', or by the recordings with 'auto').
+    ``every_sample``: where the bags measured battery-side power, fit its terms again to every sample
+    (:mod:`.reconcile`)."""
     import dataclasses
 
     from skidsteer_power.estimator import factory
@@ -129,13 +137,33 @@ def calibrate_bags(
         left_fixed=left_fixed,
     )
     result.drive = drive
+    if every_sample and any(math.isfinite(sum(s.battery_W)) for s in segments):  # V x I measured
+        reconcile_battery_terms(result, bags, vehicle, veh, options, terrain, powertrain.gear_ratio)
     return result, segments
+
+
+def reconcile_battery_terms(
+    result: CalibrationResult,
+    bags: Sequence[str],
+    vehicle: str,
+    veh: Vehicle,
+    options: SegmentOptions,
+    terrain: str,
+    gear_ratio: float,
+) -> None:
+    """Step 6 (:mod:`.reconcile`): the battery-side terms fitted to every sample of ``bags``."""
+    import numpy as np
+
+    from skidsteer_power.calibration import reconcile
+    from skidsteer_power.calibration.fit import Model
+
+    samples = reconcile.replay_samples(bags, vehicle, result, options, terrain, gear_ratio)
+    model = Model(veh, result.terrain, result.powertrain, np.zeros(0), np.zeros(0))
+    reconcile.apply(result, model, reconcile.reconcile(model, samples, result.start))
 
 
 def _what_to_fit(segments: Sequence[Segment]) -> str:
     """'both', 'torque' or 'motion': what the segments measured (torque and / or a body motion)."""
-    import math
-
     # a battery-side V x I is power evidence too: the torque residuals carry it (fit.FitData)
     torque = any(math.isfinite(sum(s.motor_torque_Nm)) or math.isfinite(sum(s.battery_W)) for s in segments)
     motion = any(s.motion_source != 'command' for s in segments)

@@ -144,7 +144,13 @@ BATTERY_PARAMS: dict[str, FitParameter] = {  # terms only a battery-side (V x I)
     # a motor's shaft (the Husky's ASSUMED 167) and an effective powertrain's axle (~0.1)
     'copper_loss_W_per_Nm2': FitParameter('W/(N m)^2', True, (1e-4, 1e4)),
 }
-PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **TIED_INTERNAL_PARAMS, **BATTERY_PARAMS}
+EFFICIENCY_PARAMS: dict[str, FitParameter] = {
+    # the amplifier's (the drive's) efficiency, bus power = terminal power / eta when motoring: scales
+    # every motoring watt, so the steady windows cannot tell it from the loss terms; only the
+    # reconciliation with every sample fits it (reconcile.py). 0.3: a drive losing more is broken
+    'amplifier_efficiency': FitParameter('-', False, (0.3, 1.0)),
+}
+PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **TIED_INTERNAL_PARAMS, **BATTERY_PARAMS, **EFFICIENCY_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
 FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
@@ -253,6 +259,8 @@ class Model:
             return max(self.powertrain.copper_loss_W_per_Nm2, BATTERY_PARAMS[name].bounds[0])
         if name in BATTERY_PARAMS:
             return float(getattr(self.powertrain, name, 0.0))
+        if name == 'amplifier_efficiency':
+            return float(self.powertrain.amplifier.efficiency)
         side, kind = name.split('_')
         sides = ('left', 'right') if side == 'sides' else (side,)
         totals = [self.powertrain.resistance(s).total for s in sides]
@@ -282,6 +290,9 @@ class Model:
             powertrain = dataclasses.replace(powertrain, left=left, right=right)
         if 'idle_power_W' in values:
             powertrain = dataclasses.replace(powertrain, idle_power_W=values['idle_power_W'])
+        if 'amplifier_efficiency' in values:
+            amplifier = dataclasses.replace(powertrain.amplifier, efficiency=values['amplifier_efficiency'])
+            powertrain = dataclasses.replace(powertrain, amplifier=amplifier)
         if 'copper_loss_W_per_Nm2' in values:  # k_cu = R / K_t^2: the motor's R carries it
             kt = powertrain.motor.torque_constant_Nm_A
             motor = dataclasses.replace(
@@ -415,10 +426,19 @@ class CalibrationResult:
     kept_start: str = ''  # why the start was kept (empty: the fit was kept)
     motion: dict[str, float] = field(default_factory=dict)  # hold-out motion errors before / after
     drive: DriveIdentification | None = None  # the drive controller's limits (--fit auto), docs/DRIVE.md
+    # battery-side terms fitted again to every sample of the drive (reconcile.py), parameter units
+    reconciled: dict[str, float] = field(default_factory=dict)
+    reconciliation: dict[str, Any] = field(default_factory=dict)  # its report (Reconciliation.as_json)
 
     def status(self, name: str) -> str:
         """'fitted', 'fixed', 'fixed: not identifiable', 'not identifiable', 'at_bound (lower|upper)'
-        or 'kept start' (the fit made the hold-out worse)."""
+        'kept start' (the fit made the hold-out worse), 'fitted (every sample)' or 'at_bound (lower|upper),
+        every sample' (reconcile.py)."""
+        if name in self.reconciled:
+            lo, hi = PARAMS[name].bounds
+            value, edge = self.reconciled[name], 1e-6 * (hi - lo)
+            side = 'lower' if value <= lo + edge else 'upper' if value >= hi - edge else ''
+            return f'at_bound ({side}), every sample' if side else 'fitted (every sample)'
         if self.kept_start and name in self.names:
             return 'kept start'
         if name in self.at_bound:
@@ -440,7 +460,8 @@ class CalibrationResult:
                 'at_bound': name in self.at_bound,
                 'unit': PARAMS[name].unit,
                 'range': list(PARAMS[name].bounds),
-                'fitted': name in self.names and not self.kept_start,
+                'fitted': (name in self.names and not self.kept_start)
+                or self.status(name) == 'fitted (every sample)',
                 'identifiable': self.identifiable.get(name, True) and name not in self.not_identifiable,
                 'start': self.start[name],
                 'sensitivity_Nm': self.sensitivity_Nm.get(name),
@@ -472,6 +493,7 @@ class CalibrationResult:
             'motion': dict(self.motion),
             'setpoints': self.setpoints,
             'drive_controller': self.drive.as_json() if self.drive is not None else None,
+            'reconciliation': dict(self.reconciliation) or None,
         }
 
 

@@ -85,7 +85,11 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
         'not_identifiable': sorted(result.not_identifiable),
         'kept_start': result.kept_start or None,
     }
-    internal = [n for n in result.names if n in POWERTRAIN_NAMES and n not in result.at_bound and not kept]
+    internal = [
+        n
+        for n in result.names
+        if n in POWERTRAIN_NAMES and n not in result.at_bound and not kept and n not in result.reconciled
+    ]
     if internal:
         block['powertrain_parameters'] = internal
         block['powertrain_units'] = [PARAMS[n].unit for n in internal]
@@ -136,12 +140,22 @@ def write_terrain(
 
 
 def _preset_or_fields(value: Any, presets: dict[str, Any]) -> Any:
-    """A preset's name when ``value`` is one of ``presets``, else its fields (SI units) as a mapping:
-    a vehicle's own motor or amplifier is written out in full."""
+    """A preset's name when ``value`` is one of ``presets``; a preset with one field changed (a fitted
+    efficiency) as ``{preset: name, field: value}``; else its fields (SI units) as a mapping: a
+    vehicle's own motor or amplifier is written out in full."""
+
+    def plain(v: Any) -> Any:
+        return v if isinstance(v, bool | str) else float(v)
+
+    fields = dataclasses.asdict(value)
     for key, preset in presets.items():
         if preset == value:
             return key
-    return {k: (v if isinstance(v, bool | str) else float(v)) for k, v in dataclasses.asdict(value).items()}
+    for key, preset in presets.items():  # a preset with a fitted field (the amplifier's efficiency)
+        changed = {k: v for k, v in fields.items() if getattr(preset, k) != v and k != 'name'}
+        if preset.name == value.name and len(changed) == 1:
+            return {'preset': key, **{k: plain(v) for k, v in changed.items()}}
+    return {k: plain(v) for k, v in fields.items()}
 
 
 def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[str, Any]:
@@ -154,7 +168,9 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
         }
         for side in ('left', 'right')
     }
-    internal = [n for n in result.names if n in POWERTRAIN_NAMES and not result.kept_start]
+    # a term fitted again to every sample (reconcile.py) has no steady-window covariance: listed apart
+    kept = bool(result.kept_start)
+    internal = [n for n in result.names if n in POWERTRAIN_NAMES and not kept and n not in result.reconciled]
     data: dict[str, Any] = {
         'name': f'{pt.name}_calibrated',
         'source': f'{pt.name} with the internal resistance of {len(bags)} bag(s) '
@@ -170,7 +186,8 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
         'bus_voltage_V': pt.bus_voltage_V,
         'idle_power_W': float(pt.idle_power_W),
     }
-    if 'copper_loss_W_per_Nm2' in internal:  # the fitted k_cu replaces the motor's R (R = k_cu K_t^2)
+    # the fitted k_cu replaces the motor's R (R = k_cu K_t^2)
+    if 'copper_loss_W_per_Nm2' in internal or 'copper_loss_W_per_Nm2' in result.reconciled:
         data['copper_loss_W_per_Nm2'] = float(pt.copper_loss_W_per_Nm2)
     if internal:
         values, cov = _block(result, internal)
@@ -182,6 +199,14 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
             'bags': [str(Path(b).resolve()) for b in bags],
             'date': _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             'residual_rms_Nm': float(result.residual_rms_Nm),
+        }
+    if result.reconciled:  # fitted to every sample's battery power (calibration/reconcile.py)
+        record = data.setdefault('calibration', {'bags': [str(Path(b).resolve()) for b in bags]})
+        record['reconciled'] = {
+            'parameters': list(result.reconciled),
+            'units': [PARAMS[n].unit for n in result.reconciled],
+            'values': [float(v) for v in result.reconciled.values()],
+            'report': result.reconciliation,
         }
     return data
 
