@@ -93,3 +93,22 @@ def test_pivot_band_agrees_with_the_direct_solve(track_map: SetpointMap) -> None
     assert sol.element_turn[0] > 0.5 and sol.shear_path[0]  # in the band, by the pivot law
     wide = track_map.query(0.196, 0.2)  # the same speed on a wide turn: an ordinary answer
     assert not wide.limited and wide.reason == ''
+
+
+def test_many_queries_answer_as_one_query_each(track_map: SetpointMap) -> None:
+    """query_many solves the commands of exact cells in one batch: the same answers as query."""
+    rng = np.random.default_rng(5)
+    veh = track_map.predictor.vehicle
+    v = rng.uniform(-1.0, 1.0, 60) * veh.max_speed_m_s
+    w = rng.uniform(-1.0, 1.0, 60) * veh.max_yaw_rate_rad_s
+    many = track_map.query_many(v.tolist(), w.tolist())
+    one = [track_map.query(float(a), float(b)) for a, b in zip(v, w, strict=True)]
+    exact_cells = 0
+    for a, b in zip(many, one, strict=True):
+        assert a.limited == b.limited and a.reason == b.reason and a.clamped == b.clamped
+        for name in ('speed_m_s', 'yaw_rate_rad_s', 'torque_left_Nm', 'torque_right_Nm', 'battery_power_W'):
+            assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-9, abs=1e-12)
+    for speed, yaw_rate in zip(v, w, strict=True):
+        exact_cells += isinstance(track_map._locate(float(speed), float(yaw_rate)), tuple)
+    assert exact_cells > 0  # the batch path was taken (7 x 7 nodes: the pivot band is exact)
+    assert track_map.query_many([], []) == []

@@ -114,7 +114,9 @@ def predict_records(
         records = [pred.record(k) for k in range(len(commands))]
     else:
         smap, _ = load_or_build(vehicle, terrain)
-        records = [_map_record(v, w, smap.query(v, w)) for v, w in commands]
+        speeds, yaw_rates = [c[0] for c in commands], [c[1] for c in commands]
+        answers = smap.query_many(speeds, yaw_rates)  # the exact cells' commands: one batched solve
+        records = [_map_record(v, w, q) for (v, w), q in zip(commands, answers, strict=True)]
     out = []
     for record in records:
         radius = record['turn_radius_m']
