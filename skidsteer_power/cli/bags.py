@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import (
     Subcommands,
     _number,
@@ -293,7 +294,10 @@ def register(subparsers: Subcommands) -> None:
         'topics', nargs='*', type=ros_topic, metavar='TOPIC', help='topics to record (default: all)'
     )
     rec.add_argument(
-        '--duration', type=RECORD_DURATION_S.arg(), metavar='S', help=RECORD_DURATION_S.help('stop after S s')
+        '--duration',
+        type=range_arg(RECORD_DURATION_S),
+        metavar='S',
+        help=range_help(RECORD_DURATION_S, 'stop after S s'),
     )
     add_json_flag(rec)
     rec.set_defaults(func=_cmd_record)
@@ -307,34 +311,44 @@ def register(subparsers: Subcommands) -> None:
     rep.add_argument('bag', metavar='BAG', help='bag file (.mcap/.db3) or rosbag2 directory')
     rep.add_argument(
         '--rate',
-        type=REPLAY_RATE.arg(),
+        type=range_arg(REPLAY_RATE),
         default=1.0,
         metavar='R',
-        help=REPLAY_RATE.help('speed factor (default 1)'),
+        help=range_help(REPLAY_RATE, 'speed factor (default 1)'),
     )
     rep.add_argument('--loop', action='store_true', help='start over at the end until stopped')
     rep.add_argument(
         '--topics', nargs='+', type=ros_topic, default=None, metavar='TOPIC', help='only these topics'
     )
     rep.add_argument(
-        '--start', type=BAG_TIME_S.arg(), default=0.0, metavar='S', help=BAG_TIME_S.help('skip the first S s')
+        '--start',
+        type=range_arg(BAG_TIME_S),
+        default=0.0,
+        metavar='S',
+        help=range_help(BAG_TIME_S, 'skip the first S s'),
     )
     rep.add_argument(
         '--duration',
-        type=RECORD_DURATION_S.arg(),
+        type=range_arg(RECORD_DURATION_S),
         metavar='D',
-        help=RECORD_DURATION_S.help('only D s of bag time'),
+        help=range_help(RECORD_DURATION_S, 'only D s of bag time'),
     )
     rep.add_argument('--clock', action='store_true', help='publish the bag time on /clock')
     rep.add_argument(
-        '--clock-hz', type=CLOCK_HZ.arg(), default=40.0, metavar='HZ', help=CLOCK_HZ.help('/clock rate (40)')
+        '--clock-hz',
+        type=range_arg(CLOCK_HZ),
+        default=40.0,
+        metavar='HZ',
+        help=range_help(CLOCK_HZ, '/clock rate (40)'),
     )
     rep.add_argument(
         '--wait-for-subscribers',
-        type=SUBSCRIBER_WAIT_S.arg(),
+        type=range_arg(SUBSCRIBER_WAIT_S),
         default=0.0,
         metavar='S',
-        help=SUBSCRIBER_WAIT_S.help('wait up to S s for every topic to have a subscriber before starting'),
+        help=range_help(
+            SUBSCRIBER_WAIT_S, 'wait up to S s for every topic to have a subscriber before starting'
+        ),
     )
     _add_bag_reading(rep)
     add_json_flag(rep)
@@ -364,10 +378,12 @@ def register(subparsers: Subcommands) -> None:
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
     val.add_argument(
         '--jobs',
-        type=LOCAL_WORKERS.arg(),
+        type=range_arg(LOCAL_WORKERS),
         default=None,
         metavar='N',
-        help=LOCAL_WORKERS.help('fleet: local worker processes (default: the cores; more: --scheduler)'),
+        help=range_help(
+            LOCAL_WORKERS, 'fleet: local worker processes (default: the cores; more: --scheduler)'
+        ),
     )
     val.add_argument(
         '--scheduler', default=None, metavar='ADDR', help='fleet: existing Dask cluster tcp://HOST:8786'

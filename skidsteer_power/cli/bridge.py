@@ -22,6 +22,7 @@ import math
 import sys
 import time
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, ros_topic, web_origin
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
@@ -82,8 +83,8 @@ def register(subparsers: Subcommands) -> None:
     )
     parser.add_argument(
         '--duration',
-        type=RECORD_DURATION_S.arg(),
-        help=RECORD_DURATION_S.help('stop after this many seconds (default: until a signal)'),
+        type=range_arg(RECORD_DURATION_S),
+        help=range_help(RECORD_DURATION_S, 'stop after this many seconds (default: until a signal)'),
     )
     add_json_flag(parser)
     parser.set_defaults(func=run)

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
@@ -70,7 +71,9 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument(
         '--holdout', type=nonnegative_float, default=0.3, help='fraction of segments held out'
     )
-    parser.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('seed of the hold-out split'))
+    parser.add_argument(
+        '--seed', type=range_arg(SEED), default=0, help=range_help(SEED, 'seed of the hold-out split')
+    )
     parser.add_argument('--out-terrain', required=True, help='calibrated terrain YAML to write')
     parser.add_argument(
         '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal or auto)'

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli import _ros_names
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
@@ -46,7 +47,10 @@ def register(subparsers: Subcommands) -> None:
         help='namespace of the suite (as run --namespace)',
     )
     parser.add_argument(
-        '--timeout', type=CALL_TIMEOUT_S.arg(), default=5.0, help=CALL_TIMEOUT_S.help('wait for the answer')
+        '--timeout',
+        type=range_arg(CALL_TIMEOUT_S),
+        default=5.0,
+        help=range_help(CALL_TIMEOUT_S, 'wait for the answer'),
     )
     add_json_flag(parser)
     parser.set_defaults(func=_cmd_call)

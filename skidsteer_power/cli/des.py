@@ -6,6 +6,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.des.client import DesAmplifier
 from skidsteer_power.des.protocol import BAUD_CODES
@@ -37,9 +38,9 @@ def register(subparsers: Subcommands) -> None:
     probe.add_argument('--baud', type=_baud, default=38400, help='link speed [bit/s] (default 38400)')
     probe.add_argument(
         '--timeout',
-        type=PROBE_TIMEOUT_S.arg(),
+        type=range_arg(PROBE_TIMEOUT_S),
         default=0.1,
-        help=PROBE_TIMEOUT_S.help('wait per acknowledge/reply (default 0.1)'),
+        help=range_help(PROBE_TIMEOUT_S, 'wait per acknowledge/reply (default 0.1)'),
     )
     add_json_flag(probe)
     probe.set_defaults(func=run_probe)

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import Range
@@ -374,10 +375,10 @@ def register(subparsers: Subcommands) -> None:
     )
     parser.add_argument(
         '--max-rows',
-        type=MAX_ROWS.arg(),
+        type=range_arg(MAX_ROWS),
         default=int(MAX_ROWS.high),
         metavar='N',
-        help=MAX_ROWS.help('largest CSV read, rows per file'),
+        help=range_help(MAX_ROWS, 'largest CSV read, rows per file'),
     )
     add_json_flag(parser)
     parser.set_defaults(func=_cmd_import)

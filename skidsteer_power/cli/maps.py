@@ -24,6 +24,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.maps import PowerMap, cache_path
@@ -65,7 +66,7 @@ def register(subparsers: Subcommands) -> None:
         ('--min-radius', MIN_RADIUS_M, 'small-radius limit (default 2 x tread)'),
     )
     for flag, limits, what in options:
-        build.add_argument(flag, type=limits.arg(), help=limits.help(what))
+        build.add_argument(flag, type=range_arg(limits), help=range_help(limits, what))
     build.add_argument('--no-progress', action='store_true', help='no progress bar')
     add_json_flag(build)
     build.set_defaults(func=run_build)

@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
@@ -47,14 +48,18 @@ def _register_mission(subparsers: Subcommands) -> None:
     p.add_argument('--route', required=True, help='patrol | search-retrieve | FILE.csv')
     p.add_argument(
         '--speed',
-        type=FORWARD_SPEED_M_S.arg(),
-        help=FORWARD_SPEED_M_S.help('forward speed (default: 0.2 patrol, 0.5 search-retrieve; CSV rows)')
+        type=range_arg(FORWARD_SPEED_M_S),
+        help=range_help(
+            FORWARD_SPEED_M_S, 'forward speed (default: 0.2 patrol, 0.5 search-retrieve; CSV rows)'
+        )
         + "; with the power map (default), above the map's speed envelope is an error",
     )
     p.add_argument(
         '--payload-kg',
-        type=PAYLOAD_KG.arg(),
-        help=PAYLOAD_KG.help('search-retrieve: payload brought back (default 10); other routes: carried'),
+        type=range_arg(PAYLOAD_KG),
+        help=range_help(
+            PAYLOAD_KG, 'search-retrieve: payload brought back (default 10); other routes: carried'
+        ),
     )
     _add_source_args(p)
     p.add_argument(
@@ -86,8 +91,8 @@ def _register_sensitivity(subparsers: Subcommands) -> None:
     p.add_argument('--route', default='search-retrieve', help='patrol | search-retrieve | FILE.csv')
     p.add_argument(
         '--speed',
-        type=FORWARD_SPEED_M_S.arg(),
-        help=FORWARD_SPEED_M_S.help("forward speed (default: the route's)"),
+        type=range_arg(FORWARD_SPEED_M_S),
+        help=range_help(FORWARD_SPEED_M_S, "forward speed (default: the route's)"),
     )
     p.add_argument('--delta', type=positive_float, default=0.01, help='relative change (default 0.01 = 1 %%)')
     _add_source_args(p)
@@ -133,7 +138,9 @@ def _register_design(subparsers: Subcommands) -> None:
 
 
 def _add_workers(p: argparse.ArgumentParser, what: str) -> None:
-    p.add_argument('--workers', type=LOCAL_WORKERS.arg(), default=None, help=LOCAL_WORKERS.help(what))
+    p.add_argument(
+        '--workers', type=range_arg(LOCAL_WORKERS), default=None, help=range_help(LOCAL_WORKERS, what)
+    )
 
 
 def _add_source_args(p: argparse.ArgumentParser) -> None:
@@ -152,12 +159,14 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, calibration: bool) -> None
     g = p.add_argument_group('uncertainty (Monte Carlo over terrain and powertrain; docs/STUDIES.md)')
     g.add_argument(
         '--samples',
-        type=SAMPLES.arg(),
+        type=range_arg(SAMPLES),
         default=0,
         metavar='N',
-        help=SAMPLES.help('samples (default 0: nominal only)'),
+        help=range_help(SAMPLES, 'samples (default 0: nominal only)'),
     )
-    g.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('sampling seed (default 0)'))
+    g.add_argument(
+        '--seed', type=range_arg(SEED), default=0, help=range_help(SEED, 'sampling seed (default 0)')
+    )
     g.add_argument(
         '--sampling', choices=('sobol', 'random'), default='sobol', help='scrambled Sobol (default) or random'
     )

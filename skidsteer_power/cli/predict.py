@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, SPEED_M_S, check_file_size
@@ -51,11 +52,11 @@ def register(subparsers: Subcommands) -> None:
     )
     parser.add_argument('--vehicle', required=True, help='vehicle YAML file or a name in config/vehicles/')
     parser.add_argument('--terrain', required=True, help='terrain preset name or YAML file')
-    parser.add_argument('--speed', type=SPEED_M_S.arg(), help=SPEED_M_S.help('commanded speed V'))
+    parser.add_argument('--speed', type=range_arg(SPEED_M_S), help=range_help(SPEED_M_S, 'commanded speed V'))
     parser.add_argument(
         '--yaw-rate',
-        type=COMMAND_YAW_RATE_RAD_S.arg(),
-        help=COMMAND_YAW_RATE_RAD_S.help('commanded yaw rate'),
+        type=range_arg(COMMAND_YAW_RATE_RAD_S),
+        help=range_help(COMMAND_YAW_RATE_RAD_S, 'commanded yaw rate'),
     )
     parser.add_argument(
         '--commands',

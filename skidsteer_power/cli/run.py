@@ -20,6 +20,7 @@ import sys
 import time
 from typing import Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli import _ros_names
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
 from skidsteer_power.errors import InputError
@@ -49,19 +50,19 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--patches', default='', help='--simulate: YAML polygons of other truth terrains')
     parser.add_argument(
         '--duration',
-        type=RECORD_DURATION_S.arg(),
-        help=RECORD_DURATION_S.help('stop after this many seconds (default: until a signal)'),
+        type=range_arg(RECORD_DURATION_S),
+        help=range_help(RECORD_DURATION_S, 'stop after this many seconds (default: until a signal)'),
     )
     parser.add_argument(
         '--speed',
-        type=SPEED_M_S.arg(),
-        help=SPEED_M_S.help('publish cmd_vel with this forward speed'),
+        type=range_arg(SPEED_M_S),
+        help=range_help(SPEED_M_S, 'publish cmd_vel with this forward speed'),
     )
     parser.add_argument(
         '--yaw-rate',
-        type=COMMAND_YAW_RATE_RAD_S.arg(),
+        type=range_arg(COMMAND_YAW_RATE_RAD_S),
         default=0.0,
-        help=COMMAND_YAW_RATE_RAD_S.help('... and this yaw rate'),
+        help=range_help(COMMAND_YAW_RATE_RAD_S, '... and this yaw rate'),
     )
     parser.add_argument(
         '--left-port',

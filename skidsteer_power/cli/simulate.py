@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import FORWARD_SPEED_M_S, LEAD_IN_S, SEED, SIM_DURATION_S
@@ -29,18 +30,20 @@ def register(subparsers: Subcommands) -> None:
     source.add_argument('--route', help='patrol | search-retrieve | FILE.csv (a mission route)')
     p.add_argument(
         '--speed',
-        type=FORWARD_SPEED_M_S.arg(),
-        help=FORWARD_SPEED_M_S.help("route speed (default: the route's)"),
+        type=range_arg(FORWARD_SPEED_M_S),
+        help=range_help(FORWARD_SPEED_M_S, "route speed (default: the route's)"),
     )
     p.add_argument('--contact', choices=('classic', 'extended'), default='extended',
                    help="the twin's contact laws: classic (the chapter 2-4 laws only) or extended (plus "
                    'slip-sinkage and bulldozing; docs/TWIN.md). Default extended')  # fmt: skip
-    p.add_argument('--seed', type=SEED.arg(), default=0, help=SEED.help('sensor noise seed (default 0)'))
+    p.add_argument(
+        '--seed', type=range_arg(SEED), default=0, help=range_help(SEED, 'sensor noise seed (default 0)')
+    )
     p.add_argument(
         '--lead-in',
-        type=LEAD_IN_S.arg(),
+        type=range_arg(LEAD_IN_S),
         default=1.0,
-        help=LEAD_IN_S.help('rest before the commands (default 1)'),
+        help=range_help(LEAD_IN_S, 'rest before the commands (default 1)'),
     )
     p.add_argument('-o', '--output', required=True, help='output bag (OUT.mcap)')
     add_json_flag(p)

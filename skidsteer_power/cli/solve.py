@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power import models
+from skidsteer_power.argtypes import range_arg, range_help, turn_radius_arg
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
@@ -34,7 +35,6 @@ from skidsteer_power.terramechanics.ranges import (
     TURN_RADIUS_M,
     check_resolution,
     check_sinkage,
-    turn_radius_arg,
 )
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
@@ -64,7 +64,10 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--vehicle', required=True, help='vehicle YAML file or a name in config/vehicles/')
     parser.add_argument('--terrain', required=True, help='terrain preset name or YAML file')
     parser.add_argument(
-        '--speed', required=True, type=FORWARD_SPEED_M_S.arg(), help=FORWARD_SPEED_M_S.help('forward speed V')
+        '--speed',
+        required=True,
+        type=range_arg(FORWARD_SPEED_M_S),
+        help=range_help(FORWARD_SPEED_M_S, 'forward speed V'),
     )
     parser.add_argument(
         '--turn-radius',
@@ -75,13 +78,13 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('--model', required=True, choices=sorted(models.MODELS), help='skid-steering model')
     parser.add_argument(
         '--mu-t',
-        type=FRICTION.arg(),
-        help=FRICTION.help('steeds: coefficient of lateral resistance (Table 3.1)'),
+        type=range_arg(FRICTION),
+        help=range_help(FRICTION, 'steeds: coefficient of lateral resistance (Table 3.1)'),
     )
     parser.add_argument(
         '--mu',
-        type=FRICTION.arg(),
-        help=FRICTION.help('icr: Coulomb friction coefficient (1.12 in the text)'),
+        type=range_arg(FRICTION),
+        help=range_help(FRICTION, 'icr: Coulomb friction coefficient (1.12 in the text)'),
     )
     parser.add_argument(
         '--resolution',

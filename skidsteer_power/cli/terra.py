@@ -21,6 +21,7 @@ import dataclasses
 from typing import Any
 
 from skidsteer_power import resources
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
@@ -68,21 +69,27 @@ def slip_float(text: str) -> float:
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--terrain', required=True, help='preset name or YAML terrain file')
-    parser.add_argument('--load', required=True, type=LOAD_N.arg(), help=LOAD_N.help('normal load W'))
-    parser.add_argument('--width', required=True, type=WIDTH_M.arg(), help=WIDTH_M.help('contact width b'))
+    parser.add_argument(
+        '--load', required=True, type=range_arg(LOAD_N), help=range_help(LOAD_N, 'normal load W')
+    )
+    parser.add_argument(
+        '--width', required=True, type=range_arg(WIDTH_M), help=range_help(WIDTH_M, 'contact width b')
+    )
     add_json_flag(parser)
 
 
 def register(subparsers: Subcommands) -> None:
     track = subparsers.add_parser('track', help='single track on deformable terrain (eqs. 2.6-2.18)')
     _common(track)
-    track.add_argument('--length', required=True, type=LENGTH_M.arg(), help=LENGTH_M.help('contact length l'))
+    track.add_argument(
+        '--length', required=True, type=range_arg(LENGTH_M), help=range_help(LENGTH_M, 'contact length l')
+    )
     track.add_argument(
         '--height',
-        type=HEIGHT_M.arg(),
+        type=range_arg(HEIGHT_M),
         default=DEFAULT_TRACK_HEIGHT_M,
-        help=HEIGHT_M.help(
-            f'track height; a deeper sinkage is an error (default {DEFAULT_TRACK_HEIGHT_M:g})'
+        help=range_help(
+            HEIGHT_M, f'track height; a deeper sinkage is an error (default {DEFAULT_TRACK_HEIGHT_M:g})'
         ),
     )
     track.add_argument('--slip', type=slip_float, default=0.0, help='slip ratio s in [-1, 1] (default 0)')
@@ -95,10 +102,14 @@ def register(subparsers: Subcommands) -> None:
         'and torque_Nm, the axle torque that drives the wheel (= -M_y of eq. 2.34; > 0 when driving).',
     )
     _common(wheel)
-    wheel.add_argument('--radius', required=True, type=RADIUS_M.arg(), help=RADIUS_M.help('wheel radius r'))
+    wheel.add_argument(
+        '--radius', required=True, type=range_arg(RADIUS_M), help=range_help(RADIUS_M, 'wheel radius r')
+    )
     wheel.add_argument('--slip', required=True, type=slip_float, help='slip ratio s in [-1, 1]')
     wheel.add_argument(
-        '--speed', type=SPEED_M_S.arg(), help=SPEED_M_S.help('forward speed V (adds wheel speed, power)')
+        '--speed',
+        type=range_arg(SPEED_M_S),
+        help=range_help(SPEED_M_S, 'forward speed V (adds wheel speed, power)'),
     )
     wheel.set_defaults(func=run_wheel)
 

@@ -29,6 +29,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.errors import InputError
 from skidsteer_power.progress import progress_bar
 from skidsteer_power.terramechanics.ranges import LOCAL_WORKERS
@@ -152,8 +153,8 @@ def add_engine_args(parser: Any, jobs_flag: str | None = None) -> None:
     parser.add_argument(
         jobs_flag,
         dest='workers',
-        type=LOCAL_WORKERS.arg(),
+        type=range_arg(LOCAL_WORKERS),
         default=None,
         metavar='N',
-        help=LOCAL_WORKERS.help('local worker processes (default: one per core; more: --scheduler)'),
+        help=range_help(LOCAL_WORKERS, 'local worker processes (default: one per core; more: --scheduler)'),
     )

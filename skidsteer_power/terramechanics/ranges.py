@@ -6,7 +6,8 @@ to 1.5 m/s, chapter 3.5) on soil described by plate-sinkage parameters. The rang
 around that, so that every physically meaningful question is accepted, and they stop at values where
 the equations overflow or lose their meaning (a 1e-300 m wide track, a 1e300 N load, a wheel at
 1e308 m/s). A value outside its range is an :class:`~skidsteer_power.errors.InputError` naming the
-range; each CLI option shows its range in ``--help``.
+range; each CLI option shows its range in ``--help``
+(:mod:`skidsteer_power.argtypes`, outside the hashed physics code).
 
 Results: a sinkage deeper than the wheel radius (wheel) or the track's height (track) means the hub
 or the belly would plough the soil, which none of eqs. 2.6-2.34 describe: :func:`check_sinkage`
@@ -15,10 +16,8 @@ makes that an error.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
-from collections.abc import Callable
 from dataclasses import dataclass
 
 from skidsteer_power.errors import InputError
@@ -67,25 +66,6 @@ class Range:
             shown = self._show(number) if self.integer and math.isfinite(number) else f'{number:g}'
             raise InputError(f'{self.name} = {shown}{unit} is outside its range {self.text}')
         return int(value) if self.integer else number
-
-    def arg(self) -> Callable[[str], float]:
-        """argparse ``type=``: a number in this range (one-line error otherwise)."""
-
-        def parse(text: str) -> float:
-            try:
-                return self.check(int(text) if self.integer else float(text))
-            except ValueError as err:  # InputError is a ValueError too
-                what = 'an integer' if self.integer else 'a number'
-                message = str(err) if isinstance(err, InputError) else f'not {what}: {text!r}'
-                raise argparse.ArgumentTypeError(message) from None
-
-        parse.__name__ = self.name  # argparse names the type in some messages
-        return parse
-
-    def help(self, what: str) -> str:
-        """``what`` with the unit and the range, for ``--help``."""
-        unit = f' [{self.unit}]' if self.unit else ''
-        return f'{what}{unit}, range {self.text}'
 
 
 # Inputs of the single track / single wheel (chapter 2) and of the skid-steer models (chapters 3-6).
@@ -156,19 +136,6 @@ track wraps the sprockets, config/vehicles/test_robot_track.yaml), the order of 
 MAX_RESOLUTION_NODES = 1_000_000
 """Largest number of integration nodes (product of a ``--resolution`` pair) a solve may use: the
 defaults are tens to hundreds; a million already takes minutes per Newton step."""
-
-
-def turn_radius_arg(text: str) -> float:
-    """argparse type: a signed turning radius [m], ``inf`` (straight) or 1e-3 <= |R| <= 1e6."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if math.isinf(value):
-        return value
-    if value == 0:
-        raise argparse.ArgumentTypeError('turning radius must be non-zero (inf = straight)')
-    return TURN_RADIUS_M.arg()(text)
 
 
 def check_file_size(path: str | os.PathLike[str], limit: int = ROUTE_CSV_BYTES) -> None:
