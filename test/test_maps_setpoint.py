@@ -6,13 +6,16 @@ at a node the map must give exactly the direct answer, between nodes a bilinear 
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.maps.setpoint_map import SetpointMap
+from skidsteer_power.maps.identity import map_identity
+from skidsteer_power.maps.setpoint_map import SetpointMap, cache_path, load_or_build
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -112,3 +115,25 @@ def test_many_queries_answer_as_one_query_each(track_map: SetpointMap) -> None:
         exact_cells += isinstance(track_map._locate(float(speed), float(yaw_rate)), tuple)
     assert exact_cells > 0  # the batch path was taken (7 x 7 nodes: the pivot band is exact)
     assert track_map.query_many([], []) == []
+
+
+def test_cached_map_is_checked_like_a_power_map(tmp_path: Path) -> None:
+    """The set-point cache keeps the power map's contract (maps/identity.py): the file says what it
+    was built for, and a file for another vehicle or older physics code is rebuilt, never used."""
+    vehicle, terrain = load_vehicle('test_robot_track'), load_terrain('sand_bin')
+    _first, built = load_or_build(vehicle, terrain, nodes=(5, 5), cache_dir=tmp_path)
+    assert built
+    path = cache_path(vehicle, terrain, (5, 5), tmp_path)
+    with np.load(path, allow_pickle=False) as data:
+        stored = json.loads(str(data['meta']))
+        arrays = {k: np.array(data[k]) for k in data.files if k != 'meta'}
+    assert stored['vehicle'] == 'test_robot_track' and stored['model_version'].startswith('setpoint-')
+    _again, built = load_or_build(vehicle, terrain, nodes=(5, 5), cache_dir=tmp_path)
+    assert not built  # its own file is used
+    other = load_vehicle('packbot_4wheel')
+    np.savez(path, meta=np.array(json.dumps(map_identity(other, terrain, 'setpoint'))), **arrays)  # type: ignore[arg-type]
+    _fresh, built = load_or_build(vehicle, terrain, nodes=(5, 5), cache_dir=tmp_path)
+    assert built  # the same bytes, another vehicle's identity: rebuilt
+    np.savez(path, **arrays)  # type: ignore[arg-type]  # a file of the code before: no identity
+    _fresh, built = load_or_build(vehicle, terrain, nodes=(5, 5), cache_dir=tmp_path)
+    assert built

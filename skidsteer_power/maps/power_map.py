@@ -78,12 +78,14 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 import numpy as np
 from numpy.typing import NDArray
 
-from skidsteer_power.cache import atomic_file, default_cache_dir, options_digest, physics_digest
+from skidsteer_power.cache import atomic_file, default_cache_dir, options_digest
 from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
 from skidsteer_power.interpolation import Axis, BilinearGrid
 from skidsteer_power.maps.grid_angles import REFINE_SPAN as REFINE_SPAN
 from skidsteer_power.maps.grid_angles import _angle_coordinate as _angle_coordinate
 from skidsteer_power.maps.grid_angles import _angle_coordinate_scalar, _refined_angles
+from skidsteer_power.maps.identity import check_identity, map_identity
+from skidsteer_power.maps.identity import model_version as model_version
 from skidsteer_power.maps.map_solve import SLIP_LIMIT as SLIP_LIMIT
 from skidsteer_power.maps.map_solve import _assemble, _check_cells, _mirror, _solve_row
 from skidsteer_power.terramechanics.terrain import terrain_fingerprint
@@ -166,12 +168,6 @@ class MapQuery:
     @property
     def total_power_W(self) -> Values:
         return self.power_left_W + self.power_right_W
-
-
-def model_version(model: str = 'fess') -> str:
-    """The model and a digest of the whole physics code (:func:`skidsteer_power.cache.physics_digest`);
-    a stored map must match it, so a map built by older code is rebuilt, never used."""
-    return f'{model}-{physics_digest()}'
 
 
 def build_options(
@@ -323,12 +319,7 @@ class PowerMap:
                 progress(k + 1, 2 * n_s - 1)
         values, converged, limited = _assemble(rows)
         meta = {
-            'vehicle': vehicle.name,
-            'vehicle_fingerprint': vehicle_fingerprint(vehicle),
-            'terrain': terrain.name,
-            'terrain_fingerprint': terrain_fingerprint(terrain),
-            'model': model,
-            'model_version': model_version(model),
+            **map_identity(vehicle, terrain, model),
             'options': options,
             'options_digest': options_digest(options),
             'elements': solver.n,
@@ -393,7 +384,7 @@ class PowerMap:
         except (OSError, KeyError, ValueError, TypeError, json.JSONDecodeError) as err:
             # TypeError: a plain .npy array (not a zip archive) cannot be opened as an archive
             raise ConfigError(f'{source}: not a skidsteer_power map ({err})') from err
-        _check_meta(source, meta, vehicle, terrain)
+        check_identity(source, meta, vehicle, terrain)
         out = cls(
             arrays['radial'],
             arrays['angles'],
@@ -519,23 +510,6 @@ def _reverse(columns: dict[str, np.ndarray], reverse: np.ndarray) -> dict[str, n
     for name in _ODD_IN_REVERSE:
         out[name] = np.where(reverse, -out[name], out[name])
     return out
-
-
-def _check_meta(source: Path, meta: dict[str, Any], vehicle: Vehicle | None, terrain: Terrain | None) -> None:
-    current = model_version(str(meta.get('model', 'fess')))  # the whole physics code's digest
-    if meta.get('model_version') != current:
-        raise MapMismatchError(
-            f'{source}: built by model version {meta.get("model_version")!r}, this package is {current!r}'
-        )
-    if vehicle is not None and meta.get('vehicle_fingerprint') != vehicle_fingerprint(vehicle):
-        raise MapMismatchError(
-            f'{source}: built for vehicle {meta.get("vehicle")!r} '
-            f'({meta.get("vehicle_fingerprint")}), not {vehicle.name!r} ({vehicle_fingerprint(vehicle)})'
-        )
-    if terrain is not None and meta.get('terrain_fingerprint') != terrain_fingerprint(terrain):
-        raise MapMismatchError(
-            f'{source}: built for terrain {meta.get("terrain")!r}, not {terrain.name!r} (parameters differ)'
-        )
 
 
 # -------------------------------------------------------------------- cache

@@ -37,6 +37,7 @@ and symmetric as it is.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Sequence
@@ -49,8 +50,9 @@ import numpy as np
 from skidsteer_power.cache import atomic_file, default_cache_dir, physics_digest
 from skidsteer_power.drive.controller import controller_for_vehicle
 from skidsteer_power.drive.current import current_limited
-from skidsteer_power.errors import InputError
+from skidsteer_power.errors import InputError, MapMismatchError
 from skidsteer_power.interpolation import Axis, BilinearGrid
+from skidsteer_power.maps.identity import check_identity, map_identity
 from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
 from skidsteer_power.models.setpoint import (
     ELEMENT_TURN_LIMIT_REV,
@@ -71,6 +73,7 @@ FIELDS = (
     'traction_margin', 'dug_in', 'contact_length', 'shear_path',
 )  # fmt: skip
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
+MAP_MODEL = 'setpoint'  # the model name in a stored map's identity (maps/identity.py)
 MAX_NODES = 200_000
 BAND_RATIO = 0.4  # cells with a corner's inner / outer set point within +-this are checked (module doc)
 CHECK_POWER = 0.005  # a checked cell whose centre is off by more (relative battery power) is exact
@@ -384,21 +387,23 @@ def load_or_build(
     cache_dir: str | os.PathLike[str] | None = None,
     controller: DriveController | None = None,
 ) -> tuple[SetpointMap, bool]:
-    """The cached set-point map of ``vehicle`` on ``terrain``, built and saved if missing or
-    unreadable. Returns (map, built). ``controller``: the drive controller its queries make set
-    points with (default: the vehicle file's; e.g. the des_driver's own limits); the nodes and the
-    cache are the vehicle's either way."""
+    """The cached set-point map of ``vehicle`` on ``terrain``, built and saved if missing,
+    unreadable or stored for another vehicle, terrain or physics code (its identity, as a power
+    map's: :mod:`skidsteer_power.maps.identity`). Returns (map, built). ``controller``: the drive
+    controller its queries make set points with (default: the vehicle file's; e.g. the des_driver's
+    own limits); the nodes and the cache are the vehicle's either way."""
     path = cache_path(vehicle, terrain, nodes, cache_dir)
     predictor = CommandPredictor(vehicle, terrain, controller=controller)
     if path.exists():
         try:
-            with np.load(path) as data:
+            with np.load(path, allow_pickle=False) as data:
+                check_identity(path, json.loads(str(data['meta'])), vehicle, terrain)
                 mean, diff, values, checked = data['mean'], data['diff'], data['values'], data['checked']
             top = envelope(predictor)
             if values.shape == (len(mean), len(diff), len(FIELDS)) and (mean[-1], diff[-1]) == top:
                 return SetpointMap(predictor, mean, diff, values, checked), False
-        except (OSError, ValueError, KeyError, InputError):
-            pass  # damaged: rebuild below, never use it
+        except (OSError, ValueError, KeyError, TypeError, InputError, MapMismatchError):
+            pass  # damaged, stale or another map: rebuild below, never use it
     built = SetpointMap.build(vehicle, terrain, nodes, predictor)  # missing, damaged or another envelope
     with atomic_file(path) as handle:
         np.savez(
@@ -407,5 +412,6 @@ def load_or_build(
             diff=built.grid.axis1.values,
             values=built.grid.values,
             checked=built.checked,
+            meta=np.array(json.dumps(map_identity(vehicle, terrain, MAP_MODEL))),
         )
     return built, True
