@@ -75,7 +75,7 @@ from skidsteer_power.bags.validate_metrics import (
 )
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.inputs import InputLimits
-from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
+from skidsteer_power.estimator.measured import apply_to_joint_arrays
 from skidsteer_power.seams import BatteryModel
 
 if TYPE_CHECKING:

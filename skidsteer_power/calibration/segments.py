@@ -30,8 +30,7 @@ from skidsteer_power.bag_io.decode import decode_joint_arrays, decode_twists
 from skidsteer_power.bag_io.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
-from skidsteer_power.estimator.measured import source_in_bag
-from skidsteer_power.estimator.side_currents import apply_to_joint_arrays
+from skidsteer_power.estimator.measured import apply_to_joint_arrays, source_in_bag
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 

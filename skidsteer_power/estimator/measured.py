@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from skidsteer_power.errors import ConfigError
-from skidsteer_power.estimator.side_currents import FieldRef
+from skidsteer_power.estimator.side_currents import FieldRef, decode_side_currents, efforts_at, source_in
 from skidsteer_power.powertrain.motor import (
     DES_70_10,
     AmplifierConstants,
@@ -432,3 +432,34 @@ def joint_efforts(
     velocity[~fresh] = np.nan
     count = max(signals[c.current][0].size for c in source.channels)
     return (position, velocity, effort), present, f'{source.describe()} ({count} messages)'
+
+
+def apply_to_joint_arrays(
+    bag: Any,
+    joint_map: Any,
+    t0_ns: int,
+    js_t: np.ndarray,
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
+    present: np.ndarray,
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray, str]:
+    """joint_states arrays (position, velocity, effort) with the effort from the drivetrain's side
+    currents, if it names any: rows without fresh currents are NaN in every field (no data).
+    Returns (arrays, present, note); the note says which source was used or why none. A vehicle
+    file's ``measured_power`` (:func:`joint_efforts`) is applied
+    the same way."""
+    if getattr(joint_map, 'measured_power', ()):
+        return joint_efforts(bag, joint_map, t0_ns, js_t, arrays, present)
+    sources = getattr(joint_map, 'side_currents', ())
+    if not sources:
+        return arrays, present, ''
+    source, why = source_in(bag, sources)
+    if source is None:
+        return arrays, np.zeros_like(present), why
+    current_t, currents = decode_side_currents(bag, source, t0_ns)
+    n_left = len(joint_map.left)
+    effort, fresh = efforts_at(js_t, current_t, currents, n_left, len(joint_map.joints), source.max_age_s)
+    position, velocity, _ = (a.copy() for a in arrays)
+    position[~fresh] = np.nan
+    velocity[~fresh] = np.nan
+    note = f'motor currents from {source.topic} ({source.left}, {source.right}; {current_t.size} messages)'
+    return (position, velocity, effort), present, note

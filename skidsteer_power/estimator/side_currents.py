@@ -170,36 +170,3 @@ def source_in(bag: Any, sources: Sequence[SideCurrentSource]) -> tuple[SideCurre
         return None, f'no definition of {", ".join(undecodable)} in the bag: pass it with --msg'
     wanted = ', '.join(f'{s.topic} ({s.msgtype})' for s in sources)
     return None, f'no side-current topic in the bag (wanted {wanted})'
-
-
-def apply_to_joint_arrays(
-    bag: Any,
-    joint_map: Any,
-    t0_ns: int,
-    js_t: np.ndarray,
-    arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
-    present: np.ndarray,
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray, str]:
-    """joint_states arrays (position, velocity, effort) with the effort from the drivetrain's side
-    currents, if it names any: rows without fresh currents are NaN in every field (no data).
-    Returns (arrays, present, note); the note says which source was used or why none. A vehicle
-    file's ``measured_power`` (:func:`skidsteer_power.estimator.measured.joint_efforts`) is applied
-    the same way."""
-    if getattr(joint_map, 'measured_power', ()):
-        from skidsteer_power.estimator.measured import joint_efforts
-
-        return joint_efforts(bag, joint_map, t0_ns, js_t, arrays, present)
-    sources = getattr(joint_map, 'side_currents', ())
-    if not sources:
-        return arrays, present, ''
-    source, why = source_in(bag, sources)
-    if source is None:
-        return arrays, np.zeros_like(present), why
-    current_t, currents = decode_side_currents(bag, source, t0_ns)
-    n_left = len(joint_map.left)
-    effort, fresh = efforts_at(js_t, current_t, currents, n_left, len(joint_map.joints), source.max_age_s)
-    position, velocity, _ = (a.copy() for a in arrays)
-    position[~fresh] = np.nan
-    velocity[~fresh] = np.nan
-    note = f'motor currents from {source.topic} ({source.left}, {source.right}; {current_t.size} messages)'
-    return (position, velocity, effort), present, note
