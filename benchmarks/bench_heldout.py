@@ -35,6 +35,17 @@ def table(outcomes: list[Outcome]) -> str:
             f'| {o.case.terrain} | {o.case.seed} | {o.measured_J / 1e3:.2f} | {o.start_pct:+.1f} % | '
             f'{o.calibrated_pct:+.1f} % | {o.linear_pct:+.1f} % | {met} | {o.fitted} |'
         )
+    within = sum(abs(o.calibrated_pct) <= 15.0 for o in outcomes)
+    better = sum(abs(o.calibrated_pct) < abs(o.linear_pct) for o in outcomes)
+    n = len(outcomes)
+    mean_cal = sum(abs(o.calibrated_pct) for o in outcomes) / max(n, 1)
+    mean_lin = sum(abs(o.linear_pct) for o in outcomes) / max(n, 1)
+    lines += [
+        '',
+        f"Goal (|error| <= 15 % and below the linear fit's): within 15 % in {within} of {n}, better than "
+        f'the linear fit in {better} of {n} (**{sum(_met(o) for o in outcomes)} of {n} met**); mean '
+        f'|error| calibrated {mean_cal:.1f} %, linear fit {mean_lin:.1f} %.',
+    ]
     return '\n'.join(lines)
 
 
