@@ -106,6 +106,186 @@ def _column(table: dict[str, np.ndarray], name: str, path: Path, option: str) ->
     return values
 
 
+@dataclass(frozen=True)
+class Signals:
+    """What one import read, in SI units: per CSV row the time t [s], the wheel speeds at the tread
+    (n, 2) [m/s], the command (n, 2) [m/s, rad/s], currents (n, 2) [A] and voltages (n, 2) [V] where
+    recorded; the yaw rate [rad/s] at its own times [s] where recorded."""
+
+    t: np.ndarray
+    speed: np.ndarray
+    cmd: np.ndarray
+    cmd_note: str
+    currents: np.ndarray | None
+    voltages: np.ndarray | None
+    yaw_t: np.ndarray | None
+    yaw: np.ndarray | None
+
+
+def _columns2(
+    table: dict[str, np.ndarray], path: Path, names: tuple[str, str], options: tuple[str, str]
+) -> np.ndarray:
+    """Two columns side by side (n, 2)."""
+    return np.column_stack([_column(table, names[k], path, options[k]) for k in (0, 1)])
+
+
+def read_signals(
+    path: Path,
+    columns: Columns,
+    tread_m: float,
+    imu: Path | None,
+    scales: tuple[float, float, float],
+    max_rows: int,
+) -> Signals:
+    """The columns of ``path`` (and of ``imu``) the mapping names; ``scales`` = (time, speed, current)."""
+    time_scale, speed_scale, current_scale = scales
+    table = read_csv(path, max_rows)
+    t = _column(table, columns.time, path, '--time') * time_scale
+    if np.any(np.diff(t) < 0):
+        raise InputError(f'{path}: the time column {columns.time!r} goes backwards')
+    if not (columns.left_speed and columns.right_speed):
+        raise InputError('import needs --left-speed and --right-speed (the wheel speed columns)')
+    speeds = (columns.left_speed, columns.right_speed)
+    speed = _columns2(table, path, speeds, ('--left-speed', '--right-speed')) * speed_scale
+    currents = None
+    if columns.left_current or columns.right_current:
+        if not (columns.left_current and columns.right_current):
+            raise InputError('give both --left-current and --right-current')
+        names = (columns.left_current, columns.right_current)
+        currents = _columns2(table, path, names, ('--left-current', '--right-current')) * current_scale
+    voltages = None
+    if columns.left_voltage or columns.right_voltage:
+        names = (columns.left_voltage or columns.right_voltage, columns.right_voltage or columns.left_voltage)
+        voltages = _columns2(table, path, names, ('--left-voltage', '--right-voltage'))
+    if columns.cmd_speed or columns.cmd_yaw_rate:
+        if not (columns.cmd_speed and columns.cmd_yaw_rate):
+            raise InputError(
+                'give both --cmd-speed and --cmd-yaw-rate, or neither (set points = wheel speeds)'
+            )
+        cmd = _columns2(
+            table, path, (columns.cmd_speed, columns.cmd_yaw_rate), ('--cmd-speed', '--cmd-yaw-rate')
+        )
+        cmd_note = f'command from columns {columns.cmd_speed}, {columns.cmd_yaw_rate}'
+    else:  # the controller holds wheel speeds: the recorded ones are the set points
+        cmd = np.column_stack([speed.mean(axis=1), (speed[:, 1] - speed[:, 0]) / tread_m])
+        cmd_note = f'command = the recorded wheel speeds as set points (tread {tread_m:g} m)'
+    yaw_t: np.ndarray | None = None
+    yaw = None
+    if imu is not None:
+        imu_table = read_csv(imu, max_rows)
+        yaw_t = _column(imu_table, columns.imu_time, imu, '--imu-time') * time_scale
+        yaw = _column(imu_table, columns.imu_yaw_rate or 'wz', imu, '--imu-yaw-rate')
+    elif columns.yaw_rate:
+        yaw_t, yaw = t, _column(table, columns.yaw_rate, path, '--yaw-rate')
+    return Signals(t, speed, cmd, cmd_note, currents, voltages, yaw_t, yaw)
+
+
+class _BagOut:
+    """The import's bag: its topics, a typestore, and a count of messages per topic."""
+
+    def __init__(
+        self, writer: Any, signals: Signals, current_topics: tuple[str, str], voltage_topics: tuple[str, str]
+    ) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.writer = writer
+        self.store = get_typestore(Stores.ROS2_JAZZY)
+        self.types = self.store.types
+        self.counts: dict[str, int] = {}
+        self.cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
+        self.joint_states = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        float64 = 'std_msgs/msg/Float64'
+        self.current = (
+            [writer.add_topic('/' + t.lstrip('/'), float64) for t in current_topics]
+            if signals.currents is not None
+            else []
+        )
+        self.voltage = (
+            [writer.add_topic('/' + t.lstrip('/'), float64) for t in voltage_topics]
+            if signals.voltages is not None
+            else []
+        )
+        self.imu = writer.add_topic('/imu/data', 'sensor_msgs/msg/Imu') if signals.yaw is not None else None
+
+    def put(self, connection: Any, stamp_ns: int, msg: Any, msgtype: str) -> None:
+        self.writer.write(connection, stamp_ns, self.store.serialize_cdr(msg, msgtype))
+        self.counts[connection.topic] = self.counts.get(connection.topic, 0) + 1
+
+    def header(self, t_ns: int) -> Any:
+        stamp = self.types['builtin_interfaces/msg/Time'](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+        return self.types['std_msgs/msg/Header'](stamp=stamp, frame_id='')
+
+    def imu_message(self, t_ns: int, yaw_rate: float) -> None:
+        vec, quat, zero9 = (
+            self.types['geometry_msgs/msg/Vector3'],
+            self.types['geometry_msgs/msg/Quaternion'],
+            np.zeros(9),
+        )
+        msg = self.types['sensor_msgs/msg/Imu'](
+            header=self.header(t_ns),
+            orientation=quat(0.0, 0.0, 0.0, 1.0),
+            orientation_covariance=zero9,
+            angular_velocity=vec(0.0, 0.0, yaw_rate),
+            angular_velocity_covariance=zero9,
+            linear_acceleration=vec(0.0, 0.0, 0.0),
+            linear_acceleration_covariance=zero9,
+        )
+        self.put(self.imu, t_ns, msg, 'sensor_msgs/msg/Imu')
+
+    def row(self, t_ns: int, cmd: np.ndarray, currents: Any, voltages: Any, joints: tuple[Any, ...]) -> None:
+        """One CSV row: the command, the currents and voltages, then joint_states (after them)."""
+        vec = self.types['geometry_msgs/msg/Vector3']
+        twist = self.types['geometry_msgs/msg/Twist'](
+            vec(float(cmd[0]), 0.0, 0.0), vec(0.0, 0.0, float(cmd[1]))
+        )
+        self.put(self.cmd, t_ns, twist, 'geometry_msgs/msg/Twist')
+        for values, connections in ((currents, self.current), (voltages, self.voltage)):
+            for k, connection in enumerate(connections):
+                msg = self.types['std_msgs/msg/Float64'](data=float(values[k]))
+                self.put(connection, t_ns, msg, 'std_msgs/msg/Float64')
+        names, position, velocity = joints
+        js = self.types['sensor_msgs/msg/JointState'](
+            header=self.header(t_ns), name=names, position=position, velocity=velocity, effort=np.zeros(0)
+        )
+        self.put(self.joint_states, t_ns + 1000, js, 'sensor_msgs/msg/JointState')
+
+
+def write_bag(
+    output: Path,
+    signals: Signals,
+    joints: Any,
+    radius_m: float,
+    topics: tuple[tuple[str, str], tuple[str, str]],
+) -> dict[str, int]:
+    """The bag of ``signals`` (module doc) for the drivetrain ``joints``; messages per topic."""
+    from skidsteer_power.bag_io.writer import BagWriter
+
+    t, n_left, names = signals.t, len(joints.left), list(joints.joints)
+    sign = np.array([-1.0 if j in joints.inverted else 1.0 for j in names])
+    omega = signals.speed / radius_m  # wheel speed [rad/s]
+    position = np.vstack(
+        [np.zeros(2), np.cumsum(0.5 * (omega[1:] + omega[:-1]) * np.diff(t)[:, None], axis=0)]
+    )
+    side = np.r_[np.zeros(n_left, int), np.ones(len(names) - n_left, int)]
+    events: list[tuple[int, int, int]] = [(round(x * 1e9), 0, i) for i, x in enumerate(t)]
+    if signals.yaw_t is not None:
+        events += [(round(x * 1e9), 1, i) for i, x in enumerate(signals.yaw_t)]
+    events.sort()
+    with BagWriter(output) as writer:
+        out = _BagOut(writer, signals, *topics)
+        for offset_ns, kind, i in events:
+            t_ns = START_NS + offset_ns
+            if kind == 1:
+                assert signals.yaw is not None
+                out.imu_message(t_ns, float(signals.yaw[i]))
+                continue
+            currents = None if signals.currents is None else signals.currents[i]
+            voltages = None if signals.voltages is None else signals.voltages[i]
+            state = (names, position[i, side] * sign, omega[i, side] * sign)
+            out.row(t_ns, signals.cmd[i], currents, voltages, state)
+    return out.counts
+
+
 def import_csv(
     path: Path,
     output: Path,
@@ -127,154 +307,14 @@ def import_csv(
     max_rows: int = int(MAX_ROWS.high),
 ) -> dict[str, Any]:
     """Write the bag (module docstring); return what was written (topics, message counts, duration)."""
-    from rosbags.typesys import Stores, get_typestore
-
-    from skidsteer_power.bag_io.writer import BagWriter
     from skidsteer_power.estimator import factory
 
     vehicle = factory.load_vehicle_config(vehicle_name)
     joints = factory.joint_map_for(vehicle)
-    table = read_csv(path, max_rows)
-    t = _column(table, columns.time, path, '--time') * time_scale
-    if np.any(np.diff(t) < 0):
-        raise InputError(f'{path}: the time column {columns.time!r} goes backwards')
-    if not (columns.left_speed and columns.right_speed):
-        raise InputError('import needs --left-speed and --right-speed (the wheel speed columns)')
-    speed = (
-        np.column_stack(
-            [
-                _column(table, columns.left_speed, path, '--left-speed'),
-                _column(table, columns.right_speed, path, '--right-speed'),
-            ]
-        )
-        * speed_scale
-    )
     radius, tread = float(vehicle.drive_radius_m), float(vehicle.tread_m)
-    currents = None
-    if columns.left_current or columns.right_current:
-        if not (columns.left_current and columns.right_current):
-            raise InputError('give both --left-current and --right-current')
-        currents = np.column_stack(
-            [
-                _column(table, columns.left_current, path, '--left-current'),
-                _column(table, columns.right_current, path, '--right-current'),
-            ]
-        )
-        currents = currents * current_scale
-    voltages = None
-    if columns.left_voltage or columns.right_voltage:
-        left_v = columns.left_voltage or columns.right_voltage
-        right_v = columns.right_voltage or columns.left_voltage
-        voltages = np.column_stack(
-            [_column(table, left_v, path, '--left-voltage'), _column(table, right_v, path, '--right-voltage')]
-        )
-    if columns.cmd_speed or columns.cmd_yaw_rate:
-        if not (columns.cmd_speed and columns.cmd_yaw_rate):
-            raise InputError(
-                'give both --cmd-speed and --cmd-yaw-rate, or neither (set points = wheel speeds)'
-            )
-        cmd = np.column_stack(
-            [
-                _column(table, columns.cmd_speed, path, '--cmd-speed'),
-                _column(table, columns.cmd_yaw_rate, path, '--cmd-yaw-rate'),
-            ]
-        )
-        cmd_note = f'command from columns {columns.cmd_speed}, {columns.cmd_yaw_rate}'
-    else:  # the controller holds wheel speeds: the recorded ones are the set points
-        cmd = np.column_stack([speed.mean(axis=1), (speed[:, 1] - speed[:, 0]) / tread])
-        cmd_note = f'command = the recorded wheel speeds as set points (tread {tread:g} m)'
-    yaw_t: np.ndarray | None = None
-    yaw = None
-    if imu is not None:
-        imu_table = read_csv(imu, max_rows)
-        yaw_t = _column(imu_table, columns.imu_time, imu, '--imu-time') * time_scale
-        yaw = _column(imu_table, columns.imu_yaw_rate or 'wz', imu, '--imu-yaw-rate')
-    elif columns.yaw_rate:
-        yaw_t, yaw = t, _column(table, columns.yaw_rate, path, '--yaw-rate')
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    types = store.types
-    n_left = len(joints.left)
-    names = list(joints.joints)
-    sign = np.array([-1.0 if j in joints.inverted else 1.0 for j in names])
-    omega = speed / radius  # wheel speed [rad/s]
-    position = np.vstack(
-        [np.zeros(2), np.cumsum(0.5 * (omega[1:] + omega[:-1]) * np.diff(t)[:, None], axis=0)]
-    )
-    side = np.r_[np.zeros(n_left, int), np.ones(len(names) - n_left, int)]
-    events: list[tuple[int, int, int]] = [(round(x * 1e9), 0, i) for i, x in enumerate(t)]
-    if yaw_t is not None:
-        events += [(round(x * 1e9), 1, i) for i, x in enumerate(yaw_t)]
-    events.sort()
-    counts: dict[str, int] = {}
-    with BagWriter(output) as writer:
-        c_cmd = writer.add_topic('/cmd_vel', 'geometry_msgs/msg/Twist')
-        c_js = writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
-        c_cur = (
-            [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in current_topics]
-            if currents is not None
-            else []
-        )
-        c_volt = (
-            [writer.add_topic('/' + topic.lstrip('/'), 'std_msgs/msg/Float64') for topic in voltage_topics]
-            if voltages is not None
-            else []
-        )
-        c_imu = writer.add_topic('/imu/data', 'sensor_msgs/msg/Imu') if yaw is not None else None
-        vec, quat = types['geometry_msgs/msg/Vector3'], types['geometry_msgs/msg/Quaternion']
-        zero9 = np.zeros(9)
-
-        def put(connection: Any, topic: str, stamp_ns: int, msg: Any, msgtype: str) -> None:
-            writer.write(connection, stamp_ns, store.serialize_cdr(msg, msgtype))
-            counts[topic] = counts.get(topic, 0) + 1
-
-        for offset_ns, kind, i in events:
-            t_ns = START_NS + offset_ns
-            stamp = types['builtin_interfaces/msg/Time'](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-            header = types['std_msgs/msg/Header'](stamp=stamp, frame_id='')
-            if kind == 1:
-                assert yaw is not None and c_imu is not None
-                imu_msg = types['sensor_msgs/msg/Imu'](
-                    header=header,
-                    orientation=quat(0.0, 0.0, 0.0, 1.0),
-                    orientation_covariance=zero9,
-                    angular_velocity=vec(0.0, 0.0, float(yaw[i])),
-                    angular_velocity_covariance=zero9,
-                    linear_acceleration=vec(0.0, 0.0, 0.0),
-                    linear_acceleration_covariance=zero9,
-                )
-                put(c_imu, '/imu/data', t_ns, imu_msg, 'sensor_msgs/msg/Imu')
-                continue
-            twist = types['geometry_msgs/msg/Twist'](
-                vec(float(cmd[i, 0]), 0.0, 0.0), vec(0.0, 0.0, float(cmd[i, 1]))
-            )
-            put(c_cmd, '/cmd_vel', t_ns, twist, 'geometry_msgs/msg/Twist')
-            for k, connection in enumerate(c_cur):
-                assert currents is not None
-                put(
-                    connection,
-                    connection.topic,
-                    t_ns,
-                    types['std_msgs/msg/Float64'](data=float(currents[i, k])),
-                    'std_msgs/msg/Float64',
-                )
-            for k, connection in enumerate(c_volt):
-                assert voltages is not None
-                put(
-                    connection,
-                    connection.topic,
-                    t_ns,
-                    types['std_msgs/msg/Float64'](data=float(voltages[i, k])),
-                    'std_msgs/msg/Float64',
-                )
-            js = types['sensor_msgs/msg/JointState'](
-                header=header,
-                name=names,
-                position=position[i, side] * sign,
-                velocity=omega[i, side] * sign,
-                effort=np.zeros(0),
-            )
-            put(c_js, '/joint_states', t_ns + 1000, js, 'sensor_msgs/msg/JointState')  # after its currents
+    signals = read_signals(path, columns, tread, imu, (time_scale, speed_scale, current_scale), max_rows)
+    counts = write_bag(output, signals, joints, radius, (current_topics, voltage_topics))
+    t = signals.t
     return {
         'bag': str(output),
         'csv': str(path),
@@ -283,7 +323,7 @@ def import_csv(
         'rows': int(t.size),
         'duration_s': float(t[-1] - t[0]) if t.size > 1 else 0.0,
         'messages': counts,
-        'command': cmd_note,
+        'command': signals.cmd_note,
         'wheel_radius_m': radius,
     }
 
