@@ -29,7 +29,7 @@ CASES = (
     Case('concrete', 9),
 )
 TABLE = 'heldout-proxy'
-MOTION_CASES = (motion.Case('grass', 5), motion.Case('sandy_loam', 4), motion.Case('lete_sand', 6))
+MOTION_CASES = (Case('grass', 5), Case('sandy_loam', 4), Case('lete_sand', 6))
 MOTION_TABLE = 'heldout-motion-proxy'
 MOTION_MODELS = ('no-slip kinematics', 'linear fit', 'FESS preset', 'FESS calibrated')
 

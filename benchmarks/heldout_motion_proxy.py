@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.heldout_proxy import cli
+from benchmarks.heldout_proxy import Case, Command, cli, teleop_commands
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.writer import BagWriter
 
@@ -50,13 +50,6 @@ GOAL_VX_M_S = 0.07  # issue 36
 
 
 @dataclass(frozen=True)
-class Case:
-    terrain: str
-    seed: int
-    seconds: float = 150.0
-
-
-@dataclass(frozen=True)
 class MotionOutcome:
     """MAE of the second half's steady windows, forward speed [m/s] and yaw rate [rad/s], per model."""
 
@@ -68,28 +61,23 @@ class MotionOutcome:
     limited: int  # windows predict flagged limited (calibrated)
 
 
+def _motion_mix(rng: random.Random) -> Command:
+    """Stops, straights to 1.5 m/s, turns to 2 rad/s, near-pivot spins to 3 rad/s, reversing."""
+    kind = rng.random()
+    if kind < 0.1:
+        return 0.0, 0.0
+    if kind < 0.3:
+        return rng.uniform(0.2, 1.5), 0.0
+    if kind < 0.6:
+        return rng.uniform(0.1, 1.2), rng.uniform(-2.0, 2.0)
+    if kind < 0.85:
+        return rng.uniform(-0.05, 0.05), rng.choice((-1.0, 1.0)) * rng.uniform(0.3, 3.0)
+    return -rng.uniform(0.1, 0.8), rng.uniform(-0.5, 0.5)
+
+
 def commands(path: Path, seconds: float, seed: int) -> Path:
-    """A command CSV (t_s, speed_m_s, yaw_rate_rad_s) of the held-out check's kind: holds of 1-8 s,
-    straights to 1.5 m/s, turns, near-pivot spins to 3 rad/s, reversing and stops."""
-    rng = random.Random(seed)
-    rows, t = ['t_s,speed_m_s,yaw_rate_rad_s'], 0.0
-    while t < seconds:
-        kind = rng.random()
-        if kind < 0.1:
-            v, w = 0.0, 0.0
-        elif kind < 0.3:
-            v, w = rng.uniform(0.2, 1.5), 0.0
-        elif kind < 0.6:
-            v, w = rng.uniform(0.1, 1.2), rng.uniform(-2.0, 2.0)
-        elif kind < 0.85:
-            v, w = rng.uniform(-0.05, 0.05), rng.choice((-1.0, 1.0)) * rng.uniform(0.3, 3.0)
-        else:
-            v, w = -rng.uniform(0.1, 0.8), rng.uniform(-0.5, 0.5)
-        rows.append(f'{t:.2f},{v:.3f},{w:.3f}')
-        t += rng.uniform(1.0, 8.0)
-    rows.append(f'{t:.2f},0,0')
-    path.write_text('\n'.join(rows) + '\n')
-    return path
+    """A command CSV of the held-out check's kind (:func:`teleop_commands` of :func:`_motion_mix`)."""
+    return teleop_commands(path, seconds, seed, _motion_mix)
 
 
 def as_husky_recording(twin_bag: Path, out: Path) -> Path:

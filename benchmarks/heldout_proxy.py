@@ -21,6 +21,7 @@ import json
 import random
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,27 +54,40 @@ class Outcome:
     fitted: str  # what calibrate fitted
 
 
-def commands(path: Path, seconds: float, seed: int) -> Path:
-    """A teleop-like command CSV (t_s, speed_m_s, yaw_rate_rad_s): holds of 1-8 s."""
+Command = tuple[float, float]
+
+
+def teleop_commands(path: Path, seconds: float, seed: int, pick: Callable[[random.Random], Command]) -> Path:
+    """A teleop-like command CSV (t_s, speed_m_s, yaw_rate_rad_s): holds of 1-8 s, each command
+    ``pick(rng)`` [m/s, rad/s], ending at rest."""
     rng = random.Random(seed)
     rows, t = ['t_s,speed_m_s,yaw_rate_rad_s'], 0.0
     while t < seconds:
-        kind = rng.random()
-        if kind < 0.15:
-            v, w = 0.0, 0.0
-        elif kind < 0.35:
-            v, w = rng.uniform(0.2, 1.0), 0.0
-        elif kind < 0.7:
-            v, w = rng.uniform(0.1, 0.9), rng.uniform(-1.0, 1.0)
-        elif kind < 0.85:
-            v, w = 0.0, rng.choice((-1.0, 1.0)) * rng.uniform(0.3, 1.5)
-        else:
-            v, w = -rng.uniform(0.1, 0.5), rng.uniform(-0.3, 0.3)
+        v, w = pick(rng)
         rows.append(f'{t:.2f},{v:.3f},{w:.3f}')
         t += rng.uniform(1.0, 8.0)
     rows.append(f'{t:.2f},0,0')
     path.write_text('\n'.join(rows) + '\n')
     return path
+
+
+def _energy_mix(rng: random.Random) -> Command:
+    """Stops, straights, turns, spins to 1.5 rad/s and slow reversing."""
+    kind = rng.random()
+    if kind < 0.15:
+        return 0.0, 0.0
+    if kind < 0.35:
+        return rng.uniform(0.2, 1.0), 0.0
+    if kind < 0.7:
+        return rng.uniform(0.1, 0.9), rng.uniform(-1.0, 1.0)
+    if kind < 0.85:
+        return 0.0, rng.choice((-1.0, 1.0)) * rng.uniform(0.3, 1.5)
+    return -rng.uniform(0.1, 0.5), rng.uniform(-0.3, 0.3)
+
+
+def commands(path: Path, seconds: float, seed: int) -> Path:
+    """The energy proxy's command CSV (:func:`teleop_commands` of :func:`_energy_mix`)."""
+    return teleop_commands(path, seconds, seed, _energy_mix)
 
 
 def user_vehicle(path: Path) -> Path:

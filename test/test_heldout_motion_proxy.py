@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.heldout_motion_proxy import Case, run_case, simulate, steady_windows
+from benchmarks.heldout_motion_proxy import run_case, simulate, steady_windows
+from benchmarks.heldout_proxy import Case
 from skidsteer_power.bag_io import open_bag
 
 
