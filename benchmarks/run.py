@@ -10,6 +10,7 @@ goal was missed (so ``make bench`` fails), 0 when every goal was met.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import importlib
 import os
@@ -23,19 +24,42 @@ from benchmarks.harness import Figure, Report
 DOC = Path(__file__).resolve().parents[1] / 'docs' / 'BENCHMARKS.md'
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = list(argv if argv is not None else sys.argv[1:])
-    write_docs = '--write-docs' in args
-    wanted = set(args) - {'--write-docs'}
-    names = sorted(
-        m.name for m in pkgutil.iter_modules([str(Path(__file__).parent)]) if m.name.startswith('bench_')
+def area_names() -> list[str]:
+    """Every benchmark module's area (``bench_NAME.py`` -> NAME), sorted."""
+    modules = pkgutil.iter_modules([str(Path(__file__).parent)])
+    return sorted(m.name.removeprefix('bench_') for m in modules if m.name.startswith('bench_'))
+
+
+def parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog='python -m benchmarks.run',
+        description='Run the benchmark areas (all, or those named) and report every figure beside its goal; '
+        'exit code 1 when a goal was missed.',
     )
+    parser.add_argument(
+        'areas', nargs='*', metavar='AREA', help=f'areas to run (default all): {", ".join(area_names())}'
+    )
+    parser.add_argument(
+        '--write-docs', action='store_true', help='render the goal table into docs/BENCHMARKS.md'
+    )
+    args = parser.parse_args(argv)
+    unknown = sorted({a.removeprefix('bench_') for a in args.areas} - set(area_names()))
+    if unknown:
+        parser.error(f'no benchmark area {", ".join(unknown)} (areas: {", ".join(area_names())})')
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(list(argv if argv is not None else sys.argv[1:]))
+    write_docs = args.write_docs
+    wanted = {a.removeprefix('bench_') for a in args.areas}
+    names = [f'bench_{a}' for a in area_names()]
     missed = 0
     reports: list[tuple[str, list[Figure]]] = []
     tables: dict[str, str] = {}
     for name in names:
         short = name.removeprefix('bench_')
-        if wanted and short not in wanted and name not in wanted:
+        if wanted and short not in wanted:
             continue
         print(f'\n== {short} ==', flush=True)
         report = Report(section=short)
