@@ -31,6 +31,7 @@ from skidsteer_power.drive import controller_for_vehicle
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.vehicle import Vehicle
 
 __all__ = [
@@ -76,7 +77,6 @@ def calibrate_bags(
     import dataclasses
 
     from skidsteer_power.estimator import factory
-    from skidsteer_power.estimator.inputs import InputLimits, JointReader
     from skidsteer_power.terramechanics.terrain import load_terrain
 
     names = parse_fit_list(fit) if isinstance(fit, str) else list(fit)
@@ -94,28 +94,7 @@ def calibrate_bags(
     options = options or base
     if options.extra_types is None and extra_types is not None:
         options = dataclasses.replace(options, extra_types=extra_types)
-    segments: list[Segment] = []
-    recordings: list[Recording] = []
-    dropped: dict[str, int] = {}
-    for bag in bags:
-        reader = JointReader(
-            factory.joint_map_for(veh),
-            powertrain.gear_ratio,
-            powertrain.motor.torque_constant_Nm_A,
-            InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
-        )  # one per bag: a position-differentiated speed must not span two bags; a battery-side
-        # V x I reading stays the power [W]: the fit compares it with the predicted P_bus
-        recordings.append(read_recording(bag, options, reader))
-        found, why = find_segments(recordings[-1], options, powertrain.motor)
-        segments.extend(found)
-        for key, count in why.items():
-            dropped[key] = dropped.get(key, 0) + count
-    if len(segments) < 3:
-        raise InputError(
-            f'only {len(segments)} steady segment(s) in {len(bags)} bag(s) (dropped: {dropped}); '
-            'calibration needs constant commands held for longer than --settle-s + --min-segment-s '
-            '(or a looser --settle-tol / --cmd-tol)'
-        )
+    recordings, segments, dropped = read_segments(bags, veh, powertrain, options)
     left_fixed: dict[str, str] = {}
     drive = None
     if names == ['auto']:  # the drive controller's limits too: commanded against measured wheel speeds
@@ -140,6 +119,40 @@ def calibrate_bags(
     if every_sample and any(math.isfinite(sum(s.battery_W)) for s in segments):  # V x I measured
         reconcile_battery_terms(result, bags, vehicle, veh, options, terrain, powertrain.gear_ratio)
     return result, segments
+
+
+def read_segments(
+    bags: Sequence[str], veh: Vehicle, powertrain: Powertrain, options: SegmentOptions
+) -> tuple[list[Recording], list[Segment], dict[str, int]]:
+    """Step 1 of :func:`calibrate_bags`: every bag read (its joints through the vehicle's own motor
+    and driver limits) and cut into steady segments. Returns (recordings, segments, windows dropped
+    by reason); InputError when fewer than 3 segments remain."""
+    from skidsteer_power.estimator import factory
+    from skidsteer_power.estimator.inputs import InputLimits, JointReader
+
+    segments: list[Segment] = []
+    recordings: list[Recording] = []
+    dropped: dict[str, int] = {}
+    for bag in bags:
+        reader = JointReader(
+            factory.joint_map_for(veh),
+            powertrain.gear_ratio,
+            powertrain.motor.torque_constant_Nm_A,
+            InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
+        )  # one per bag: a position-differentiated speed must not span two bags; a battery-side
+        # V x I reading stays the power [W]: the fit compares it with the predicted P_bus
+        recordings.append(read_recording(bag, options, reader))
+        found, why = find_segments(recordings[-1], options, powertrain.motor)
+        segments.extend(found)
+        for key, count in why.items():
+            dropped[key] = dropped.get(key, 0) + count
+    if len(segments) < 3:
+        raise InputError(
+            f'only {len(segments)} steady segment(s) in {len(bags)} bag(s) (dropped: {dropped}); '
+            'calibration needs constant commands held for longer than --settle-s + --min-segment-s '
+            '(or a looser --settle-tol / --cmd-tol)'
+        )
+    return recordings, segments, dropped
 
 
 def reconcile_battery_terms(
