@@ -48,7 +48,7 @@ from skidsteer_power.analysis.baselines import (
 )
 from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.jsonout import JsonObject
-from skidsteer_power.vehicle import TrackGear
+from skidsteer_power.vehicle import TrackGear, WheelGear
 
 if TYPE_CHECKING:
     from skidsteer_power.bags.validate import BagPrediction, ValidateOptions
@@ -353,13 +353,7 @@ def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], No
     train = concat(train_runs)
     train_envelope = envelope(train)
     linear, gazebo = LinearPower().fit(train), CmdVelConsumer().fit(train)
-    running_gear = vehicle.gear
-    contact_x = (
-        np.linspace(-0.5, 0.5, 21) * float(running_gear.track_length_m)
-        if isinstance(running_gear, TrackGear)
-        else np.array(running_gear.axle_positions_m())
-    )
-    icr = IcrRlsPower(vehicle.tread_m, contact_x).fit(train)
+    icr = IcrRlsPower(vehicle.tread_m, _contact_positions(vehicle.gear)).fit(train)
 
     split_runs: dict[str, list[BagRun]] = {name: [] for name in SPLITS}
     holdout_report = []
@@ -372,21 +366,65 @@ def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], No
         )
     transfer_report: JsonObject | None = None
     if options.transfer:
-        veh = options.vehicle
-        if options.transfer_payload_kg is not None:
-            veh = payload_vehicle(options.vehicle, options.transfer_payload_kg, folder)
-        terrains = {
-            'fess': options.transfer_terrain or options.terrain,
-            'fess_calibrated': options.transfer_terrain or cal_terrain,
-        }
-        split_runs['transfer'] = predict_runs(options.transfer, veh, terrains)
-        transfer_report = {
-            'bags': list(options.transfer),
-            'terrain': options.transfer_terrain,
-            'payload_kg': options.transfer_payload_kg,
-            'vehicle': veh,
-        }
+        split_runs['transfer'], transfer_report = _transfer(options, folder, cal_terrain, predict_runs)
+    failure = None if cal_terrain is not None else str(calibration['error'])
+    splits = _score_splits(split_runs, (linear, gazebo, icr), failure)
+    return {
+        'vehicle': options.vehicle,
+        'terrain': options.terrain,
+        # what FESS predicted from: validate's default ('cmd': the commands' wheel speed set points)
+        'kinematics': _validate_options(options.vehicle, options.terrain, cache).kinematics,
+        'train_bags': list(options.train),
+        'train_envelope': train_envelope,
+        'holdout': holdout_report,
+        'transfer': transfer_report,
+        'calibration': calibration,
+        'baselines': _baselines_json(linear, gazebo, icr),
+        'splits': splits,
+        'goal': goal(splits),
+    }
 
+
+def _contact_positions(running_gear: TrackGear | WheelGear) -> np.ndarray:
+    """Fore-aft positions [m] of the contact points the ICR baseline sums over: 21 along a track,
+    else the axles."""
+    if isinstance(running_gear, TrackGear):
+        return np.linspace(-0.5, 0.5, 21) * float(running_gear.track_length_m)
+    return np.array(running_gear.axle_positions_m())
+
+
+def _transfer(
+    options: CompareOptions,
+    folder: Path,
+    cal_terrain: str | None,
+    predict_runs: Callable[[Sequence[str], str, dict[str, str | None]], list[BagRun]],
+) -> tuple[list[BagRun], JsonObject]:
+    """The transfer bags predicted (on the transfer terrain, with the payload vehicle if one is
+    given) and what the report says of them."""
+    veh = options.vehicle
+    if options.transfer_payload_kg is not None:
+        veh = payload_vehicle(options.vehicle, options.transfer_payload_kg, folder)
+    terrains = {
+        'fess': options.transfer_terrain or options.terrain,
+        'fess_calibrated': options.transfer_terrain or cal_terrain,
+    }
+    report: JsonObject = {
+        'bags': list(options.transfer),
+        'terrain': options.transfer_terrain,
+        'payload_kg': options.transfer_payload_kg,
+        'vehicle': veh,
+    }
+    return predict_runs(options.transfer, veh, terrains), report
+
+
+def _score_splits(
+    split_runs: dict[str, list[BagRun]],
+    baselines: tuple[LinearPower, CmdVelConsumer, IcrRlsPower],
+    failure: str | None,
+) -> JsonObject:
+    """Every model's scores per split; ``failure``: why the calibrated models failed (their rows
+    then carry the reason), None when they ran."""
+    linear, gazebo, icr = baselines
     splits: JsonObject = {}
     for name, runs in split_runs.items():
         if not runs:
@@ -402,30 +440,22 @@ def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], No
                 predicted[key] = np.concatenate([r.predicted_W[key] for r in runs])
         models = {key: scores(p, runs) for key, p in predicted.items()}
         for key in FESS_MODELS:  # a model that failed is a visible row with its reason
-            if key not in models and 'calibrated' in key and cal_terrain is None:
-                models[key] = failed_scores(str(calibration['error']))
+            if key not in models and 'calibrated' in key and failure is not None:
+                models[key] = failed_scores(failure)
         splits[name] = {'bags': [r.path for r in runs], 'models': models}
+    return splits
+
+
+def _baselines_json(linear: LinearPower, gazebo: CmdVelConsumer, icr: IcrRlsPower) -> JsonObject:
+    """The fitted baselines' coefficients, named with their units."""
     return {
-        'vehicle': options.vehicle,
-        'terrain': options.terrain,
-        # what FESS predicted from: validate's default ('cmd': the commands' wheel speed set points)
-        'kinematics': _validate_options(options.vehicle, options.terrain, cache).kinematics,
-        'train_bags': list(options.train),
-        'train_envelope': train_envelope,
-        'holdout': holdout_report,
-        'transfer': transfer_report,
-        'calibration': calibration,
-        'baselines': {
-            'linear': dict(zip(('a_W_s_per_m', 'b_W_s_per_rad', 'c_W'), linear.coef.tolist(), strict=True)),
-            'gazebo_cmd_vel': {
-                'power_load_rate_x': float(gazebo.rate_speed),
-                'power_load_rate_yaw': float(gazebo.rate_yaw),
-                'consumer_idle_power': gazebo.idle_W,
-            },
-            'icr_rls_online': {'icr_y_m_after_training': icr.icr.tolist(), 'theta': icr.theta.tolist()},
+        'linear': dict(zip(('a_W_s_per_m', 'b_W_s_per_rad', 'c_W'), linear.coef.tolist(), strict=True)),
+        'gazebo_cmd_vel': {
+            'power_load_rate_x': float(gazebo.rate_speed),
+            'power_load_rate_yaw': float(gazebo.rate_yaw),
+            'consumer_idle_power': gazebo.idle_W,
         },
-        'splits': splits,
-        'goal': goal(splits),
+        'icr_rls_online': {'icr_y_m_after_training': icr.icr.tolist(), 'theta': icr.theta.tolist()},
     }
 
 
