@@ -445,8 +445,7 @@ def apply_to_joint_arrays(
     """joint_states arrays (position, velocity, effort) with the effort from the drivetrain's side
     currents, if it names any: rows without fresh currents are NaN in every field (no data).
     Returns (arrays, present, note); the note says which source was used or why none. A vehicle
-    file's ``measured_power`` (:func:`joint_efforts`) is applied
-    the same way."""
+    file's ``measured_power`` (:func:`joint_efforts`) is applied the same way."""
     if getattr(joint_map, 'measured_power', ()):
         return joint_efforts(bag, joint_map, t0_ns, js_t, arrays, present)
     sources = getattr(joint_map, 'side_currents', ())
