@@ -14,9 +14,11 @@ from typing import Any
 import numpy as np
 
 JsonObject = dict[str, Any]
-"""A JSON object as built by an ``as_json``. ``Any`` because a JSON value's type depends on its key
-(a number, a string, a nested object, null) and a reader of the printed JSON indexes it by key; the
-typed view is the dataclass that made it. The package's one ``Any`` for JSON."""
+"""A JSON object as built by an ``as_json``, or a JSON or YAML mapping as read (a vehicle or terrain
+file, a bag's metadata) before it is checked into a typed object. ``Any`` because a JSON value's type
+depends on its key (a number, a string, a nested object, null) and a reader indexes it by key; the
+typed view is the dataclass that made it or that the reader builds. The package's one ``Any`` for
+JSON and YAML documents."""
 
 
 def jsonable(value: object) -> object:
