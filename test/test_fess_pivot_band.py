@@ -99,7 +99,7 @@ def test_band_is_solved_by_the_pivot_law(solver: SetpointSolver) -> None:
     assert not sol.limited.any() and not sol.dug_in.any()
     assert sol.shear_path.all() and np.all(sol.element_turn > 0.5)
     assert np.all(sol.speed > 0) and np.all(sol.yaw_rate > 0)  # turning the way the set points ask
-    pivot = solver._path_solver()
+    pivot = solver.path_solver()
     assert pivot.fess.path_law
     for k, left in enumerate(lefts):
         x, res, torque = _root(pivot, left)
@@ -129,7 +129,7 @@ def test_pivot_law_is_the_chord_below_half_a_revolution(solver: SetpointSolver) 
     half = np.pi * np.array([0.0, 0.5, 0.5 + PIVOT_BLEND_REV / 2, 0.5 + PIVOT_BLEND_REV, 3.0])
     np.testing.assert_array_equal(pivot_blend(half), [0.0, 0.0, 0.5, 1.0, 1.0])
     np.testing.assert_array_equal(pivot_blend(-half), pivot_blend(half))
-    chord, pivot = solver.fess, solver._path_solver().fess
+    chord, pivot = solver.fess, solver.path_solver().fess
     speed, yaw = np.array([0.18]), np.array([0.29])  # set points (1.0, RIGHT): turn 0.21 rev
     state = np.array([[[0.02, 1.0, RIGHT]]])
     np.testing.assert_array_equal(
@@ -149,7 +149,7 @@ def test_inner_side_at_rest_over_the_ground_is_a_steady_state(solver: SetpointSo
     inner_ground = sol.speed - sol.yaw_rate * solver.tread / 2
     assert np.all(np.abs(inner_ground) < 0.005) and np.all(sol.slip[:, 0] > 0.95)
     assert np.all(sol.speed > 0) and np.all(sol.yaw_rate > 0)
-    pivot = solver._path_solver()
+    pivot = solver.path_solver()
     veh = pivot.fess.vehicle
     weight, length = veh.mass_kg * 9.81, pivot._length_scale()
     scale = np.array([weight, weight, weight * length])

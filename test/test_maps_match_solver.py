@@ -24,6 +24,13 @@ def track_map() -> SetpointMap:
     return SetpointMap.build(load_vehicle('test_robot_track'), load_terrain('sand_bin'))
 
 
+@pytest.fixture(scope='module')
+def husky_map() -> SetpointMap:
+    """A wheeled robot whose pivot band covers 29 % of its cells on sand_bin (answered by the pivot
+    law at once, maps/setpoint_map.py's ``_solve_deferred``)."""
+    return SetpointMap.build(load_vehicle('husky_a200'), load_terrain('sand_bin'))
+
+
 def test_map_matches_direct_on_a_dense_grid(track_map: SetpointMap) -> None:
     """25 x 25 commands over the whole envelope (both signs of V and w_z), off the map's nodes."""
     veh = track_map.predictor.vehicle
@@ -47,6 +54,27 @@ def test_map_matches_direct_on_a_dense_grid(track_map: SetpointMap) -> None:
     assert np.max(power_err[ok]) < 0.01
     assert np.max(np.abs(speed - direct.speed)[ok]) < 0.005
     assert np.max(np.abs(yaw - direct.yaw_rate)[ok]) < 0.05 * veh.max_yaw_rate_rad_s
+
+
+def test_husky_map_matches_direct_in_its_pivot_band(husky_map: SetpointMap) -> None:
+    """15 x 15 commands over the Husky's envelope (both signs), off the map's nodes, the ones in
+    exact cells batched as ``predict --commands`` does (:meth:`SetpointMap.query_many`): the goals
+    of the dense grid above."""
+    veh = husky_map.predictor.vehicle
+    grid_v, grid_w = np.meshgrid(
+        np.linspace(-1, 1, 15) * veh.max_speed_m_s * 0.987, np.linspace(-1, 1, 15) * veh.max_yaw_rate_rad_s
+    )
+    v, w = grid_v.ravel(), grid_w.ravel()
+    direct = husky_map.predictor.predict(v, w)
+    answers = husky_map.query_many(v.tolist(), w.tolist())
+    limited = np.array([q.limited for q in answers])
+    np.testing.assert_array_equal(limited, direct.limited)
+    assert husky_map.exact_fraction > 0.2  # the band is there: the batched pivot-law solve is used
+    ok = ~limited
+    power = np.array([q.battery_power_W for q in answers])
+    power_err = np.abs(power - direct.battery_power) / np.maximum(np.abs(direct.battery_power), 1.0)
+    assert np.max(power_err[ok]) < 0.01
+    assert np.max(np.abs(np.array([q.speed_m_s for q in answers]) - direct.speed)[ok]) < 0.005
 
 
 @pytest.mark.parametrize('yaw', [0.3, 0.9])

@@ -15,7 +15,7 @@ import pytest
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.maps.identity import map_identity
-from skidsteer_power.maps.setpoint_map import SetpointMap, cache_path, load_or_build
+from skidsteer_power.maps.setpoint_map import SetpointMap, SetpointQuery, cache_path, load_or_build
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 
@@ -80,15 +80,18 @@ def test_current_limit_holds_in_every_query(track_map: SetpointMap) -> None:
 def test_pivot_band_agrees_with_the_direct_solve(track_map: SetpointMap) -> None:
     """A command whose inner element turns past half a revolution in the contact (set points
     0.375 / 3.545 rad/s; models/setpoint.py's element_turn_rev) is solved by the pivot law
-    (docs/PREDICTION.md, "The pivot band"): the map answers it exactly as the direct solve does,
-    unflagged, and the wide turn at the same speed is an ordinary answer too."""
+    (docs/PREDICTION.md, "The pivot band"): the map answers it as the direct solve does, unflagged,
+    and the wide turn at the same speed is an ordinary answer too. The map solves it with the pivot
+    law at once, warm-started from its interpolated state, the direct solve after eq. 6.6's chord
+    failed, from the no-slip guess: the same root within the stopping rule |F| < 1e-3 N (section
+    3.3.1), here to about 2e-7 relative, not bit for bit (rel=1e-5 below)."""
     query = track_map.query(0.196, 0.744)
     direct = track_map.predictor.predict([0.196], [0.744])
     assert not query.limited and not direct.limited[0] and query.reason == direct.reason[0] == ''
-    assert query.speed_m_s == pytest.approx(float(direct.speed[0]), rel=1e-9)
-    assert query.yaw_rate_rad_s == pytest.approx(float(direct.yaw_rate[0]), rel=1e-9)
-    assert query.torque_left_Nm == pytest.approx(float(direct.torque[0, 0]), rel=1e-9)
-    assert query.torque_right_Nm == pytest.approx(float(direct.torque[0, 1]), rel=1e-9)
+    assert query.speed_m_s == pytest.approx(float(direct.speed[0]), rel=1e-5)
+    assert query.yaw_rate_rad_s == pytest.approx(float(direct.yaw_rate[0]), rel=1e-5)
+    assert query.torque_left_Nm == pytest.approx(float(direct.torque[0, 0]), rel=1e-5)
+    assert query.torque_right_Nm == pytest.approx(float(direct.torque[0, 1]), rel=1e-5)
     assert query.yaw_rate_rad_s > 0 and query.setpoint_left_rad_s < 0.15 * query.setpoint_right_rad_s
     sol = track_map.predictor.solver.solve(
         np.array([[query.setpoint_left_rad_s, query.setpoint_right_rad_s]])
@@ -112,7 +115,7 @@ def test_many_queries_answer_as_one_query_each(track_map: SetpointMap) -> None:
         for name in ('speed_m_s', 'yaw_rate_rad_s', 'torque_left_Nm', 'torque_right_Nm', 'battery_power_W'):
             assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-9, abs=1e-12)
     for speed, yaw_rate in zip(v, w, strict=True):
-        exact_cells += isinstance(track_map._locate(float(speed), float(yaw_rate)), tuple)
+        exact_cells += not isinstance(track_map._locate(float(speed), float(yaw_rate)), SetpointQuery)
     assert exact_cells > 0  # the batch path was taken (7 x 7 nodes: the pivot band is exact)
     assert track_map.query_many([], []) == []
 

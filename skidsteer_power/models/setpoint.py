@@ -42,7 +42,7 @@ half a revolution (:data:`REASON_PIVOT`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -131,6 +131,19 @@ class SetpointSolution:
     contact_length: np.ndarray
     shear_path: np.ndarray
 
+    def take(self, rows: np.ndarray) -> SetpointSolution:
+        """The solution of the points ``rows`` (indices) only."""
+        arrays = {f.name: getattr(self, f.name)[rows] for f in fields(self) if f.name != 'reason'}
+        return SetpointSolution(reason=[self.reason[k] for k in rows], **arrays)
+
+    def replace_rows(self, rows: np.ndarray, other: SetpointSolution) -> None:
+        """Overwrite the points ``rows`` (indices) with ``other``'s, in order (len(rows) points)."""
+        for f in fields(self):
+            if f.name != 'reason':
+                getattr(self, f.name)[rows] = getattr(other, f.name)
+        for k, reason in zip(rows, other.reason, strict=True):
+            self.reason[k] = reason
+
     @property
     def turn_radius(self) -> np.ndarray:
         """Signed R = V / w_z [m]: +-inf straight, 0 spinning in place, NaN at rest."""
@@ -196,21 +209,17 @@ class SetpointSolver:
         reversed). A root it finds replaces the point's answer, no longer limited; the others keep
         theirs. Updates ``out``."""
         idx = np.flatnonzero(out.limited)
-        path = self._path_solver().solve(sp[idx], tol=tol)
+        path = self.path_solver().solve(sp[idx], tol=tol)
         ok = ~path.limited
         if not np.any(ok):
             return
-        rows, src = idx[ok], np.flatnonzero(ok)
-        for name in ('speed', 'yaw_rate', 's0', 'torque', 'slip', 'sinkage', 'traction_margin'):
-            getattr(out, name)[rows] = getattr(path, name)[src]
-        for name in ('limited', 'dug_in', 'element_turn', 'contact_length', 'iterations'):
-            getattr(out, name)[rows] = getattr(path, name)[src]
-        out.shear_path[rows] = True
-        for k in rows:
-            out.reason[k] = REASON_OK
+        out.replace_rows(idx[ok], path.take(np.flatnonzero(ok)))
 
-    def _path_solver(self) -> SetpointSolver:
-        """The same solve with the pivot law (``path_law=True``; built once)."""
+    def path_solver(self) -> SetpointSolver:
+        """The same solve with the pivot law (``path_law=True``; built once). It equals eq. 6.6's
+        chord wherever no element turns past half a revolution (:func:`~skidsteer_power.models.
+        fess_problem.pivot_blend`), so where :meth:`solve` falls back to it, solving with it at once
+        gives the same steady state."""
         if self._path is None:
             f = self.fess
             self._path = SetpointSolver(FessSolver(f.vehicle, f.terrain, f.n, path_law=True))
