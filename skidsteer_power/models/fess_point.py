@@ -39,7 +39,6 @@ from skidsteer_power.models.fess_problem import (
 from skidsteer_power.models.fess_steady import PointSolution
 from skidsteer_power.models.newton import MAX_HALVINGS, MAX_ITERATIONS, fd_steps, solve3_floats, trust_scale
 from skidsteer_power.models.rigid_contact import slip_path_displacement
-from skidsteer_power.numeric import sign
 from skidsteer_power.terramechanics.soil import shear_fraction_magnitude
 
 if TYPE_CHECKING:
@@ -105,14 +104,10 @@ class PointKernel:
         v, w, half_tread = float(problem.speed[0]), float(problem.yaw[0]), float(problem.half_tread)
         self.side_y = (half_tread, -half_tread)  # fess.SIDE_Y_SIGN
         self.side_speed = (v - w * half_tread, v + w * half_tread)  # V - w_z y_side [m/s]
-        resistance_l, resistance_r = c.resistance[0].tolist()
-        # compaction resistance against each side's motion over the ground [N]
-        self.rolling = (resistance_l * sign(self.side_speed[0]), resistance_r * sign(self.side_speed[1]))
-        if (
-            problem.path_law and not problem.terrain.is_rigid
-        ):  # the pivot law (fess_problem.rolling_direction)
-            ramp_l, ramp_r = (c.resistance[0] * rolling_direction(problem)[0]).tolist()
-            self.rolling = (ramp_l, ramp_r)
+        # compaction (rolling) resistance against each side's motion over the ground [N], with the
+        # pivot law's ramp at rest over the ground (fess_problem.rolling_direction)
+        rolling_l, rolling_r = (c.resistance[0] * rolling_direction(problem)[0]).tolist()
+        self.rolling = (float(rolling_l), float(rolling_r))
         turn_radius = v / w  # finite: straight points run at STRAIGHT_YAW
         self._offset = np.array(
             [[[half_tread - turn_radius]], [[-half_tread - turn_radius]]]

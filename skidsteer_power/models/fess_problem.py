@@ -152,13 +152,15 @@ PIVOT_REST_SPEED_M_S = 1e-3
 
 
 def rolling_direction(problem: Problem) -> np.ndarray:
-    """(P, 2) the compaction resistance's direction factor per side [-]: sign(v_side) (against the
-    motion over the ground); in the pivot law on soil clip(v_side / PIVOT_REST_SPEED_M_S, -1, 1),
-    because a side at rest over the ground (a pivot's inner side, its ground speed crossing 0) holds
-    any resistance in [-R_c, R_c], as static friction does, and the sign's jump left a gap of set
-    points without a root (docs/PREDICTION.md, "The pivot band")."""
+    """(P, 2) the compaction (on rigid ground: rolling) resistance's direction factor per side [-]:
+    sign(v_side) (against the motion over the ground); in the pivot law (on soil the fallback, on
+    rigid ground always) clip(v_side / PIVOT_REST_SPEED_M_S, -1, 1), because a side at rest over the
+    ground (a pivot's inner side, its ground speed crossing 0) holds any resistance in [-R, R], as
+    static friction does, and the sign's jump left a gap of set points without a root
+    (docs/PREDICTION.md, "The pivot band"; on rigid ground husky_a200 on grass, inner / outer set
+    point -0.25 to -0.15, was "dug in" between two steady states)."""
     v = problem.side_speed
-    if problem.path_law and not problem.terrain.is_rigid:
+    if problem.path_law:
         ramp: np.ndarray = np.clip(v / PIVOT_REST_SPEED_M_S, -1.0, 1.0)
         return ramp
     direction: np.ndarray = np.sign(v)
