@@ -275,6 +275,12 @@ def _hold_float(text: str) -> float:
 
 
 def register(subparsers: Subcommands) -> None:
+    _register_record(subparsers)
+    _register_replay(subparsers)
+    _register_validate(subparsers)
+
+
+def _register_record(subparsers: Subcommands) -> None:
     rec = subparsers.add_parser(
         'record',
         help='record topics into a rosbag2 MCAP bag (Ctrl-C/SIGTERM stop cleanly)',
@@ -302,6 +308,8 @@ def register(subparsers: Subcommands) -> None:
     add_json_flag(rec)
     rec.set_defaults(func=_cmd_record)
 
+
+def _register_replay(subparsers: Subcommands) -> None:
     rep = subparsers.add_parser(
         'replay',
         help='publish a bag (MCAP or sqlite3) with its original timing',
@@ -354,6 +362,8 @@ def register(subparsers: Subcommands) -> None:
     add_json_flag(rep)
     rep.set_defaults(func=_cmd_replay)
 
+
+def _register_validate(subparsers: Subcommands) -> None:
     val = subparsers.add_parser(
         'validate',
         help='run the estimator offline over a bag; compare with measured torque/power; report',
@@ -376,7 +386,17 @@ def register(subparsers: Subcommands) -> None:
     val.add_argument('--odom', default='/odom', metavar='TOPIC', help='odometry topic for the trace (/odom)')
     val.add_argument('--map-cache', default=None, metavar='DIR', help='power map cache (estimator default)')
     val.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
-    val.add_argument(
+    _add_validate_fleet_options(val)
+    _add_validate_kinematics_options(val)
+    _add_validate_joint_options(val)
+    _add_bag_reading(val)
+    add_json_flag(val)
+    val.set_defaults(func=_cmd_validate)
+
+
+def _add_validate_fleet_options(parser: argparse.ArgumentParser) -> None:
+    """Options of a validation over several bags (apps/fleet.py)."""
+    parser.add_argument(
         '--jobs',
         type=range_arg(LOCAL_WORKERS),
         default=None,
@@ -385,16 +405,20 @@ def register(subparsers: Subcommands) -> None:
             LOCAL_WORKERS, 'fleet: local worker processes (default: the cores; more: --scheduler)'
         ),
     )
-    val.add_argument(
+    parser.add_argument(
         '--scheduler', default=None, metavar='ADDR', help='fleet: existing Dask cluster tcp://HOST:8786'
     )
-    val.add_argument(
+    parser.add_argument(
         '--manifest',
         default=None,
         metavar='CSV',
         help='fleet: per-bag vehicle, terrain (bag,vehicle,terrain)',
     )
-    val.add_argument(
+
+
+def _add_validate_kinematics_options(parser: argparse.ArgumentParser) -> None:
+    """What the prediction is made from, and how long each command holds."""
+    parser.add_argument(
         '--kinematics',
         choices=('cmd', 'twist', 'odom', 'ground_truth'),
         default='cmd',
@@ -402,7 +426,7 @@ def register(subparsers: Subcommands) -> None:
         'as the motion (twist), the --odom twist, or /ground_truth/odom; with cmd or twist, a bag with '
         'odometry also gets the prediction from the measured motion',
     )
-    val.add_argument(
+    parser.add_argument(
         '--cmd-hold',
         type=_hold_float,
         default=None,
@@ -410,20 +434,25 @@ def register(subparsers: Subcommands) -> None:
         help='hold each command at most S s ("inf": until the next one); default: inferred from the '
         'bag (stream: its longest ordinary pause; on-change: until the next command or odometry rest)',
     )
-    val.add_argument('--left-joints', default='', metavar='A,B', help='left joints (default: vehicle file)')
-    val.add_argument('--right-joints', default='', metavar='C,D', help='right joints (default: vehicle file)')
-    val.add_argument(
+
+
+def _add_validate_joint_options(parser: argparse.ArgumentParser) -> None:
+    """Which joints are each side's and what their values are (default: the vehicle file's drivetrain)."""
+    parser.add_argument(
+        '--left-joints', default='', metavar='A,B', help='left joints (default: vehicle file)'
+    )
+    parser.add_argument(
+        '--right-joints', default='', metavar='C,D', help='right joints (default: vehicle file)'
+    )
+    parser.add_argument(
         '--effort',
         default='',
         choices=('torque', 'current'),
         help='joint_states effort is torque [N m] or current [A] (default: vehicle file)',
     )
-    val.add_argument(
+    parser.add_argument(
         '--joints-at',
         default='',
         choices=('motor', 'wheel'),
         help='joint values are at the motor shaft or the wheel (default: vehicle file)',
     )
-    _add_bag_reading(val)
-    add_json_flag(val)
-    val.set_defaults(func=_cmd_validate)
