@@ -44,6 +44,23 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument('bags', nargs='+', metavar='BAG', help='rosbag2 bags (MCAP or sqlite3)')
     parser.add_argument('--vehicle', required=True, help='vehicle name in config/vehicles/ or YAML file')
     parser.add_argument('--terrain', required=True, help='starting terrain T0: preset name or YAML file')
+    _add_fit_options(parser)
+    _add_output_options(parser)
+    _add_segment_options(parser)
+    parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
+    add_msg_option(parser)
+    parser.add_argument(
+        '--suggest',
+        action='store_true',
+        help='name the 2-4 (V, yaw rate) holds that would most shrink the widest interval '
+        "(experiment design from the fit's Fisher information; a 7 x 7 grid over the command envelope)",
+    )
+    add_json_flag(parser)
+    parser.set_defaults(func=run)
+
+
+def _add_fit_options(parser: argparse.ArgumentParser) -> None:
+    """What is fitted, to what, at which speeds, and the hold-out split."""
     parser.add_argument(
         '--fit',
         default='kphi,n,c,phi,K',
@@ -74,6 +91,10 @@ def register(subparsers: Subcommands) -> None:
     parser.add_argument(
         '--seed', type=range_arg(SEED), default=0, help=range_help(SEED, 'seed of the hold-out split')
     )
+
+
+def _add_output_options(parser: argparse.ArgumentParser) -> None:
+    """The calibrated files written."""
     parser.add_argument('--out-terrain', required=True, help='calibrated terrain YAML to write')
     parser.add_argument(
         '--out-powertrain', help='calibrated powertrain YAML to write (with --fit ...,internal or auto)'
@@ -83,6 +104,10 @@ def register(subparsers: Subcommands) -> None:
         help='vehicle YAML to write: the --vehicle file with its identified powertrain inline',
     )
     parser.add_argument('--name', help='name of the calibrated terrain (default: the output file stem)')
+
+
+def _add_segment_options(parser: argparse.ArgumentParser) -> None:
+    """The topics read and how the bags are cut into steady segments (calibration.segments)."""
     parser.add_argument(
         '--settle-s', type=nonnegative_float, default=1.5, help='start of each segment dropped [s]'
     )
@@ -125,16 +150,6 @@ def register(subparsers: Subcommands) -> None:
         'sensor_msgs/Imu (yaw rate only); default ground_truth/odom where the bag has it, else odom. '
         'Wheel odometry from the same encoders shows no slip: it is no evidence of the ground',
     )
-    parser.add_argument('--plot', help='PNG: measured vs predicted torque per segment, before and after')
-    add_msg_option(parser)
-    parser.add_argument(
-        '--suggest',
-        action='store_true',
-        help='name the 2-4 (V, yaw rate) holds that would most shrink the widest interval '
-        "(experiment design from the fit's Fisher information; a 7 x 7 grid over the command envelope)",
-    )
-    add_json_flag(parser)
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
