@@ -96,47 +96,64 @@ def _power_plot(fl: Any, side: str) -> Any:
     return _time_plot(fl, f'{side} motor power: predicted vs measured [W]', paths, 60.0, y_axis_label='W')
 
 
-def operator_layout() -> Any:
-    """The layout as a :class:`foxglove.layouts.Layout`."""
-    import foxglove.layouts as fl
-
-    def item(content: Any, proportion: float = 1.0) -> Any:
-        return fl.SplitItem(proportion=proportion, content=content)
-
-    battery_gauge = fl.GaugePanel(
+def _battery_gauge(fl: Any) -> Any:
+    return fl.GaugePanel(
         title='battery state of charge [-]',
         config=fl.GaugeConfig(
             path='/battery/state.percentage', min_value=0.0, max_value=1.0, color_mode='colormap',
             color_map='red-yellow-green',
         ),
     )  # fmt: skip
-    battery_power = _time_plot(fl, 'battery power: predicted vs measured [W]', [
+
+
+def _battery_power_plot(fl: Any) -> Any:
+    return _time_plot(fl, 'battery power: predicted vs measured [W]', [
         _series(fl, '/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
         _series(fl, '/power/measured_battery_w', 'measured [W]', MEASURED),
     ], 600.0)  # fmt: skip
-    time_to_empty = _indicator(
+
+
+def _time_to_empty_indicator(fl: Any) -> Any:
+    return _indicator(
         fl, 'time to empty [s]', '/energy/time_to_empty_s', ('<', str(LOW_TIME_TO_EMPTY_S)),
         'battery low: under 10 min', 'time to empty',
     )  # fmt: skip
-    traction = _indicator(
+
+
+def _traction_indicator(fl: Any) -> Any:
+    return _indicator(
         fl, 'traction margin [-]', '/power/traction_margin', ('<=', str(TRACTION_WARNING_MARGIN)),
         'TRACTION WARNING: the robot may get stuck', 'traction ok',
     )  # fmt: skip
-    traction_plot = _time_plot(fl, 'traction margin [-] and time to empty [s]', [
+
+
+def _traction_plot(fl: Any) -> Any:
+    """Traction margin and time to empty (right axis: seconds, not a ratio)."""
+    return _time_plot(fl, 'traction margin [-] and time to empty [s]', [
         _series(fl, '/power/traction_margin', 'traction margin [-]', '#9467bd'),
         fl.PlotSeries(value='/energy/time_to_empty_s.data', label='time to empty [s]', enabled=True,
                       color='#2ca02c', timestamp_method='receiveTime', use_right_y_axis=True),
     ], 120.0)  # fmt: skip
-    path_margin = _indicator(
+
+
+def _path_margin_indicator(fl: Any) -> Any:
+    return _indicator(
         fl, 'path margin [Wh]', '/energy/path_margin_wh', ('<', '0'),
         'CANNOT drive the path and return', 'path and return ok',
     )  # fmt: skip
-    path_energy = _time_plot(fl, 'planned path: energy required and margin [Wh]', [
+
+
+def _path_energy_plot(fl: Any) -> Any:
+    return _time_plot(fl, 'planned path: energy required and margin [Wh]', [
         _series(fl, '/energy/path_required_wh', 'required [Wh]', PREDICTED),
         _series(fl, '/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
     ], 600.0)  # fmt: skip
+
+
+def _trace_plot(fl: Any) -> Any:
+    """The odometry position as an XY plot, y [m] against x [m], equal scales."""
     odom_x = fl.PlotXAxisPath(value='/odom.pose.pose.position.x', enabled=True)
-    trace = fl.PlotPanel(
+    return fl.PlotPanel(
         title='trace from odometry: y [m] vs x [m]',
         config=fl.PlotConfig(
             paths=[fl.PlotSeries(value='/odom.pose.pose.position.y', label='trace', enabled=True,
@@ -145,8 +162,11 @@ def operator_layout() -> Any:
             x_axis_label='x [m]', y_axis_label='y [m]', axis_scales_mode='lockedScales', show_legend=False,
         ),
     )  # fmt: skip
-    diagnostics = fl.DiagnosticsSummaryPanel(title='estimator and driver diagnostics')
-    teleop = fl.TeleopPanel(
+
+
+def _teleop(fl: Any) -> Any:
+    """Arrow buttons on /cmd_vel at :data:`TELEOP_RATE_HZ` (module doc: the watchdog)."""
+    return fl.TeleopPanel(
         title=f'teleop: /cmd_vel at {TELEOP_RATE_HZ:g} Hz (watchdog 0.5 s)',
         config=fl.TeleopConfig(
             topic='/cmd_vel', publish_rate=TELEOP_RATE_HZ,
@@ -156,45 +176,53 @@ def operator_layout() -> Any:
             right_button=fl.TeleopButton(field='angular-z', value=-TELEOP_YAW_RATE_RAD_S),
         ),
     )  # fmt: skip
+
+
+def _column(fl: Any, panels: list[tuple[Any, float]]) -> Any:
+    """A column of (panel, proportion) pairs, top to bottom."""
+    return fl.SplitContainer(
+        direction='column',
+        items=[fl.SplitItem(proportion=proportion, content=panel) for panel, proportion in panels],
+    )
+
+
+def operator_layout() -> Any:
+    """The layout as a :class:`foxglove.layouts.Layout`: three columns, motor and battery power
+    (twice as wide); battery and traction; trace, path energy, diagnostics and teleop."""
+    import foxglove.layouts as fl
+
+    power = _column(
+        fl,
+        [
+            (_power_plot(fl, 'left'), 1.0),
+            (_power_plot(fl, 'right'), 1.0),
+            (_battery_power_plot(fl), 1.0),
+        ],
+    )
+    battery = _column(
+        fl,
+        [
+            (_battery_gauge(fl), 1.0),
+            (_time_to_empty_indicator(fl), 0.5),
+            (_traction_indicator(fl), 0.5),
+            (_traction_plot(fl), 1.0),
+        ],
+    )
+    path = _column(
+        fl,
+        [
+            (_trace_plot(fl), 2.0),
+            (_path_margin_indicator(fl), 0.5),
+            (_path_energy_plot(fl), 1.0),
+            (fl.DiagnosticsSummaryPanel(title='estimator and driver diagnostics'), 1.0),
+            (_teleop(fl), 1.0),
+        ],
+    )
+    columns = [(power, 2.0), (battery, 1.0), (path, 1.0)]
     return fl.Layout(
         content=fl.SplitContainer(
             direction='row',
-            items=[
-                item(
-                    fl.SplitContainer(
-                        direction='column',
-                        items=[
-                            item(_power_plot(fl, 'left')),
-                            item(_power_plot(fl, 'right')),
-                            item(battery_power),
-                        ],
-                    ),
-                    2.0,
-                ),
-                item(
-                    fl.SplitContainer(
-                        direction='column',
-                        items=[
-                            item(battery_gauge),
-                            item(time_to_empty, 0.5),
-                            item(traction, 0.5),
-                            item(traction_plot),
-                        ],
-                    ),
-                ),
-                item(
-                    fl.SplitContainer(
-                        direction='column',
-                        items=[
-                            item(trace, 2.0),
-                            item(path_margin, 0.5),
-                            item(path_energy),
-                            item(diagnostics),
-                            item(teleop),
-                        ],
-                    )
-                ),
-            ],
+            items=[fl.SplitItem(proportion=proportion, content=column) for column, proportion in columns],
         ),
     )
 
