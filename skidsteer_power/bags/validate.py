@@ -310,14 +310,55 @@ def run_estimator(core: EstimatorCore, inputs: Inputs) -> RunSeries:
     battery integration is exact whenever it is advanced (each input advances it), and the time to
     empty is only wanted at the end.
     """
-    from skidsteer_power.estimator.core import RejectedInput
+    times, kinds, index, order = _time_order(inputs)
+    fed = _feed_in_time_order(core, inputs, times, kinds, index, order)
+    core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
+    columns = _series_columns(core, fed.rows, fed.holds, motor_data=inputs.js_t.size > 0)
+    return RunSeries(
+        columns,
+        fed.rejected,
+        dict(core.energy.energy_J),
+        core.battery.remaining_wh,
+        core.battery.soc,
+        core.no_data_count,
+        dict(fed.reasons),
+    )
 
-    motor_data = inputs.js_t.size > 0
-    ends = inputs.cmd_end
+
+def _time_order(inputs: Inputs) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Commands and joint states merged: each input's time [s], kind (0 command, 1 joint_states),
+    index in its own arrays, and the order to feed them in."""
     times = np.concatenate([inputs.cmd_t, inputs.js_t])
     kinds = np.concatenate([np.zeros(inputs.cmd_t.size, np.int8), np.ones(inputs.js_t.size, np.int8)])
     index = np.concatenate([np.arange(inputs.cmd_t.size), np.arange(inputs.js_t.size)])
     order = np.lexsort((kinds, times))  # stable by time; a command first when stamps tie
+    return times, kinds, index, order
+
+
+class _Fed(NamedTuple):
+    """What :func:`_feed_in_time_order` made: the rows, each row's hold [s] (NaN for a joint_states
+    row: set from the row times afterwards), the rejected inputs per topic and per reason."""
+
+    rows: list[Row]
+    holds: list[float]
+    rejected: dict[str, int]
+    reasons: Counter[str]
+
+
+def _feed_in_time_order(
+    core: EstimatorCore,
+    inputs: Inputs,
+    times: np.ndarray,
+    kinds: np.ndarray,
+    index: np.ndarray,
+    order: np.ndarray,
+) -> _Fed:
+    """Each input to ``core`` in ``order`` (:func:`_time_order`); a row per joint_states reading
+    that gave a comparison, or per command when there are no joint states."""
+    from skidsteer_power.estimator.core import RejectedInput
+
+    motor_data = inputs.js_t.size > 0
+    ends = inputs.cmd_end
     rejected = {'cmd_vel': 0, 'joint_states': 0}
     reasons: Counter[str] = Counter()
     battery_side = bool(core.settings.joint_map.measures_battery)
@@ -364,7 +405,13 @@ def run_estimator(core: EstimatorCore, inputs: Inputs) -> RunSeries:
         else:
             row_hold.append(math.nan)
         rows.append(_row(now, core.prediction, fresh, comparison, _soc(core.battery), battery_side, online))
-    core.tick(max(float(times.max()) if times.size else 0.0, inputs.end_s))
+    return _Fed(rows, row_hold, rejected, reasons)
+
+
+def _series_columns(
+    core: EstimatorCore, rows: list[Row], holds: list[float], *, motor_data: bool
+) -> dict[str, np.ndarray]:
+    """The run's columns: the rows', the online ones derived from them, and ``hold_s``."""
     table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
     columns.update(online_columns(columns, core.powertrain))
@@ -374,16 +421,8 @@ def run_estimator(core: EstimatorCore, inputs: Inputs) -> RunSeries:
             np.diff(t, append=t[-1] if t.size else 0.0), core.settings.joint_timeout_s
         )
     else:  # a command row holds as long as the command is in force
-        columns['hold_s'] = np.array(row_hold, dtype=float)
-    return RunSeries(
-        columns,
-        rejected,
-        dict(core.energy.energy_J),
-        core.battery.remaining_wh,
-        core.battery.soc,
-        core.no_data_count,
-        dict(reasons),
-    )
+        columns['hold_s'] = np.array(holds, dtype=float)
+    return columns
 
 
 def reason_of(err: Exception) -> str:
