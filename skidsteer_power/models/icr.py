@@ -38,7 +38,7 @@ from scipy.special import roots_legendre
 from skidsteer_power.errors import InputError
 from skidsteer_power.models import loads, steeds
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, newton_solve
+from skidsteer_power.models.newton import MAX_ITERATIONS, TOLERANCE, Residual, newton_solve
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import TrackGear, Vehicle
 
@@ -95,6 +95,26 @@ def solve(
     f_c = loads.centrifugal_force(vehicle, points)
     half_b = 0.5 * vehicle.tread_m
     pressure = (patches.load_o / contact.total_area, np.maximum(patches.load_i, 0.0) / contact.total_area)
+    forces = _friction_forces(contact, pressure, half_b, mu)
+    equilibrium = _equilibrium(forces, points, patches, f_c, half_b)
+    x0 = _first_guess(vehicle, patches, points.speed.size, half_b)
+    x, converged, iterations, residual_max = _solve_turning(equilibrium, x0, ~points.straight, tol, max_iter)
+    return _state(
+        vehicle, points, patches, x, forces, converged, iterations, residual_max, mu, raise_on_failure
+    )
+
+
+Forces = Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, ...]]
+"""forces(x, idx, outer) of :func:`_friction_forces`."""
+
+
+def _friction_forces(
+    contact: _Contact, pressure: tuple[np.ndarray, np.ndarray], half_b: float, mu: float
+) -> Forces:
+    """forces(x, idx, outer): one side's friction (outer or inner) at the unknowns x = (s0, Y_o,
+    Y_i) [m] of the points ``idx``: F_x, F_y [N], the moment about the CG and the turning moment
+    [N m], and the saturation |friction| / (mu p) [-] (eqs. 3.24-3.26); ``pressure`` [Pa] per side
+    (outer, inner), ``half_b`` half the tread [m]."""
 
     def forces(x: np.ndarray, idx: np.ndarray, outer: bool) -> tuple[np.ndarray, ...]:
         s0 = x[:, 0, None, None]
@@ -118,6 +138,19 @@ def solve(
             saturation,
         )
 
+    return forces
+
+
+def _equilibrium(
+    forces: Forces,
+    points: loads.OperatingPoints,
+    patches: steeds.Patches,
+    f_c: np.ndarray,
+    half_b: float,
+) -> Residual:
+    """equilibrium(x, idx): the residuals of eq. 3.18 (longitudinal, lateral [N], yaw [N m]) with
+    the compaction resistance and the centrifugal force ``f_c`` [N] of the points ``idx``."""
+
     def equilibrium(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
         fxo, fyo, mo, _, _ = forces(x, idx, True)
         fxi, fyi, mi, _, _ = forces(x, idx, False)
@@ -129,11 +162,23 @@ def solve(
         yaw = mo + mi - half_b * (rt_o - rt_i) + s0 * f_c[idx] * np.cos(beta)
         return np.stack([longitudinal, lateral, yaw], axis=1)
 
-    turning = ~points.straight
-    n = points.speed.size
+    return equilibrium
+
+
+def _first_guess(vehicle: Vehicle, patches: steeds.Patches, n: int, half_b: float) -> np.ndarray:
+    """(n, 3) start of the Newton solve: s0 = l / 4 ahead of the CG, each ICR just outside its
+    side's centreline [m] (module doc)."""
     gear = vehicle.gear
     lead = 0.25 * (float(np.max(patches.lengths)) if isinstance(gear, TrackGear) else float(gear.wheelbase_m))
-    x0 = np.stack([np.full(n, lead), np.full(n, -1.1 * half_b), np.full(n, 1.1 * half_b)], axis=1)
+    return np.stack([np.full(n, lead), np.full(n, -1.1 * half_b), np.full(n, 1.1 * half_b)], axis=1)
+
+
+def _solve_turning(
+    equilibrium: Residual, x0: np.ndarray, turning: np.ndarray, tol: float, max_iter: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Newton-Raphson on the ``turning`` points (straight ones keep x = 0: no slipping velocity,
+    module doc): x (n, 3) [m], converged, iterations and the largest residual per point."""
+    n = x0.shape[0]
     x = np.zeros((n, 3))
     converged = np.ones(n, dtype=bool)
     iterations = np.zeros(n)
@@ -147,9 +192,7 @@ def solve(
         result = newton_solve(sub_equilibrium, x0[sub], steps=np.full(3, 1e-7), tol=tol, max_iter=max_iter)
         x[sub], converged[sub], iterations[sub] = result.x, result.converged, result.iterations
         residual_max[sub] = np.max(np.abs(result.residual), axis=1)
-    return _state(
-        vehicle, points, patches, x, forces, converged, iterations, residual_max, mu, raise_on_failure
-    )
+    return x, converged, iterations, residual_max
 
 
 def _state(
