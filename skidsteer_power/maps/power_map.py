@@ -94,6 +94,7 @@ from skidsteer_power.vehicle import vehicle_fingerprint
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from skidsteer_power.models.fess import FessSolver
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -282,12 +283,7 @@ class PowerMap:
         compatibility: they set max_speed = max |speeds|, max_yaw_rate = max |yaw_rates| and
         shape = (their lengths); the grid itself stays polar (module doc).
         """
-        if speeds is not None:
-            max_speed = float(np.max(np.abs(_axis(speeds, 'speeds'))))
-        if yaw_rates is not None:
-            max_yaw_rate = float(np.max(np.abs(_axis(yaw_rates, 'yaw_rates'))))
-        if shape is None and speeds is not None and yaw_rates is not None:
-            shape = (len(np.ravel(speeds)), max(len(np.ravel(yaw_rates)), 3))
+        max_speed, max_yaw_rate, shape = _envelope_of_axes(speeds, yaw_rates, max_speed, max_yaw_rate, shape)
         if model != 'fess':
             raise InputError(f"maps are built with the FESS model only (model='fess'), not {model!r}")
         from skidsteer_power.models import fess
@@ -306,30 +302,10 @@ class PowerMap:
         length = options['max_speed'] / options['max_yaw_rate']
         radial = np.linspace(0.0, np.sqrt(2.0) * options['max_speed'], n_s)
         angles = _refined_angles(n_psi, options['refine'], length, r_min)
-        n_psi = len(angles)
-        left = angles >= 0  # solved; the rest mirrored
         solver = fess.FessSolver(vehicle, terrain, options['n'])
-        rows: list[dict[str, Any]] = []
-        for k, s in enumerate(radial):
-            ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
-            v = ring * np.cos(angles[left])
-            w = ring * np.sin(angles[left]) / length
-            rows.append(_mirror(_solve_row(solver, v, w, r_min), n_psi))
-            if progress is not None:
-                progress(k + 1, 2 * n_s - 1)
+        rows = _solve_rings(solver, radial, angles, length, r_min, progress)
         values, converged, limited = _assemble(rows)
-        meta = {
-            **map_identity(vehicle, terrain, model),
-            'options': options,
-            'options_digest': options_digest(options),
-            'elements': solver.n,
-            'min_radius_m': r_min,
-            'max_speed_m_s': options['max_speed'],
-            'max_yaw_rate_rad_s': options['max_yaw_rate'],
-            'drive_radius_m': float(vehicle.drive_radius_m),
-            'tread_m': float(vehicle.tread_m),
-            'failed_points': int(np.sum(~converged)),
-        }
+        meta = _build_meta(vehicle, terrain, model, options, solver.n, converged)
         out = cls(radial, angles, float(length), values, converged, limited, meta)
         ring_done = None if progress is None else (lambda k: progress(n_s + k + 1, 2 * n_s - 1))
         cell_error = _check_cells(out, solver, r_min, ring_done)
@@ -488,6 +464,70 @@ class PowerMap:
         s, psi = np.meshgrid(self.radial, self.angles, indexing='ij')
         q = self.query(s * np.cos(psi), s * np.sin(psi) / self.length_m)
         return np.asarray(q.power_left_W + q.power_right_W)
+
+
+def _envelope_of_axes(
+    speeds: ArrayLike | None,
+    yaw_rates: ArrayLike | None,
+    max_speed: float | None,
+    max_yaw_rate: float | None,
+    shape: tuple[int, int] | None,
+) -> tuple[float | None, float | None, tuple[int, int] | None]:
+    """(max_speed [m/s], max_yaw_rate [rad/s], shape) of :meth:`PowerMap.build`, set from the
+    ``speeds`` and ``yaw_rates`` axes of docs/INTERFACES.md where given (the grid stays polar)."""
+    if speeds is not None:
+        max_speed = float(np.max(np.abs(_axis(speeds, 'speeds'))))
+    if yaw_rates is not None:
+        max_yaw_rate = float(np.max(np.abs(_axis(yaw_rates, 'yaw_rates'))))
+    if shape is None and speeds is not None and yaw_rates is not None:
+        shape = (len(np.ravel(speeds)), max(len(np.ravel(yaw_rates)), 3))
+    return max_speed, max_yaw_rate, shape
+
+
+def _solve_rings(
+    solver: FessSolver,
+    radial: np.ndarray,
+    angles: np.ndarray,
+    length: float,
+    r_min: float,
+    progress: ProgressCallback | None,
+) -> list[dict[str, Any]]:
+    """One batched FESS solve per ring s = const [m/s], left turns only (psi >= 0), each row then
+    mirrored to the right turns; ``progress(ring, 2 rings - 1)`` after each (the cell check follows)."""
+    n_s, n_psi = len(radial), len(angles)
+    left = angles >= 0  # solved; the rest mirrored
+    rows: list[dict[str, Any]] = []
+    for k, s in enumerate(radial):
+        ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
+        v = ring * np.cos(angles[left])
+        w = ring * np.sin(angles[left]) / length
+        rows.append(_mirror(_solve_row(solver, v, w, r_min), n_psi))
+        if progress is not None:
+            progress(k + 1, 2 * n_s - 1)
+    return rows
+
+
+def _build_meta(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    model: str,
+    options: dict[str, Any],
+    elements: int,
+    converged: np.ndarray,
+) -> dict[str, Any]:
+    """A new map's ``meta``: its identity, build options and what the solves found."""
+    return {
+        **map_identity(vehicle, terrain, model),
+        'options': options,
+        'options_digest': options_digest(options),
+        'elements': elements,
+        'min_radius_m': options['min_radius'],
+        'max_speed_m_s': options['max_speed'],
+        'max_yaw_rate_rad_s': options['max_yaw_rate'],
+        'drive_radius_m': float(vehicle.drive_radius_m),
+        'tread_m': float(vehicle.tread_m),
+        'failed_points': int(np.sum(~converged)),
+    }
 
 
 def _axis(values: ArrayLike, name: str) -> np.ndarray:
