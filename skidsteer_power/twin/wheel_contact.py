@@ -191,22 +191,40 @@ class WheelContact(Contact):
         wheels (per side, and weighted by the wheels' positions) in a second one.
         """
         if self._patched:
-            if self._soil_age <= 0:
-                self._soil(pose)
-                self._soil_age = SOIL_REFRESH_STEPS
-            else:
-                self._soil_age -= 1
+            self._refresh_soil(pose)
         kin = self._kinematics if self._kinematics is not None else self._kinematics_of(vel, omega_m)
         sides, _ = kin
-        r = self.r
-        # Wong-Reece angles (eqs. 2.20, 2.22) at the side's slip i, as fractions of theta_f:
-        # theta_r = (b0 + b1 i) theta_f, theta_m = (a0 + a1 i) theta_f. The arc spans theta_f - theta_r;
-        # behind theta_m the equivalent front angle of eq. 2.22,
-        # theta_e = theta_f - (theta_f - theta_m) (theta - theta_r) / (theta_m - theta_r)
-        #         = theta_f - k (span - u) (u = theta_f - theta), falls from theta_f to theta_m over
-        # [theta_r, theta_m] and continues below theta_m ahead of it, so the angle to use in eq. 2.21
-        # is max(theta, theta_e) = theta_f - min(u, k (span - u)) everywhere on the arc, with
-        # u = span xi and k (span - u) = k span (1 - xi): both in one matrix product.
+        self._arc_spans(sides)
+        span = self._integrands()
+        fx, fy, mz, axle, power = self._body_forces(sides, span)
+        # dissipation = power of the contact stresses on the slip velocities = what the axles put in
+        # minus what the body receives (F . v + M_z yaw rate)
+        vx, vy, wz = vel.tolist()
+        dissipation = power - (fx * vx + fy * vy + mz * wz)
+        self._loads = loads
+        return (fx, fy, mz), axle, dissipation, self._deepest
+
+    def _refresh_soil(self, pose: np.ndarray) -> None:
+        """With patches: the terrain under each wheel (_soil) every ``SOIL_REFRESH_STEPS`` steps."""
+        if self._soil_age <= 0:
+            self._soil(pose)
+            self._soil_age = SOIL_REFRESH_STEPS
+        else:
+            self._soil_age -= 1
+
+    def _arc_spans(self, sides: list[SideKinematics]) -> None:
+        """Each wheel's arc theta_f - theta_r and its k (theta_f - theta_r) [rad] at its side's slip
+        (into ``_spans``, ``_slope_spans``).
+
+        Wong-Reece angles (eqs. 2.20, 2.22) at the side's slip i, as fractions of theta_f:
+        theta_r = (b0 + b1 i) theta_f, theta_m = (a0 + a1 i) theta_f. The arc spans theta_f - theta_r;
+        behind theta_m the equivalent front angle of eq. 2.22,
+        theta_e = theta_f - (theta_f - theta_m) (theta - theta_r) / (theta_m - theta_r)
+                = theta_f - k (span - u) (u = theta_f - theta), falls from theta_f to theta_m over
+        [theta_r, theta_m] and continues below theta_m ahead of it, so the angle to use in eq. 2.21
+        is max(theta, theta_e) = theta_f - min(u, k (span - u)) everywhere on the arc, with
+        u = span xi and k (span - u) = k span (1 - xi): both in one matrix product (_integrands).
+        """
         tfs = self._tf
         spans, slope_spans = self._spans, self._slope_spans  # theta_f - theta_r and k (theta_f - theta_r)
         for side, (a0, a1, b0, b1), wheels in self._wp_groups:  # wheels sharing a side and a soil
@@ -216,14 +234,19 @@ class WheelContact(Contact):
             for wheel in wheels:
                 spans[wheel] = arc = tfs[wheel] * rear
                 slope_spans[wheel] = k * arc
+
+    def _integrands(self) -> np.ndarray:
+        """The six integrands of the contact integrals at the rim nodes into ``_rows`` [Pa]: sigma
+        cos(theta), sigma sin(theta), tau_t cos(theta), tau_t sin(theta), tau_t, tau_y; returns the
+        arc theta_f - theta_r per wheel [rad] (a view of ``_outer``)."""
         n = self.n_wheels
         outer = self._outer  # (2 n, 2): [span, 0] and [0, k span] rows
-        outer[:n, 0] = spans
+        outer[:n, 0] = self._spans
         span = outer[:n, 0]
-        outer[n:, 1] = slope_spans
+        outer[n:, 1] = self._slope_spans
         np.dot(outer, self._xi_pair, out=self._u_pair_flat)
         u_pair = self._u_pair
-        # u = theta_f - theta at the nodes, k (span - u) [rad]
+        # u = theta_f - theta at the nodes, k (span - u) [rad] (_arc_spans)
         angles = self._angles  # theta, theta - pi / 2, max(theta, theta_e)
         np.subtract(self._tf_pair, u_pair[0], out=angles[:2])
         depth = np.minimum(u_pair[0], u_pair[1], out=angles[2])
@@ -255,6 +278,15 @@ class WheelContact(Contact):
         shear -= np.multiply(strength, self._damped_rate, out=self._damped)
         np.multiply(sigma, trig, out=rows[:2])
         np.multiply(rows[4], trig, out=rows[2:4])
+        return span
+
+    def _body_forces(
+        self, sides: list[SideKinematics], span: np.ndarray
+    ) -> tuple[float, float, float, list[float], float]:
+        """F_x, F_y [N], M_z [N m], the axle torques per side [N m] and the axles' power into the
+        contact [W], from the integrands (_integrands) over the arcs ``span`` [rad]; sets
+        ``body_damping`` (the slopes of the face bulldozing)."""
+        r = self.r
         # per wheel [N]: s_cos, s_sin, t_cos, t_sin, t_sum, y_sum (arc x width per unit xi [m^2])
         per_wheel = self._per_wheel
         np.dot(self._rows_flat, self.xi_w, out=self._integrals_flat)
@@ -299,12 +331,7 @@ class WheelContact(Contact):
         fy = y_sum  # eq. 4.9
         mz += y_sum_x
         self.body_damping = (c_x, -c_x_y, 0.0, 0.0, c_x_yy)
-        # dissipation = power of the contact stresses on the slip velocities = what the axles put in
-        # minus what the body receives (F . v + M_z yaw rate)
-        vx, vy, wz = vel.tolist()
-        dissipation = power - (fx * vx + fy * vy + mz * wz)
-        self._loads = loads
-        return (fx, fy, mz), axle, dissipation, self._deepest
+        return fx, fy, mz, axle, power
 
     def advance(self, dt: float, vel: np.ndarray, omega_m: np.ndarray) -> None:
         """Transport the rim's shear displacement; every ``SOIL_REFRESH_STEPS`` also relax the sinkage
