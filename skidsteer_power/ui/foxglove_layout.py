@@ -27,7 +27,9 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Literal
+
+import foxglove.layouts as fl
 
 LOW_TIME_TO_EMPTY_S = 600.0
 TRACTION_WARNING_MARGIN = 0.1  # power_estimator's traction_warning_margin default
@@ -37,13 +39,16 @@ held button never lets the watchdog stop the robot; the panel's own default, 1 H
 TELEOP_SPEED_M_S = 0.3  # ASSUMED: a gentle forward speed for the arrow buttons [m/s]
 TELEOP_YAW_RATE_RAD_S = 0.5  # ASSUMED: a gentle turn rate for the arrow buttons [rad/s]
 
+Comparison = Literal['=', '<', '<=', '>', '>=']
+"""An IndicatorRule's operator."""
+
 PREDICTED = '#1f77b4'
 MEASURED = '#d62728'
 ALARM = '#d62728'
 OK = '#2ca02c'
 
 
-def _series(fl: Any, topic: str, label: str, color: str, dashed: bool = False) -> Any:
+def _series(topic: str, label: str, color: str, dashed: bool = False) -> fl.PlotSeries:
     return fl.PlotSeries(
         value=f'{topic}.data',
         label=label,
@@ -55,8 +60,8 @@ def _series(fl: Any, topic: str, label: str, color: str, dashed: bool = False) -
 
 
 def _indicator(
-    fl: Any, title: str, topic: str, alarm: tuple[str, str], alarm_label: str, ok_label: str
-) -> Any:
+    title: str, topic: str, alarm: tuple[Comparison, str], alarm_label: str, ok_label: str
+) -> fl.IndicatorPanel:
     """A red/green indicator of ``topic``'s Float64: red with ``alarm_label`` while ``data <op> value``
     for ``alarm`` = (op, value), else green with ``ok_label``."""
     operator, value = alarm
@@ -73,7 +78,9 @@ def _indicator(
     )
 
 
-def _time_plot(fl: Any, title: str, paths: list[Any], window_s: float, **config: Any) -> Any:
+def _time_plot(
+    title: str, paths: list[fl.PlotSeries], window_s: float, y_axis_label: str | None = None
+) -> fl.PlotPanel:
     """A plot of ``paths`` over the last ``window_s`` seconds (sliding), legend on top."""
     return fl.PlotPanel(
         title=title,
@@ -83,20 +90,20 @@ def _time_plot(fl: Any, title: str, paths: list[Any], window_s: float, **config:
             legend_display='top',
             time_window_mode='sliding',
             following_view_width=window_s,
-            **config,
+            y_axis_label=y_axis_label,
         ),
     )
 
 
-def _power_plot(fl: Any, side: str) -> Any:
+def _power_plot(side: str) -> fl.PlotPanel:
     paths = [
-        _series(fl, f'/power/predicted_{side}_w', f'predicted {side} [W]', PREDICTED, dashed=True),
-        _series(fl, f'/power/measured_{side}_w', f'measured {side} [W]', MEASURED),
+        _series(f'/power/predicted_{side}_w', f'predicted {side} [W]', PREDICTED, dashed=True),
+        _series(f'/power/measured_{side}_w', f'measured {side} [W]', MEASURED),
     ]
-    return _time_plot(fl, f'{side} motor power: predicted vs measured [W]', paths, 60.0, y_axis_label='W')
+    return _time_plot(f'{side} motor power: predicted vs measured [W]', paths, 60.0, y_axis_label='W')
 
 
-def _battery_gauge(fl: Any) -> Any:
+def _battery_gauge() -> fl.GaugePanel:
     return fl.GaugePanel(
         title='battery state of charge [-]',
         config=fl.GaugeConfig(
@@ -106,51 +113,51 @@ def _battery_gauge(fl: Any) -> Any:
     )  # fmt: skip
 
 
-def _battery_power_plot(fl: Any) -> Any:
-    return _time_plot(fl, 'battery power: predicted vs measured [W]', [
-        _series(fl, '/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
-        _series(fl, '/power/measured_battery_w', 'measured [W]', MEASURED),
+def _battery_power_plot() -> fl.PlotPanel:
+    return _time_plot('battery power: predicted vs measured [W]', [
+        _series('/power/predicted_battery_w', 'predicted [W]', PREDICTED, dashed=True),
+        _series('/power/measured_battery_w', 'measured [W]', MEASURED),
     ], 600.0)  # fmt: skip
 
 
-def _time_to_empty_indicator(fl: Any) -> Any:
+def _time_to_empty_indicator() -> fl.IndicatorPanel:
     return _indicator(
-        fl, 'time to empty [s]', '/energy/time_to_empty_s', ('<', str(LOW_TIME_TO_EMPTY_S)),
+        'time to empty [s]', '/energy/time_to_empty_s', ('<', str(LOW_TIME_TO_EMPTY_S)),
         'battery low: under 10 min', 'time to empty',
     )  # fmt: skip
 
 
-def _traction_indicator(fl: Any) -> Any:
+def _traction_indicator() -> fl.IndicatorPanel:
     return _indicator(
-        fl, 'traction margin [-]', '/power/traction_margin', ('<=', str(TRACTION_WARNING_MARGIN)),
+        'traction margin [-]', '/power/traction_margin', ('<=', str(TRACTION_WARNING_MARGIN)),
         'TRACTION WARNING: the robot may get stuck', 'traction ok',
     )  # fmt: skip
 
 
-def _traction_plot(fl: Any) -> Any:
+def _traction_plot() -> fl.PlotPanel:
     """Traction margin and time to empty (right axis: seconds, not a ratio)."""
-    return _time_plot(fl, 'traction margin [-] and time to empty [s]', [
-        _series(fl, '/power/traction_margin', 'traction margin [-]', '#9467bd'),
+    return _time_plot('traction margin [-] and time to empty [s]', [
+        _series('/power/traction_margin', 'traction margin [-]', '#9467bd'),
         fl.PlotSeries(value='/energy/time_to_empty_s.data', label='time to empty [s]', enabled=True,
                       color='#2ca02c', timestamp_method='receiveTime', use_right_y_axis=True),
     ], 120.0)  # fmt: skip
 
 
-def _path_margin_indicator(fl: Any) -> Any:
+def _path_margin_indicator() -> fl.IndicatorPanel:
     return _indicator(
-        fl, 'path margin [Wh]', '/energy/path_margin_wh', ('<', '0'),
+        'path margin [Wh]', '/energy/path_margin_wh', ('<', '0'),
         'CANNOT drive the path and return', 'path and return ok',
     )  # fmt: skip
 
 
-def _path_energy_plot(fl: Any) -> Any:
-    return _time_plot(fl, 'planned path: energy required and margin [Wh]', [
-        _series(fl, '/energy/path_required_wh', 'required [Wh]', PREDICTED),
-        _series(fl, '/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
+def _path_energy_plot() -> fl.PlotPanel:
+    return _time_plot('planned path: energy required and margin [Wh]', [
+        _series('/energy/path_required_wh', 'required [Wh]', PREDICTED),
+        _series('/energy/path_margin_wh', 'margin after return and reserve [Wh]', '#2ca02c'),
     ], 600.0)  # fmt: skip
 
 
-def _trace_plot(fl: Any) -> Any:
+def _trace_plot() -> fl.PlotPanel:
     """The odometry position as an XY plot, y [m] against x [m], equal scales."""
     odom_x = fl.PlotXAxisPath(value='/odom.pose.pose.position.x', enabled=True)
     return fl.PlotPanel(
@@ -164,7 +171,7 @@ def _trace_plot(fl: Any) -> Any:
     )  # fmt: skip
 
 
-def _teleop(fl: Any) -> Any:
+def _teleop() -> fl.TeleopPanel:
     """Arrow buttons on /cmd_vel at :data:`TELEOP_RATE_HZ` (module doc: the watchdog)."""
     return fl.TeleopPanel(
         title=f'teleop: /cmd_vel at {TELEOP_RATE_HZ:g} Hz (watchdog 0.5 s)',
@@ -178,7 +185,7 @@ def _teleop(fl: Any) -> Any:
     )  # fmt: skip
 
 
-def _column(fl: Any, panels: list[tuple[Any, float]]) -> Any:
+def _column(panels: list[tuple[fl.BasePanel, float]]) -> fl.SplitContainer:
     """A column of (panel, proportion) pairs, top to bottom."""
     return fl.SplitContainer(
         direction='column',
@@ -186,36 +193,31 @@ def _column(fl: Any, panels: list[tuple[Any, float]]) -> Any:
     )
 
 
-def operator_layout() -> Any:
+def operator_layout() -> fl.Layout:
     """The layout as a :class:`foxglove.layouts.Layout`: three columns, motor and battery power
     (twice as wide); battery and traction; trace, path energy, diagnostics and teleop."""
-    import foxglove.layouts as fl
-
     power = _column(
-        fl,
         [
-            (_power_plot(fl, 'left'), 1.0),
-            (_power_plot(fl, 'right'), 1.0),
-            (_battery_power_plot(fl), 1.0),
+            (_power_plot('left'), 1.0),
+            (_power_plot('right'), 1.0),
+            (_battery_power_plot(), 1.0),
         ],
     )
     battery = _column(
-        fl,
         [
-            (_battery_gauge(fl), 1.0),
-            (_time_to_empty_indicator(fl), 0.5),
-            (_traction_indicator(fl), 0.5),
-            (_traction_plot(fl), 1.0),
+            (_battery_gauge(), 1.0),
+            (_time_to_empty_indicator(), 0.5),
+            (_traction_indicator(), 0.5),
+            (_traction_plot(), 1.0),
         ],
     )
     path = _column(
-        fl,
         [
-            (_trace_plot(fl), 2.0),
-            (_path_margin_indicator(fl), 0.5),
-            (_path_energy_plot(fl), 1.0),
+            (_trace_plot(), 2.0),
+            (_path_margin_indicator(), 0.5),
+            (_path_energy_plot(), 1.0),
             (fl.DiagnosticsSummaryPanel(title='estimator and driver diagnostics'), 1.0),
-            (_teleop(fl), 1.0),
+            (_teleop(), 1.0),
         ],
     )
     columns = [(power, 2.0), (battery, 1.0), (path, 1.0)]
@@ -236,7 +238,7 @@ def topics_used(text: str) -> set[str]:
     """Topics the layout reads (the part of each path before the first '.')."""
     found: set[str] = set()
 
-    def walk(value: Any) -> None:
+    def walk(value: object) -> None:
         if isinstance(value, dict):
             for v in value.values():
                 walk(v)
