@@ -9,12 +9,11 @@ One FESS parameter is fitted to these radii: the test robot track's longitudinal
 (``track_longitudinal_shear_ratio`` in ``config/vehicles/test_robot_track.yaml``), to the track's
 seven 0.1 m/s cells only (:data:`~skidsteer_power.real_robot.TRACK_FIT_CELLS`,
 :func:`fit_track_shear_ratio`); the other seven cells are the check. ``python -m
-skidsteer_power.models.appendix_d [fit]`` prints the table (and the fit's sweep).
+tools.appendix_d [fit]`` prints the table (and the fit's sweep); the models take no command line.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 from dataclasses import dataclass
 
@@ -95,27 +94,3 @@ def fit_track_shear_ratio(candidates: tuple[float, ...] = FIT_CANDIDATES) -> lis
         result = summary(check(TRACK_FIT_CELLS, vehicles={track.name: trial}))
         out.append((ratio, result['median_error'], result['max_error']))
     return out
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog='python -m skidsteer_power.models.appendix_d')
-    parser.add_argument('what', nargs='*', choices=('table', 'fit'), default=['table'])
-    args = parser.parse_args(argv)
-    if 'table' in args.what:
-        rows = check()
-        print('vehicle | V cmd | yaw cmd | R cmd | R real | R FESS set points | R pred / R real - 1')
-        for r in rows:
-            c = r.cell
-            radii = f'{c.commanded_radius_m:.2f} | {c.radius_m:.2f} | {r.radius_m:.2f}'
-            print(f'{c.vehicle} | {c.speed_cmd:g} | {c.yaw_cmd:g} | {radii} | '
-                  f'{100 * (r.radius_m / c.radius_m - 1):+.1f} %')  # fmt: skip
-        result = summary(rows)
-        print(f'median {100 * result["median_error"]:.1f} %, max {100 * result["max_error"]:.1f} %')
-    if 'fit' in args.what:
-        for ratio, median, worst in fit_track_shear_ratio():
-            print(f'K_x / K = {ratio:g}: median {100 * median:.1f} %, max {100 * worst:.1f} %', flush=True)
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())
