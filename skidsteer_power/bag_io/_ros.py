@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Collection, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from rclpy.duration import Duration
 from rclpy.qos import (
@@ -30,7 +30,7 @@ QUEUE_DEPTH = 1000
 GRAPH_TOPICS = frozenset({'/rosout', '/parameter_events'})
 
 
-def message_class(msgtype: str) -> Any:
+def message_class(msgtype: str) -> type:
     """The rclpy message class of ``pkg/msg/Name``. Raises InputError if it is not installed."""
     parts = msgtype.split('/')
     if len(parts) != 3 or not all(parts):
@@ -38,7 +38,8 @@ def message_class(msgtype: str) -> Any:
     package, kind, name = parts
     try:
         module = importlib.import_module(f'{package}.{kind}')
-        return getattr(module, name)
+        cls: type = getattr(module, name)  # a generated message class
+        return cls
     except (ImportError, AttributeError) as err:
         raise InputError(f'message type {msgtype} is not installed for Python ({err})') from err
 

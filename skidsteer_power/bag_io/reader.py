@@ -25,7 +25,7 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple, TypeGuard
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeAlias, TypeGuard
 
 from rosbags.interfaces import MessageDefinitionFormat, Qos
 from rosbags.rosbag2 import Reader as Rosbag2Reader
@@ -41,7 +41,14 @@ if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
     from rosbags.typesys.store import Typestore
 
+    from skidsteer_power.jsonout import JsonObject
+
 LOG = logging.getLogger(__name__)
+
+RosMessage: TypeAlias = Any  # Any: a rosbags message, its class chosen at run time by the type name
+"""A decoded message (:meth:`BagReader.deserialize`): a ``rosbags`` dataclass of the topic's type,
+read by field (``msg.twist.linear.x``). Which class depends on the topic's type name in the bag,
+known only at run time (rosbags itself returns ``object``)."""
 
 DEFAULT_STORE = Stores.ROS2_JAZZY
 ROS_ENCODING = 'cdr'  # message encoding of ROS 2 channels; others (protobuf, json) are skipped
@@ -256,7 +263,7 @@ class BagReader:
             and not self.unverified
         )
 
-    def integrity(self) -> dict[str, Any]:
+    def integrity(self) -> JsonObject:
         """``messages_expected`` (the bag's own count; None if unknown), ``messages_read``, ``complete``,
         ``undecodable`` (messages skipped per topic because they could not be decoded; salvage only),
         ``messages_unverified`` (messages of chunks whose CRC failed, left out; salvage only)."""
@@ -380,7 +387,7 @@ class BagReader:
             ):
                 yield message
 
-    def deserialize(self, message: BagMessage) -> Any:
+    def deserialize(self, message: BagMessage) -> RosMessage:
         """The message as a ``rosbags`` object. Raises InputError if its type is unknown or bytes bad."""
         info = self.topics[message.topic]
         if not info.decodable:
@@ -390,7 +397,7 @@ class BagReader:
         except Exception as err:  # rosbags raises assorted errors for bad bytes; report one clear line
             raise InputError(f'{message.topic}: cannot decode a {message.msgtype} message: {err}') from err
 
-    def decoded(self, topic: str) -> Iterator[tuple[BagMessage, Any]]:
+    def decoded(self, topic: str) -> Iterator[tuple[BagMessage, RosMessage]]:
         """(message, decoded message) of ``topic`` in time order. A message that cannot be decoded
         raises InputError, or, in a salvage read, is skipped and counted in ``undecodable`` (as
         ``replay --salvage`` does), with one warning per topic."""

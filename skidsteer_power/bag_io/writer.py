@@ -32,7 +32,7 @@ import time
 from collections.abc import Sequence
 from importlib.metadata import version
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal, cast
 
 from mcap.data_stream import RecordBuilder
 from mcap.records import Channel, Schema
@@ -46,7 +46,7 @@ from skidsteer_power.bag_io.reader import build_typestore
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
-    from rosbags.interfaces import Connection
+    from rosbags.interfaces import Connection, ConnectionExtRosbag2
 
 ROSBAG2_VERSION: Literal[9] = 9
 CHUNK_SIZE = 1 << 20
@@ -121,7 +121,7 @@ class _FlushingMcap:
     def add_connection(self, connection: Connection, offered_qos_profiles: str) -> None:
         schema_id = self._schema_ids[connection.msgtype]
         metadata = {'offered_qos_profiles': offered_qos_profiles, 'topic_type_hash': connection.digest}
-        ext: Any = connection.ext
+        ext = cast('ConnectionExtRosbag2', connection.ext)  # a rosbag2 writer's connections
         encoding = ext.serialization_format
         channel_id = self._mcap.register_channel(connection.topic, encoding, schema_id, metadata)
         self._channel_ids[connection.id] = channel_id
