@@ -67,7 +67,8 @@ class ArrayPowerMapLike(Protocol):
 
 
 class PowertrainLike(Protocol):
-    """A skid-steer powertrain: reduction, motor, amplifier and the per-side power flow (eqs. 7.1-7.4)."""
+    """A skid-steer powertrain: reduction, motor, amplifier and the per-side power flow (eqs. 7.1-7.4),
+    forward (:meth:`motor_side`) and back from a measured battery-side power (V x I readings)."""
 
     @property
     def gear_ratio(self) -> float: ...
@@ -82,6 +83,14 @@ class PowertrainLike(Protocol):
     def regen_efficiency(self) -> float | None: ...
 
     def motor_side(self, side: str, axle_torque_Nm: Real, axle_omega_rad_s: Real) -> MotorPoint[Real]: ...
+
+    def terminal_from_bus(self, bus_W: Real) -> Real:
+        """Motor terminal power [W] of one side's measured battery-side power [W]."""
+        ...
+
+    def torque_from_terminal(self, terminal_W: Real, motor_omega_rad_s: Real) -> Real:
+        """Motor torque [N m] whose terminal power is ``terminal_W`` [W] at motor speed [rad/s]."""
+        ...
 
 
 if TYPE_CHECKING:

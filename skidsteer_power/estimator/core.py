@@ -19,10 +19,10 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.errors import ConfigError, InputError
-from skidsteer_power.estimator.adaptation import AdaptationSettings, TorqueAdaptation
+from skidsteer_power.estimator.adaptation import AdaptationSettings, Correction, TorqueAdaptation
 from skidsteer_power.estimator.energy import EnergyTracker
 from skidsteer_power.estimator.inputs import (
     TEST_ROBOT_JOINTS,
@@ -41,13 +41,16 @@ from skidsteer_power.powertrain.battery import BatteryState
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
 from skidsteer_power.seams import BatteryModel, PowertrainLike
 
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
+
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
 IMPLAUSIBLE_WARN_S = 10.0
 """Diagnostics stay WARN this long after the last implausible reading or prediction [s]."""
 TERRAIN_CHANGE_SHOWN_S = 10.0  # diagnostics warn "terrain changed" this long after a detection [s]
 
 
-def adaptation_values(c: Any, enabled: bool) -> dict[str, str]:
+def adaptation_values(c: Correction, enabled: bool) -> dict[str, str]:
     """Diagnostic key/values of a :class:`~skidsteer_power.estimator.adaptation.Correction`."""
     return {
         'adaptation': 'on' if enabled else 'off',
@@ -416,7 +419,7 @@ class EstimatorCore:
             message += '; ' + '; '.join(notes)
         return level, message, values
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> JsonObject:
         """What a restart needs: the battery's tallies and the energy tallies (no configuration:
         estimator/persistence.py)."""
         self.energy.flush()
@@ -434,7 +437,7 @@ class EstimatorCore:
         self.energy.energy_J.update(measured=0.0, predicted=0.0)
         self.time_to_empty_s = self.energy.time_to_empty_s()
 
-    def restore(self, state: dict[str, Any]) -> None:
+    def restore(self, state: JsonObject) -> None:
         """Restore the tallies of :meth:`state_dict` output into this battery (its configuration
         stays this vehicle's); ConfigError if a number is missing or outside its range."""
         tallies, energy = restored_tallies(state)

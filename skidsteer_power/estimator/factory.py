@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator.inputs import JointMap
@@ -20,6 +20,7 @@ from skidsteer_power.vehicle import Vehicle, load_vehicle
 
 if TYPE_CHECKING:
     from skidsteer_power.drive.controller import DriveController
+    from skidsteer_power.maps.power_map import PowerMap
 
 SECONDS_PER_HOUR = 3600.0
 
@@ -51,7 +52,7 @@ def powertrain_for(vehicle: Vehicle) -> Powertrain:
     return Powertrain.for_vehicle(vehicle)
 
 
-def joint_map_for(vehicle: Vehicle, **overrides: Any) -> JointMap:
+def joint_map_for(vehicle: Vehicle, **overrides: object) -> JointMap:
     """The vehicle's joint_states mapping (its ``drivetrain:`` and ``measured_power:`` sections), with
     non-empty ``overrides`` (node parameters, CLI options: left, right, effort_is, location,
     gear_ratio ...) applied."""
@@ -109,7 +110,7 @@ def map_predictor(
         where = setpoint_map.cache_path(vehicle, terrain, cache_dir=cache_dir or None)
         description = f'{vehicle.name} on {terrain.name}, set points ({where})'
 
-        def motion_map() -> Any:  # path energy starts from a motion: the (V, yaw rate) map
+        def motion_map() -> PowerMap:  # path energy starts from a motion: the (V, yaw rate) map
             from skidsteer_power.maps import load_or_build
 
             return load_or_build(vehicle, terrain, cache_dir or None)[0]
@@ -129,8 +130,14 @@ def map_predictor(
 CURRENT_DEADBAND_A = 1e-3
 """|current| [A] below which the battery is neither charging nor discharging."""
 
+BatteryMessageFields: TypeAlias = dict[str, Any]  # Any: a field's value type depends on its name
+"""sensor_msgs/BatteryState field name -> value, as :func:`battery_message_fields` gives them: floats,
+the per-cell lists, ``present`` (bool), ``status`` and ``chemistry`` (str). A plain dict, not a
+TypedDict: the node's ``battery_state_message`` (nodes/power_estimator.py) is typed to take a plain
+dict, and pops ``status`` and ``chemistry`` off a copy before building the message from the rest."""
 
-def battery_message_fields(battery: BatteryModel, power_W: float) -> dict[str, Any]:
+
+def battery_message_fields(battery: BatteryModel, power_W: float) -> BatteryMessageFields:
     """sensor_msgs/BatteryState fields for the battery under ``power_W`` [W] (battery side).
 
     The message's conventions: ``current`` [A] negative while discharging; voltage [V]; charge,

@@ -10,10 +10,15 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict, cast
 
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.energy import CLOCK_STEP_BACK_S
+
+if TYPE_CHECKING:
+    from skidsteer_power.estimator.measured import MeasuredPowerSource
+    from skidsteer_power.estimator.side_currents import SideCurrentSource
+    from skidsteer_power.powertrain.drivetrain import Powertrain
 
 _isfinite = math.isfinite
 
@@ -54,7 +59,7 @@ class InputLimits:
                 raise InputError(f'{name} must be a number > 0, got {value!r}')
 
     @classmethod
-    def for_powertrain(cls, powertrain: Any, **overrides: float) -> InputLimits:
+    def for_powertrain(cls, powertrain: Powertrain, **overrides: float) -> InputLimits:
         """The limits of a vehicle's own motor and driver (``powertrain``: a
         :class:`~skidsteer_power.powertrain.Powertrain`), each with the margin :data:`LIMIT_MARGIN`:
 
@@ -159,8 +164,8 @@ class JointMap:
     interfaces: tuple[str, ...] = INTERFACES
     inverted: tuple[str, ...] = ()
     source: str = ''
-    side_currents: tuple[Any, ...] = ()
-    measured_power: tuple[Any, ...] = ()
+    side_currents: tuple[SideCurrentSource, ...] = ()
+    measured_power: tuple[MeasuredPowerSource, ...] = ()
     bus_voltage_V: float | None = None
 
     def __post_init__(self) -> None:
@@ -217,13 +222,13 @@ class JointMap:
         return self.effort_is == 'battery_power'
 
     @property
-    def vendor_sources(self) -> tuple[Any, ...]:
+    def vendor_sources(self) -> tuple[MeasuredPowerSource, ...] | tuple[SideCurrentSource, ...]:
         """The vendor topics the effort comes from: ``measured_power`` or ``side_currents``."""
         return self.measured_power or self.side_currents
 
     @classmethod
     def from_config(
-        cls, config: Any, measured_power: Any = None, bus_voltage_V: float | None = None
+        cls, config: object, measured_power: object = None, bus_voltage_V: float | None = None
     ) -> JointMap:
         """From a vehicle's ``drivetrain:`` mapping (``preset`` expanded from config/drivetrains/)
         and its ``measured_power:`` (:func:`~skidsteer_power.estimator.measured.parse_measured_power`;
@@ -271,17 +276,36 @@ class JointMap:
         cfg['bus_voltage_V'] = bus_voltage_V
         return cls(**cfg)
 
-    def with_overrides(self, **overrides: Any) -> JointMap:
+    def with_overrides(self, **overrides: object) -> JointMap:
         """A copy with the given non-empty overrides (node parameters, CLI options) applied;
         comma-separated strings are accepted for the joint lists."""
-        changes = {}
+        changes: dict[str, object] = {}
         for key, value in overrides.items():
             if value is None or value == '' or value == ():
                 continue
             if key in ('left', 'right', 'interfaces', 'inverted') and isinstance(value, str):
                 value = tuple(v.strip() for v in value.split(',') if v.strip())
             changes[key] = value
-        return replace(self, **changes) if changes else self
+        # the values as given, for these fields (unchecked here: __post_init__ checks them)
+        return replace(self, **cast('JointMapFields', changes)) if changes else self
+
+
+class JointMapFields(TypedDict, total=False):
+    """The fields of a :class:`JointMap`, as :meth:`JointMap.with_overrides` hands them to
+    ``dataclasses.replace``."""
+
+    left: tuple[str, ...]
+    right: tuple[str, ...]
+    effort_is: str
+    location: str
+    gear_ratio: float | None
+    torque_constant_Nm_A: float | None
+    interfaces: tuple[str, ...]
+    inverted: tuple[str, ...]
+    source: str
+    side_currents: tuple[SideCurrentSource, ...]
+    measured_power: tuple[MeasuredPowerSource, ...]
+    bus_voltage_V: float | None
 
 
 TEST_ROBOT_JOINTS = JointMap(

@@ -23,12 +23,18 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from skidsteer_power.errors import ConfigError
-from skidsteer_power.estimator.side_currents import FieldRef, decode_side_currents, efforts_at, source_in
+from skidsteer_power.estimator.side_currents import (
+    FieldRef,
+    SideCurrentSource,
+    decode_side_currents,
+    efforts_at,
+    source_in,
+)
 from skidsteer_power.powertrain.motor import (
     DES_70_10,
     AmplifierConstants,
@@ -37,6 +43,10 @@ from skidsteer_power.powertrain.motor import (
     motor_current,
     terminal_power,
 )
+
+if TYPE_CHECKING:
+    from skidsteer_power.bag_io.reader import BagReader
+    from skidsteer_power.seams import PowertrainLike
 
 Pair = tuple[float, float]
 
@@ -119,7 +129,7 @@ class Signal:
     field: FieldRef
     scale: float = 1.0
 
-    def read(self, msg: Any) -> float:
+    def read(self, msg: object) -> float:
         """The value [A or V] in one message (NaN if the message lacks it)."""
         return self.field.read(msg) * self.scale
 
@@ -187,12 +197,12 @@ class MeasuredPowerSource:
         return f'measured power {what} from ' + '; '.join(parts)
 
 
-def _msgtype(text: Any) -> str:
+def _msgtype(text: object) -> str:
     msgtype = str(text)
     return msgtype.replace('/', '/msg/') if msgtype.count('/') == 1 else msgtype
 
 
-def _signal(config: Any, what: str) -> Signal:
+def _signal(config: object, what: str) -> Signal:
     if not isinstance(config, Mapping):
         raise ConfigError(f'measured_power: {what} must be a mapping {{topic, type, field}}, not {config!r}')
     unknown = sorted(set(config) - {'topic', 'type', 'field', 'scale'})
@@ -215,7 +225,7 @@ def _signal(config: Any, what: str) -> Signal:
     )
 
 
-def _channel(config: Any, what: str) -> PowerChannel:
+def _channel(config: object, what: str) -> PowerChannel:
     if not isinstance(config, Mapping):
         raise ConfigError(f'measured_power: {what} must be a mapping, not {config!r}')
     if 'current' not in config and _msgtype(config.get('type', '')) == BATTERY_STATE:  # a BatteryState
@@ -251,7 +261,7 @@ def _channel(config: Any, what: str) -> PowerChannel:
     return PowerChannel(current, voltage, str(current_is), signed, float(max_age))
 
 
-def _source(config: Any) -> MeasuredPowerSource:
+def _source(config: object) -> MeasuredPowerSource:
     if not isinstance(config, Mapping):
         raise ConfigError(f'measured_power: each source is a mapping of left/right or total, not {config!r}')
     keys = set(config)
@@ -270,7 +280,7 @@ def _source(config: Any) -> MeasuredPowerSource:
     raise ConfigError(f'measured_power: give left and right, or total; got {sorted(map(str, keys))}')
 
 
-def parse_measured_power(config: Any) -> tuple[MeasuredPowerSource, ...]:
+def parse_measured_power(config: object) -> tuple[MeasuredPowerSource, ...]:
     """The sources of a vehicle file's ``measured_power:`` (a mapping, or a list of alternatives: the
     first whose topics a bag holds is used); None or empty: none. ConfigError for a bad entry."""
     if not config:
@@ -310,7 +320,7 @@ def side_values(
     return np.column_stack(columns)
 
 
-def measure_battery_power(omega_rad_s: Pair, bus_W: Pair, powertrain: Any) -> MeasuredPower:
+def measure_battery_power(omega_rad_s: Pair, bus_W: Pair, powertrain: PowertrainLike) -> MeasuredPower:
     """Per-side measured power from motor shaft speed [rad/s] and measured battery-side power V x I
     [W]: the terminal power and the motor torque are the powertrain's inverse (amplifier and idle
     terms, then T w + k_cu T^2 = P_t: :meth:`Powertrain.terminal_from_bus`, ``torque_from_terminal``),
@@ -332,7 +342,9 @@ def measure_battery_power(omega_rad_s: Pair, bus_W: Pair, powertrain: Any) -> Me
     )
 
 
-def source_in_bag(bag: Any, sources: Sequence[MeasuredPowerSource]) -> tuple[MeasuredPowerSource | None, str]:
+def source_in_bag(
+    bag: BagReader, sources: Sequence[MeasuredPowerSource]
+) -> tuple[MeasuredPowerSource | None, str]:
     """(the first of ``sources`` whose every topic the bag holds with the declared type and can
     decode, why none if none: one line naming what was wanted)."""
     held = {name.lstrip('/'): info for name, info in bag.topics.items()}
@@ -371,7 +383,7 @@ def latest_at(t: np.ndarray, sample_t: np.ndarray, values: np.ndarray, max_age_s
 
 
 def decode_signals(
-    bag: Any, source: MeasuredPowerSource, t0_ns: int
+    bag: BagReader, source: MeasuredPowerSource, t0_ns: int
 ) -> dict[Signal, tuple[np.ndarray, np.ndarray]]:
     """Every signal of ``source`` in ``bag``: (t [s] from ``t0_ns``, values), each topic read once."""
     by_topic: dict[str, list[Signal]] = {}
@@ -393,9 +405,33 @@ def decode_signals(
     return out
 
 
+class SideJoints(Protocol):
+    """What the joint_states arrays are rewritten by: the joints of each side and the vendor
+    sources of their effort (:class:`~skidsteer_power.estimator.inputs.JointMap`, which imports
+    this module)."""
+
+    @property
+    def left(self) -> tuple[str, ...]: ...
+
+    @property
+    def joints(self) -> tuple[str, ...]: ...
+
+    @property
+    def inverted(self) -> tuple[str, ...]: ...
+
+    @property
+    def measured_power(self) -> tuple[MeasuredPowerSource, ...]: ...
+
+    @property
+    def side_currents(self) -> tuple[SideCurrentSource, ...]: ...
+
+    @property
+    def bus_voltage_V(self) -> float | None: ...
+
+
 def joint_efforts(
-    bag: Any,
-    joint_map: Any,
+    bag: BagReader,
+    joint_map: SideJoints,
     t0_ns: int,
     js_t: np.ndarray,
     arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
@@ -435,8 +471,8 @@ def joint_efforts(
 
 
 def apply_to_joint_arrays(
-    bag: Any,
-    joint_map: Any,
+    bag: BagReader,
+    joint_map: SideJoints,
     t0_ns: int,
     js_t: np.ndarray,
     arrays: tuple[np.ndarray, np.ndarray, np.ndarray],

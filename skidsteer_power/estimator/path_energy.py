@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -102,7 +101,7 @@ class PathGeometry:
     xy: np.ndarray
 
     @classmethod
-    def from_polyline(cls, x: Any, y: Any) -> PathGeometry:
+    def from_polyline(cls, x: ArrayLike, y: ArrayLike) -> PathGeometry:
         """InputError when the points are not finite or fewer than two are distinct."""
         xy = np.column_stack([np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()])
         if not np.all(np.isfinite(xy)):
@@ -141,7 +140,7 @@ def _check_speed(speed_m_s: float) -> None:
         raise InputError(f'path speed must be finite and > 0 m/s, got {speed_m_s}')
 
 
-def route_from_polyline(x: Any, y: Any, speed_m_s: float, name: str = 'path') -> Route:
+def route_from_polyline(x: ArrayLike, y: ArrayLike, speed_m_s: float, name: str = 'path') -> Route:
     """Constant-radius route through the points (x, y) [m], driven at ``speed_m_s`` [m/s] (module doc).
 
     InputError when the path has fewer than two distinct points or the speed is not > 0.
@@ -264,9 +263,9 @@ class PathTracker:
 
     def __init__(self) -> None:
         self.path: PlannedPath | None = None
-        self._loads_key: tuple[Any, ...] | None = None
+        self._loads_key: tuple[object, ...] | None = None
         self._loads: PathLoads | None = None
-        self._key: tuple[Any, ...] | None = None
+        self._key: tuple[object, ...] | None = None
         self.energy: PathEnergy | None = None
 
     def set_path(self, x: ArrayLike, y: ArrayLike) -> None:
@@ -301,7 +300,7 @@ class PathTracker:
         return self.energy
 
 
-def _same(key: tuple[Any, ...], kept: tuple[Any, ...] | None) -> bool:
+def _same(key: tuple[object, ...], kept: tuple[object, ...] | None) -> bool:
     """Cache keys of numbers and objects: numbers equal, objects the same ones."""
     return kept is not None and all(
         a == b if isinstance(a, float) else a is b for a, b in zip(key, kept, strict=True)

@@ -23,14 +23,17 @@ import json
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.cache import atomic_file
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.safe_read import read_capped
 from skidsteer_power.terramechanics.ranges import Range
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 FORMAT_VERSION = 1
 MAX_STATE_BYTES = 64 * 1024
@@ -45,12 +48,12 @@ TALLY_RANGES = {
 """Range of each restored number (far beyond any small robot's battery; they stop nan, inf, 1e308)."""
 
 
-def battery_tallies(state: Any) -> dict[str, float]:
+def battery_tallies(state: Mapping[str, float]) -> dict[str, float]:
     """The battery numbers a restart keeps, from a battery's state dict: soc, elapsed_s, drawn_J."""
     return {k: float(state[k]) for k in ('soc', 'elapsed_s', 'drawn_J')}
 
 
-def restored_tallies(state: dict[str, Any]) -> tuple[dict[str, float], dict[str, float]]:
+def restored_tallies(state: JsonObject) -> tuple[dict[str, float], dict[str, float]]:
     """(battery tallies, energy tallies [J]) of a loaded state, each range-checked; ConfigError if
     a number is missing, not a number or outside its range (:data:`TALLY_RANGES`)."""
     try:
@@ -64,7 +67,7 @@ def restored_tallies(state: dict[str, Any]) -> tuple[dict[str, float], dict[str,
     return battery, energy
 
 
-def save_state(path: str | os.PathLike[str], state: dict[str, Any]) -> None:
+def save_state(path: str | os.PathLike[str], state: JsonObject) -> None:
     """Atomically write ``state`` (JSON-serializable) to ``path``, creating parent directories."""
     payload = json.dumps({'format_version': FORMAT_VERSION, **state}, indent=1, sort_keys=True)
     with atomic_file(path) as tmp:
@@ -82,19 +85,19 @@ class StateWriter:
     (a robot standing) is not written again. ``on_error`` gets every OSError's one-line message.
     """
 
-    def __init__(self, path: str | os.PathLike[str], on_error: Callable[[str], Any]) -> None:
+    def __init__(self, path: str | os.PathLike[str], on_error: Callable[[str], object]) -> None:
         self.path = Path(path)
         self.on_error = on_error
         self.writes = 0
-        self._last: dict[str, Any] | None = None
-        self._pending: dict[str, Any] | None = None
+        self._last: JsonObject | None = None
+        self._pending: JsonObject | None = None
         self._closed = False
         self._io = threading.Lock()  # one write at a time (the thread's and write_now's)
         self._wake = threading.Condition()
         self._thread = threading.Thread(target=self._run, name='energy-state-writer', daemon=True)
         self._thread.start()
 
-    def submit(self, state: dict[str, Any]) -> None:
+    def submit(self, state: JsonObject) -> None:
         """Write ``state`` soon (a JSON-serializable dict; ``saved_unix_s`` is added when written)."""
         with self._wake:
             self._pending = state
@@ -110,13 +113,13 @@ class StateWriter:
                 return
             self._write(state)
 
-    def write_now(self, state: dict[str, Any]) -> bool:
+    def write_now(self, state: JsonObject) -> bool:
         """Write ``state`` in the calling thread (reset, shutdown); True when the file holds it."""
         with self._wake:
             self._pending = None  # older than this one
         return self._write(state)
 
-    def _write(self, state: dict[str, Any]) -> bool:
+    def _write(self, state: JsonObject) -> bool:
         with self._io:
             if state == self._last:
                 return True
@@ -129,7 +132,7 @@ class StateWriter:
             self.writes += 1
             return True
 
-    def close(self, final: dict[str, Any] | None = None) -> None:
+    def close(self, final: JsonObject | None = None) -> None:
         """Stop the thread after the pending write; then write ``final`` here (shutdown)."""
         with self._wake:
             self._closed = True
@@ -139,7 +142,7 @@ class StateWriter:
             self._write(final)
 
 
-def load_state(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+def load_state(path: str | os.PathLike[str]) -> JsonObject | None:
     """Read a state written by :func:`save_state`; None if the file does not exist.
 
     Raises ConfigError for an unreadable, corrupt or foreign file (the caller decides whether to
@@ -179,8 +182,8 @@ def quarantine(path: str | os.PathLike[str]) -> Path:
 
 
 def load_or_quarantine(
-    path: str | os.PathLike[str], accept: Callable[[dict[str, Any]], None]
-) -> tuple[dict[str, Any] | None, str]:
+    path: str | os.PathLike[str], accept: Callable[[JsonObject], None]
+) -> tuple[JsonObject | None, str]:
     """Load the state at ``path`` and hand it to ``accept`` (which raises ConfigError to refuse it).
 
     Returns (state, '') when accepted, (None, '') when there is no file, and (None, warning) when the

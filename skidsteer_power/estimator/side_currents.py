@@ -26,11 +26,14 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from skidsteer_power.errors import ConfigError
+
+if TYPE_CHECKING:
+    from skidsteer_power.bag_io.reader import BagReader
 
 _FIELD = re.compile(r'^([A-Za-z_]\w*)(?:\[(\d+)\])?$')
 DEFAULT_MAX_AGE_S = 1.5
@@ -44,13 +47,13 @@ class FieldRef:
     index: int | None = None
 
     @classmethod
-    def parse(cls, text: Any) -> FieldRef:
+    def parse(cls, text: object) -> FieldRef:
         match = _FIELD.match(str(text).strip()) if isinstance(text, str) else None
         if match is None:
             raise ConfigError(f"side_currents: a field is 'name' or 'name[index]', not {text!r}")
         return cls(match.group(1), None if match.group(2) is None else int(match.group(2)))
 
-    def read(self, msg: Any) -> float:
+    def read(self, msg: object) -> float:
         """The field's value as a float (NaN if the message lacks it or the array is short)."""
         value = getattr(msg, self.name, None)
         if value is not None and self.index is not None:
@@ -75,7 +78,7 @@ class SideCurrentSource:
     max_age_s: float = DEFAULT_MAX_AGE_S
 
     @classmethod
-    def from_config(cls, config: Any) -> SideCurrentSource:
+    def from_config(cls, config: object) -> SideCurrentSource:
         if not isinstance(config, dict):
             raise ConfigError(f'side_currents: each entry is a mapping, not {config!r}')
         unknown = sorted(set(config) - {'topic', 'type', 'left', 'right', 'max_age_s'})
@@ -96,12 +99,12 @@ class SideCurrentSource:
             float(max_age),
         )
 
-    def read(self, msg: Any) -> tuple[float, float]:
+    def read(self, msg: object) -> tuple[float, float]:
         """(left, right) current [A] of one message."""
         return self.left.read(msg), self.right.read(msg)
 
 
-def parse_sources(config: Any) -> tuple[SideCurrentSource, ...]:
+def parse_sources(config: object) -> tuple[SideCurrentSource, ...]:
     """The ``side_currents`` list of a drivetrain section (None or empty: none)."""
     if config is None:
         return ()
@@ -143,7 +146,9 @@ def efforts_at(
     return effort, fresh
 
 
-def decode_side_currents(bag: Any, source: SideCurrentSource, t0_ns: int) -> tuple[np.ndarray, np.ndarray]:
+def decode_side_currents(
+    bag: BagReader, source: SideCurrentSource, t0_ns: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(t [s] from ``t0_ns``, currents (m, 2) [A]) of ``source`` in ``bag`` (a BagReader)."""
     topic = next(t for t in bag.topics if t.lstrip('/') == source.topic)
     t, currents = [], []
@@ -153,7 +158,7 @@ def decode_side_currents(bag: Any, source: SideCurrentSource, t0_ns: int) -> tup
     return np.array(t, dtype=float), np.array(currents, dtype=float).reshape(-1, 2)
 
 
-def source_in(bag: Any, sources: Sequence[SideCurrentSource]) -> tuple[SideCurrentSource | None, str]:
+def source_in(bag: BagReader, sources: Sequence[SideCurrentSource]) -> tuple[SideCurrentSource | None, str]:
     """(the first of ``sources`` whose topic the bag holds with the declared type and can decode,
     why none if none)."""
     held = {name.lstrip('/'): info for name, info in bag.topics.items()}

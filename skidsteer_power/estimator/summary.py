@@ -21,9 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.estimator.energy import SOURCES
+
+if TYPE_CHECKING:
+    from skidsteer_power.estimator.core import Comparison, EstimatorCore
+    from skidsteer_power.estimator.prediction import Prediction
 
 SUMMARY_FIELDS: tuple[str, ...] = (
     'speed_cmd_m_s',
@@ -90,7 +94,7 @@ MEASUREMENT_FIGURES: tuple[tuple[str, str], ...] = (
 """(topic, summary field) published as std_msgs/Float64 after accepted joint_states (``figure_period_s``)."""
 
 
-def _prediction_values(p: Any) -> dict[str, float]:
+def _prediction_values(p: Prediction | None) -> dict[str, float]:
     if p is None:
         return {}
     return {
@@ -115,7 +119,7 @@ def _prediction_values(p: Any) -> dict[str, float]:
     }
 
 
-def _measured_values(c: Any) -> dict[str, float]:
+def _measured_values(c: Comparison | None) -> dict[str, float]:
     if c is None:
         return {}
     m = c.measured
@@ -136,7 +140,7 @@ def _measured_values(c: Any) -> dict[str, float]:
     }
 
 
-def summary_dict(core: Any, now_s: float) -> dict[str, float]:
+def summary_dict(core: EstimatorCore, now_s: float) -> dict[str, float]:
     """Every :data:`SUMMARY_FIELDS` entry for an :class:`EstimatorCore` at ``now_s`` [s]."""
     values = dict.fromkeys(SUMMARY_FIELDS, math.nan)
     values.update(_prediction_values(core.prediction))
@@ -159,25 +163,25 @@ def summary_dict(core: Any, now_s: float) -> dict[str, float]:
     return values
 
 
-def summary_values(core: Any, now_s: float) -> list[float]:
+def summary_values(core: EstimatorCore, now_s: float) -> list[float]:
     """:func:`summary_dict` as a list in :data:`SUMMARY_FIELDS` order."""
     values = summary_dict(core, now_s)
     return [float(values[name]) for name in SUMMARY_FIELDS]
 
 
-def prediction_figures(prediction: Any) -> list[float]:
+def prediction_figures(prediction: Prediction | None) -> list[float]:
     """:data:`COMMAND_FIGURES` values of a :class:`~skidsteer_power.estimator.prediction.Prediction`."""
     values = _prediction_values(prediction)
     return [float(values[field]) for _, field in COMMAND_FIGURES]
 
 
-def measurement_figures(comparison: Any) -> list[float]:
+def measurement_figures(comparison: Comparison | None) -> list[float]:
     """:data:`MEASUREMENT_FIGURES` values of a :class:`~skidsteer_power.estimator.core.Comparison`."""
     values = _measured_values(comparison)
     return [float(values[field]) for _, field in MEASUREMENT_FIGURES]
 
 
-def summary_key_values(core: Any, now_s: float) -> list[tuple[str, str]]:
+def summary_key_values(core: EstimatorCore, now_s: float) -> list[tuple[str, str]]:
     """(name, value text) for every :data:`SUMMARY_FIELDS` entry; ``repr``-exact floats, 'nan' if unknown."""
     values = summary_dict(core, now_s)
     return [(name, repr(float(values[name]))) for name in SUMMARY_FIELDS]
