@@ -17,7 +17,7 @@ A parameter at a bound or held fixed is not in the design (it has no interval to
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import stats
@@ -25,6 +25,7 @@ from scipy import stats
 from skidsteer_power.calibration.fit import PARAMS, CalibrationResult, Model, _from_z
 
 if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.vehicle import Vehicle
 
 MAX_HOLDS = 4
@@ -49,7 +50,7 @@ def relative_width(result: CalibrationResult, name: str) -> float:
 
 def suggest_holds(
     vehicle: Vehicle, result: CalibrationResult, candidates: np.ndarray | None = None
-) -> dict[str, Any]:
+) -> JsonObject:
     """The holds that most shrink the widest interval of ``result`` (module doc)."""
     free = [n for n in result.names if n not in result.at_bound and result.ci95.get(n) is not None]
     if not free or result.jacobian_z.size == 0:
@@ -70,7 +71,7 @@ def suggest_holds(
         sigma = math.sqrt(max(float(np.linalg.pinv(matrix)[w, w]), 0.0))
         return [_from_z(widest, z - t * sigma), _from_z(widest, z + t * sigma)]
 
-    chosen: list[dict[str, Any]] = []
+    chosen: list[dict[str, float | list[float]]] = []
     used = np.zeros(len(candidates), bool)
     current = info
     variance = float(np.linalg.pinv(current)[w, w])

@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import math
 import types
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from skidsteer_power.models.fess import FessSolver
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from skidsteer_power.estimator.core import EstimatorCore
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -26,7 +29,10 @@ class DirectFessMap:
     def __init__(self, vehicle: Vehicle, terrain: Terrain) -> None:
         self.solver = FessSolver(vehicle, terrain)
 
-    def query(self, speed_m_s: float, yaw_rate_rad_s: float) -> Any:
+    def query(self, speed_m_s: float, yaw_rate_rad_s: float) -> Any:  # Any: stands in for a MapQuery
+        """A namespace with the :class:`~skidsteer_power.maps.power_map.MapQuery` fields MapPredictor
+        reads (not a MapQuery: no power, sinkage or offset), so the class fits
+        :class:`~skidsteer_power.seams.PowerMapLike`."""
         sol = self.solver.solve_twist(speed_m_s, yaw_rate_rad_s)
         return types.SimpleNamespace(
             omega_left_rad_s=sol.omega[0, 0],
@@ -39,8 +45,26 @@ class DirectFessMap:
         )
 
 
+class TraceLike(Protocol):
+    """What :func:`feed_trace` reads of a twin trace (:class:`skidsteer_power.twin.TwinTrace`): per
+    sample the time [s], the command (V [m/s], yaw rate [rad/s]) and the joints' speed [rad/s] and
+    effort [N m]."""
+
+    @property
+    def t(self) -> np.ndarray: ...
+
+    @property
+    def cmd(self) -> np.ndarray: ...
+
+    @property
+    def joint_velocity_rad_s(self) -> np.ndarray: ...
+
+    @property
+    def joint_effort_Nm(self) -> np.ndarray: ...
+
+
 def feed_trace(
-    core: Any, trace: Any, *, tick_period_s: float = 0.2, after_s: float = -math.inf
+    core: EstimatorCore, trace: TraceLike, *, tick_period_s: float = 0.2, after_s: float = -math.inf
 ) -> list[float]:
     """Feed a twin trace (``skidsteer_power.twin.TwinTrace``) to an ``EstimatorCore`` as the node
     would: per sample the command, then joint_states; ``tick`` whenever a multiple of

@@ -71,7 +71,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import optimize, stats
@@ -85,6 +85,9 @@ from skidsteer_power.powertrain.internal import Resistance, SideResistance
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 RHO_WARN = 0.95
 SOLVE_TOL_N = 1e-6  # FESS equilibrium tolerance during the fit [N, N m]
@@ -428,7 +431,7 @@ class CalibrationResult:
     drive: DriveIdentification | None = None  # the drive controller's limits (--fit auto), docs/DRIVE.md
     # battery-side terms fitted again to every sample of the drive (reconcile.py), parameter units
     reconciled: dict[str, float] = field(default_factory=dict)
-    reconciliation: dict[str, Any] = field(default_factory=dict)  # its report (Reconciliation.as_json)
+    reconciliation: JsonObject = field(default_factory=dict)  # its report (Reconciliation.as_json)
 
     def status(self, name: str) -> str:
         """'fitted', 'fixed', 'fixed: not identifiable', 'not identifiable', 'at_bound (lower|upper)'
@@ -449,7 +452,7 @@ class CalibrationResult:
             return 'fixed' if self.identifiable.get(name, True) else 'fixed: not identifiable'
         return 'fitted'
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         parameters = {}
         for name in self.values:
             ci = self.ci95.get(name)

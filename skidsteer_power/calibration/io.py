@@ -27,9 +27,9 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import yaml
@@ -49,7 +49,11 @@ from skidsteer_power.terramechanics.terrain import load_terrain
 POWERTRAIN_NAMES = (*INTERNAL_PARAMS, *TIED_INTERNAL_PARAMS, *BATTERY_PARAMS)  # fitted powertrain terms
 
 if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
+    from skidsteer_power.powertrain.motor import AmplifierConstants, MotorConstants
     from skidsteer_power.terramechanics.terrain import Terrain
+
+    Part = TypeVar('Part', MotorConstants, AmplifierConstants)
 
 
 def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], list[list[float]]]:
@@ -58,14 +62,14 @@ def _block(result: CalibrationResult, names: list[str]) -> tuple[list[float], li
     return [float(result.values[n]) for n in names], [[float(v) for v in row] for row in cov]
 
 
-def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name: str) -> dict[str, Any]:
+def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name: str) -> JsonObject:
     """The ``calibration:`` mapping written into the terrain file (see module doc)."""
     # a parameter at a fit bound is no estimate (fit.py): written as a plain value, listed in at_bound
     # so is one whose interval left its range (not in names) and every fit when the start was kept
     kept = bool(result.kept_start)
     terrain_names = [n for n in result.names if n in TERRAIN_PARAMS and n not in result.at_bound and not kept]
     values, cov = _block(result, terrain_names)
-    block: dict[str, Any] = {
+    block: JsonObject = {
         'parameters': terrain_names,
         'units': [PARAMS[n].unit for n in terrain_names],
         'values': values,
@@ -97,14 +101,14 @@ def calibration_block(result: CalibrationResult, bags: Sequence[str], start_name
     return block
 
 
-def terrain_mapping(terrain: Terrain) -> dict[str, Any]:
+def terrain_mapping(terrain: Terrain) -> JsonObject:
     """A terrain as a YAML mapping in SI keys (phi in degrees as ``phi_deg``; rigid ground: its
     friction, rolling resistance and K, :func:`terrain_fields`)."""
     if terrain.is_rigid:
         from skidsteer_power.terramechanics.terrain import terrain_fields
 
         return {'name': terrain.name, **terrain_fields(terrain)}
-    data: dict[str, Any] = {
+    data: JsonObject = {
         'name': terrain.name,
         'n': float(terrain.n),
         'kc': float(terrain.kc),
@@ -139,12 +143,12 @@ def write_terrain(
     return out
 
 
-def _preset_or_fields(value: Any, presets: dict[str, Any]) -> Any:
+def _preset_or_fields(value: Part, presets: Mapping[str, Part]) -> str | dict[str, float | bool | str]:
     """A preset's name when ``value`` is one of ``presets``; a preset with one field changed (a fitted
     efficiency) as ``{preset: name, field: value}``; else its fields (SI units) as a mapping: a
     vehicle's own motor or amplifier is written out in full."""
 
-    def plain(v: Any) -> Any:
+    def plain(v: float | bool | str) -> float | bool | str:
         return v if isinstance(v, bool | str) else float(v)
 
     fields = dataclasses.asdict(value)
@@ -158,7 +162,7 @@ def _preset_or_fields(value: Any, presets: dict[str, Any]) -> Any:
     return {k: plain(v) for k, v in fields.items()}
 
 
-def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[str, Any]:
+def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> JsonObject:
     """The calibrated powertrain as a ``config/powertrains/*.yaml`` mapping (with its calibration)."""
     pt = result.powertrain
     sides = {
@@ -171,7 +175,7 @@ def powertrain_mapping(result: CalibrationResult, bags: Sequence[str]) -> dict[s
     # a term fitted again to every sample (reconcile.py) has no steady-window covariance: listed apart
     kept = bool(result.kept_start)
     internal = [n for n in result.names if n in POWERTRAIN_NAMES and not kept and n not in result.reconciled]
-    data: dict[str, Any] = {
+    data: JsonObject = {
         'name': f'{pt.name}_calibrated',
         'source': f'{pt.name} with the internal resistance of {len(bags)} bag(s) '
         '(skidsteer-power calibrate); '
@@ -258,19 +262,19 @@ def write_vehicle(
     return out
 
 
-def _motors() -> dict[str, Any]:
+def _motors() -> dict[str, MotorConstants]:
     from skidsteer_power.powertrain.drivetrain import MOTORS
 
     return dict(MOTORS)
 
 
-def _amplifiers() -> dict[str, Any]:
+def _amplifiers() -> dict[str, AmplifierConstants]:
     from skidsteer_power.powertrain.drivetrain import AMPLIFIERS
 
     return dict(AMPLIFIERS)
 
 
-def read_calibration(path: str | Path) -> tuple[Any, list[str], np.ndarray, np.ndarray]:
+def read_calibration(path: str | Path) -> tuple[Terrain, list[str], np.ndarray, np.ndarray]:
     """(terrain, parameter names, values, covariance) of a calibrated terrain file, in the block's units.
 
     ConfigError when the file has no usable ``calibration:`` block.

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from skidsteer_power.calibration.fit import CalibrationResult
+    from skidsteer_power.calibration.segments import Segment
 
-def plot_segments(path: str | Path, result: Any, segments: Sequence[Any]) -> Path:
+
+def plot_segments(path: str | Path, result: CalibrationResult, segments: Sequence[Segment]) -> Path:
     """Write a PNG: per segment and side, predicted vs measured K_t i [N m]; hold-out segments filled."""
     import matplotlib
 
