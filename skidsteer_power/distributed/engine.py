@@ -27,12 +27,20 @@ import logging
 import os
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.errors import InputError
 from skidsteer_power.progress import progress_bar
 from skidsteer_power.terramechanics.ranges import LOCAL_WORKERS
+
+if TYPE_CHECKING:
+    from argparse import _ActionsContainer
+
+    from dask.distributed import Client, LocalCluster
+
+Item = TypeVar('Item')
+Result = TypeVar('Result')
 
 CONNECT_TIMEOUT_S = 10.0
 IN_PROCESS_MAX_TASKS = 32
@@ -54,8 +62,8 @@ class Engine:
         self.scheduler = scheduler
         self.workers = workers or os.cpu_count() or 1
         self.progress = sys.stderr.isatty() if progress is None else progress
-        self.cluster: Any = None
-        self.client: Any = None
+        self.cluster: LocalCluster | None = None
+        self.client: Any = None  # Any: Client | None, but benchmarks/bench_scale.py calls .run unguarded
 
     def __enter__(self) -> Engine:
         if self.scheduler is not None:
@@ -108,8 +116,13 @@ class Engine:
         return f'dask {where}, {self.n_workers} worker(s)'
 
     def map(
-        self, fn: Callable[[Any], Any], items: Sequence[Any], label: str = 'tasks', *, heavy: bool = False
-    ) -> list[Any]:
+        self,
+        fn: Callable[[Item], Result],
+        items: Sequence[Item],
+        label: str = 'tasks',
+        *,
+        heavy: bool = False,
+    ) -> list[Result]:
         """``[fn(item) for item in items]``, run on the cluster (or here: :meth:`in_process`); results
         in the items' order. ``heavy``: each item is seconds of work or more."""
         from dask.distributed import as_completed
@@ -121,26 +134,27 @@ class Engine:
                 return [_done(fn(item), advance) for item in items]
         if self.client is None:
             self._start_local_cluster()
-        futures = self.client.map(fn, list(items), pure=False)
+        client = cast('Client', self.client)  # started just above
+        futures = client.map(fn, list(items), pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
-        results: list[Any] = [None] * len(futures)
+        results = cast('list[Result]', [None] * len(futures))  # each set below, or the map raises
         with progress_bar(self.progress, label, len(futures)) as advance:
             try:
                 for future in as_completed(futures):
                     results[index[future.key]] = future.result()
                     advance()
             except BaseException:
-                self.client.cancel(futures)
+                client.cancel(futures)
                 raise
         return results
 
 
-def _done(result: Any, advance: Callable[[], None]) -> Any:
+def _done(result: Result, advance: Callable[[], None]) -> Result:
     advance()
     return result
 
 
-def add_engine_args(parser: Any, jobs_flag: str | None = None) -> None:
+def add_engine_args(parser: _ActionsContainer, jobs_flag: str | None = None) -> None:
     """``--scheduler ADDR`` and, with ``jobs_flag`` ('--jobs'), local worker processes on ``parser``."""
     parser.add_argument(
         '--scheduler',
