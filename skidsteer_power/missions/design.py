@@ -28,7 +28,7 @@ import importlib
 import itertools
 import os
 from concurrent.futures import ProcessPoolExecutor
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -41,8 +41,18 @@ from skidsteer_power.powertrain.perturbed import apply_powertrain
 from skidsteer_power.vehicle import GRAVITY_M_S2, TrackGear, Vehicle, WheelGear
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.terramechanics.terrain import Terrain
+
+    ChunkJob: TypeAlias = (
+        tuple[list[JsonObject], Terrain, str]
+        | tuple[list[JsonObject], Terrain, str, Mapping[str, float] | None]
+    )
+    """A task of :func:`evaluate_chunk`: (candidates (:func:`grid` rows), terrain, model[, powertrain
+    sample (:func:`skidsteer_power.powertrain.perturbed.apply_powertrain`)])."""
 
 CONFIGURATIONS = ('track', '4-wheel', '6-wheel')  # Table 8.4
 MASSES_KG = (10.0, 20.0, 30.0)
@@ -56,14 +66,14 @@ TURN_RADIUS_M = 2.0  # ch. 8.3
 CRITERIA = ('merit', 'power', 'mobility')
 
 
-def grid() -> list[dict[str, Any]]:
+def grid() -> list[JsonObject]:
     """The 729 Table 8.4 candidates in a fixed order (configuration, mass, width, radius, length, tread)."""
     rows = itertools.product(CONFIGURATIONS, MASSES_KG, WIDTHS_M, RADII_M, LENGTHS_M, TREADS_M)
     keys = ('configuration', 'mass_kg', 'width_m', 'radius_m', 'length_or_wheelbase_m', 'tread_m')
     return [dict(zip(keys, row, strict=True)) | {'index': k} for k, row in enumerate(rows)]
 
 
-def candidate_vehicle(c: dict[str, Any]) -> Vehicle:
+def candidate_vehicle(c: JsonObject) -> Vehicle:
     """The :class:`~skidsteer_power.vehicle.Vehicle` of one grid row, with the test robot's powertrain."""
     gear: TrackGear | WheelGear
     if c['configuration'] == 'track':
@@ -90,7 +100,7 @@ def candidate_vehicle(c: dict[str, Any]) -> Vehicle:
     )
 
 
-def evaluate_chunk(job: tuple[Any, ...]) -> list[dict[str, Any]]:
+def evaluate_chunk(job: ChunkJob) -> list[JsonObject]:
     """Solve (candidates, terrain, model[, powertrain sample]) (see skidsteer_power.studies)."""
     from skidsteer_power.models import solve
 
@@ -136,7 +146,7 @@ def design_study(
     workers: int | None = None,
     engine: Engine | None = None,
     configurations: tuple[str, ...] = CONFIGURATIONS,
-) -> dict[str, Any]:
+) -> JsonObject:
     """Evaluate the Table 8.4 grid on ``terrain``; returns candidates, best per configuration, criterion.
 
     ``engine`` (a :class:`skidsteer_power.distributed.engine.Engine`) runs the parts on Dask instead;
@@ -172,7 +182,7 @@ def design_study(
     }
 
 
-def score(evaluated: list[dict[str, Any]], terrain: Terrain) -> list[dict[str, Any]]:
+def score(evaluated: list[JsonObject], terrain: Terrain) -> list[JsonObject]:
     """Add max drawbar pull [N], its ratio to the weight [-] and the merit [1/W] to solved candidates."""
     dp = max_drawbar_pull([candidate_vehicle(c) for c in evaluated], terrain)
     for c, pull in zip(evaluated, dp, strict=True):
@@ -183,7 +193,7 @@ def score(evaluated: list[dict[str, Any]], terrain: Terrain) -> list[dict[str, A
     return evaluated
 
 
-def best_per_configuration(evaluated: list[dict[str, Any]], criterion: str) -> dict[str, Any]:
+def best_per_configuration(evaluated: list[JsonObject], criterion: str) -> dict[str, JsonObject | None]:
     """Configuration -> its best scored candidate by ``criterion`` (None if none is eligible)."""
     return {
         config: _best([c for c in evaluated if c['configuration'] == config], criterion)
@@ -203,7 +213,7 @@ def _preload(model: str) -> None:
 _TRACK_COST, _WHEEL_COST, _WHEEL_TABLE_COST = 1.6, 2.5, 3.0  # ms, measured (see module doc)
 
 
-def balanced_parts(rows: list[dict[str, Any]], parts: int) -> list[list[dict[str, Any]]]:
+def balanced_parts(rows: list[JsonObject], parts: int) -> list[list[JsonObject]]:
     """Split the grid into ``parts`` contiguous pieces of about equal estimated cost."""
     cost = np.array([_TRACK_COST if c['configuration'] == 'track' else _WHEEL_COST for c in rows])
     first_of_group = np.array([k % (len(LENGTHS_M) * len(TREADS_M)) == 0 for k in range(len(rows))])
@@ -221,14 +231,14 @@ CRITERION_TEXT = {
 }
 
 
-def _merit(c: dict[str, Any]) -> float | None:
+def _merit(c: JsonObject) -> float | None:
     if not c['converged']:
         return None
     mean_power = 0.5 * (c['power_straight_W'] + c['power_turning_W'])
     return c['drawbar_pull_ratio'] / mean_power if mean_power > 0 else None
 
 
-def _best(rows: list[dict[str, Any]], criterion: str) -> dict[str, Any] | None:
+def _best(rows: list[JsonObject], criterion: str) -> JsonObject | None:
     eligible = [c for c in rows if c['converged'] and c['max_drawbar_pull_N'] > 0 and c['merit'] is not None]
     if not eligible:
         return None

@@ -22,7 +22,7 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,6 +35,7 @@ from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
 
 if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -153,7 +154,7 @@ class MissionResult:
             )
         return out
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """The DESIGN.md ``mission --json`` keys, plus a few more (SI units)."""
         return {
             'energy_J': self.energy_J,
@@ -297,7 +298,11 @@ def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
 
 
 def _map_states(
-    vehicle: Vehicle, terrain: Terrain, speed: np.ndarray, radius: np.ndarray, cache_dir: Any
+    vehicle: Vehicle,
+    terrain: Terrain,
+    speed: np.ndarray,
+    radius: np.ndarray,
+    cache_dir: str | os.PathLike[str] | None,
 ) -> dict[str, np.ndarray]:
     from skidsteer_power.maps import PowerMap, load_or_build
 

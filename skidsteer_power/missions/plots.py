@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.missions.energy import MissionResult
 
 
-def _pyplot() -> Any:
+def _pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -52,7 +55,7 @@ CONFIG_COLOURS = {'track': 'tab:blue', '4-wheel': 'tab:red', '6-wheel': 'tab:gre
 
 
 def plot_design_study(
-    candidates: Sequence[dict[str, Any]], best: dict[str, dict[str, Any]], path: str | os.PathLike[str]
+    candidates: Sequence[JsonObject], best: dict[str, JsonObject], path: str | os.PathLike[str]
 ) -> None:
     """Power vs mobility (max drawbar pull / weight) scatter, straight and turning (Figures 8.16-8.18)."""
     plt = _pyplot()
@@ -85,7 +88,7 @@ def plot_design_study(
     plt.close(fig)
 
 
-def plot_sensitivity(table: dict[str, Any], path: str | os.PathLike[str]) -> None:
+def plot_sensitivity(table: JsonObject, path: str | os.PathLike[str]) -> None:
     """Bar chart of the relative change [%] of energy, drawbar pull ratio and sinkage per perturbation."""
     plt = _pyplot()
     metrics = ('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m')

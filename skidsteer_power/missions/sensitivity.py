@@ -16,14 +16,16 @@ from __future__ import annotations
 import dataclasses
 import os
 from concurrent.futures import ProcessPoolExecutor
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.errors import ConvergenceError
 from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route
 
 if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 SOIL_PARAMETERS = ('n', 'kc', 'kphi', 'c', 'phi', 'K')
 METRICS = ('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m')
@@ -46,7 +48,7 @@ def cases(delta: float) -> dict[str, tuple[tuple[str, ...], float]]:
     return out
 
 
-def _metrics(job: tuple[Any, Any, Route, str, str]) -> dict[str, float] | None:
+def _metrics(job: tuple[Vehicle, Terrain, Route, str, str]) -> dict[str, float] | None:
     """The case's metrics; None when a solve did not converge."""
     vehicle, terrain, route, source, model = job
     try:
@@ -61,12 +63,12 @@ SMOOTH_TOLERANCE = 1e-9  # relative changes below this count as zero (no sign)
 
 def derivatives(
     base: dict[str, float], plus: dict[str, float] | None, minus: dict[str, float] | None, delta: float
-) -> dict[str, Any]:
+) -> dict[str, dict[str, float | str | None]]:
     """Central-difference derivatives [% per %] of each metric and whether each is smooth.
 
     Returns {metric: {'derivative': value or None, 'status': 'ok' | 'non_smooth' | 'failed'}}.
     """
-    out: dict[str, Any] = {}
+    out: dict[str, dict[str, float | str | None]] = {}
     for m in METRICS:
         if plus is None or minus is None or not base[m]:
             out[m] = {'derivative': None, 'status': 'failed'}
@@ -81,7 +83,7 @@ def derivatives(
 
 
 def sensitivity(
-    vehicles: list[Any],
+    vehicles: list[Vehicle],
     terrain: Terrain,
     route: Route,
     *,
@@ -89,7 +91,7 @@ def sensitivity(
     source: str = 'direct',
     model: str = 'fess',
     workers: int | None = None,
-) -> dict[str, Any]:
+) -> JsonObject:
     """Run every case for every vehicle; returns baseline values and per-case changes in percent."""
     labels = cases(delta)
     jobs = [
@@ -107,7 +109,7 @@ def sensitivity(
             values = list(pool.map(_metrics, jobs))
     else:
         values = [_metrics(job) for job in jobs]
-    results: dict[str, Any] = {}
+    results: JsonObject = {}
     per_vehicle = len(labels)
     for k, vehicle in enumerate(vehicles):
         chunk = dict(zip(labels, values[k * per_vehicle : (k + 1) * per_vehicle], strict=True))
