@@ -14,9 +14,10 @@ Percentiles are numpy's linear-interpolation percentiles of the samples (p05, p5
 from __future__ import annotations
 
 from collections import Counter
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from skidsteer_power.missions.routes import Route
 from skidsteer_power.powertrain import Powertrain
@@ -24,6 +25,7 @@ from skidsteer_power.studies.uncertainty import ParameterSpread, apply_powertrai
 
 if TYPE_CHECKING:
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -31,7 +33,7 @@ PERCENTILES = (5, 50, 95)
 MISSION_KEYS = ('energy_J', 'energy_battery_J', 'energy_terrain_J', 'energy_internal_J')
 
 
-def percentiles(values: Any, prefix: str) -> dict[str, float]:
+def percentiles(values: ArrayLike, prefix: str) -> dict[str, float]:
     """``{prefix_p05, prefix_p50, prefix_p95}`` of the finite values (nan if none)."""
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
@@ -39,7 +41,7 @@ def percentiles(values: Any, prefix: str) -> dict[str, float]:
 
 
 # ----------------------------------------------------------------------------------------- mission
-def _mission_task(job: tuple[Any, Any, Route, Any, str, str]) -> dict[str, float]:
+def _mission_task(job: tuple[Vehicle, Terrain, Route, Powertrain, str, str]) -> dict[str, float]:
     from skidsteer_power.missions.energy import run_mission
 
     vehicle, terrain, route, powertrain, source, model = job
@@ -61,7 +63,7 @@ def mission_uncertainty(
     method: str = 'sobol',
     source: str = 'map',
     model: str = 'fess',
-) -> dict[str, Any]:
+) -> JsonObject:
     """Energy percentiles of ``route`` over ``samples`` draws of ``spread`` (module doc).
 
     Returns energy_J_p05/p50/p95 (terrain + internal, the mission's ``energy_J``),
@@ -74,7 +76,7 @@ def mission_uncertainty(
         for s in sets
     ]
     results = engine.map(_mission_task, jobs, label=f'mission x {samples} samples')
-    out: dict[str, Any] = {}
+    out: JsonObject = {}
     for key in ('energy_J', 'energy_battery_J'):
         out |= percentiles([r[key] for r in results], key)
     out['uncertainty'] = {
@@ -94,7 +96,7 @@ def mission_uncertainty(
 
 # ------------------------------------------------------------------------------------ design study
 def _design_task(
-    job: tuple[int, list[dict[str, Any]], Any, str, dict[str, float]],
+    job: tuple[int, list[JsonObject], Terrain, str, dict[str, float]],
 ) -> list[tuple[int, float | None, bool]]:
     """(candidate index, merit, usable) of one sample's design-grid chunk."""
     from skidsteer_power.missions.design import evaluate_chunk, score
@@ -116,9 +118,9 @@ def design_uncertainty(
     seed: int = 0,
     method: str = 'sobol',
     model: str = 'fess',
-    rows: list[dict[str, Any]] | None = None,
+    rows: list[JsonObject] | None = None,
     parts_per_sample: int = 3,
-) -> dict[str, Any]:
+) -> JsonObject:
     """The design study repeated over ``samples`` draws (criterion: merit).
 
     Returns per configuration the probability that each candidate is the best (those best at least
@@ -150,7 +152,7 @@ def design_uncertainty(
     per_sample = len(parts)
     for k in range(samples):
         flat = [t for chunk in done[k * per_sample : (k + 1) * per_sample] for t in chunk]
-        best: dict[str, tuple[float, int]] = {}
+        best: dict[str, tuple[float | None, int]] = {}  # m is None only where not eligible
         for index, m, eligible in flat:
             merit[index].append(m if m is not None else np.nan)
             config = by_row[index]['configuration']

@@ -16,7 +16,7 @@ in its spread. Parameters with a zero spread are left out (they have no variance
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,12 +31,15 @@ from skidsteer_power.studies.uncertainty import (
 
 if TYPE_CHECKING:
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.jsonout import JsonObject
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 METRICS = ('energy_J', 'drawbar_pull_ratio', 'max_sinkage_m')
 
 
-def _task(job: tuple[Any, Any, Route, Any, str, str]) -> tuple[float, ...]:
+def _task(job: tuple[Vehicle, Terrain, Route, Powertrain, str, str]) -> tuple[float, ...]:
     from skidsteer_power.missions.energy import run_mission
 
     vehicle, terrain, route, powertrain, source, model = job
@@ -48,7 +51,7 @@ def _task(job: tuple[Any, Any, Route, Any, str, str]) -> tuple[float, ...]:
 
 def sobol_indices(
     engine: Engine,
-    vehicles: list[Any],
+    vehicles: list[Vehicle],
     terrain: Terrain,
     route: Route,
     spread: ParameterSpread,
@@ -57,7 +60,7 @@ def sobol_indices(
     seed: int = 0,
     source: str = 'map',
     model: str = 'fess',
-) -> dict[str, Any]:
+) -> JsonObject:
     """S1, ST and their 95 % confidence half-widths per vehicle, metric and parameter (module doc).
 
     ``samples`` is SALib's N (ideally a power of 2); the mission runs N (D + 2) times per vehicle.
@@ -74,7 +77,7 @@ def sobol_indices(
     names = [n for n in spread.names if sigma[n] > 0]
     if not names:
         raise InputError(f'{spread.source}: every parameter has a zero spread')
-    out: dict[str, Any] = {}
+    out: JsonObject = {}
     runs = 0
     for vehicle in vehicles:
         powertrain = Powertrain.for_vehicle(vehicle)

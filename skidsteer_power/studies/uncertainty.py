@@ -41,7 +41,7 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import yaml
@@ -50,6 +50,10 @@ from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.perturbed import apply_powertrain as apply_powertrain  # its home (re-export)
 from skidsteer_power.terramechanics.terrain import _UNIT_KEYS, Terrain
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
+    from skidsteer_power.terramechanics.terrain import TerrainNumbers
 
 DEFAULT_RELATIVE_SIGMA: dict[str, float] = {
     'n': 0.05,
@@ -177,10 +181,10 @@ def draw(
 
 def apply_terrain(terrain: Terrain, sample: Mapping[str, float]) -> Terrain:
     """``terrain`` with the sample's terrain parameters (SI) replaced (validated as any terrain)."""
-    changes: dict[str, Any] = {k: v for k, v in sample.items() if _is_terrain(k)}
+    changes = {k: v for k, v in sample.items() if _is_terrain(k)}
     if not changes:
         return terrain
-    return dataclasses.replace(terrain, name=f'{terrain.name}~', **changes)
+    return dataclasses.replace(terrain, name=f'{terrain.name}~', **cast('TerrainNumbers', changes))
 
 
 def _is_terrain(name: str) -> bool:
@@ -274,7 +278,7 @@ def spread_from_calibration(path: str | Path) -> ParameterSpread:
     return ParameterSpread(tuple(names), cov, f'calibration {path}')
 
 
-def _file_key(name: str, data: Mapping[str, Any]) -> str:
+def _file_key(name: str, data: Mapping[str, object]) -> str:
     """The key under which the terrain file gives field ``name`` (so its unit), else ``name``."""
     if name in data or (name in _UNIT_KEYS and _UNIT_KEYS[name][0] != name):
         return name
@@ -284,7 +288,7 @@ def _file_key(name: str, data: Mapping[str, Any]) -> str:
     return name
 
 
-def _field_and_factor(key: str, path: Any) -> tuple[str, float]:
+def _field_and_factor(key: str, path: str | Path) -> tuple[str, float]:
     """(parameter name, factor to SI) for a terrain file key, field name or powertrain name."""
     if _is_powertrain(key):
         return key, 1.0
@@ -297,7 +301,7 @@ def _field_and_factor(key: str, path: Any) -> tuple[str, float]:
     raise ConfigError(f'{path}: {key!r} is not a terrain or powertrain parameter')
 
 
-def _matrix(value: Any, n: int, where: str) -> np.ndarray:
+def _matrix(value: object, n: int, where: str) -> np.ndarray:
     try:
         out = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -307,13 +311,13 @@ def _matrix(value: Any, n: int, where: str) -> np.ndarray:
     return out
 
 
-def _number(value: Any, where: str) -> float:
+def _number(value: object, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(f'{where} must be a finite number, got {value!r}')
     return float(value)
 
 
-def _read_yaml(path: str | Path) -> dict[str, Any]:
+def _read_yaml(path: str | Path) -> JsonObject:
     try:
         data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
     except FileNotFoundError:
