@@ -7,7 +7,7 @@ command line's argument types) does not import scipy: ``skidsteer-power --help``
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from skidsteer_power.terramechanics.soil import (
@@ -64,7 +64,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:  # the names' own types: the imports above (mypy)
     module = _WHERE.get(name)
     if module is None:
         raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

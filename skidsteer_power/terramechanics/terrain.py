@@ -41,7 +41,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict, cast
 
 import yaml
 
@@ -49,6 +49,9 @@ from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.numeric import Real
 from skidsteer_power.terramechanics.ranges import RIGID_FIELD_RANGES
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 # Table 2.4 (Wong and Reece, dry sand): the only wheel coefficients the dissertation gives. Chapter 2
 # uses them for all three soils, and so do the presets here.
@@ -115,6 +118,26 @@ class Terrain:
         """Equivalent pressure-sinkage modulus kc/b + kphi [N/m^(n+2)] for contact width b [m]
         (eq. 2.1); a float or an array (:mod:`skidsteer_power.numeric`)."""
         return self.kc / b + self.kphi
+
+
+class TerrainNumbers(TypedDict, total=False):
+    """The numeric fields of a :class:`Terrain` (SI), as a mapping handed to its constructor or to
+    ``dataclasses.replace`` (a file's soil fields, a study's sampled parameters)."""
+
+    n: float
+    kc: float
+    kphi: float
+    c: float
+    phi: float
+    K: float
+    Kr: float | None
+    Kw: float | None
+    a0: float
+    a1: float
+    b0: float
+    b1: float
+    mu_lateral: float | None
+    rolling_resistance: float | None
 
 
 def _bad(name: str, field: str, why: str) -> ConfigError:
@@ -206,7 +229,7 @@ _TEXT_KEYS = ('name', 'shear_type', 'source', 'description', 'contact')
 _SKIPPED_KEYS = ('calibration',)
 
 
-def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain') -> Terrain:
+def terrain_from_mapping(data: Mapping[str, object], default_name: str = 'terrain') -> Terrain:
     """Build a :class:`Terrain` from table units (see module doc); ConfigError names a bad field."""
     if not isinstance(data, Mapping):
         raise ConfigError(
@@ -218,7 +241,7 @@ def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain')
         return _rigid_from_mapping(data, name)
     if contact != CONTACT_SOIL:
         raise _bad(name, 'contact', f"must be 'soil' or 'rigid', got {contact!r}")
-    fields: dict[str, Any] = {}
+    fields: dict[str, float] = {}
     for key, value in data.items():
         if key in _TEXT_KEYS or key in _SKIPPED_KEYS:
             continue
@@ -235,10 +258,10 @@ def terrain_from_mapping(data: Mapping[str, Any], default_name: str = 'terrain')
         if field not in fields:
             raise _bad(name, field if field != 'phi' else 'phi_deg', 'is missing')
     shear_type = str(data.get('shear_type', 'A')).upper()
-    return Terrain(name=name, shear_type=shear_type, **fields)
+    return Terrain(name=name, shear_type=shear_type, **cast('TerrainNumbers', fields))  # _UNIT_KEYS' fields
 
 
-def _rigid_from_mapping(data: Mapping[str, Any], name: str) -> Terrain:
+def _rigid_from_mapping(data: Mapping[str, object], name: str) -> Terrain:
     """A rigid terrain from its file fields (:data:`RIGID_FIELDS`, SI); soil fields are an error."""
     values: dict[str, float] = {}
     for key, value in data.items():
@@ -285,7 +308,7 @@ def rigid_terrain(
     )
 
 
-def terrain_fields(terrain: Terrain) -> dict[str, Any]:
+def terrain_fields(terrain: Terrain) -> JsonObject:
     """The fields a terrain file of ``terrain`` holds, SI units (phi as ``phi_deg`` [deg]): the soil
     fields of a soil, ``contact`` and :data:`RIGID_FIELDS` of rigid ground."""
     if terrain.is_rigid:
@@ -297,7 +320,7 @@ def terrain_fields(terrain: Terrain) -> dict[str, Any]:
             'rolling_resistance': float(terrain.rolling_resistance),
             'K': float(terrain.K),
         }
-    fields: dict[str, Any] = {'contact': CONTACT_SOIL}
+    fields: JsonObject = {'contact': CONTACT_SOIL}
     for key in ('n', 'kc', 'kphi', 'c'):
         fields[key] = float(getattr(terrain, key))
     fields['phi_deg'] = terrain.phi_deg
@@ -313,7 +336,7 @@ def terrain_fields(terrain: Terrain) -> dict[str, Any]:
 
 # Table units, exactly as printed. Tables 2.1-2.3 (dry sand, sandy loam, clay; K from Table 2.3 and
 # the text under Figure 2.10), Table 7.2 (sand bin), Table 8.2 (sandy soil), Table 8.3 (LETE sand).
-_PRESET_TABLES: dict[str, dict[str, Any]] = {
+_PRESET_TABLES: dict[str, dict[str, float]] = {
     'dry_sand': {'n': 1.1, 'kc_kN': 0.90, 'kphi_kN': 1523.4, 'c': 1000, 'phi_deg': 30, 'K': 0.025},
     'sandy_loam': {'n': 0.7, 'kc_kN': 5.3, 'kphi_kN': 1515.0, 'c': 1700, 'phi_deg': 29, 'K': 0.025},
     'clay': {'n': 0.5, 'kc_kN': 13.2, 'kphi_kN': 692.2, 'c': 4140, 'phi_deg': 13, 'K': 0.01},

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -209,7 +209,17 @@ def sinkage_at_slip(
     return z
 
 
-def _check_root(terrain: Terrain, res: Any, args: tuple[FloatArray, ...]) -> None:
+class _RootResult(Protocol):
+    """What :func:`_check_root` reads of the result of scipy's ``elementwise.find_root`` (untyped)."""
+
+    @property
+    def success(self) -> ArrayLike: ...
+
+    @property
+    def f_x(self) -> ArrayLike: ...
+
+
+def _check_root(terrain: Terrain, res: _RootResult, args: tuple[FloatArray, ...]) -> None:
     """``res``: the result of scipy's ``elementwise.find_root`` (untyped)."""
     bad = ~np.asarray(res.success) | ~(np.abs(np.asarray(res.f_x)) < BALANCE_TOL_N)
     if np.any(bad):
