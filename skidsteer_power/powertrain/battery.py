@@ -23,13 +23,16 @@ import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.powertrain.config import merged
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 SECONDS_PER_HOUR = 3600.0
 _MAX_SUBSTEP_SOC = 0.002  # RK4 sub-step size in SOC, small enough for the piecewise-linear OCV curve
@@ -109,7 +112,7 @@ class BatteryConfig:
         """
         return self.cells_in_series * np.interp(soc, self.soc_points, self.cell_ocv_V)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         data = asdict(self)
         data['soc_points'] = list(self.soc_points)
         data['cell_ocv_V'] = list(self.cell_ocv_V)
@@ -155,7 +158,7 @@ class Battery:
         self._refresh(current=self.state.current_A, power=self.state.power_W)
 
     @classmethod
-    def from_config(cls, config: Mapping[str, Any] | str | None, soc: float = 1.0) -> Battery:
+    def from_config(cls, config: Mapping[str, object] | str | None, soc: float = 1.0) -> Battery:
         """Build from a mapping (``preset`` expanded) or a preset name; full unless ``soc`` [-] given."""
         if config is None or isinstance(config, str):
             config = {'preset': config or 'test_robot'}
@@ -225,7 +228,7 @@ class Battery:
         self.state.drawn_J += power_W * used
         self._refresh(current=self.current_for_power(power_W, soc) if used > 0 else 0.0, power=power_W)
 
-    def run_profile(self, power_W: Any, dt_s: Any) -> None:
+    def run_profile(self, power_W: ArrayLike, dt_s: ArrayLike) -> None:
         """Step through a piecewise-constant power profile: ``power_W[k]`` [W] held for ``dt_s[k]`` [s]
         (e.g. a mission's battery power per segment), in order."""
         for power, dt in zip(np.ravel(power_W), np.ravel(dt_s), strict=True):
@@ -294,12 +297,12 @@ class Battery:
         return self.remaining_wh if math.isinf(t) else power_W * t / SECONDS_PER_HOUR
 
     # -- persistence ------------------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """Plain dict (config and state) that :meth:`from_dict` restores, e.g. as JSON or YAML."""
         return {'config': self.config.as_dict(), 'state': asdict(self.state)}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Battery:
+    def from_dict(cls, data: JsonObject) -> Battery:
         try:
             config = _parse_config(dict(data['config']))
             state = BatteryState(**{k: float(v) for k, v in dict(data['state']).items()})
@@ -309,14 +312,14 @@ class Battery:
         return cls(config, state)
 
 
-def _soc(value: Any) -> float:
+def _soc(value: float) -> float:
     soc = float(value)
     if not (0.0 <= soc <= 1.0):
         raise ConfigError(f'battery: state of charge must be in [0, 1], not {value}')
     return soc
 
 
-def _parse_config(cfg: Mapping[str, Any]) -> BatteryConfig:
+def _parse_config(cfg: JsonObject) -> BatteryConfig:
     try:
         curve = cfg.get('ocv_curve') or {}
         soc_points = tuple(float(v) for v in cfg.get('soc_points', curve.get('soc', ())))

@@ -27,13 +27,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Generic
+from typing import TYPE_CHECKING, Generic
 
 import numpy as np
 
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.numeric import Real, by_sign, real
-from skidsteer_power.powertrain.config import merged
+from skidsteer_power.powertrain.config import merged, to_float
 from skidsteer_power.powertrain.internal import SideResistance, side_from_config
 from skidsteer_power.powertrain.motor import (
     AMPLIFIERS,
@@ -124,7 +124,7 @@ class Powertrain:
     left: SideResistance
     right: SideResistance
     regen_efficiency: float | None = None
-    battery: str | Mapping[str, Any] | None = None
+    battery: str | Mapping[str, object] | None = None
     source: str = ''
     current_limit_A: float = DES_70_10.continuous_current_A
     bus_voltage_V: float | None = None
@@ -154,7 +154,7 @@ class Powertrain:
             return self.motor.nominal_voltage_V
 
     @classmethod
-    def from_config(cls, config: Mapping[str, Any] | None, running_gear: str = 'track') -> Powertrain:
+    def from_config(cls, config: Mapping[str, object] | None, running_gear: str = 'track') -> Powertrain:
         """Build from a config mapping (a vehicle's ``powertrain:`` section), ``preset`` expanded.
 
         An empty mapping means the test robot. Raises ConfigError for unknown or bad values.
@@ -292,13 +292,13 @@ comes from (datasheet, manual, or ASSUMED); ``calibration`` is the record ``skid
 writes (skidsteer_power/calibration/io.py), not read here."""
 
 
-def _check_keys(cfg: Mapping[str, Any]) -> None:
+def _check_keys(cfg: Mapping[str, object]) -> None:
     unknown = sorted(set(cfg) - set(KEYS))
     if unknown:
         raise ConfigError(f'powertrain: unknown key(s) {", ".join(unknown)}; known: {", ".join(KEYS)}')
 
 
-def _limit(value: Any) -> float:
+def _limit(value: object) -> float:
     """A current limit [A]: a number > 0, or null / inf for none."""
     if value is None:
         return float('inf')
@@ -308,9 +308,9 @@ def _limit(value: Any) -> float:
     return number
 
 
-def _nonnegative(value: Any, name: str) -> float:
+def _nonnegative(value: object, name: str) -> float:
     try:
-        number = float(value)
+        number = to_float(value)
     except (TypeError, ValueError):
         raise ConfigError(f'powertrain: {name} must be a number, not {value!r}') from None
     if np.isnan(number) or number < 0 or (np.isinf(number) and name != 'current_limit_A'):
@@ -318,9 +318,9 @@ def _nonnegative(value: Any, name: str) -> float:
     return number
 
 
-def _positive(value: Any, name: str) -> float:
+def _positive(value: object, name: str) -> float:
     try:
-        number = float(value)
+        number = to_float(value)
     except (TypeError, ValueError):
         raise ConfigError(f'powertrain: {name} must be a number, not {value!r}') from None
     if not np.isfinite(number) or number <= 0:

@@ -17,7 +17,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.numeric import Real, by_sign, real
@@ -198,7 +198,7 @@ AMPLIFIERS: dict[str, AmplifierConstants] = {'DES_70_10': DES_70_10, 'EFFECTIVE'
 """Amplifier presets a powertrain file names (``amplifier: DES_70_10``)."""
 
 
-def motor_from_config(value: str | Mapping[str, Any] | None) -> MotorConstants:
+def motor_from_config(value: str | Mapping[str, object] | None) -> MotorConstants:
     """The motor of a powertrain file's ``motor:`` entry: a preset name (:data:`MOTORS`), or a mapping
     ``{preset: EC45, <field>: <SI value>, ...}`` whose fields (those of :class:`MotorConstants`, SI
     units) replace the preset's; without ``preset`` every field must be given. None = EC-45.
@@ -206,7 +206,7 @@ def motor_from_config(value: str | Mapping[str, Any] | None) -> MotorConstants:
     return _from_config(value, MOTORS, 'EC45', 'motor')
 
 
-def amplifier_from_config(value: str | Mapping[str, Any] | None) -> AmplifierConstants:
+def amplifier_from_config(value: str | Mapping[str, object] | None) -> AmplifierConstants:
     """The amplifier of a powertrain file's ``amplifier:`` entry, as :func:`motor_from_config`."""
     return _from_config(value, AMPLIFIERS, 'DES_70_10', 'amplifier')
 

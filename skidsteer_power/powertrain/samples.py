@@ -22,7 +22,7 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -141,7 +141,7 @@ def read_bag(path: str | os.PathLike[str], topic: str = '/joint_states', stage: 
             if not connections:
                 raise InputError(f'{path}: no topic {topic} in the bag')
             for connection, _, raw in reader.messages(connections=connections):
-                msg: Any = reader.deserialize(raw, connection.msgtype)  # rosbags returns `object`
+                msg = cast('_JointState', reader.deserialize(raw, connection.msgtype))  # rosbags: `object`
                 _add_joint_state(samples, msg.name, msg.velocity, msg.effort, stage)
     except InputError:
         raise
@@ -150,6 +150,19 @@ def read_bag(path: str | os.PathLike[str], topic: str = '/joint_states', stage: 
     if not samples.groups:
         raise InputError(f'{path}: no left_motor/right_motor samples with velocity and effort on {topic}')
     return samples
+
+
+class _JointState(Protocol):
+    """What :func:`read_bag` reads of a ``sensor_msgs/msg/JointState`` as rosbags decodes it."""
+
+    @property
+    def name(self) -> Iterable[str]: ...
+
+    @property
+    def velocity(self) -> Iterable[float]: ...
+
+    @property
+    def effort(self) -> Iterable[float]: ...
 
 
 def _add_joint_state(
