@@ -39,7 +39,7 @@ import math
 import os
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 import yaml
 
@@ -47,6 +47,9 @@ from skidsteer_power import resources
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.terramechanics import ranges
 from skidsteer_power.terramechanics.ranges import Range
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 GRAVITY_M_S2 = 9.81  # [m/s^2], the value used throughout the dissertation
 
@@ -212,13 +215,13 @@ class Vehicle:
     cg_height_m: float
     tread_m: float
     yaw_inertia_kg_m2: float | None = None
-    powertrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    powertrain: JsonObject = field(default_factory=dict, hash=False)
     source: str = ''
-    drivetrain: dict[str, Any] = field(default_factory=dict, hash=False)
+    drivetrain: JsonObject = field(default_factory=dict, hash=False)
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
-    drive_controller: dict[str, Any] = field(default_factory=dict, hash=False)
-    measured_power: dict[str, Any] | list[Any] = field(default_factory=dict, hash=False)
+    drive_controller: JsonObject = field(default_factory=dict, hash=False)
+    measured_power: JsonObject | list[object] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -286,10 +289,10 @@ class Vehicle:
             return self.gear
         raise InputError(f'this needs a wheeled vehicle; {self.name!r} has tracks')
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
         """The flat fields of a vehicle file (:data:`FIELD_NAMES`; None: a field of the other running
         gear). :func:`vehicle_from_dict` builds the same vehicle from it."""
-        flat: dict[str, Any] = dict.fromkeys(FIELD_NAMES)
+        flat: JsonObject = dict.fromkeys(FIELD_NAMES)
         flat.update({f.name: getattr(self, f.name) for f in fields(self) if f.name != 'gear'})
         flat.update({f.name: getattr(self.gear, f.name) for f in fields(self.gear)})
         flat['running_gear'] = self.running_gear
@@ -338,7 +341,7 @@ def _validate(vehicle: Vehicle) -> None:
         raise ConfigError('source must be a string')
 
 
-def _gear_from_fields(values: dict[str, Any]) -> TrackGear | WheelGear:
+def _gear_from_fields(values: JsonObject) -> TrackGear | WheelGear:
     """The running gear named by ``values['running_gear']``, from (and removing) the gear keys of a
     vehicle file's mapping; an absent or null key is missing."""
     kind = values.pop('running_gear')
@@ -359,7 +362,7 @@ def _gear_from_fields(values: dict[str, Any]) -> TrackGear | WheelGear:
     return gear_class(**given)
 
 
-def vehicle_from_dict(data: Any, *, origin: str = '<dict>') -> Vehicle:
+def vehicle_from_dict(data: object, *, origin: str = '<dict>') -> Vehicle:
     """Build a validated :class:`Vehicle` from a mapping of the flat file keys (e.g. parsed YAML);
     ``origin`` names the source."""
     if not isinstance(data, dict):
