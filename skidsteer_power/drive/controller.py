@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal, TypedDict, cast
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from skidsteer_power.powertrain.motor import RPM, MotorConstants
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.powertrain.drivetrain import Powertrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -84,6 +85,24 @@ FILE_NUMBERS = (
     'current_limit_A',
 )
 FILE_KEYS = (*FILE_NUMBERS, 'ceiling', 'sources')
+
+
+class ControllerChanges(TypedDict, total=False):
+    """The attributes :meth:`DriveController.with_values` replaces: the numbers and the ceiling mode."""
+
+    wheel_separation_m: float
+    wheel_radius_m: float
+    wheel_separation_multiplier: float
+    left_wheel_radius_multiplier: float
+    right_wheel_radius_multiplier: float
+    max_speed_m_s: float
+    max_yaw_rate_rad_s: float
+    max_accel_m_s2: float
+    max_yaw_accel_rad_s2: float
+    max_jerk_m_s3: float
+    max_yaw_jerk_rad_s3: float
+    max_wheel_rad_s: float
+    ceiling: CeilingMode
 
 
 def set_point_limit_rpm(motor: MotorConstants) -> float:
@@ -208,9 +227,9 @@ class DriveController:
         )
         return any(math.isfinite(x) for x in limits)
 
-    def with_values(self, **values: Any) -> DriveController:
-        """A copy with some attributes replaced (validated again)."""
-        return replace(self, **values)
+    def with_values(self, **values: float | str) -> DriveController:
+        """A copy with some attributes replaced (validated again): numbers, ``ceiling`` a mode."""
+        return replace(self, **cast('ControllerChanges', values))  # each checked by __post_init__
 
     # -- steady set points (no time) ------------------------------------------------------------
     def apply(
@@ -360,7 +379,7 @@ def controller_for_vehicle(vehicle: Vehicle, powertrain: Powertrain | None = Non
     mapping declares the controller's own ``wheel_separation_m`` / ``wheel_radius_m``. Without a
     mapping: no acceleration limit and the DES 70/10 set-point limit of its motor, scaled (the
     project's des_driver)."""
-    data: Mapping[str, Any] = getattr(vehicle, 'drive_controller', None) or {}
+    data: JsonObject = getattr(vehicle, 'drive_controller', None) or {}
     origin = f'vehicle {vehicle.name!r}: drive_controller'
     if not isinstance(data, Mapping):
         raise ConfigError(f'{origin} must be a mapping, not {type(data).__name__}')
@@ -375,7 +394,7 @@ def controller_for_vehicle(vehicle: Vehicle, powertrain: Powertrain | None = Non
         raise ConfigError(
             f'{origin}: no source for {", ".join(missing)} (cite one under sources:, or ASSUMED)'
         )
-    values: dict[str, Any] = {k: data[k] for k in FILE_NUMBERS if k in data}
+    values: JsonObject = {k: data[k] for k in FILE_NUMBERS if k in data}
     ceiling_value = values.pop('max_wheel_speed_rad_s', SET_POINT_LIMIT)
     if ceiling_value == SET_POINT_LIMIT:
         if powertrain is None:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -39,6 +39,8 @@ from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
+
+    from skidsteer_power.jsonout import JsonObject
 
 __all__ = ['DriveIdentification', 'IdentifiedValue', 'identify']
 
@@ -71,7 +73,7 @@ class IdentifiedValue:
     evidence: int
     note: str
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         value = self.value if isinstance(self.value, str) or math.isfinite(self.value) else None
         return {
             'value': value,
@@ -94,18 +96,18 @@ class DriveIdentification:
     steady_points: int
     noise_rad_s: float
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         return {
             'steady_points': self.steady_points,
             'noise_rad_s': self.noise_rad_s,
             'values': {k: v.as_json() for k, v in self.values.items()},
         }
 
-    def vehicle_entries(self, source: str) -> dict[str, Any]:
+    def vehicle_entries(self, source: str) -> JsonObject:
         """The identified values as vehicle-file keys: ``max_speed_m_s``, ``max_yaw_rate_rad_s`` (top
         level) and a ``drive_controller`` mapping, each reached value with ``source`` as its source."""
-        top: dict[str, Any] = {}
-        drive: dict[str, Any] = {}
+        top: JsonObject = {}
+        drive: JsonObject = {}
         sources: dict[str, str] = {}
         file_key = {'max_wheel_rad_s': 'max_wheel_speed_rad_s'}
         for name, item in self.values.items():
