@@ -16,9 +16,9 @@ import hashlib
 import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 CACHE_ENV = 'SKIDSTEER_POWER_CACHE'
 _PACKAGE = Path(__file__).resolve().parent
@@ -68,7 +68,7 @@ def physics_digest() -> str:
     return digest.hexdigest()[:12]
 
 
-def options_digest(options: dict[str, Any]) -> str:
+def options_digest(options: Mapping[str, object]) -> str:
     """8 hex digits identifying build options (floats by repr, so 2 and 2.0 hash alike)."""
     norm = {
         k: (repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)

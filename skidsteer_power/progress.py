@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 class progress_bar:
@@ -16,7 +19,7 @@ class progress_bar:
     def __init__(self, enabled: bool | None, label: str, total: float) -> None:
         self.enabled = sys.stderr.isatty() if enabled is None else enabled
         self.label, self.total = label, total
-        self.bar: Any = None
+        self.bar: Progress | None = None
 
     def __enter__(self) -> Callable[..., None]:
         if not self.enabled:
@@ -24,7 +27,7 @@ class progress_bar:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        self.bar = Progress(
+        self.bar = bar = Progress(
             TextColumn('{task.description}'),
             BarColumn(),
             MofNCompleteColumn(),
@@ -32,9 +35,9 @@ class progress_bar:
             console=Console(stderr=True),
             transient=True,
         )
-        self.bar.start()
-        task = self.bar.add_task(self.label, total=self.total)
-        return lambda amount=1.0: self.bar.advance(task, amount)
+        bar.start()
+        task = bar.add_task(self.label, total=self.total)
+        return lambda amount=1.0: bar.advance(task, amount)
 
     def __exit__(self, *exc: object) -> None:
         if self.bar is not None:

@@ -36,7 +36,7 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> Any:  # Any: the lazily loaded names' own types (no TYPE_CHECKING imports yet)
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

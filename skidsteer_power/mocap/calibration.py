@@ -11,13 +11,16 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 import yaml
 
 from skidsteer_power.errors import ConfigError, InputError
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
 MIN_CALIBRATION_IMAGES = 3
@@ -50,7 +53,7 @@ class CameraCalibration:
         """(fx, fy) [px]."""
         return float(self.camera_matrix[0, 0]), float(self.camera_matrix[1, 1])
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Plain numbers for the CLI (px, dimensionless coefficients)."""
         k1, k2, _, _, k3 = (float(v) for v in self.dist_coeffs)
         return {

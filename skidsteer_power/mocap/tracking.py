@@ -14,7 +14,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -25,6 +25,9 @@ from skidsteer_power.mocap.calibration import CameraCalibration
 from skidsteer_power.mocap.config import TargetConfig
 from skidsteer_power.mocap.plane import GroundPlane, check_image_size, pixels_to_plane
 from skidsteer_power.mocap.target import TargetDetection, detect_target
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 DEFAULT_SAMPLE_HZ = 5.0  # the text samples its 30 fps video at 5 Hz (Figure 7.28)
 IMAGE_SUFFIXES = frozenset({'.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff'})
@@ -58,7 +61,7 @@ class TrackResult:
     fps: float
     sample_hz: float
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """The CLI's JSON payload (SI units)."""
         return {
             'radius_m': self.fit.radius_m,
