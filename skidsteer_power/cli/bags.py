@@ -8,7 +8,7 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import (
@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from skidsteer_power.bag_io.reader import BagReader
     from skidsteer_power.bag_io.record import Recorder
     from skidsteer_power.bags.validate import ValidateOptions
+    from skidsteer_power.jsonout import JsonObject
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
@@ -77,7 +78,7 @@ def _open(args: argparse.Namespace) -> BagReader:
     return bag
 
 
-def _integrity(bag: BagReader, undecodable: dict[str, int]) -> dict[str, Any]:
+def _integrity(bag: BagReader, undecodable: dict[str, int]) -> JsonObject:
     """The bag's integrity keys, with ``undecodable`` (skipped messages per topic) merged in."""
     out = bag.integrity()
     for topic, count in undecodable.items():

@@ -21,12 +21,15 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
+
+if TYPE_CHECKING:
+    from skidsteer_power.jsonout import JsonObject
 
 FIT_TO = ('torque', 'motion', 'both')  # = calibration.fit.FIT_TO (not imported: --help stays light)
 SETTLE_TOL, SETTLE_ABS_RAD_S, CMD_TOL, GAP_S = 0.1, 2.0, 0.01, 1.0  # = SegmentOptions()'s defaults
@@ -197,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
     result.seconds = time.perf_counter() - started
     name = args.name or out.stem
     io.write_terrain(out, result, args.bags, str(args.terrain), name)
-    payload: dict[str, Any] = result.as_json()
+    payload: JsonObject = result.as_json()
     payload['out_terrain'] = str(out)
     payload['out_powertrain'] = None
     if args.out_powertrain:
@@ -224,11 +227,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fmt(value: Any) -> str:
+def _fmt(value: object) -> str:
     return f'{value:.4g}' if isinstance(value, float) else str(value)
 
 
-def _print_human(payload: dict[str, Any]) -> None:
+def _print_human(payload: JsonObject) -> None:
     print(f'{"parameter":<17}{"value":>12}  {"95 % CI":<26}{"unit":<12}status')
     for name, p in payload['parameters'].items():
         ci = f'[{_fmt(p["ci95"][0])}, {_fmt(p["ci95"][1])}]' if p['ci95'] else '-'

@@ -34,7 +34,7 @@ import time
 import tty
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict, Unpack
 
 from skidsteer_power.des.errors import DesCrcError, DesFrameError
 from skidsteer_power.des.motor_model import (  # re-exported: the old import path of the motor model
@@ -668,10 +668,21 @@ class SimulatedDes:
             time.sleep(left)
 
 
+class SimulatorOptions(TypedDict, total=False):
+    """The keyword arguments of :class:`SimulatedDes` a :class:`SimulatedPair` gives both sides."""
+
+    config: DesConfig | None
+    model: MotorModel | None
+    motor: MotorConstants | None
+    link_path: str | None
+    emulate_baud: bool
+    latency_s: float
+
+
 class SimulatedPair:
     """Two virtual amplifiers, ``left`` and ``right`` (one per side, as on the robot)."""
 
-    def __init__(self, baudrate: int = 38400, **kwargs: Any) -> None:
+    def __init__(self, baudrate: int = 38400, **kwargs: Unpack[SimulatorOptions]) -> None:
         """``kwargs``: the keyword arguments of :class:`SimulatedDes` but ``name``, for both sides."""
         self.left = SimulatedDes(baudrate, name='des_left', **kwargs)
         self.right = SimulatedDes(baudrate, name='des_right', **kwargs)
