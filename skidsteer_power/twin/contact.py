@@ -16,7 +16,6 @@ a digging wheel's excavated step (Hegedus, as Ishigami et al. 2007 apply it,
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
@@ -74,10 +73,11 @@ def bulldozing_coefficients(terrain: Terrain) -> tuple[float, float]:
     return d1 * terrain.c, 0.5 * d1 * d2 * SOIL_UNIT_WEIGHT_N_M3
 
 
-def bulldozing_resistance(a: Any, b: Any, depth_m: Any) -> Any:
+def bulldozing_resistance(a: float | np.ndarray, b: float | np.ndarray, depth_m: np.ndarray) -> np.ndarray:
     """R_b = (A + B h) h [N/m] per unit length of side wall at depth h [m], from
-    :func:`bulldozing_coefficients` (floats or arrays, broadcast)."""
-    return (a + b * depth_m) * depth_m
+    :func:`bulldozing_coefficients` (A and B floats or arrays, broadcast against the depths)."""
+    resistance: np.ndarray = (a + b * depth_m) * depth_m
+    return resistance
 
 
 class Contact:

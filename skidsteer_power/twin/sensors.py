@@ -19,12 +19,13 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io.synthetic import NS, START_NS
@@ -33,6 +34,9 @@ from skidsteer_power.commands import Segment
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.terramechanics.ranges import COMMAND_ROWS, SIM_DURATION_S, check_file_size
 from skidsteer_power.twin.model import Twin
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import MsgType
 
 SENSOR_RATE_HZ = 50.0
 """Sample rate of the trace and of joint_states in the bag [Hz] (the des_driver's joint_states rate)."""
@@ -235,7 +239,7 @@ def _diverged(twin: Twin, what: str) -> ConvergenceError:
     )
 
 
-def _check_physical(twin: Twin, axle_torque_Nm: Any, bound_Nm: float) -> None:
+def _check_physical(twin: Twin, axle_torque_Nm: npt.ArrayLike, bound_Nm: float) -> None:
     """ConvergenceError when the twin's state is not finite or a side's axle torque [N m] exceeds
     ``bound_Nm`` (:data:`TRACTION_BOUND`): a trace that silently carries a diverged state would be
     read as a recording."""
@@ -382,7 +386,7 @@ def commands_from_csv(path: str | os.PathLike[str]) -> list[Segment]:
     return segments
 
 
-def _capped(reader: Any, file: Path) -> Any:
+def _capped(reader: Iterable[dict[str, str]], file: Path) -> Iterator[tuple[int, dict[str, str]]]:
     """(line, row) of ``reader``; InputError past ``COMMAND_ROWS`` rows, before reading further."""
     for line, row in enumerate(reader, start=2):
         if line - 1 > COMMAND_ROWS:
@@ -493,12 +497,12 @@ def write_bag(trace: TwinTrace, path: str | os.PathLike[str], *, start_ns: int =
     return Path(path)
 
 
-MessageClasses = Mapping[str, Any]
+MessageClasses: TypeAlias = 'Mapping[str, type[MsgType]]'
 """A typestore's message classes by type name (rosbags ``Typestore.types``): rosbags makes them at
 run time from the message definitions, so their constructors have no static signature."""
 
 
-def _header(types: MessageClasses, stamp_ns: int, frame: str) -> Any:
+def _header(types: MessageClasses, stamp_ns: int, frame: str) -> MsgType:
     sec, nsec = divmod(int(stamp_ns), NS)
     return types['std_msgs/msg/Header'](types['builtin_interfaces/msg/Time'](sec, nsec), frame)
 
@@ -522,7 +526,7 @@ def _odometry(types: MessageClasses, stamp_ns: int, pose: np.ndarray, twist: np.
 
 
 def _battery(types: MessageClasses, stamp_ns: int, trace: TwinTrace, i: int) -> object:
-    msg = types['sensor_msgs/msg/BatteryState']
+    msg: Any = types['sensor_msgs/msg/BatteryState']  # Any: its POWER_SUPPLY_* constants are made at run time
     nan = float('nan')
     return msg(
         header=_header(types, stamp_ns, 'base_link'),
