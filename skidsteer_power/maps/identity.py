@@ -8,8 +8,9 @@ rebuilds it, a user's ``--map FILE`` is refused; never used.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.cache import physics_digest
 from skidsteer_power.errors import MapMismatchError
@@ -40,7 +41,7 @@ def map_identity(vehicle: Vehicle, terrain: Terrain, model: str = 'fess') -> dic
 
 
 def check_identity(
-    source: Path, meta: dict[str, Any], vehicle: Vehicle | None, terrain: Terrain | None
+    source: Path, meta: Mapping[str, object], vehicle: Vehicle | None, terrain: Terrain | None
 ) -> None:
     """MapMismatchError unless the map at ``source`` (its stored ``meta``) was built by this physics
     code and, where given, for ``vehicle`` and ``terrain``."""

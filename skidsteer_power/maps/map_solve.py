@@ -7,13 +7,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol, TypeAlias
 
 import numpy as np
 
+from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.maps.grid_angles import _angle_coordinate, _angle_from_coordinate
 
+if TYPE_CHECKING:
+    from skidsteer_power.models.fess import FessSolver
+
 SLIP_LIMIT = 0.7  # slip ratio from which a node counts as at the traction limit (module doc) [-]
+Ring: TypeAlias = dict[str, np.ndarray]
+"""One ring of solved points by quantity (:func:`_solve_row`: torque, slip, omega (P, 2); s0, sinkage,
+margin, slip_ratio, converged, limited (P,))."""
+
+
+class PowerAnswer(Protocol):
+    """What :func:`_check_cells` reads of a map's answer
+    (:class:`~skidsteer_power.maps.power_map.MapQuery`)."""
+
+    @property
+    def total_power_W(self) -> float | np.ndarray: ...  # [W]
 
 
 class GridMap(Protocol):
@@ -24,12 +39,12 @@ class GridMap(Protocol):
     angles: np.ndarray  # (Npsi,) turn angle [rad]
     length_m: float  # L [m]
     values: dict[str, np.ndarray]
-    meta: dict[str, Any]
+    meta: JsonObject
 
-    def query(self, speed: Any, yaw_rate: Any) -> Any: ...
+    def query(self, speed: np.ndarray, yaw_rate: np.ndarray) -> PowerAnswer: ...
 
 
-def _solve_row(solver: Any, v: np.ndarray, w: np.ndarray, r_min: float) -> dict[str, Any]:
+def _solve_row(solver: FessSolver, v: np.ndarray, w: np.ndarray, r_min: float) -> Ring:
     """One ring of points (V, w_z): FESS at (V_eff, w_z), V_eff = max(V, r_min |w_z|) (the
     small-radius limit), each from FESS's own first guess (:meth:`PowerMap.build` re-solves failures)."""
     veh = solver.vehicle
@@ -81,7 +96,7 @@ def _spin_symmetric(
 
 
 def _check_cells(
-    power_map: GridMap, solver: Any, r_min: float, ring_done: Callable[[int], None] | None = None
+    power_map: GridMap, solver: FessSolver, r_min: float, ring_done: Callable[[int], None] | None = None
 ) -> np.ndarray:
     """The build-time accuracy check (module doc): the relative total-power error [-] of the map at
     the centre of every cell a query could answer unflagged, against FESS solved there (with the
@@ -120,7 +135,7 @@ def _check_cells(
     return out
 
 
-def _mirror(row: dict[str, Any], n_psi: int) -> dict[str, Any]:
+def _mirror(row: Ring, n_psi: int) -> Ring:
     """Extend a ring solved for psi >= 0 to all ``n_psi`` angles: the right turn at -psi is the
     left turn at psi with left and right swapped (s0, sinkage and margin unchanged)."""
     m = len(row['converged'])
@@ -135,7 +150,7 @@ def _mirror(row: dict[str, Any], n_psi: int) -> dict[str, Any]:
     return out
 
 
-def _assemble(rows: list[dict[str, Any]]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+def _assemble(rows: list[Ring]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     torque = np.stack([r['torque'] for r in rows])  # (Nv, Nw, 2)
     slip = np.stack([r['slip'] for r in rows])
     converged = np.stack([r['converged'] for r in rows])

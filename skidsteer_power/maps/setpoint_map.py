@@ -49,7 +49,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -72,6 +72,7 @@ from skidsteer_power.vehicle import vehicle_fingerprint
 
 if TYPE_CHECKING:
     from skidsteer_power.drive.controller import DriveController
+    from skidsteer_power.powertrain.drivetrain import MotorPoint
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 
@@ -107,7 +108,10 @@ class SetpointQuery:
     limited: bool
     clamped: bool
     reason: str
-    motors: tuple[Any, Any] = (None, None)  # each side's MotorPoint (the estimator reuses them)
+    motors: tuple[MotorPoint[float] | None, MotorPoint[float] | None] = (
+        None,
+        None,
+    )  # the estimator reuses them
 
     @property
     def turn_radius_m(self) -> float:
@@ -357,7 +361,7 @@ class SetpointMap:
         left, right, clamped = pred.controller.apply_one(v, w, ceiling_rad_s=pred.max_axle_rad_s)
         return (left, right), clamped
 
-    def _side(self, side: str, torque: float, omega: float) -> tuple[float, float, Any, bool]:
+    def _side(self, side: str, torque: float, omega: float) -> tuple[float, float, MotorPoint[float], bool]:
         """(torque [N m], current [A], motor point (:class:`MotorPoint`), over the limit) of one side
         under the current limit (:func:`~skidsteer_power.drive.current.current_limited`, the direct
         path's formula, in floats)."""
