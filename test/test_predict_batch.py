@@ -109,7 +109,9 @@ def test_a_side_the_current_limit_holds_back_reports_its_real_motion() -> None:
     assert abs(held.current[0, 1]) <= 8.0 and abs(held.current[0, 1]) > 8.0 * 0.99  # at the limit
     assert 0 < held.speed[0] < full.speed[0] and 0 < held.yaw_rate[0] < full.yaw_rate[0]
     record = held.record(0)
-    assert record['omega_right_rad_s'] < record['setpoint_right_rad_s']
+    omega_right, setpoint_right = record['omega_right_rad_s'], record['setpoint_right_rad_s']
+    assert isinstance(omega_right, float) and isinstance(setpoint_right, float)  # a record's numbers
+    assert omega_right < setpoint_right
 
 
 def test_a_side_that_needs_more_than_the_limit_at_any_speed_stalls() -> None:

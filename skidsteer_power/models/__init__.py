@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.errors import InputError
 from skidsteer_power.models.base import SteadyState
@@ -46,7 +46,7 @@ def solve(
     speed: npt.ArrayLike,
     turn_radius: npt.ArrayLike,
     model: str = 'fess',
-    **options: Any,
+    **options: object,
 ) -> SteadyState:
     """Solve the steady state of ``vehicle`` on ``terrain`` with the named ``model``."""
     try:

@@ -9,7 +9,6 @@ equal). Every field is a numpy array broadcast over the operating points.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import Any
 
 import numpy as np
 
@@ -58,15 +57,29 @@ class SteadyState:
     @classmethod
     def unsolved(cls, speed: np.ndarray, turn_radius: np.ndarray, model: str) -> SteadyState:
         """Every point not converged (NaN results): a batch the model could not even set up."""
-        fixed = ('speed_m_s', 'turn_radius_m', 'converged', 'model', 'extra')
         shape = np.shape(speed)
-        results: dict[str, Any] = {f.name: np.full(shape, np.nan) for f in fields(cls) if f.name not in fixed}
+
+        def nan() -> np.ndarray:
+            return np.full(shape, np.nan)
+
         return cls(
             speed_m_s=np.asarray(speed, dtype=float),
             turn_radius_m=np.asarray(turn_radius, dtype=float),
+            s0_m=nan(),
+            omega_outer_rad_s=nan(),
+            omega_inner_rad_s=nan(),
+            torque_outer_Nm=nan(),
+            torque_inner_Nm=nan(),
+            power_outer_W=nan(),
+            power_inner_W=nan(),
+            slip_outer=nan(),
+            slip_inner=nan(),
+            thrust_outer_N=nan(),
+            thrust_inner_N=nan(),
+            sinkage_m=nan(),
+            traction_margin=nan(),
             converged=np.zeros(shape, dtype=bool),
             model=model,
-            **results,
         )
 
     @property

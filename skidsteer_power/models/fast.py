@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import elementwise
@@ -30,7 +30,13 @@ from scipy.optimize import elementwise
 from skidsteer_power.cache import atomic_file
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.models.base import SteadyState
-from skidsteer_power.models.loads import omega_for_slip, operating_points, side_loads, sideslip_angle
+from skidsteer_power.models.loads import (
+    OperatingPoints,
+    omega_for_slip,
+    operating_points,
+    side_loads,
+    sideslip_angle,
+)
 from skidsteer_power.terramechanics.track import compaction_resistance, track_sinkage, tractive_effort
 
 if TYPE_CHECKING:
@@ -101,7 +107,7 @@ def _mu_t_from_balance(vehicle: Vehicle, terrain: Terrain, state: SteadyState) -
     return mu_t.reshape(np.shape(state.s0_m))
 
 
-def _resistances(vehicle: Vehicle, terrain: Terrain, pts: Any) -> tuple[np.ndarray, np.ndarray]:
+def _resistances(vehicle: Vehicle, terrain: Terrain, pts: OperatingPoints) -> tuple[np.ndarray, np.ndarray]:
     lo, li = side_loads(vehicle, pts)
     tracks = vehicle.tracks()
     width, length = float(tracks.track_width_m), float(tracks.track_length_m)
@@ -176,7 +182,7 @@ def solve(
     source: str = 'wong',
     tables: TurningTables | None = None,
     raise_on_failure: bool | None = None,
-    **options: Any,
+    **options: object,
 ) -> SteadyState:
     """Chapter 5 fast model at forward speed V [m/s] and signed turning radius R [m] (inf straight).
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import time
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -485,7 +485,7 @@ def solve(
     n: int = DEFAULT_ELEMENTS,
     raise_on_failure: bool | None = None,
     tol: float = FORCE_TOL_N,
-    **options: Any,
+    **options: object,
 ) -> SteadyState:
     """FESS steady state at forward speed V [m/s] and signed turning radius R [m] (inf = straight).
 

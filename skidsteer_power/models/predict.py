@@ -23,7 +23,7 @@ motor pushing with the limit current (:data:`REASON_STALL`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -71,6 +71,9 @@ JSON_KEYS = (
     'reason',
 )
 """The keys of ``skidsteer-power predict --json`` (DESIGN.md), in order."""
+PredictRecord: TypeAlias = dict[str, float | bool | str | None]
+"""One command's record (keys :data:`JSON_KEYS`): numbers, the two flags, the reason; ``predict`` makes
+an undefined turn radius (at rest) None."""
 
 
 @dataclass
@@ -102,7 +105,7 @@ class CommandPrediction:
     reason: list[str]
     omega: np.ndarray | None = None  # None: the set points
 
-    def record(self, k: int) -> dict[str, Any]:
+    def record(self, k: int) -> PredictRecord:
         """Point ``k`` as the JSON record of ``skidsteer-power predict`` (keys :data:`JSON_KEYS`)."""
         left, right = 0, 1
         omega = self.setpoint if self.omega is None else self.omega
@@ -125,7 +128,7 @@ class CommandPrediction:
             self.current[k, right],
             self.battery_power[k],
         )
-        out: dict[str, Any] = {key: float(v) for key, v in zip(JSON_KEYS, values, strict=False)}
+        out: PredictRecord = {key: float(v) for key, v in zip(JSON_KEYS, values, strict=False)}
         out.update(limited=bool(self.limited[k]), clamped=bool(self.clamped[k]), reason=self.reason[k])
         return out
 

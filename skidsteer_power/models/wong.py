@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 from numpy.typing import ArrayLike
 
@@ -18,7 +17,7 @@ from skidsteer_power.vehicle import Vehicle
 
 
 def solve(
-    vehicle: Vehicle, terrain: Terrain, speed: ArrayLike, turn_radius: ArrayLike, **options: Any
+    vehicle: Vehicle, terrain: Terrain, speed: ArrayLike, turn_radius: ArrayLike, **options: object
 ) -> SteadyState:
     """Steady state by Wong's theory for speed V [m/s] and signed turning radius R [m] (inf straight)."""
     return solver_for(vehicle)(vehicle, terrain, speed, turn_radius, **options)
