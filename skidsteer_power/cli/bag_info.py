@@ -14,9 +14,32 @@ from __future__ import annotations
 import argparse
 import datetime
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit
+
+
+class TopicLine(TypedDict):
+    """One topic of :class:`BagInfo`: its name, ROS type, message count and serialization format."""
+
+    topic: str
+    type: str
+    count: int
+    serialization_format: str
+
+
+class BagInfo(TypedDict):
+    """The ``--json`` keys of ``info`` (sizes in bytes, times in ns since the epoch)."""
+
+    bag: str
+    files: list[str]
+    size_bytes: int
+    storage: str
+    duration_s: float
+    start_ns: int
+    end_ns: int
+    messages: int
+    topics: list[TopicLine]
 
 
 def register(subparsers: Subcommands) -> None:
@@ -32,7 +55,7 @@ def register(subparsers: Subcommands) -> None:
     parser.set_defaults(func=_cmd_info)
 
 
-def bag_info(path: str, msg: list[str] | None = None) -> dict[str, Any]:
+def bag_info(path: str, msg: list[str] | None = None) -> BagInfo:
     """The ``--json`` keys of ``info`` for the bag at ``path`` (InputError if it cannot be opened)."""
     from skidsteer_power.bag_io.reader import load_msg_definitions, open_bag
 
@@ -71,7 +94,7 @@ def _time_text(ns: int) -> str:
     return f'{when:%b %d %Y %H:%M:%S}.{ns % 1_000_000_000 // 1_000_000:03d} ({ns // 10**9}.{ns % 10**9:09d})'
 
 
-def info_text(info: dict[str, Any]) -> str:
+def info_text(info: BagInfo) -> str:
     """``ros2 bag info``'s layout (rosbag2 Jazzy: labels padded to 19 columns)."""
     topics = info['topics']
     lines = [

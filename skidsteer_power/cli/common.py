@@ -11,8 +11,8 @@ import json
 import math
 import os
 import sys
-from collections.abc import Iterator
-from typing import Any, TypeAlias
+from collections.abc import Iterator, Mapping
+from typing import TypeAlias
 
 import numpy as np
 
@@ -20,7 +20,7 @@ Subcommands: TypeAlias = 'argparse._SubParsersAction[argparse.ArgumentParser]'
 """What ``register(subparsers)`` of each command module is given (``add_parser`` makes a command)."""
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: object) -> object:
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -34,20 +34,20 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def print_json(payload: dict[str, Any]) -> None:
+def print_json(payload: Mapping[str, object]) -> None:
     """Print ``payload`` as JSON (numpy values converted; NaN -> null, inf -> "inf")."""
     json.dump(_plain(payload), sys.stdout, indent=2)
     sys.stdout.write('\n')
 
 
-def print_table(payload: dict[str, Any]) -> None:
+def print_table(payload: Mapping[str, object]) -> None:
     """Print ``key  value`` lines for a human."""
     width = max((len(k) for k in payload), default=0)
-    for key, value in _plain(payload).items():
-        print(f'{key:<{width}}  {value}')
+    for key, value in payload.items():
+        print(f'{key:<{width}}  {_plain(value)}')
 
 
-def emit(payload: dict[str, Any], as_json: bool) -> None:
+def emit(payload: Mapping[str, object], as_json: bool) -> None:
     (print_json if as_json else print_table)(payload)
 
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -36,11 +36,18 @@ from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import Range
 
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import MsgType
+
+    from skidsteer_power.bag_io.writer import BagWriter
+    from skidsteer_power.estimator.inputs import JointMap
+
 MAX_ROWS = Range('rows', 0, 5_000_000, 'rows', positive=True, integer=True)
 """Largest CSV (rows, each file) an import reads: ~2.3 h of 100 Hz data x 2 (issue 28's rule)."""
 START_NS = 1_700_000_000 * 10**9
 """The bag's clock at the CSV's time 0 [ns] (a CSV keeps relative time only)."""
-PRESETS: dict[str, dict[str, Any]] = {
+PRESETS: dict[str, dict[str, str]] = {
     'borealtc': {
         'time': 'time',
         'left_speed': 'velL',
@@ -184,7 +191,11 @@ class _BagOut:
     """The import's bag: its topics, a typestore, and a count of messages per topic."""
 
     def __init__(
-        self, writer: Any, signals: Signals, current_topics: tuple[str, str], voltage_topics: tuple[str, str]
+        self,
+        writer: BagWriter,
+        signals: Signals,
+        current_topics: tuple[str, str],
+        voltage_topics: tuple[str, str],
     ) -> None:
         from rosbags.typesys import Stores, get_typestore
 
@@ -207,11 +218,11 @@ class _BagOut:
         )
         self.imu = writer.add_topic('/imu/data', 'sensor_msgs/msg/Imu') if signals.yaw is not None else None
 
-    def put(self, connection: Any, stamp_ns: int, msg: Any, msgtype: str) -> None:
+    def put(self, connection: Connection, stamp_ns: int, msg: object, msgtype: str) -> None:
         self.writer.write(connection, stamp_ns, self.store.serialize_cdr(msg, msgtype))
         self.counts[connection.topic] = self.counts.get(connection.topic, 0) + 1
 
-    def header(self, t_ns: int) -> Any:
+    def header(self, t_ns: int) -> MsgType:
         stamp = self.types['builtin_interfaces/msg/Time'](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
         return self.types['std_msgs/msg/Header'](stamp=stamp, frame_id='')
 
@@ -230,9 +241,17 @@ class _BagOut:
             linear_acceleration=vec(0.0, 0.0, 0.0),
             linear_acceleration_covariance=zero9,
         )
+        assert self.imu is not None  # the topic exists whenever a yaw rate was read
         self.put(self.imu, t_ns, msg, 'sensor_msgs/msg/Imu')
 
-    def row(self, t_ns: int, cmd: np.ndarray, currents: Any, voltages: Any, joints: tuple[Any, ...]) -> None:
+    def row(
+        self,
+        t_ns: int,
+        cmd: np.ndarray,
+        currents: np.ndarray | None,
+        voltages: np.ndarray | None,
+        joints: tuple[list[str], np.ndarray, np.ndarray],
+    ) -> None:
         """One CSV row: the command, the currents and voltages, then joint_states (after them)."""
         vec = self.types['geometry_msgs/msg/Vector3']
         twist = self.types['geometry_msgs/msg/Twist'](
@@ -241,6 +260,7 @@ class _BagOut:
         self.put(self.cmd, t_ns, twist, 'geometry_msgs/msg/Twist')
         for values, connections in ((currents, self.current), (voltages, self.voltage)):
             for k, connection in enumerate(connections):
+                assert values is not None  # a side's topics exist only where its values were recorded
                 msg = self.types['std_msgs/msg/Float64'](data=float(values[k]))
                 self.put(connection, t_ns, msg, 'std_msgs/msg/Float64')
         names, position, velocity = joints
@@ -253,7 +273,7 @@ class _BagOut:
 def write_bag(
     output: Path,
     signals: Signals,
-    joints: Any,
+    joints: JointMap,
     radius_m: float,
     topics: tuple[tuple[str, str], tuple[str, str]],
 ) -> dict[str, int]:
@@ -286,6 +306,21 @@ def write_bag(
     return out.counts
 
 
+class ImportSummary(TypedDict):
+    """What :func:`import_csv` wrote (the ``--json`` keys): the bag, its sources, the vehicle, the CSV's
+    rows and duration [s], messages per topic, where the command came from and the wheel radius [m]."""
+
+    bag: str
+    csv: str
+    imu_csv: str | None
+    vehicle: str
+    rows: int
+    duration_s: float
+    messages: dict[str, int]
+    command: str
+    wheel_radius_m: float
+
+
 def import_csv(
     path: Path,
     output: Path,
@@ -305,7 +340,7 @@ def import_csv(
         'right_drive/status/battery_voltage',
     ),
     max_rows: int = int(MAX_ROWS.high),
-) -> dict[str, Any]:
+) -> ImportSummary:
     """Write the bag (module docstring); return what was written (topics, message counts, duration)."""
     from skidsteer_power.estimator import factory
 

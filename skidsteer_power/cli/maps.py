@@ -22,7 +22,7 @@ import sys
 import time
 import zipfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, finite_float
@@ -39,6 +39,9 @@ from skidsteer_power.terramechanics.ranges import (
 )
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 def register(subparsers: Subcommands) -> None:
@@ -82,7 +85,7 @@ def register(subparsers: Subcommands) -> None:
     show.set_defaults(func=run_show)
 
 
-def _progress_bar(enabled: bool) -> Any:
+def _progress_bar(enabled: bool) -> Progress | None:
     """A rich progress bar on stderr (None when disabled or stderr is not a terminal)."""
     if not enabled or not sys.stderr.isatty():
         return None

@@ -10,8 +10,9 @@ candidates: [...], criterion. sensitivity --json: results: {vehicle: {baseline, 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positive_float
@@ -23,6 +24,14 @@ from skidsteer_power.terramechanics.ranges import (
     SAMPLES,
     SEED,
 )
+
+if TYPE_CHECKING:
+    from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.missions.routes import Route
+    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.studies.uncertainty import ParameterSpread
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 PACKBOTS = ('packbot_track', 'packbot_4wheel', 'packbot_6wheel')
 MODEL_CHOICES = ('fess', 'wong', 'steeds', 'icr', 'fast')
@@ -179,7 +188,7 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, calibration: bool) -> None
     add_engine_args(g)
 
 
-def _spread(args: argparse.Namespace, terrain: Any, powertrain: Any) -> Any:
+def _spread(args: argparse.Namespace, terrain: Terrain, powertrain: Powertrain) -> ParameterSpread:
     from skidsteer_power.studies import uncertainty
 
     if args.samples < 0:
@@ -191,7 +200,7 @@ def _spread(args: argparse.Namespace, terrain: Any, powertrain: Any) -> Any:
     return uncertainty.default_spread(terrain, powertrain)
 
 
-def _engine(args: argparse.Namespace) -> Any:
+def _engine(args: argparse.Namespace) -> Engine:
     from skidsteer_power.distributed.engine import Engine
 
     return Engine(args.scheduler, None if args.scheduler else _workers(args.workers))
@@ -201,14 +210,14 @@ def _source(args: argparse.Namespace) -> str:
     return 'direct' if args.direct or args.model != 'fess' else 'map'
 
 
-def _load(vehicle: str, terrain: str) -> tuple[Any, Any]:
+def _load(vehicle: str, terrain: str) -> tuple[Vehicle, Terrain]:
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.vehicle import load_vehicle
 
     return load_vehicle(vehicle), load_terrain(terrain)
 
 
-def _route(spec: str, speed: float | None, payload: float | None) -> Any:
+def _route(spec: str, speed: float | None, payload: float | None) -> Route:
     import dataclasses
 
     from skidsteer_power.missions.routes import resolve_route, search_retrieve
@@ -401,7 +410,7 @@ def run_design_cmd(args: argparse.Namespace) -> int:
     return 0
 
 
-def _design_line(best: dict[str, Any]) -> str:
+def _design_line(best: Mapping[str, object]) -> str:
     shape = (
         f'm {best["mass_kg"]:g} kg, width {best["width_m"]:g} m, radius {best["radius_m"]:g} m, '
         f'length/wheelbase {best["length_or_wheelbase_m"]:g} m, tread {best["tread_m"]:g} m'

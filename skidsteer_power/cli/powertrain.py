@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, nonnegative_float
 from skidsteer_power.errors import InputError
+from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.powertrain.drivetrain import Powertrain
-from skidsteer_power.powertrain.internal import COMPONENTS, components_from_stages, fit_internal
+from skidsteer_power.powertrain.internal import COMPONENTS, InternalFit, components_from_stages, fit_internal
 from skidsteer_power.powertrain.samples import read_bag, read_csv
 from skidsteer_power.vehicle import load_vehicle
 
@@ -54,8 +54,8 @@ def run(args: argparse.Namespace) -> int:
         samples = read_csv(path, kt)
     else:
         samples = read_bag(path, args.topic, args.stage)
-    fits: dict[str, dict[str, Any]] = {}
-    stage_fits: dict[str, dict[str, Any]] = {}
+    fits: dict[str, dict[str, dict[str, float]]] = {}  # side -> stage -> coefficients, rms, n
+    stage_fits: dict[str, dict[str, InternalFit]] = {}
     for (side, stage), (omega, torque) in sorted(samples.arrays().items()):
         keep = np.abs(omega) >= args.min_speed
         try:
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         }
         if stage != 'all':
             stage_fits.setdefault(side, {})[stage] = fit
-    payload: dict[str, Any] = {'torque_constant_Nm_A': kt, 'fits': fits}
+    payload: JsonObject = {'torque_constant_Nm_A': kt, 'fits': fits}
     if stage_fits:
         payload['components'] = {
             side: {

@@ -21,8 +21,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
@@ -31,6 +32,9 @@ from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, SPEED_
 
 if TYPE_CHECKING:
     from skidsteer_power.maps.setpoint_map import SetpointQuery
+    from skidsteer_power.models.predict import PredictRecord
+    from skidsteer_power.terramechanics.terrain import Terrain
+    from skidsteer_power.vehicle import Vehicle
 
 # The heavy parts (maps, models: numpy, scipy) are imported in run_predict: `skidsteer-power --help`
 # stays fast (cli/main.py).
@@ -103,8 +107,8 @@ def run_predict(args: argparse.Namespace) -> int:
 
 
 def predict_records(
-    vehicle: Any, terrain: Any, commands: list[tuple[float, float]], direct: bool
-) -> list[dict[str, Any]]:
+    vehicle: Vehicle, terrain: Terrain, commands: list[tuple[float, float]], direct: bool
+) -> list[PredictRecord]:
     """predict's record (keys ``JSON_KEYS``) of each command (V [m/s], w_z [rad/s]): one batched
     direct solve, or one set-point map query each (the map built once and cached)."""
     from skidsteer_power.maps.setpoint_map import load_or_build
@@ -155,10 +159,10 @@ def read_commands(path: Path, max_rows: int) -> list[tuple[float, float]]:
     return rows
 
 
-def _command(path: Path, line: int, row: dict[str, Any]) -> tuple[float, float]:
+def _command(path: Path, line: int, row: Mapping[str, str]) -> tuple[float, float]:
     try:
         speed, yaw_rate = (float(row[k]) for k in COLUMNS)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError):  # TypeError: csv gives a short row's missing cells as None
         raise InputError(f'{path}:{line}: {" and ".join(COLUMNS)} must be numbers') from None
     try:
         return SPEED_M_S.check(speed), COMMAND_YAW_RATE_RAD_S.check(yaw_rate)
@@ -166,7 +170,7 @@ def _command(path: Path, line: int, row: dict[str, Any]) -> tuple[float, float]:
         raise InputError(f'{path}:{line}: {err}') from None
 
 
-def _csv_cell(value: Any) -> str:
+def _csv_cell(value: object) -> str:
     if value is None:
         return ''
     if isinstance(value, str):
@@ -200,8 +204,8 @@ JSON_KEYS = (
 written here so that the command's module imports no model."""
 
 
-def _map_record(speed: float, yaw_rate: float, q: SetpointQuery) -> dict[str, Any]:
-    record: dict[str, Any] = {
+def _map_record(speed: float, yaw_rate: float, q: SetpointQuery) -> PredictRecord:
+    record: PredictRecord = {
         'speed_cmd_m_s': speed,
         'yaw_rate_cmd_rad_s': yaw_rate,
         'turn_radius_m': q.turn_radius_m,

@@ -18,7 +18,7 @@ import contextlib
 import math
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli import _ros_names
@@ -26,6 +26,12 @@ from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, positiv
 from skidsteer_power.errors import InputError
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 from skidsteer_power.terramechanics.ranges import COMMAND_YAW_RATE_RAD_S, RECORD_DURATION_S, SPEED_M_S
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from skidsteer_power.nodes.param_spec import ParamValue
+    from skidsteer_power.nodes.suite import Suite
 
 HARDWARE_PORTS = ('/dev/ttyUSB0', '/dev/ttyUSB1')
 """Default serial ports of the left and right amplifiers."""
@@ -98,7 +104,18 @@ def register(subparsers: Subcommands) -> None:
     parser.set_defaults(func=run)
 
 
-def _snapshot(suite: Any) -> dict[str, Any]:
+class _Snapshot(TypedDict):
+    """The estimator's battery and energy at one moment (SI units, energy in W h and J)."""
+
+    soc: float
+    remaining_wh: float
+    energy_source: str
+    energy_used_J: float
+    battery_W: float
+    rejected_inputs: int
+
+
+def _snapshot(suite: Suite) -> _Snapshot:
     estimator = suite.estimator
     now = estimator.now_s()
     with estimator._lock:
@@ -185,14 +202,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _estimator_params(args: argparse.Namespace) -> dict[str, Any]:
-    params: dict[str, Any] = {'cmd_vel_type': args.cmd_vel_type}
+def _estimator_params(args: argparse.Namespace) -> dict[str, ParamValue]:
+    params: dict[str, ParamValue] = {'cmd_vel_type': args.cmd_vel_type}
     if args.simulate and not args.state_file and not args.resume_energy:
         params['persist'] = False  # a simulation starts with a full battery and leaves no state behind
     return params
 
 
-def _drive(helper: Any, args: argparse.Namespace) -> None:
+def _drive(helper: Node, args: argparse.Namespace) -> None:
     """Publish --speed / --yaw-rate at 10 Hz, as the type the suite takes (TwistStamped stamped now
     with --cmd-vel-type twist_stamped, else Twist)."""
     from geometry_msgs.msg import Twist, TwistStamped
@@ -215,7 +232,9 @@ def _count(counters: _Counters, name: str) -> None:
     setattr(counters, name, getattr(counters, name) + 1)
 
 
-def _wait(suite: Any, args: argparse.Namespace, started: float, counters: _Counters, stop: StopFlag) -> None:
+def _wait(
+    suite: Suite, args: argparse.Namespace, started: float, counters: _Counters, stop: StopFlag
+) -> None:
     """Print status lines until ``--duration`` has passed, a signal arrived or a thread died."""
     duration = args.duration if args.duration is not None else math.inf
     next_status = started + args.status_every

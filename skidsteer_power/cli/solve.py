@@ -20,14 +20,15 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from skidsteer_power import models
 from skidsteer_power.argtypes import range_arg, range_help, turn_radius_arg
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit
 from skidsteer_power.errors import InputError
+from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.terramechanics.ranges import (
     FORWARD_SPEED_M_S,
     FRICTION,
@@ -96,8 +97,8 @@ def register(subparsers: Subcommands) -> None:
     parser.set_defaults(func=run_solve)
 
 
-def _options(args: argparse.Namespace) -> dict[str, Any]:
-    options: dict[str, Any] = {'raise_on_failure': True}
+def _options(args: argparse.Namespace) -> dict[str, object]:
+    options: dict[str, object] = {'raise_on_failure': True}
     if args.mu_t is not None:
         if args.model != 'steeds':
             raise InputError('--mu-t applies to --model steeds only')
@@ -135,13 +136,13 @@ def run_solve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scalar(value: Any) -> Any:
+def _scalar(value: npt.ArrayLike) -> float | bool | None:
     arr = np.asarray(value)
     return arr.reshape(-1)[0].item() if arr.size else None
 
 
-def _payload(vehicle: str, terrain: str, state: models.SteadyState, elapsed: float) -> dict[str, Any]:
-    payload: dict[str, Any] = {
+def _payload(vehicle: str, terrain: str, state: models.SteadyState, elapsed: float) -> JsonObject:
+    payload: JsonObject = {
         's0_m': _scalar(state.s0_m),
         'omega_outer_rad_s': _scalar(state.omega_outer_rad_s),
         'omega_inner_rad_s': _scalar(state.omega_inner_rad_s),

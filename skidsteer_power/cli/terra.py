@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from typing import Any
+from typing import TypedDict
 
 from skidsteer_power import resources
 from skidsteer_power.argtypes import range_arg, range_help
@@ -142,7 +142,7 @@ def run_wheel(args: argparse.Namespace) -> int:
     terrain = load_terrain(args.terrain)
     state = wheel_at_slip(terrain, args.load, args.slip, args.radius, args.width)
     check_sinkage(float(state.sinkage_m), args.radius, 'wheel radius')
-    payload: dict[str, Any] = {
+    payload: dict[str, float | str] = {
         'terrain': terrain.name,
         'slip': args.slip,
         'sinkage_m': float(state.sinkage_m),
@@ -169,12 +169,20 @@ def wheel_speed(speed: float, slip: float, radius: float) -> float:
     return speed * (1.0 + slip) / radius
 
 
-def _shipped_terrain_files() -> dict[str, dict[str, Any]]:
+class TerrainEntry(TypedDict):
+    """One terrain of ``terrains``: its fields (SI; phi also as ``phi_deg`` [deg]; ``shear_type`` and
+    ``contact`` are words) and where its values come from."""
+
+    values: dict[str, float | str]
+    source: str
+
+
+def _shipped_terrain_files() -> dict[str, TerrainEntry]:
     """Shipped terrain files that are not a preset's copy (config/terrains/): name -> {values (SI,
     :func:`terrain_fields`), source (the file's ``source``)}."""
     import yaml
 
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, TerrainEntry] = {}
     for name, path in resources.shipped('terrains', ('.yaml', '.yml')).items():
         if name in PRESETS or name.startswith('example'):
             continue
@@ -185,7 +193,7 @@ def _shipped_terrain_files() -> dict[str, dict[str, Any]]:
 
 
 def run_terrains(args: argparse.Namespace) -> int:
-    payload: dict[str, dict[str, Any]] = {}  # preset name -> {values, source}
+    payload: dict[str, TerrainEntry] = {}  # preset name -> {values, source}
     for name, terrain in PRESETS.items():
         values = {k: v for k, v in dataclasses.asdict(terrain).items() if k != 'name' and v is not None}
         values['phi_deg'] = terrain.phi_deg
