@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-JsonObject = dict[str, Any]
+JsonObject = dict[str, Any]  # Any: a JSON value's type depends on its key (see below)
 """A JSON object as built by an ``as_json``, or a JSON or YAML mapping as read (a vehicle or terrain
 file, a bag's metadata) before it is checked into a typed object. ``Any`` because a JSON value's type
 depends on its key (a number, a string, a nested object, null) and a reader indexes it by key; the
