@@ -73,7 +73,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import TYPE_CHECKING, TypeAlias, TypedDict, Unpack
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,13 +87,14 @@ from skidsteer_power.maps.grid_angles import _angle_coordinate_scalar, _refined_
 from skidsteer_power.maps.identity import check_identity, map_identity
 from skidsteer_power.maps.identity import model_version as model_version
 from skidsteer_power.maps.map_solve import SLIP_LIMIT as SLIP_LIMIT
-from skidsteer_power.maps.map_solve import _assemble, _check_cells, _mirror, _solve_row
+from skidsteer_power.maps.map_solve import Ring, _assemble, _check_cells, _mirror, _solve_row
 from skidsteer_power.terramechanics.terrain import terrain_fingerprint
 from skidsteer_power.vehicle import vehicle_fingerprint
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
+    from skidsteer_power.jsonout import JsonObject
     from skidsteer_power.models.fess import FessSolver
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
@@ -171,6 +172,28 @@ class MapQuery:
         return self.power_left_W + self.power_right_W
 
 
+class MapOptions(TypedDict):
+    """Every option that changes a map, resolved (:func:`build_options`; stored in a map's meta)."""
+
+    max_speed: float  # [m/s]
+    max_yaw_rate: float  # [rad/s]
+    shape: list[int]  # (rings, angles)
+    n: int  # FESS elements per contact
+    min_radius: float  # small-radius limit [m]
+    refine: int  # angle refinement steps near the small-radius limit
+
+
+class MapKeywords(TypedDict, total=False):
+    """The options :func:`build_options` takes, as keywords (None: the default)."""
+
+    max_speed: float | None
+    max_yaw_rate: float | None
+    shape: tuple[int, int] | None
+    n: int | None
+    min_radius: float | None
+    refine: int | None
+
+
 def build_options(
     vehicle: Vehicle,
     *,
@@ -180,14 +203,14 @@ def build_options(
     n: int | None = None,
     min_radius: float | None = None,
     refine: int | None = None,
-) -> dict[str, Any]:
+) -> MapOptions:
     """Every option that changes a map, defaults resolved: the vehicle's command envelope
     (``max_speed_m_s``, ``max_yaw_rate_rad_s``), :data:`DEFAULT_SHAPE`, FESS's default element
     count, the small-radius limit 2 x tread [m]. ``map build`` and the library both use this, so the
     same options give the same cache file and different options never share one."""
     from skidsteer_power.models import fess
 
-    options: dict[str, Any] = {
+    options: MapOptions = {
         'max_speed': float(vehicle.max_speed_m_s if max_speed is None else max_speed),
         'max_yaw_rate': float(vehicle.max_yaw_rate_rad_s if max_yaw_rate is None else max_yaw_rate),
         'shape': [int(k) for k in (DEFAULT_SHAPE if shape is None else shape)],
@@ -196,9 +219,9 @@ def build_options(
         # the refinement belongs to the default grid; an explicit shape is taken as it is
         'refine': int((DEFAULT_REFINE if shape is None else 0) if refine is None else refine),
     }
-    for name in ('max_speed', 'max_yaw_rate'):
-        if not np.isfinite(options[name]) or options[name] <= 0:
-            raise InputError(f'{name} must be a finite number > 0, got {options[name]!r}')
+    for name, value in (('max_speed', options['max_speed']), ('max_yaw_rate', options['max_yaw_rate'])):
+        if not np.isfinite(value) or value <= 0:
+            raise InputError(f'{name} must be a finite number > 0, got {value!r}')
     if not np.isfinite(options['min_radius']) or options['min_radius'] <= 0:
         raise InputError(f'min_radius must be a finite number > 0 m, got {min_radius!r}')
     n_s, n_psi = options['shape']
@@ -219,7 +242,7 @@ class PowerMap:
     values: dict[str, np.ndarray]  # FIELDS -> (Ns, Npsi)
     converged: np.ndarray  # (Ns, Npsi) bool
     limited: np.ndarray  # (Ns, Npsi) bool: solved at the small-radius limit
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: JsonObject = field(default_factory=dict)
     path: Path | None = None
     # (Ns - 1, Npsi - 1) build-time check per cell: relative power error at the cell centre [-]; nan
     # where not checked (cells every query flags anyway), inf where FESS found no steady state there
@@ -439,7 +462,7 @@ class PowerMap:
         return MapQuery(tl, tr, ol, orr, tl * ol, tr * orr, s0, sinkage, margin, clamped, limited)
 
     # ---------------------------------------------------------------- description
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         """Metadata and grid extent, for ``map show``."""
         return {
             **self.meta,
@@ -491,12 +514,12 @@ def _solve_rings(
     length: float,
     r_min: float,
     progress: ProgressCallback | None,
-) -> list[dict[str, Any]]:
+) -> list[Ring]:
     """One batched FESS solve per ring s = const [m/s], left turns only (psi >= 0), each row then
     mirrored to the right turns; ``progress(ring, 2 rings - 1)`` after each (the cell check follows)."""
     n_s, n_psi = len(radial), len(angles)
     left = angles >= 0  # solved; the rest mirrored
-    rows: list[dict[str, Any]] = []
+    rows: list[Ring] = []
     for k, s in enumerate(radial):
         ring = max(float(s), 1e-3 * radial[1])  # s = 0: the limit s -> 0 along each angle
         v = ring * np.cos(angles[left])
@@ -511,10 +534,10 @@ def _build_meta(
     vehicle: Vehicle,
     terrain: Terrain,
     model: str,
-    options: dict[str, Any],
+    options: MapOptions,
     elements: int,
     converged: np.ndarray,
-) -> dict[str, Any]:
+) -> JsonObject:
     """A new map's ``meta``: its identity, build options and what the solves found."""
     return {
         **map_identity(vehicle, terrain, model),
@@ -560,7 +583,7 @@ def cache_path(
     terrain: Terrain,
     cache_dir: str | os.PathLike[str] | None = None,
     model: str = 'fess',
-    **options: Any,
+    **options: Unpack[MapKeywords],
 ) -> Path:
     """Where :func:`load_or_build` (and ``map build``) keep the map of this vehicle and terrain built
     with ``options`` (:func:`build_options`; defaults resolved first, so explicit defaults and
@@ -580,7 +603,7 @@ def load_or_build(
     *,
     progress: ProgressCallback | None = None,
     rebuild: bool = False,
-    **options: Any,
+    **options: Unpack[MapKeywords],
 ) -> tuple[PowerMap, bool]:
     """The cached map of ``vehicle`` on ``terrain`` (default options: :func:`build_options`),
     building (and saving) it if it is missing, unreadable or was built for another vehicle, terrain,
