@@ -16,12 +16,14 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import TypeVar
 
 MALFORMED_WARN_S = 10.0
 """How long the diagnostics WARN after the latest malformed message [s]."""
 PREVIEW_BYTES = 16
 """How many leading bytes of a malformed message the warning shows."""
+
+_Decoded = TypeVar('_Decoded')
 
 
 class MalformedInputs:
@@ -32,7 +34,7 @@ class MalformedInputs:
 
     def __init__(
         self,
-        warn: Callable[[str], Any],
+        warn: Callable[[str], object],
         warn_period_s: float = 2.0,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -43,11 +45,11 @@ class MalformedInputs:
         self.last_s: float | None = None
         self._warned_s: dict[str, float] = {}
 
-    def guard(self, topic: str, decode: Callable[[bytes], Any]) -> Callable[[bytes], Any | None]:
+    def guard(self, topic: str, decode: Callable[[bytes], _Decoded]) -> Callable[[bytes], _Decoded | None]:
         """``decode`` for ``topic`` that returns None (counted, maybe logged) instead of raising."""
         self.counts[topic] += 0  # listed in the diagnostics from the start
 
-        def safe(data: bytes) -> Any | None:
+        def safe(data: bytes) -> _Decoded | None:
             try:
                 return decode(data)
             except Exception as err:  # untrusted bytes: any decoder error is the message's fault

@@ -21,11 +21,18 @@ import dataclasses
 import functools
 import importlib.metadata
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 import rclpy.logging
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle.node import LifecycleNodeMixin
+
+if TYPE_CHECKING:
+    from lifecycle_msgs.srv import ChangeState
+    from rclpy.destroyable import DestroyableType
+    from rclpy.lifecycle import LifecycleNode
+
+    from skidsteer_power.nodes.ros_types import RosMessage
 
 TESTED_RCLPY = ('7.1.5', '7.1.6')
 """rclpy versions these internals were read from and tested with (ROS 2 Jazzy)."""
@@ -42,7 +49,77 @@ EXECUTOR_INTERNALS = (
 CHANGE_STATE_HANDLER = '_LifecycleNodeMixin__on_change_state'
 """rclpy's lifecycle change_state service handler (``LifecycleNodeMixin.__on_change_state``)."""
 
-_rclpy: Any = rclpy_implementation
+
+# The C-extension handles, for annotations only: this module imports (and check() falls back) on
+# an rclpy without rclpy.destroyable too
+if TYPE_CHECKING:
+
+    class EntityHandle(DestroyableType, Protocol):
+        """The C-extension handle of an rclpy entity (its ``handle``: ``_rclpy.Timer``, ``Subscription``,
+        ``Service``, ``Client``, ``GuardCondition``): held (a context manager) while used, and its address.
+        pybind11 objects without Python types; rclpy's :class:`~rclpy.destroyable.DestroyableType` and
+        these Protocols name what is used."""
+
+        @property
+        def pointer(self) -> int: ...
+
+    class TimerHandle(EntityHandle, Protocol):
+        """``_rclpy.Timer``."""
+
+        def is_timer_ready(self) -> bool: ...
+        def call_timer(self) -> None: ...
+
+    class SubscriptionHandle(EntityHandle, Protocol):
+        """``_rclpy.Subscription``: ``take_message`` gives (message or bytes, message info), or None."""
+
+        def take_message(self, msg_type: object, raw: bool) -> tuple[RosMessage, object] | None: ...
+
+    class RequestId(Protocol):
+        """rmw's request id in a service info."""
+
+        @property
+        def sequence_number(self) -> int: ...
+
+    class ServiceInfo(Protocol):
+        """rmw's service info (the header of a request or a response)."""
+
+        @property
+        def request_id(self) -> RequestId: ...
+
+    class ServiceHandle(EntityHandle, Protocol):
+        """``_rclpy.Service``: ``service_take_request`` gives (request, header), or (None, None)."""
+
+        def service_take_request(self, request_type: object) -> tuple[RosMessage, ServiceInfo | None]: ...
+
+    class ClientHandle(EntityHandle, Protocol):
+        """``_rclpy.Client``: ``take_response`` gives (header, response), or (None, None)."""
+
+        def take_response(self, response_type: object) -> tuple[ServiceInfo | None, RosMessage]: ...
+
+    class WaitSetHandle(Protocol):
+        """``_rclpy.WaitSet``: entities added by their handles, a wait, the ready ones by pointer."""
+
+        def clear_entities(self) -> None: ...
+        def add_guard_condition(self, handle: EntityHandle) -> None: ...
+        def wait(self, timeout_nsec: int) -> None: ...
+        def get_ready_entities(self, kind: str) -> list[int]: ...
+
+    class RclpyExtension(Protocol):
+        """What the lean executor uses of rclpy's C extension (where :func:`check` found it)."""
+
+        def WaitSet(  # the extension's class, called as a constructor
+            self,
+            subscriptions: int,
+            guard_conditions: int,
+            timers: int,
+            clients: int,
+            services: int,
+            events: int,
+            context: object,
+        ) -> WaitSetHandle: ...
+
+
+_rclpy: RclpyExtension = rclpy_implementation
 """rclpy's C extension (``WaitSet``, entity handles), for the lean executor."""
 
 
@@ -101,7 +178,7 @@ def check() -> RclpySupport:
     return support
 
 
-Refused = Callable[[Any, Any, Exception], None]
+Refused = Callable[['LifecycleNode', 'ChangeState.Request', Exception], None]
 """``on_refused(node, request, error)``: told of a transition answered with ``success: false``."""
 
 
@@ -117,7 +194,9 @@ def refuse_invalid_transitions(
         return False
     stock = getattr(LifecycleNodeMixin, CHANGE_STATE_HANDLER)
 
-    def on_change_state(self: Any, request: Any, response: Any) -> Any:
+    def on_change_state(
+        self: LifecycleNode, request: ChangeState.Request, response: ChangeState.Response
+    ) -> ChangeState.Response:
         try:
             return stock(self, request, response)
         except errors as err:

@@ -8,8 +8,9 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import sys
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Coroutine, Generator, Mapping, Sequence
+from contextlib import AbstractContextManager
+from typing import TYPE_CHECKING, TypedDict, TypeVar, cast
 
 import rclpy
 import rclpy.logging
@@ -18,6 +19,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
@@ -30,7 +32,35 @@ from skidsteer_power.nodes.rclpy_compat import _rclpy
 from skidsteer_power.stop_signals import StopFlag, stop_on_signals
 
 if TYPE_CHECKING:
+    from typing import Any, Unpack
+
+    from rclpy.callback_groups import CallbackGroup
+    from rclpy.client import Client
+    from rclpy.context import Context, ContextHandle
+    from rclpy.guard_condition import GuardCondition
     from rclpy.impl.rcutils_logger import RcutilsLogger
+    from rclpy.qos import QoSProfile
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from rclpy.service import Service
+
+    from skidsteer_power.nodes.rclpy_compat import (
+        ClientHandle,
+        EntityHandle,
+        ServiceHandle,
+        ServiceInfo,
+        SubscriptionHandle,
+        TimerHandle,
+        WaitSetHandle,
+    )
+    from skidsteer_power.nodes.ros_types import RosMessage
+
+    _KindEntity = Any  # Any: a Timer, Subscription, Service or Client: the one its dict key names
+    """An entity in a dict by kind ('timer', 'subscription', 'service', 'client'), whose values are
+    of the key's kind (a str-keyed dict cannot say which: each kind is read by its own key)."""
+    _EntityT = TypeVar('_EntityT', Timer, Subscription, Service, Client)
+    _HandleT = TypeVar('_HandleT')
+    _TakenT = TypeVar('_TakenT')
+    _GoneT = TypeVar('_GoneT')
 
 
 class LeanExecutor(SingleThreadedExecutor):
@@ -54,8 +84,8 @@ class LeanExecutor(SingleThreadedExecutor):
     is rclpy's executor unchanged.
     """
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
+    def __init__(self, *, context: Context | None = None) -> None:
+        super().__init__(context=context)
         self.lean = rclpy_compat.check().lean_executor(self)
         if not self.lean:  # another rclpy: its own executor, unchanged (correct, only slower)
             rclpy.logging.get_logger('spin').warning(
@@ -76,7 +106,7 @@ class LeanExecutor(SingleThreadedExecutor):
             self._plan = None
             super().spin_once(timeout_sec)
             return
-        generator: Any = self._cb_iter
+        generator: Generator[object, None, None] | None = self._cb_iter
         if generator is not None:  # rclpy's, from a spin it served: it may hold entities' handles
             generator.close()
             self._cb_iter = None
@@ -101,8 +131,8 @@ class _Ready:
     rebuild: bool = False
     timers: list[Timer] = dataclasses.field(default_factory=list)
     subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
-    services: list[Any] = dataclasses.field(default_factory=list)  # rclpy.service.Service
-    clients: list[Any] = dataclasses.field(default_factory=list)  # rclpy.client.Client
+    services: list[Service] = dataclasses.field(default_factory=list)
+    clients: list[Client] = dataclasses.field(default_factory=list)
     waitables: list[Waitable] = dataclasses.field(default_factory=list)
 
     def run(self, executor: Executor) -> None:
@@ -118,7 +148,8 @@ class _Ready:
         for srv in self.services:
             request, header = _taken(srv, _take_request, (None, None))
             if header is not None:
-                srv.send_response(srv.callback(request, srv.srv_type.Response()), header)
+                # rclpy 7 types srv_type and callback by TypeVars its Service does not bind (as below)
+                srv.send_response(srv.callback(request, srv.srv_type.Response()), header)  # type: ignore[arg-type, attr-defined]  # rclpy TypeVars
         for client in self.clients:
             header, response = _taken(client, _take_response, (None, None))
             if header is None:
@@ -136,7 +167,7 @@ class _Ready:
             _run_to_end(waitable.execute(data))
 
 
-def _taken(entity: Any, take: Callable[[Any, Any], Any], gone: Any) -> Any:
+def _taken(entity: _EntityT, take: Callable[[_HandleT, _EntityT], _TakenT], gone: _GoneT) -> _TakenT | _GoneT:
     """``take(handle, entity)`` with the entity's handle held; ``gone`` if it was destroyed."""
     try:
         with entity.handle:
@@ -145,7 +176,7 @@ def _taken(entity: Any, take: Callable[[Any, Any], Any], gone: Any) -> Any:
         return gone
 
 
-def _call_timer(handle: Any, timer: Timer) -> bool:
+def _call_timer(handle: TimerHandle, timer: Timer) -> bool:
     """Mark a ready timer as called; False if it is not ready after all (cancelled, as in rclpy)."""
     if not handle.is_timer_ready():
         return False
@@ -153,19 +184,23 @@ def _call_timer(handle: Any, timer: Timer) -> bool:
     return True
 
 
-def _take_message(handle: Any, sub: Subscription) -> Any:
+def _take_message(handle: SubscriptionHandle, sub: Subscription) -> tuple[RosMessage, object] | None:
     return handle.take_message(sub.msg_type, sub.raw)
 
 
-def _take_request(handle: Any, srv: Any) -> Any:
-    return handle.service_take_request(srv.srv_type.Request)
+# rclpy 7 types Service.srv_type and Client.srv_type by a TypeVar the class does not bind: to mypy the
+# service class has no Request or Response
 
 
-def _take_response(handle: Any, client: Any) -> Any:
-    return handle.take_response(client.srv_type.Response)
+def _take_request(handle: ServiceHandle, srv: Service) -> tuple[RosMessage, ServiceInfo | None]:
+    return handle.service_take_request(srv.srv_type.Request)  # type: ignore[attr-defined]  # rclpy TypeVar
 
 
-def _run_to_end(coroutine: Any) -> None:
+def _take_response(handle: ClientHandle, client: Client) -> tuple[ServiceInfo | None, RosMessage]:
+    return handle.take_response(client.srv_type.Response)  # type: ignore[attr-defined]  # rclpy TypeVar
+
+
+def _run_to_end(coroutine: Coroutine[object, None, object]) -> None:
     """Run a coroutine that never suspends (a waitable's ``execute`` with a plain callback)."""
     try:
         coroutine.send(None)
@@ -182,18 +217,21 @@ class _WaitPlan:
     ``wait_set`` is None when a node has something the plan does not run (a coroutine callback, a
     guard condition of its own): rclpy's executor spins then."""
 
-    wait_set: Any
-    handles: list[Any]  # entered around each wait, the context's last
-    adders: list[tuple[Callable[[Any], None], Any]]  # (wait_set.add_*, handle), once per wait
+    wait_set: WaitSetHandle | None
+    handles: Sequence[AbstractContextManager[object]]  # entered around each wait, the context's last
+    # (wait_set.add_*, handle), once per wait
+    adders: list[tuple[Callable[[EntityHandle], None], EntityHandle]]
     waitables: list[Waitable]
-    by_pointer: dict[str, dict[int, Any]]  # entity kind -> handle pointer -> entity
+    by_pointer: dict[str, dict[int, _KindEntity]]  # entity kind -> handle pointer -> entity
     guard_pointer: int
 
     KINDS = ('timer', 'subscription', 'service', 'client')
 
     @classmethod
-    def build(cls, nodes: list[Node], guards: tuple[Any, Any], context: Any) -> _WaitPlan:
-        entities: dict[str, list[Any]] = {kind: [] for kind in cls.KINDS}
+    def build(
+        cls, nodes: list[Node], guards: tuple[GuardCondition, GuardCondition], context: Context
+    ) -> _WaitPlan:
+        entities: dict[str, list[_KindEntity]] = {kind: [] for kind in cls.KINDS}
         waitables: list[Waitable] = []
         unsupported = False
         for node in nodes:
@@ -219,7 +257,7 @@ class _WaitPlan:
             for waitable in waitables:
                 with waitable:
                     count += waitable.get_num_entities()
-            wait_set = _rclpy.WaitSet(
+            wait_set: WaitSetHandle = _rclpy.WaitSet(
                 count.num_subscriptions,
                 count.num_guard_conditions,
                 count.num_timers,
@@ -228,22 +266,23 @@ class _WaitPlan:
                 count.num_events,
                 context.handle,
             )
-            adders: list[tuple[Callable[[Any], None], Any]] = []
-            by_pointer: dict[str, dict[int, Any]] = {}
+            adders: list[tuple[Callable[[EntityHandle], None], EntityHandle]] = []
+            by_pointer: dict[str, dict[int, _KindEntity]] = {}
             for kind in cls.KINDS:
                 add = getattr(wait_set, f'add_{kind}')
                 adders += [(add, e.handle) for e in entities[kind]]
                 by_pointer[kind] = {e.handle.pointer: e for e in entities[kind]}
             adders += [(wait_set.add_guard_condition, gc.handle) for gc in guards]
-            handles = [handle for _, handle in adders] + [context.handle]
+            # a live context has a handle (rclpy types it Optional: None before init)
+            handles = [handle for _, handle in adders] + [cast('ContextHandle', context.handle)]
             return cls(wait_set, handles, adders, waitables, by_pointer, guards[0].handle.pointer)
         except InvalidHandle:  # destroyed while being planned: plan again on the next spin
             return empty
 
     def wait(self, timeout_nsec: int) -> _Ready:
         """Wait up to ``timeout_nsec`` [ns] (-1: forever) and return what is ready."""
-        wait_set = self.wait_set
-        entered: list[Any] = []
+        wait_set: WaitSetHandle = self.wait_set  # type: ignore[assignment]  # spin_once waits on one
+        entered: list[AbstractContextManager[object]] = []
         try:
             for handle in (*self.handles, *self.waitables):
                 handle.__enter__()
@@ -287,9 +326,25 @@ class QuietNode(Node):
         def get_logger(self) -> RcutilsLogger: ...
         def destroy_node(self) -> None: ...
 
-    def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
+    def create_publisher(
+        self,
+        msg_type: type,
+        topic: str,
+        qos_profile: QoSProfile | int,
+        *,
+        event_callbacks: PublisherEventCallbacks | None = None,
+        **kwargs: Unpack[PublisherOptions],
+    ) -> Publisher:
         quiet = event_callbacks or PublisherEventCallbacks(use_default_callbacks=False)
-        return super().create_publisher(*args, event_callbacks=quiet, **kwargs)
+        return super().create_publisher(msg_type, topic, qos_profile, event_callbacks=quiet, **kwargs)
+
+
+class PublisherOptions(TypedDict, total=False):
+    """The other keyword arguments of :meth:`rclpy.node.Node.create_publisher` (rclpy 7)."""
+
+    callback_group: CallbackGroup | None
+    qos_overriding_options: QoSOverridingOptions | None
+    publisher_class: type[Publisher]
 
 
 class Batched:
@@ -304,12 +359,12 @@ class Batched:
     inputs wait. Set ``subscription`` to the subscription created with this callback.
     """
 
-    def __init__(self, callback: Callable[[Any], None], batch: int = 8) -> None:
+    def __init__(self, callback: Callable[[RosMessage], None], batch: int = 8) -> None:
         self.callback = callback
         self.batch = batch
-        self.subscription: Any = None
+        self.subscription: Subscription = None  # type: ignore[assignment]  # set by its creator (class doc)
 
-    def __call__(self, msg: Any) -> None:
+    def __call__(self, msg: RosMessage) -> None:
         self.callback(msg)
         sub = self.subscription
         for _ in range(self.batch - 1):
@@ -320,7 +375,7 @@ class Batched:
             self.callback(taken[0])
 
 
-def node_command(module: str, namespace: str, params: dict[str, Any] | None = None) -> list[str]:
+def node_command(module: str, namespace: str, params: Mapping[str, object] | None = None) -> list[str]:
     """The command line that runs a node module's ``main`` in a process of its own, as ``ros2 run``
     would: ``python -m module --ros-args -r __ns:=/namespace -p name:=value ...``."""
     argv = [sys.executable, '-m', module, '--ros-args', '-r', f'__ns:=/{namespace.lstrip("/")}']
@@ -338,7 +393,7 @@ def spin_node(
     make_node: Callable[[], Node],
     name: str,
     args: list[str] | None = None,
-    executor: Callable[[], Any] | None = None,
+    executor: Callable[[], Executor] | None = None,
 ) -> None:
     """Create the node with ``make_node`` and spin it until a signal or an external shutdown.
 
@@ -357,7 +412,7 @@ def _spin_until_stopped(
     make_node: Callable[[], Node],
     name: str,
     args: list[str] | None,
-    executor: Callable[[], Any] | None,
+    executor: Callable[[], Executor] | None,
     stop: StopFlag,
 ) -> None:
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)

@@ -20,11 +20,14 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING
 
 from rclpy.serialization import serialize_message
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
+
+if TYPE_CHECKING:
+    from skidsteer_power.nodes.ros_types import RosMessage
 
 _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -75,7 +78,7 @@ class PackedJointState:
         return bytes(buffer)
 
 
-def decoder(msg_type: type) -> Callable[[bytes], Any]:
+def decoder(msg_type: type) -> Callable[[bytes], RosMessage]:
     """Serialized ``msg_type`` (an rclpy message class) -> its rosbags message: a dataclass with the
     same fields, number sequences as numpy arrays."""
     package = msg_type.__module__.split('.')[0]
