@@ -39,7 +39,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from geometry_msgs.msg import Twist, TwistStamped
 from rclpy._rclpy_pybind11 import RCLError
@@ -48,7 +48,15 @@ from rclpy.node import Node
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.nodes.param_spec import ParamSpec
 
-TYPES: dict[str, Any] = {'twist': Twist, 'twist_stamped': TwistStamped}
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from rclpy.subscription import Subscription
+    from rclpy.topic_endpoint_info import TopicEndpointInfo
+
+    from skidsteer_power.nodes.ros_types import RosMessage, TwistLike
+
+TYPES: dict[str, type] = {'twist': Twist, 'twist_stamped': TwistStamped}
 """``cmd_vel_type`` values that pin the type -> the rclpy message class."""
 ROS_TYPE_NAMES = {'twist': 'geometry_msgs/msg/Twist', 'twist_stamped': 'geometry_msgs/msg/TwistStamped'}
 MODES = ('auto', *TYPES)
@@ -189,6 +197,13 @@ class _TypeGroup:
             return True
 
 
+class _SubscriptionOptions(TypedDict, total=False):
+    """The keyword arguments :meth:`CmdVelInput._subscribe` gives ``Node.create_subscription``."""
+
+    raw: bool
+    qos_overriding_options: QoSOverridingOptions
+
+
 _GROUPS: dict[tuple[int, str], _TypeGroup] = {}
 _GROUPS_LOCK = threading.Lock()
 
@@ -204,18 +219,18 @@ class CmdVelInput:
 
     node: Node
     mode: str
-    callback: Callable[[Any], None]
-    qos: Any
+    callback: Callable[[RosMessage], None]
+    qos: QoSProfile | int
     timeout_s: float
     tolerance_s: float
-    decode: Callable[[Any], Callable[[bytes], Any]] | None = None
-    make_callback: Callable[[Callable[[Any], None]], Any] | None = None
-    qos_overriding_options: Any = None
+    decode: Callable[[type], Callable[[bytes], RosMessage | None]] | None = None
+    make_callback: Callable[[Callable[[RosMessage], None]], Callable[[RosMessage], None]] | None = None
+    qos_overriding_options: QoSOverridingOptions | None = None
     topic: str = 'cmd_vel'
     stamps: StampCheck = field(init=False)
     gaps: CommandGaps = field(init=False)
     refused_publishers: dict[str, str] = field(default_factory=dict)
-    subscription: Any = field(default=None, init=False)
+    subscription: Subscription | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
         self.stamps = StampCheck(self.timeout_s, self.tolerance_s)
@@ -252,7 +267,7 @@ class CmdVelInput:
         return modes.pop() if len(modes) == 1 else 'twist'
 
     @staticmethod
-    def _offered(publishers: list[Any]) -> set[str]:
+    def _offered(publishers: list[TopicEndpointInfo]) -> set[str]:
         known = {name: mode for mode, name in ROS_TYPE_NAMES.items()}
         return {known[info.topic_type] for info in publishers if info.topic_type in known}
 
@@ -263,7 +278,7 @@ class CmdVelInput:
 
     def _subscribe(self, mode: str) -> None:
         msg_type = TYPES[mode]
-        callback: Any = self.callback
+        callback: Callable[[RosMessage], None] = self.callback
         if self.decode is not None:
             decode, inner = self.decode(msg_type), self.callback
 
@@ -274,7 +289,7 @@ class CmdVelInput:
 
         if self.make_callback is not None:
             callback = self.make_callback(callback)
-        kwargs: dict[str, Any] = {'raw': self.decode is not None}
+        kwargs: _SubscriptionOptions = {'raw': self.decode is not None}
         if self.qos_overriding_options is not None:
             kwargs['qos_overriding_options'] = self.qos_overriding_options
         self.subscription = self.node.create_subscription(msg_type, self.topic, callback, self.qos, **kwargs)
@@ -309,12 +324,12 @@ class CmdVelInput:
                 )
         self.refused_publishers = refused
 
-    def accept(self, msg: Any, now_s: float) -> Any:
+    def accept(self, msg: RosMessage, now_s: float) -> TwistLike | None:
         """The twist of ``msg`` (Twist or TwistStamped, rclpy or rosbags) if it is to be taken at
         ``now_s`` (the node clock [s]), else None (a refused stamp, warned and counted). Also notes
         the gap since the previous command (:class:`CommandGaps`)."""
         header = getattr(msg, 'header', None)
-        twist = msg if header is None else msg.twist
+        twist: TwistLike = msg if header is None else msg.twist
         if header is not None:
             reason = self.stamps.check(int(header.stamp.sec), int(header.stamp.nanosec), now_s)
             if reason == 'zero':

@@ -76,7 +76,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import rclpy
 import rclpy.utilities
@@ -87,6 +87,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -110,7 +111,18 @@ from skidsteer_power.stop_signals import PauseHook, on_pause, remove_pause_hook
 from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
+    from typing import TypeVar, TypeVarTuple, Unpack
+
+    from geometry_msgs.msg import Twist, TwistStamped
+    from lifecycle_msgs.srv import ChangeState
     from rclpy.impl.rcutils_logger import RcutilsLogger
+    from rclpy.parameter import Parameter
+    from rclpy.subscription import Subscription
+
+    from skidsteer_power.nodes.ros_types import LifecycleNodeKwargs
+
+    _Args = TypeVarTuple('_Args')
+    _Result = TypeVar('_Result')
 
 NODE_NAME = 'des_driver'
 
@@ -243,11 +255,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 PARAMETERS += GUARDIAN_PARAMETERS  # issue 34: the guardian process (nodes/driver_guardian.py)
 
 
-def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
+def _fail_safe(
+    callback: Callable[[DesDriver, Unpack[_Args]], _Result],
+) -> Callable[[DesDriver, Unpack[_Args]], _Result]:
     """An exception in a callback zeroes and disables both amplifiers before it propagates."""
 
     @functools.wraps(callback)
-    def wrapper(self: DesDriver, *args: Any) -> Any:
+    def wrapper(self: DesDriver, *args: Unpack[_Args]) -> _Result:
         try:
             return callback(self, *args)
         except RCLError:
@@ -263,11 +277,13 @@ def _fail_safe(callback: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-def _traceback_logged(transition: Callable[..., Any]) -> Callable[..., Any]:
+def _traceback_logged(
+    transition: Callable[[DesDriver, LifecycleState], TransitionCallbackReturn],
+) -> Callable[[DesDriver, LifecycleState], TransitionCallbackReturn]:
     """rclpy turns an exception in a transition callback into ERROR without a word: log it first."""
 
     @functools.wraps(transition)
-    def wrapper(self: DesDriver, state: LifecycleState) -> Any:
+    def wrapper(self: DesDriver, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             return transition(self, state)
         except Exception:
@@ -298,7 +314,7 @@ class DesDriver(LifecycleNode):
         def trigger_deactivate(self) -> TransitionCallbackReturn: ...
         def trigger_cleanup(self) -> TransitionCallbackReturn: ...
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, **kwargs: Unpack[LifecycleNodeKwargs]) -> None:
         super().__init__(NODE_NAME, **kwargs)
         declare(self, PARAMETERS)  # a value out of its range: one ConfigError
         self.params, self.setup = self._read_parameters()  # a bad value is one clear error at once
@@ -309,7 +325,7 @@ class DesDriver(LifecycleNode):
         self.configure_error = ''
         self.counts = {'received': 0, 'rejected_non_finite': 0, 'clamped': 0, 'ignored_inactive': 0}
         self._published = {side: 0 for side in SIDES}
-        self._runtime: list[Any] = []  # subscription and timers of the configured state
+        self._runtime: list[Timer | Subscription] = []  # subscription and timers of the configured state
         self._pause_hook: PauseHook | None = None
         self.unsafe_stop = ''  # set when a stop could not be confirmed at an amplifier (exit 1)
         self.cmd_input: CmdVelInput | None = None  # cmd_vel of the configured state
@@ -347,7 +363,7 @@ class DesDriver(LifecycleNode):
             cmd_vel_mode=cmd_vel_input.cmd_vel_mode(self, p.cmd_vel_type, 'twist_stamped', p.twist_stamped),
         )
 
-    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         if self.state_label == 'unconfigured' or all(p.name.startswith('qos_overrides.') for p in params):
             return SetParametersResult(successful=True)  # QoS overrides: declared (read-only) at configure
         return SetParametersResult(
@@ -512,7 +528,7 @@ class DesDriver(LifecycleNode):
         self._stop_pollers()
         self.guardian.close()
         for entity in self._runtime:
-            if hasattr(entity, 'cancel'):
+            if isinstance(entity, Timer):
                 self.destroy_timer(entity)
             else:
                 self.destroy_subscription(entity)
@@ -535,7 +551,7 @@ class DesDriver(LifecycleNode):
     # -- callbacks ------------------------------------------------------------------------------
 
     @_fail_safe
-    def _on_cmd_vel(self, msg: Any) -> None:
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
         self.counts['received'] += 1
         command, cmd_input = self.command, self.cmd_input
         if command is None or not command.active or cmd_input is None:
@@ -728,7 +744,7 @@ class DesDriver(LifecycleNode):
         LifecycleNode.destroy_node(self)  # its one base (spelled out: rclpy leaves it unannotated)
 
 
-def _log_refused(node: Any, request: Any, err: Exception) -> None:
+def _log_refused(node: LifecycleNode, request: ChangeState.Request, err: Exception) -> None:
     node.get_logger().warn(f'refused lifecycle transition {request.transition}: {err}')
 
 
@@ -754,7 +770,7 @@ def bring_down(node: DesDriver) -> None:
     node.stop_motors()  # in any other state too (idempotent)
 
 
-def make_driver(**kwargs: Any) -> DesDriver:
+def make_driver(**kwargs: Unpack[LifecycleNodeKwargs]) -> DesDriver:
     """A :class:`DesDriver`; with ``autostart`` configured and activated (ConfigError if that fails).
 
     A SIGINT / SIGTERM during start-up (rclpy then invalidates the context under the node) is an

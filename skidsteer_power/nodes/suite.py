@@ -21,7 +21,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -31,7 +31,22 @@ from skidsteer_power.estimator import factory
 from skidsteer_power.stop_signals import StopFlag
 
 if TYPE_CHECKING:
+    from typing import TypedDict, Unpack
+
+    from rclpy.context import Context
+
     from skidsteer_power.des.simulator import SimulatedPair
+    from skidsteer_power.nodes.param_spec import ParamValue
+    from skidsteer_power.nodes.ros_types import NodeKwargs
+    from skidsteer_power.twin.live import TwinCoupling
+    from skidsteer_power.vehicle import Vehicle
+
+    class _Placement(TypedDict):
+        """Where each node of the suite lives: its context and namespace (of :class:`NodeKwargs`)."""
+
+        context: Context | None
+        namespace: str
+
 
 SMOOTHING_RAD_S = 1.0
 """Motor speed over which the Coulomb terms change sign (tanh), so the explicit motor model does not
@@ -41,7 +56,7 @@ chatter at standstill [rad/s]."""
 class TerrainSim(Node):
     """Publishes the twin's odom (encoder dead reckoning) and ground_truth/odom at 20 Hz."""
 
-    def __init__(self, coupling: Any, **kwargs: Any) -> None:
+    def __init__(self, coupling: TwinCoupling, **kwargs: Unpack[NodeKwargs]) -> None:
         from nav_msgs.msg import Odometry
 
         super().__init__('terrain_sim', **kwargs)
@@ -67,7 +82,7 @@ class TerrainSim(Node):
             publisher.publish(msg)
 
 
-def driver_joint_params(vehicle: Any) -> dict[str, Any]:
+def driver_joint_params(vehicle: Vehicle) -> dict[str, ParamValue]:
     """The estimator's joint mapping for des_driver's joint_states (``left_motor``/``right_motor``:
     motor shaft, effort = K_t I [N m], the vehicle's powertrain reduction), whatever joints the
     vehicle file's ``drivetrain:`` names for its own stack (a ros2_control robot's wheel joints): in
@@ -97,14 +112,16 @@ class SuiteOptions:
     left_port: str = '/dev/ttyUSB0'
     right_port: str = '/dev/ttyUSB1'
     namespace: str = ''
-    estimator_params: dict[str, Any] = field(default_factory=dict)
-    driver_params: dict[str, Any] = field(default_factory=dict)
+    estimator_params: dict[str, ParamValue] = field(default_factory=dict)
+    driver_params: dict[str, ParamValue] = field(default_factory=dict)
 
 
 class Suite:
     """Creates, spins (in a background thread or the caller's) and tears down the node suite."""
 
-    def __init__(self, options: SuiteOptions, context: Any = None, stop: StopFlag | None = None) -> None:
+    def __init__(
+        self, options: SuiteOptions, context: Context | None = None, stop: StopFlag | None = None
+    ) -> None:
         from skidsteer_power.nodes.des_driver import DesDriver
         from skidsteer_power.nodes.power_estimator import PowerEstimator
 
@@ -112,7 +129,7 @@ class Suite:
         self.context = context
         self.stop = stop if stop is not None else StopFlag()
         self.failure = ''  # why a thread of the process died (then ``stop`` is set), else ''
-        self._previous_excepthook: Callable[[threading.ExceptHookArgs], Any] | None = None
+        self._previous_excepthook: Callable[[threading.ExceptHookArgs], None] | None = None
         self.vehicle = factory.load_vehicle_config(options.vehicle)
         self.sim: SimulatedPair | None = None
         self.nodes: list[Node] = []
@@ -122,7 +139,7 @@ class Suite:
             left_port, right_port = options.left_port, options.right_port
             if options.simulate:
                 left_port, right_port = self._start_simulation()
-            kwargs = {'context': context, 'namespace': options.namespace}
+            kwargs: _Placement = {'context': context, 'namespace': options.namespace}
             self.estimator = PowerEstimator(parameter_overrides=self._estimator_params(), **kwargs)
             self.nodes.append(self.estimator)
             self.driver = DesDriver(parameter_overrides=self._driver_params(left_port, right_port), **kwargs)
@@ -133,7 +150,7 @@ class Suite:
 
     def _estimator_params(self) -> list[Parameter]:
         o = self.options
-        values: dict[str, Any] = {
+        values: dict[str, ParamValue] = {
             'vehicle': o.vehicle,
             'terrain': o.terrain,
             'map_cache_dir': o.map_cache_dir,
@@ -160,7 +177,9 @@ class Suite:
             return float(given.get(name, defaults[name]))
 
         powertrain = Powertrain.for_vehicle(self.vehicle)
-        limits = limits_for(controller_for_vehicle(self.vehicle, powertrain), given)  # as the driver
+        limit_names = ('max_speed_m_s', 'max_yaw_rate_rad_s', 'max_accel_m_s2', 'max_yaw_accel_rad_s2')
+        given_limits = {name: value(name) for name in limit_names}  # defaults 0: the vehicle's
+        limits = limits_for(controller_for_vehicle(self.vehicle, powertrain), given_limits)  # as the driver
         return {
             'drive_max_speed_m_s': limits.max_speed_m_s,
             'drive_max_yaw_rate_rad_s': limits.max_yaw_rate_rad_s,
@@ -168,7 +187,7 @@ class Suite:
         }
 
     def _driver_params(self, left_port: str, right_port: str) -> list[Parameter]:
-        values: dict[str, Any] = {
+        values: dict[str, ParamValue] = {
             'left_port': left_port,
             'right_port': right_port,
             'vehicle': self.options.vehicle,
