@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
     from skidsteer_power.estimator.inputs import InputLimits, JointMap
     from skidsteer_power.nodes.parameters import PowerEstimatorParameters
-    from skidsteer_power.nodes.side_current_feed import SideCurrentFeed
+    from skidsteer_power.nodes.side_current_feed import FeedNode, SideCurrentFeed
     from skidsteer_power.vehicle import Vehicle
 
 
@@ -26,7 +26,7 @@ class MeasuredPowerFeed:
     """The latest value of every signal of the first ``measured_power`` source whose message packages
     are installed; :meth:`joint_values` rewrites a joint_states reading with the side values."""
 
-    def __init__(self, node: Any, joint_map: JointMap, qos: QoSProfile | int) -> None:
+    def __init__(self, node: FeedNode, joint_map: JointMap, qos: QoSProfile | int) -> None:
         """``node``: the power_estimator (its subscriptions, logger and ``now_s`` clock [s])."""
         from skidsteer_power.bag_io._ros import message_class
         from skidsteer_power.errors import InputError
@@ -123,7 +123,7 @@ def vehicle_limits(limits: InputLimits, vehicle: Vehicle, p: PowerEstimatorParam
 
 
 def vendor_feed(
-    node: Any, joint_map: JointMap, qos: QoSProfile | int
+    node: FeedNode, joint_map: JointMap, qos: QoSProfile | int
 ) -> MeasuredPowerFeed | SideCurrentFeed | None:
     """The feed of the joint map's vendor topics: measured_power, side_currents, or None."""
     if joint_map.measured_power:

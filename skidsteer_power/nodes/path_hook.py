@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import struct
 import threading
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -46,6 +47,14 @@ from skidsteer_power.estimator.path_energy import (
 from skidsteer_power.nodes.param_spec import ParamSpec
 from skidsteer_power.nodes.parameters import PowerEstimatorParameters
 from skidsteer_power.nodes.wire import decoder
+
+if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
+    from rclpy.publisher import Publisher
+    from rclpy.qos import QoSProfile
+    from rclpy.subscription import Subscription
+
+    from skidsteer_power.estimator.prediction import Predictor
 
 MAX_READ_POSES = 2_000_000
 """Most poses of a ``plan`` read (about 140 MB of CDR); a larger one is refused unread."""
@@ -70,16 +79,35 @@ class PathInputs(NamedTuple):
     online terrain scale k [-] (estimator/adaptation.py).
     """
 
-    predictor: Any
+    predictor: Predictor
     command: tuple[float, float] | None
     remaining_wh: float
     terrain_scale: float
 
 
+class PathNode(Protocol):
+    """What the hook uses of its node (the power_estimator): a raw subscription, publishers, the
+    logger, the name and :meth:`path_inputs`."""
+
+    def create_subscription(
+        self,
+        msg_type: type,
+        topic: str,
+        callback: Callable[[bytes], None],
+        qos_profile: QoSProfile | int,
+        *,
+        raw: bool = False,
+    ) -> Subscription: ...
+    def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile | int) -> Publisher: ...
+    def get_logger(self) -> RcutilsLogger: ...
+    def get_name(self) -> str: ...
+    def path_inputs(self) -> PathInputs: ...
+
+
 class PathEnergyHook:
     """Subscribes ``plan`` on ``node`` and publishes the path energies (module doc)."""
 
-    def __init__(self, node: Any, p: PowerEstimatorParameters, qos: Any) -> None:
+    def __init__(self, node: PathNode, p: PowerEstimatorParameters, qos: QoSProfile | int) -> None:
         """``p``: the node's parameters (:data:`PARAMETERS` among them, within their ranges)."""
         self.node = node
         self.speed_m_s = p.path_speed_m_s

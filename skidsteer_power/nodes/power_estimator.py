@@ -85,7 +85,8 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistStamped
@@ -124,6 +125,19 @@ from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
 from skidsteer_power.nodes.wire import PackedJointState, decoder
+
+if TYPE_CHECKING:
+    from typing import Unpack
+
+    from builtin_interfaces.msg import Time
+    from rclpy.parameter import Parameter
+    from rclpy.publisher import Publisher
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as DecodedTwist
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TwistStamped as DecodedTwistStamped
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__JointState as DecodedJointState
+
+    from skidsteer_power.jsonout import JsonObject
+    from skidsteer_power.nodes.ros_types import NodeKwargs, RosMessage, TimeLike
 
 NODE_NAME = 'power_estimator'
 
@@ -280,8 +294,10 @@ BATTERY_TECHNOLOGY = {
 }
 
 
-def battery_state_message(fields: dict[str, Any]) -> BatteryState:
-    """A BatteryState from :func:`skidsteer_power.estimator.factory.battery_message_fields`."""
+def battery_state_message(fields: dict[str, Any]) -> BatteryState:  # Any: battery_message_fields' type
+    """A BatteryState from :func:`skidsteer_power.estimator.factory.battery_message_fields` (its
+    ``dict[str, ...]`` of message fields by name, of mixed types: ``status`` and ``chemistry`` are
+    strings, the rest numbers)."""
     values = dict(fields)
     status = values.pop('status')
     chemistry = values.pop('chemistry').lower()
@@ -296,7 +312,7 @@ def battery_state_message(fields: dict[str, Any]) -> BatteryState:
 class PowerEstimator(QuietNode):
     """Predicts per-side power from cmd_vel, measures it from joint_states, tracks the battery."""
 
-    def __init__(self, predictor: Predictor | None = None, **node_kwargs: Any) -> None:
+    def __init__(self, predictor: Predictor | None = None, **node_kwargs: Unpack[NodeKwargs]) -> None:
         """``predictor`` replaces the map built from the parameters (tests, replays); ``node_kwargs``
         go to :class:`rclpy.node.Node` (context, parameter_overrides ...)."""
         super().__init__(NODE_NAME, **node_kwargs)
@@ -321,7 +337,7 @@ class PowerEstimator(QuietNode):
             max_wheel_rad_s=p.drive_max_wheel_rad_s,
         )
         self.odometry = PredictedOdometry()
-        self._predicted_twist_stamp: Any = None
+        self._predicted_twist_stamp: TimeLike | None = None
         if predictor is None:
             predictor = self._make_predictor(p.terrain, p.map_cache_dir)
         adaptation = AdaptationSettings(
@@ -404,7 +420,7 @@ class PowerEstimator(QuietNode):
         if state is None and initial_soc >= 0:
             self.core.energy.battery = factory.battery_for(self.vehicle, soc=initial_soc)
 
-    def _accept_state(self, state: dict[str, Any]) -> None:
+    def _accept_state(self, state: JsonObject) -> None:
         if state.get('vehicle') != self.vehicle.name:
             raise ConfigError(f'it holds the state of vehicle {state.get("vehicle")!r}')
         self.core.restore(state)
@@ -417,7 +433,7 @@ class PowerEstimator(QuietNode):
 
         self.malformed = MalformedInputs(self.get_logger().warning, p.warn_period_s)
 
-        def sub(msg_type: Any, topic: str, callback: Any) -> None:
+        def sub(msg_type: type, topic: str, callback: Callable[[RosMessage], None]) -> None:
             # raw bytes in, decoded by rosbags (nodes/wire.py); a malformed one is dropped and counted
             decode = self.malformed.guard(topic, decoder(msg_type))
 
@@ -431,7 +447,7 @@ class PowerEstimator(QuietNode):
                 msg_type, topic, batched, qos_in, qos_overriding_options=overrides, raw=True
             )
 
-        def pub(msg_type: Any, topic: str, qos: Any = 10) -> Any:
+        def pub(msg_type: type, topic: str, qos: QoSProfile | int = 10) -> Publisher:
             return self.create_publisher(msg_type, topic, qos, qos_overriding_options=overrides)
 
         self.cmd_input = CmdVelInput(
@@ -482,7 +498,7 @@ class PowerEstimator(QuietNode):
     def now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_cmd_vel(self, msg: Any) -> None:
+    def _on_cmd_vel(self, msg: DecodedTwist | DecodedTwistStamped) -> None:
         """A decoded (rosbags) geometry_msgs/Twist or TwistStamped (a refused stamp is dropped)."""
         received = self.get_clock().now()
         now = received.nanoseconds * 1e-9
@@ -514,7 +530,7 @@ class PowerEstimator(QuietNode):
             )
         self._traction_warned = warning
 
-    def _on_joint_states(self, msg: Any) -> None:
+    def _on_joint_states(self, msg: DecodedJointState) -> None:
         """A decoded (rosbags) sensor_msgs/JointState: number sequences are numpy arrays."""
         now = self.now_s()
         velocity, effort, position = msg.velocity.tolist(), msg.effort.tolist(), msg.position.tolist()
@@ -559,7 +575,7 @@ class PowerEstimator(QuietNode):
         effort = (*prediction.motor_torque_Nm, *prediction.terrain_torque_Nm)
         self.pub_predicted.publish(self._predicted_wire.pack(sec, nanosec, velocity, effort))
 
-    def _publish_predicted_motion(self, prediction: Prediction, now: float, stamp: Any) -> None:
+    def _publish_predicted_motion(self, prediction: Prediction, now: float, stamp: TimeLike) -> None:
         """The dead reckoning of ``odom/predicted`` takes this command's predicted motion at once;
         ``power/predicted_twist`` goes out with the figures (``figure_period_s``, the newest
         command's stamp), as a message per command would cost the 1 kHz budget of issue 18."""
@@ -574,7 +590,7 @@ class PowerEstimator(QuietNode):
         twist.twist.linear.x, twist.twist.angular.z = float(speed), float(yaw_rate)
         self.pub_predicted_twist.publish(twist)
 
-    def _publish_odometry(self, stamp: Any) -> None:
+    def _publish_odometry(self, stamp: Time) -> None:
         with self._lock:
             odo = dataclasses.replace(self.odometry)
         msg = Odometry()
@@ -613,7 +629,7 @@ class PowerEstimator(QuietNode):
         self._figures_due[:] = [False, False]
         with self._lock:
             prediction, comparison = self.core.prediction, self.core.comparison
-        figures: list[tuple[Any, float]] = []
+        figures: list[tuple[Publisher, float]] = []
         if command_due:
             figures += zip(self.pub_command_figures, prediction_figures(prediction), strict=True)
             if prediction is not None and self._predicted_twist_stamp is not None:
@@ -700,7 +716,7 @@ class PowerEstimator(QuietNode):
         self.pub_diag.publish(array)
 
     # --- persistence --------------------------------------------------------------------------
-    def _state(self) -> dict[str, Any]:
+    def _state(self) -> JsonObject:
         with self._lock:
             self.core.tick(self.now_s())
             state = self.core.state_dict()
@@ -718,7 +734,7 @@ class PowerEstimator(QuietNode):
             self._writer.write_now(self._state())
 
     # --- run-time terrain change --------------------------------------------------------------
-    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for param in params:
             if param.name == 'terrain':
                 try:

@@ -5,21 +5,35 @@ the latest currents as its effort; without fresh ones it is "no data" (NaN in ev
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 from skidsteer_power.estimator.side_currents import SideCurrentSource, side_efforts
 
 if TYPE_CHECKING:
+    from rclpy.impl.rcutils_logger import RcutilsLogger
     from rclpy.qos import QoSProfile
+    from rclpy.subscription import Subscription
 
     from skidsteer_power.estimator.inputs import JointMap
+
+
+class FeedNode(Protocol):
+    """What a vendor-topic feed uses of its node (the power_estimator): subscriptions, the logger
+    and its ``now_s`` clock [s]."""
+
+    def create_subscription(
+        self, msg_type: type, topic: str, callback: Callable[[object], None], qos_profile: QoSProfile | int
+    ) -> Subscription: ...
+    def get_logger(self) -> RcutilsLogger: ...
+    def now_s(self) -> float: ...
 
 
 class SideCurrentFeed:
     """The latest (left, right) current [A] of the first ``side_currents`` source whose message
     package is installed; :meth:`joint_values` rewrites a joint_states reading with it."""
 
-    def __init__(self, node: Any, joint_map: JointMap, qos: QoSProfile | int) -> None:
+    def __init__(self, node: FeedNode, joint_map: JointMap, qos: QoSProfile | int) -> None:
         """``node``: the power_estimator (its subscriptions, logger and ``now_s`` clock [s])."""
         from skidsteer_power.bag_io._ros import message_class
         from skidsteer_power.errors import InputError
