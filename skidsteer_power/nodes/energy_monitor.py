@@ -32,7 +32,7 @@ import termios
 import time
 import tty
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import rclpy
 import rclpy.utilities
@@ -61,6 +61,11 @@ from skidsteer_power.ui.monitor import (
     render,
 )
 from skidsteer_power.vehicle import load_vehicle
+
+if TYPE_CHECKING:
+    from typing import Unpack
+
+    from skidsteer_power.nodes.ros_types import NodeKwargs
 
 MODES = ('free', 'case', 'view')
 
@@ -116,7 +121,7 @@ class EnergyMonitor(Node):
         refresh_hz: float = 5.0,
         drive: FreeDrive | None = None,
         vehicle: str = 'test_robot_track',
-        **node_kwargs: Any,
+        **node_kwargs: Unpack[NodeKwargs],
     ) -> None:
         super().__init__('energy_monitor', **node_kwargs)
         if mode not in MODES:

@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.node import Node
@@ -36,6 +36,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from skidsteer_power.bag_io._ros import GRAPH_TOPICS, absolute_topic, discover_topics, message_class
 from skidsteer_power.bag_io.writer import message_definition
 from skidsteer_power.errors import InputError
+
+if TYPE_CHECKING:
+    from foxglove import Channel
+    from foxglove.websocket import Capability, ChannelView, Client, ClientChannel, WebSocketServer
+    from rclpy.publisher import Publisher
+    from rclpy.subscription import Subscription
 
 LOG = logging.getLogger(__name__)
 
@@ -51,12 +57,23 @@ class Forwarded:
 
     topic: str
     msgtype: str
-    channel: Any
-    subscription: Any
+    channel: Channel
+    subscription: Subscription | None  # None until made (its callback holds the entry)
     messages: int = 0
 
 
-def _forwarder(entry: Forwarded) -> Any:
+class _ClientPublishOptions(TypedDict, total=False):
+    """The keyword arguments of ``foxglove.start_server`` for client publishing. Its
+    ``server_listener`` is typed ``foxglove.websocket.ServerListener``, a Protocol of 12 callbacks;
+    :class:`ClientPublish` has those of client publishing and subscriptions, not the parameter and
+    playback ones (capabilities this server does not offer)."""
+
+    capabilities: list[Capability]
+    supported_encodings: list[str]
+    server_listener: ClientPublish
+
+
+def _forwarder(entry: Forwarded) -> Callable[[bytes], None]:
     """The raw-subscription callback of ``entry`` (one argument: rclpy passes only the CDR bytes)."""
 
     def on_message(data: bytes) -> None:
@@ -99,7 +116,7 @@ class FoxgloveBridge:
         self.skipped: dict[str, str] = {}
         self.context = foxglove.Context()
         self.client_publish = ClientPublish(node, allow_publish) if allow_publish else None
-        publish: dict[str, Any] = {}
+        publish: _ClientPublishOptions = {}
         if self.client_publish is not None:
             publish = {
                 'capabilities': [Capability.ClientPublish],
@@ -115,7 +132,7 @@ class FoxgloveBridge:
                 context=self.context,
                 tls_cert=cert,
                 tls_key=key,
-                **publish,
+                **publish,  # type: ignore[arg-type]  # ClientPublish: see _ClientPublishOptions
             )
         except (OSError, RuntimeError) as err:
             raise InputError(f'cannot start the Foxglove server on loopback: {err}') from err
@@ -177,7 +194,7 @@ class FoxgloveBridge:
         self._timer.cancel()
         self.front.close()
         for entry in self.forwarded.values():
-            self.node.destroy_subscription(entry.subscription)
+            self.node.destroy_subscription(entry.subscription)  # type: ignore[arg-type]  # made in _forward
             entry.channel.close()
         self.server.stop()
 
@@ -190,18 +207,19 @@ class ClientPublish:
     def __init__(self, node: Node, topics: Sequence[str]) -> None:
         self.node = node
         self.topics = {absolute_topic(t) for t in topics}
-        self.publishers: dict[tuple[int, int], Any] = {}  # (client id, client channel id) -> publisher
+        # (client id, client channel id) -> (topic, publisher)
+        self.publishers: dict[tuple[int, int], tuple[str, Publisher]] = {}
         self.published: dict[str, int] = dict.fromkeys(sorted(self.topics), 0)
         self.refused = 0
-        self.server: Any = None  # the SDK's WebSocketServer, set once it runs
+        self.server: WebSocketServer | None = None  # set once it runs
 
     # The SDK calls every ServerListener method it knows of (foxglove-sdk 0.30: subscribe and
     # unsubscribe for each channel a client views, whatever the capabilities): a missing one logged
     # "Callback failed: AttributeError" for each (issue 37 item 6). Subscriptions need nothing here.
-    def on_subscribe(self, client: Any, channel: Any) -> None:
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         """A client subscribed to a bridged channel (the SDK sends it the channel's messages)."""
 
-    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
         """A client unsubscribed from a bridged channel."""
 
     def on_connection_graph_subscribe(self) -> None:
@@ -210,7 +228,7 @@ class ClientPublish:
     def on_connection_graph_unsubscribe(self) -> None:
         """Not offered (no connectionGraph capability)."""
 
-    def on_client_advertise(self, client: Any, channel: Any) -> None:
+    def on_client_advertise(self, client: Client, channel: ClientChannel) -> None:
         topic = absolute_topic(channel.topic)
         reason = ''
         if topic not in self.topics:
@@ -238,7 +256,7 @@ class ClientPublish:
         self.publishers[(client.id, channel.id)] = (topic, publisher)
         LOG.info('client %d publishes %s (%s)', client.id, topic, channel.schema_name)
 
-    def _refuse(self, client: Any, topic: str, schema_name: str, reason: str) -> None:
+    def _refuse(self, client: Client, topic: str, schema_name: str, reason: str) -> None:
         """Log the refusal and send it back as a warning status (to every client: foxglove-sdk 0.30
         has no per-client status; the message names the client)."""
         self.refused += 1
@@ -249,12 +267,12 @@ class ClientPublish:
             message = f'client {client.id}: refused channel {topic} ({schema_name}): {reason}'
             self.server.publish_status(message, StatusLevel.Warning)
 
-    def on_client_unadvertise(self, client: Any, client_channel_id: int) -> None:
+    def on_client_unadvertise(self, client: Client, client_channel_id: int) -> None:
         entry = self.publishers.pop((client.id, client_channel_id), None)
         if entry is not None:
             self.node.destroy_publisher(entry[1])
 
-    def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
+    def on_message_data(self, client: Client, client_channel_id: int, data: bytes) -> None:
         entry = self.publishers.get((client.id, client_channel_id))
         if entry is None:
             return
