@@ -110,11 +110,11 @@ def _samples_per_second(report: Report) -> None:
         with Engine(workers=workers, progress=False) as engine:
             started = time.perf_counter() - start
             engine.map(abs, [0])  # workers warm (imports) before timing
-            cpu0 = engine.client.run(time.process_time)  # CPU seconds of each worker process
+            cpu0 = engine.worker_cpu_s()  # CPU seconds of the worker processes
             t0 = time.perf_counter()
             mission_uncertainty(engine, vehicle, terrain, patrol(), pt, spread, samples=n, seed=workers)
             wall = time.perf_counter() - t0
-            cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
+            cpu = engine.worker_cpu_s() - cpu0
             rates[workers] = n / wall
             per_cpu[workers] = n / cpu
         report.figure(
@@ -192,11 +192,11 @@ def _design(report: Report) -> None:
     n = 8
     with Engine(workers=2, progress=False) as engine:
         engine.map(abs, [0, 1])
-        cpu0 = engine.client.run(time.process_time)
+        cpu0 = engine.worker_cpu_s()
         t0 = time.perf_counter()
         design_uncertainty(engine, terrain, spread, samples=n, seed=0)
         wall = time.perf_counter() - t0
-        cpu = sum(engine.client.run(time.process_time).values()) - sum(cpu0.values())
+        cpu = engine.worker_cpu_s() - cpu0
     per_sample, cpu_per_sample = wall / n, cpu / n
     report.figure(
         'uncertain design study, 729 candidates per sample, 2 workers (wall)', per_sample, 's/sample'

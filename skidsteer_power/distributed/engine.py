@@ -26,8 +26,9 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, TypeVar, cast
+from typing import TYPE_CHECKING, TypeVar, cast
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.errors import InputError
@@ -63,7 +64,7 @@ class Engine:
         self.workers = workers or os.cpu_count() or 1
         self.progress = sys.stderr.isatty() if progress is None else progress
         self.cluster: LocalCluster | None = None
-        self.client: Any = None  # Any: Client | None, but benchmarks/bench_scale.py calls .run unguarded
+        self.client: Client | None = None
 
     def __enter__(self) -> Engine:
         if self.scheduler is not None:
@@ -107,6 +108,12 @@ class Engine:
         if self.client is None:
             return 1
         return len(self.client.scheduler_info(n_workers=-1)['workers'])
+
+    def worker_cpu_s(self) -> float:
+        """CPU seconds [s] the worker processes have used so far (this process's when in-process)."""
+        if self.client is None:
+            return time.process_time()
+        return float(sum(self.client.run(time.process_time).values()))
 
     @property
     def description(self) -> str:

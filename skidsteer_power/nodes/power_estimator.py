@@ -86,7 +86,7 @@ import dataclasses
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistStamped
@@ -102,6 +102,7 @@ from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
+from skidsteer_power.estimator.factory import BatteryMessageFields
 from skidsteer_power.estimator.inputs import InputLimits, JointMap
 from skidsteer_power.estimator.odometry import PredictedOdometry
 from skidsteer_power.estimator.persistence import StateWriter, load_or_quarantine
@@ -294,7 +295,7 @@ BATTERY_TECHNOLOGY = {
 }
 
 
-def battery_state_message(fields: dict[str, Any]) -> BatteryState:  # Any: battery_message_fields' type
+def battery_state_message(fields: BatteryMessageFields) -> BatteryState:
     """A BatteryState from :func:`skidsteer_power.estimator.factory.battery_message_fields` (its
     ``dict[str, ...]`` of message fields by name, of mixed types: ``status`` and ``chemistry`` are
     strings, the rest numbers)."""
