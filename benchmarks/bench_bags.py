@@ -41,13 +41,14 @@ def _validate_throughput(report: Report, folder: Path) -> None:
     from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.commands import Segment
     from skidsteer_power.estimator import factory
+    from skidsteer_power.vehicle import load_vehicle
 
     # Ten minutes of the Table 7.3 commands (V 0.1/0.2 m/s, yaw rates 0-0.35 rad/s), 100 Hz.
     yaw_rates = [0.0, 0.01, 0.02, 0.04, 0.08, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35]
     runs = [Segment(v, r, 600 / 22) for v in (0.1, 0.2) for r in yaw_rates]
     bag_path = folder / 'ten_minutes.mcap'
     write_drive_bag(bag_path, runs, rate_hz=100, odom_hz=10)
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     # built once, not timed: the set-point map (prediction from the command) and the (V, yaw rate)
     # map (motion_prediction, from the bag's odometry)
     predictor, _, _ = factory.map_predictor(vehicle, TERRAIN, folder / 'maps')

@@ -98,10 +98,11 @@ def run_segments(surface: str, numbers: list[int]) -> list[SeriesSegment]:
     its measured motor torque K_t |I| in its set point's direction (module doc; NaN below
     :data:`FLOOR_A`) and no battery-side power (the current is the motor's)."""
     from skidsteer_power.drive import controller_for_vehicle
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.vehicle import load_vehicle
 
-    vehicle = factory.load_vehicle_config(VEHICLE)
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(VEHICLE)
+    powertrain = Powertrain.for_vehicle(vehicle)
     kt, ratio = powertrain.motor.torque_constant_Nm_A, powertrain.gear_ratio
     controller = controller_for_vehicle(vehicle)
     out: list[SeriesSegment] = []
@@ -164,12 +165,13 @@ def motion_row(surface: str, fit_runs: list[int], check_runs: list[int]) -> Moti
     and an ICR fit on the same segments."""
     from skidsteer_power.calibration import auto_fit_names, calibrate
     from skidsteer_power.calibration.series import segments_of
-    from skidsteer_power.estimator import factory
     from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
 
-    vehicle = factory.load_vehicle_config(VEHICLE)
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(VEHICLE)
+    powertrain = Powertrain.for_vehicle(vehicle)
     start = load_terrain(SURFACE_TERRAIN[surface])
     fit, check = run_segments(surface, fit_runs), run_segments(surface, check_runs)
     fit_sp = np.array([s.setpoint_rad_s for s in fit])
@@ -223,9 +225,9 @@ def _samples(surface: str, numbers: list[int]) -> tuple[np.ndarray, np.ndarray, 
     """(commands (n, 2) [m/s, rad/s], measured battery power (n,) [W], hold time (n,) [s]) of every
     sample of runs ``numbers``: the set points' twist through the drive controller, sample-and-hold."""
     from skidsteer_power.drive import controller_for_vehicle
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.vehicle import load_vehicle
 
-    controller = controller_for_vehicle(factory.load_vehicle_config(VEHICLE))
+    controller = controller_for_vehicle(load_vehicle(VEHICLE))
     commands, power, hold = [], [], []
     for n in numbers:
         series = load_run(surface, n)
@@ -256,12 +258,13 @@ def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[i
     ``check_runs`` from its set points (sample-and-hold energy)."""
     from skidsteer_power.calibration import auto_fit_names, calibrate
     from skidsteer_power.calibration.series import segments_of
-    from skidsteer_power.estimator import factory
     from skidsteer_power.models.predict import CommandPredictor
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
 
-    vehicle = factory.load_vehicle_config(VEHICLE)
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(VEHICLE)
+    powertrain = Powertrain.for_vehicle(vehicle)
     start = load_terrain(SURFACE_TERRAIN[surface])
     segments = segments_of(run_segments(surface, fit_runs))
     names, fixed = auto_fit_names(segments, start)

@@ -24,6 +24,8 @@ from skidsteer_power.bags.validate import TraceSegment, ValidateOptions, validat
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 TWIN_BAG = ROOT / 'bags' / 'test_robot_6wheel_sand_bin.mcap'
@@ -56,9 +58,9 @@ def copy_mcap(src: Path, dst: Path, drop: tuple[str, ...] = (), profile: str | N
 @pytest.fixture(scope='module')
 def predictor() -> MapPredictor:
     """A real FESS map of the 6-wheel test robot on the sand bin, on a coarse grid (fast)."""
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     power_map = PowerMap.build(vehicle, factory.check_terrain(TERRAIN), shape=(6, 9))
-    return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
+    return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description='coarse test map')
 
 
 @pytest.mark.parametrize('kinematics', ['odom', 'ground_truth'])

@@ -30,6 +30,8 @@ from skidsteer_power.bags.validate import (
 from skidsteer_power.commands import Segment
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
 # Table 7.3 style commands: V = 0.1 m/s straight, then yaw rates 0.1 and 0.2 rad/s (R = 1 m, 0.5 m).
@@ -39,9 +41,9 @@ RUNS = [Segment(0.1, 0.0, 3.0), Segment(0.1, 0.1, 3.0), Segment(0.1, 0.2, 3.0)]
 @pytest.fixture(scope='module')
 def predictor() -> MapPredictor:
     """A real FESS power map of the test robot on the sand bin, on a coarse grid to keep tests fast."""
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     power_map = PowerMap.build(vehicle, factory.check_terrain(TERRAIN), shape=(6, 9))
-    return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
+    return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description='coarse test map')
 
 
 def _predicted_motors(predictor: MapPredictor) -> Callable[[DriveSamples], MotorArrays]:

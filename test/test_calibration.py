@@ -25,7 +25,9 @@ from skidsteer_power.calibration.segments import Segment as SteadySegment
 from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
 from skidsteer_power.cli.main import main
 from skidsteer_power.commands import Segment
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain, load_terrain
+from skidsteer_power.vehicle import load_vehicle
 
 VEHICLE = 'test_robot_4wheel'
 TRUTH = PRESETS['dry_sand'].__class__(
@@ -293,8 +295,8 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
     from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits, JointReader
 
-    vehicle = factory.load_vehicle_config(VEHICLE)
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(VEHICLE)
+    powertrain = Powertrain.for_vehicle(vehicle)
     g = powertrain.gear_ratio
     assert g == 12.0  # chapter 7: 12:1 reduction
     wheels = factory.joint_map_for(vehicle, left='front_left_wheel_joint,rear_left_wheel_joint',
@@ -348,13 +350,12 @@ def command_energy_error(terrain: Terrain, segments: list[SteadySegment]) -> flo
     """Signed energy error [-] of the set-point prediction from each segment's command (as the node
     predicts) against the twin's measured motor terminal energy."""
     from skidsteer_power.calibration.fit import setpoint_check
-    from skidsteer_power.estimator import factory
 
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     measured = np.array([s.motor_torque_Nm for s in segments])
     every = np.arange(len(segments))
     check = setpoint_check(
-        vehicle, terrain, factory.powertrain_for(vehicle), segments, measured, every, every
+        vehicle, terrain, Powertrain.for_vehicle(vehicle), segments, measured, every, every
     )
     return check['holdout_energy_error']
 

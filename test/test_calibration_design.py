@@ -31,8 +31,9 @@ from skidsteer_power.calibration import (
 )
 from skidsteer_power.calibration.design import suggest_holds
 from skidsteer_power.calibration.fit import bound_hits
-from skidsteer_power.estimator import factory
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.vehicle import load_vehicle
 
 BAG = str(Path(__file__).resolve().parents[1] / 'bags' / 'test_robot_4wheel_sand_bin.mcap')
 VEHICLE = 'test_robot_4wheel'
@@ -48,8 +49,8 @@ def fit() -> CalibrationResult:
 
 def calibrate_scaled(share: float) -> CalibrationResult:
     """Calibration from sand_bin of the bag's segments with the measured torques times ``share``."""
-    vehicle = factory.load_vehicle_config(VEHICLE)
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(VEHICLE)
+    powertrain = Powertrain.for_vehicle(vehicle)
     options = SegmentOptions()
     segments, _ = find_segments(read_recording(BAG, options), options, powertrain.motor)
     # the scaled torques no longer match the recorded terminal power: drop it (NaN = not measured), so
@@ -109,7 +110,7 @@ def test_a_parameter_at_its_bound_has_no_interval_and_a_warning(
 
 
 def test_suggested_holds_shrink_the_widest_interval(fit: CalibrationResult) -> None:
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     suggestion = suggest_holds(vehicle, fit)
     widest = suggestion['widest_parameter']
     intervals = {n: e['ci95'] for n, e in fit.as_json()['parameters'].items() if e['ci95'] is not None}

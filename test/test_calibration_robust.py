@@ -29,6 +29,7 @@ from skidsteer_power.calibration.fit import (
     uncertainty,
 )
 from skidsteer_power.cli.main import main
+from skidsteer_power.vehicle import load_vehicle
 
 VEHICLE = 'test_robot_4wheel'
 
@@ -133,14 +134,14 @@ def test_motion_calibration_without_motor_torque(motion_fit: tuple[dict[str, Any
 
 
 def test_out_vehicle_is_a_vehicle_file_with_its_powertrain(motion_fit: tuple[dict[str, Any], Path]) -> None:
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
 
     p, folder = motion_fit
     assert p['out_vehicle'] == str(folder / 'v.yaml')
     data = yaml.safe_load((folder / 'v.yaml').read_text())
     assert str((folder / 't.yaml').resolve()) in data['source']  # says where its terrain is
-    vehicle = factory.load_vehicle_config(str(folder / 'v.yaml'))
-    pt = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(str(folder / 'v.yaml'))
+    pt = Powertrain.for_vehicle(vehicle)
     assert pt.gear_ratio == 12.0  # the test robot's 12:1 (chapter 7), carried over
     code, out, err = run_cli(
         [*('predict', '--vehicle', str(folder / 'v.yaml'), '--terrain', str(folder / 't.yaml')),

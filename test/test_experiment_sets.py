@@ -83,6 +83,7 @@ def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path: Path) -> None
 
     from skidsteer_power.estimator import factory
     from skidsteer_power.models import fess
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics import load_terrain
     from skidsteer_power.vehicle import load_vehicle
 
@@ -100,7 +101,7 @@ def test_fess_at_the_twins_motion_is_fess_at_that_motion(tmp_path: Path) -> None
     command, _, _ = factory.map_predictor(vehicle, job.TRUTH, cache)
     motion, _, _ = factory.map_predictor(vehicle, job.TRUTH, cache, kinematics='twist')
     sets = job._experiment_sets(
-        cast('TwinTrace', trace), command, motion, factory.powertrain_for(vehicle), vehicle.tread_m
+        cast('TwinTrace', trace), command, motion, Powertrain.for_vehicle(vehicle), vehicle.tread_m
     )
     direct = fess.solve(vehicle, load_terrain(job.TRUTH), speed, speed / yaw)
     outer = sets[0]['fess_motion_torque_Nm'][1]  # a left turn: the right track is the outer one

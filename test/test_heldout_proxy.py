@@ -11,7 +11,8 @@ from pathlib import Path
 import yaml
 
 from benchmarks.heldout_proxy import Case, run_case
-from skidsteer_power.estimator import factory
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 
 def test_an_unknown_robot_calibrates_on_one_bag_and_predicts_the_other(tmp_path: Path) -> None:
@@ -23,8 +24,8 @@ def test_an_unknown_robot_calibrates_on_one_bag_and_predicts_the_other(tmp_path:
     # the watts-vs-newton-metres bug read +4135 % here; any sane fit is within a factor of two
     assert abs(outcome.calibrated_pct) < 50.0
     written = tmp_path / 'calibrated_vehicle.yaml'
-    vehicle = factory.load_vehicle_config(str(written))
-    powertrain = factory.powertrain_for(vehicle)
+    vehicle = load_vehicle(str(written))
+    powertrain = Powertrain.for_vehicle(vehicle)
     assert powertrain.is_effective
     # a whole-robot total fits one b, c for both sides: the two sides are written alike
     sides = yaml.safe_load(written.read_text())['powertrain']['internal_resistance']

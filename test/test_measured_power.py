@@ -26,6 +26,7 @@ from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.measured import parse_measured_power
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 HUSKY, TERRAIN = 'husky_a200', 'sandy_loam'
 JOINTS = (
@@ -41,9 +42,9 @@ T = STORE.types
 
 @pytest.fixture(scope='module')
 def predictor() -> MapPredictor:
-    vehicle = factory.load_vehicle_config(HUSKY)
+    vehicle = load_vehicle(HUSKY)
     power_map = PowerMap.build(vehicle, factory.check_terrain(TERRAIN), shape=(6, 9))
-    return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
+    return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description='coarse test map')
 
 
 @pytest.mark.parametrize('preset', ['test_robot', 'husky_a200', 'jackal', 'leo_rover', 'effective'])
@@ -314,8 +315,8 @@ def _calibration_segments(bag: Path, vehicle: str) -> list[Any]:
     from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
     from skidsteer_power.estimator.inputs import JointReader
 
-    veh = factory.load_vehicle_config(vehicle)
-    pt = factory.powertrain_for(veh)
+    veh = load_vehicle(vehicle)
+    pt = Powertrain.for_vehicle(veh)
     limits = InputLimits.for_powertrain(pt)
     reader = JointReader(factory.joint_map_for(veh), pt.gear_ratio, pt.motor.torque_constant_Nm_A, limits)
     segments, _ = find_segments(read_recording(bag, SegmentOptions(), reader), SegmentOptions(), pt.motor)

@@ -10,9 +10,9 @@ import pytest
 
 from skidsteer_power.calibration import reconcile
 from skidsteer_power.calibration.fit import Model
-from skidsteer_power.estimator import factory
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
+from skidsteer_power.vehicle import load_vehicle
 
 B_NM_S, C_NM = 0.4, 2.0  # the drive's viscous and Coulomb loss at the axle (this test's own numbers)
 
@@ -20,7 +20,7 @@ B_NM_S, C_NM = 0.4, 2.0  # the drive's viscous and Coulomb loss at the axle (thi
 def effective_model() -> Model:
     """A Husky's geometry on grass with an effective powertrain (gear ratio 1, no copper loss) and the
     loss terms above, efficiency 1 and no idle power: a steady-window fit's result."""
-    vehicle = factory.load_vehicle_config('husky_a200')
+    vehicle = load_vehicle('husky_a200')
     powertrain = Powertrain.from_config({'preset': 'effective', 'bus_voltage_V': 24.0}, 'wheel')
     model = Model(vehicle, load_terrain('grass'), powertrain, np.zeros(0), np.zeros(0))
     losses = {'sides_b': B_NM_S, 'sides_c': C_NM, 'copper_loss_W_per_Nm2': 1e-4}

@@ -29,6 +29,7 @@ from skidsteer_power.estimator.core import LEVEL_WARN
 from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
 from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
@@ -56,7 +57,7 @@ def four_wheel() -> MapPredictor:
 def _predictor(name: str) -> MapPredictor:
     vehicle = load_vehicle(name)
     power_map = PowerMap.build(vehicle, factory.check_terrain(TERRAIN), shape=(6, 21))
-    return MapPredictor(power_map, factory.powertrain_for(vehicle), description=f'coarse {name} map')
+    return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description=f'coarse {name} map')
 
 
 def _twist(v: float, w: float) -> bytes:
@@ -227,7 +228,7 @@ def test_public_robot_files_hold_their_published_dimensions(
 def test_diagnostics_warn_while_a_command_is_outside_the_map(track: MapPredictor) -> None:
     vehicle = load_vehicle('test_robot_track')
     core = EstimatorCore(
-        track, factory.battery_for(vehicle), factory.powertrain_for(vehicle), EstimatorSettings()
+        track, factory.battery_for(vehicle), Powertrain.for_vehicle(vehicle), EstimatorSettings()
     )
     core.on_command(0.2, 0.0, 0.0)
     level, message, values = core.diagnostics(0.1)

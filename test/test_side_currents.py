@@ -27,6 +27,8 @@ from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
 from skidsteer_power.maps import PowerMap
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 MSG_DIR = Path(__file__).resolve().parent / 'msg'
 # the Husky with its pre-issue-35 side_currents mapping (config/vehicles/husky_a200.yaml now declares
@@ -111,16 +113,16 @@ def _vendor_msg(types: dict[str, Any], vendor: str, header: object) -> object:
 
 @pytest.fixture(scope='module')
 def predictor() -> MapPredictor:
-    vehicle = factory.load_vehicle_config(VEHICLE)
+    vehicle = load_vehicle(VEHICLE)
     power_map = PowerMap.build(vehicle, factory.check_terrain(TERRAIN), shape=(6, 9))
-    return MapPredictor(power_map, factory.powertrain_for(vehicle), description='coarse test map')
+    return MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description='coarse test map')
 
 
 def expected_side(current_A: float) -> tuple[float, float]:
     """(motor torque [N m], terminal power [W]) by hand: T = Kt I, w_m = G v / r_wheel,
     P = T w_m + R I^2 with the husky file's ASSUMED powertrain (EC-45: Kt 0.114 N m/A, R 0.710 ohm
     phase to phase; 12:1, chapter 7.1)."""
-    pt = factory.powertrain_for(factory.load_vehicle_config(VEHICLE))
+    pt = Powertrain.for_vehicle(load_vehicle(VEHICLE))
     kt, r = pt.motor.torque_constant_Nm_A, pt.motor.terminal_resistance_ohm
     assert (kt, r, pt.gear_ratio) == pytest.approx((0.114, 0.710, 12.0), rel=0.01)
     omega_m = pt.gear_ratio * SPEED_M_S / WHEEL_RADIUS_M
@@ -167,8 +169,8 @@ def test_validate_without_the_vendor_topic_says_so(tmp_path: Path, predictor: Ma
 def test_calibrate_reads_the_vendor_currents(tmp_path: Path) -> None:
     path = tmp_path / 'husky.mcap'
     write_husky_bag(path, HUSKY)
-    pt = factory.powertrain_for(factory.load_vehicle_config(VEHICLE))
-    joint_map = factory.joint_map_for(factory.load_vehicle_config(VEHICLE))
+    pt = Powertrain.for_vehicle(load_vehicle(VEHICLE))
+    joint_map = factory.joint_map_for(load_vehicle(VEHICLE))
     reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, InputLimits())
     recording = read_recording(path, SegmentOptions(), reader)
     assert recording.js_t.size > 400
@@ -255,8 +257,8 @@ def test_a_bag_without_the_definition_needs_msg(tmp_path: Path, predictor: MapPr
     assert summary['has_motor_data'] and summary['motor_currents_from'].startswith(
         'motor currents from status'
     )
-    pt = factory.powertrain_for(factory.load_vehicle_config(VEHICLE))
-    joint_map = factory.joint_map_for(factory.load_vehicle_config(VEHICLE))
+    pt = Powertrain.for_vehicle(load_vehicle(VEHICLE))
+    joint_map = factory.joint_map_for(load_vehicle(VEHICLE))
     reader = JointReader(joint_map, pt.gear_ratio, pt.motor.torque_constant_Nm_A, InputLimits())
     recording = read_recording(path, SegmentOptions(extra_types=extra), reader)
     assert np.allclose(recording.torque, [expected_side(i)[0] for i in CURRENT_A], rtol=1e-5)

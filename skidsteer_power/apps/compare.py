@@ -316,11 +316,12 @@ def compare(options: CompareOptions, progress: Callable[[str], None] | None = No
 
 
 def _compare(options: CompareOptions, folder: Path, progress: Callable[[str], None] | None) -> JsonObject:
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.vehicle import load_vehicle
 
     say = progress or (lambda message: None)
-    vehicle = factory.load_vehicle_config(options.vehicle)
-    gear = factory.powertrain_for(vehicle).gear_ratio
+    vehicle = load_vehicle(options.vehicle)
+    gear = Powertrain.for_vehicle(vehicle).gear_ratio
     cache = options.map_cache_dir
     say(f'calibrating on {len(options.train)} training bag(s)')
     cal_terrain, calibration = calibrated_terrain(options, folder)

@@ -103,6 +103,7 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     from skidsteer_power.bag_io.reader import open_bag
     from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics import load_terrain
     from skidsteer_power.twin import Twin, run_commands, write_bag
     from skidsteer_power.vehicle import load_vehicle
@@ -129,7 +130,7 @@ def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = 
     # set-point map there would read the motion as a command and predict a wider, slipping turn.)
     predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir)
     motion_predictor, _, _ = factory.map_predictor(vehicle, TRUTH, cache_dir, kinematics='twist')
-    powertrain = factory.powertrain_for(vehicle)
+    powertrain = Powertrain.for_vehicle(vehicle)
     sets = _experiment_sets(trace, predictor, motion_predictor, powertrain, vehicle.tread_m)
     assert summary.motion_prediction is not None  # the twin's bag has /ground_truth/odom
     motion_energy = summary.motion_prediction.metrics.energy_error_pct  # from ground truth

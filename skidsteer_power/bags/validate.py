@@ -76,7 +76,9 @@ from skidsteer_power.bags.validate_metrics import (
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.measured import apply_to_joint_arrays
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.seams import BatteryModel
+from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
     from skidsteer_power.estimator import EstimatorCore
@@ -150,7 +152,7 @@ def joint_map_of(options: ValidateOptions) -> JointMap:
     from skidsteer_power.estimator import factory
 
     return factory.joint_map_for(
-        factory.load_vehicle_config(options.vehicle),
+        load_vehicle(options.vehicle),
         left=options.left_joints,
         right=options.right_joints,
         effort_is=options.effort_is,
@@ -285,7 +287,7 @@ def build_core(
     rate) map that takes its input as the motion (``twist`` and the measured-motion kinematics)."""
     from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, factory
 
-    vehicle = factory.load_vehicle_config(options.vehicle)
+    vehicle = load_vehicle(options.vehicle)
     if predictor is None:
         try:
             kind = 'setpoint' if (kinematics or options.kinematics) == 'cmd' else 'twist'
@@ -297,7 +299,7 @@ def build_core(
     battery: BatteryModel = factory.battery_for(vehicle)
     if battery_window_s > 0:
         battery = WindowedBattery(battery, battery_window_s)
-    powertrain = factory.powertrain_for(vehicle)
+    powertrain = Powertrain.for_vehicle(vehicle)
     limits = InputLimits.for_powertrain(powertrain)  # the vehicle's own motor and driver (issue 35)
     settings = EstimatorSettings(joint_map=joint_map_of(options), limits=limits)
     return EstimatorCore(predictor, battery, powertrain, settings)

@@ -76,13 +76,14 @@ def calibrate_bags(
     (:mod:`.reconcile`)."""
     import dataclasses
 
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
+    from skidsteer_power.vehicle import load_vehicle
 
     names = parse_fit_list(fit) if isinstance(fit, str) else list(fit)
-    veh = factory.load_vehicle_config(vehicle)
+    veh = load_vehicle(vehicle)
     start = load_terrain(terrain)
-    powertrain = factory.powertrain_for(veh)
+    powertrain = Powertrain.for_vehicle(veh)
     base = SegmentOptions(
         settle_s=settle_s,
         min_s=min_segment_s,

@@ -230,7 +230,8 @@ def write_vehicle(
     ``source`` says what was calibrated from which bags and where the terrain went (a vehicle file has
     no other free-text key); re-read as a check."""
     from skidsteer_power import resources
-    from skidsteer_power.estimator import factory
+    from skidsteer_power.powertrain import Powertrain
+    from skidsteer_power.vehicle import load_vehicle
 
     data = yaml.safe_load(resources.find('vehicles', vehicle).read_text(encoding='utf-8'))
     data['powertrain'] = powertrain_mapping(result, bags)
@@ -256,7 +257,7 @@ def write_vehicle(
     )
     out.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding='utf-8')
     try:
-        factory.powertrain_for(factory.load_vehicle_config(str(out)))
+        Powertrain.for_vehicle(load_vehicle(str(out)))
     except SkidsteerError as err:  # a bug here, not the user's input: say so plainly
         raise ConfigError(f'{out}: the written vehicle does not load again ({err})') from err
     return out

@@ -175,10 +175,11 @@ def _check_manifest(path: str | None, manifest: dict[str, tuple[str, str]] | Non
     the manifest, not a failed row per bag (issue 34)."""
     from skidsteer_power.errors import SkidsteerError
     from skidsteer_power.estimator import factory
+    from skidsteer_power.vehicle import load_vehicle
 
     for bag, (vehicle, terrain) in sorted((manifest or {}).items()):
         try:
-            factory.load_vehicle_config(vehicle)
+            load_vehicle(vehicle)
             factory.check_terrain(terrain)
         except SkidsteerError as err:
             raise InputError(f'manifest {path}, bag {bag}: {err}') from err

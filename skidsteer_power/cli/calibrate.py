@@ -213,9 +213,9 @@ def run(args: argparse.Namespace) -> int:
     payload['suggest'] = None
     if args.suggest:
         from skidsteer_power.calibration.design import suggest_holds
-        from skidsteer_power.estimator import factory
+        from skidsteer_power.vehicle import load_vehicle
 
-        payload['suggest'] = suggest_holds(factory.load_vehicle_config(args.vehicle), result)
+        payload['suggest'] = suggest_holds(load_vehicle(args.vehicle), result)
     if args.plot:
         from skidsteer_power.calibration.plots import plot_segments
 

@@ -343,8 +343,9 @@ def import_csv(
 ) -> ImportSummary:
     """Write the bag (module docstring); return what was written (topics, message counts, duration)."""
     from skidsteer_power.estimator import factory
+    from skidsteer_power.vehicle import load_vehicle
 
-    vehicle = factory.load_vehicle_config(vehicle_name)
+    vehicle = load_vehicle(vehicle_name)
     joints = factory.joint_map_for(vehicle)
     radius, tread = float(vehicle.drive_radius_m), float(vehicle.tread_m)
     signals = read_signals(path, columns, tread, imu, (time_scale, speed_scale, current_scale), max_rows)

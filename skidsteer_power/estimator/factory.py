@@ -16,18 +16,13 @@ from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.seams import BatteryModel
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
-from skidsteer_power.vehicle import Vehicle, load_vehicle
+from skidsteer_power.vehicle import Vehicle
 
 if TYPE_CHECKING:
     from skidsteer_power.drive.controller import DriveController
     from skidsteer_power.maps.power_map import PowerMap
 
 SECONDS_PER_HOUR = 3600.0
-
-
-def load_vehicle_config(name_or_path: str) -> Vehicle:
-    """The vehicle named (config/vehicles/<name>.yaml) or in a YAML file; ConfigError if bad."""
-    return load_vehicle(name_or_path)
 
 
 def check_terrain(name_or_path: str) -> Terrain:
@@ -48,22 +43,18 @@ def state_path(configured: str, vehicle: Vehicle, namespace: str = '') -> Path:
     return Path(base) / 'skidsteer_power' / name
 
 
-def powertrain_for(vehicle: Vehicle) -> Powertrain:
-    return Powertrain.for_vehicle(vehicle)
-
-
 def joint_map_for(vehicle: Vehicle, **overrides: object) -> JointMap:
     """The vehicle's joint_states mapping (its ``drivetrain:`` and ``measured_power:`` sections), with
     non-empty ``overrides`` (node parameters, CLI options: left, right, effort_is, location,
     gear_ratio ...) applied."""
     measured = getattr(vehicle, 'measured_power', None)
-    bus = powertrain_for(vehicle).nominal_bus_voltage_V() if measured else None
+    bus = Powertrain.for_vehicle(vehicle).nominal_bus_voltage_V() if measured else None
     return JointMap.from_config(vehicle.drivetrain or None, measured, bus).with_overrides(**overrides)
 
 
 def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:
     """The vehicle's battery (its powertrain's ``battery`` preset), at state of charge ``soc`` [-]."""
-    return Battery.from_config(powertrain_for(vehicle).battery, soc)
+    return Battery.from_config(Powertrain.for_vehicle(vehicle).battery, soc)
 
 
 KINEMATICS = ('setpoint', 'twist')
@@ -78,7 +69,7 @@ def drive_controller(vehicle: Vehicle, **limits: float) -> DriveController:
     the limits the robot's driver applies (the des_driver's parameters, ``skidsteer-power run``)."""
     from skidsteer_power.drive.controller import controller_for_vehicle
 
-    ctrl = controller_for_vehicle(vehicle, powertrain_for(vehicle))
+    ctrl = controller_for_vehicle(vehicle, Powertrain.for_vehicle(vehicle))
     given = {name: float(value) for name, value in limits.items() if value}
     return ctrl.with_values(**given) if given else ctrl
 
@@ -116,7 +107,7 @@ def map_predictor(
             return load_or_build(vehicle, terrain, cache_dir or None)[0]
 
         predictor = SetpointPredictor(
-            smap, powertrain_for(vehicle), description=description, motion_map=motion_map
+            smap, Powertrain.for_vehicle(vehicle), description=description, motion_map=motion_map
         )
         return predictor, built, str(where)
     from skidsteer_power.maps import cache_path, load_or_build
@@ -124,7 +115,11 @@ def map_predictor(
     power_map, built = load_or_build(vehicle, terrain, cache_dir or None)
     where = cache_path(vehicle, terrain, cache_dir or None)
     description = f'{vehicle.name} on {terrain.name} ({where})'
-    return MapPredictor(power_map, powertrain_for(vehicle), description=description), built, str(where)
+    return (
+        MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description=description),
+        built,
+        str(where),
+    )
 
 
 CURRENT_DEADBAND_A = 1e-3

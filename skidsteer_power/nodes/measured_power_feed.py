@@ -109,10 +109,10 @@ def vehicle_limits(limits: InputLimits, vehicle: Vehicle, p: PowerEstimatorParam
     test robot's 1200 rad/s and 5 N m), the parameter where one is set to another value."""
     import dataclasses
 
-    from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits
+    from skidsteer_power.powertrain import Powertrain
 
-    own = InputLimits.for_powertrain(factory.powertrain_for(vehicle))
+    own = InputLimits.for_powertrain(Powertrain.for_vehicle(vehicle))
     defaults = InputLimits()
     changes = {
         name: getattr(own, name)

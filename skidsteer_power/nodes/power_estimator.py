@@ -126,6 +126,8 @@ from skidsteer_power.nodes.path_hook import PARAMETERS as PATH_PARAMETERS
 from skidsteer_power.nodes.path_hook import PathEnergyHook, PathInputs
 from skidsteer_power.nodes.spin import Batched, LeanExecutor, QuietNode, spin_node
 from skidsteer_power.nodes.wire import PackedJointState, decoder
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
     from typing import Unpack
@@ -326,7 +328,7 @@ class PowerEstimator(QuietNode):
         self._figures_due = [False, False]  # a new prediction / measurement since the figures' tick
         self._figure_timer_idle = False  # cancelled after a tick with nothing new (no idle wake-ups)
         settings = self._settings(p)
-        self.vehicle = factory.load_vehicle_config(p.vehicle)
+        self.vehicle = load_vehicle(p.vehicle)
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
         self.terrain_name = p.terrain
@@ -349,7 +351,7 @@ class PowerEstimator(QuietNode):
         self.core = EstimatorCore(
             predictor,
             factory.battery_for(self.vehicle),
-            factory.powertrain_for(self.vehicle),
+            Powertrain.for_vehicle(self.vehicle),
             settings,
             adaptation,
         )

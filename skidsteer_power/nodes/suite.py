@@ -28,7 +28,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from skidsteer_power.estimator import factory
+from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.stop_signals import StopFlag
+from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
     from typing import TypedDict, Unpack
@@ -87,7 +89,7 @@ def driver_joint_params(vehicle: Vehicle) -> dict[str, ParamValue]:
     motor shaft, effort = K_t I [N m], the vehicle's powertrain reduction), whatever joints the
     vehicle file's ``drivetrain:`` names for its own stack (a ros2_control robot's wheel joints): in
     this suite the joint_states come from des_driver (issue 37 item 3)."""
-    gear_ratio = float(factory.powertrain_for(vehicle).gear_ratio)
+    gear_ratio = float(Powertrain.for_vehicle(vehicle).gear_ratio)
     return {
         'left_joints': 'left_motor',
         'right_joints': 'right_motor',
@@ -130,7 +132,7 @@ class Suite:
         self.stop = stop if stop is not None else StopFlag()
         self.failure = ''  # why a thread of the process died (then ``stop`` is set), else ''
         self._previous_excepthook: Callable[[threading.ExceptHookArgs], None] | None = None
-        self.vehicle = factory.load_vehicle_config(options.vehicle)
+        self.vehicle = load_vehicle(options.vehicle)
         self.sim: SimulatedPair | None = None
         self.nodes: list[Node] = []
         self._executors: list[SingleThreadedExecutor] = []
@@ -271,5 +273,5 @@ class Suite:
 
 def state_file_for(options: SuiteOptions) -> Path:
     """The energy-state file the suite's estimator uses."""
-    vehicle = factory.load_vehicle_config(options.vehicle)
+    vehicle = load_vehicle(options.vehicle)
     return factory.state_path(options.state_file, vehicle, options.namespace)
