@@ -21,8 +21,7 @@ import yaml
 from skidsteer_power.bag_io.synthetic import write_drive_bag
 from skidsteer_power.calibration.fit import select_identifiable
 from skidsteer_power.calibration.io import read_calibration
-from skidsteer_power.calibration.segments import Segment as SteadySegment
-from skidsteer_power.calibration.segments import SegmentOptions, find_segments, read_recording
+from skidsteer_power.calibration.segments import SegmentOptions, SteadyWindow, find_segments, read_recording
 from skidsteer_power.cli.main import main
 from skidsteer_power.commands import Segment
 from skidsteer_power.powertrain import Powertrain
@@ -329,7 +328,7 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
 
 
 @pytest.fixture(scope='module')
-def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list[SteadySegment]:
+def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list[SteadyWindow]:
     """Steady segments of a second twin bag (same terrain, seed 5) with commands the training bag
     never drove, inside its envelope: the hold-out the calibration never sees."""
     from skidsteer_power.twin import Twin, run_commands, write_bag
@@ -346,7 +345,7 @@ def holdout_segments(tmp_path_factory: pytest.TempPathFactory) -> list[SteadySeg
     return segments
 
 
-def command_energy_error(terrain: Terrain, segments: list[SteadySegment]) -> float:
+def command_energy_error(terrain: Terrain, segments: list[SteadyWindow]) -> float:
     """Signed energy error [-] of the set-point prediction from each segment's command (as the node
     predicts) against the twin's measured motor terminal energy."""
     from skidsteer_power.calibration.fit import setpoint_check
@@ -361,7 +360,7 @@ def command_energy_error(terrain: Terrain, segments: list[SteadySegment]) -> flo
 
 
 def test_calibrating_never_worsens_the_prediction_from_the_command(
-    calibrated: tuple[dict[str, Any], Path], holdout_segments: list[SteadySegment]
+    calibrated: tuple[dict[str, Any], Path], holdout_segments: list[SteadyWindow]
 ) -> None:
     """Issue 27: calibrate fits what the node predicts (the torques at the set points of each
     command), so the hold-out prediction from the command is no worse after than before. Reference:
@@ -383,7 +382,7 @@ def test_calibrating_never_worsens_the_prediction_from_the_command(
 
 
 def test_fit_at_the_motion_stays_available(
-    twin_bag: Path, tmp_path: Path, holdout_segments: list[SteadySegment]
+    twin_bag: Path, tmp_path: Path, holdout_segments: list[SteadyWindow]
 ) -> None:
     """``--fit-at motion`` solves the segments at the measured motion (the twin's ground truth); its
     terrain then predicts the commands through the set points, reported in ``setpoints``."""

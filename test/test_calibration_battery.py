@@ -13,7 +13,7 @@ import pytest
 
 from skidsteer_power.calibration import calibrate
 from skidsteer_power.calibration.fit import auto_fit_names, motor_points
-from skidsteer_power.calibration.segments import Segment
+from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.models.predict import CommandPredictor
 from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
@@ -41,7 +41,7 @@ def _effective(**terms: float) -> Powertrain:
     )
 
 
-def _segments(powertrain: Powertrain, noise_W: float = 0.0) -> list[Segment]:
+def _segments(powertrain: Powertrain, noise_W: float = 0.0) -> list[SteadyWindow]:
     """Steady holds over the Husky's envelope (straight at three speeds, gentle and tight turns, spot
     turns), each with the battery-side power per side that ``powertrain`` draws there, plus seeded
     normal noise of ``noise_W`` [W] (a window mean's scatter)."""
@@ -51,7 +51,7 @@ def _segments(powertrain: Powertrain, noise_W: float = 0.0) -> list[Segment]:
     _, _, power = motor_points(powertrain, pred.torque, pred.setpoint)
     power = power + np.random.default_rng(7).normal(0.0, noise_W, power.shape)
     return [
-        Segment(
+        SteadyWindow(
             source='synthetic',
             start_s=10.0 * k,
             duration_s=5.0,

@@ -22,8 +22,8 @@ from skidsteer_power.calibration.fit import (
 )
 from skidsteer_power.calibration.segments import (
     Recording,
-    Segment,
     SegmentOptions,
+    SteadyWindow,
     find_segments,
     read_recording,
 )
@@ -39,8 +39,8 @@ __all__ = [
     'FIT_AT',
     'FIT_TO',
     'CalibrationResult',
-    'Segment',
     'SegmentOptions',
+    'SteadyWindow',
     'auto_fit_names',
     'calibrate',
     'calibrate_bags',
@@ -66,7 +66,7 @@ def calibrate_bags(
     options: SegmentOptions | None = None,
     fit_to: str | None = None,
     every_sample: bool = True,
-) -> tuple[CalibrationResult, list[Segment]]:
+) -> tuple[CalibrationResult, list[SteadyWindow]]:
     """Read ``bags``, cut steady segments and fit ``fit`` starting from ``terrain``, solved at
     ``fit_at`` (:data:`FIT_AT`; see fit.py). ``fit`` 'auto' (or ['auto']): what the recordings
     identify (:func:`auto_fit_names`), fitted to the torque and the measured motion together where
@@ -124,14 +124,14 @@ def calibrate_bags(
 
 def read_segments(
     bags: Sequence[str], veh: Vehicle, powertrain: Powertrain, options: SegmentOptions
-) -> tuple[list[Recording], list[Segment], dict[str, int]]:
+) -> tuple[list[Recording], list[SteadyWindow], dict[str, int]]:
     """Step 1 of :func:`calibrate_bags`: every bag read (its joints through the vehicle's own motor
     and driver limits) and cut into steady segments. Returns (recordings, segments, windows dropped
     by reason); InputError when fewer than 3 segments remain."""
     from skidsteer_power.estimator import factory
     from skidsteer_power.estimator.inputs import InputLimits, JointReader
 
-    segments: list[Segment] = []
+    segments: list[SteadyWindow] = []
     recordings: list[Recording] = []
     dropped: dict[str, int] = {}
     for bag in bags:
@@ -176,7 +176,7 @@ def reconcile_battery_terms(
     reconcile.apply(result, model, reconcile.reconcile(model, samples, result.start))
 
 
-def _what_to_fit(segments: Sequence[Segment]) -> str:
+def _what_to_fit(segments: Sequence[SteadyWindow]) -> str:
     """'both', 'torque' or 'motion': what the segments measured (torque and / or a body motion)."""
     # a battery-side V x I is power evidence too: the torque residuals carry it (fit.FitData)
     torque = any(math.isfinite(sum(s.motor_torque_Nm)) or math.isfinite(sum(s.battery_W)) for s in segments)

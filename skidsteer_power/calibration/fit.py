@@ -76,7 +76,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import optimize, stats
 
-from skidsteer_power.calibration.segments import Segment
+from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.drive import DriveIdentification
 from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
@@ -195,7 +195,7 @@ def terrain_params(terrain: Terrain) -> tuple[str, ...]:
 
 
 def auto_fit_names(
-    segments: Sequence[Segment], terrain: Terrain | None = None
+    segments: Sequence[SteadyWindow], terrain: Terrain | None = None
 ) -> tuple[list[str], dict[str, str]]:
     """(candidates, {name: why left fixed}) of ``--fit auto`` for ``segments``: the ground's
     parameters (of ``terrain``'s kind) always; the internal resistance only where the segments carry
@@ -597,7 +597,7 @@ def split_holdout(count: int, fraction: float, seed: int) -> tuple[np.ndarray, n
 
 
 def _energy_error(
-    segments: Sequence[Segment], idx: np.ndarray, ev: Evaluation, motor: MotorConstants
+    segments: Sequence[SteadyWindow], idx: np.ndarray, ev: Evaluation, motor: MotorConstants
 ) -> float:
     """Signed relative error of the summed energy of segments ``idx`` [-] (predicted vs measured):
     the battery-side energy where the segments measured it (V x I), else the motor terminal energy
@@ -628,7 +628,7 @@ def _rmse(err: np.ndarray) -> float:
 class FitData:
     """The measurements of a calibration and their noise scales (module doc, "Residuals")."""
 
-    segments: list[Segment]
+    segments: list[SteadyWindow]
     model: Model
     fit_idx: np.ndarray
     hold_idx: np.ndarray
@@ -696,7 +696,7 @@ def prepare(
     vehicle: Vehicle,
     terrain: Terrain,
     powertrain: Powertrain,
-    segments: Sequence[Segment],
+    segments: Sequence[SteadyWindow],
     fit: Sequence[str],
     *,
     holdout: float,
@@ -1057,7 +1057,7 @@ def calibrate(
     vehicle: Vehicle,
     terrain: Terrain,
     powertrain: Powertrain,
-    segments: Sequence[Segment],
+    segments: Sequence[SteadyWindow],
     fit: Sequence[str] = DEFAULT_FIT,
     *,
     holdout: float = 0.3,
@@ -1212,7 +1212,7 @@ def _result(
 
 
 def segment_model(
-    vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain, segments: Sequence[Segment], fit_at: str
+    vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain, segments: Sequence[SteadyWindow], fit_at: str
 ) -> Model:
     """The :class:`Model` of ``segments``: at their commands ('setpoints') or measured motion ('motion')."""
     if fit_at == 'setpoints':
@@ -1226,7 +1226,7 @@ def setpoint_check(
     vehicle: Vehicle,
     terrain: Terrain,
     powertrain: Powertrain,
-    segments: Sequence[Segment],
+    segments: Sequence[SteadyWindow],
     measured: np.ndarray,
     err_idx: np.ndarray,
     hold_idx: np.ndarray,

@@ -10,10 +10,10 @@ import numpy as np
 
 if TYPE_CHECKING:
     from skidsteer_power.calibration.fit import CalibrationResult
-    from skidsteer_power.calibration.segments import Segment
+    from skidsteer_power.calibration.segments import SteadyWindow
 
 
-def plot_segments(path: str | Path, result: CalibrationResult, segments: Sequence[Segment]) -> Path:
+def plot_segments(path: str | Path, result: CalibrationResult, segments: Sequence[SteadyWindow]) -> Path:
     """Write a PNG: per segment and side, predicted vs measured K_t i [N m]; hold-out segments filled."""
     import matplotlib
 

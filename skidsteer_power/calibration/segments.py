@@ -90,8 +90,9 @@ class Recording:
 
 
 @dataclass(frozen=True)
-class Segment:
-    """One steady segment, SI units, per side (left, right) where a pair.
+class SteadyWindow:
+    """One steady window of a recording (not a held command: that is
+    :class:`skidsteer_power.commands.Segment`), SI units, per side (left, right) where a pair.
 
     speed_m_s, yaw_rate_rad_s : measured motion (``motion_source`` says from what) [m/s], [rad/s]
     command : the commanded (V, yaw rate); duration_s : window length [s]; samples : joint_states
@@ -302,7 +303,7 @@ def _measured_motion(
 
 def find_segments(
     rec: Recording, options: SegmentOptions | None = None, motor: MotorConstants | None = None
-) -> tuple[list[Segment], dict[str, int]]:
+) -> tuple[list[SteadyWindow], dict[str, int]]:
     """Steady segments of ``rec`` and the count of runs dropped per reason (``motor``: for power; the
     vehicle's powertrain motor, default the test robot's, :meth:`Powertrain.default_test_robot`)."""
     options = options or SegmentOptions()
@@ -325,7 +326,7 @@ def find_segments(
         torque = rec.torque[sel]
         speed, yaw_rate, motion = _measured_motion(rec, lo, hi, command)
         segments.append(
-            Segment(
+            SteadyWindow(
                 source=rec.source,
                 start_s=lo,
                 duration_s=hi - lo,

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skidsteer_power.calibration.segments import Segment
+from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.errors import InputError
 
 MAX_SAMPLES = 10_000_000  # samples of one series at most (declared maximum of the work)
@@ -58,10 +58,10 @@ class Series:
 
 @dataclass(frozen=True)
 class SeriesSegment:
-    """A steady segment (:class:`Segment`, torque NaN) with the measured power per side [W] (NaN when
+    """A steady segment (:class:`SteadyWindow`, torque NaN) with the measured power per side [W] (NaN when
     none) and its set points (2,) [rad/s]."""
 
-    segment: Segment
+    segment: SteadyWindow
     power_W: tuple[float, float]
     setpoint_rad_s: tuple[float, float]
 
@@ -118,7 +118,7 @@ def steady_segments(
             pw = series.power_W[sel].mean(axis=0)
             power = (float(pw[0]), float(pw[1]))
         nan2 = (math.nan, math.nan)
-        segment = Segment(
+        segment = SteadyWindow(
             source=series.source,
             start_s=float(lo),
             duration_s=float(hi - lo),
@@ -136,6 +136,6 @@ def steady_segments(
     return out, dropped
 
 
-def segments_of(items: Sequence[SeriesSegment]) -> list[Segment]:
-    """The plain :class:`Segment` of each item."""
+def segments_of(items: Sequence[SeriesSegment]) -> list[SteadyWindow]:
+    """The plain :class:`SteadyWindow` of each item."""
     return [item.segment for item in items]
