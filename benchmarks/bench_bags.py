@@ -38,9 +38,9 @@ VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'
 def _validate_throughput(report: Report, folder: Path) -> None:
     from skidsteer_power.bag_io import open_bag
     from skidsteer_power.bag_io.synthetic import write_drive_bag
-    from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.commands import Segment
     from skidsteer_power.estimator import factory
+    from skidsteer_power.validation.validate import ValidateOptions, validate
     from skidsteer_power.vehicle import load_vehicle
 
     # Ten minutes of the Table 7.3 commands (V 0.1/0.2 m/s, yaw rates 0-0.35 rad/s), 100 Hz.

@@ -18,13 +18,13 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bags.cmd_timing import command_timing
-from skidsteer_power.bags.report import MIN_TURN_RAD, flagged_spans, is_turn
-from skidsteer_power.bags.validate import TraceSegment, ValidateOptions, validate
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.validation.cmd_timing import command_timing
+from skidsteer_power.validation.report import MIN_TURN_RAD, flagged_spans, is_turn
+from skidsteer_power.validation.validate import TraceSegment, ValidateOptions, validate
 from skidsteer_power.vehicle import load_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,7 +18,11 @@ from rclpy.context import Context
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.synthetic import DriveSamples, MotorArrays, write_drive_bag
-from skidsteer_power.bags.validate import (
+from skidsteer_power.commands import Segment
+from skidsteer_power.estimator import MapPredictor, factory
+from skidsteer_power.maps import PowerMap
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.validation.validate import (
     ValidateOptions,
     WindowedBattery,
     build_core,
@@ -27,10 +31,6 @@ from skidsteer_power.bags.validate import (
     run_estimator,
     validate,
 )
-from skidsteer_power.commands import Segment
-from skidsteer_power.estimator import MapPredictor, factory
-from skidsteer_power.maps import PowerMap
-from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.vehicle import load_vehicle
 
 VEHICLE, TERRAIN = 'test_robot_track', 'sand_bin'

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from skidsteer_power.bag_io import open_bag
-from skidsteer_power.bags.validate import (
+from skidsteer_power.validation.validate import (
     MEASURED_COLUMNS,
     PREDICTED_COLUMNS,
     ValidateOptions,
@@ -20,7 +20,7 @@ from skidsteer_power.bags.validate import (
     run_estimator,
     with_other_commands,
 )
-from skidsteer_power.bags.validate_metrics import error_metrics
+from skidsteer_power.validation.validate_metrics import error_metrics
 
 BUNDLED = Path(__file__).resolve().parents[1] / 'bags' / 'test_robot_track_sand_bin.mcap'
 

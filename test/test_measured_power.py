@@ -18,7 +18,6 @@ from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.writer import BagWriter
-from skidsteer_power.bags.validate import ValidateOptions, console_warnings, reading_warnings, validate
 from skidsteer_power.cli.import_csv import PRESETS, Columns, import_csv
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator import MapPredictor, factory
@@ -26,6 +25,7 @@ from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.measured import parse_measured_power
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.validation.validate import ValidateOptions, console_warnings, reading_warnings, validate
 from skidsteer_power.vehicle import load_vehicle
 
 HUSKY, TERRAIN = 'husky_a200', 'sandy_loam'

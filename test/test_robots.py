@@ -21,8 +21,6 @@ from rosbags.typesys import Stores, get_typestore
 
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.writer import BagWriter
-from skidsteer_power.bags.cmd_timing import command_timing
-from skidsteer_power.bags.validate import ValidateOptions, validate
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator import EstimatorCore, EstimatorSettings, MapPredictor, factory
 from skidsteer_power.estimator.core import LEVEL_WARN
@@ -30,6 +28,8 @@ from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
 from skidsteer_power.estimator.prediction import Predictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.validation.cmd_timing import command_timing
+from skidsteer_power.validation.validate import ValidateOptions, validate
 from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:

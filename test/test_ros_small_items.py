@@ -11,8 +11,8 @@ import numpy as np
 from rclpy.context import Context
 from test_cmd_vel_input import Graph
 
-from skidsteer_power.bags.report import MIN_FIT_POSES, is_fitted, is_turn, trace_window
-from skidsteer_power.bags.validate import TraceSegment
+from skidsteer_power.validation.report import MIN_FIT_POSES, is_fitted, is_turn, trace_window
+from skidsteer_power.validation.validate import TraceSegment
 
 ROOT = Path(__file__).resolve().parents[1]
 

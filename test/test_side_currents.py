@@ -21,13 +21,13 @@ from test_nodes_estimator import Rig
 from skidsteer_power.bag_io import open_bag
 from skidsteer_power.bag_io.reader import build_typestore, load_msg_definitions
 from skidsteer_power.bag_io.writer import BagWriter
-from skidsteer_power.bags.validate import ValidateOptions, validate
 from skidsteer_power.calibration.segments import SegmentOptions, read_recording
 from skidsteer_power.errors import ConfigError
 from skidsteer_power.estimator import MapPredictor, factory
 from skidsteer_power.estimator.inputs import InputLimits, JointMap, JointReader
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.validation.validate import ValidateOptions, validate
 from skidsteer_power.vehicle import load_vehicle
 
 MSG_DIR = Path(__file__).resolve().parent / 'msg'

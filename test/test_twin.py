@@ -361,7 +361,7 @@ def turning_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 def test_validate_kinematics_predicts_from_the_motion(turning_bag: tuple[Path, Path]) -> None:
     from skidsteer_power.bag_io.reader import open_bag
-    from skidsteer_power.bags.validate import ValidateOptions, validate
+    from skidsteer_power.validation.validate import ValidateOptions, validate
 
     bag_path, folder = turning_bag
     summaries = {}

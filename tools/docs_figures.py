@@ -137,7 +137,7 @@ LAYER_ROLES = {
     'cli': 'command line',
     'apps': 'applications and ROS nodes',
     'twin': 'users of recordings',
-    'bags': 'single-bag validation against the estimator',
+    'validation': 'single-bag validation against the estimator',
     'analysis': 'studies and helpers',
     'estimator': 'on-board estimator',
     'missions': 'missions',

@@ -1,7 +1,7 @@
 """FESS against the simple models a user would fit, on the user's own bags (issue 27).
 
 The baselines (:mod:`skidsteer_power.analysis.baselines`) are fitted on the training bags' measured
-motor terminal power; FESS predicts each bag as ``validate`` does (:func:`skidsteer_power.bags.
+motor terminal power; FESS predicts each bag as ``validate`` does (:func:`skidsteer_power.validation.
 validate.predict_bag`: the estimator core fed the bag's commands, so whatever validate predicts from
 by default, compare follows), with the given terrain, with the terrain calibrated on the training
 bags (:func:`skidsteer_power.calibration.calibrate_bags`, by default fitted at the wheel speed set
@@ -51,7 +51,7 @@ from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.vehicle import TrackGear, WheelGear
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.validate import BagPrediction, ValidateOptions
+    from skidsteer_power.validation.validate import BagPrediction, ValidateOptions
 
 MAX_BAGS = 16  # per list (training, hold-out, transfer)
 MAX_BAG_S = 3600.0  # longest bag [s]
@@ -124,7 +124,7 @@ class BagRun:
 
 
 def _validate_options(vehicle: str, terrain: str, cache: str | Path | None) -> ValidateOptions:
-    from skidsteer_power.bags.validate import ValidateOptions
+    from skidsteer_power.validation.validate import ValidateOptions
 
     return ValidateOptions(vehicle, terrain, report_dir='.', plots=False, map_cache_dir=cache)
 
@@ -137,7 +137,7 @@ def _predict(
     extra_types: Mapping[str, str] | None = None,
 ) -> BagPrediction:
     from skidsteer_power.bag_io import open_bag
-    from skidsteer_power.bags.validate import predict_bag
+    from skidsteer_power.validation.validate import predict_bag
 
     with open_bag(path, extra_types=extra_types) as bag:
         if bag.duration_s > MAX_BAG_S:
@@ -157,7 +157,7 @@ def bag_run(path: str, prediction: BagPrediction, drive_radius_m: float, gear_ra
     """The scored samples of a bag from validate's run over it (rows with a command in force and a
     measurement, as validate's metrics), with the command in force, the sprocket surface speeds
     (motor speed / G x r [m/s]) and the measured motion (ground truth if recorded, else odometry)."""
-    from skidsteer_power.bags.validate import command_segments
+    from skidsteer_power.validation.validate import command_segments
 
     c, inputs = prediction.series.columns, prediction.inputs
     valid = (c['cmd_fresh'] > 0) & np.isfinite(c['measured_torque_left_Nm'])

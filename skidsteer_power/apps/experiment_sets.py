@@ -101,11 +101,11 @@ def set_windows() -> list[tuple[float, float, float, float]]:
 def run_configuration(vehicle_name: str, out_dir: Path, cache_dir: str | None = None) -> JsonObject:
     """Simulate, record, validate and tabulate one configuration; returns its summary."""
     from skidsteer_power.bag_io.reader import open_bag
-    from skidsteer_power.bags.validate import ValidateOptions, validate
     from skidsteer_power.estimator import factory
     from skidsteer_power.powertrain import Powertrain
     from skidsteer_power.terramechanics import load_terrain
     from skidsteer_power.twin import Twin, run_commands, write_bag
+    from skidsteer_power.validation.validate import ValidateOptions, validate
     from skidsteer_power.vehicle import load_vehicle
 
     vehicle = load_vehicle(vehicle_name)

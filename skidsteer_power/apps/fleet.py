@@ -1,7 +1,7 @@
 """Fleet validation: many bags validated in parallel on Dask, one report per bag and a fleet summary.
 
 ``validate DIR|GLOB|BAG ... --jobs N | --scheduler ADDR --report OUT``: every bag goes through the
-single-bag :func:`skidsteer_power.bags.validate.validate` (unchanged, in a Dask task), its report in
+single-bag :func:`skidsteer_power.validation.validate.validate` (unchanged, in a Dask task), its report in
 ``OUT/<bag name>/``. A bag that fails (unreadable, no commands, any error) is a row with ``ok`` false
 and the error; the others go on. The fleet summary in ``OUT``:
 
@@ -36,9 +36,9 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.jsonout import JsonObject
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.series import Inputs
-    from skidsteer_power.bags.validate import ValidateOptions
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.validation.series import Inputs
+    from skidsteer_power.validation.validate import ValidateOptions
 
 BAG_SUFFIXES = ('.mcap', '.db3')
 CMD_HOLD_S = 0.5  # [s] a command counts as driven for at most this long (the estimator's staleness)
@@ -258,7 +258,7 @@ def validate_job(job: BagJob) -> FleetRow:
     row = FleetRow(job.bag, job.vehicle, job.terrain, job.report_dir, error='', processing_s=math.nan)
     try:
         from skidsteer_power.bag_io.reader import open_bag
-        from skidsteer_power.bags.validate import read_inputs, validate
+        from skidsteer_power.validation.validate import read_inputs, validate
 
         options = job.options
         with open_bag(job.bag, salvage=job.salvage, warn_unknown=False) as bag:

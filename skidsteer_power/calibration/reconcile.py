@@ -7,7 +7,7 @@ of 8.0 kJ, predicted 13 % low). The simplest alternative, P = a|v| + b|w| + c, i
 sample; so is this step, with the physics in front of it.
 
 With the ground fixed at its calibrated values, the drive is replayed through the estimator
-(:func:`skidsteer_power.bags.validate.predict_bag`: the set points, the drive controller, the map),
+(:func:`skidsteer_power.validation.validate.predict_bag`: the set points, the drive controller, the map),
 every sample's predicted axle torque and speed per side kept. Two battery-side terms
 (:data:`RECONCILED`: the amplifier efficiency, which scales every motoring watt, and the idle power,
 every second) are then fitted to the measured battery power of the sides together, each sample
@@ -205,9 +205,9 @@ def replay_samples(
     from pathlib import Path
 
     from skidsteer_power.bag_io.reader import open_bag
-    from skidsteer_power.bags.series import ValidateOptions
-    from skidsteer_power.bags.validate import predict_bag
     from skidsteer_power.calibration import io
+    from skidsteer_power.validation.series import ValidateOptions
+    from skidsteer_power.validation.validate import predict_bag
 
     parts: list[PowerSamples] = []
     offset = 0.0

@@ -33,8 +33,8 @@ from skidsteer_power.terramechanics.ranges import (
 if TYPE_CHECKING:
     from skidsteer_power.bag_io.reader import BagReader
     from skidsteer_power.bag_io.record import Recorder
-    from skidsteer_power.bags.validate import ValidateOptions
     from skidsteer_power.jsonout import JsonObject
+    from skidsteer_power.validation.validate import ValidateOptions
 
 
 def _add_bag_reading(parser: argparse.ArgumentParser) -> None:
@@ -219,8 +219,8 @@ def _run_fleet(args: argparse.Namespace, shared: ValidateOptions) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from skidsteer_power.bags.report import one_screen
-    from skidsteer_power.bags.validate import ValidateOptions, console_warnings, validate
+    from skidsteer_power.validation.report import one_screen
+    from skidsteer_power.validation.validate import ValidateOptions, console_warnings, validate
 
     options = ValidateOptions(
         vehicle=args.vehicle,

@@ -189,7 +189,7 @@ class EstimatorCore:
         """Predict for a cmd_vel (V [m/s], yaw rate [rad/s]); raises RejectedInput for a bad one.
 
         The command is in force for ``hold_s`` [s] (None: ``settings.cmd_timeout_s``); offline
-        validation passes each recorded command's hold (:mod:`skidsteer_power.bags.cmd_timing`).
+        validation passes each recorded command's hold (:mod:`skidsteer_power.validation.cmd_timing`).
         """
         try:
             speed, yaw_rate = check_command(speed_m_s, yaw_rate_rad_s, self.settings.limits)
@@ -235,7 +235,7 @@ class EstimatorCore:
 
     def corrected_terminal_W(self) -> tuple[float, float]:
         """Motor terminal power [W] (left, right) of the corrected prediction, at the predicted motor
-        speeds (validate's ``online_power_*``: :func:`skidsteer_power.bags.online.online_columns`)."""
+        speeds (validate's ``online_power_*``: :func:`skidsteer_power.validation.online.online_columns`)."""
         p = self.prediction
         assert p is not None
         left, right = (

@@ -7,7 +7,7 @@ shaft speed [rad/s], effort = Kt*I [N m]) are fed in receive-time order to
 :class:`skidsteer_power.estimator.EstimatorCore`, as the live ``power_estimator`` node feeds it, so
 each joint_states sample is aligned with the prediction in force when it arrived. How long a command
 stays in force depends on how it was published (a stream or only on change) and, for on-change
-commands, on whether odometry shows the robot still moving (:mod:`skidsteer_power.bags.cmd_timing`).
+commands, on whether odometry shows the robot still moving (:mod:`skidsteer_power.validation.cmd_timing`).
 Compared per side at the motor (motor-equivalent for wheel joints): torque [N m] and terminal
 (electrical) power [W]; metrics over samples whose command is in force: MAE, RMSE and the error of
 the energy over the run [%]. The share of time and energy whose prediction came from outside the
@@ -40,44 +40,44 @@ from skidsteer_power.bag_io.decode import (
     decode_twists,
 )
 from skidsteer_power.bag_io.reader import BagReader
-from skidsteer_power.bags.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
-from skidsteer_power.bags.online import (
+from skidsteer_power.errors import ConfigError, InputError
+from skidsteer_power.estimator.inputs import InputLimits
+from skidsteer_power.estimator.measured import apply_to_joint_arrays
+from skidsteer_power.powertrain import Powertrain
+from skidsteer_power.seams import BatteryModel
+from skidsteer_power.validation.cmd_timing import CommandTiming, at_rest, command_timing, hold_ends
+from skidsteer_power.validation.online import (
     DERIVED_COLUMNS,
     online_columns,
     online_figures,
     online_summary,
     predicted_battery_J,
 )
-from skidsteer_power.bags.series import Inputs as Inputs  # re-exported: their old import path
-from skidsteer_power.bags.series import RunSeries as RunSeries
-from skidsteer_power.bags.series import ValidateOptions as ValidateOptions
-from skidsteer_power.bags.summary import (
+from skidsteer_power.validation.series import Inputs as Inputs  # re-exported: their old import path
+from skidsteer_power.validation.series import RunSeries as RunSeries
+from skidsteer_power.validation.series import ValidateOptions as ValidateOptions
+from skidsteer_power.validation.summary import (
     BatteryFigures,
     JointsUsed,
     MessageCounts,
     MotionPrediction,
     ValidationSummary,
 )
-from skidsteer_power.bags.validate_metrics import (  # re-exported: their old import path
+from skidsteer_power.validation.validate_metrics import (  # re-exported: their old import path
     LIVE_TOLERANCE_NM as LIVE_TOLERANCE_NM,
 )
-from skidsteer_power.bags.validate_metrics import (
+from skidsteer_power.validation.validate_metrics import (
     TraceSegment as TraceSegment,
 )
-from skidsteer_power.bags.validate_metrics import (
+from skidsteer_power.validation.validate_metrics import (
     command_segments as command_segments,
 )
-from skidsteer_power.bags.validate_metrics import (
+from skidsteer_power.validation.validate_metrics import (
     error_metrics,
     live_comparison,
     map_coverage,
     trace_segments,
 )
-from skidsteer_power.errors import ConfigError, InputError
-from skidsteer_power.estimator.inputs import InputLimits
-from skidsteer_power.estimator.measured import apply_to_joint_arrays
-from skidsteer_power.powertrain import Powertrain
-from skidsteer_power.seams import BatteryModel
 from skidsteer_power.vehicle import load_vehicle
 
 if TYPE_CHECKING:
@@ -684,7 +684,7 @@ def validate(
 ) -> ValidationSummary:
     """Run the whole validation of ``bag``; write the report; return the summary (``as_json``: the
     JSON of ``validate --json``)."""
-    from skidsteer_power.bags.report import write_report
+    from skidsteer_power.validation.report import write_report
 
     began = time.perf_counter()
     run = predict_bag(bag, options, predictor)

@@ -1,6 +1,6 @@
 """What power_estimator would have published from a bag: the online correction replayed offline.
 
-:func:`skidsteer_power.bags.validate.run_estimator` feeds the bag to the estimator core as the node
+:func:`skidsteer_power.validation.validate.run_estimator` feeds the bag to the estimator core as the node
 does; before each joint_states reading updates the core's online adaptation
 (:mod:`skidsteer_power.estimator.adaptation`), :func:`online_figures` records the corrected
 prediction the core holds at that moment (a one-sample-ahead estimate: it has learned from the
@@ -20,13 +20,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidsteer_power.bags.summary import OnlinePrediction
 from skidsteer_power.powertrain.motor import bus_power, terminal_power
+from skidsteer_power.validation.summary import OnlinePrediction
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.series import RunSeries
     from skidsteer_power.estimator import EstimatorCore
     from skidsteer_power.seams import PowertrainLike
+    from skidsteer_power.validation.series import RunSeries
 
 NO_ONLINE = (math.nan,) * 3
 DERIVED_COLUMNS = (
@@ -111,7 +111,7 @@ def online_summary(series: RunSeries, core: EstimatorCore) -> OnlinePrediction:
     scaled by the online terrain scale k, as the path energy uses it; ``battery_energy_predicted_J``:
     the corrected battery energy; the adaptation's final state.
     """
-    from skidsteer_power.bags.validate_metrics import error_metrics
+    from skidsteer_power.validation.validate_metrics import error_metrics
 
     metrics = error_metrics(with_prediction(series, 'online_torque_{side}_Nm', 'online_power_{side}_W'))
     scaled = error_metrics(with_prediction(series, None, 'scaled_power_{side}_W'))

@@ -1,4 +1,4 @@
-"""What a validation reports (:func:`skidsteer_power.bags.validate.validate`), typed.
+"""What a validation reports (:func:`skidsteer_power.validation.validate.validate`), typed.
 
 Each result is a frozen dataclass whose fields are named as the JSON keys of ``validate --json``
 (docs/VALIDATION.md, DESIGN.md's CLI contract) and whose ``as_json`` gives that JSON object, keys in
@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
-from skidsteer_power.bags.series import TraceSegment
 from skidsteer_power.jsonout import JsonObject
+from skidsteer_power.validation.series import TraceSegment
 
 QUANTITIES = (('torque', 'Nm'), ('power', 'W'))
 """The compared quantities and their units, in the order of the JSON keys and the report's tables."""
@@ -36,7 +36,7 @@ NO_ERROR = {unit: SideError(math.nan, math.nan, unit) for _, unit in QUANTITIES}
 
 @dataclass(frozen=True)
 class ErrorMetrics:
-    """Predicted against measured (:func:`skidsteer_power.bags.validate_metrics.error_metrics`):
+    """Predicted against measured (:func:`skidsteer_power.validation.validate_metrics.error_metrics`):
     rows compared, per side torque [N m] and power [W] errors, energy [J] and its error [%]."""
 
     samples_compared: int
@@ -68,7 +68,7 @@ class ErrorMetrics:
 @dataclass(frozen=True)
 class MapCoverage:
     """Share of the time and of the predicted energy whose prediction came from outside the power
-    map (clamped or limited) [-] (:func:`skidsteer_power.bags.validate_metrics.map_coverage`)."""
+    map (clamped or limited) [-] (:func:`skidsteer_power.validation.validate_metrics.map_coverage`)."""
 
     clamped_time_fraction: float
     clamped_energy_fraction: float
@@ -109,7 +109,7 @@ class MotionPrediction:
 @dataclass(frozen=True)
 class OnlinePrediction:
     """What power_estimator would have published from the bag (``online_prediction``,
-    :func:`skidsteer_power.bags.online.online_summary`): the corrected prediction's metrics, the
+    :func:`skidsteer_power.validation.online.online_summary`): the corrected prediction's metrics, the
     terrain-scaled prediction's (energy and power only), the corrected battery energy [J] and the
     adaptation's final state (terrain scale k [-], per-side scale [-] and offset [N m])."""
 

@@ -10,13 +10,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidsteer_power.bags.summary import QUANTITIES, SIDES, ReportFiles
 from skidsteer_power.errors import InputError
 from skidsteer_power.jsonout import jsonable as jsonable  # re-exported: its old import path
+from skidsteer_power.validation.summary import QUANTITIES, SIDES, ReportFiles
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.series import Inputs, RunSeries, TraceSegment
-    from skidsteer_power.bags.summary import ValidationSummary
+    from skidsteer_power.validation.series import Inputs, RunSeries, TraceSegment
+    from skidsteer_power.validation.summary import ValidationSummary
 
 SEGMENT_COLUMNS = (
     't_start_s',

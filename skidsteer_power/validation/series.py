@@ -1,4 +1,4 @@
-"""The data of a validation run (:mod:`skidsteer_power.bags.validate`), in a module of their own so
+"""The data of a validation run (:mod:`skidsteer_power.validation.validate`), in a module of their own so
 that the modules working on them (validate_metrics, online, report) import them without importing
 validate, which imports those modules: what to validate, the decoded bag inputs, the aligned series."""
 

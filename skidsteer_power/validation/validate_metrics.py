@@ -1,4 +1,4 @@
-"""Metrics and segments of a validation run (:mod:`skidsteer_power.bags.validate`): the errors of the
+"""Metrics and segments of a validation run (:mod:`skidsteer_power.validation.validate`): the errors of the
 predicted against the measured torque [N m], power [W] and energy [J]; the share outside the power
 map; the trace analysis of each constant-command segment (eqs. 7.8-7.10); the match of the offline
 predictions with the live node's. Pure functions of a run's series and inputs; validate re-exports them.
@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from skidsteer_power.analysis.trace import fit_circle, mean_speed
-from skidsteer_power.bags.series import TraceSegment as TraceSegment  # re-exported: its old import path
-from skidsteer_power.bags.summary import (
+from skidsteer_power.errors import InputError
+from skidsteer_power.validation.series import TraceSegment as TraceSegment  # re-exported: its old import path
+from skidsteer_power.validation.summary import (
     NO_ERROR,
     QUANTITIES,
     SIDES,
@@ -22,11 +23,10 @@ from skidsteer_power.bags.summary import (
     MapCoverage,
     SideError,
 )
-from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
-    from skidsteer_power.bags.series import Inputs, RunSeries, ValidateOptions
     from skidsteer_power.estimator.prediction import Predictor
+    from skidsteer_power.validation.series import Inputs, RunSeries, ValidateOptions
 
 
 def error_metrics(series: RunSeries) -> ErrorMetrics:
@@ -97,7 +97,7 @@ def command_segments(
 ) -> list[tuple[float, float, float, float]]:
     """(start, end, V, yaw rate) of runs of one repeated command, split where it stops being in force.
 
-    ``hold_end`` [s]: when each command stops being in force (:func:`bags.cmd_timing.hold_ends`);
+    ``hold_end`` [s]: when each command stops being in force (:func:`validation.cmd_timing.hold_ends`);
     None: at the next command, at most ``timeout_s`` later. A run ends where its last command's hold
     ends. Runs shorter than ``min_duration_s`` and standstill runs (V = yaw rate = 0) are dropped.
     """
