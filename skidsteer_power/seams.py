@@ -17,8 +17,8 @@ if TYPE_CHECKING:
 
     from skidsteer_power.maps.power_map import MapQuery
     from skidsteer_power.powertrain.battery import BatteryConfig, BatteryState
-    from skidsteer_power.powertrain.drivetrain import MotorPoint
     from skidsteer_power.powertrain.motor import AmplifierConstants, MotorConstants
+    from skidsteer_power.powertrain.power_flow import MotorPoint
 
 __all__ = ['ArrayPowerMapLike', 'BatteryModel', 'PowerMapLike', 'PowertrainLike']
 
@@ -96,7 +96,7 @@ class PowertrainLike(Protocol):
 if TYPE_CHECKING:
     from skidsteer_power.maps.power_map import PowerMap
     from skidsteer_power.powertrain.battery import Battery
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
 
     def _concrete_classes_fit(
         battery: Battery, power_map: PowerMap, powertrain: Powertrain

@@ -15,7 +15,7 @@ from skidsteer_power.calibration import calibrate
 from skidsteer_power.calibration.fit import auto_fit_names, motor_points
 from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.models.predict import CommandPredictor
-from skidsteer_power.powertrain.drivetrain import Powertrain
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import load_vehicle
 

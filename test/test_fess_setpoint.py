@@ -22,7 +22,7 @@ from skidsteer_power.models import appendix_d, fess
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.predict import JSON_KEYS, CommandPredictor
 from skidsteer_power.models.setpoint import SetpointSolver, command_setpoints
-from skidsteer_power.powertrain.drivetrain import Powertrain
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.real_robot import APPENDIX_D_RADII
 from skidsteer_power.terramechanics.terrain import Terrain, load_terrain
 from skidsteer_power.vehicle import load_vehicle

@@ -94,7 +94,7 @@ def test_a_side_the_current_limit_holds_back_reports_its_real_motion() -> None:
     sand bin: the outer (right) side needs 8.4 A at its set point, so it falls behind it until its
     current is the limit; the motion reported is that one, slower and wider than at the set points."""
     from skidsteer_power.models.predict import REASON_CURRENT, CommandPredictor
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.vehicle import load_vehicle
 
@@ -118,7 +118,7 @@ def test_a_side_that_needs_more_than_the_limit_at_any_speed_stalls() -> None:
     """A 5 A limit below the drivetrain's own Coulomb friction (about 6.8 A at any speed, eq. 7.1's c):
     the side stands, the motor pushing with the limit current."""
     from skidsteer_power.models.predict import REASON_STALL, CommandPredictor
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.vehicle import load_vehicle
 

@@ -39,7 +39,7 @@ from skidsteer_power.real_robot import APPENDIX_D_RADII
 if TYPE_CHECKING:
     from skidsteer_power.estimator.prediction import Predictor
     from skidsteer_power.models.predict import CommandPredictor
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.twin.sensors import TwinTrace
 
 CONFIGURATIONS = ('test_robot_track', 'test_robot_4wheel', 'test_robot_6wheel')

@@ -80,9 +80,9 @@ from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.drive import DriveIdentification
 from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
-from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.vehicle import Vehicle
 

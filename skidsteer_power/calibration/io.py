@@ -264,13 +264,13 @@ def write_vehicle(
 
 
 def _motors() -> dict[str, MotorConstants]:
-    from skidsteer_power.powertrain.drivetrain import MOTORS
+    from skidsteer_power.powertrain.power_flow import MOTORS
 
     return dict(MOTORS)
 
 
 def _amplifiers() -> dict[str, AmplifierConstants]:
-    from skidsteer_power.powertrain.drivetrain import AMPLIFIERS
+    from skidsteer_power.powertrain.power_flow import AMPLIFIERS
 
     return dict(AMPLIFIERS)
 

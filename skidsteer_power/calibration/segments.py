@@ -31,8 +31,8 @@ from skidsteer_power.bag_io.reader import BagReader, open_bag
 from skidsteer_power.errors import InputError
 from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, JointReader
 from skidsteer_power.estimator.measured import apply_to_joint_arrays, source_in_bag
-from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
+from skidsteer_power.powertrain.power_flow import Powertrain
 
 POSE_TYPES = (
     'nav_msgs/msg/Odometry',

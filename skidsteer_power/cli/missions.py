@@ -28,7 +28,7 @@ from skidsteer_power.terramechanics.ranges import (
 if TYPE_CHECKING:
     from skidsteer_power.distributed.engine import Engine
     from skidsteer_power.missions.routes import Route
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.studies.uncertainty import ParameterSpread
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle

@@ -15,8 +15,8 @@ import numpy as np
 from skidsteer_power.cli.common import Subcommands, add_json_flag, emit, nonnegative_float
 from skidsteer_power.errors import InputError
 from skidsteer_power.jsonout import JsonObject
-from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.internal import COMPONENTS, InternalFit, components_from_stages, fit_internal
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.powertrain.samples import read_bag, read_csv
 from skidsteer_power.vehicle import load_vehicle
 

@@ -16,8 +16,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.motor import DES_70_10, GEAR_RATIO, MotorConstants
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.powertrain.speed_loop import (
     SPEED_LOOP_BANDWIDTH_RAD_S,
     current_limits,

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from skidsteer_power.jsonout import JsonObject
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.vehicle import Vehicle
 
 __all__ = [
@@ -398,7 +398,7 @@ def controller_for_vehicle(vehicle: Vehicle, powertrain: Powertrain | None = Non
     ceiling_value = values.pop('max_wheel_speed_rad_s', SET_POINT_LIMIT)
     if ceiling_value == SET_POINT_LIMIT:
         if powertrain is None:
-            from skidsteer_power.powertrain.drivetrain import Powertrain
+            from skidsteer_power.powertrain.power_flow import Powertrain
 
             powertrain = Powertrain.for_vehicle(vehicle)
         ceiling_value = set_point_limit_rpm(powertrain.motor) * RPM / powertrain.gear_ratio

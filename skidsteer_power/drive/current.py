@@ -16,7 +16,7 @@ import numpy as np
 from skidsteer_power.numeric import Real, sign, where
 
 if TYPE_CHECKING:
-    from skidsteer_power.powertrain.drivetrain import MotorPoint, Powertrain
+    from skidsteer_power.powertrain.power_flow import MotorPoint, Powertrain
 
 __all__ = ['current_limited']
 

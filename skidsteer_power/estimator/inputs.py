@@ -18,7 +18,7 @@ from skidsteer_power.estimator.energy import CLOCK_STEP_BACK_S
 if TYPE_CHECKING:
     from skidsteer_power.estimator.measured import MeasuredPowerSource
     from skidsteer_power.estimator.side_currents import SideCurrentSource
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
 
 _isfinite = math.isfinite
 

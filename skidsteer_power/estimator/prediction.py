@@ -33,7 +33,7 @@ from skidsteer_power.seams import PowerMapLike, PowertrainLike
 if TYPE_CHECKING:
     from skidsteer_power.maps.power_map import MapQuery
     from skidsteer_power.maps.setpoint_map import SetpointMap
-    from skidsteer_power.powertrain.drivetrain import MotorPoint
+    from skidsteer_power.powertrain.power_flow import MotorPoint
 
 Pair = tuple[float, float]
 

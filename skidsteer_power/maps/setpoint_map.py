@@ -72,7 +72,7 @@ from skidsteer_power.vehicle import vehicle_fingerprint
 
 if TYPE_CHECKING:
     from skidsteer_power.drive.controller import DriveController
-    from skidsteer_power.powertrain.drivetrain import MotorPoint
+    from skidsteer_power.powertrain.power_flow import MotorPoint
     from skidsteer_power.terramechanics.terrain import Terrain
     from skidsteer_power.vehicle import Vehicle
 

@@ -36,8 +36,8 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.missions.energy import state_powers
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.powertrain import Powertrain
-from skidsteer_power.powertrain.drivetrain import SIDES
 from skidsteer_power.powertrain.perturbed import apply_powertrain
+from skidsteer_power.powertrain.power_flow import SIDES
 from skidsteer_power.vehicle import GRAVITY_M_S2, TrackGear, Vehicle, WheelGear
 
 if TYPE_CHECKING:

@@ -31,7 +31,7 @@ from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.missions.routes import Route
 from skidsteer_power.numeric import distinct_rows
 from skidsteer_power.powertrain import Powertrain
-from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.powertrain.power_flow import SIDES
 from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
 
 if TYPE_CHECKING:

@@ -32,7 +32,7 @@ from skidsteer_power.drive.current import current_limited
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.models.setpoint import SetpointSolution, SetpointSolver
 from skidsteer_power.powertrain.battery import Battery
-from skidsteer_power.powertrain.drivetrain import SIDES, Powertrain
+from skidsteer_power.powertrain.power_flow import SIDES, Powertrain
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

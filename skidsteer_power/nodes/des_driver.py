@@ -106,7 +106,7 @@ from skidsteer_power.nodes.parameters import DesDriverParameters
 from skidsteer_power.nodes.rclpy_compat import refuse_invalid_transitions
 from skidsteer_power.nodes.spin import spin_node
 from skidsteer_power.powertrain import Powertrain
-from skidsteer_power.powertrain.drivetrain import SIDES
+from skidsteer_power.powertrain.power_flow import SIDES
 from skidsteer_power.stop_signals import PauseHook, on_pause, remove_pause_hook
 from skidsteer_power.vehicle import load_vehicle
 

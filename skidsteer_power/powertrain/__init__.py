@@ -7,9 +7,9 @@
 from __future__ import annotations
 
 from skidsteer_power.powertrain.battery import Battery, BatteryConfig, BatteryState
-from skidsteer_power.powertrain.drivetrain import MotorPoint, Powertrain
 from skidsteer_power.powertrain.internal import InternalFit, Resistance, SideResistance, fit_internal
 from skidsteer_power.powertrain.motor import DES_70_10, EC45, GEAR_RATIO, AmplifierConstants, MotorConstants
+from skidsteer_power.powertrain.power_flow import MotorPoint, Powertrain
 
 __all__ = [
     'DES_70_10',

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
 
 if TYPE_CHECKING:
-    from skidsteer_power.powertrain.drivetrain import Powertrain
+    from skidsteer_power.powertrain.power_flow import Powertrain
 
 
 def apply_powertrain(powertrain: Powertrain, sample: Mapping[str, float]) -> Powertrain:

@@ -1,5 +1,5 @@
 """The DES 70/10's speed loop (ch. 7.1.2, Appendix A): one drive model for the twin
-(``twin/drivetrain.py``, semi-implicit) and the simulated amplifier (``des/simulator.MotorModel``,
+(``twin/motor_dynamics.py``, semi-implicit) and the simulated amplifier (``des/simulator.MotorModel``,
 explicit Euler). SI units: rad/s at the motor shaft, A, V, s.
 
 Per step: the set point ramps towards the target at the amplifier's ACCELERATION, a PI loop turns the

@@ -47,8 +47,8 @@ import numpy as np
 import yaml
 
 from skidsteer_power.errors import ConfigError, InputError
-from skidsteer_power.powertrain.drivetrain import Powertrain
 from skidsteer_power.powertrain.perturbed import apply_powertrain as apply_powertrain  # its home (re-export)
+from skidsteer_power.powertrain.power_flow import Powertrain
 from skidsteer_power.terramechanics.terrain import _UNIT_KEYS, Terrain
 
 if TYPE_CHECKING:

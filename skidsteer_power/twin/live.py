@@ -23,8 +23,8 @@ import threading
 import numpy as np
 
 from skidsteer_power.des.simulator import MotorModel
-from skidsteer_power.twin.drivetrain import FRICTION_SMOOTHING_RAD_S
 from skidsteer_power.twin.model import Twin
+from skidsteer_power.twin.motor_dynamics import FRICTION_SMOOTHING_RAD_S
 
 MAX_CATCH_UP_STEPS = 50
 """At most this many twin steps per load call; a stalled process does not replay the backlog."""

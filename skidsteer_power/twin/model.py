@@ -37,9 +37,9 @@ Terrain contact (see docs/TWIN.md for where this agrees with and departs from th
   the track's Appendix D radii at 0.1 m/s).
 
 The contacts are strategies (``track_contact.TrackContact``, ``wheel_contact.WheelContact``, their
-shared part in ``contact.py``); the drivetrain is ``drivetrain.Drivetrain``.
+shared part in ``contact.py``); the motors, amplifiers and gearboxes are ``motor_dynamics.MotorDynamics``.
 
-Drivetrain, per side (``drivetrain.py``, ``powertrain``: Table 7.1 internal resistance, left/right
+Motor dynamics, per side (``motor_dynamics.py``, ``powertrain``: Table 7.1 internal resistance, left/right
 asymmetric): J dw_m/dt = K_t i - (b w_m + c tanh(w_m / 1 rad/s)) - T_axle / G, the current from the
 DES speed loop (PI, 10 A limit, voltage limit 0.9 V_bus - EMF).
 """
@@ -56,7 +56,7 @@ from skidsteer_power.errors import InputError
 from skidsteer_power.powertrain import Battery, Powertrain
 from skidsteer_power.terramechanics.terrain import Terrain
 from skidsteer_power.twin.contact import CONTACT_LAWS, Contact
-from skidsteer_power.twin.drivetrain import Drivetrain
+from skidsteer_power.twin.motor_dynamics import MotorDynamics
 from skidsteer_power.twin.terrain_field import Patch, TerrainField
 from skidsteer_power.twin.track_contact import TrackContact
 from skidsteer_power.twin.wheel_contact import WheelContact
@@ -128,8 +128,8 @@ class Twin:
         self.dt = dt
         # 'classic': the chapter 2-4 laws only (no slip-sinkage, bulldozing or belt compliance)
         self.contact_laws = contact
-        self.drivetrain = Drivetrain(vehicle, self.powertrain)
-        d = self.drivetrain
+        self.motor_dynamics = MotorDynamics(vehicle, self.powertrain)
+        d = self.motor_dynamics
         self.G, self.kt, self.R, self.peak_A, self.J, self.kp, self.ki = (
             d.G,
             d.kt,
@@ -159,7 +159,7 @@ class Twin:
         self.vel = np.zeros(3)  # v_x, v_y [m/s] (hull), yaw rate [rad/s]
         self.omega_m = np.zeros(2)  # motor speeds, forward positive [rad/s]
         self.theta_m = np.zeros(2)  # motor angles [rad]
-        self.drivetrain.reset()
+        self.motor_dynamics.reset()
         self._ramp.reset()
         self.command = (0.0, 0.0)
         self.energy = EnergyLedger()
@@ -275,7 +275,7 @@ class Twin:
         )
         if sinkage > self.max_sinkage_m:
             self.max_sinkage_m = sinkage
-        omegas, currents, p_terms, p_buses, friction_power = self.drivetrain.step(
+        omegas, currents, p_terms, p_buses, friction_power = self.motor_dynamics.step(
             dt, self.omega_m, self._targets, axle, self.bus_voltage_V
         )
         dissipation += self._move(force, np.array(omegas))

@@ -1,4 +1,4 @@
-"""The twin's drivetrain, per side: the DES 70/10 speed loop and current limit, the EC-45 motor and
+"""The twin's motor dynamics, per side: the DES 70/10 speed loop and current limit, the EC-45 motor and
 the gearbox's internal resistance (Table 7.1, eqs. 7.1-7.4), integrated with the PI and friction terms
 implicit so the stiff zero-speed friction stays stable. SI units; sides 0 = left, 1 = right.
 
@@ -38,7 +38,7 @@ SideFigures = tuple[list[float], list[float], list[float], list[float], float]
 mean power of the internal resistance over the step [W]."""
 
 
-class Drivetrain:
+class MotorDynamics:
     """Both sides' amplifier, motor and gearbox (``powertrain``: Table 7.1 internal resistance,
     left/right asymmetric); the state is the ramped set point and the PI integral per side."""
 
