@@ -304,6 +304,31 @@ class DriveController:
             return (left * scale, True), (right * scale, True)
         return (min(top, max(-top, left)), True), (min(top, max(-top, right)), True)
 
+    def path_scale(
+        self, speed: ArrayLike, yaw_rate: ArrayLike, *, ceiling_rad_s: float | None = None
+    ) -> np.ndarray:
+        """(P,) factor s in (0, 1] by which a path follower slows the twists (V [m/s], w_z [rad/s],
+        broadcast) so the controller carries them out unchanged: the same path (curvature w_z / V)
+        at the highest speed within the velocity limits and the wheel speed ceiling (module doc,
+        steps 1, 3, 4; ``ceiling_rad_s`` as in :meth:`apply`). 1 where nothing limits. Unlike
+        :meth:`apply`, which limits V and w_z each on its own as diff_drive_controller does, this
+        keeps the path, as a route or a planned path asks (missions)."""
+        v, w = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(yaw_rate, dtype=float))
+        v, w = v.ravel(), w.ravel()
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
+            raise InputError('path speed and yaw rate must be finite numbers (m/s, rad/s)')
+        left, right = side_speeds(v, w, self.separation_m)
+        r_left, r_right = self.radii_m
+        peak = np.maximum(np.abs(left) / r_left, np.abs(right) / r_right)  # wheel speed [rad/s]
+        with np.errstate(divide='ignore'):  # x / 0 = inf: that limit does not bind
+            ratios = (
+                self.max_speed_m_s / np.abs(v),
+                self.max_yaw_rate_rad_s / np.abs(w),
+                self.ceiling_for(ceiling_rad_s) / peak,
+            )
+        out: np.ndarray = np.minimum.reduce([np.ones_like(v), *ratios])
+        return out
+
     def twist_of(self, setpoint: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(V [m/s], w_z [rad/s]) of wheel speeds (P, 2) [rad/s] through the controller's kinematics
         (the inverse of step 3; with no slip, the body motion)."""

@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidsteer_power.commands import Segment
+from skidsteer_power.drive import DriveController, controller_for_vehicle
 from skidsteer_power.errors import ConvergenceError, InputError
 from skidsteer_power.missions.mobility import max_drawbar_pull
 from skidsteer_power.missions.routes import Route
@@ -50,6 +52,8 @@ class MissionResult:
     flags (:class:`~skidsteer_power.maps.MapQuery`): ``clamped`` (the command lies outside the map's
     envelope) and ``limited`` (a physics limit: a turn tighter than the map's limit radius, or a cell
     at the traction limit or failing the map's accuracy check). A direct solve flags neither.
+    ``slowed``: the drive controller could not carry out the segment's twist, so the robot drove its
+    path slower (:func:`driven_route`; ``route`` is the route as driven).
     """
 
     route: Route
@@ -71,6 +75,7 @@ class MissionResult:
     setpoint_rad_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     drive_radius_m: float = math.nan
     tread_m: float = math.nan
+    slowed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def commands(self) -> list[dict[str, float]]:
         """Per route segment, the wheel speed set points that produce its (V, R) (each side's axle
@@ -168,6 +173,7 @@ class MissionResult:
             'energy_battery_J': self.energy_battery_J,
             'clamped_segments': int(np.sum(self.clamped)),
             'limited_segments': int(np.sum(self.limited)),
+            'slowed_segments': int(np.sum(self.slowed)),
             'internal_fraction': self.energy_internal_J / self.energy_J,
             'distance_m': self.route.length_m,
             'duration_s': self.route.duration_s,
@@ -225,8 +231,10 @@ def run_mission(
     model: str = 'fess',
     powertrain: Powertrain | None = None,
     cache_dir: str | os.PathLike[str] | None = None,
+    controller: DriveController | None = None,
 ) -> MissionResult:
-    """Evaluate ``route`` for ``vehicle`` on ``terrain`` (see module doc).
+    """Evaluate ``route`` for ``vehicle`` on ``terrain`` (see module doc), driven as the robot's drive
+    ``controller`` (default: the vehicle file's) carries it out: :func:`driven_route`.
 
     ``source='map'`` (default) queries the FESS power map of the vehicle (one per payload state) from
     :mod:`skidsteer_power.maps`: built in memory, or loaded from / saved to ``cache_dir``. The map
@@ -239,6 +247,7 @@ def run_mission(
     if source == 'map' and model != 'fess':
         raise InputError(f"power maps are built with FESS; use source='direct' for model {model!r}")
     pt = powertrain or Powertrain.for_vehicle(vehicle)
+    route, slowed = driven_route(route, controller or controller_for_vehicle(vehicle, pt), pt)
     a = route.arrays()
     n = len(route.segments)
     fields_ = {k: np.zeros(n) for k in ('P', 'Pt', 'Pi', 'Pb', 'Pl', 'Pr', 'z', 'tm', 'wl', 'wr')}
@@ -288,7 +297,31 @@ def run_mission(
         setpoint_rad_s=np.column_stack([fields_['wl'], fields_['wr']]),
         drive_radius_m=float(vehicle.drive_radius_m),
         tread_m=float(vehicle.tread_m),
+        slowed=slowed,
     )
+
+
+def driven_route(
+    route: Route, controller: DriveController, powertrain: Powertrain
+) -> tuple[Route, np.ndarray]:
+    """(``route`` as the robot drives it, slowed (n,) bool): a segment whose twist the drive
+    ``controller`` cannot carry out (a velocity limit, the wheel speed ceiling or the motors' no-load
+    speed, :func:`~skidsteer_power.models.predict.max_axle_speed`) is driven on the same path
+    (curvature, length, turned angle) at the highest speed it can: V and yaw rate times
+    :meth:`~skidsteer_power.drive.DriveController.path_scale` s < 1, the duration divided by s."""
+    from skidsteer_power.models.predict import max_axle_speed
+
+    speed = np.array([s.speed_m_s for s in route.segments])
+    yaw_rate = np.array([s.yaw_rate_rad_s for s in route.segments])
+    scale = controller.path_scale(speed, yaw_rate, ceiling_rad_s=max_axle_speed(powertrain))
+    slowed = scale < 1.0
+    if not np.any(slowed):
+        return route, slowed
+    driven = tuple(
+        Segment(s.speed_m_s * k, s.yaw_rate_rad_s * k, s.duration_s / k, s.payload_kg) if k < 1.0 else s
+        for s, k in zip(route.segments, scale.tolist(), strict=True)
+    )
+    return dataclasses.replace(route, segments=driven), slowed
 
 
 def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
