@@ -27,10 +27,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from benchmarks.harness import Report
-from skidsteer_power.bag_io.synthetic import table_7_3_segments
 from skidsteer_power.calibration import calibrate_bags
 from skidsteer_power.calibration.direct import feed_trace
 from skidsteer_power.commands import Segment
+from skidsteer_power.real_robot import table_7_3_segments
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, drive_until_empty, run_commands, write_bag
 from skidsteer_power.vehicle import Vehicle, load_vehicle

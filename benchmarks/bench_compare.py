@@ -30,8 +30,8 @@ from benchmarks.bench_calibration import TRUTH as HIDDEN
 from benchmarks.bench_calibration import nearest_preset
 from benchmarks.harness import Report
 from skidsteer_power.apps.compare import CompareOptions, compare, table
-from skidsteer_power.bag_io.synthetic import table_7_3_segments
 from skidsteer_power.commands import Segment
+from skidsteer_power.real_robot import table_7_3_segments
 from skidsteer_power.terramechanics.terrain import PRESETS, Terrain
 from skidsteer_power.twin import Twin, run_commands, write_bag
 from skidsteer_power.vehicle import load_vehicle

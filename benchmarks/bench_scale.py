@@ -221,8 +221,9 @@ def _design(report: Report) -> None:
 
 def _fleet(report: Report) -> None:
     from skidsteer_power.apps.fleet import plan_jobs, validate_fleet
-    from skidsteer_power.bag_io.synthetic import table_7_3_segments, write_drive_bag
+    from skidsteer_power.bag_io.synthetic import write_drive_bag
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.real_robot import table_7_3_segments
     from skidsteer_power.validation.validate import ValidateOptions
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -17,8 +17,8 @@ from collections.abc import Callable
 from functools import partial
 
 from benchmarks.harness import Report
-from skidsteer_power.bag_io.synthetic import table_7_3_segments
 from skidsteer_power.commands import Segment
+from skidsteer_power.real_robot import table_7_3_segments
 from skidsteer_power.terramechanics import load_terrain
 from skidsteer_power.twin import Twin, run_commands
 from skidsteer_power.vehicle import load_vehicle

@@ -10,11 +10,14 @@ twin and model figure answers to. Nothing here is computed.
 * :data:`TABLE_7_3_COMPLETED`: the cells of Table 7.3 with an entry (the run completed); the text:
   "skid steering tests failed (cells with no entry in Table 7.3), when the turning radius was
   small ... the test robot got stuck in the sand". One grid for all three configurations.
+* :func:`table_7_3_segments`: the experiment as commands, every completed set held from rest.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from skidsteer_power.commands import Segment
 
 TABLE_7_3_YAW_RATES = (0.0, 0.01, 0.02, 0.04, 0.08, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35)
 """Table 7.3's yaw-rate columns [rad/s]."""
@@ -83,3 +86,16 @@ def table_7_3_cells() -> list[tuple[str, float, float, bool]]:
         for v in TABLE_7_3_SPEEDS
         for w in TABLE_7_3_YAW_RATES
     ]
+
+
+def table_7_3_segments(hold_s: float = 4.0, pause_s: float = 1.0) -> list[Segment]:
+    """Every completed Table 7.3 set (:data:`TABLE_7_3_COMPLETED`) as a constant command held
+    ``hold_s`` [s], each followed by a stop of ``pause_s`` [s] (V = yaw rate = 0), so each set starts
+    from rest as in the experiments (ch. 7.3.4)."""
+    segments = []
+    for speed, yaw_rates in TABLE_7_3_COMPLETED.items():
+        for yaw_rate in yaw_rates:
+            segments.append(Segment(speed, yaw_rate, hold_s))
+            if pause_s > 0:
+                segments.append(Segment(0.0, 0.0, pause_s))
+    return segments

@@ -228,7 +228,7 @@ def test_synthetic_drive_bag_has_expected_topics_and_counts(tmp_path: Path) -> N
 
 
 def test_table_7_3_command_sets() -> None:
-    from skidsteer_power.bag_io.synthetic import table_7_3_segments
+    from skidsteer_power.real_robot import table_7_3_segments
 
     runs = [s for s in table_7_3_segments() if s.speed_m_s != 0]
     # Table 7.3: 8 sets at 0.1 m/s (yaw 0 ... 0.2 rad/s) and 11 at 0.2 m/s (yaw 0 ... 0.35 rad/s).

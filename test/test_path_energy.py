@@ -273,11 +273,11 @@ def test_terrain_scale_brings_the_path_energy_to_the_twins_on_another_terrain(tm
     to it than without (measured: +135 % -> +18 %, 3391 J -> 1699 J against 1443 J; the start-up,
     the final stop and the twin's wider-than-commanded turns are not in the steady path model;
     docs/ROS.md "Path energy")."""
-    from skidsteer_power.bag_io.synthetic import table_7_3_segments
     from skidsteer_power.calibration.direct import feed_trace
     from skidsteer_power.estimator.core import EstimatorCore
     from skidsteer_power.estimator.path_energy import PlannedPath
     from skidsteer_power.powertrain import Battery
+    from skidsteer_power.real_robot import table_7_3_segments
     from skidsteer_power.terramechanics.terrain import PRESETS
     from skidsteer_power.twin import Twin, commands_from_route, run_commands
 

@@ -31,10 +31,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidsteer_power.bag_io.synthetic import TABLE_7_3_SETS, table_7_3_segments
 from skidsteer_power.commands import Segment
 from skidsteer_power.jsonout import JsonObject
-from skidsteer_power.real_robot import APPENDIX_D_RADII
+from skidsteer_power.real_robot import APPENDIX_D_RADII, TABLE_7_3_COMPLETED, table_7_3_segments
 
 if TYPE_CHECKING:
     from skidsteer_power.estimator.prediction import Predictor
@@ -91,7 +90,7 @@ def set_windows() -> list[tuple[float, float, float, float]]:
     """(V_cmd [m/s], yaw rate cmd [rad/s], window start, end [s]) of each experiment set."""
     t = LEAD_IN_S
     out = []
-    for speed, yaw_rates in TABLE_7_3_SETS.items():
+    for speed, yaw_rates in TABLE_7_3_COMPLETED.items():
         for yaw in yaw_rates:
             out.append((speed, yaw, t + HOLD_S - WINDOW_S, t + HOLD_S))
             t += HOLD_S + PAUSE_S
@@ -207,7 +206,7 @@ def plot_configuration(result: JsonObject, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex='row')
-    for row, speed in enumerate(TABLE_7_3_SETS):
+    for row, speed in enumerate(TABLE_7_3_COMPLETED):
         sets = [s for s in result['sets'] if s['speed_cmd_m_s'] == speed]
         x = np.array([s['yaw_rate_cmd_rad_s'] for s in sets])
         for col, (quantity, unit) in enumerate((('torque', 'Nm'), ('power', 'W'))):
@@ -242,7 +241,7 @@ def plot_radius(results: list[JsonObject], path: Path) -> None:
 
     fig, axes = plt.subplots(len(results), 2, figsize=(10, 3.2 * len(results)), squeeze=False)
     for row, result in enumerate(results):
-        for col, speed in enumerate(TABLE_7_3_SETS):
+        for col, speed in enumerate(TABLE_7_3_COMPLETED):
             segs = [
                 r
                 for r in result['radius']

@@ -42,26 +42,6 @@ class DriveSamples:
     heading: np.ndarray
 
 
-# Table 7.3 (dissertation 7.3.4): the experiment sets run on dry sand; commanded forward speed [m/s]
-# -> commanded yaw rates [rad/s]. Cells without an entry (the robot got stuck) are left out.
-TABLE_7_3_SETS: dict[float, tuple[float, ...]] = {
-    0.1: (0.0, 0.01, 0.02, 0.04, 0.08, 0.1, 0.15, 0.2),
-    0.2: (0.0, 0.01, 0.02, 0.04, 0.08, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35),
-}
-
-
-def table_7_3_segments(hold_s: float = 4.0, pause_s: float = 1.0) -> list[Segment]:
-    """Every Table 7.3 set as a constant command held ``hold_s`` [s], each followed by a stop of
-    ``pause_s`` [s] (V = yaw rate = 0), so each set starts from rest as in the experiments."""
-    segments = []
-    for speed, yaw_rates in TABLE_7_3_SETS.items():
-        for yaw_rate in yaw_rates:
-            segments.append(Segment(speed, yaw_rate, hold_s))
-            if pause_s > 0:
-                segments.append(Segment(0.0, 0.0, pause_s))
-    return segments
-
-
 def sample_drive(segments: Sequence[Segment], rate_hz: float) -> DriveSamples:
     """Sample the ideal unicycle driving ``segments`` at ``rate_hz`` [Hz]; exact per-step integration."""
     durations = np.array([s.duration_s for s in segments], dtype=float)
