@@ -10,6 +10,7 @@ candidates: [...], criterion. sensitivity --json: results: {vehicle: {baseline, 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -27,6 +28,7 @@ from skidsteer_power.terramechanics.ranges import (
 
 if TYPE_CHECKING:
     from skidsteer_power.distributed.engine import Engine
+    from skidsteer_power.missions.energy import MissionResult
     from skidsteer_power.missions.routes import Route
     from skidsteer_power.powertrain.power_flow import Powertrain
     from skidsteer_power.studies.uncertainty import ParameterSpread
@@ -261,6 +263,8 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
         cache_dir=cache_dir,
     )
     payload = result.summary()
+    if payload['slowed_segments']:
+        print(f'warning: {_slowed_warning(result)}', file=sys.stderr)
     battery = Battery.from_config(powertrain.battery)
     battery.run_profile(result.power_battery_W, result.duration_s)
     payload['battery_end_soc'] = battery.soc
@@ -286,6 +290,17 @@ def run_mission_cmd(args: argparse.Namespace) -> int:
         args.json,
     )
     return 0
+
+
+def _slowed_warning(result: MissionResult) -> str:
+    """The console line of a mission the drive controller slowed (issue 36: never a silent change)."""
+    slowed = result.slowed
+    fastest = max(abs(s.speed_m_s) for s, k in zip(result.route.segments, slowed, strict=True) if k)
+    return (
+        f'{int(slowed.sum())} of {slowed.size} route segments are faster than the drive controller '
+        f'carries out (velocity limits, wheel speed ceiling): driven on the same path, slower (at most '
+        f'{fastest:.3g} m/s there; slowed_segments, duration_s as driven)'
+    )
 
 
 def _png(text: str) -> Path:
