@@ -33,6 +33,7 @@ JAZZY_TFMESSAGE_HASH = 'RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22
 the distribution's tf2_msgs (and as rosbag2 stores it in a Jazzy bag's metadata.yaml)."""
 COUNT = 40  # /tf messages the robot sends (2 s at 20 Hz)
 TIMEOUT_S = 120.0  # bound on each process (not a timing goal) [s]
+WAIT_S = 6.0  # replay --wait-for-subscribers [s]: the late /tf_static subscriber makes every wait run out
 
 
 def _require_tf2_msgs() -> None:
@@ -111,9 +112,10 @@ def _replay_to_listener(
     )  # fmt: skip
     try:
         assert listener.stdout is not None and listener.stdout.readline().strip() == 'ready'
-        # waits (3 s) for /tf's listener; /tf_static has none until the listener's 5th /tf message
+        # waits (WAIT_S) for /tf's listener; /tf_static has none until the listener's 5th /tf
+        # message, so the wait always runs out: WAIT_S is the listener's time to match on a loaded CI
         replay = subprocess.run(
-            _cli('replay', str(bag), '--json', '--wait-for-subscribers', '3', *replay_args),
+            _cli('replay', str(bag), '--json', '--wait-for-subscribers', str(WAIT_S), *replay_args),
             capture_output=True, text=True, cwd=ROOT, env=_env(), timeout=TIMEOUT_S,
         )  # fmt: skip
         out, err = listener.communicate(timeout=TIMEOUT_S)

@@ -56,7 +56,7 @@ other topic: their stored bytes, published as tf2_msgs/msg/TFMessage."""
 
 NS = 1_000_000_000
 ACK_TIMEOUT_S = 5.0  # longest wait at the end for subscribers to acknowledge [s]
-MATCH_SETTLE_S = 0.3  # pause after every publisher is matched, before the first message [s]
+MATCH_SETTLE_S = 0.3  # pause after the publishers matched (or the wait ended), before the first message [s]
 SPIN_S = 0.0002
 """The last part of each wait that is spun instead of slept [s]: a timed wait wakes 0.1-0.15 ms after
 its deadline (median, measured at 200 Hz), a spin on time. Longer spins buy nothing measurable: on a
@@ -214,7 +214,10 @@ class Replayer:
                 stop.wait(MATCH_SETTLE_S)
                 return True
             time.sleep(0.01)
-        return self._all_matched()
+        matched = self._all_matched()
+        if any(pub.get_subscription_count() > 0 for pub in self.publishers.values()):
+            stop.wait(MATCH_SETTLE_S)  # the topics that did match get the same pause (a late joiner's don't)
+        return matched
 
     def _all_matched(self) -> bool:
         """Every publisher has a subscriber, and is matched with every subscription the graph shows."""
