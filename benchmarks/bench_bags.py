@@ -395,8 +395,8 @@ def _salvage_figures(report: Report, folder: Path) -> None:
             try:
                 with open_bag(path, salvage=True) as bag:
                     recovered, why = sum(1 for _ in bag.messages()), ''
-            except InputError as err:  # the damage hit the only chunk: salvage says so, one line
-                recovered, why = 0, f'; {err}'.split(' (')[0]
+            except InputError:  # the damage hit the bag's only chunk: salvage refuses, one line
+                recovered, why = 0, '; nothing intact to salvage'
             report.figure(
                 f'salvage, {label}, {case}',
                 recovered / written * 100,

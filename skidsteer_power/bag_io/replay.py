@@ -206,17 +206,15 @@ class Replayer:
         """Wait up to ``options.wait_for_subscribers_s`` until every publisher is matched with every
         subscription to its topic on the graph (a recorder that just joined included)."""
         end = time.monotonic() + self.options.wait_for_subscribers_s
-        while time.monotonic() < end and not stop.is_set():
-            if self._all_matched():
-                # DDS matching is two-sided: our writer can see a reader before that reader has
-                # discovered the writer, and a volatile reader then skips what came before. A short
-                # pause lets the other side finish (as ``ros2 bag play --delay`` would).
-                stop.wait(MATCH_SETTLE_S)
-                return True
+        while time.monotonic() < end and not stop.is_set() and not self._all_matched():
             time.sleep(0.01)
         matched = self._all_matched()
         if any(pub.get_subscription_count() > 0 for pub in self.publishers.values()):
-            stop.wait(MATCH_SETTLE_S)  # the topics that did match get the same pause (a late joiner's don't)
+            # DDS matching is two-sided: our writer can see a reader before that reader has
+            # discovered the writer, and a volatile reader then skips what came before. A short
+            # pause lets the other side finish (as ``ros2 bag play --delay`` would), for every topic
+            # that matched, also when the wait ran out on another (a late joiner)
+            stop.wait(MATCH_SETTLE_S)
         return matched
 
     def _all_matched(self) -> bool:

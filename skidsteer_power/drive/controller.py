@@ -255,12 +255,7 @@ class DriveController:
     ) -> tuple[np.ndarray, np.ndarray]:
         """(set points (P, 2) [rad/s], ceiling reached (P,)) of twists already within the velocity
         limits: the kinematics and the ceiling (module doc, steps 3 and 4)."""
-        left, right = side_speeds(speed, yaw_rate, self.separation_m)
-        r_left, r_right = self.radii_m
-        if r_left == r_right:
-            sp = np.column_stack([left, right]) / r_left
-        else:
-            sp = np.column_stack([left / r_left, right / r_right])
+        sp = self._kinematic_wheels(speed, yaw_rate)
         top = self.ceiling_for(ceiling_rad_s)
         peak = np.max(np.abs(sp), axis=1)
         reached = peak > top
@@ -268,6 +263,15 @@ class DriveController:
             scale = np.where(reached, top / np.where(peak > 0, peak, 1.0), 1.0)
             return sp * scale[:, None], reached
         return np.clip(sp, -top, top), reached
+
+    def _kinematic_wheels(self, speed: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:
+        """(P, 2) wheel speeds [rad/s] of twists through the kinematics alone (module doc, step 3)."""
+        left, right = side_speeds(speed, yaw_rate, self.separation_m)
+        r_left, r_right = self.radii_m
+        if r_left == r_right:
+            out: np.ndarray = np.column_stack([left, right]) / r_left
+            return out
+        return np.column_stack([left / r_left, right / r_right])
 
     def ceiling_for(self, ceiling_rad_s: float | None = None) -> float:
         """The wheel speed ceiling that applies [rad/s]: the controller's, or a lower ``ceiling_rad_s``."""
@@ -317,9 +321,7 @@ class DriveController:
         v, w = v.ravel(), w.ravel()
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
             raise InputError('path speed and yaw rate must be finite numbers (m/s, rad/s)')
-        left, right = side_speeds(v, w, self.separation_m)
-        r_left, r_right = self.radii_m
-        peak = np.maximum(np.abs(left) / r_left, np.abs(right) / r_right)  # wheel speed [rad/s]
+        peak = np.max(np.abs(self._kinematic_wheels(v, w)), axis=1)  # wheel speed [rad/s]
         with np.errstate(divide='ignore'):  # x / 0 = inf: that limit does not bind
             ratios = (
                 self.max_speed_m_s / np.abs(v),

@@ -308,21 +308,22 @@ def _limit(value: object) -> float:
     return number
 
 
-def _nonnegative(value: object, name: str) -> float:
+def _number(value: object, name: str) -> float:
     try:
-        number = to_float(value)
+        return to_float(value)
     except (TypeError, ValueError):
         raise ConfigError(f'powertrain: {name} must be a number, not {value!r}') from None
+
+
+def _nonnegative(value: object, name: str) -> float:
+    number = _number(value, name)
     if np.isnan(number) or number < 0 or (np.isinf(number) and name != 'current_limit_A'):
         raise ConfigError(f'powertrain: {name} must be a finite number >= 0, not {value!r}')
     return number
 
 
 def _positive(value: object, name: str) -> float:
-    try:
-        number = to_float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f'powertrain: {name} must be a number, not {value!r}') from None
+    number = _number(value, name)
     if not np.isfinite(number) or number <= 0:
         raise ConfigError(f'powertrain: {name} must be > 0, not {value!r}')
     return number
