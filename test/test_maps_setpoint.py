@@ -140,3 +140,47 @@ def test_cached_map_is_checked_like_a_power_map(tmp_path: Path) -> None:
     np.savez(path, **arrays)  # type: ignore[arg-type]  # a file of the code before: no identity
     _fresh, built = load_or_build(vehicle, terrain, nodes=(5, 5), cache_dir=tmp_path)
     assert built
+
+
+def test_refined_cells_interpolate_their_sub_grid_and_match_the_direct_solve(track_map: SetpointMap) -> None:
+    """Every exact cell is refined 4 x 4 (maps/setpoint_map.py, module doc): at a sub-grid node the
+    answer is the direct solve (its node), and a command inside an interpolated sub-cell is within
+    the map's goals of the direct solve (1 % battery power, 5 mm/s, issue 36)."""
+    assert len(track_map.refined.cells) == int(track_map.exact.sum()) > 0
+    assert track_map.exact_fraction < track_map.exact.mean()  # part of the exact area interpolated
+    veh = track_map.predictor.vehicle
+    r, half_tread = veh.drive_radius_m, 0.5 * veh.tread_m
+    checked = 0
+    for sub in track_map._sub.values():
+        grid, flags = sub.grid, sub.flags
+        for i, j in np.argwhere(~flags.exact)[:2]:
+            m = 0.5 * (grid.axis0.values[i] + grid.axis0.values[i + 1])
+            d = 0.5 * (grid.axis1.values[j] + grid.axis1.values[j + 1])
+            v, w = float(m * r), float(d * r / half_tread)  # the sub-cell's centre as a command
+            q = track_map.query(v, w)
+            direct = track_map.predictor.predict(v, w)
+            assert q.limited == bool(direct.limited[0])
+            p_direct = float(direct.battery_power[0])
+            assert abs(q.battery_power_W - p_direct) <= 0.01 * max(abs(p_direct), 1.0)
+            assert abs(q.speed_m_s - float(direct.speed[0])) <= 0.005
+            checked += 1
+    assert checked > 0, f'no interpolated sub-cell in {len(track_map._sub)} refined cells'
+
+
+def test_a_cached_map_keeps_its_refinements(tmp_path: Path) -> None:
+    """The cache stores the sub-grids: the loaded map answers as the built one, bit for bit, in a
+    refined cell too; ``refine=1`` builds none, and a refinement outside 1...MAX_REFINE is refused."""
+    vehicle, terrain = load_vehicle('test_robot_track'), load_terrain('sand_bin')
+    built_map, built = load_or_build(vehicle, terrain, nodes=(7, 7), cache_dir=tmp_path)
+    loaded_map, again = load_or_build(vehicle, terrain, nodes=(7, 7), cache_dir=tmp_path)
+    assert built and not again and len(loaded_map.refined.cells) > 0
+    cell = int(loaded_map.refined.cells[0])
+    i, j = divmod(cell, len(loaded_map.grid.axis1.values) - 1)
+    mean, diff = loaded_map.grid.axis0.values, loaded_map.grid.axis1.values
+    m, d = 0.3 * mean[i] + 0.7 * mean[i + 1], 0.6 * diff[j] + 0.4 * diff[j + 1]
+    v, w = float(m * vehicle.drive_radius_m), float(2 * d * vehicle.drive_radius_m / vehicle.tread_m)
+    assert loaded_map.query(v, w) == built_map.query(v, w)
+    plain = SetpointMap.build(vehicle, terrain, nodes=(7, 7), refine=1)
+    assert len(plain.refined.cells) == 0 and plain.exact_fraction == plain.exact.mean()
+    with pytest.raises(InputError, match='refine'):
+        SetpointMap.build(vehicle, terrain, nodes=(7, 7), refine=0)

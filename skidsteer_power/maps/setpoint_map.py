@@ -21,22 +21,37 @@ envelope it is answered at the edge and ``clamped``. Accuracy and speed against 
 benchmarks/bench_maps.py.
 
 Cells answered exactly (issue 36: the map agrees with the direct solve): where the steady state
-changes too abruptly for bilinear interpolation the map does not interpolate but solves the command
-directly (:meth:`SetpointMap.query` then costs one set-point solve, milliseconds). Those cells are
+changes too abruptly for bilinear interpolation the map does not interpolate the grid. Those cells are
 the ones with a dug-in corner or whose corners disagree on the pivot test (the limited boundary:
-interpolating across it would flag or unflag commands the direct solve does not), and, found at build
-time, the cells near the pivot band (a corner's inner / outer set point ratio within
-+-:data:`BAND_RATIO`, where the motion turns steeply with the inner set point; on rigid ground every
-cell: Coulomb friction has a kink where the wheels begin to skid sideways, near straight driving,
-where the Husky's map was 16.7 % off on asphalt) whose centre, solved directly, is off the
-interpolated answer by more than :data:`CHECK_POWER` in battery power or :data:`CHECK_SPEED_M_S` in
-speed (half the goals of 1 % and 5 mm/s: for a smooth solution bilinear interpolation errs most at
-the centre). A spin in place (mean 0) is then solved like the direct path
-and symmetric as it is. A command in a cell with a corner the pivot law solved (the direct solve's
-fallback) is solved with the pivot law at once, warm-started from the cell's interpolated state
-(s0, V, w_z): the law equals eq. 6.6's chord wherever no element turns past half a revolution, so
-this is the direct solve's root within its stopping rule, without the chord's failing Newton and
-continuation first (husky_a200 x sand_bin: 14.5 s -> 1.75 s for 406 such commands; largest
+interpolating across it would flag or unflag commands the direct solve does not), with a corner the
+slip-path fallback solved (the pivot band on soil), and, found at build time, the cells near the
+pivot band (a corner's inner / outer set point ratio within +-:data:`BAND_RATIO`, where the motion
+turns steeply with the inner set point; on rigid ground every cell: Coulomb friction has a kink where
+the wheels begin to skid sideways, near straight driving, where the Husky's map was 16.7 % off on
+asphalt) whose centre, solved directly, is off the interpolated answer by more than
+:data:`CHECK_POWER` in battery power or :data:`CHECK_SPEED_M_S` in speed (half the goals of 1 % and
+5 mm/s: for a smooth solution bilinear interpolation errs most at the centre).
+
+Every exact cell is then refined at build: a :data:`REFINE` x :data:`REFINE` sub-grid over it is
+solved (as a query there would be, below) and every sub-cell checked at its centre the same way.
+A sub-cell is interpolated in its sub-grid unless it has a dug-in corner (or one the pivot law,
+started from the interpolated state, leaves without a steady state), corners that disagree on
+the pivot test, or misses the check; inside the pivot band and at its edge it is interpolated without
+the pivot test (the pivot law equals eq. 6.6's chord up to half a revolution of an element, so the
+answer is continuous across the edge and the direct solve flags nothing there). Only a command in an
+exact sub-cell is solved directly at query time (:meth:`SetpointMap.query` then costs one set-point
+solve, milliseconds: the estimator at 1 kHz, benchmarks/bench_estimator.py). On test_robot_track x
+dry_sand refinement took the share of 5,000 random-walk commands (V 0...0.4 m/s, w_z +-0.6 rad/s)
+solved at query time from 34 % to 13 %, the mean query from 1.3 ms to 0.42 ms, the area answered
+by the direct solve from 18.6 % to 4.4 % and the build from 0.5 s to 1.5 s (husky_a200, leo_rover,
+packbot_4wheel x sand_bin: 2-3 s -> 6.5-8 s; benchmarks/bench_maps.py).
+
+A directly solved command starts from the cell's interpolated state (s0, V, w_z). A spin in place
+(mean 0) is solved like the direct path and symmetric as it is. A command in a cell with a corner
+the pivot law solved (the direct solve's fallback) is solved with the pivot law at once
+(:meth:`SetpointMap.solve_at`): the law equals eq. 6.6's chord wherever no element turns past half a
+revolution, so this is the direct solve's root within its stopping rule, without the chord's failing
+Newton and continuation first (husky_a200 x sand_bin: 14.5 s -> 1.75 s for 406 such commands; largest
 difference to the direct solve over 1,500 random commands on five vehicle x soil pairs 0.17 % in
 battery power and 0.48 mm/s in speed, no flag different).
 """
@@ -83,9 +98,11 @@ FIELDS = (
 DEFAULT_NODES = (25, 25)  # (mean, difference) nodes
 MAP_MODEL = 'setpoint'  # the model name in a stored map's identity (maps/identity.py)
 MAX_NODES = 200_000
+MAX_REFINE = 8  # sub-cells per side of an exact cell, at most
 BAND_RATIO = 0.4  # cells with a corner's inner / outer set point within +-this are checked (module doc)
 CHECK_POWER = 0.005  # a checked cell whose centre is off by more (relative battery power) is exact
 CHECK_SPEED_M_S = 0.0025  # ... or by more in speed [m/s]
+REFINE = 4  # an exact cell is subdivided into REFINE x REFINE sub-cells at build (module doc)
 
 
 @dataclass(frozen=True)
@@ -131,9 +148,12 @@ class SetpointMap:
         diff: np.ndarray,
         values: np.ndarray,
         checked: np.ndarray | None = None,
+        refined: Refinements | None = None,
     ) -> None:
         """``checked`` (n_mean - 1, n_diff - 1) bool: cells the build-time check found off (module
-        doc); with those with a dug-in corner or a mixed pivot test they are answered exactly."""
+        doc); with those with a dug-in corner, a mixed pivot test or a corner the pivot law solved
+        they are exact. ``refined``: the sub-grids of exact cells (:class:`Refinements`); an exact
+        cell without one is answered by the direct solve everywhere."""
         self.predictor = predictor
         self.grid = BilinearGrid(
             Axis(mean, 'set point mean'), Axis(diff, 'set point half difference'), values
@@ -141,38 +161,39 @@ class SetpointMap:
         self._radius = float(predictor.vehicle.drive_radius_m)
         # element_turn_rev's test in floats: |w_z| xi / v_rim > limit [rev] times 2 pi [rad]
         self._turn_limit = ELEMENT_TURN_LIMIT_REV * 2.0 * math.pi
-        shape = (len(mean) - 1, len(diff) - 1)
-        self.checked = np.zeros(shape, dtype=bool) if checked is None else np.asarray(checked, dtype=bool)
-        if self.checked.shape != shape:
-            raise InputError(f'set-point map: checked cells {self.checked.shape} do not match {shape}')
-        # the element-turn (pivot) test belongs to eq. 6.6's chord: not on rigid ground, and a cell
-        # with a corner the slip-path fallback solved (the pivot band on soil) is answered exactly
+        # the element-turn (pivot) test belongs to eq. 6.6's chord: not on rigid ground
         self._pivot_test = not predictor.solver.fess.path_law
-        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
-        fallback = _corner_any(path) if self._pivot_test else np.zeros(shape, dtype=bool)
-        self.exact = _corner_any(self._dug_in()) | _mixed(self._pivot_nodes()) | fallback | self.checked
-        self._cell_exact = self.exact.ravel().tolist()
-        self._cell_path = fallback.ravel().tolist()
         self._limit = predictor.current_limit_A
+        self.cells = _CellFlags.top(self, self.grid, checked)
+        self.checked = self.cells.checked
+        self.exact = self.cells.exact
+        self.refined = refined if refined is not None else Refinements.empty(len(FIELDS))
+        self._sub = self.refined.grids(self)
+
+    def node_flags(self, grid: BilinearGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dug in, pivot test fails, pivot law solved) at every node of ``grid`` (this map's or a
+        sub-grid's): the direct solve's flags (:func:`element_turn_rev`'s test on the chord)."""
+        m, d = np.meshgrid(grid.axis0.values, grid.axis1.values, indexing='ij')
+        inner_rim = np.abs(m - d) * self._radius
+        dug = np.asarray(grid.values[..., FIELDS.index('dug_in')] > 0)
+        path = np.asarray(grid.values[..., FIELDS.index('shear_path')] > 0)
+        yaw = grid.values[..., FIELDS.index('yaw_rate')]
+        contact = grid.values[..., FIELDS.index('contact_length')]
+        turn = element_turn_rev(yaw, contact, inner_rim)
+        pivot = (turn > ELEMENT_TURN_LIMIT_REV) & ~dug & ~path & self._pivot_test
+        return dug, np.asarray(pivot), path
 
     def _dug_in(self) -> np.ndarray:
-        return np.asarray(self.grid.values[..., FIELDS.index('dug_in')] > 0)
-
-    def _pivot_nodes(self) -> np.ndarray:
-        """(n_mean, n_diff) the direct solve's pivot test at every node (:func:`element_turn_rev`)."""
-        m, d = np.meshgrid(self.grid.axis0.values, self.grid.axis1.values, indexing='ij')
-        inner_rim = np.abs(m - d) * self._radius
-        yaw = self.grid.values[..., FIELDS.index('yaw_rate')]
-        contact = self.grid.values[..., FIELDS.index('contact_length')]
-        turn = element_turn_rev(yaw, contact, inner_rim)
-        path = self.grid.values[..., FIELDS.index('shear_path')] > 0
-        pivot: np.ndarray = (turn > ELEMENT_TURN_LIMIT_REV) & ~self._dug_in() & ~path & self._pivot_test
-        return pivot
+        return self.node_flags(self.grid)[0]
 
     @property
     def exact_fraction(self) -> float:
-        """Share of the map's cells answered by the direct solve [-] (module doc)."""
-        return float(np.mean(self.exact))
+        """Share of the map's area answered by the direct solve [-] (module doc): the exact cells,
+        of a refined one its exact sub-cells."""
+        share = self.exact.astype(float).ravel()
+        for cell, sub in self._sub.items():
+            share[cell] = float(np.mean(sub.flags.exact))
+        return float(np.mean(share))
 
     @classmethod
     def build(
@@ -181,37 +202,26 @@ class SetpointMap:
         terrain: Terrain,
         nodes: tuple[int, int] = DEFAULT_NODES,
         predictor: CommandPredictor | None = None,
+        refine: int = REFINE,
     ) -> SetpointMap:
         """Solve every node in one batched set-point solve (nodes = (mean, difference) counts, each
-        >= 2, at most MAX_NODES in all)."""
+        >= 2, at most MAX_NODES in all), check the cells near the pivot band, then subdivide every
+        exact cell ``refine`` x ``refine`` (1: none; at most MAX_REFINE) and check its sub-cells
+        (module doc)."""
         n_mean, n_diff = (int(n) for n in nodes)
         if min(n_mean, n_diff) < 2 or n_mean * n_diff > MAX_NODES:
             raise InputError(
                 f'set-point map nodes must be >= 2 each and at most {MAX_NODES:,} in all: {nodes}'
             )
+        if not 1 <= int(refine) <= MAX_REFINE:
+            raise InputError(f'set-point map refine must be 1...{MAX_REFINE}, not {refine}')
         predictor = predictor or CommandPredictor(vehicle, terrain)
         mean_top, diff_top = envelope(predictor)
         mean = np.linspace(0.0, mean_top, n_mean)
         diff = np.linspace(0.0, diff_top, n_diff)
-        m, d = np.meshgrid(mean, diff, indexing='ij')
-        sol = predictor.solver.solve(np.column_stack([(m - d).ravel(), (m + d).ravel()]))
-        columns = (
-            sol.speed,
-            sol.yaw_rate,
-            sol.torque[:, 0],
-            sol.torque[:, 1],
-            sol.slip[:, 0],
-            sol.slip[:, 1],
-            sol.sinkage,
-            sol.traction_margin,
-            sol.dug_in.astype(float),
-            sol.contact_length,
-            np.asarray(sol.shear_path, dtype=float),
-            sol.s0,
-        )
-        values = np.stack(columns, axis=-1).reshape(n_mean, n_diff, len(FIELDS))
-        unchecked = cls(predictor, mean, diff, values)
-        return cls(predictor, mean, diff, values, unchecked.check_cells())
+        unchecked = cls(predictor, mean, diff, solve_nodes(predictor, mean, diff))
+        top = cls(predictor, mean, diff, unchecked.grid.values, unchecked.check_cells())
+        return cls(predictor, mean, diff, top.grid.values, top.checked, top.refine(int(refine)))
 
     def check_cells(self) -> np.ndarray:
         """The build-time check (module doc): (n_mean - 1, n_diff - 1) True where a cell near the
@@ -223,17 +233,28 @@ class SetpointMap:
         band = _corner_any(np.nan_to_num(ratio, nan=0.0) <= BAND_RATIO) & ~self.exact
         if self.predictor.solver.fess.terrain.is_rigid:  # Coulomb contact kinks where wheels skid
             band = ~self.exact
-        cells = np.argwhere(band)
-        out = np.zeros(band.shape, dtype=bool)
+        return self.off_at_centres(self.grid, band)
+
+    def off_at_centres(
+        self, grid: BilinearGrid, candidates: np.ndarray, path: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(cells of ``grid``) True where a ``candidates`` cell's centre, solved directly, is
+        limited or off its bilinear answer by more than CHECK_POWER or CHECK_SPEED_M_S. Solved
+        cold (the direct solve), or with ``path`` (cells of a sub-grid) as a query in that cell
+        would be, were it exact (:meth:`solve_at`)."""
+        out = np.zeros(candidates.shape, dtype=bool)
+        cells = np.argwhere(candidates)
         if cells.size == 0:
             return out
-        mc = 0.5 * (mean[cells[:, 0]] + mean[cells[:, 0] + 1])
-        dc = 0.5 * (diff[cells[:, 1]] + diff[cells[:, 1] + 1])
-        sp = np.column_stack([mc - dc, mc + dc])
-        sol = self.predictor.solver.solve(sp)
-        _, _, p_direct, _ = self.predictor.electrical(sol.torque, sp)
-        vals = self.grid.values
+        mean, diff, vals = grid.axis0.values, grid.axis1.values, grid.values
         i, j = cells[:, 0], cells[:, 1]
+        mc, dc = 0.5 * (mean[i] + mean[i + 1]), 0.5 * (diff[j] + diff[j + 1])
+        sp = np.column_stack([mc - dc, mc + dc])
+        if path is None:
+            sol = self.predictor.solver.solve(sp)
+        else:
+            sol = self.solve_at(sp, self._warm(grid, mc, dc), path[i, j])
+        _, _, p_direct, _ = self.predictor.electrical(sol.torque, sp)
         centre = 0.25 * (vals[i, j] + vals[i + 1, j] + vals[i, j + 1] + vals[i + 1, j + 1])  # bilinear
         torque = centre[:, [FIELDS.index('torque_left'), FIELDS.index('torque_right')]]
         _, _, p_map, _ = self.predictor.electrical(torque, sp)
@@ -242,6 +263,39 @@ class SetpointMap:
         off = sol.limited | (p_err > CHECK_POWER) | (v_err > CHECK_SPEED_M_S)
         out[i[off], j[off]] = True
         return out
+
+    def refine(self, factor: int) -> Refinements:
+        """The sub-grids of every exact cell, ``factor`` x ``factor`` sub-cells each, solved in one
+        batch and checked at every sub-cell centre (module doc)."""
+        cells = np.flatnonzero(self.exact.ravel()) if factor > 1 else np.zeros(0, dtype=int)
+        if cells.size == 0:
+            return Refinements.empty(len(FIELDS), factor)
+        axes = [self._sub_axes(int(c), factor) for c in cells]
+        points = [np.meshgrid(m, d, indexing='ij') for m, d in axes]
+        m = np.concatenate([p[0].ravel() for p in points])
+        d = np.concatenate([p[1].ravel() for p in points])
+        in_band = np.repeat(self.cells.path_any.ravel()[cells], (factor + 1) ** 2)
+        sol = self.solve_at(np.column_stack([m - d, m + d]), self._warm(self.grid, m, d), in_band, redo=False)
+        shape = (cells.size, factor + 1, factor + 1, len(FIELDS))
+        values = _solution_values(sol).reshape(shape)
+        checked = np.zeros((cells.size, factor, factor), dtype=bool)
+        for k, (sub_mean, sub_diff) in enumerate(axes):
+            grid = _sub_grid(sub_mean, sub_diff, values[k])
+            flags = _CellFlags.sub(self, grid, None)
+            checked[k] = self.off_at_centres(grid, ~flags.exact, flags.path_any)
+        return Refinements(cells, values, checked)
+
+    def _warm(self, grid: BilinearGrid, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """(P, 3) the interpolated (s0 [m], V [m/s], w_z [rad/s]) of ``grid`` at set point mean and
+        half difference (m, d) >= 0 [rad/s] (:meth:`solve_at`'s warm start)."""
+        vals: np.ndarray = grid(m, d)[0]
+        return vals[:, [FIELDS.index('s0'), FIELDS.index('speed'), FIELDS.index('yaw_rate')]]
+
+    def _sub_axes(self, cell: int, factor: int) -> tuple[np.ndarray, np.ndarray]:
+        """The (mean, difference) node values [rad/s] of one top cell's sub-grid."""
+        i, j = divmod(cell, len(self.grid.axis1.values) - 1)
+        mean, diff = self.grid.axis0.values, self.grid.axis1.values
+        return np.linspace(mean[i], mean[i + 1], factor + 1), np.linspace(diff[j], diff[j + 1], factor + 1)
 
     @property
     def limited_fraction(self) -> float:
@@ -285,15 +339,19 @@ class SetpointMap:
         mean, diff = 0.5 * flip * (sp_l + sp_r), 0.5 * flip * (sp_r - sp_l)
         reverse, right_turn = flip < 0, diff < 0
         vals, off_grid, cell = self.grid.scalar(mean, abs(diff))
+        flags = self.cells
+        if flags.exact_list[cell] and cell in self._sub:  # a refined exact cell: its sub-grid
+            sub = self._sub[cell]
+            vals, _, cell = sub.grid.scalar(mean, abs(diff))
+            flags = sub.flags
         speed, yaw, t_l, t_r, s_l, s_r, sinkage, margin, _, contact, _, s0 = vals
-        if self._cell_exact[cell]:
-            warm = None
-            if self._cell_path[cell]:  # the mirrored interpolated state: (s0, V, w_z) of the command
-                warm = (flip * s0, flip * speed, flip * (-yaw if right_turn else yaw))
-            return _Deferred((sp_l, sp_r), clamped_sp or off_grid, warm)
+        if flags.exact_list[cell]:
+            warm = (flip * s0, flip * speed, flip * (-yaw if right_turn else yaw))  # mirrored back
+            return _Deferred((sp_l, sp_r), clamped_sp or off_grid, warm, flags.path_any_list[cell])
         inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
         pivot = (
             self._pivot_test
+            and not flags.path_all_list[cell]  # the pivot law solved every corner: it has no such limit
             and yaw != 0
             and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
         )
@@ -336,24 +394,39 @@ class SetpointMap:
         return out
 
     def _solve_deferred(self, deferred: Sequence[_Deferred]) -> SetpointSolution:
-        """The direct solve of every deferred command. In a cell with a corner the pivot law
-        solved, the pivot law at once, warm-started from the interpolated state: where the direct
-        solve falls back to it that is its answer, elsewhere it equals eq. 6.6's chord
-        (:meth:`SetpointSolver.path_solver`), and it skips the chord's failing Newton and
-        continuation (5x faster cold, about 50x warm on husky_a200 x sand_bin). A command it
-        leaves limited gets the direct solve's own answer."""
-        solver = self.predictor.solver
+        """The direct solve of every deferred command (:meth:`solve_at`)."""
         setpoints = np.array([item.setpoints for item in deferred], dtype=float)
-        sol = solver.solve(setpoints) if not any(item.warm for item in deferred) else None
-        if sol is not None:
+        warm = np.array([item.warm for item in deferred], dtype=float)
+        return self.solve_at(setpoints, warm, np.array([item.path for item in deferred]))
+
+    def solve_at(
+        self, setpoints: np.ndarray, warm: np.ndarray, path: np.ndarray, *, redo: bool = True
+    ) -> SetpointSolution:
+        """The direct solve of set points (P, 2) [rad/s], warm-started from the interpolated state
+        ``warm`` (P, 3) (s0 [m], V [m/s], w_z [rad/s]). A ``path`` row (in a cell with a corner the
+        pivot law solved) is solved with the pivot law at once: where the direct solve falls back
+        to it that is its answer, elsewhere it equals eq. 6.6's chord (:meth:`SetpointSolver.
+        path_solver`), and it skips the chord's failing Newton and continuation (5x faster cold,
+        about 50x warm on husky_a200 x sand_bin). A row it leaves limited gets the direct solve's
+        own answer, from the no-slip first guess; with ``redo=False`` (a sub-grid's nodes, module
+        doc) it stays limited and is marked dug in, so the sub-cells around it are solved at query
+        time instead (the direct solve's chord, continuation and fallback there cost seconds)."""
+        solver = self.predictor.solver
+        rows, chord = np.flatnonzero(path), np.flatnonzero(~path)
+        if rows.size == 0:
+            return solver.solve(setpoints, x0=warm)
+        sol = solver.path_solver().solve(setpoints[rows], x0=warm[rows])
+        failed = np.flatnonzero(sol.limited)  # these get the direct solve's own answer, cold
+        if failed.size and redo:
+            sol.replace_rows(failed, solver.solve(setpoints[rows[failed]]))
+        elif failed.size:
+            sol.dug_in[failed] = True
+        if chord.size == 0:
             return sol
-        path = np.array([item.warm is not None for item in deferred])
-        warm = np.array([item.warm or (math.nan,) * 3 for item in deferred], dtype=float)
-        sol = solver.path_solver().solve(setpoints, x0=warm)
-        redo = ~path | sol.limited
-        if np.any(redo):
-            sol.replace_rows(np.flatnonzero(redo), solver.solve(setpoints[redo]))
-        return sol
+        out = sol.take(np.zeros(len(setpoints), dtype=int))  # (P,) rows, every one overwritten
+        out.replace_rows(rows, sol)
+        out.replace_rows(chord, solver.solve(setpoints[chord], x0=warm[chord]))
+        return out
 
     def _setpoints(self, v: float, w: float) -> tuple[tuple[float, float], bool]:
         """The drive controller's set points (in floats, :meth:`DriveController.apply_one`)."""
@@ -378,7 +451,130 @@ class _Deferred:
 
     setpoints: tuple[float, float]
     clamped: bool
-    warm: tuple[float, float, float] | None
+    warm: tuple[float, float, float]
+    path: bool
+
+
+@dataclass(frozen=True)
+class _CellFlags:
+    """Per cell of a grid (the map's or a sub-grid's, row-major): answered by the direct solve,
+    found off by the build-time check, a corner the pivot law solved (the direct solve is then
+    warm-started from the interpolated state), every corner it solved (no pivot test). The lists
+    are the arrays' values in plain Python for the query."""
+
+    exact: np.ndarray
+    checked: np.ndarray
+    path_any: np.ndarray
+    path_all: np.ndarray
+    exact_list: list[bool]
+    path_any_list: list[bool]
+    path_all_list: list[bool]
+
+    @classmethod
+    def top(cls, smap: SetpointMap, grid: BilinearGrid, checked: np.ndarray | None) -> _CellFlags:
+        """The map's own cells: a corner the pivot law solved makes a cell exact (module doc)."""
+        dug, pivot, path = smap.node_flags(grid)
+        checked = _checked(grid, checked)
+        path_any = _corner_any(path) & smap._pivot_test
+        exact = _corner_any(dug) | _mixed(pivot) | path_any | checked
+        return cls._of(exact, checked, path_any, np.zeros_like(exact))
+
+    @classmethod
+    def sub(cls, smap: SetpointMap, grid: BilinearGrid, checked: np.ndarray | None) -> _CellFlags:
+        """A sub-grid's cells: interpolated in and at the edge of the pivot law's region too (the
+        law equals eq. 6.6's chord up to half a revolution of an element, so the answer is
+        continuous across the edge, and the direct solve flags no pivot there), unless the check
+        finds them off (module doc)."""
+        dug, pivot, path = smap.node_flags(grid)
+        checked = _checked(grid, checked)
+        path_any = _corner_any(path) & smap._pivot_test
+        exact = _corner_any(dug) | _mixed(pivot) | checked
+        return cls._of(exact, checked, path_any, path_any)
+
+    @classmethod
+    def _of(
+        cls, exact: np.ndarray, checked: np.ndarray, path_any: np.ndarray, path_all: np.ndarray
+    ) -> _CellFlags:
+        return cls(
+            exact, checked, path_any, path_all,
+            exact.ravel().tolist(), path_any.ravel().tolist(), path_all.ravel().tolist(),
+        )  # fmt: skip
+
+
+def _checked(grid: BilinearGrid, checked: np.ndarray | None) -> np.ndarray:
+    """The check's cells of ``grid`` as bool (none given: none), or InputError on a shape mismatch."""
+    shape = (len(grid.axis0.values) - 1, len(grid.axis1.values) - 1)
+    out = np.zeros(shape, dtype=bool) if checked is None else np.asarray(checked, dtype=bool)
+    if out.shape != shape:
+        raise InputError(f'set-point map: checked cells {out.shape} do not match {shape}')
+    return out
+
+
+@dataclass(frozen=True)
+class _SubGrid:
+    """One refined exact cell: its bilinear grid over the cell and its sub-cells' flags."""
+
+    grid: BilinearGrid
+    flags: _CellFlags
+
+
+@dataclass(frozen=True)
+class Refinements:
+    """The sub-grids of a map's exact cells (module doc), as stored: ``cells`` (R,) the map's cell
+    numbers (row-major over (n_mean - 1, n_diff - 1)), ``values`` (R, k + 1, k + 1, F) the
+    :data:`FIELDS` at each sub-grid's nodes, ``checked`` (R, k, k) the sub-cells the check found off."""
+
+    cells: np.ndarray
+    values: np.ndarray
+    checked: np.ndarray
+
+    @classmethod
+    def empty(cls, n_fields: int, factor: int = REFINE) -> Refinements:
+        """No refined cell."""
+        k = max(int(factor), 1)
+        values = np.zeros((0, k + 1, k + 1, n_fields))
+        return cls(np.zeros(0, dtype=int), values, np.zeros((0, k, k), dtype=bool))
+
+    def grids(self, smap: SetpointMap) -> dict[int, _SubGrid]:
+        """{cell: sub-grid} of ``smap``, or InputError where these do not fit its grid."""
+        r, n0, n1 = len(self.cells), self.values.shape[1], self.values.shape[2]
+        if self.values.shape != (r, n0, n0, len(FIELDS)) or self.checked.shape != (r, n0 - 1, n0 - 1):
+            raise InputError(f'set-point map: refinements {self.values.shape} do not fit the map')
+        out = {}
+        for k, cell in enumerate(int(c) for c in self.cells):
+            if not 0 <= cell < smap.exact.size or not smap.exact.flat[cell]:
+                raise InputError(f'set-point map: refined cell {cell} is not an exact cell')
+            sub_mean, sub_diff = smap._sub_axes(cell, n1 - 1)
+            grid = _sub_grid(sub_mean, sub_diff, self.values[k])
+            out[cell] = _SubGrid(grid, _CellFlags.sub(smap, grid, self.checked[k]))
+        return out
+
+
+def _sub_grid(mean: np.ndarray, diff: np.ndarray, values: np.ndarray) -> BilinearGrid:
+    """The bilinear grid over one exact cell (sub-grid node values [rad/s], fields)."""
+    return BilinearGrid(Axis(mean, 'sub-cell mean'), Axis(diff, 'sub-cell half difference'), values)
+
+
+def solve_nodes(predictor: CommandPredictor, mean: np.ndarray, diff: np.ndarray) -> np.ndarray:
+    """(len(mean), len(diff), F) the :data:`FIELDS` at every node of a (mean, difference) grid
+    [rad/s], in one batched set-point solve."""
+    m, d = np.meshgrid(mean, diff, indexing='ij')
+    return _node_values(predictor, m.ravel(), d.ravel()).reshape(len(mean), len(diff), len(FIELDS))
+
+
+def _node_values(predictor: CommandPredictor, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N, F) the :data:`FIELDS` at set points (mean ``m``, half difference ``d``) [rad/s]."""
+    return _solution_values(predictor.solver.solve(np.column_stack([m - d, m + d])))
+
+
+def _solution_values(sol: SetpointSolution) -> np.ndarray:
+    """(N, F) the :data:`FIELDS` of a set-point solution."""
+    columns = (
+        sol.speed, sol.yaw_rate, sol.torque[:, 0], sol.torque[:, 1], sol.slip[:, 0], sol.slip[:, 1],
+        sol.sinkage, sol.traction_margin, sol.dug_in.astype(float), sol.contact_length,
+        np.asarray(sol.shear_path, dtype=float), sol.s0,
+    )  # fmt: skip
+    return np.stack(columns, axis=-1)
 
 
 def envelope(predictor: CommandPredictor) -> tuple[float, float]:
@@ -442,9 +638,10 @@ def load_or_build(
             with np.load(path, allow_pickle=False) as data:
                 check_identity(path, json.loads(str(data['meta'])), vehicle, terrain)
                 mean, diff, values, checked = data['mean'], data['diff'], data['values'], data['checked']
+                refined = Refinements(data['refine_cells'], data['refine_values'], data['refine_checked'])
             top = envelope(predictor)
             if values.shape == (len(mean), len(diff), len(FIELDS)) and (mean[-1], diff[-1]) == top:
-                return SetpointMap(predictor, mean, diff, values, checked), False
+                return SetpointMap(predictor, mean, diff, values, checked, refined), False
         except (OSError, ValueError, KeyError, TypeError, InputError, MapMismatchError):
             pass  # damaged, stale or another map: rebuild below, never use it
     built = SetpointMap.build(vehicle, terrain, nodes, predictor)  # missing, damaged or another envelope
@@ -455,6 +652,9 @@ def load_or_build(
             diff=built.grid.axis1.values,
             values=built.grid.values,
             checked=built.checked,
+            refine_cells=built.refined.cells,
+            refine_values=built.refined.values,
+            refine_checked=built.refined.checked,
             meta=np.array(json.dumps(map_identity(vehicle, terrain, MAP_MODEL))),
         )
     return built, True
