@@ -3,6 +3,7 @@ power_estimator answers a published nav_msgs/Path with the energy ``mission --ro
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import pathlib
@@ -20,13 +21,16 @@ from test_nodes_estimator import Rig
 
 from skidsteer_power.cli.main import main
 from skidsteer_power.commands import Segment
+from skidsteer_power.drive.controller import controller_for_vehicle
 from skidsteer_power.errors import InputError
+from skidsteer_power.estimator.factory import KINEMATICS, drive_controller, map_predictor
 from skidsteer_power.estimator.path_energy import PathTracker, path_energy, route_from_polyline
 from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.maps import PowerMap
 from skidsteer_power.maps.power_map import MapQuery
 from skidsteer_power.missions.energy import run_mission
 from skidsteer_power.missions.routes import Route, _trace, read_route_csv
+from skidsteer_power.models.predict import max_axle_speed
 from skidsteer_power.powertrain import Powertrain
 from skidsteer_power.terramechanics.terrain import load_terrain
 from skidsteer_power.vehicle import Vehicle, load_vehicle
@@ -160,6 +164,43 @@ def test_sampled_csv_route_matches_mission_to_a_fraction_of_a_percent(
     energy = path_energy(xy[:, 0], xy[:, 1], SPEED, power_map, powertrain)
     mission = run_mission(vehicle, load_terrain('dry_sand'), route).energy_battery_J
     assert energy.required_J == pytest.approx(mission, rel=0.005)
+
+
+def test_a_path_is_driven_as_the_drive_controller_carries_it_out(
+    tmp_path: pathlib.Path, track_map: tuple[PowerMap, Powertrain, Vehicle]
+) -> None:
+    """Issue 36: a planned path's energy follows the drive controller as ``mission`` does
+    (missions.energy.driven_route). At 1.2 m/s a 0.4 m arc asks 3 rad/s, over the test robot's
+    2.0 rad/s yaw rate limit (config/vehicles/test_robot_track.yaml, max_yaw_rate_rad_s): that arc
+    is driven at 1.2 x 2 / 3 = 0.8 m/s for 1.5 x as long, the straights as asked (a wheel at
+    1.2 / 0.1 = 12 rad/s, under the 36.9 rad/s ceiling). Reference: run_mission on the same route,
+    which slows its segments through the same controller."""
+    power_map, powertrain, vehicle = track_map
+    speed = 1.2
+    csv = '\n'.join(['length_m,turn_radius_m', '2.0,', f'{0.5 * math.pi * 0.4},0.4', '2.0,']) + '\n'
+    (tmp_path / 'arc.csv').write_text(csv)
+    route = read_route_csv(tmp_path / 'arc.csv', speed)
+    xy = _poses(route, 0.05)
+    ctrl = controller_for_vehicle(vehicle, powertrain)
+    scale = functools.partial(ctrl.path_scale, ceiling_rad_s=max_axle_speed(powertrain))
+    driven = path_energy(xy[:, 0], xy[:, 1], speed, power_map, powertrain, path_scale=scale)
+    asked = path_energy(xy[:, 0], xy[:, 1], speed, power_map, powertrain)
+    mission = run_mission(vehicle, load_terrain('dry_sand'), route)
+    assert mission.slowed.any() and driven.slowed_segments > 0 and asked.slowed_segments == 0
+    assert driven.required_J == pytest.approx(mission.energy_battery_J, rel=0.01)
+    assert abs(asked.required_J - mission.energy_battery_J) > 0.02 * mission.energy_battery_J
+
+
+def test_the_estimators_predictors_carry_their_drive_controller(tmp_path: pathlib.Path) -> None:
+    """Both predictors the estimator builds give path energy their drive controller's path scale,
+    with the limits the estimator was given (the des_driver's own, factory.drive_controller)."""
+    vehicle = load_vehicle('test_robot_track')
+    slow = drive_controller(vehicle, max_speed_m_s=0.5)
+    for kinematics in KINEMATICS:
+        predictor, _, _ = map_predictor(vehicle, 'dry_sand', tmp_path, kinematics, controller=slow)
+        assert predictor.path_scale is not None
+        scale = predictor.path_scale(np.array([1.0, 0.25]), np.array([0.0, 0.0]))
+        np.testing.assert_allclose(scale, [0.5, 1.0])  # 0.5 m/s of 1.0 asked; 0.25 as asked
 
 
 def _path_msg(xy: np.ndarray) -> Path:

@@ -5,6 +5,7 @@ Pure (no ROS): the node, the suite and tests share these, so a parameter means t
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from pathlib import Path
@@ -111,15 +112,16 @@ def map_predictor(
         )
         return predictor, built, str(where)
     from skidsteer_power.maps import cache_path, load_or_build
+    from skidsteer_power.models.predict import max_axle_speed
 
     power_map, built = load_or_build(vehicle, terrain, cache_dir or None)
     where = cache_path(vehicle, terrain, cache_dir or None)
     description = f'{vehicle.name} on {terrain.name} ({where})'
-    return (
-        MapPredictor(power_map, Powertrain.for_vehicle(vehicle), description=description),
-        built,
-        str(where),
-    )
+    powertrain = Powertrain.for_vehicle(vehicle)
+    ctrl = controller or drive_controller(vehicle)
+    path_scale = functools.partial(ctrl.path_scale, ceiling_rad_s=max_axle_speed(powertrain))
+    twist = MapPredictor(power_map, powertrain, description=description, path_scale=path_scale)
+    return twist, built, str(where)
 
 
 CURRENT_DEADBAND_A = 1e-3

@@ -30,6 +30,14 @@ missions (motor and amplifier losses included), at a constant speed, with the ma
 multiplied by the online terrain scale k (:mod:`skidsteer_power.estimator.adaptation`, "Terrain
 scale"; 1 = the map as built).
 
+Drive controller (issue 36): the robot drives the path as its drive controller carries it out. With
+a ``path_scale`` (the controller's :meth:`~skidsteer_power.drive.DriveController.path_scale` at the
+robot's wheel speed ceiling; the estimator's predictors give theirs), a piece whose twist (V, V / R)
+the controller cannot carry out (a velocity limit, the wheel speed ceiling) is driven on the same
+path at the highest speed it can, V s with s < 1, for length / (V s): what ``mission`` does with a
+route (:func:`~skidsteer_power.missions.energy.driven_route`). Such pieces are counted in
+``slowed_segments``.
+
 Cost: the path's geometry (piece lengths and radii, there and back) is computed once per path as
 arrays (:class:`PathGeometry`); a new speed only re-queries the map at the path's unique (V, R)
 states (:class:`skidsteer_power.missions.energy.MapLoads`), about a millisecond for a 2001-pose path,
@@ -40,7 +48,9 @@ reruns the powertrain on those loads (:class:`PathTracker`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -91,6 +101,11 @@ def decimate_polyline(xy: np.ndarray, tolerance_m: float, max_points: int) -> np
     return np.flatnonzero(keep)
 
 
+PathScale: TypeAlias = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(V [m/s], w_z [rad/s]) arrays -> (P,) factor in (0, 1] by which the drive controller slows each
+twist to carry it out on the same path (module doc, "Drive controller")."""
+
+
 @dataclass(frozen=True)
 class PathGeometry:
     """A polyline as constant-radius pieces (module doc): ``length_m`` [m] and signed
@@ -127,12 +142,22 @@ class PathGeometry:
     def total_length_m(self) -> float:
         return float(np.sum(self.length_m))
 
-    def loads(self, speed_m_s: float, power_map: ArrayPowerMapLike) -> MapLoads:
-        """The map's loads on the pieces driven at ``speed_m_s`` [m/s]
-        (:class:`~skidsteer_power.missions.energy.MapLoads`: the missions' energy code)."""
+    def loads(
+        self, speed_m_s: float, power_map: ArrayPowerMapLike, path_scale: PathScale | None = None
+    ) -> tuple[MapLoads, int]:
+        """(the map's loads on the pieces driven at ``speed_m_s`` [m/s], pieces slowed): with
+        ``path_scale`` each piece as the drive controller carries it out (module doc); the loads
+        are :class:`~skidsteer_power.missions.energy.MapLoads`, the missions' energy code."""
         _check_speed(speed_m_s)
         speed = np.full(self.length_m.shape, float(speed_m_s))
-        return MapLoads.of(speed, self.turn_radius_m, self.length_m / speed_m_s, power_map)
+        slowed = 0
+        if path_scale is not None:
+            straight = np.isinf(self.turn_radius_m)
+            yaw_rate = np.where(straight, 0.0, speed / np.where(straight, 1.0, self.turn_radius_m))
+            scale = np.asarray(path_scale(speed, yaw_rate), dtype=float)
+            slowed = int(np.count_nonzero(scale < 1.0))
+            speed = speed * scale
+        return MapLoads.of(speed, self.turn_radius_m, self.length_m / speed, power_map), slowed
 
 
 def _check_speed(speed_m_s: float) -> None:
@@ -166,6 +191,7 @@ class PathEnergy:
     clamped_segments: int
     terrain_scale: float = 1.0
     limited_segments: int = 0  # segments the map flagged limited (physics limit, cell check)
+    slowed_segments: int = 0  # segments the drive controller drives slower (module doc)
 
     @property
     def required_wh(self) -> float:
@@ -188,6 +214,7 @@ class PathLoads:
     speed_m_s: float
     there: MapLoads
     back: MapLoads
+    slowed_segments: int = 0  # there and back, by the drive controller (module doc)
 
 
 class PlannedPath:
@@ -209,10 +236,15 @@ class PlannedPath:
         self.there = PathGeometry.from_polyline(xs, ys)
         self.back = PathGeometry.from_polyline(xs[::-1], ys[::-1])
 
-    def loads(self, speed_m_s: float, power_map: ArrayPowerMapLike) -> PathLoads:
-        """The map's loads there and back at ``speed_m_s`` [m/s] (|speed| is driven both ways)."""
+    def loads(
+        self, speed_m_s: float, power_map: ArrayPowerMapLike, path_scale: PathScale | None = None
+    ) -> PathLoads:
+        """The map's loads there and back at ``speed_m_s`` [m/s] (|speed| is driven both ways), with
+        ``path_scale`` as the drive controller carries each piece out (module doc)."""
         speed = abs(float(speed_m_s))
-        return PathLoads(speed, self.there.loads(speed, power_map), self.back.loads(speed, power_map))
+        there, slowed_there = self.there.loads(speed, power_map, path_scale)
+        back, slowed_back = self.back.loads(speed, power_map, path_scale)
+        return PathLoads(speed, there, back, slowed_there + slowed_back)
 
     def energy(
         self,
@@ -220,10 +252,12 @@ class PlannedPath:
         power_map: ArrayPowerMapLike,
         powertrain: PowertrainLike,
         terrain_scale: float = 1.0,
+        path_scale: PathScale | None = None,
     ) -> PathEnergy:
         """Battery energy there and back at ``speed_m_s`` [m/s] with the loads of ``power_map`` and
-        ``powertrain``, axle torques times ``terrain_scale`` [-]."""
-        return self.energy_from(self.loads(speed_m_s, power_map), powertrain, terrain_scale)
+        ``powertrain``, axle torques times ``terrain_scale`` [-], driven as ``path_scale`` says."""
+        loads = self.loads(speed_m_s, power_map, path_scale)
+        return self.energy_from(loads, powertrain, terrain_scale)
 
     def energy_from(
         self, loads: PathLoads, powertrain: PowertrainLike, terrain_scale: float = 1.0
@@ -239,6 +273,7 @@ class PlannedPath:
             clamped_segments=int(there['clamped_segments'] + back['clamped_segments']),
             terrain_scale=float(terrain_scale),
             limited_segments=int(there['limited_segments'] + back['limited_segments']),
+            slowed_segments=loads.slowed_segments,
         )
 
 
@@ -249,11 +284,13 @@ def path_energy(
     power_map: ArrayPowerMapLike,
     powertrain: PowertrainLike,
     terrain_scale: float = 1.0,
+    path_scale: PathScale | None = None,
 ) -> PathEnergy:
     """Battery energy to drive the polyline (x, y) [m] at ``speed_m_s`` [m/s] and back along it
     (reversed path, driven forward), with the loads of ``power_map`` and ``powertrain`` and the axle
-    torques times ``terrain_scale`` [-]."""
-    return PlannedPath(x, y).energy(speed_m_s, power_map, powertrain, terrain_scale)
+    torques times ``terrain_scale`` [-], each piece as ``path_scale``'s drive controller carries it
+    out (module doc; None: as asked)."""
+    return PlannedPath(x, y).energy(speed_m_s, power_map, powertrain, terrain_scale, path_scale)
 
 
 class PathTracker:
@@ -284,14 +321,16 @@ class PathTracker:
         power_map: ArrayPowerMapLike | None,
         powertrain: PowertrainLike | None,
         terrain_scale: float = 1.0,
+        path_scale: PathScale | None = None,
     ) -> PathEnergy | None:
-        """Energies of the current path at ``speed_m_s`` [m/s] (None: no path, map or powertrain, or
-        speed 0)."""
+        """Energies of the current path at ``speed_m_s`` [m/s] as ``path_scale``'s drive controller
+        drives it (None: no path, map or powertrain, or speed 0)."""
         if self.path is None or power_map is None or powertrain is None or not speed_m_s:
             return None
-        loads_key = (abs(float(speed_m_s)), power_map)  # the objects, not their id(): no reuse mix-up
+        # the objects, not their id(): no reuse mix-up
+        loads_key = (abs(float(speed_m_s)), power_map, path_scale)
         if self._loads is None or not _same(loads_key, self._loads_key):
-            self._loads = self.path.loads(speed_m_s, power_map)
+            self._loads = self.path.loads(speed_m_s, power_map, path_scale)
             self._loads_key = loads_key
         key = (*loads_key, powertrain, float(terrain_scale))
         if not _same(key, self._key):

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -122,6 +122,9 @@ class MapPredictor:
     ``powertrain`` is a :class:`skidsteer_power.powertrain.Powertrain`, whose ``motor_side`` adds the
     internal resistance, reduction, motor and amplifier to the map's axle torque and speed.
     Repeated commands (teleoperation repeats the last one) are answered from a small cache.
+    ``path_scale``: how the drive controller slows a planned path's twists (V [m/s], w_z [rad/s]) ->
+    factor in (0, 1] (:meth:`~skidsteer_power.drive.DriveController.path_scale` at the wheel speed
+    ceiling; path energy, :mod:`skidsteer_power.estimator.path_energy`); None: paths driven as asked.
     """
 
     def __init__(
@@ -131,9 +134,11 @@ class MapPredictor:
         *,
         description: str = '',
         cache_size: int = 256,
+        path_scale: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.power_map = power_map
         self.powertrain = powertrain
+        self.path_scale = path_scale
         self.description = description or 'power map'
         self.predict = lru_cache(maxsize=cache_size)(self._predict)
 
@@ -176,6 +181,9 @@ class SetpointPredictor:
     ) -> None:
         self.setpoint_map = setpoint_map
         self.powertrain = powertrain
+        command = setpoint_map.predictor  # its drive controller and wheel speed ceiling
+        self.path_scale = partial(command.controller.path_scale, ceiling_rad_s=command.max_axle_rad_s)
+        """How this predictor's drive controller slows a planned path (:class:`MapPredictor`)."""
         self.description = description or 'set-point map'
         self.predict = lru_cache(maxsize=cache_size)(self._predict)
         self._motion_map = motion_map

@@ -189,7 +189,8 @@ class PathEnergyHook:
             return None, remaining
         try:
             powertrain = getattr(predictor, 'powertrain', None)
-            energy = self.tracker.evaluate(speed, power_map, powertrain, terrain_scale)
+            path_scale = getattr(predictor, 'path_scale', None)  # its drive controller's
+            energy = self.tracker.evaluate(speed, power_map, powertrain, terrain_scale, path_scale)
         except SkidsteerError as err:
             self._reject(err)
             return None, remaining
@@ -235,6 +236,7 @@ class PathEnergyHook:
                 'terrain_scale': f'{energy.terrain_scale:.4f}',
                 'clamped_segments': str(energy.clamped_segments),
                 'limited_segments': str(energy.limited_segments),
+                'slowed_segments': str(energy.slowed_segments),
             }
             if margin < 0:
                 level = DiagnosticStatus.WARN
@@ -244,6 +246,9 @@ class PathEnergyHook:
             flagged = energy.clamped_segments + energy.limited_segments
             if flagged:
                 message += f" ({flagged} segments outside the map's validity: clamped or limited)"
+            if energy.slowed_segments:
+                message += f' ({energy.slowed_segments} segments slowed by the drive controller)'
+
         status = DiagnosticStatus(level=level, name=f'{self.node.get_name()}: path energy', message=message)
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         return status
