@@ -366,8 +366,8 @@ def test_calibrating_never_worsens_the_prediction_from_the_command(
     command), so the hold-out prediction from the command is no worse after than before. Reference:
     the twin's measured motor power on a bag the fit never read (FESS is not in the twin)."""
     payload, path = calibrated
-    assert payload['fit_at'] == 'setpoints'
-    assert yaml.safe_load(path.read_text())['calibration']['fit_at'] == 'setpoints'  # the file says so
+    assert payload['fit_at'] == 'cmd'
+    assert yaml.safe_load(path.read_text())['calibration']['fit_at'] == 'cmd'  # the file says so
     before = command_energy_error(load_terrain('dry_sand'), holdout_segments)
     after = command_energy_error(load_terrain(path), holdout_segments)
     assert abs(after) <= abs(before)  # measured +18.8 % -> -0.3 %

@@ -55,7 +55,7 @@ def test_every_model_is_scored_on_every_split(result: dict[str, Any]) -> None:
     # issue 27 round 2: FESS predicts from the commands' set points, as the node does, and is
     # calibrated on the same footing
     assert result['kinematics'] == 'cmd'
-    assert result['calibration']['fit_at'] == 'setpoints'
+    assert result['calibration']['fit_at'] == 'cmd'
 
 
 def test_linear_baseline_on_its_own_training_bag_has_zero_energy_error(result: dict[str, Any]) -> None:

@@ -46,6 +46,7 @@ from skidsteer_power.analysis.baselines import (
     Samples,
     energy_J,
 )
+from skidsteer_power.drive.prediction_modes import CMD
 from skidsteer_power.errors import InputError, SkidsteerError
 from skidsteer_power.jsonout import JsonObject
 from skidsteer_power.vehicle import TrackGear, WheelGear
@@ -71,7 +72,7 @@ class CompareOptions:
     transfer_payload_kg : what changed for the transfer bags [-, kg]; work_dir : where the calibrated
     terrain and a payload vehicle file are written (None: a temporary folder); map_cache_dir : power
     map cache (None: the estimator's default); calibrate_fit : parameters calibrate fits;
-    calibrate_fit_at : what calibrate solves the segments at ('setpoints', as the node predicts, or
+    calibrate_fit_at : what calibrate solves the segments at ('cmd', as the node predicts, or
     'motion')."""
 
     vehicle: str
@@ -84,7 +85,7 @@ class CompareOptions:
     work_dir: str | Path | None = None
     map_cache_dir: str | Path | None = None
     calibrate_fit: str = 'auto'  # what the recordings identify, soil or rigid ground, powertrain terms
-    calibrate_fit_at: str = 'setpoints'
+    calibrate_fit_at: str = CMD
     extra_types: Mapping[str, str] | None = None  # .msg texts by type name (--msg): types the bags lack
 
     def check(self) -> None:

@@ -2,13 +2,14 @@
 
 The model of a segment is what the estimator predicts for it (``fit_at``, :data:`FIT_AT`):
 
-* ``setpoints`` (default, issue 27): FESS driven by the wheel speed set points of the segment's
-  COMMAND (:class:`~skidsteer_power.models.predict.CommandPredictor`, issue 25: the driver's
-  kinematics, the body motion FESS finds for them, the amplifiers' current limit), as power_estimator
-  and ``validate --kinematics cmd`` predict. Fitting what the node predicts is what makes calibrating
-  improve the prediction from the command: a terrain fitted at the measured motion can make it worse
-  (on the twin's wheeled robot FESS turns far more at the set points than the robot does, so the
-  terrain that matches the torques at the measured motion over-predicts them from the command);
+* ``cmd`` (default, issue 27; ``setpoints`` before, still accepted): FESS driven by the wheel speed
+  set points of the segment's COMMAND (:class:`~skidsteer_power.models.predict.CommandPredictor`,
+  issue 25: the driver's kinematics, the body motion FESS finds for them, the amplifiers' current
+  limit), as power_estimator and ``validate --kinematics cmd`` predict. Fitting what the node
+  predicts is what makes calibrating improve the prediction from the command: a terrain fitted at
+  the measured motion can make it worse (on the twin's wheeled robot FESS turns far more at the set
+  points than the robot does, so the terrain that matches the torques at the measured motion
+  over-predicts them from the command);
 * ``motion``: FESS solved directly at the segment's measured forward speed V [m/s] and yaw rate
   [rad/s] (the terrain as a terramechanics description of the ground; needs a pose topic).
 
@@ -78,6 +79,7 @@ from scipy import optimize, stats
 
 from skidsteer_power.calibration.segments import SteadyWindow
 from skidsteer_power.drive import DriveIdentification
+from skidsteer_power.drive.prediction_modes import CMD, FIT_AT, prediction_mode
 from skidsteer_power.errors import ConfigError, ConvergenceError, InputError
 from skidsteer_power.models.fess import FessSolver
 from skidsteer_power.powertrain.internal import Resistance, SideResistance
@@ -155,7 +157,6 @@ EFFICIENCY_PARAMS: dict[str, FitParameter] = {
 }
 PARAMS = {**TERRAIN_PARAMS, **INTERNAL_PARAMS, **TIED_INTERNAL_PARAMS, **BATTERY_PARAMS, **EFFICIENCY_PARAMS}
 DEFAULT_FIT = ('kphi', 'n', 'c', 'phi', 'K')
-FIT_AT = ('setpoints', 'motion')  # what the model of a segment is solved at (module doc)
 
 
 def parse_fit_list(text: str) -> list[str]:
@@ -249,7 +250,7 @@ class Model:
     vehicle: Vehicle
     terrain: Terrain
     powertrain: Powertrain
-    speed: np.ndarray  # (S,) [m/s]: the measured motion, or the command with fit_at 'setpoints'
+    speed: np.ndarray  # (S,) [m/s]: the measured motion, or the command with fit_at 'cmd'
     yaw: np.ndarray  # (S,) [rad/s]
     fit_at: str = 'motion'
     _warm: np.ndarray | None = field(default=None, init=False)
@@ -316,7 +317,7 @@ class Model:
         except ConfigError:  # a trial outside the terrain's validity (e.g. rigid ground's K range)
             return self._failed()
         try:
-            if self.fit_at == 'setpoints':
+            if self.fit_at == CMD:
                 return self._predict_setpoints(terrain, powertrain)
             return self._predict_motion(terrain, powertrain)
         except ConvergenceError:  # a trial terrain where FESS's contact has no solution at all
@@ -705,8 +706,7 @@ def prepare(
     fit_to: str,
 ) -> FitData:
     """Step 1: the hold-out split, the segment model, the measurements and the start values."""
-    if fit_at not in FIT_AT:
-        raise InputError(f'--fit-at must be one of {", ".join(FIT_AT)}, not {fit_at!r}')
+    fit_at = prediction_mode(fit_at, '--fit-at', FIT_AT)[0]  # an old spelling means the same
     if fit_to not in FIT_TO:
         raise InputError(f'fit_to must be one of {", ".join(FIT_TO)}, not {fit_to!r}')
     segments = list(segments)
@@ -727,8 +727,8 @@ def prepare(
         )
     if fit_to != 'torque' and not np.any(np.isfinite(motion)):
         raise InputError('the segments carry no measured motion (no odometry, pose or yaw-rate topic)')
-    if fit_to != 'torque' and fit_at != 'setpoints':
-        raise InputError('a motion fit predicts the motion at the set points: --fit-at setpoints')
+    if fit_to != 'torque' and fit_at != CMD:
+        raise InputError('a motion fit predicts the motion at the set points: --fit-at cmd')
     finite = measured[np.isfinite(measured)]
     rms = float(np.sqrt(np.mean(finite**2))) if finite.size else 1.0
     kind = terrain_params(terrain)
@@ -1064,12 +1064,12 @@ def calibrate(
     seed: int = 0,
     ident_tol_Nm: float | None = None,
     dropped: dict[str, int] | None = None,
-    fit_at: str = 'setpoints',
+    fit_at: str = CMD,
     fit_to: str = 'torque',
     left_fixed: dict[str, str] | None = None,
 ) -> CalibrationResult:
     """Fit ``fit`` (names of :data:`PARAMS`) to ``segments``; see the module doc for the method,
-    for ``fit_at`` ('setpoints': the commands at their set points, 'motion': the measured motion) and
+    for ``fit_at`` ('cmd': the commands at their set points, 'motion': the measured motion) and
     ``fit_to`` ('torque', 'motion' or 'both': what the residuals compare, :data:`FIT_TO`).
 
     ``ident_tol_Nm`` : RMS torque change [N m] below which a 10 % parameter change counts as
@@ -1214,8 +1214,8 @@ def _result(
 def segment_model(
     vehicle: Vehicle, terrain: Terrain, powertrain: Powertrain, segments: Sequence[SteadyWindow], fit_at: str
 ) -> Model:
-    """The :class:`Model` of ``segments``: at their commands ('setpoints') or measured motion ('motion')."""
-    if fit_at == 'setpoints':
+    """The :class:`Model` of ``segments``: at their commands ('cmd') or measured motion ('motion')."""
+    if fit_at == CMD:
         at = np.array([s.command for s in segments], dtype=float).reshape(-1, 2)
     else:
         at = np.array([(s.speed_m_s, s.yaw_rate_rad_s) for s in segments], dtype=float).reshape(-1, 2)
@@ -1232,7 +1232,7 @@ def setpoint_check(
     hold_idx: np.ndarray,
 ) -> dict[str, float]:
     """The fitted terrain and powertrain predicting each segment from its COMMAND, at the wheel
-    speed set points (issue 25), whatever the fit was solved at (with ``fit_at`` 'setpoints' the
+    speed set points (issue 25), whatever the fit was solved at (with ``fit_at`` 'cmd' the
     torques and energy are the fit's own; the motion errors say how far FESS's set-point motion is
     from the measured one).
 

@@ -20,6 +20,7 @@ from skidsteer_power.cli.common import (
     print_json,
     ros_topic,
 )
+from skidsteer_power.drive.prediction_modes import CMD, VALIDATE_KINEMATICS
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import (
     BAG_TIME_S,
@@ -422,8 +423,8 @@ def _add_validate_kinematics_options(parser: argparse.ArgumentParser) -> None:
     """What the prediction is made from, and how long each command holds."""
     parser.add_argument(
         '--kinematics',
-        choices=('cmd', 'twist', 'odom', 'ground_truth'),
-        default='cmd',
+        choices=VALIDATE_KINEMATICS,
+        default=CMD,
         help='predict from the command at its wheel speed set points (default), from the command taken '
         'as the motion (twist), the --odom twist, or /ground_truth/odom; with cmd or twist, a bag with '
         'odometry also gets the prediction from the measured motion',

@@ -7,7 +7,7 @@ holdout_energy_error_before, holdout_energy_error_after (signed fractions: predi
 of the hold-out segments' motor terminal energy), seconds, residual_rms_Nm, correlation,
 segments_dropped, optimizer_converged (the optimizer's own stop; see at_bound),
 at_bound (fitted parameters pinned at a fit bound: status 'at_bound (lower|upper)', no interval, a
-warning), converged_inside_bounds, fit_at ('setpoints' | 'motion', what the segments were solved
+warning), converged_inside_bounds, fit_at ('cmd' | 'motion', what the segments were solved
 at), setpoints (the fitted terrain predicting each segment from its command, at the wheel speed set
 points), fit_to ('torque' | 'motion' | 'both'), not_identifiable (name -> why: its interval left the
 physical range), left_fixed (name -> why it was not fitted), kept_start (why the start was kept, or
@@ -19,12 +19,14 @@ out_powertrain, out_vehicle. Method:
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from skidsteer_power.argtypes import range_arg, range_help
 from skidsteer_power.cli.common import Subcommands, add_json_flag, add_msg_option, emit, nonnegative_float
+from skidsteer_power.drive.prediction_modes import CMD, FIT_AT, prediction_mode
 from skidsteer_power.errors import InputError
 from skidsteer_power.terramechanics.ranges import SEED
 
@@ -83,10 +85,12 @@ def _add_fit_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         '--fit-at',
-        choices=('setpoints', 'motion'),
-        default='setpoints',
-        help='solve the segments at the wheel speed set points of their commands (default: what '
-        'power_estimator and validate predict from) or at the measured motion (needs a pose topic)',
+        type=_fit_at,
+        default=CMD,
+        metavar='{' + ','.join(FIT_AT) + '}',
+        help='solve the segments at the wheel speed set points of their commands (cmd, the default: '
+        'what power_estimator and validate predict from; the old spelling setpoints still works) or '
+        'at the measured motion (needs a pose topic)',
     )
     parser.add_argument(
         '--holdout', type=nonnegative_float, default=0.3, help='fraction of segments held out'
@@ -94,6 +98,18 @@ def _add_fit_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--seed', type=range_arg(SEED), default=0, help=range_help(SEED, 'seed of the hold-out split')
     )
+
+
+def _fit_at(text: str) -> str:
+    """``--fit-at``'s value by its name (:mod:`skidsteer_power.drive.prediction_modes`); an earlier
+    spelling works with a one-line note on stderr."""
+    try:
+        name, note = prediction_mode(text, '--fit-at', FIT_AT)
+    except InputError as err:
+        raise argparse.ArgumentTypeError(str(err)) from err
+    if note:
+        print(f'note: {note}', file=sys.stderr)
+    return name
 
 
 def _add_output_options(parser: argparse.ArgumentParser) -> None:
@@ -244,7 +260,7 @@ def _print_human(payload: JsonObject) -> None:
             print(f'left fixed: {name}: {why}')
     if payload['at_bound']:
         print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
-    at = 'the set points of their commands' if payload['fit_at'] == 'setpoints' else 'the measured motion'
+    at = 'the set points of their commands' if payload['fit_at'] == CMD else 'the measured motion'
     print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out, solved at {at}')
     print(
         'hold-out torque RMSE: '

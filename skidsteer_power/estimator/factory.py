@@ -8,10 +8,12 @@ from __future__ import annotations
 import functools
 import math
 import os
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeAlias
 
-from skidsteer_power.errors import ConfigError
+from skidsteer_power.drive.prediction_modes import CMD, TWIST, prediction_mode
+from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.inputs import JointMap
 from skidsteer_power.estimator.prediction import MapPredictor, SetpointPredictor
 from skidsteer_power.powertrain import Battery, Powertrain
@@ -58,9 +60,10 @@ def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:
     return Battery.from_config(Powertrain.for_vehicle(vehicle).battery, soc)
 
 
-KINEMATICS = ('setpoint', 'twist')
-"""How a command is predicted: 'setpoint' (default: at the command's wheel speed set points, the
-motion FESS finds for them; issue 25) or 'twist' (the command taken as the motion itself)."""
+KINEMATICS = (CMD, TWIST)
+"""How a command is predicted (:mod:`skidsteer_power.drive.prediction_modes`): 'cmd' (default: at
+the command's wheel speed set points, the motion FESS finds for them; issue 25) or 'twist' (the
+command taken as the motion itself)."""
 
 
 def drive_controller(vehicle: Vehicle, **limits: float) -> DriveController:
@@ -79,21 +82,25 @@ def map_predictor(
     vehicle: Vehicle,
     terrain_name: str,
     cache_dir: str | os.PathLike[str] | None = None,
-    kinematics: str = 'setpoint',
+    kinematics: str = CMD,
     controller: DriveController | None = None,
 ) -> tuple[MapPredictor | SetpointPredictor, bool, str]:
     """A predictor for ``vehicle`` on the named terrain from its cached map, loaded from
     ``cache_dir`` (default: $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power) or built there
-    (FESS) if missing: the set-point map (:class:`SetpointPredictor`) for ``kinematics='setpoint'``,
+    (FESS) if missing: the set-point map (:class:`SetpointPredictor`) for ``kinematics='cmd'``,
     the (V, yaw rate) power map (:class:`MapPredictor`) for ``'twist'``. ``controller``: the drive
     controller the set points follow (default: the vehicle file's, :mod:`skidsteer_power.drive`).
 
     Returns (predictor, built, description of the map).
     """
-    if kinematics not in KINEMATICS:
-        raise ConfigError(f'kinematics must be one of {", ".join(KINEMATICS)}, not {kinematics!r}')
+    try:
+        kinematics, note = prediction_mode(kinematics, 'kinematics', KINEMATICS)
+    except InputError as err:
+        raise ConfigError(str(err)) from err
+    if note:  # an earlier spelling (a saved parameter file): it works, and its owner learns the name
+        warnings.warn(note, FutureWarning, stacklevel=2)
     terrain = check_terrain(terrain_name)
-    if kinematics == 'setpoint':
+    if kinematics == CMD:
         from skidsteer_power.maps import setpoint_map
 
         smap, built = setpoint_map.load_or_build(

@@ -111,9 +111,9 @@ class PowerEstimatorParameters:
     """vehicle name in config/vehicles/ or a YAML file; read only"""
     terrain: str = 'dry_sand'
     """terrain preset or YAML file; may be changed at run time (swaps maps)"""
-    kinematics: str = 'setpoint'
-    """how a command is predicted: 'setpoint' (at its wheel speed set points) or 'twist' (as the motion);
-    read only
+    kinematics: str = 'cmd'
+    """how a command is predicted: 'cmd' (at its wheel speed set points; 'setpoint' still accepted) or
+    'twist' (as the motion); read only
     """
     map_cache_dir: str = ''
     """directory of cached maps ('' = $SKIDSTEER_POWER_CACHE or ~/.cache/skidsteer_power); read only"""

@@ -17,7 +17,7 @@ publishes per cmd_vel
                  ``left_axle``, ``right_axle`` (axle / sprocket: velocity [rad/s], effort = torque the
                  terrain needs [N m]); stamp = the TwistStamped's, else receive time
     ``power/predicted_twist`` geometry_msgs/TwistStamped, with the figures below (``figure_period_s``):
-                 the motion the model expects for the latest command (``kinematics: setpoint``: FESS
+                 the motion the model expects for the latest command (``kinematics: cmd``: FESS
                  at its wheel speed set points; linear.x = V [m/s], angular.z = yaw rate [rad/s];
                  frame base_link; stamp = that command's)
 periodic, and on ``~/reset_odometry``
@@ -98,6 +98,7 @@ from sensor_msgs.msg import BatteryState, JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from skidsteer_power.drive.prediction_modes import prediction_mode
 from skidsteer_power.errors import ConfigError, SkidsteerError
 from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
@@ -149,8 +150,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('terrain', 'dry_sand', 'terrain preset or YAML file; may be changed at run time (swaps maps)'),
     ParamSpec(
         'kinematics',
-        'setpoint',
-        "how a command is predicted: 'setpoint' (at its wheel speed set points) or 'twist' (as the motion)",
+        'cmd',
+        "how a command is predicted: 'cmd' (at its wheel speed set points; 'setpoint' still accepted) or "
+        "'twist' (as the motion)",
     ),
     ParamSpec(
         'map_cache_dir',
@@ -332,7 +334,9 @@ class PowerEstimator(QuietNode):
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
         self.terrain_name = p.terrain
-        self.kinematics = p.kinematics
+        self.kinematics, note = prediction_mode(p.kinematics, 'kinematics', factory.KINEMATICS)
+        if note:
+            self.get_logger().warning(note)
         self.controller = factory.drive_controller(
             self.vehicle,
             max_speed_m_s=p.drive_max_speed_m_s,

@@ -40,6 +40,7 @@ from skidsteer_power.bag_io.decode import (
     decode_twists,
 )
 from skidsteer_power.bag_io.reader import BagReader
+from skidsteer_power.drive.prediction_modes import CMD, TWIST, VALIDATE_KINEMATICS
 from skidsteer_power.errors import ConfigError, InputError
 from skidsteer_power.estimator.inputs import InputLimits
 from skidsteer_power.estimator.measured import apply_to_joint_arrays
@@ -290,7 +291,7 @@ def build_core(
     vehicle = load_vehicle(options.vehicle)
     if predictor is None:
         try:
-            kind = 'setpoint' if (kinematics or options.kinematics) == 'cmd' else 'twist'
+            kind = CMD if (kinematics or options.kinematics) == CMD else TWIST
             predictor, _, _ = factory.map_predictor(vehicle, options.terrain, options.map_cache_dir, kind)
         except ImportError as err:
             raise ConfigError(f'power maps are not available in this installation: {err}') from err
@@ -573,8 +574,8 @@ def stream_hold_ends(t: np.ndarray, cap_s: float) -> np.ndarray:
     return ends
 
 
-KINEMATICS = ('cmd', 'twist', 'odom', 'ground_truth')
-FROM_COMMAND = ('cmd', 'twist')  # predicted from the command: at its set points, or as the motion
+KINEMATICS = VALIDATE_KINEMATICS
+FROM_COMMAND = (CMD, TWIST)  # predicted from the command: at its set points, or as the motion
 GROUND_TRUTH_TOPIC = '/ground_truth/odom'
 
 
