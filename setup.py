@@ -18,7 +18,7 @@ setup(
         (f'share/{PACKAGE}/config/vehicles', glob('config/vehicles/*.yaml')),
         (f'share/{PACKAGE}/config/powertrains', glob('config/powertrains/*.yaml')),
         (f'share/{PACKAGE}/config/batteries', glob('config/batteries/*.yaml')),
-        (f'share/{PACKAGE}/config/drivetrains', glob('config/drivetrains/*.yaml')),
+        (f'share/{PACKAGE}/config/joints', glob('config/joints/*.yaml')),
         (f'share/{PACKAGE}/config/foxglove', glob('config/foxglove/*.json')),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),

@@ -5,7 +5,7 @@ The whole path a Husky user takes, through the real command line, with the shipp
 ``--vehicle husky_a200``. It is no real robot: the recordings come from the project's dynamic twin
 (``skidsteer-power simulate``: its own contact laws, motor dynamics, drive controller and sensor
 noise, never FESS or the maps), rewritten into what a Husky records: joint_states of its four
-ros2_control wheel joints at the wheel (position and velocity, no effort; config/drivetrains/
+ros2_control wheel joints at the wheel (position and velocity, no effort; config/joints/
 ros2_control_4wheel.yaml), cmd_vel and the body motion on ``ground_truth/odom`` (standing in for
 lidar scan matching or motion capture); the battery topic is dropped (no current, as most motion
 recordings).
@@ -41,7 +41,7 @@ GEAR_RATIO = 79.0  # the twin's joint_states are at the motor (husky_a200 powert
 WHEEL_JOINTS = (
     ('front_left_wheel_joint', 'rear_left_wheel_joint'),
     ('front_right_wheel_joint', 'rear_right_wheel_joint'),
-)  # config/drivetrains/ros2_control_4wheel.yaml (husky_description's names)
+)  # config/joints/ros2_control_4wheel.yaml (husky_description's names)
 SETTLE_S = 1.5  # a held command's first seconds left out of its window [s] (calibrate's default)
 MIN_WINDOW_S = 0.5  # shortest window compared [s]
 MOTION_TOPIC = '/ground_truth/odom'

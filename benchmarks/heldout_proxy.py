@@ -99,7 +99,7 @@ def user_vehicle(path: Path) -> Path:
         'total': {'topic': 'battery/measured', 'type': 'sensor_msgs/msg/BatteryState'}
     }
     # the twin publishes one motor joint per side at the motor shaft, velocity and position
-    config['drivetrain'] = {
+    config['joints'] = {
         'preset': 'test_robot',
         'gear_ratio': GEAR_RATIO,
         'interfaces': ['position', 'velocity'],

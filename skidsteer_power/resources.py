@@ -1,5 +1,5 @@
 """One place that finds the files this package ships: vehicles, terrains, powertrains, batteries,
-joint_states mappings (drivetrains), node parameters and the Foxglove layout
+joint_states mappings (joints), node parameters and the Foxglove layout
 (``config/<kind>/<name>.<ext>``).
 
 Where they are depends on how the package was installed:
@@ -25,7 +25,7 @@ from pathlib import Path
 from skidsteer_power.errors import ConfigError
 
 PACKAGE = 'skidsteer_power'
-KINDS = ('vehicles', 'terrains', 'powertrains', 'batteries', 'drivetrains', 'foxglove', '')
+KINDS = ('vehicles', 'terrains', 'powertrains', 'batteries', 'joints', 'foxglove', '')
 """Sub-folders of ``config/`` that hold shipped files ('' = ``config/`` itself: node parameters)."""
 
 _SOURCE_CONFIG = Path(__file__).resolve().parent.parent / 'config'

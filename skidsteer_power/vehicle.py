@@ -19,7 +19,8 @@ A vehicle file in ``config/vehicles/`` holds the fields of :class:`Vehicle` and 
     yaw_inertia_kg_m2: 1.5       # optional; default: a uniform box (see Vehicle.yaw_inertia)
     track_longitudinal_shear_ratio: 4.0   # optional, tracks only: K_x / K in FESS (default 1)
     powertrain: {preset: test_robot}
-    drivetrain: {preset: test_robot}   # joint_states mapping (skidsteer_power.estimator.inputs.JointMap)
+    joints: {preset: test_robot}       # joint_states mapping (skidsteer_power.estimator.inputs.JointMap;
+                                       #   'drivetrain:' before, still read)
     max_speed_m_s: 1.5           # optional: the command envelope the maps cover (defaults below)
     max_yaw_rate_rad_s: 2.0      #   and the drive controller's velocity limits
     drive_controller: {...}      # optional: skidsteer_power.drive (docs/DRIVE.md)
@@ -37,6 +38,7 @@ import hashlib
 import json
 import math
 import os
+import warnings
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, Literal
@@ -195,7 +197,7 @@ class Vehicle:
         it, the steady models do not; default :attr:`yaw_inertia`)
     powertrain : powertrain description, interpreted by ``skidsteer_power.powertrain`` (may be empty)
     source : where the numbers come from; flags assumed values
-    drivetrain : how its joint_states map to the sides (joint names, units), interpreted by
+    joints : how its joint_states map to the sides (joint names, units), interpreted by
         :class:`skidsteer_power.estimator.inputs.JointMap` (empty: the test robot's left_motor/right_motor)
     max_speed_m_s : largest |forward speed| the vehicle is commanded [m/s] (default 1.5); the power
         maps cover it, commands beyond it are flagged ``clamped``
@@ -217,7 +219,7 @@ class Vehicle:
     yaw_inertia_kg_m2: float | None = None
     powertrain: JsonObject = field(default_factory=dict, hash=False)
     source: str = ''
-    drivetrain: JsonObject = field(default_factory=dict, hash=False)
+    joints: JsonObject = field(default_factory=dict, hash=False)
     max_speed_m_s: float = DEFAULT_MAX_SPEED_M_S
     max_yaw_rate_rad_s: float = DEFAULT_MAX_YAW_RATE_RAD_S
     drive_controller: JsonObject = field(default_factory=dict, hash=False)
@@ -327,8 +329,8 @@ def _validate(vehicle: Vehicle) -> None:
         _check_positive('yaw_inertia_kg_m2', vehicle.yaw_inertia_kg_m2)
     if not isinstance(vehicle.powertrain, dict):
         raise ConfigError(f'powertrain must be a mapping, not {type(vehicle.powertrain).__name__}')
-    if not isinstance(vehicle.drivetrain, dict):
-        raise ConfigError(f'drivetrain must be a mapping, not {type(vehicle.drivetrain).__name__}')
+    if not isinstance(vehicle.joints, dict):
+        raise ConfigError(f'joints must be a mapping, not {type(vehicle.joints).__name__}')
     if not isinstance(vehicle.drive_controller, dict):
         raise ConfigError(
             f'drive_controller must be a mapping, not {type(vehicle.drive_controller).__name__}'
@@ -362,6 +364,26 @@ def _gear_from_fields(values: JsonObject) -> TrackGear | WheelGear:
     return gear_class(**given)
 
 
+RENAMED_SECTIONS = {'drivetrain': 'joints'}
+"""Vehicle-file sections of earlier rounds -> their names (issue 38: "drivetrain" was the joint
+mapping here and the powertrain's parts elsewhere)."""
+
+
+def _renamed_sections(data: JsonObject, origin: str) -> JsonObject:
+    """``data`` with each earlier section name (:data:`RENAMED_SECTIONS`) read as its name, with a
+    FutureWarning saying so; ConfigError where a file gives both."""
+    out = dict(data)
+    for old, new in RENAMED_SECTIONS.items():
+        if old not in out:
+            continue
+        if new in out:
+            raise ConfigError(f'{origin}: give {new!r} only ({old!r} is its earlier name)')
+        out[new] = out.pop(old)
+        note = f"{origin}: '{old}:' is now spelled '{new}:' (the old name still works)"
+        warnings.warn(note, FutureWarning, stacklevel=3)
+    return out
+
+
 def vehicle_from_dict(data: object, *, origin: str = '<dict>') -> Vehicle:
     """Build a validated :class:`Vehicle` from a mapping of the flat file keys (e.g. parsed YAML);
     ``origin`` names the source."""
@@ -369,6 +391,7 @@ def vehicle_from_dict(data: object, *, origin: str = '<dict>') -> Vehicle:
         raise ConfigError(
             f'{origin}: a vehicle file must hold a mapping of fields, not {type(data).__name__}'
         )
+    data = _renamed_sections(data, origin)
     unknown = sorted(set(data) - set(FIELD_NAMES))
     if unknown:
         raise ConfigError(
@@ -378,7 +401,7 @@ def vehicle_from_dict(data: object, *, origin: str = '<dict>') -> Vehicle:
         if required not in data:
             raise ConfigError(f'{origin}: missing field {required!r}')
     values = dict(data)
-    for section in ('powertrain', 'drivetrain', 'drive_controller', 'measured_power'):
+    for section in ('powertrain', 'joints', 'drive_controller', 'measured_power'):
         if values.get(section) is None:
             values[section] = {}
     name = str(values.pop('name'))
@@ -429,7 +452,7 @@ def load_vehicle(path_or_name: str | os.PathLike[str] | Vehicle) -> Vehicle:
 _NOT_FINGERPRINTED = (
     'name',
     'source',
-    'drivetrain',
+    'joints',
     'measured_power',
     'yaw_inertia_kg_m2',
     'max_speed_m_s',

@@ -285,7 +285,7 @@ def test_four_wheel_joints_in_newton_metres_at_the_wheel_give_the_same_segments(
 ) -> None:
     """calibrate reads joint_states through the vehicle file's drivetrain mapping (issue 16), as the
     estimator and validate do. The twin bag's two motor joints (effort Kt I at the motor, N m) are
-    re-written as a ros2_control robot's four wheel joints (config/drivetrains/ros2_control_4wheel):
+    re-written as a ros2_control robot's four wheel joints (config/joints/ros2_control_4wheel):
     per side two joints each carrying half the axle torque, T_w = T_m G / 2, at the axle speed
     w_w = w_m / G (G = 12, the test robot's reduction). Mapped back (sum of T_w / G, mean of w_w x G)
     this is the motor's own reading again, so both bags must give the same steady segments."""

@@ -34,7 +34,7 @@ def _effective(**terms: float) -> Powertrain:
             'idle_power_W': terms.get('idle_power_W', 0.0),
             'copper_loss_W_per_Nm2': terms.get('copper_loss_W_per_Nm2', 0.0),
             'internal_resistance': {
-                s: {'drivetrain': {'viscous_Nm_s': 0.0, 'coulomb_Nm': c}} for s, c in side.items()
+                s: {'lumped': {'viscous_Nm_s': 0.0, 'coulomb_Nm': c}} for s, c in side.items()
             },
         },
         'wheel',

@@ -133,7 +133,7 @@ def test_colcon_installs_the_executables_config_and_ament_marker(workspace: Path
     assert (share / 'package.xml').is_file() and (share / 'config' / 'estimator.yaml').is_file()
     for kind, name in (('vehicles', 'test_robot_track.yaml'), ('powertrains', 'test_robot.yaml'),
                        ('batteries', 'test_robot.yaml'), ('foxglove', 'operator_layout.json'),
-                       ('drivetrains', 'ros2_control_4wheel.yaml')):  # fmt: skip
+                       ('joints', 'ros2_control_4wheel.yaml')):  # fmt: skip
         assert (share / 'config' / kind / name).is_file()
     marker = installed(workspace, 'share', 'ament_index', 'resource_index', 'packages', 'skidsteer_power')
     assert marker.is_file()

@@ -30,7 +30,7 @@ def test_a_husky_recording_calibrates_motion_and_predicts_the_other_half(tmp_pat
     assert yaw <= preset_yaw and vx <= preset_vx + 0.005
     assert yaw <= 0.08 and vx <= 0.07
     written = yaml.safe_load((tmp_path / 'calibrated_vehicle.yaml').read_text())
-    assert written['drivetrain']['preset'] == 'ros2_control_4wheel'  # the user's vehicle, rewritten
+    assert written['joints']['preset'] == 'ros2_control_4wheel'  # the user's vehicle, rewritten
 
 
 def test_the_rewritten_recording_is_the_husky_layout(tmp_path: Path) -> None:

@@ -23,7 +23,7 @@ SOURCE_CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 def test_source_tree_resolves_every_shipped_file() -> None:
-    for kind in ('vehicles', 'terrains', 'powertrains', 'batteries', 'drivetrains'):
+    for kind in ('vehicles', 'terrains', 'powertrains', 'batteries', 'joints'):
         names = {p.stem for p in (SOURCE_CONFIG / kind).glob('*.yaml')}
         assert names and set(resources.shipped(kind)) >= names, kind
     assert resources.params_file('estimator.yaml') == SOURCE_CONFIG / 'estimator.yaml'

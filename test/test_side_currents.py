@@ -209,7 +209,7 @@ def test_power_estimator_node_takes_effort_from_a_current_topic(
 
     config = yaml.safe_load(find('vehicles', VEHICLE).read_text())
     if installed:
-        config['drivetrain']['side_currents'] = [
+        config['joints']['side_currents'] = [
             {
                 'topic': 'currents',
                 'type': 'std_msgs/msg/Float64MultiArray',

@@ -200,7 +200,7 @@ def read_recording(
 ) -> Recording:
     """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if one is missing.
 
-    ``reader`` maps the joints to the sides (the vehicle file's ``drivetrain:``; default: the test
+    ``reader`` maps the joints to the sides (the vehicle file's ``joints:``; default: the test
     robot's left_motor/right_motor, effort = Kt I at the motor).
     """
     options = options or SegmentOptions()

@@ -23,9 +23,10 @@ import os
 import pkgutil
 import re
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import NoReturn, TextIO
 
 from skidsteer_power import __version__
 from skidsteer_power.errors import SkidsteerError
@@ -183,6 +184,18 @@ def _command_of(argv: Sequence[str]) -> str | None:
     return next((a for a in argv if not a.startswith('-')), None)
 
 
+def _note(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """A warning on the command line: ``note: message``, one line on stderr."""
+    print(f'note: {message}', file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _command_of(argv)
@@ -200,7 +213,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from skidsteer_power.cli.common import native_stdout_to_stderr
 
     try:
-        with native_stdout_to_stderr():  # DDS logs must not mix into --json output
+        with native_stdout_to_stderr(), warnings.catch_warnings():  # DDS logs apart from --json
+            warnings.showwarning = _note  # an old spelling's FutureWarning: one line, no source line
             code = func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit
     except SkidsteerError as err:

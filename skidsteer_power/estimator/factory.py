@@ -47,12 +47,12 @@ def state_path(configured: str, vehicle: Vehicle, namespace: str = '') -> Path:
 
 
 def joint_map_for(vehicle: Vehicle, **overrides: object) -> JointMap:
-    """The vehicle's joint_states mapping (its ``drivetrain:`` and ``measured_power:`` sections), with
+    """The vehicle's joint_states mapping (its ``joints:`` and ``measured_power:`` sections), with
     non-empty ``overrides`` (node parameters, CLI options: left, right, effort_is, location,
     gear_ratio ...) applied."""
     measured = getattr(vehicle, 'measured_power', None)
     bus = Powertrain.for_vehicle(vehicle).nominal_bus_voltage_V() if measured else None
-    return JointMap.from_config(vehicle.drivetrain or None, measured, bus).with_overrides(**overrides)
+    return JointMap.from_config(vehicle.joints or None, measured, bus).with_overrides(**overrides)
 
 
 def battery_for(vehicle: Vehicle, soc: float = 1.0) -> Battery:

@@ -172,34 +172,32 @@ class JointMap:
         for side in ('left', 'right'):
             joints = getattr(self, side)
             if not joints or not all(isinstance(j, str) and j for j in joints):
-                raise ConfigError(f'drivetrain: {side} must name at least one joint, got {joints!r}')
+                raise ConfigError(f'joints: {side} must name at least one joint, got {joints!r}')
         both = set(self.left) & set(self.right)
         if both or len(set(self.joints)) != len(self.joints):
-            raise ConfigError(f'drivetrain: a joint is listed twice: {sorted(both) or list(self.joints)}')
+            raise ConfigError(f'joints: a joint is listed twice: {sorted(both) or list(self.joints)}')
         if self.effort_is not in EFFORT_KINDS:
-            raise ConfigError(f'drivetrain: effort_is must be one of {EFFORT_KINDS}, not {self.effort_is!r}')
+            raise ConfigError(f'joints: effort_is must be one of {EFFORT_KINDS}, not {self.effort_is!r}')
         if self.location not in LOCATIONS:
-            raise ConfigError(f'drivetrain: location must be one of {LOCATIONS}, not {self.location!r}')
+            raise ConfigError(f'joints: location must be one of {LOCATIONS}, not {self.location!r}')
         unknown = set(self.interfaces) - set(INTERFACES)
         if unknown:
-            raise ConfigError(f'drivetrain: unknown interfaces {sorted(unknown)}; known: {INTERFACES}')
+            raise ConfigError(f'joints: unknown interfaces {sorted(unknown)}; known: {INTERFACES}')
         for name in ('gear_ratio', 'torque_constant_Nm_A'):
             value = getattr(self, name)
             if value is not None and not (
                 isinstance(value, (int, float)) and math.isfinite(value) and value > 0
             ):
-                raise ConfigError(f'drivetrain: {name} must be a number > 0 or null, not {value!r}')
+                raise ConfigError(f'joints: {name} must be a number > 0 or null, not {value!r}')
         stray = set(self.inverted) - set(self.joints)
         if stray:
-            raise ConfigError(f'drivetrain: inverted joints {sorted(stray)} are not in left or right')
+            raise ConfigError(f'joints: inverted joints {sorted(stray)} are not in left or right')
         if self.side_currents and (self.effort_is != 'current' or 'effort' not in self.interfaces):
-            raise ConfigError('drivetrain: side_currents needs effort_is: current and effort in interfaces')
+            raise ConfigError('joints: side_currents needs effort_is: current and effort in interfaces')
         if self.side_currents and self.measured_power:
-            raise ConfigError(
-                "declare measured power once: measured_power, or the drivetrain's side_currents"
-            )
+            raise ConfigError("declare measured power once: measured_power, or the joints' side_currents")
         if self.effort_is == 'battery_power' and not self.measured_power:
-            raise ConfigError('drivetrain: effort_is battery_power comes only from measured_power')
+            raise ConfigError('joints: effort_is battery_power comes only from measured_power')
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -230,7 +228,7 @@ class JointMap:
     def from_config(
         cls, config: object, measured_power: object = None, bus_voltage_V: float | None = None
     ) -> JointMap:
-        """From a vehicle's ``drivetrain:`` mapping (``preset`` expanded from config/drivetrains/)
+        """From a vehicle's ``joints:`` mapping (``preset`` expanded from config/joints/)
         and its ``measured_power:`` (:func:`~skidsteer_power.estimator.measured.parse_measured_power`;
         it sets ``effort_is`` and adds the effort interface), with the powertrain's bus voltage [V].
 
@@ -254,14 +252,14 @@ class JointMap:
                 else TEST_ROBOT_JOINTS
             )
         if not isinstance(config, dict):
-            raise ConfigError(f'drivetrain must be a mapping, not {type(config).__name__}')
-        cfg = merged('drivetrains', config)
+            raise ConfigError(f'joints must be a mapping, not {type(config).__name__}')
+        cfg = merged('joints', config)
         cfg.pop('name', None)
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(cfg) - known)
         if unknown:
             raise ConfigError(
-                f'drivetrain: unknown key(s) {", ".join(unknown)}; known: {", ".join(sorted(known))}'
+                f'joints: unknown key(s) {", ".join(unknown)}; known: {", ".join(sorted(known))}'
             )
         for key in ('left', 'right', 'interfaces', 'inverted'):
             if key in cfg:
@@ -406,7 +404,7 @@ class JointReader:
         rows = self._rows_of(names)
         interfaces = self.map.interfaces
         if 'effort' not in interfaces:
-            raise InputError('the drivetrain mapping declares no effort: no measured power')
+            raise InputError('the joints mapping declares no effort: no measured power')
         torque = self._pick('effort', effort, rows)
         if 'velocity' in interfaces:
             omega = self._pick('velocity', velocity, rows)
@@ -418,7 +416,7 @@ class JointReader:
             dt = now_s - last[0]
             omega = [(a - b) / dt for a, b in zip(angle, last[1], strict=True)]
         else:
-            raise InputError('the drivetrain mapping declares neither velocity nor position')
+            raise InputError('the joints mapping declares neither velocity nor position')
         n, m = self._n_left, len(omega) - self._n_left
         w_f, t_f = self._omega_factor, self._torque_factor
         omega_m = (sum(omega[:n]) / n * w_f, sum(omega[n:]) / m * w_f)

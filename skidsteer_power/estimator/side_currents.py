@@ -4,7 +4,7 @@ Real skid-steer robots report motor current on their own topics, not in joint_st
 on ``status`` (husky_msgs/HuskyStatus: ``left_driver_current``, ``right_driver_current`` [A]),
 Clearpath's newer software on ``platform/mcu/status/power`` (clearpath_platform_msgs/Power:
 ``measured_currents[A200_LEFT_DRIVER_CURRENT = 1]``, ``[A200_RIGHT_DRIVER_CURRENT = 2]`` [A]). A
-vehicle file's ``drivetrain:`` section names them under ``side_currents`` (a list: the first source
+vehicle file's ``joints:`` section names them under ``side_currents`` (a list: the first source
 present is used)::
 
     side_currents:

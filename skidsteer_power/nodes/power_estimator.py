@@ -10,7 +10,7 @@ subscribes (best-effort by default, so reliable AND best-effort publishers both 
                  linear.x = V [m/s], angular.z = yaw rate [rad/s] (REP 103, + = left)
     ``joint_states`` sensor_msgs/JointState from ``des_driver``: ``left_motor``/``right_motor``,
                  velocity = motor shaft speed [rad/s], effort = Kt * I [N m]; any other robot's
-                 joints by the vehicle file's ``drivetrain:`` section or the ``*_joints`` parameters
+                 joints by the vehicle file's ``joints:`` section or the ``*_joints`` parameters
 publishes per cmd_vel
     ``power/predicted`` sensor_msgs/JointState: ``left_motor``, ``right_motor`` (motor shaft: velocity
                  [rad/s], effort = predicted Kt * I [N m], comparable with joint_states) and

@@ -87,7 +87,7 @@ class TerrainSim(Node):
 def driver_joint_params(vehicle: Vehicle) -> dict[str, ParamValue]:
     """The estimator's joint mapping for des_driver's joint_states (``left_motor``/``right_motor``:
     motor shaft, effort = K_t I [N m], the vehicle's powertrain reduction), whatever joints the
-    vehicle file's ``drivetrain:`` names for its own stack (a ros2_control robot's wheel joints): in
+    vehicle file's ``joints:`` names for its own stack (a ros2_control robot's wheel joints): in
     this suite the joint_states come from des_driver (issue 37 item 3)."""
     gear_ratio = float(Powertrain.for_vehicle(vehicle).gear_ratio)
     return {

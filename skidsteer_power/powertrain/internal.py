@@ -45,8 +45,10 @@ from skidsteer_power.numeric import Real, real, sign
 COMPONENTS = ('motor', 'gear_train', 'roller_chain', 'track')
 """Drivetrain components in assembly order (ch. 7.2.1-7.2.3)."""
 
-LUMPED = 'drivetrain'
-"""The component name of a lumped side (:func:`side_from_config`)."""
+LUMPED = 'lumped'
+"""The component name of a lumped side (:func:`side_from_config`); ``drivetrain``, its name before
+(issue 38: "drivetrain" also named the vehicle file's joint mapping), is still read."""
+LUMPED_EARLIER = 'drivetrain'
 
 COMPONENTS_BY_RUNNING_GEAR = {
     'track': COMPONENTS,
@@ -122,13 +124,15 @@ def side_from_config(
     Each component gives either torques (``viscous_Nm_s``, ``coulomb_Nm``; the project's reading of
     Table 7.1) or motor currents (``viscous_A_s``, ``coulomb_A``; converted with K_t [N m/A]).
     Components not used by ``running_gear`` ('track' | 'wheel') are dropped (ch. 7.2.3). A side of
-    one component ``drivetrain`` is the whole side lumped (motor to running gear, as one viscous plus
+    one component ``lumped`` is the whole side lumped (motor to running gear, as one viscous plus
     Coulomb term at the motor shaft: what a robot's measured battery power identifies, issue 35).
     """
     try:
         wanted = COMPONENTS_BY_RUNNING_GEAR[running_gear]
     except KeyError:
         raise ConfigError(f"running_gear must be 'track' or 'wheel', not {running_gear!r}") from None
+    if set(entries) == {LUMPED_EARLIER}:  # its earlier name: the same part
+        entries = {LUMPED: entries[LUMPED_EARLIER]}
     if set(entries) == {LUMPED}:
         wanted = (LUMPED,)
     parts: dict[str, Resistance] = {}

@@ -1,7 +1,7 @@
 """Offline validation: the estimator run over a bag, compared with what the motors measured.
 
 No ROS graph is needed. The bag's ``cmd_vel`` (Twist or TwistStamped: V [m/s], yaw rate [rad/s]) and
-``joint_states`` (the vehicle's joints, mapped to the sides by its ``drivetrain:`` section, see
+``joint_states`` (the vehicle's joints, mapped to the sides by its ``joints:`` section, see
 :class:`skidsteer_power.estimator.inputs.JointMap`; the test robot's ``left_motor``/``right_motor``:
 shaft speed [rad/s], effort = Kt*I [N m]) are fed in receive-time order to
 :class:`skidsteer_power.estimator.EstimatorCore`, as the live ``power_estimator`` node feeds it, so
@@ -149,7 +149,7 @@ def _topic_of_type(bag: BagReader, wanted: str, types: Sequence[str]) -> str:
 
 
 def joint_map_of(options: ValidateOptions) -> JointMap:
-    """The joint_states mapping: the vehicle file's ``drivetrain:`` with the options' overrides."""
+    """The joint_states mapping: the vehicle file's ``joints:`` with the options' overrides."""
     from skidsteer_power.estimator import factory
 
     return factory.joint_map_for(
