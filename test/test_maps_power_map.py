@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import RegularGridInterpolator
 
-from skidsteer_power.errors import ConfigError, MapMismatchError
+from skidsteer_power.errors import ConfigError, InputError, MapMismatchError
 from skidsteer_power.maps import FIELDS, PowerMap, cache_path, load_or_build
 from skidsteer_power.maps import power_map as pm
 from skidsteer_power.models import fess
@@ -267,6 +267,13 @@ def test_cache_key_holds_the_options_and_the_physics_code(tmp_path: Path) -> Non
     assert cache_path(PACKBOT, DRY, tmp_path, min_radius=0.5) != default
     names = {p.name for p in physics_files()}
     assert {'vehicle.py', 'terrain.py', 'base.py', 'fess.py', 'power_map.py', 'interpolation.py'} <= names
+
+
+def test_an_unknown_map_option_is_refused_not_ignored(tmp_path: Path) -> None:
+    """``**options`` takes any keyword at run time: a typo is an InputError naming the known options
+    (issue 38: reject unknown options everywhere), never the default map under the typo's name."""
+    with pytest.raises(InputError, match=r'unknown map option\(s\) shpe; known: max_speed'):
+        cache_path(PACKBOT, DRY, tmp_path, shpe=(16, 41))  # type: ignore[call-arg]
 
 
 def test_writers_of_one_cache_file_at_once_each_rename_a_whole_file(tmp_path: Path) -> None:

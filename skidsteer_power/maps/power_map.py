@@ -184,7 +184,8 @@ class MapOptions(TypedDict):
 
 
 class MapKeywords(TypedDict, total=False):
-    """The options :func:`build_options` takes, as keywords (None: the default)."""
+    """The options :func:`build_options` takes, as keywords (None or missing: the default); the one
+    list of them (the map functions take them as ``**options: Unpack[MapKeywords]``)."""
 
     max_speed: float | None
     max_yaw_rate: float | None
@@ -194,22 +195,21 @@ class MapKeywords(TypedDict, total=False):
     refine: int | None
 
 
-def build_options(
-    vehicle: Vehicle,
-    *,
-    max_speed: float | None = None,
-    max_yaw_rate: float | None = None,
-    shape: tuple[int, int] | None = None,
-    n: int | None = None,
-    min_radius: float | None = None,
-    refine: int | None = None,
-) -> MapOptions:
+def build_options(vehicle: Vehicle, **keywords: Unpack[MapKeywords]) -> MapOptions:
     """Every option that changes a map, defaults resolved: the vehicle's command envelope
     (``max_speed_m_s``, ``max_yaw_rate_rad_s``), :data:`DEFAULT_SHAPE`, FESS's default element
     count, the small-radius limit 2 x tread [m]. ``map build`` and the library both use this, so the
     same options give the same cache file and different options never share one."""
     from skidsteer_power.models import fess
 
+    unknown = sorted(set(keywords) - set(MapKeywords.__annotations__))
+    if unknown:  # ** takes any name at run time: a typo must not become a default
+        raise InputError(
+            f'unknown map option(s) {", ".join(unknown)}; known: {", ".join(MapKeywords.__annotations__)}'
+        )
+    max_speed, max_yaw_rate = keywords.get('max_speed'), keywords.get('max_yaw_rate')
+    shape, n, refine = keywords.get('shape'), keywords.get('n'), keywords.get('refine')
+    min_radius = keywords.get('min_radius')
     options: MapOptions = {
         'max_speed': float(vehicle.max_speed_m_s if max_speed is None else max_speed),
         'max_yaw_rate': float(vehicle.max_yaw_rate_rad_s if max_yaw_rate is None else max_yaw_rate),
