@@ -233,35 +233,42 @@ class SetpointMap:
         band = _corner_any(np.nan_to_num(ratio, nan=0.0) <= BAND_RATIO) & ~self.exact
         if self.predictor.solver.fess.terrain.is_rigid:  # Coulomb contact kinks where wheels skid
             band = ~self.exact
-        return self.off_at_centres(self.grid, band)
+        return self.off_at_centres([self.grid], [band])[0]
 
     def off_at_centres(
-        self, grid: BilinearGrid, candidates: np.ndarray, path: np.ndarray | None = None
-    ) -> np.ndarray:
-        """(cells of ``grid``) True where a ``candidates`` cell's centre, solved directly, is
-        limited or off its bilinear answer by more than CHECK_POWER or CHECK_SPEED_M_S. Solved
-        cold (the direct solve), or with ``path`` (cells of a sub-grid) as a query in that cell
-        would be, were it exact (:meth:`solve_at`)."""
-        out = np.zeros(candidates.shape, dtype=bool)
-        cells = np.argwhere(candidates)
-        if cells.size == 0:
+        self,
+        grids: Sequence[BilinearGrid],
+        candidates: Sequence[np.ndarray],
+        paths: Sequence[np.ndarray] | None = None,
+    ) -> list[np.ndarray]:
+        """(cells of each grid) True where a ``candidates`` cell's centre, solved directly, is
+        limited or off its bilinear answer by more than CHECK_POWER or CHECK_SPEED_M_S; every
+        grid's centres in one batched solve. Solved cold (the direct solve), or with ``paths``
+        (cells of sub-grids) as a query in that cell would be, were it exact (:meth:`solve_at`)."""
+        picks = [np.argwhere(c) for c in candidates]
+        out = [np.zeros(c.shape, dtype=bool) for c in candidates]
+        if not any(len(cells) for cells in picks):
             return out
-        mean, diff, vals = grid.axis0.values, grid.axis1.values, grid.values
-        i, j = cells[:, 0], cells[:, 1]
-        mc, dc = 0.5 * (mean[i] + mean[i + 1]), 0.5 * (diff[j] + diff[j + 1])
+        centres = [_centres(grid, cells) for grid, cells in zip(grids, picks, strict=True)]
+        mc = np.concatenate([c[0] for c in centres])
+        dc = np.concatenate([c[1] for c in centres])
+        interpolated = np.concatenate([c[2] for c in centres])
         sp = np.column_stack([mc - dc, mc + dc])
-        if path is None:
+        if paths is None:
             sol = self.predictor.solver.solve(sp)
         else:
-            sol = self.solve_at(sp, self._warm(grid, mc, dc), path[i, j])
+            warm = np.concatenate([self._warm(g, c[0], c[1]) for g, c in zip(grids, centres, strict=True)])
+            path = np.concatenate([p[c[:, 0], c[:, 1]] for p, c in zip(paths, picks, strict=True)])
+            sol = self.solve_at(sp, warm, path)
         _, _, p_direct, _ = self.predictor.electrical(sol.torque, sp)
-        centre = 0.25 * (vals[i, j] + vals[i + 1, j] + vals[i, j + 1] + vals[i + 1, j + 1])  # bilinear
-        torque = centre[:, [FIELDS.index('torque_left'), FIELDS.index('torque_right')]]
+        torque = interpolated[:, [FIELDS.index('torque_left'), FIELDS.index('torque_right')]]
         _, _, p_map, _ = self.predictor.electrical(torque, sp)
         p_err = np.abs(p_map - p_direct) / np.maximum(np.abs(p_direct), 1.0)
-        v_err = np.abs(centre[:, FIELDS.index('speed')] - sol.speed)
+        v_err = np.abs(interpolated[:, FIELDS.index('speed')] - sol.speed)
         off = sol.limited | (p_err > CHECK_POWER) | (v_err > CHECK_SPEED_M_S)
-        out[i[off], j[off]] = True
+        split = np.cumsum([len(cells) for cells in picks])[:-1]
+        for mask, cells, cell_off in zip(out, picks, np.split(off, split), strict=True):
+            mask[cells[cell_off, 0], cells[cell_off, 1]] = True
         return out
 
     def refine(self, factor: int) -> Refinements:
@@ -278,12 +285,10 @@ class SetpointMap:
         sol = self.solve_at(np.column_stack([m - d, m + d]), self._warm(self.grid, m, d), in_band, redo=False)
         shape = (cells.size, factor + 1, factor + 1, len(FIELDS))
         values = _solution_values(sol).reshape(shape)
-        checked = np.zeros((cells.size, factor, factor), dtype=bool)
-        for k, (sub_mean, sub_diff) in enumerate(axes):
-            grid = _sub_grid(sub_mean, sub_diff, values[k])
-            flags = _CellFlags.sub(self, grid, None)
-            checked[k] = self.off_at_centres(grid, ~flags.exact, flags.path_any)
-        return Refinements(cells, values, checked)
+        grids = [_sub_grid(sub_mean, sub_diff, values[k]) for k, (sub_mean, sub_diff) in enumerate(axes)]
+        flags = [_CellFlags.sub(self, grid, None) for grid in grids]
+        checked = self.off_at_centres(grids, [~f.exact for f in flags], [f.path_any for f in flags])
+        return Refinements(cells, values, np.array(checked, dtype=bool))
 
     def _warm(self, grid: BilinearGrid, m: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(P, 3) the interpolated (s0 [m], V [m/s], w_z [rad/s]) of ``grid`` at set point mean and
@@ -351,7 +356,7 @@ class SetpointMap:
         inner_rim = min(abs(sp_l), abs(sp_r)) * self._radius
         pivot = (
             self._pivot_test
-            and not flags.path_all_list[cell]  # the pivot law solved every corner: it has no such limit
+            and not flags.no_pivot_list[cell]  # the pivot law's region: it has no such limit
             and yaw != 0
             and (inner_rim == 0 or abs(yaw) * contact / inner_rim > self._turn_limit)
         )
@@ -458,17 +463,17 @@ class _Deferred:
 @dataclass(frozen=True)
 class _CellFlags:
     """Per cell of a grid (the map's or a sub-grid's, row-major): answered by the direct solve,
-    found off by the build-time check, a corner the pivot law solved (the direct solve is then
-    warm-started from the interpolated state), every corner it solved (no pivot test). The lists
-    are the arrays' values in plain Python for the query."""
+    found off by the build-time check, a corner the pivot law solved (an exact one is then solved
+    with the pivot law at once), and interpolated without the pivot test (a sub-cell with such a
+    corner, module doc). The lists are the arrays' values in plain Python for the query."""
 
     exact: np.ndarray
     checked: np.ndarray
     path_any: np.ndarray
-    path_all: np.ndarray
+    no_pivot: np.ndarray
     exact_list: list[bool]
     path_any_list: list[bool]
-    path_all_list: list[bool]
+    no_pivot_list: list[bool]
 
     @classmethod
     def top(cls, smap: SetpointMap, grid: BilinearGrid, checked: np.ndarray | None) -> _CellFlags:
@@ -493,11 +498,11 @@ class _CellFlags:
 
     @classmethod
     def _of(
-        cls, exact: np.ndarray, checked: np.ndarray, path_any: np.ndarray, path_all: np.ndarray
+        cls, exact: np.ndarray, checked: np.ndarray, path_any: np.ndarray, no_pivot: np.ndarray
     ) -> _CellFlags:
         return cls(
-            exact, checked, path_any, path_all,
-            exact.ravel().tolist(), path_any.ravel().tolist(), path_all.ravel().tolist(),
+            exact, checked, path_any, no_pivot,
+            exact.ravel().tolist(), path_any.ravel().tolist(), no_pivot.ravel().tolist(),
         )  # fmt: skip
 
 
@@ -548,6 +553,15 @@ class Refinements:
             grid = _sub_grid(sub_mean, sub_diff, self.values[k])
             out[cell] = _SubGrid(grid, _CellFlags.sub(smap, grid, self.checked[k]))
         return out
+
+
+def _centres(grid: BilinearGrid, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mean [rad/s], half difference [rad/s], bilinear fields) at the centres of ``cells`` (C, 2)
+    (cell indices) of ``grid``: the average of each cell's four corners."""
+    mean, diff, vals = grid.axis0.values, grid.axis1.values, grid.values
+    i, j = cells[:, 0], cells[:, 1]
+    centre = 0.25 * (vals[i, j] + vals[i + 1, j] + vals[i, j + 1] + vals[i + 1, j + 1])
+    return 0.5 * (mean[i] + mean[i + 1]), 0.5 * (diff[j] + diff[j + 1]), centre
 
 
 def _sub_grid(mean: np.ndarray, diff: np.ndarray, values: np.ndarray) -> BilinearGrid:
