@@ -58,6 +58,7 @@ battery power and 0.48 mm/s in speed, no flag different).
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -278,17 +279,39 @@ class SetpointMap:
         if cells.size == 0:
             return Refinements.empty(len(FIELDS), factor)
         axes = [self._sub_axes(int(c), factor) for c in cells]
-        points = [np.meshgrid(m, d, indexing='ij') for m, d in axes]
-        m = np.concatenate([p[0].ravel() for p in points])
-        d = np.concatenate([p[1].ravel() for p in points])
-        in_band = np.repeat(self.cells.path_any.ravel()[cells], (factor + 1) ** 2)
-        sol = self.solve_at(np.column_stack([m - d, m + d]), self._warm(self.grid, m, d), in_band, redo=False)
         shape = (cells.size, factor + 1, factor + 1, len(FIELDS))
-        values = _solution_values(sol).reshape(shape)
+        values = self._sub_node_values(cells, factor).reshape(shape)
         grids = [_sub_grid(sub_mean, sub_diff, values[k]) for k, (sub_mean, sub_diff) in enumerate(axes)]
         flags = [_CellFlags.sub(self, grid, None) for grid in grids]
         checked = self.off_at_centres(grids, [~f.exact for f in flags], [f.path_any for f in flags])
         return Refinements(cells, values, np.array(checked, dtype=bool))
+
+    def _sub_node_values(self, cells: np.ndarray, factor: int) -> np.ndarray:
+        """(R (factor + 1)^2, F) the :data:`FIELDS` at every sub-grid node of ``cells`` (R,), in
+        sub-grid order. A node is solved once however many refined cells share it, and a node of the
+        map's own grid is its value there; a node is solved with the pivot law at once only where
+        every cell around it has a corner the pivot law solved (:meth:`solve_at`), else directly."""
+        k, n1 = factor, len(self.grid.axis1.values) - 1
+        ci, cj = np.divmod(cells, n1)
+        a, b = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing='ij')
+        gi, gj = (ci[:, None, None] * k + a).ravel(), (cj[:, None, None] * k + b).ravel()  # fine lattice
+        stride = n1 * k + 1
+        unique, inverse = np.unique(gi * stride + gj, return_inverse=True)
+        ui, uj = np.divmod(unique, stride)
+        owner_band = np.repeat(self.cells.path_any.ravel()[cells], (k + 1) ** 2)
+        band = np.ones(unique.size, dtype=bool)
+        np.logical_and.at(band, inverse, owner_band)
+        fine_mean = _fine_axis(self.grid.axis0.values, k)
+        fine_diff = _fine_axis(self.grid.axis1.values, k)
+        m, d = fine_mean[ui], fine_diff[uj]
+        out = np.empty((unique.size, len(FIELDS)))
+        on_map = (ui % k == 0) & (uj % k == 0)
+        out[on_map] = self.grid.values[ui[on_map] // k, uj[on_map] // k]
+        rest = ~on_map
+        sp = np.column_stack([m[rest] - d[rest], m[rest] + d[rest]])
+        warm = self._warm(self.grid, m[rest], d[rest])
+        out[rest] = _solution_values(self.solve_at(sp, warm, band[rest], redo=False))
+        return out[inverse]
 
     def _warm(self, grid: BilinearGrid, m: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(P, 3) the interpolated (s0 [m], V [m/s], w_z [rad/s]) of ``grid`` at set point mean and
@@ -562,6 +585,13 @@ def _centres(grid: BilinearGrid, cells: np.ndarray) -> tuple[np.ndarray, np.ndar
     i, j = cells[:, 0], cells[:, 1]
     centre = 0.25 * (vals[i, j] + vals[i + 1, j] + vals[i, j + 1] + vals[i + 1, j + 1])
     return 0.5 * (mean[i] + mean[i + 1]), 0.5 * (diff[j] + diff[j + 1]), centre
+
+
+def _fine_axis(values: np.ndarray, factor: int) -> np.ndarray:
+    """An axis's nodes [rad/s] with ``factor`` - 1 more evenly between each pair (the sub-grids'
+    nodes, :meth:`SetpointMap._sub_axes`: the same linspace per cell)."""
+    pieces = [np.linspace(lo, hi, factor + 1)[:-1] for lo, hi in itertools.pairwise(values)]
+    return np.concatenate([*pieces, values[-1:]])
 
 
 def _sub_grid(mean: np.ndarray, diff: np.ndarray, values: np.ndarray) -> BilinearGrid:
