@@ -192,8 +192,15 @@ def _note(
     file: TextIO | None = None,
     line: str | None = None,
 ) -> None:
-    """A warning on the command line: ``note: message``, one line on stderr."""
-    print(f'note: {message}', file=sys.stderr)
+    """An old spelling's FutureWarning on the command line: ``note: message``, one line on stderr;
+    any other warning as Python shows it."""
+    if issubclass(category, FutureWarning):
+        print(f'note: {message}', file=sys.stderr)
+    else:
+        _SHOW_WARNING(message, category, filename, lineno, file, line)
+
+
+_SHOW_WARNING = warnings.showwarning
 
 
 def main(argv: Sequence[str] | None = None) -> int:

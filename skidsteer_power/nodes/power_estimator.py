@@ -99,7 +99,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from skidsteer_power.drive.prediction_modes import prediction_mode
-from skidsteer_power.errors import ConfigError, SkidsteerError
+from skidsteer_power.errors import ConfigError, InputError, SkidsteerError
 from skidsteer_power.estimator import factory
 from skidsteer_power.estimator.adaptation import CORRECTION_FIELDS, AdaptationSettings, correction_values
 from skidsteer_power.estimator.core import EstimatorCore, EstimatorSettings, RejectedInput
@@ -334,7 +334,10 @@ class PowerEstimator(QuietNode):
         settings = dataclasses.replace(settings, joint_map=self._joint_map(p))
         settings = dataclasses.replace(settings, limits=vehicle_limits(settings.limits, self.vehicle, p))
         self.terrain_name = p.terrain
-        self.kinematics, note = prediction_mode(p.kinematics, 'kinematics', factory.KINEMATICS)
+        try:
+            self.kinematics, note = prediction_mode(p.kinematics, 'kinematics', factory.KINEMATICS)
+        except InputError as err:  # a parameter: a configuration error, as the factory's
+            raise ConfigError(str(err)) from err
         if note:
             self.get_logger().warning(note)
         self.controller = factory.drive_controller(
