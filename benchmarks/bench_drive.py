@@ -78,7 +78,7 @@ def _batch(report: Report, folder: Path) -> None:
             'rows/s',
             goal=f'>= {BATCH_GOAL_ROWS_S:,.0f} rows/s',
             met=BATCH_ROWS / elapsed >= BATCH_GOAL_ROWS_S,
-            note=f'the cached map loaded in each call; {smap.exact_fraction:.0%} of its cells answered by '
+            note=f'the cached map loaded in each call; {smap.exact_fraction:.0%} of its area answered by '
             'the direct solve (one batch for the whole file)',
         )
     argv = [sys.executable, '-m', 'skidsteer_power.cli.main', 'predict', '--vehicle', 'test_robot_track']
