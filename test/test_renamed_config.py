@@ -39,7 +39,8 @@ def test_the_lumped_internal_resistance_reads_its_earlier_name() -> None:
     """One viscous + Coulomb term per side at the motor shaft (config/powertrains/husky_a200.yaml)."""
     coefficients = {'viscous_Nm_s': 0.0001, 'coulomb_Nm': 0.046}
     now = side_from_config({LUMPED: coefficients}, 0.05, 'wheel')
-    before = side_from_config({'drivetrain': coefficients}, 0.05, 'wheel')
+    with pytest.warns(FutureWarning, match="'drivetrain' is now spelled 'lumped'"):
+        before = side_from_config({'drivetrain': coefficients}, 0.05, 'wheel')
     assert LUMPED == 'lumped' and list(before.components) == [LUMPED]
     assert before.components == now.components
 

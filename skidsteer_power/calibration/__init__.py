@@ -7,7 +7,6 @@ CLI (``skidsteer-power calibrate``) writes the result with :mod:`.io`.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -28,7 +27,7 @@ from skidsteer_power.calibration.segments import (
     read_recording,
 )
 from skidsteer_power.drive import controller_for_vehicle
-from skidsteer_power.drive.prediction_modes import CMD, FIT_AT, prediction_mode
+from skidsteer_power.drive.prediction_modes import CMD, FIT_AT
 from skidsteer_power.errors import InputError
 
 if TYPE_CHECKING:
@@ -81,9 +80,6 @@ def calibrate_bags(
     from skidsteer_power.terramechanics.terrain import load_terrain
     from skidsteer_power.vehicle import load_vehicle
 
-    fit_at, note = prediction_mode(fit_at, '--fit-at', FIT_AT)
-    if note:  # an earlier spelling: it works, and the caller learns the name
-        warnings.warn(note, FutureWarning, stacklevel=2)
     names = parse_fit_list(fit) if isinstance(fit, str) else list(fit)
     veh = load_vehicle(vehicle)
     start = load_terrain(terrain)

@@ -70,6 +70,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -706,7 +707,9 @@ def prepare(
     fit_to: str,
 ) -> FitData:
     """Step 1: the hold-out split, the segment model, the measurements and the start values."""
-    fit_at = prediction_mode(fit_at, '--fit-at', FIT_AT)[0]  # an old spelling means the same
+    fit_at, note = prediction_mode(fit_at, '--fit-at', FIT_AT)
+    if note:  # an earlier spelling: it works, and the caller learns the name
+        warnings.warn(note, FutureWarning, stacklevel=3)
     if fit_to not in FIT_TO:
         raise InputError(f'fit_to must be one of {", ".join(FIT_TO)}, not {fit_to!r}')
     segments = list(segments)

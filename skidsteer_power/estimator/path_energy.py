@@ -57,7 +57,7 @@ from numpy.typing import ArrayLike
 
 from skidsteer_power.commands import Segment
 from skidsteer_power.errors import InputError
-from skidsteer_power.missions.energy import MapLoads
+from skidsteer_power.missions.energy import MapLoads, yaw_rate_of
 from skidsteer_power.missions.routes import STRAIGHT_CURVATURE, Route
 from skidsteer_power.seams import ArrayPowerMapLike, PowertrainLike
 
@@ -152,9 +152,7 @@ class PathGeometry:
         speed = np.full(self.length_m.shape, float(speed_m_s))
         slowed = 0
         if path_scale is not None:
-            straight = np.isinf(self.turn_radius_m)
-            yaw_rate = np.where(straight, 0.0, speed / np.where(straight, 1.0, self.turn_radius_m))
-            scale = np.asarray(path_scale(speed, yaw_rate), dtype=float)
+            scale = np.asarray(path_scale(speed, yaw_rate_of(speed, self.turn_radius_m)), dtype=float)
             slowed = int(np.count_nonzero(scale < 1.0))
             speed = speed * scale
         return MapLoads.of(speed, self.turn_radius_m, self.length_m / speed, power_map), slowed

@@ -324,8 +324,8 @@ def driven_route(
     return dataclasses.replace(route, segments=driven), slowed
 
 
-def _yaw_rate(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """Yaw rate V / R [rad/s] (0 for R = inf)."""
+def yaw_rate_of(speed: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Yaw rate V / R [rad/s] of forward speeds [m/s] on signed turn radii [m] (0 for R = inf)."""
     straight = np.isinf(radius)
     return np.where(straight, 0.0, speed / np.where(straight, 1.0, radius))
 
@@ -358,7 +358,7 @@ def map_axle_states(
     """Per-side axle torque [N m] and speed [rad/s], sinkage [m], traction margin and the clamped and
     limited flags from a :class:`~skidsteer_power.maps.PowerMap` at forward speeds [m/s] and signed
     radii [m]."""
-    q = power_map.query(speed, _yaw_rate(speed, radius))
+    q = power_map.query(speed, yaw_rate_of(speed, radius))
     return {
         'torque_left': np.asarray(q.torque_left_Nm, dtype=float),
         'torque_right': np.asarray(q.torque_right_Nm, dtype=float),

@@ -34,6 +34,7 @@ components ``viscous_A_s``/``coulomb_A`` instead of ``viscous_Nm_s``/``coulomb_N
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -131,7 +132,9 @@ def side_from_config(
         wanted = COMPONENTS_BY_RUNNING_GEAR[running_gear]
     except KeyError:
         raise ConfigError(f"running_gear must be 'track' or 'wheel', not {running_gear!r}") from None
-    if set(entries) == {LUMPED_EARLIER}:  # its earlier name: the same part
+    if set(entries) == {LUMPED_EARLIER}:  # its earlier name: the same part, and the owner learns it
+        note = f"internal resistance: the component '{LUMPED_EARLIER}' is now spelled '{LUMPED}'"
+        warnings.warn(note + ' (the old name still works)', FutureWarning, stacklevel=2)
         entries = {LUMPED: entries[LUMPED_EARLIER]}
     if set(entries) == {LUMPED}:
         wanted = (LUMPED,)
