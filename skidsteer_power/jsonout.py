@@ -8,10 +8,14 @@ objects.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 JsonObject = dict[str, Any]  # Any: a JSON value's type depends on its key (see below)
 """A JSON object as built by an ``as_json``, or a JSON or YAML mapping as read (a vehicle or terrain
@@ -19,6 +23,13 @@ file, a bag's metadata) before it is checked into a typed object. ``Any`` becaus
 depends on its key (a number, a string, a nested object, null) and a reader indexes it by key; the
 typed view is the dataclass that made it or that the reader builds. The package's one ``Any`` for
 JSON and YAML documents."""
+
+
+class FieldsAsJson:
+    """Mixin of a dataclass whose fields are already JSON values: ``as_json`` is its fields by name."""
+
+    def as_json(self) -> JsonObject:
+        return dataclasses.asdict(cast('DataclassInstance', self))
 
 
 def jsonable(value: object) -> object:

@@ -375,7 +375,7 @@ def test_calibrating_never_worsens_the_prediction_from_the_command(
     # the calibration's own hold-out segments, predicted from their commands: the same (to the
     # solvers' tolerance: the fit's solve is warm-started, the check's is not)
     assert abs(payload['holdout_energy_error_after']) <= abs(payload['holdout_energy_error_before'])
-    assert payload['setpoints']['holdout_energy_error'] == pytest.approx(
+    assert payload['from_cmd']['holdout_energy_error'] == pytest.approx(
         payload['holdout_energy_error_after'], abs=1e-4
     )
     print(f'hold-out bag from the command: before {before:+.2%}, after {after:+.2%}')
@@ -385,7 +385,7 @@ def test_fit_at_the_motion_stays_available(
     twin_bag: Path, tmp_path: Path, holdout_segments: list[SteadyWindow]
 ) -> None:
     """``--fit-at motion`` solves the segments at the measured motion (the twin's ground truth); its
-    terrain then predicts the commands through the set points, reported in ``setpoints``."""
+    terrain then predicts the commands through the set points, reported in ``from_cmd``."""
     out = tmp_path / 'motion.yaml'
     code, stdout, stderr = run_cli(
         [
@@ -405,7 +405,7 @@ def test_fit_at_the_motion_stays_available(
     assert code == 0, stderr
     p = json.loads(stdout)
     assert p['fit_at'] == 'motion'
-    sp = p['setpoints']
+    sp = p['from_cmd']
     keys = {'torque_rmse_Nm', 'holdout_energy_error', 'speed_error_median', 'yaw_rate_error_median'}
     assert set(sp) == keys | {'limited_segments'}
     assert sp['speed_error_median'] < 0.05  # measured 2.1 %

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from skidsteer_power.errors import InputError
-from skidsteer_power.jsonout import JsonObject
+from skidsteer_power.jsonout import FieldsAsJson, JsonObject
 
 if TYPE_CHECKING:
     from skidsteer_power.distributed.engine import Engine
@@ -138,7 +138,7 @@ class FleetRow:
 
 
 @dataclass(frozen=True)
-class FleetGroup:
+class FleetGroup(FieldsAsJson):
     """Per (vehicle, terrain): bags, distance [m], energy per metre [J/m] (distance-weighted), mean
     energy error [%]."""
 
@@ -148,9 +148,6 @@ class FleetGroup:
     distance_m: float
     energy_per_m_J_m: float
     energy_error_pct_mean: float
-
-    def as_json(self) -> JsonObject:
-        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -423,7 +423,7 @@ class CalibrationResult:
     jacobian_z: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # residual Jacobian in z
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fitted values in search coordinates
     residual_variance: float = math.nan  # s^2 of the scaled residuals [-]
-    setpoints: dict[str, float] = field(default_factory=dict)
+    from_cmd: dict[str, float] = field(default_factory=dict)  # the fit predicting from each command
     fit_at: str = 'motion'
     fit_to: str = 'torque'
     not_identifiable: dict[str, str] = field(default_factory=dict)  # name -> why (interval, screen)
@@ -496,7 +496,7 @@ class CalibrationResult:
             'left_fixed': dict(self.left_fixed),
             'kept_start': self.kept_start or None,
             'motion': dict(self.motion),
-            'setpoints': self.setpoints,
+            'from_cmd': self.from_cmd,
             'drive_controller': self.drive.as_json() if self.drive is not None else None,
             'reconciliation': dict(self.reconciliation) or None,
         }
@@ -1202,7 +1202,7 @@ def _result(
         before_Nm=scr.base.torque,
         after_Nm=after.torque,
         holdout_index=data.hold_idx,
-        setpoints=setpoint_check(
+        from_cmd=setpoint_check(
             model.vehicle, terrain_fit, powertrain_fit, data.segments, data.measured, err_idx, data.hold_idx
         ),
         fit_at=model.fit_at,

@@ -15,7 +15,7 @@ skips::
       at_bound: [phi]                  # fitted but stopped at a fit bound: no estimate, no covariance
       bags: [...]; date: ISO 8601 UTC; residual_rms_Nm: fit residual (motor torque RMS)
       start_terrain: name of T0; segments_fit, segments_holdout
-      fit_at: setpoints | motion       # what the segments were solved at (the commands' wheel speed
+      fit_at: cmd | motion             # what the segments were solved at (the commands' wheel speed
                                        # set points, as the estimator predicts, or the measured motion)
       powertrain_parameters / powertrain_covariance: when internal resistance was fitted
 

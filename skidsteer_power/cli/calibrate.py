@@ -8,7 +8,7 @@ of the hold-out segments' motor terminal energy), seconds, residual_rms_Nm, corr
 segments_dropped, optimizer_converged (the optimizer's own stop; see at_bound),
 at_bound (fitted parameters pinned at a fit bound: status 'at_bound (lower|upper)', no interval, a
 warning), converged_inside_bounds, fit_at ('cmd' | 'motion', what the segments were solved
-at), setpoints (the fitted terrain predicting each segment from its command, at the wheel speed set
+at), from_cmd (the fitted terrain predicting each segment from its command, at the wheel speed set
 points), fit_to ('torque' | 'motion' | 'both'), not_identifiable (name -> why: its interval left the
 physical range), left_fixed (name -> why it was not fitted), kept_start (why the start was kept, or
 null), motion (hold-out V and yaw-rate MAE before / after), suggest (with --suggest), out_terrain,

@@ -103,6 +103,7 @@ class ControllerChanges(TypedDict, total=False):
     max_yaw_jerk_rad_s3: float
     max_wheel_rad_s: float
     ceiling: CeilingMode
+    current_limit_A: float | None
 
 
 def set_point_limit_rpm(motor: MotorConstants) -> float:

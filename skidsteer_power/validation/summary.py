@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
-from skidsteer_power.jsonout import JsonObject
+from skidsteer_power.jsonout import FieldsAsJson, JsonObject
 from skidsteer_power.validation.series import TraceSegment
 
 QUANTITIES = (('torque', 'Nm'), ('power', 'W'))
@@ -66,15 +66,12 @@ class ErrorMetrics:
 
 
 @dataclass(frozen=True)
-class MapCoverage:
+class MapCoverage(FieldsAsJson):
     """Share of the time and of the predicted energy whose prediction came from outside the power
     map (clamped or limited) [-] (:func:`skidsteer_power.validation.validate_metrics.map_coverage`)."""
 
     clamped_time_fraction: float
     clamped_energy_fraction: float
-
-    def as_json(self) -> JsonObject:
-        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -159,19 +156,16 @@ class JointsUsed:
 
 
 @dataclass(frozen=True)
-class MessageCounts:
+class MessageCounts(FieldsAsJson):
     """Messages decoded per input (``messages``)."""
 
     cmd_vel: int
     joint_states: int
     poses: int
 
-    def as_json(self) -> JsonObject:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class BatteryFigures:
+class BatteryFigures(FieldsAsJson):
     """The battery over the run (``battery``): energy drawn from measured power, the open-loop
     prediction over the same time, energy drawn from predicted power [J], what remains [W h], [-]."""
 
@@ -180,9 +174,6 @@ class BatteryFigures:
     energy_drawn_from_prediction_J: float
     remaining_wh: float
     soc: float
-
-    def as_json(self) -> JsonObject:
-        return asdict(self)
 
 
 @dataclass(frozen=True)
