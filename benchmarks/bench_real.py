@@ -21,6 +21,7 @@ from benchmarks.harness import Report
 from skidsteer_power.errors import SkidsteerError
 
 TABLE = 'real'
+BREAKDOWN = 'real-breakdown'
 SPLITS = ('even/odd', 'transfer')
 
 
@@ -44,6 +45,26 @@ def table(rows: list[realdata.EnergyRow], failed: dict[str, str]) -> str:
     return '\n'.join(lines) + (
         '\n\nEnergy error, predicted / measured - 1, of the check runs. Goals: even/odd |error| <= '
         f"max(linear's + 2 points, 5 %), transfer <= half the linear fit's: **{met_count} of {total} met**."
+    )
+
+
+def breakdown(rows: list[realdata.EnergyRow]) -> str:
+    """Where each split's check-run energy goes, by kind of motion (realdata.MOTION_KINDS)."""
+    lines = [
+        '| surface | split | motion | time [s] | measured [kJ] | FESS calibrated [kJ] | linear [kJ] |',
+        '| --- | --- | --- | ---: | ---: | ---: | ---: |',
+    ]
+    for r in rows:
+        for kind, share in r.by_motion.items():
+            if share.seconds <= 0.0:
+                continue
+            lines.append(
+                f'| {r.surface} | {r.split} | {kind} | {share.seconds:.0f} | {share.measured_J / 1e3:.1f} | '
+                f'{share.calibrated_J / 1e3:.1f} | {share.linear_J / 1e3:.1f} |'
+            )
+    return '\n'.join(lines) + (
+        '\n\nBy command: standing |v| < 0.02 m/s and |w| < 0.1 rad/s; straight |w| < 0.1; turning |w| >= 0.1 '
+        'and |v| >= 0.1; spinning |w| >= 0.1 and |v| < 0.1 (`benchmarks/realdata.py` MOTION_KINDS).'
     )
 
 
@@ -78,3 +99,4 @@ def run(report: Report) -> None:
                 f'{surface} {split}: |energy error| linear fit (reference)', abs(row.linear_pct), '%'
             )
     report.tables[TABLE] = table(rows, failed)
+    report.tables[BREAKDOWN] = breakdown(rows)

@@ -219,6 +219,36 @@ class EnergyRow:
     calibrated_pct: float
     linear_pct: float
     status: str
+    by_motion: dict[str, MotionShare] = dataclasses.field(default_factory=dict)  # MOTION_KINDS
+
+
+@dataclass(frozen=True)
+class MotionShare:
+    """One kind of motion in the check runs (:data:`MOTION_KINDS`): time [s] and measured,
+    calibrated and linear-fit energy [J]."""
+
+    seconds: float
+    measured_J: float
+    calibrated_J: float
+    linear_J: float
+
+
+MOTION_KINDS = ('standing', 'straight', 'turning', 'spinning')
+"""Where a check run's energy goes, by command: standing |v| < 0.02 m/s and |w| < 0.1 rad/s,
+straight |v| >= 0.02 and |w| < 0.1, turning |w| >= 0.1 and |v| >= 0.1, spinning |w| >= 0.1 and
+|v| < 0.1 (thresholds of this breakdown only)."""
+
+
+def motion_kinds(commands: np.ndarray) -> dict[str, np.ndarray]:
+    """(n,) masks of :data:`MOTION_KINDS` for commands (n, 2) [m/s, rad/s]."""
+    v, w = np.abs(commands[:, 0]), np.abs(commands[:, 1])
+    turning = w >= 0.1
+    return {
+        'standing': ~turning & (v < 0.02),
+        'straight': ~turning & (v >= 0.02),
+        'turning': turning & (v >= 0.1),
+        'spinning': turning & (v < 0.1),
+    }
 
 
 def _samples(surface: str, numbers: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -277,6 +307,16 @@ def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[i
     after = CommandPredictor(vehicle, result.terrain, result.powertrain).predict(cmd[:, 0], cmd[:, 1])
     a, b, c = linear_fit(fit_cmd, fit_p)
     linear = a * np.abs(cmd[:, 0]) + b * np.abs(cmd[:, 1]) + c
+    calibrated = reading_W(after.current, after.setpoint)
+    by_motion = {
+        kind: MotionShare(
+            float(hold[m].sum()),
+            float(measured[m] @ hold[m]),
+            float(calibrated[m] @ hold[m]),
+            float(linear[m] @ hold[m]),
+        )
+        for kind, m in motion_kinds(cmd).items()
+    }
     fitted = [n for n in result.names if result.status(n) == 'fitted']
     pinned = [f'{n} at its {side} bound' for n, side in result.at_bound.items()]
     status = result.kept_start or '; '.join(
@@ -289,9 +329,10 @@ def energy_row(surface: str, split: str, fit_runs: list[int], check_runs: list[i
         check_runs,
         float(measured @ hold),
         energy_pct(reading_W(before.current, before.setpoint), measured, hold),
-        energy_pct(reading_W(after.current, after.setpoint), measured, hold),
+        energy_pct(calibrated, measured, hold),
         energy_pct(linear, measured, hold),
         status,
+        by_motion,
     )
 
 
