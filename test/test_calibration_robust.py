@@ -197,3 +197,54 @@ def test_adaptation_residual_before_any_sample_warns_nothing() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter('error')
         assert math.isnan(state.relative_residual((1.0, 1.0)))
+
+
+def _copy_without(source: Path, target: Path, dropped: set[str]) -> Path:
+    """``source`` written again without the topics ``dropped`` (the project's own bag writer)."""
+    from skidsteer_power.bag_io import open_bag
+    from skidsteer_power.bag_io.writer import BagWriter
+
+    with open_bag(source) as bag, BagWriter(target) as writer:
+        out = {n: writer.add_topic(n, i.msgtype) for n, i in bag.topics.items() if n not in dropped}
+        for message in bag.messages():
+            if message.topic in out:
+                writer.write(out[message.topic], message.timestamp_ns, message.data)
+    return target
+
+
+def test_motion_calibration_from_cmd_vel_and_odometry_only(motion_bag: Path, tmp_path: Path) -> None:
+    """Many robots record no wheel speeds: cmd_vel and a motion topic only. The windows then settle
+    on the measured motion (segments.MOTION_SETTLE_ABS), the fit is the motion fit, and no drive
+    controller is identified (no wheel speeds to compare the commands with). The same nine commands
+    as the bag with wheel speeds; the hold-out speed error falls as it does there."""
+    bare = _copy_without(motion_bag.parent / 'full.mcap', tmp_path / 'no_joints.mcap', {'/joint_states'})
+    argv = ['calibrate', str(bare), '--vehicle', VEHICLE, '--terrain', 'dry_sand', '--fit', 'auto']
+    code, stdout, stderr = run_cli(
+        [*argv, '--motion-topic', 'ground_truth/odom', '--out-terrain', str(tmp_path / 't.yaml'), '--json']
+    )
+    assert code == 0, stderr
+    p = json.loads(stdout)
+    assert p['segments_fit'] + p['segments_holdout'] >= 7  # of the nine moving commands
+    assert p['fit_to'] == 'motion'
+    assert p['drive_controller'] is None
+    assert p['left_fixed']['left_b'] == 'no measured torque, current or power in the recordings'
+    m = p['motion']
+    assert m['speed_mae_after_m_s'] < m['speed_mae_before_m_s']
+
+
+def test_neither_joint_states_nor_motion_is_one_line(motion_bag: Path, tmp_path: Path) -> None:
+    dropped = {'/joint_states', '/odom', '/ground_truth/odom'}
+    bare = _copy_without(motion_bag.parent / 'full.mcap', tmp_path / 'cmd_only.mcap', dropped)
+    with_poses = [t for t in _topics(bare) if 'odom' in t or 'pose' in t or 'imu' in t]
+    assert not with_poses, with_poses  # the copy has no motion topic left
+    argv = ['calibrate', str(bare), '--vehicle', VEHICLE, '--terrain', 'dry_sand', '--fit', 'auto']
+    code, _, err = run_cli([*argv, '--out-terrain', str(tmp_path / 't.yaml')])
+    assert code == 2 and 'neither torque nor motion to fit to' in err
+    assert err.count('\n') == 1 and 'Traceback' not in err
+
+
+def _topics(path: Path) -> list[str]:
+    from skidsteer_power.bag_io import open_bag
+
+    with open_bag(path) as bag:
+        return list(bag.topics)

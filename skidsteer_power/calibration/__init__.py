@@ -95,7 +95,10 @@ def calibrate_bags(
     options = options or base
     if options.extra_types is None and extra_types is not None:
         options = dataclasses.replace(options, extra_types=extra_types)
-    recordings, segments, dropped = read_segments(bags, veh, powertrain, options)
+    motion_allowed = names == ['auto'] or fit_to == 'motion'  # else the fit needs the joints' torque
+    recordings, segments, dropped = read_segments(
+        bags, veh, powertrain, options, need_joints=not motion_allowed
+    )
     left_fixed: dict[str, str] = {}
     drive = None
     if names == ['auto']:  # the drive controller's limits too: commanded against measured wheel speeds
@@ -123,7 +126,12 @@ def calibrate_bags(
 
 
 def read_segments(
-    bags: Sequence[str], veh: Vehicle, powertrain: Powertrain, options: SegmentOptions
+    bags: Sequence[str],
+    veh: Vehicle,
+    powertrain: Powertrain,
+    options: SegmentOptions,
+    *,
+    need_joints: bool = False,
 ) -> tuple[list[Recording], list[SteadyWindow], dict[str, int]]:
     """Step 1 of :func:`calibrate_bags`: every bag read (its joints through the vehicle's own motor
     and driver limits) and cut into steady segments. Returns (recordings, segments, windows dropped
@@ -142,7 +150,7 @@ def read_segments(
             InputLimits.for_powertrain(powertrain),  # the vehicle's own motor and driver (issue 35)
         )  # one per bag: a position-differentiated speed must not span two bags; a battery-side
         # V x I reading stays the power [W]: the fit compares it with the predicted P_bus
-        recordings.append(read_recording(bag, options, reader))
+        recordings.append(read_recording(bag, options, reader, need_joints=need_joints))
         found, why = find_segments(recordings[-1], options, powertrain.motor)
         segments.extend(found)
         for key, count in why.items():

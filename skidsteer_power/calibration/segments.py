@@ -15,6 +15,12 @@ twist of ``nav_msgs/Odometry`` (linear.x [m/s], angular.z [rad/s], REP 103) over
 pose-only topics (PoseStamped), the path length over time and the slope of the unwrapped heading
 from the orientation quaternion. Without any pose topic the command itself is used (and the segment
 says so).
+
+A recording without joint_states (cmd_vel and a motion topic only: many robots record no wheel
+speeds) gives motion-only segments: a window is settled when its measured motion is (the mean
+forward speed and yaw rate of its halves within ``settle_tol``, or :data:`MOTION_SETTLE_ABS`), and
+it carries no wheel speed, torque or power, so only the ground's slip can be fitted to it
+(``--fit auto`` fits the motion) and no drive controller limit can be identified from it.
 """
 
 from __future__ import annotations
@@ -33,6 +39,11 @@ from skidsteer_power.estimator.inputs import TEST_ROBOT_JOINTS, InputLimits, Joi
 from skidsteer_power.estimator.measured import apply_to_joint_arrays, source_in_bag
 from skidsteer_power.powertrain.motor import MotorConstants, terminal_power
 from skidsteer_power.powertrain.power_flow import Powertrain
+
+MOTION_SETTLE_ABS = (0.02, 0.02)
+"""Without wheel speeds (no joint_states): the drift of a window's mean forward speed [m/s] and yaw
+rate [rad/s] between its halves always allowed (ASSUMED: the calibration's noise scales of a steady
+window's mean motion, fit.SPEED_SCALE_M_S and YAW_SCALE_RAD_S)."""
 
 POSE_TYPES = (
     'nav_msgs/msg/Odometry',
@@ -196,9 +207,14 @@ def side_readings(
 
 
 def read_recording(
-    path: str | Path, options: SegmentOptions | None = None, reader: JointReader | None = None
+    path: str | Path,
+    options: SegmentOptions | None = None,
+    reader: JointReader | None = None,
+    *,
+    need_joints: bool = False,
 ) -> Recording:
-    """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if one is missing.
+    """Decode cmd_vel, joint_states and odometry/poses of one bag; InputError if cmd_vel is missing,
+    or joint_states where ``need_joints`` (a fit to torque), or both joint_states and a motion topic.
 
     ``reader`` maps the joints to the sides (the vehicle file's ``joints:``; default: the test
     robot's left_motor/right_motor, effort = Kt I at the motor).
@@ -209,18 +225,30 @@ def read_recording(
         t0 = bag.start_ns
         if options.cmd_vel_topic not in bag.topics:
             raise InputError(f'{path}: no {options.cmd_vel_topic} topic: no commands to cut segments from')
-        if options.joint_states_topic not in bag.topics:
-            raise InputError(f'{path}: no {options.joint_states_topic} topic: no motor effort to fit to')
-        cmd_t, cmd = decode_twists(bag, options.cmd_vel_topic, t0)
-        names = reader.map.joints
-        js_t, position, velocity, effort, present = decode_joint_arrays(
-            bag, options.joint_states_topic, t0, names
-        )
-        (position, velocity, effort), _, _ = apply_to_joint_arrays(
-            bag, reader.map, t0, js_t, (position, velocity, effort), present
-        )
-        omega, torque, ok = side_readings(reader, names, js_t, position, velocity, effort)
         topic = _pose_topic(bag, options.odom_topic)
+        has_joints = options.joint_states_topic in bag.topics
+        if not has_joints and need_joints:
+            raise InputError(
+                f'{path}: no {options.joint_states_topic} topic: no motor effort to fit to '
+                '(--fit auto fits the ground to the recorded motion instead)'
+            )
+        if not has_joints and not topic:
+            raise InputError(
+                f'{path}: no {options.joint_states_topic} topic and no odometry, pose or IMU topic: '
+                'neither torque nor motion to fit to'
+            )
+        cmd_t, cmd = decode_twists(bag, options.cmd_vel_topic, t0)
+        if has_joints:
+            names = reader.map.joints
+            js_t, position, velocity, effort, present = decode_joint_arrays(
+                bag, options.joint_states_topic, t0, names
+            )
+            (position, velocity, effort), _, _ = apply_to_joint_arrays(
+                bag, reader.map, t0, js_t, (position, velocity, effort), present
+            )
+            omega, torque, ok = side_readings(reader, names, js_t, position, velocity, effort)
+        else:  # motion only (module doc): no wheel speed, torque or power
+            js_t, omega, torque, ok = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool)
         gyro = None
         if topic and bag.topics[topic].msgtype == IMU_TYPE:
             pose_t, gyro = _decode_gyro(bag, topic, t0)
@@ -351,20 +379,42 @@ def settled_window(
 ) -> tuple[float, float, np.ndarray] | str:
     """(start [s], end [s], joint_states mask) of the settled part of the hold [lo, hi), or why
     there is none ('too_short' | 'not_settled'): a window not settled loses its first half, at most
-    :data:`MAX_HALVINGS` times, while it stays at least ``min_s`` long (module doc)."""
+    :data:`MAX_HALVINGS` times, while it stays at least ``min_s`` long (module doc). Without
+    joint_states the measured motion must settle (:func:`motion_samples`); the mask is then empty."""
+    motion_only = rec.js_t.size == 0
+    t, values = motion_samples(rec) if motion_only else (rec.js_t, rec.omega)
+    floor = np.array(MOTION_SETTLE_ABS) if motion_only else np.full(2, options.settle_abs_rad_s)
+    measured = np.all(np.isfinite(values), axis=0)  # a gyro gives no forward speed: its yaw rate only
+    values, floor = values[:, measured], floor[measured]
     for attempt in range(MAX_HALVINGS + 1):
-        sel = (rec.js_t >= lo) & (rec.js_t < hi)
+        sel = (t >= lo) & (t < hi)
         n = int(np.count_nonzero(sel))
         if hi - lo < options.min_s or n < 6:
             return 'too_short' if attempt == 0 else 'not_settled'
-        omega = rec.omega[sel]
+        held = values[sel]
         half = n // 2
-        first, second = omega[:half].mean(axis=0), omega[half:].mean(axis=0)
-        allowed = np.maximum(options.settle_tol * np.abs(omega.mean(axis=0)), options.settle_abs_rad_s)
+        first, second = held[:half].mean(axis=0), held[half:].mean(axis=0)
+        allowed = np.maximum(options.settle_tol * np.abs(held.mean(axis=0)), floor)
         if not np.any(np.abs(first - second) > allowed):
-            return lo, hi, sel
+            return lo, hi, (rec.js_t >= lo) & (rec.js_t < hi)
         lo = 0.5 * (lo + hi)
     return 'not_settled'
+
+
+def motion_samples(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """(t (n,) [s], measured (V [m/s], yaw rate [rad/s]) (n, 2)) of the recording's motion topic: an
+    odometry twist, a gyro's yaw rate (V NaN), or the pose's differences (path speed, heading rate)."""
+    t = rec.pose_t
+    if rec.twist is not None:
+        return t, rec.twist
+    if rec.gyro is not None:
+        return t, np.column_stack([np.full(t.size, np.nan), rec.gyro])
+    if t.size < 2:
+        return t, np.zeros((t.size, 2))
+    dt = np.maximum(np.diff(t), 1e-9)
+    speed = np.hypot(*np.diff(rec.pose_xy, axis=0).T) / dt
+    yaw_rate = np.diff(np.unwrap(rec.pose_yaw)) / dt
+    return t[1:], np.column_stack([speed, yaw_rate])
 
 
 def _mean_pair(values: np.ndarray) -> tuple[float, float]:

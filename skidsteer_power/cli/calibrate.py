@@ -19,6 +19,7 @@ out_powertrain, out_vehicle. Method:
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -247,6 +248,19 @@ def _fmt(value: object) -> str:
     return f'{value:.4g}' if isinstance(value, float) else str(value)
 
 
+def _print_torque_line(payload: JsonObject) -> None:
+    """The hold-out torque and energy line; without a measured torque or power, one line saying so."""
+    before, after = payload['torque_rmse_before_Nm'], payload['torque_rmse_after_Nm']
+    energy = payload['holdout_energy_error_before'], payload['holdout_energy_error_after']
+    if not all(isinstance(v, float) and math.isfinite(v) for v in (before, after)):
+        print('hold-out torque and energy: none measured (no torque, current or power in the recordings)')
+        return
+    line = f'hold-out torque RMSE: {before:.4g} -> {after:.4g} N m'
+    if all(isinstance(v, float) and math.isfinite(v) for v in energy):
+        line += f'; energy error: {energy[0]:+.1%} -> {energy[1]:+.1%}'
+    print(line)
+
+
 def _print_human(payload: JsonObject) -> None:
     print(f'{"parameter":<17}{"value":>12}  {"95 % CI":<26}{"unit":<12}status')
     for name, p in payload['parameters'].items():
@@ -262,11 +276,7 @@ def _print_human(payload: JsonObject) -> None:
         print(f'warning: the optimizer stopped with {", ".join(payload["at_bound"])} at a fit bound')
     at = 'the set points of their commands' if payload['fit_at'] == CMD else 'the measured motion'
     print(f'segments: {payload["segments_fit"]} fit, {payload["segments_holdout"]} hold-out, solved at {at}')
-    print(
-        'hold-out torque RMSE: '
-        f'{payload["torque_rmse_before_Nm"]:.4g} -> {payload["torque_rmse_after_Nm"]:.4g} N m; energy error: '
-        f'{payload["holdout_energy_error_before"]:+.1%} -> {payload["holdout_energy_error_after"]:+.1%}'
-    )
+    _print_torque_line(payload)
     motion = payload['motion']
     if payload['fit_to'] != 'torque' and motion:
         print(
@@ -275,6 +285,8 @@ def _print_human(payload: JsonObject) -> None:
             f'{motion["yaw_mae_after_rad_s"]:.3g} rad/s'
         )
     drive = payload.get('drive_controller')
+    if drive is None and payload['fit_to'] != 'torque':
+        print('drive controller: not identified (no recording has commands and wheel speeds)')
     for name, item in (drive or {}).get('values', {}).items():
         shown = f'{_fmt(item["value"])} {item["unit"]}' if item['reached'] else item['note']
         print(f'drive controller: {name}: {shown}')
