@@ -286,7 +286,7 @@ def _print_human(payload: JsonObject) -> None:
         )
     drive = payload.get('drive_controller')
     if drive is None and payload['fit_to'] != 'torque':
-        print('drive controller: not identified (no recording has commands and wheel speeds)')
+        print('drive controller: not identified (--fit auto identifies it from commands and wheel speeds)')
     for name, item in (drive or {}).get('values', {}).items():
         shown = f'{_fmt(item["value"])} {item["unit"]}' if item['reached'] else item['note']
         print(f'drive controller: {name}: {shown}')
