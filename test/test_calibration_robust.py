@@ -248,3 +248,33 @@ def _topics(path: Path) -> list[str]:
 
     with open_bag(path) as bag:
         return list(bag.topics)
+
+
+@pytest.mark.parametrize(
+    ('torque', 'energy', 'line'),
+    [
+        (
+            (0.14, 0.0026),
+            (1.073, 0.011),
+            'hold-out torque RMSE: 0.14 -> 0.0026 N m; energy error: +107.3% -> +1.1%',
+        ),
+        ((math.nan, math.nan), (-0.86, -0.15), 'hold-out energy error: -86.0% -> -15.0%'),  # V x I only
+        ((None, None), (None, None), 'hold-out torque and energy: none measured'),  # the motion only
+    ],
+)
+def test_the_hold_out_line_shows_what_was_measured(
+    torque: tuple[Any, Any], energy: tuple[Any, Any], line: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A battery-side recording has an energy error and no torque; it must still be shown (it was
+    hidden behind 'none measured' for one commit)."""
+    from skidsteer_power.cli.calibrate import _print_torque_line
+
+    _print_torque_line(
+        {
+            'torque_rmse_before_Nm': torque[0],
+            'torque_rmse_after_Nm': torque[1],
+            'holdout_energy_error_before': energy[0],
+            'holdout_energy_error_after': energy[1],
+        }
+    )
+    assert capsys.readouterr().out.startswith(line)

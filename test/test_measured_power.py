@@ -275,6 +275,14 @@ def test_import_a_borealtc_run_and_validate_it(tmp_path: Path, predictor: MapPre
 
         _, cmd = decode_twists(bag, '/cmd_vel', bag.start_ns)
     assert cmd[10, 0] == pytest.approx((csv['velL'][10] + csv['velR'][10]) / 2)
+    # and the Husky's own drive controller (wheel separation x 1.875) turns every command back into
+    # the recorded wheel speeds: an import with the bare tread gave a yaw rate 1.875 x too large
+    from skidsteer_power.drive import controller_for_vehicle
+    from skidsteer_power.vehicle import load_vehicle
+
+    recorded = np.column_stack([csv['velL'], csv['velR']]) / 0.1651  # husky_a200.yaml wheel radius
+    setpoint = controller_for_vehicle(load_vehicle(HUSKY)).apply(cmd[:, 0], cmd[:, 1]).setpoint
+    assert np.allclose(setpoint, recorded, atol=1e-9)
 
 
 @pytest.mark.ros

@@ -249,16 +249,23 @@ def _fmt(value: object) -> str:
 
 
 def _print_torque_line(payload: JsonObject) -> None:
-    """The hold-out torque and energy line; without a measured torque or power, one line saying so."""
-    before, after = payload['torque_rmse_before_Nm'], payload['torque_rmse_after_Nm']
+    """The hold-out torque and energy line, each part only where it was measured."""
+
+    def finite(*values: object) -> bool:
+        return all(isinstance(v, float) and math.isfinite(v) for v in values)
+
+    torque = payload['torque_rmse_before_Nm'], payload['torque_rmse_after_Nm']
     energy = payload['holdout_energy_error_before'], payload['holdout_energy_error_after']
-    if not all(isinstance(v, float) and math.isfinite(v) for v in (before, after)):
-        print('hold-out torque and energy: none measured (no torque, current or power in the recordings)')
-        return
-    line = f'hold-out torque RMSE: {before:.4g} -> {after:.4g} N m'
-    if all(isinstance(v, float) and math.isfinite(v) for v in energy):
-        line += f'; energy error: {energy[0]:+.1%} -> {energy[1]:+.1%}'
-    print(line)
+    parts = []
+    if finite(*torque):
+        parts.append(f'hold-out torque RMSE: {torque[0]:.4g} -> {torque[1]:.4g} N m')
+    if finite(*energy):
+        parts.append(
+            f'{"energy" if parts else "hold-out energy"} error: {energy[0]:+.1%} -> {energy[1]:+.1%}'
+        )
+    print(
+        '; '.join(parts) or 'hold-out torque and energy: none measured (no torque, current or power recorded)'
+    )
 
 
 def _print_human(payload: JsonObject) -> None:

@@ -10,16 +10,20 @@ holds:
 * ``/joint_states`` (sensor_msgs/JointState): the vehicle's drivetrain joints, velocity = wheel speed /
   wheel radius [rad/s] (each joint of a side alike), position its integral [rad];
 * ``/cmd_vel`` (geometry_msgs/Twist): the command columns, or without them the recorded wheel speeds
-  taken as the set points (a controller that holds wheel speeds: V = (v_l + v_r) / 2,
-  r = (v_r - v_l) / B with the vehicle's tread B, so the drive's set points are the recorded speeds);
+  taken as the set points (a controller that holds wheel speeds): the twist that the vehicle's own
+  drive controller turns into exactly those set points (:meth:`DriveController.twist_of`: its wheel
+  separation, with diff_drive_controller's multiplier, and radius multipliers);
 * the currents and voltages, one std_msgs/Float64 topic each (``--current-topics``,
   ``--voltage-topics``): what a vehicle file's ``measured_power:`` maps (config/vehicles/husky_a200.yaml
   has the mapping of ``--preset borealtc``);
 * ``/imu/data`` (sensor_msgs/Imu: angular_velocity.z = the yaw rate [rad/s]) if a yaw rate is given.
 
 ``--preset borealtc`` is the BorealTC dataset's Husky logs (docs/USAGE.md, "import": how its units and
-signs were worked out): ``pro_XX.csv`` time, curL, curR (battery-side magnitudes [A]), velL, velR
-([m/s] at the tread), merged with ``imu_XX.csv``'s wz (``--imu``).
+signs were worked out): ``pro_XX.csv`` time, curL, curR (current magnitudes [A]), velL, velR
+([m/s] at the tread), merged with ``imu_XX.csv``'s wz (``--imu``). The shipped husky_a200 file maps
+those topics as battery-side currents; benchmarks/realdata.py shows from the data that BorealTC's
+follow torque (the motors' currents), so validate's measured V x I of such a bag is 24 V x the motor
+current, an upper bound of the battery power, not the battery power.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import MsgType
 
     from skidsteer_power.bag_io.writer import BagWriter
+    from skidsteer_power.drive.controller import DriveController
     from skidsteer_power.estimator.inputs import JointMap
 
 MAX_ROWS = Range('rows', 0, 5_000_000, 'rows', positive=True, integer=True)
@@ -139,12 +144,15 @@ def _columns2(
 def read_signals(
     path: Path,
     columns: Columns,
-    tread_m: float,
+    controller: tuple[DriveController, float],
     imu: Path | None,
     scales: tuple[float, float, float],
     max_rows: int,
 ) -> Signals:
-    """The columns of ``path`` (and of ``imu``) the mapping names; ``scales`` = (time, speed, current)."""
+    """The columns of ``path`` (and of ``imu``) the mapping names; ``scales`` = (time, speed, current).
+    Without command columns the command is the twist whose set points, through the vehicle's own
+    drive controller (``controller`` = (it, the joints' wheel radius [m]): its wheel separation and
+    radius multipliers), are the recorded wheel speeds."""
     time_scale, speed_scale, current_scale = scales
     table = read_csv(path, max_rows)
     t = _column(table, columns.time, path, '--time') * time_scale
@@ -174,8 +182,12 @@ def read_signals(
         )
         cmd_note = f'command from columns {columns.cmd_speed}, {columns.cmd_yaw_rate}'
     else:  # the controller holds wheel speeds: the recorded ones are the set points
-        cmd = np.column_stack([speed.mean(axis=1), (speed[:, 1] - speed[:, 0]) / tread_m])
-        cmd_note = f'command = the recorded wheel speeds as set points (tread {tread_m:g} m)'
+        drive, radius_m = controller
+        cmd = np.column_stack(drive.twist_of(speed / radius_m))
+        cmd_note = (
+            'command = the twist whose set points are the recorded wheel speeds (the drive '
+            f"controller's kinematics: wheel separation {drive.separation_m:g} m)"
+        )
     yaw_t: np.ndarray | None = None
     yaw = None
     if imu is not None:
@@ -342,13 +354,16 @@ def import_csv(
     max_rows: int = int(MAX_ROWS.high),
 ) -> ImportSummary:
     """Write the bag (module docstring); return what was written (topics, message counts, duration)."""
+    from skidsteer_power.drive import controller_for_vehicle
     from skidsteer_power.estimator import factory
     from skidsteer_power.vehicle import load_vehicle
 
     vehicle = load_vehicle(vehicle_name)
     joints = factory.joint_map_for(vehicle)
-    radius, tread = float(vehicle.drive_radius_m), float(vehicle.tread_m)
-    signals = read_signals(path, columns, tread, imu, (time_scale, speed_scale, current_scale), max_rows)
+    radius = float(vehicle.drive_radius_m)
+    controller = controller_for_vehicle(vehicle)
+    scales = (time_scale, speed_scale, current_scale)
+    signals = read_signals(path, columns, (controller, radius), imu, scales, max_rows)
     counts = write_bag(output, signals, joints, radius, (current_topics, voltage_topics))
     t = signals.t
     return {
