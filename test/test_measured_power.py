@@ -247,6 +247,34 @@ def test_dropped_readings_are_counted_and_explained_on_the_console(
     assert 'battery power = # W exceeds the plausible limit # W' in line
 
 
+def test_the_online_correction_is_scored_battery_side_against_v_times_i(
+    tmp_path: Path, predictor: MapPredictor
+) -> None:
+    """With a battery-side measurement (V x I) the online rows are battery-side too: each side's
+    corrected power is its predicted battery power plus the change the correction makes through
+    the amplifier, so the sides add up to the corrected battery power (``online_battery_W``, what
+    the node integrates). They were terminal powers: compare's online rows on a BorealTC import then
+    read -57 % where the corrected battery energy was -24 % (a terminal power lacks the amplifier
+    and idle terms the measured V x I holds)."""
+    path = tmp_path / 'husky.mcap'
+    write_bag(path, [(-5.0, 7.0)])
+    options = ValidateOptions(vehicle=HUSKY, terrain=TERRAIN, report_dir=tmp_path / 'r', plots=False)
+    with open_bag(path) as bag:
+        summary = validate(bag, options, predictor).as_json()
+    assert summary['power_compared'] == 'battery'
+    c = np.genfromtxt(summary['report']['timeseries_csv'], delimiter=',', names=True)
+    rows = np.isfinite(c['online_battery_W'])
+    corrected = c['online_torque_left_Nm'] != c['predicted_torque_left_Nm']
+    assert corrected[rows].any()  # the correction acted (24 V x 5 A is not what the map predicts)
+    sides = c['online_power_left_W'] + c['online_power_right_W']
+    # the report's CSV holds 6 decimals
+    np.testing.assert_allclose(sides[rows], c['online_battery_W'][rows], rtol=1e-6, atol=1e-4)
+    uncorrected = rows & ~corrected
+    np.testing.assert_allclose(
+        c['online_power_left_W'][uncorrected], c['predicted_power_left_W'][uncorrected], atol=1e-4
+    )
+
+
 def test_import_a_borealtc_run_and_validate_it(tmp_path: Path, predictor: MapPredictor) -> None:
     """BorealTC ASPHALT run 00 (338 rows at 6.5 Hz, 5186 IMU rows) as a bag: the measured energy is
     24 V x (|curL| + |curR|) x the hold of each reading (until the next, at most the 0.5 s joint

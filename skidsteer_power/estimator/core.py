@@ -235,7 +235,8 @@ class EstimatorCore:
 
     def corrected_terminal_W(self) -> tuple[float, float]:
         """Motor terminal power [W] (left, right) of the corrected prediction, at the predicted motor
-        speeds (validate's ``online_power_*``: :func:`skidsteer_power.validation.online.online_columns`)."""
+        speeds (validate's ``online_power_*`` where the measurement is not battery-side:
+        :func:`skidsteer_power.validation.online.online_columns`)."""
         p = self.prediction
         assert p is not None
         left, right = (

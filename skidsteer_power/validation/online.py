@@ -53,11 +53,19 @@ def online_figures(core: EstimatorCore) -> tuple[float, float, float]:
     return left.a * torque[0] + left.b, right.a * torque[1] + right.b, adaptation.terrain_scale()
 
 
-def online_columns(c: dict[str, np.ndarray], powertrain: PowertrainLike) -> dict[str, np.ndarray]:
-    """:data:`DERIVED_COLUMNS` from a run's rows, vectorized: the corrected prediction's terminal
-    powers [W] at the predicted motor speeds, its battery power [W] (the prediction's plus the change
+def online_columns(
+    c: dict[str, np.ndarray], powertrain: PowertrainLike, battery_side: bool = False
+) -> dict[str, np.ndarray]:
+    """:data:`DERIVED_COLUMNS` from a run's rows, vectorized: the corrected prediction's per-side
+    power [W] at the predicted motor speeds, its battery power [W] (the prediction's plus the change
     the correction makes through the amplifier, as ``EstimatorCore.corrected_bus_W``), and the
-    terminal powers [W] of the terrain-scaled prediction (internal + k x terrain torque at the motor)."""
+    per-side power [W] of the terrain-scaled prediction (internal + k x terrain torque at the motor).
+
+    The per-side powers are in the rows' own terms: terminal powers, or with ``battery_side`` (a
+    measured V x I, whose rows hold battery-side ``predicted_power_*``) each side's predicted
+    battery power plus the change the correction makes through the amplifier. Terminal powers there
+    once compared with battery-side measurements: compare's online rows on a BorealTC import read
+    -57 % where the corrected battery energy was -24 %."""
     motor, amplifier, regen = powertrain.motor, powertrain.amplifier, powertrain.regen_efficiency
     k = c['terrain_scale']
     out: dict[str, np.ndarray] = {}
@@ -67,17 +75,18 @@ def online_columns(c: dict[str, np.ndarray], powertrain: PowertrainLike) -> dict
             omega = c[f'predicted_omega_{side}_rad_s']
             torque = c[f'predicted_torque_{side}_Nm']
             online = np.asarray(terminal_power(motor, c[f'online_torque_{side}_Nm'], omega))
-            out[f'online_power_{side}_W'] = online
             plain = np.asarray(terminal_power(motor, torque, omega))
-            bus_change = (
-                bus_change
-                + np.asarray(bus_power(online, amplifier, regen))
-                - np.asarray(bus_power(plain, amplifier, regen))
-            )
             terrain = c[f'predicted_axle_torque_{side}_Nm'] / powertrain.gear_ratio
-            out[f'scaled_power_{side}_W'] = np.asarray(
-                terminal_power(motor, torque + (k - 1.0) * terrain, omega)
-            )
+            scaled = np.asarray(terminal_power(motor, torque + (k - 1.0) * terrain, omega))
+            plain_bus = np.asarray(bus_power(plain, amplifier, regen))
+            side_change = np.asarray(bus_power(online, amplifier, regen)) - plain_bus
+            bus_change = bus_change + side_change
+            if battery_side:
+                predicted = c[f'predicted_power_{side}_W']
+                online = predicted + side_change
+                scaled = predicted + np.asarray(bus_power(scaled, amplifier, regen)) - plain_bus
+            out[f'online_power_{side}_W'] = online
+            out[f'scaled_power_{side}_W'] = scaled
     out['online_battery_W'] = c['predicted_battery_W'] + bus_change
     return out
 

@@ -417,7 +417,8 @@ def _series_columns(
     """The run's columns: the rows', the online ones derived from them, and ``hold_s``."""
     table = np.array(rows, dtype=float).reshape(-1, len(ROW_COLUMNS))
     columns = {name: table[:, j] for j, name in enumerate(ROW_COLUMNS)}
-    columns.update(online_columns(columns, core.powertrain))
+    battery_side = bool(core.settings.joint_map.measures_battery)
+    columns.update(online_columns(columns, core.powertrain, battery_side))
     t = columns['t_s']
     if motor_data:  # a measurement holds until the next one, at most the joint timeout
         columns['hold_s'] = np.minimum(
